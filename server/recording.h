@@ -1,0 +1,99 @@
+// Recordings: the CSV formats of SPEC §2, parsed strictly and incrementally.
+//
+// RecordingParser takes the bytes in chunks of any size (so an upload can be validated while it
+// streams, without holding it in memory) and either only validates and summarises them, or also
+// collects the numbers for a calibration. Every error names the file, the 1-based line and column,
+// and the column's header name where one applies.
+#ifndef CALIBD_SERVER_RECORDING_H_
+#define CALIBD_SERVER_RECORDING_H_
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/status.h"
+
+namespace calibd::server {
+
+enum class Layout {
+  kPcaAveraged,  // position,s1,...,sm
+  kPcaRaw,       // position,phase,s1,...,sm   (phase: static | moving)
+  kArray,        // [t,]aK_x,aK_y,aK_z,...,gJ_x,gJ_y,gJ_z  (any column order)
+};
+const char* LayoutName(Layout layout);  // "pca_averaged", "pca_raw", "array"
+const char* LayoutMethod(Layout layout);  // "pca" or "array"
+
+// A pca recording reduced to one column per position.
+struct PcaRecording {
+  std::vector<std::string> sensor_names;     // m names, header order
+  std::vector<std::string> position_labels;  // n labels, in order of first appearance
+  // m×n. Averaged layout: the mean of the rows with that label (usually one row each).
+  // Raw layout: mean of the position's `moving` rows minus the mean of its `static` rows
+  // (the paper's Eq. 18, m = m′ − b′).
+  Eigen::MatrixXd readings;
+  bool raw = false;
+  // Raw layout only (else empty): m×n means of the static rows, b′ per position, and the number
+  // of static and moving rows per position.
+  Eigen::MatrixXd static_means;
+  std::vector<int64_t> static_rows, moving_rows;
+  std::vector<int64_t> rows_per_position;  // n: rows that went into each column (both layouts)
+};
+
+// An array recording: one row per sample.
+struct ArrayRecording {
+  std::vector<std::string> accel_names;  // "a0".."a{K-1}", by index
+  std::vector<std::string> gyro_names;   // "g0".."g{G-1}", by index
+  Eigen::MatrixXd accel;                 // N × 3K: a0_x a0_y a0_z a1_x ... (m/s²)
+  Eigen::MatrixXd gyro;                  // N × 3G: g0_x g0_y g0_z ... (unit as recorded)
+  Eigen::VectorXd t;                     // N seconds, or empty when there is no `t` column
+};
+
+// What storage keeps about a recording without re-reading it.
+struct RecordingSummary {
+  Layout layout = Layout::kPcaAveraged;
+  int64_t rows = 0;                  // data rows (comments and header excluded)
+  std::vector<std::string> columns;  // header names in file order
+  // pca: sensor names; array: triad names (a0.., then g0..).
+  std::vector<std::string> sensors;
+  int64_t positions = 0;  // pca only: distinct position labels
+};
+
+struct RecordingLimits {
+  int64_t max_line_bytes = 1 << 20;  // a longer line is an error (guards memory)
+  int64_t max_columns = 4096;        // more header fields is an error
+};
+
+class RecordingParser {
+ public:
+  // file_name: used in error messages only. collect: also keep the numbers (Take*()).
+  RecordingParser(std::string file_name, bool collect, RecordingLimits limits = {});
+  ~RecordingParser();
+  RecordingParser(const RecordingParser&) = delete;
+  RecordingParser& operator=(const RecordingParser&) = delete;
+
+  // Feed the next chunk. After the first error every call returns it again.
+  Status Feed(std::string_view chunk);
+  // End of input: checks the last line and the whole-file rules (e.g. every raw position has
+  // static and moving rows). Must be called once after the last Feed.
+  Status Finish();
+
+  const RecordingSummary& summary() const;
+  // Valid after a successful Finish() of a collecting parser, for the matching layout.
+  Status TakePca(PcaRecording* out);
+  Status TakeArray(ArrayRecording* out);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Convenience: parse a whole buffer (collecting).
+Status ParseRecording(std::string_view bytes, const std::string& file_name,
+                      RecordingParser* parser);
+
+}  // namespace calibd::server
+
+#endif  // CALIBD_SERVER_RECORDING_H_
