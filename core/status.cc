@@ -4,17 +4,28 @@ namespace calibd {
 
 const char* StatusCodeName(StatusCode code) {
   switch (code) {
-    case StatusCode::kOk: return "ok";
-    case StatusCode::kInvalidInput: return "invalid_input";
-    case StatusCode::kNotDeterminable: return "not_determinable";
-    case StatusCode::kNotFound: return "not_found";
-    case StatusCode::kConflict: return "conflict";
-    case StatusCode::kUnsupportedMedia: return "unsupported_media_type";
-    case StatusCode::kTooLarge: return "too_large";
-    case StatusCode::kBusy: return "busy";
-    case StatusCode::kIoError: return "io_error";
-    case StatusCode::kCorruption: return "corruption";
-    case StatusCode::kInternal: return "internal";
+    case StatusCode::kOk:
+      return "ok";
+    case StatusCode::kInvalidInput:
+      return "invalid_input";
+    case StatusCode::kNotDeterminable:
+      return "not_determinable";
+    case StatusCode::kNotFound:
+      return "not_found";
+    case StatusCode::kConflict:
+      return "conflict";
+    case StatusCode::kUnsupportedMedia:
+      return "unsupported_media_type";
+    case StatusCode::kTooLarge:
+      return "too_large";
+    case StatusCode::kBusy:
+      return "busy";
+    case StatusCode::kIoError:
+      return "io_error";
+    case StatusCode::kCorruption:
+      return "corruption";
+    case StatusCode::kInternal:
+      return "internal";
   }
   return "unknown";
 }

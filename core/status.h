@@ -36,7 +36,9 @@ class Status {
   Status(StatusCode code, std::string message) : code_(code), message_(std::move(message)) {}
 
   static Status Ok() { return Status(); }
-  static Status InvalidInput(std::string msg) { return {StatusCode::kInvalidInput, std::move(msg)}; }
+  static Status InvalidInput(std::string msg) {
+    return {StatusCode::kInvalidInput, std::move(msg)};
+  }
   static Status NotDeterminable(std::string msg) {
     return {StatusCode::kNotDeterminable, std::move(msg)};
   }
@@ -57,13 +59,19 @@ class Status {
   int64_t column() const { return column_; }
   const std::string& field() const { return field_; }
 
-  Status& WithFile(std::string file) { file_ = std::move(file); return *this; }
+  Status& WithFile(std::string file) {
+    file_ = std::move(file);
+    return *this;
+  }
   Status& WithLocation(int64_t line, int64_t column) {
     line_ = line;
     column_ = column;
     return *this;
   }
-  Status& WithField(std::string field) { field_ = std::move(field); return *this; }
+  Status& WithField(std::string field) {
+    field_ = std::move(field);
+    return *this;
+  }
 
   // "file:line:column: message" (the parts that are known), for a terminal.
   std::string ToString() const;

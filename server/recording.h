@@ -23,7 +23,7 @@ enum class Layout {
   kPcaRaw,       // position,phase,s1,...,sm   (phase: static | moving)
   kArray,        // [t,]aK_x,aK_y,aK_z,...,gJ_x,gJ_y,gJ_z  (any column order)
 };
-const char* LayoutName(Layout layout);  // "pca_averaged", "pca_raw", "array"
+const char* LayoutName(Layout layout);    // "pca_averaged", "pca_raw", "array"
 const char* LayoutMethod(Layout layout);  // "pca" or "array"
 
 // A pca recording reduced to one column per position.
@@ -64,6 +64,7 @@ struct RecordingSummary {
 struct RecordingLimits {
   int64_t max_line_bytes = 1 << 20;  // a longer line is an error (guards memory)
   int64_t max_columns = 4096;        // more header fields is an error
+  int64_t max_positions = 1000000;   // pca: more distinct position labels is an error
 };
 
 class RecordingParser {
@@ -91,8 +92,7 @@ class RecordingParser {
 };
 
 // Convenience: parse a whole buffer (collecting).
-Status ParseRecording(std::string_view bytes, const std::string& file_name,
-                      RecordingParser* parser);
+Status ParseRecording(std::string_view bytes, RecordingParser* parser);
 
 }  // namespace calibd::server
 

@@ -1,0 +1,173 @@
+#include "server/config.h"
+
+#include <cctype>
+
+#include "server/array_method.h"
+#include "server/pca_method.h"
+
+namespace calibd::server {
+
+using nlohmann::json;
+
+namespace {
+
+// 1-based line and column of byte `offset` in `text`.
+void LineColumn(std::string_view text, size_t offset, int64_t* line, int64_t* column) {
+  *line = 1;
+  *column = 1;
+  offset = std::min(offset, text.size());
+  for (size_t i = 0; i < offset; ++i) {
+    if (text[i] == '\n') {
+      ++*line;
+      *column = 1;
+    } else {
+      ++*column;
+    }
+  }
+}
+
+bool IsStringKey(const std::string& key) {
+  return key == "method" || key == "device" || key == "bias" || key == "solver" ||
+         key == "gyro_unit";
+}
+
+}  // namespace
+
+Status ParseJsonText(std::string_view text, const std::string& what, json* out) {
+  bool too_deep = false;
+  // The callback sees every event with its depth; discarding is not enough (the parser would
+  // still descend), so a too-deep document is stopped by throwing out of the callback.
+  struct TooDeep {};
+  try {
+    *out = json::parse(
+        text.begin(), text.end(),
+        [&](int depth, json::parse_event_t event, json&) {
+          if (depth > kMaxJsonDepth && (event == json::parse_event_t::object_start ||
+                                        event == json::parse_event_t::array_start)) {
+            too_deep = true;
+            throw TooDeep{};
+          }
+          return true;
+        },
+        /*allow_exceptions=*/true, /*ignore_comments=*/false);
+  } catch (const TooDeep&) {
+  } catch (const json::parse_error& e) {
+    int64_t line, column;
+    LineColumn(text, e.byte > 0 ? e.byte - 1 : 0, &line, &column);
+    std::string msg = e.what();
+    // nlohmann's message is "[json.exception.parse_error.101] parse error at line 1, column 2:
+    // syntax error while parsing value - ..." : keep the part after the location.
+    const size_t colon = msg.find(": ");
+    if (colon != std::string::npos) msg = msg.substr(colon + 2);
+    return Status::InvalidInput("invalid JSON: " + msg).WithFile(what).WithLocation(line, column);
+  } catch (const json::exception&) {
+    return Status::InvalidInput("invalid JSON").WithFile(what);
+  }
+  if (too_deep) {
+    return Status::InvalidInput("JSON nested deeper than " + std::to_string(kMaxJsonDepth) +
+                                " levels")
+        .WithFile(what);
+  }
+  return Status::Ok();
+}
+
+Status ConfigFromQuery(const std::multimap<std::string, std::string>& params, json* config) {
+  *config = json::object();
+  for (const auto& [key, value] : params) {
+    if (config->contains(key)) {
+      return Status::InvalidInput("query parameter '" + key + "' given more than once")
+          .WithField(key);
+    }
+    if (IsStringKey(key)) {
+      (*config)[key] = value;
+      continue;
+    }
+    json parsed;
+    Status s = ParseJsonText(value, "query parameter '" + key + "'", &parsed);
+    if (s.ok() && !parsed.is_string()) {
+      (*config)[key] = std::move(parsed);
+    } else {
+      (*config)[key] = value;
+    }
+  }
+  return Status::Ok();
+}
+
+Status ValidateConfig(const json& config, CommonConfig* common) {
+  if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
+  auto method = config.find("method");
+  if (method == config.end()) {
+    return Status::InvalidInput("missing key 'method' (\"pca\" or \"array\")").WithField("method");
+  }
+  if (!method->is_string() || (*method != "pca" && *method != "array")) {
+    return Status::InvalidInput("'method' must be \"pca\" or \"array\", not " +
+                                method->dump().substr(0, 60))
+        .WithField("method");
+  }
+  common->method = method->get<std::string>();
+  common->device.clear();
+  if (auto device = config.find("device"); device != config.end()) {
+    if (!device->is_string()) {
+      return Status::InvalidInput("'device' must be a string (the serial number)")
+          .WithField("device");
+    }
+    const std::string& serial = device->get_ref<const std::string&>();
+    if (serial.empty() || serial.size() > 128) {
+      return Status::InvalidInput("'device' must have 1 to 128 characters").WithField("device");
+    }
+    for (unsigned char ch : serial) {
+      if (ch < 0x20 || ch == 0x7f || ch == '/') {
+        return Status::InvalidInput(
+                   "'device' may not contain control characters or '/' (it is part of URLs)")
+            .WithField("device");
+      }
+    }
+    common->device = serial;
+  }
+  if (common->method == "pca") {
+    core::PcaOptions options;
+    return ParsePcaConfig(config, &options);
+  }
+  core::ArrayProblem geometry;
+  core::ArrayOptions options;
+  bool degrees = false;
+  return ParseArrayConfig(config, &geometry, &options, &degrees);
+}
+
+Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, const json& config,
+                       json* result) {
+  CommonConfig common;
+  Status s = ValidateConfig(config, &common);
+  if (!s.ok()) return s;
+  const Layout layout = parser->summary().layout;
+  if (common.method != LayoutMethod(layout)) {
+    return Status::InvalidInput(std::string("the config says method '") + common.method +
+                                "' but the recording has the " + LayoutName(layout) +
+                                " layout (SPEC §2)")
+        .WithFile(file_name)
+        .WithField("method");
+  }
+  if (common.method == "pca") {
+    PcaRecording recording;
+    s = parser->TakePca(&recording);
+    if (!s.ok()) return s;
+    core::PcaOptions options;
+    s = ParsePcaConfig(config, &options);
+    if (!s.ok()) return s;
+    return RunPca(recording, options, result);
+  }
+  ArrayRecording recording;
+  s = parser->TakeArray(&recording);
+  if (!s.ok()) return s;
+  return RunArray(recording, config, result);
+}
+
+Status Calibrate(std::string_view recording, const std::string& file_name, const json& config,
+                 json* result) {
+  RecordingParser parser(file_name, /*collect=*/true);
+  Status s = ParseRecording(recording, &parser);
+  if (!s.ok()) return s;
+  return CalibrateParsed(&parser, file_name, config, result);
+}
+
+}  // namespace calibd::server

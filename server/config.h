@@ -1,0 +1,53 @@
+// Calibration configs (SPEC §3): JSON text, or HTTP query parameters, to a validated JSON object;
+// and the one entry point that runs a calibration of a recording's bytes with such a config.
+#ifndef CALIBD_SERVER_CONFIG_H_
+#define CALIBD_SERVER_CONFIG_H_
+
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <string_view>
+
+#include "core/status.h"
+#include "server/recording.h"
+
+namespace calibd::server {
+
+// Nesting deeper than this in any JSON we accept is an error (guards the stack and memory).
+inline constexpr int kMaxJsonDepth = 64;
+
+// Parses JSON text. Errors are kInvalidInput naming `what` (e.g. "config.json") with the 1-based
+// line and column of the fault. Rejects nesting deeper than kMaxJsonDepth.
+Status ParseJsonText(std::string_view text, const std::string& what, nlohmann::json* out);
+
+// Builds a config object from query parameters. Values that read as JSON numbers, booleans,
+// arrays or objects become those; everything else stays a string (so device=123 is "123" only
+// for the keys that are strings by the SPEC: method, device, bias, solver, gyro_unit).
+// Parameters in `ignore` (e.g. "format") are skipped. A repeated key is an error.
+Status ConfigFromQuery(const std::multimap<std::string, std::string>& params,
+                       nlohmann::json* config);
+
+// The common keys of every config.
+struct CommonConfig {
+  std::string method;  // "pca" | "array"
+  std::string device;  // serial number; empty when not given
+};
+
+// Checks the whole config: an object, `method` known, `device` a non-empty string of at most
+// 128 printable characters when present, and the method's own keys (unknown keys are errors).
+// Errors name the key (Status::field()).
+Status ValidateConfig(const nlohmann::json& config, CommonConfig* common);
+
+// Parses the recording bytes (collecting), checks the layout matches the config's method, runs the
+// calibration and writes the result JSON (SPEC §4). kInvalidInput for bad bytes or config,
+// kNotDeterminable when the data cannot determine the parameters.
+Status Calibrate(std::string_view recording, const std::string& file_name,
+                 const nlohmann::json& config, nlohmann::json* result);
+
+// The same, from a parser that has already been fed and finished (collecting).
+Status CalibrateParsed(RecordingParser* parser, const std::string& file_name,
+                       const nlohmann::json& config, nlohmann::json* result);
+
+}  // namespace calibd::server
+
+#endif  // CALIBD_SERVER_CONFIG_H_

@@ -1,0 +1,545 @@
+// Strict, incremental CSV parser for the recording layouts of SPEC §2.
+//
+// Lines are cut out of the incoming chunks without copying unless a line straddles two chunks;
+// fields are string_views into the line; numbers go through std::from_chars (libstdc++ 12: the
+// fast_float algorithm, correctly rounded). Column numbers in errors are 1-based field numbers.
+#include "server/recording.h"
+
+#include <array>
+#include <charconv>
+#include <cmath>
+#include <unordered_map>
+
+namespace calibd::server {
+
+const char* LayoutName(Layout layout) {
+  switch (layout) {
+    case Layout::kPcaAveraged:
+      return "pca_averaged";
+    case Layout::kPcaRaw:
+      return "pca_raw";
+    case Layout::kArray:
+      return "array";
+  }
+  return "unknown";
+}
+
+const char* LayoutMethod(Layout layout) { return layout == Layout::kArray ? "array" : "pca"; }
+
+namespace {
+
+constexpr char kAxes[] = {'x', 'y', 'z'};
+
+std::string_view TrimSpaces(std::string_view s) {
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
+  return s;
+}
+
+// Shortens a user string for an error message, so a hostile 1 MiB field does not echo back whole.
+std::string Excerpt(std::string_view s) {
+  constexpr size_t kMax = 40;
+  if (s.size() <= kMax) return std::string(s);
+  return std::string(s.substr(0, kMax)) + "...";
+}
+
+// Parses "a12_x" style names. kind is 'a' or 'g'; returns false if the name has another form.
+bool ParseTriadColumn(std::string_view name, char* kind, int* index, int* axis) {
+  if (name.size() < 4 || (name[0] != 'a' && name[0] != 'g')) return false;
+  const size_t underscore = name.find('_');
+  if (underscore == std::string_view::npos || underscore < 2 || underscore + 2 != name.size()) {
+    return false;
+  }
+  const std::string_view digits = name.substr(1, underscore - 1);
+  if (digits.size() > 1 && digits[0] == '0') return false;  // "a01_x" is not a0/a1
+  int value = 0;
+  auto [ptr, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+  if (ec != std::errc() || ptr != digits.data() + digits.size() || value < 0) return false;
+  const char axis_char = name.back();
+  if (axis_char < 'x' || axis_char > 'z') return false;
+  *kind = name[0];
+  *index = value;
+  *axis = axis_char - 'x';
+  return true;
+}
+
+}  // namespace
+
+struct RecordingParser::Impl {
+  std::string file_name;
+  bool collect;
+  RecordingLimits limits;
+
+  Status error;  // sticky first error
+  bool finished = false;
+  std::string carry;     // an incomplete line from the previous chunk
+  int64_t line_no = 0;   // physical line number of the line being parsed
+  bool at_start = true;  // BOM check pending
+  bool have_header = false;
+  RecordingSummary summary;
+  std::vector<std::string_view> fields;  // reused per line
+  std::vector<std::string> unquoted;     // storage for fields that had quotes (see Split)
+
+  // pca
+  int first_sensor_col = 1;  // 1 (averaged) or 2 (raw)
+  size_t sensor_count = 0;
+  struct Position {
+    std::string label;
+    int64_t first_line;
+    int64_t static_rows = 0, moving_rows = 0, rows = 0;
+  };
+  std::vector<Position> positions;
+  std::unordered_map<std::string, size_t> position_index;
+  std::vector<double> moving_sum, static_sum;  // n*m, position-major (collect only)
+  std::vector<double> row_values;              // reused
+
+  // array: for each file column, the destination (-1 = t, otherwise index into the row layout
+  // a0_x..a{K-1}_z, g0_x..g{G-1}_z).
+  std::vector<int> column_target;
+  int accel_triads = 0, gyro_triads = 0;
+  bool has_t = false;
+  std::vector<double> array_values;  // N * (3K+3G), row-major (collect only)
+  std::vector<double> t_values;
+
+  Status Fail(std::string message, int64_t column = 0, std::string field = {}) {
+    Status s = Status::InvalidInput(std::move(message));
+    s.WithFile(file_name).WithLocation(line_no, column);
+    if (!field.empty()) s.WithField(std::move(field));
+    error = s;
+    return s;
+  }
+
+  // Splits `line` at commas into `fields`, honouring RFC 4180 double quotes within the line.
+  Status Split(std::string_view line) {
+    fields.clear();
+    unquoted.clear();
+    size_t pos = 0;
+    while (true) {
+      if (static_cast<int64_t>(fields.size()) >= limits.max_columns) {
+        return Fail("more than " + std::to_string(limits.max_columns) + " columns",
+                    static_cast<int64_t>(fields.size()) + 1);
+      }
+      const size_t start = pos;
+      size_t lead = start;
+      while (lead < line.size() && (line[lead] == ' ' || line[lead] == '\t')) ++lead;
+      if (lead < line.size() && line[lead] == '"') {
+        std::string value;
+        size_t i = lead + 1;
+        bool closed = false;
+        while (i < line.size()) {
+          if (line[i] == '"') {
+            if (i + 1 < line.size() && line[i + 1] == '"') {
+              value.push_back('"');
+              i += 2;
+              continue;
+            }
+            closed = true;
+            ++i;
+            break;
+          }
+          value.push_back(line[i++]);
+        }
+        if (!closed) {
+          return Fail("unterminated quoted field", static_cast<int64_t>(fields.size()) + 1);
+        }
+        while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
+        if (i < line.size() && line[i] != ',') {
+          return Fail("unexpected text after a quoted field",
+                      static_cast<int64_t>(fields.size()) + 1);
+        }
+        // Capacity is reserved for max_columns strings, so earlier views stay valid.
+        if (unquoted.capacity() < static_cast<size_t>(limits.max_columns)) {
+          unquoted.reserve(limits.max_columns);
+        }
+        unquoted.push_back(std::move(value));
+        fields.push_back(unquoted.back());
+        pos = i;
+      } else {
+        size_t comma = line.find(',', start);
+        if (comma == std::string_view::npos) comma = line.size();
+        fields.push_back(TrimSpaces(line.substr(start, comma - start)));
+        pos = comma;
+      }
+      if (pos >= line.size()) break;
+      ++pos;  // skip the comma
+    }
+    return Status::Ok();
+  }
+
+  Status ParseNumber(std::string_view text, int64_t column, const std::string& name,
+                     double* value) {
+    if (text.empty()) return Fail("empty cell in column '" + name + "'", column, name);
+    std::string_view digits = text;
+    if (digits.front() == '+') digits.remove_prefix(1);
+    const char* end = digits.data() + digits.size();
+    auto [ptr, ec] = std::from_chars(digits.data(), end, *value);
+    if (ec == std::errc::result_out_of_range) {
+      return Fail("number '" + Excerpt(text) + "' in column '" + name + "' is out of range", column,
+                  name);
+    }
+    if (ec != std::errc() || ptr != end) {
+      return Fail("'" + Excerpt(text) + "' in column '" + name + "' is not a number", column, name);
+    }
+    if (!std::isfinite(*value)) {
+      return Fail("'" + Excerpt(text) + "' in column '" + name +
+                      "' is not a finite number (NaN and Inf are not allowed)",
+                  column, name);
+    }
+    return Status::Ok();
+  }
+
+  Status Header() {
+    const auto& f = fields;
+    summary.columns.assign(f.begin(), f.end());
+    if (f.size() == 1 && f[0].empty()) return Fail("empty header line");
+    if (f[0] == "position") {
+      const bool raw = f.size() > 1 && f[1] == "phase";
+      summary.layout = raw ? Layout::kPcaRaw : Layout::kPcaAveraged;
+      first_sensor_col = raw ? 2 : 1;
+      std::unordered_map<std::string_view, size_t> seen;
+      for (size_t i = first_sensor_col; i < f.size(); ++i) {
+        const int64_t col = static_cast<int64_t>(i) + 1;
+        if (f[i].empty()) return Fail("empty sensor name in the header", col);
+        if (f[i] == "position" || f[i] == "phase") {
+          return Fail("'" + std::string(f[i]) + "' may only be the first" +
+                          (f[i] == "phase" ? std::string(" or second") : std::string()) + " column",
+                      col);
+        }
+        auto [it, inserted] = seen.emplace(f[i], i);
+        if (!inserted) {
+          return Fail("duplicate sensor name '" + Excerpt(f[i]) + "' (also column " +
+                          std::to_string(it->second + 1) + ")",
+                      col, std::string(f[i]));
+        }
+        summary.sensors.emplace_back(f[i]);
+      }
+      sensor_count = summary.sensors.size();
+      if (sensor_count == 0) {
+        return Fail(std::string("no sensor columns after '") + (raw ? "phase" : "position") + "'");
+      }
+      row_values.resize(sensor_count);
+      return Status::Ok();
+    }
+    // array layout: t and triad columns in any order.
+    summary.layout = Layout::kArray;
+    std::vector<std::array<int64_t, 3>> accel_cols, gyro_cols;  // file column per axis, 0 = none
+    int64_t t_col = 0;
+    for (size_t i = 0; i < f.size(); ++i) {
+      const int64_t col = static_cast<int64_t>(i) + 1;
+      const std::string name(f[i]);
+      if (name == "t") {
+        if (t_col)
+          return Fail("duplicate column 't' (also column " + std::to_string(t_col) + ")", col,
+                      name);
+        t_col = col;
+        continue;
+      }
+      char kind;
+      int index, axis;
+      if (!ParseTriadColumn(f[i], &kind, &index, &axis)) {
+        return Fail("unknown column '" + Excerpt(f[i]) +
+                        "': an array recording has columns t, aK_x, aK_y, aK_z (accelerometer "
+                        "triad K) and gJ_x, gJ_y, gJ_z (gyroscope triad J); a pca recording "
+                        "starts with 'position'",
+                    col, name);
+      }
+      if (index >= limits.max_columns) {
+        return Fail("triad index " + std::to_string(index) + " is too large", col, name);
+      }
+      auto& cols = kind == 'a' ? accel_cols : gyro_cols;
+      if (static_cast<int>(cols.size()) <= index) cols.resize(index + 1, {0, 0, 0});
+      if (cols[index][axis]) {
+        return Fail("duplicate column '" + name + "' (also column " +
+                        std::to_string(cols[index][axis]) + ")",
+                    col, name);
+      }
+      cols[index][axis] = col;
+    }
+    for (char kind : {'a', 'g'}) {
+      const auto& cols = kind == 'a' ? accel_cols : gyro_cols;
+      for (size_t k = 0; k < cols.size(); ++k) {
+        for (int axis = 0; axis < 3; ++axis) {
+          if (!cols[k][axis]) {
+            const std::string missing =
+                std::string(1, kind) + std::to_string(k) + "_" + kAxes[axis];
+            return Fail("missing column '" + missing + "': triads are numbered from 0 without " +
+                            "gaps and each needs _x, _y and _z",
+                        0, missing);
+          }
+        }
+      }
+    }
+    if (accel_cols.empty()) {
+      return Fail("no accelerometer columns (a0_x, a0_y, a0_z, ...)");
+    }
+    accel_triads = static_cast<int>(accel_cols.size());
+    gyro_triads = static_cast<int>(gyro_cols.size());
+    has_t = t_col != 0;
+    column_target.assign(f.size(), -1);
+    for (int k = 0; k < accel_triads; ++k) {
+      for (int axis = 0; axis < 3; ++axis) column_target[accel_cols[k][axis] - 1] = 3 * k + axis;
+    }
+    for (int j = 0; j < gyro_triads; ++j) {
+      for (int axis = 0; axis < 3; ++axis) {
+        column_target[gyro_cols[j][axis] - 1] = 3 * accel_triads + 3 * j + axis;
+      }
+    }
+    for (int k = 0; k < accel_triads; ++k) summary.sensors.push_back("a" + std::to_string(k));
+    for (int j = 0; j < gyro_triads; ++j) summary.sensors.push_back("g" + std::to_string(j));
+    row_values.resize(3 * (accel_triads + gyro_triads));
+    return Status::Ok();
+  }
+
+  Status PcaRow() {
+    const auto& f = fields;
+    const size_t expected = first_sensor_col + sensor_count;
+    if (f.size() != expected) {
+      return Fail("row has " + std::to_string(f.size()) + " fields, the header has " +
+                      std::to_string(expected),
+                  static_cast<int64_t>(std::min(f.size(), expected)) + 1);
+    }
+    if (f[0].empty()) return Fail("empty position label", 1, "position");
+    bool moving = true;
+    if (first_sensor_col == 2) {
+      if (f[1] == "static") {
+        moving = false;
+      } else if (f[1] != "moving") {
+        return Fail("phase must be 'static' or 'moving', not '" + Excerpt(f[1]) + "'", 2, "phase");
+      }
+    }
+    for (size_t i = 0; i < sensor_count; ++i) {
+      const size_t col = first_sensor_col + i;
+      Status s =
+          ParseNumber(f[col], static_cast<int64_t>(col) + 1, summary.sensors[i], &row_values[i]);
+      if (!s.ok()) return s;
+    }
+    auto it = position_index.find(std::string(f[0]));
+    size_t p;
+    if (it == position_index.end()) {
+      if (static_cast<int64_t>(positions.size()) >= limits.max_positions) {
+        return Fail("more than " + std::to_string(limits.max_positions) + " distinct positions", 1,
+                    "position");
+      }
+      p = positions.size();
+      position_index.emplace(std::string(f[0]), p);
+      positions.push_back({std::string(f[0]), line_no});
+      if (collect) {
+        moving_sum.resize(moving_sum.size() + sensor_count, 0.0);
+        static_sum.resize(static_sum.size() + sensor_count, 0.0);
+      }
+    } else {
+      p = it->second;
+    }
+    Position& pos = positions[p];
+    ++pos.rows;
+    (moving ? pos.moving_rows : pos.static_rows)++;
+    if (collect) {
+      double* sum = (moving ? moving_sum.data() : static_sum.data()) + p * sensor_count;
+      for (size_t i = 0; i < sensor_count; ++i) sum[i] += row_values[i];
+    }
+    return Status::Ok();
+  }
+
+  Status ArrayRow() {
+    const auto& f = fields;
+    if (f.size() != column_target.size()) {
+      return Fail("row has " + std::to_string(f.size()) + " fields, the header has " +
+                      std::to_string(column_target.size()),
+                  static_cast<int64_t>(std::min(f.size(), column_target.size())) + 1);
+    }
+    double t = 0;
+    for (size_t i = 0; i < f.size(); ++i) {
+      const int target = column_target[i];
+      double* dst = target < 0 ? &t : &row_values[target];
+      Status s = ParseNumber(f[i], static_cast<int64_t>(i) + 1, summary.columns[i], dst);
+      if (!s.ok()) return s;
+    }
+    if (collect) {
+      array_values.insert(array_values.end(), row_values.begin(), row_values.end());
+      if (has_t) t_values.push_back(t);
+    }
+    return Status::Ok();
+  }
+
+  Status Line(std::string_view line) {
+    ++line_no;
+    if (at_start) {
+      at_start = false;
+      if (line.size() >= 3 && line.substr(0, 3) == "\xEF\xBB\xBF") line.remove_prefix(3);
+    }
+    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    if (!line.empty() && line.front() == '#') return Status::Ok();
+    if (TrimSpaces(line).empty()) return Status::Ok();
+    Status s = Split(line);
+    if (!s.ok()) return s;
+    if (!have_header) {
+      have_header = true;
+      return Header();
+    }
+    ++summary.rows;
+    return summary.layout == Layout::kArray ? ArrayRow() : PcaRow();
+  }
+
+  Status Feed(std::string_view chunk) {
+    if (!error.ok()) return error;
+    if (finished) return Status::Internal("RecordingParser::Feed after Finish");
+    while (!chunk.empty()) {
+      const size_t nl = chunk.find('\n');
+      if (nl == std::string_view::npos) {
+        if (static_cast<int64_t>(carry.size() + chunk.size()) > limits.max_line_bytes) {
+          ++line_no;
+          return Fail("line longer than " + std::to_string(limits.max_line_bytes) + " bytes");
+        }
+        carry.append(chunk);
+        return Status::Ok();
+      }
+      std::string_view piece = chunk.substr(0, nl);
+      chunk.remove_prefix(nl + 1);
+      if (static_cast<int64_t>(carry.size() + piece.size()) > limits.max_line_bytes) {
+        ++line_no;
+        return Fail("line longer than " + std::to_string(limits.max_line_bytes) + " bytes");
+      }
+      Status s;
+      if (carry.empty()) {
+        s = Line(piece);
+      } else {
+        carry.append(piece);
+        s = Line(carry);
+        carry.clear();
+      }
+      if (!s.ok()) return s;
+    }
+    return Status::Ok();
+  }
+
+  Status Finish() {
+    if (!error.ok()) return error;
+    if (finished) return Status::Ok();
+    if (!carry.empty()) {
+      std::string last = std::move(carry);
+      carry.clear();
+      Status s = Line(last);
+      if (!s.ok()) return s;
+    }
+    finished = true;
+    if (!have_header) {
+      Status s = Status::InvalidInput("empty recording: no header line");
+      s.WithFile(file_name);
+      return error = s;
+    }
+    if (summary.rows == 0) {
+      Status s = Status::InvalidInput("no data rows after the header");
+      s.WithFile(file_name).WithLocation(line_no, 0);
+      return error = s;
+    }
+    if (summary.layout == Layout::kPcaRaw) {
+      for (const Position& p : positions) {
+        if (p.static_rows == 0 || p.moving_rows == 0) {
+          Status s = Status::InvalidInput(
+              "position '" + Excerpt(p.label) + "' has no " +
+              (p.static_rows == 0 ? "static" : "moving") +
+              " rows: the raw layout needs both (static: the bias b'; moving: m')");
+          s.WithFile(file_name).WithLocation(p.first_line, 1).WithField("position");
+          return error = s;
+        }
+      }
+    }
+    if (summary.layout != Layout::kArray)
+      summary.positions = static_cast<int64_t>(positions.size());
+    return Status::Ok();
+  }
+};
+
+RecordingParser::RecordingParser(std::string file_name, bool collect, RecordingLimits limits)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->file_name = std::move(file_name);
+  impl_->collect = collect;
+  impl_->limits = limits;
+}
+
+RecordingParser::~RecordingParser() = default;
+
+Status RecordingParser::Feed(std::string_view chunk) { return impl_->Feed(chunk); }
+Status RecordingParser::Finish() { return impl_->Finish(); }
+const RecordingSummary& RecordingParser::summary() const { return impl_->summary; }
+
+Status RecordingParser::TakePca(PcaRecording* out) {
+  Impl& d = *impl_;
+  if (!d.finished || !d.error.ok() || !d.collect) {
+    return Status::Internal("TakePca needs a successful Finish() of a collecting parser");
+  }
+  if (d.summary.layout == Layout::kArray) {
+    return Status::InvalidInput(
+               "this is an array recording (columns aK_x.., gJ_x..), not a pca recording "
+               "(first column 'position')")
+        .WithFile(d.file_name);
+  }
+  const size_t m = d.sensor_count, n = d.positions.size();
+  out->sensor_names = d.summary.sensors;
+  out->position_labels.clear();
+  out->raw = d.summary.layout == Layout::kPcaRaw;
+  out->readings.resize(m, n);
+  out->rows_per_position.clear();
+  out->static_rows.clear();
+  out->moving_rows.clear();
+  if (out->raw)
+    out->static_means.resize(m, n);
+  else
+    out->static_means.resize(0, 0);
+  for (size_t p = 0; p < n; ++p) {
+    const Impl::Position& pos = d.positions[p];
+    out->position_labels.push_back(pos.label);
+    out->rows_per_position.push_back(pos.rows);
+    for (size_t i = 0; i < m; ++i) {
+      const double moving = d.moving_sum[p * m + i] / static_cast<double>(pos.moving_rows);
+      if (out->raw) {
+        const double bias = d.static_sum[p * m + i] / static_cast<double>(pos.static_rows);
+        out->static_means(i, p) = bias;
+        out->readings(i, p) = moving - bias;
+      } else {
+        out->readings(i, p) = moving;
+      }
+    }
+    if (out->raw) {
+      out->static_rows.push_back(pos.static_rows);
+      out->moving_rows.push_back(pos.moving_rows);
+    }
+  }
+  return Status::Ok();
+}
+
+Status RecordingParser::TakeArray(ArrayRecording* out) {
+  Impl& d = *impl_;
+  if (!d.finished || !d.error.ok() || !d.collect) {
+    return Status::Internal("TakeArray needs a successful Finish() of a collecting parser");
+  }
+  if (d.summary.layout != Layout::kArray) {
+    return Status::InvalidInput(
+               "this is a pca recording (first column 'position'), not an array recording "
+               "(columns aK_x.., gJ_x..)")
+        .WithFile(d.file_name);
+  }
+  const int64_t rows = d.summary.rows;
+  const int width = 3 * (d.accel_triads + d.gyro_triads);
+  Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> all(
+      d.array_values.data(), rows, width);
+  out->accel = all.leftCols(3 * d.accel_triads);
+  out->gyro = all.rightCols(3 * d.gyro_triads);
+  out->accel_names.assign(d.summary.sensors.begin(), d.summary.sensors.begin() + d.accel_triads);
+  out->gyro_names.assign(d.summary.sensors.begin() + d.accel_triads, d.summary.sensors.end());
+  if (d.has_t) {
+    out->t = Eigen::Map<const Eigen::VectorXd>(d.t_values.data(), rows);
+  } else {
+    out->t.resize(0);
+  }
+  std::vector<double>().swap(d.array_values);
+  return Status::Ok();
+}
+
+Status ParseRecording(std::string_view bytes, RecordingParser* parser) {
+  Status s = parser->Feed(bytes);
+  if (!s.ok()) return s;
+  return parser->Finish();
+}
+
+}  // namespace calibd::server

@@ -1,0 +1,236 @@
+// Tests of the strict CSV reader for SPEC §2 recordings: both pca layouts, the array layout,
+// chunk boundaries, and every bad-input case naming line and column.
+#include "server/recording.h"
+
+#include <gtest/gtest.h>
+
+#include <string>
+
+namespace calibd::server {
+namespace {
+
+Status ParseAll(const std::string& text, RecordingParser* parser) {
+  return ParseRecording(text, parser);
+}
+
+// Feeds `text` one byte at a time: the result must not depend on chunk boundaries.
+Status ParseBytewise(const std::string& text, RecordingParser* parser) {
+  for (char c : text) {
+    Status s = parser->Feed(std::string_view(&c, 1));
+    if (!s.ok()) return s;
+  }
+  return parser->Finish();
+}
+
+TEST(RecordingParser, ReadsAveragedPcaLayoutWithCommentsCrlfAndBom) {
+  const std::string text =
+      "\xEF\xBB\xBF# recorded on line 3\r\n"
+      "position,s1,s2,s3\r\n"
+      "p1,1.5,-2e-3,+3\r\n"
+      "# a comment between rows\r\n"
+      "p2, 4 ,5.0E1,6\r\n";
+  RecordingParser parser("rec.csv", true);
+  ASSERT_TRUE(ParseAll(text, &parser).ok());
+  EXPECT_EQ(parser.summary().layout, Layout::kPcaAveraged);
+  EXPECT_EQ(parser.summary().rows, 2);
+  EXPECT_EQ(parser.summary().positions, 2);
+  PcaRecording rec;
+  ASSERT_TRUE(parser.TakePca(&rec).ok());
+  ASSERT_EQ(rec.readings.rows(), 3);
+  ASSERT_EQ(rec.readings.cols(), 2);
+  EXPECT_EQ(rec.sensor_names, (std::vector<std::string>{"s1", "s2", "s3"}));
+  EXPECT_EQ(rec.position_labels, (std::vector<std::string>{"p1", "p2"}));
+  EXPECT_DOUBLE_EQ(rec.readings(0, 0), 1.5);
+  EXPECT_DOUBLE_EQ(rec.readings(1, 0), -2e-3);
+  EXPECT_DOUBLE_EQ(rec.readings(2, 0), 3);
+  EXPECT_DOUBLE_EQ(rec.readings(1, 1), 50);
+  EXPECT_FALSE(rec.raw);
+}
+
+TEST(RecordingParser, RawLayoutSubtractsEachPositionsStaticMean) {
+  const std::string text =
+      "position,phase,s1,s2\n"
+      "A,static,0.1,0.2\n"
+      "A,static,0.3,0.2\n"
+      "A,moving,1.2,0.2\n"
+      "B,moving,0.2,2.2\n"
+      "B,static,0.2,0.1\n"
+      "B,moving,0.2,2.4\n";
+  RecordingParser parser("raw.csv", true);
+  ASSERT_TRUE(ParseAll(text, &parser).ok());
+  EXPECT_EQ(parser.summary().layout, Layout::kPcaRaw);
+  PcaRecording rec;
+  ASSERT_TRUE(parser.TakePca(&rec).ok());
+  EXPECT_TRUE(rec.raw);
+  EXPECT_NEAR(rec.readings(0, 0), 1.2 - 0.2, 1e-15);
+  EXPECT_NEAR(rec.readings(1, 0), 0.0, 1e-15);
+  EXPECT_NEAR(rec.readings(1, 1), 2.3 - 0.1, 1e-15);
+  EXPECT_NEAR(rec.static_means(0, 0), 0.2, 1e-15);
+  EXPECT_EQ(rec.static_rows, (std::vector<int64_t>{2, 1}));
+  EXPECT_EQ(rec.moving_rows, (std::vector<int64_t>{1, 2}));
+}
+
+TEST(RecordingParser, ResultDoesNotDependOnChunkBoundaries) {
+  std::string text = "position,phase,\"s 1\",s2\n";
+  for (int p = 0; p < 20; ++p) {
+    text += "p" + std::to_string(p) + ",static,0." + std::to_string(p) + ",1\n";
+    text += "p" + std::to_string(p) + ",moving,1." + std::to_string(p) + ",2e" +
+            std::to_string(p % 3) + "\r\n";
+  }
+  RecordingParser whole("a.csv", true), bytewise("a.csv", true);
+  ASSERT_TRUE(ParseAll(text, &whole).ok());
+  ASSERT_TRUE(ParseBytewise(text, &bytewise).ok());
+  PcaRecording a, b;
+  ASSERT_TRUE(whole.TakePca(&a).ok());
+  ASSERT_TRUE(bytewise.TakePca(&b).ok());
+  EXPECT_EQ(a.sensor_names[0], "s 1");
+  EXPECT_EQ(a.readings, b.readings);
+  EXPECT_EQ(a.position_labels, b.position_labels);
+}
+
+TEST(RecordingParser, ReadsArrayColumnsInAnyOrder) {
+  const std::string text =
+      "g0_z,a1_x,a1_y,a1_z,t,a0_x,a0_y,a0_z,g0_x,g0_y\n"
+      "9,4,5,6,0.5,1,2,3,7,8\n"
+      "19,14,15,16,0.6,11,12,13,17,18\n";
+  RecordingParser parser("arr.csv", true);
+  ASSERT_TRUE(ParseAll(text, &parser).ok());
+  EXPECT_EQ(parser.summary().layout, Layout::kArray);
+  EXPECT_EQ(parser.summary().sensors, (std::vector<std::string>{"a0", "a1", "g0"}));
+  ArrayRecording rec;
+  ASSERT_TRUE(parser.TakeArray(&rec).ok());
+  ASSERT_EQ(rec.accel.rows(), 2);
+  ASSERT_EQ(rec.accel.cols(), 6);
+  ASSERT_EQ(rec.gyro.cols(), 3);
+  for (int j = 0; j < 6; ++j) EXPECT_DOUBLE_EQ(rec.accel(0, j), j + 1);
+  for (int j = 0; j < 3; ++j) EXPECT_DOUBLE_EQ(rec.gyro(1, j), 17 + j);
+  ASSERT_EQ(rec.t.size(), 2);
+  EXPECT_DOUBLE_EQ(rec.t(1), 0.6);
+}
+
+TEST(RecordingParser, ArrayWithoutTimeColumnHasEmptyT) {
+  RecordingParser parser("arr.csv", true);
+  ASSERT_TRUE(ParseAll("a0_x,a0_y,a0_z\n1,2,3\n", &parser).ok());
+  ArrayRecording rec;
+  ASSERT_TRUE(parser.TakeArray(&rec).ok());
+  EXPECT_EQ(rec.t.size(), 0);
+  EXPECT_EQ(rec.gyro.cols(), 0);
+}
+
+struct BadCase {
+  const char* name;
+  std::string text;
+  int64_t line;
+  int64_t column;
+  const char* message_part;
+};
+
+class RecordingParserRejects : public ::testing::TestWithParam<BadCase> {};
+
+TEST_P(RecordingParserRejects, WithLineColumnAndReason) {
+  const BadCase& c = GetParam();
+  for (bool bytewise : {false, true}) {
+    RecordingParser parser("bad.csv", true);
+    Status s = bytewise ? ParseBytewise(c.text, &parser) : ParseAll(c.text, &parser);
+    ASSERT_FALSE(s.ok()) << c.name;
+    EXPECT_EQ(s.code(), StatusCode::kInvalidInput) << c.name;
+    EXPECT_EQ(s.file(), "bad.csv");
+    EXPECT_EQ(s.line(), c.line) << c.name << ": " << s.ToString();
+    EXPECT_EQ(s.column(), c.column) << c.name << ": " << s.ToString();
+    EXPECT_NE(s.message().find(c.message_part), std::string::npos) << c.name << ": " << s.message();
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    BadInput, RecordingParserRejects,
+    ::testing::Values(
+        BadCase{"nan", "position,s1,s2\np,1,nan\n", 2, 3, "not a finite number"},
+        BadCase{"inf", "position,s1,s2\np,-inf,1\n", 2, 2, "not a finite number"},
+        BadCase{"huge exponent", "position,s1\np,1e999\n", 2, 2, "out of range"},
+        BadCase{"empty cell", "position,s1,s2\np,,1\n", 2, 2, "empty cell in column 's1'"},
+        BadCase{"text", "position,s1,s2\np,1,abc\n", 2, 3, "not a number"},
+        BadCase{"trailing junk", "position,s1\np,1.5x\n", 2, 2, "not a number"},
+        BadCase{"short row", "position,s1,s2\np,1,2\nq,1\n", 3, 3, "row has 2 fields"},
+        BadCase{"long row", "position,s1\np,1,2\n", 2, 3, "row has 3 fields"},
+        BadCase{"duplicate sensor", "position,s1,s1\n", 1, 3, "duplicate sensor name 's1'"},
+        BadCase{"empty sensor name", "position,s1,,s3\n", 1, 3, "empty sensor name"},
+        BadCase{"no sensors", "position\n", 1, 0, "no sensor columns"},
+        BadCase{"bad phase", "position,phase,s1\np,rest,1\n", 2, 2, "phase must be"},
+        BadCase{"missing moving", "position,phase,s1\np,static,1\nq,static,1\nq,moving,2\n", 2, 1,
+                "position 'p' has no moving rows"},
+        BadCase{"missing static", "position,phase,s1\np,moving,1\n", 2, 1, "no static rows"},
+        BadCase{"empty label", "position,s1\n,1\n", 2, 1, "empty position label"},
+        BadCase{"unknown array column", "a0_x,a0_y,a0_z,temp\n", 1, 4, "unknown column 'temp'"},
+        BadCase{"incomplete triad", "a0_x,a0_y,a0_z,a1_x,a1_y\n", 1, 0, "missing column 'a1_z'"},
+        BadCase{"triad gap", "a0_x,a0_y,a0_z,a2_x,a2_y,a2_z\n", 1, 0, "missing column 'a1_x'"},
+        BadCase{"duplicate array column", "a0_x,a0_y,a0_z,a0_x\n", 1, 4, "duplicate column"},
+        BadCase{"gyro only", "g0_x,g0_y,g0_z\n", 1, 0, "no accelerometer columns"},
+        BadCase{"unterminated quote", "position,\"s1\n", 1, 2, "unterminated quoted field"},
+        BadCase{"no rows", "# only a comment\nposition,s1\n", 2, 0, "no data rows"},
+        BadCase{"empty file", "", 0, 0, "no header line"}),
+    [](const ::testing::TestParamInfo<BadCase>& info) {
+      std::string name = info.param.name;
+      for (char& ch : name) {
+        if (!isalnum(static_cast<unsigned char>(ch))) ch = '_';
+      }
+      return name;
+    });
+
+TEST(RecordingParser, RejectsOverlongLineWithoutBufferingIt) {
+  RecordingLimits limits;
+  limits.max_line_bytes = 1000;
+  RecordingParser parser("big.csv", false, limits);
+  ASSERT_TRUE(parser.Feed("position,s1\n").ok());
+  std::string chunk(600, '1');
+  ASSERT_TRUE(parser.Feed("p,").ok());
+  ASSERT_TRUE(parser.Feed(chunk).ok());
+  Status s = parser.Feed(chunk);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.line(), 2);
+  EXPECT_NE(s.message().find("longer than 1000 bytes"), std::string::npos);
+  // The error is sticky.
+  EXPECT_FALSE(parser.Feed("\n").ok());
+  EXPECT_FALSE(parser.Finish().ok());
+}
+
+TEST(RecordingParser, RejectsTooManyColumns) {
+  RecordingLimits limits;
+  limits.max_columns = 10;
+  RecordingParser parser("wide.csv", false, limits);
+  std::string header = "position";
+  for (int i = 0; i < 20; ++i) header += ",s" + std::to_string(i);
+  Status s = ParseAll(header + "\n", &parser);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.line(), 1);
+  EXPECT_EQ(s.column(), 11);
+}
+
+TEST(RecordingParser, ValidatingParserKeepsNoNumbersButSummarises) {
+  RecordingParser parser("v.csv", false);
+  ASSERT_TRUE(ParseAll("position,s1\na,1\nb,2\na,3\n", &parser).ok());
+  EXPECT_EQ(parser.summary().rows, 3);
+  EXPECT_EQ(parser.summary().positions, 2);
+  PcaRecording rec;
+  EXPECT_EQ(parser.TakePca(&rec).code(), StatusCode::kInternal);
+}
+
+TEST(RecordingParser, AveragesRepeatedRowsOfOnePosition) {
+  RecordingParser parser("v.csv", true);
+  ASSERT_TRUE(ParseAll("position,s1\na,1\nb,2\na,3\n", &parser).ok());
+  PcaRecording rec;
+  ASSERT_TRUE(parser.TakePca(&rec).ok());
+  EXPECT_DOUBLE_EQ(rec.readings(0, 0), 2.0);
+  EXPECT_EQ(rec.rows_per_position, (std::vector<int64_t>{2, 1}));
+}
+
+TEST(RecordingParser, TakingTheWrongLayoutIsAClearError) {
+  RecordingParser parser("v.csv", true);
+  ASSERT_TRUE(ParseAll("position,s1\na,1\n", &parser).ok());
+  ArrayRecording rec;
+  Status s = parser.TakeArray(&rec);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+  EXPECT_NE(s.message().find("not an array recording"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace calibd::server
