@@ -1,0 +1,332 @@
+#include "web/svg_plot.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "web/html.h"
+
+namespace calibd::web {
+namespace {
+
+void ExpectTicks(const std::vector<double>& got, const std::vector<double>& want) {
+  ASSERT_EQ(got.size(), want.size());
+  for (size_t i = 0; i < got.size(); ++i) {
+    EXPECT_NEAR(got[i], want[i], std::fabs(want[i]) * 1e-12 + 1e-15) << "tick " << i;
+  }
+}
+
+size_t Count(const std::string& s, const std::string& needle) {
+  size_t n = 0;
+  for (size_t p = s.find(needle); p != std::string::npos; p = s.find(needle, p + 1)) ++n;
+  return n;
+}
+
+// A minimal well-formedness check: one <svg> root that is closed, balanced angle brackets,
+// no NaN/inf leaking into coordinates.
+void ExpectValidSvg(const std::string& svg, const std::string& name) {
+  EXPECT_EQ(svg.rfind("<svg ", 0), 0u) << svg.substr(0, 80);
+  EXPECT_EQ(svg.substr(svg.size() - 6), "</svg>");
+  EXPECT_EQ(Count(svg, "<svg "), 1u);
+  EXPECT_EQ(Count(svg, "<"), Count(svg, ">"));
+  EXPECT_NE(svg.find("class=\"plot plot-" + name + "\""), std::string::npos);
+  EXPECT_NE(svg.find("role=\"img\""), std::string::npos);
+  EXPECT_NE(svg.find("viewBox=\"0 0 "), std::string::npos);
+  EXPECT_NE(svg.find("<title>"), std::string::npos);
+  EXPECT_EQ(svg.find("nan"), std::string::npos);
+  EXPECT_EQ(svg.find("inf"), std::string::npos);
+}
+
+TEST(NiceTicks, UnitIntervalStepsByTwoTenths) {
+  ExpectTicks(NiceLinearTicks(0, 1, 5), {0, 0.2, 0.4, 0.6, 0.8, 1.0});
+  EXPECT_DOUBLE_EQ(NiceStep(0, 1, 5), 0.2);
+}
+
+TEST(NiceTicks, SmallRangeUsesMillesimalSteps) {
+  ExpectTicks(NiceLinearTicks(0.0013, 0.0071, 5), {0.002, 0.003, 0.004, 0.005, 0.006, 0.007});
+  EXPECT_EQ(FormatTick(0.003, 0.001), "0.003");
+}
+
+TEST(NiceTicks, StepsAreOneTwoOrFiveTimesAPowerOfTen) {
+  for (double span : {0.37, 1.0, 2.2, 7.9, 13.0, 480.0, 6.3e-6, 1e7}) {
+    const double step = NiceStep(-span / 3, span, 5);
+    const double mant = step / std::pow(10.0, std::floor(std::log10(step) + 1e-12));
+    EXPECT_TRUE(std::fabs(mant - 1) < 1e-9 || std::fabs(mant - 2) < 1e-9 ||
+                std::fabs(mant - 5) < 1e-9)
+        << span << " -> " << step;
+    const auto ticks = NiceLinearTicks(-span / 3, span, 5);
+    EXPECT_GE(ticks.size(), 3u);
+    EXPECT_LE(ticks.size(), 12u);
+  }
+}
+
+TEST(NiceTicks, NegativeRangeHasExactZeroAndNoMinusZeroLabel) {
+  const auto ticks = NiceLinearTicks(-0.3, 0.3, 6);
+  bool zero = false;
+  for (double t : ticks) zero |= (t == 0 && !std::signbit(t));
+  EXPECT_TRUE(zero);
+  EXPECT_EQ(FormatTick(-0.0, 0.1), "0");
+  EXPECT_EQ(FormatTick(-1e-18, 0.1), "0");
+  EXPECT_EQ(FormatTick(-0.2, 0.1), "-0.2");
+}
+
+TEST(NiceTicks, DegenerateRangesGiveNoTicks) {
+  EXPECT_TRUE(NiceLinearTicks(1, 1).empty());
+  EXPECT_TRUE(NiceLinearTicks(0, std::numeric_limits<double>::quiet_NaN()).empty());
+  EXPECT_TRUE(NiceLinearTicks(0, std::numeric_limits<double>::infinity()).empty());
+  ExpectTicks(NiceLinearTicks(1, 0, 5), {0, 0.2, 0.4, 0.6, 0.8, 1.0});  // swapped
+}
+
+TEST(LogTicksTest, OneTickPerDecadeFromMicroToHundred) {
+  ExpectTicks(LogTicks(1e-6, 1e2), {1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1, 10, 100});
+  EXPECT_EQ(FormatTick(1e-6, 0), "1e-6");
+  EXPECT_EQ(FormatTick(1e-2, 0), "0.01");
+  EXPECT_EQ(FormatTick(100, 0), "100");
+  EXPECT_EQ(FormatTick(1e8, 0), "1e8");
+}
+
+TEST(LogTicksTest, ManyDecadesAreThinnedAndFewGetTwoAndFive) {
+  const auto many = LogTicks(1e-20, 1e10, 9);
+  EXPECT_LE(many.size(), 9u);
+  EXPECT_GE(many.size(), 5u);
+  ExpectTicks(LogTicks(1, 10), {1, 2, 5, 10});
+  EXPECT_TRUE(LogTicks(0, 10).empty());
+  EXPECT_TRUE(LogTicks(-1, 10).empty());
+}
+
+TEST(FormatTickTest, LargeAndTinyLinearValuesUseExponents) {
+  EXPECT_EQ(FormatTick(2.5e8, 5e7), "2.5e8");
+  EXPECT_EQ(FormatTick(2e-6, 1e-6), "2e-6");
+  EXPECT_EQ(FormatTick(1500, 500), "1500");
+}
+
+TEST(Decimation, KeepsExtremesAndShrinksLargeSeries) {
+  const size_t n = 100000;
+  std::vector<double> x(n), y(n);
+  for (size_t i = 0; i < n; ++i) {
+    x[i] = static_cast<double>(i);
+    y[i] = std::sin(i * 0.001);
+  }
+  y[31337] = 42.0;   // a single-sample spike
+  y[77777] = -17.0;  // and a dip
+  const auto keep = DecimateMinMax(x, y, 2000);
+  EXPECT_LE(keep.size(), 2002u);
+  bool spike = false, dip = false;
+  for (size_t i : keep) {
+    spike |= i == 31337;
+    dip |= i == 77777;
+  }
+  EXPECT_TRUE(spike);
+  EXPECT_TRUE(dip);
+  EXPECT_EQ(keep.front(), 0u);
+  EXPECT_EQ(keep.back(), n - 1);
+  for (size_t k = 1; k < keep.size(); ++k) EXPECT_LT(keep[k - 1], keep[k]);
+}
+
+TEST(Decimation, DropsNonFinitePointsAndKeepsSmallSeriesWhole) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const auto keep = DecimateMinMax({0, 1, 2, 3}, {1, nan, 3, INFINITY}, 100);
+  ASSERT_EQ(keep.size(), 2u);
+  EXPECT_EQ(keep[0], 0u);
+  EXPECT_EQ(keep[1], 2u);
+}
+
+TEST(XYPlot, HundredThousandPointSeriesStaysSmallAndKeepsPeak) {
+  const size_t n = 100000;
+  Series s;
+  s.label = "|omega|";
+  s.x.resize(n);
+  s.y.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    s.x[i] = static_cast<double>(i);
+    s.y[i] = 30 + std::sin(i * 0.01);
+  }
+  s.y[54321] = 99.5;
+  PlotOptions o;
+  o.name = "excitation";
+  o.title = "Excitation";
+  o.x.title = "sample";
+  o.y.title = "|omega| (rad/s)";
+  const std::string svg = RenderXYPlot(o, {s});
+  ExpectValidSvg(svg, "excitation");
+  EXPECT_LT(svg.size(), 100u * 1024u);
+  // The peak is kept: the y axis reaches 100 (its nice upper end).
+  EXPECT_NE(svg.find(">100</text>"), std::string::npos);
+  EXPECT_NE(svg.find("decimated"), std::string::npos);
+}
+
+TEST(XYPlot, EmptyInputGivesValidSvgSayingNoData) {
+  PlotOptions o;
+  o.name = "empty";
+  const std::string svg = RenderXYPlot(o, {});
+  ExpectValidSvg(svg, "empty");
+  EXPECT_NE(svg.find("no data"), std::string::npos);
+  Series s;  // a series with no points
+  ExpectValidSvg(RenderXYPlot(o, {s}), "empty");
+}
+
+TEST(XYPlot, OnePointAndAllEqualValuesDoNotCollapseTheAxis) {
+  PlotOptions o;
+  o.name = "one";
+  Series one;
+  one.x = {3};
+  one.y = {7};
+  const std::string a = RenderXYPlot(o, {one});
+  ExpectValidSvg(a, "one");
+  EXPECT_NE(a.find("<circle"), std::string::npos);  // a lone point is drawn as a marker
+  Series flat;
+  flat.x = {0, 1, 2, 3};
+  flat.y = {5, 5, 5, 5};
+  o.name = "flat";
+  ExpectValidSvg(RenderXYPlot(o, {flat}), "flat");
+  o.y.type = ScaleType::kLog10;
+  o.name = "flat-log";
+  ExpectValidSvg(RenderXYPlot(o, {flat}), "flat-log");
+  flat.y = {0, 0, 0, 0};
+  o.y.type = ScaleType::kLinear;
+  o.name = "zeros";
+  ExpectValidSvg(RenderXYPlot(o, {flat}), "zeros");
+}
+
+TEST(XYPlot, NonFiniteValuesAreSkippedWithANote) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  Series s;
+  s.x = {0, 1, 2, 3, 4};
+  s.y = {1, nan, INFINITY, -INFINITY, 2};
+  PlotOptions o;
+  o.name = "nonfinite";
+  const std::string svg = RenderXYPlot(o, {s});
+  ExpectValidSvg(svg, "nonfinite");
+  EXPECT_NE(svg.find("3 non-finite point(s) not shown"), std::string::npos);
+}
+
+TEST(XYPlot, NonPositiveValuesOnLogAxisAreSkippedWithANote) {
+  Series s;
+  s.x = {1, 2, 3, 4, 5};
+  s.y = {10, 1, 0, -1, 1e-4};
+  s.marker = Marker::kCircle;
+  PlotOptions o;
+  o.name = "singular-values";
+  o.y.type = ScaleType::kLog10;
+  const std::string svg = RenderXYPlot(o, {s});
+  ExpectValidSvg(svg, "singular-values");
+  EXPECT_NE(svg.find("2 zero or negative value(s) not shown on the log axis"), std::string::npos);
+  EXPECT_EQ(Count(svg, "<circle"), 3u);
+  EXPECT_NE(svg.find(">1e-4</text>"), std::string::npos);
+  EXPECT_NE(svg.find(">10</text>"), std::string::npos);
+}
+
+TEST(XYPlot, TextIsEscapedEverywhere) {
+  const std::string evil = "<script>alert(1)</script>\"><img src=x onerror=alert(1)>";
+  Series s;
+  s.label = evil;
+  s.x = {0, 1};
+  s.y = {0, 1};
+  s.point_labels = {evil, evil};
+  PlotOptions o;
+  o.name = evil;
+  o.title = evil;
+  o.description = evil;
+  o.x.title = evil;
+  o.y.title = evil;
+  o.notes = {evil};
+  o.ref_lines = {{true, 0.5, evil, true}};
+  const std::string svg = RenderXYPlot(o, {s});
+  EXPECT_EQ(svg.find("<script"), std::string::npos);
+  EXPECT_EQ(svg.find("<img"), std::string::npos);
+  EXPECT_NE(svg.find("&quot;&gt;&lt;img"), std::string::npos);
+  BarSeries b{evil, {1, 2}, {}, -1};
+  const std::string bars = RenderBarChart(o, {evil, evil}, {b, b});
+  EXPECT_EQ(bars.find("<script"), std::string::npos);
+  EXPECT_EQ(bars.find("<img"), std::string::npos);
+  Histogram h = MakeHistogram({1, 2, 3}, 3, evil);
+  const std::string hist = RenderHistogram(o, {h});
+  EXPECT_EQ(hist.find("<script"), std::string::npos);
+  EXPECT_EQ(hist.find("<img"), std::string::npos);
+}
+
+TEST(XYPlot, EllipsesErrorBarsLegendAndEqualAspect) {
+  Series nominal, est;
+  nominal.label = "nominal";
+  nominal.x = {0, 6.3, 0, 6.3};
+  nominal.y = {0, 0, 6.3, 6.3};
+  nominal.line = false;
+  nominal.marker = Marker::kOpenCircle;
+  est = nominal;
+  est.label = "estimated";
+  est.marker = Marker::kCross;
+  est.ellipses = {{0.01, 0.002, 0.02}, {0.01, 0, 0.01}, {0.04, -0.01, 0.01}, {0, 0, 0}};
+  est.y_err = {0.1, 0.1, 0.1, 0.1};
+  PlotOptions o;
+  o.name = "positions-xy";
+  o.equal_aspect = true;
+  o.x.title = "x (mm)";
+  o.y.title = "y (mm)";
+  const std::string svg = RenderXYPlot(o, {nominal, est});
+  ExpectValidSvg(svg, "positions-xy");
+  EXPECT_NE(svg.find("class=\"ellipses\""), std::string::npos);
+  EXPECT_NE(svg.find("class=\"error-bars\""), std::string::npos);
+  EXPECT_NE(svg.find("class=\"legend\""), std::string::npos);
+  EXPECT_NE(svg.find(">estimated</text>"), std::string::npos);
+}
+
+TEST(BarChart, LogAxisSkipsNonPositiveAndHandlesNoCategories) {
+  PlotOptions o;
+  o.name = "residual-rms";
+  o.y.type = ScaleType::kLog10;
+  BarSeries s{"rms", {0.04, 0, 0.001}, {}, -1};
+  const std::string svg = RenderBarChart(o, {"accelerometer", "zero", "gyroscope"}, {s});
+  ExpectValidSvg(svg, "residual-rms");
+  EXPECT_NE(svg.find("1 zero or negative value(s)"), std::string::npos);
+  EXPECT_EQ(Count(svg, "<rect x="), 2u + 2u);  // two bars plus the two frame rects
+  ExpectValidSvg(RenderBarChart(o, {}, {}), "residual-rms");
+  // Many long category names rotate and still give a valid SVG.
+  std::vector<std::string> cats;
+  std::vector<double> vals;
+  for (int i = 0; i < 96; ++i) {
+    cats.push_back("accelerometer_triad_" + std::to_string(i));
+    vals.push_back(i + 1.0);
+  }
+  o.y.type = ScaleType::kLinear;
+  const std::string many = RenderBarChart(o, cats, {{"v", vals, {}, -1}});
+  ExpectValidSvg(many, "residual-rms");
+  EXPECT_NE(many.find("rotate(-40"), std::string::npos);
+}
+
+TEST(HistogramTest, CountsAllFiniteValuesAndRendersDegenerateOnes) {
+  const Histogram h = MakeHistogram({0, 1, 2, 3, NAN, 4}, 4);
+  ASSERT_EQ(h.counts.size(), 4u);
+  double total = 0;
+  for (double c : h.counts) total += c;
+  EXPECT_EQ(total, 5);
+  PlotOptions o;
+  o.name = "residual-histogram";
+  ExpectValidSvg(RenderHistogram(o, {h}), "residual-histogram");
+  ExpectValidSvg(RenderHistogram(o, {MakeHistogram({2, 2, 2}, 5)}), "residual-histogram");
+  ExpectValidSvg(RenderHistogram(o, {MakeHistogram({}, 5)}), "residual-histogram");
+}
+
+TEST(HtmlHelpers, EscapingAndNumberFormatting) {
+  EXPECT_EQ(EscapeText("<a href=\"x\">&'"), "&lt;a href=&quot;x&quot;&gt;&amp;&#39;");
+  EXPECT_EQ(EscapeAttr("a\nb"), "a&#10;b");
+  EXPECT_EQ(EscapeText("bad \xFF byte"), "bad \xEF\xBF\xBD byte");
+  EXPECT_EQ(EscapeText("\xC2\xB5m"), "\xC2\xB5m");
+  EXPECT_EQ(UrlEncode("a b/<c>"), "a%20b%2F%3Cc%3E");
+  EXPECT_EQ(FormatSig(0.00123456, 3), "0.00123");
+  EXPECT_EQ(FormatSig(1.5e-7, 2), "1.5e-7");
+  EXPECT_EQ(FormatSig(-0.0, 3), "0");
+  EXPECT_EQ(FormatMicrometres(2.04e-6), "2.04 \xC2\xB5m");
+  EXPECT_EQ(FormatSI(0.00123, "V"), "1.23 mV");
+  EXPECT_EQ(FormatDuration(185), "3 min 05 s");
+  double t = 0;
+  ASSERT_TRUE(ParseTimestamp("1970-01-02T00:00:01Z", &t));
+  EXPECT_DOUBLE_EQ(t, 86401);
+  ASSERT_TRUE(ParseTimestamp("2026-11-22 04:04:04.5", &t));
+  EXPECT_FALSE(ParseTimestamp("yesterday", &t));
+}
+
+}  // namespace
+}  // namespace calibd::web
