@@ -1,0 +1,178 @@
+#include "storage/schema.h"
+
+#include <string>
+#include <vector>
+
+#include "storage/sha256.h"
+
+namespace calibd::storage {
+namespace {
+
+// Version 1: the first schema. Kept verbatim: never edit a released step, add a new one.
+constexpr const char* kV1 = R"sql(
+CREATE TABLE recordings (
+  id           INTEGER PRIMARY KEY,
+  sha256       TEXT    NOT NULL UNIQUE,
+  bytes        INTEGER NOT NULL,
+  device       TEXT    NOT NULL DEFAULT '',
+  layout       TEXT    NOT NULL DEFAULT '',
+  rows         INTEGER NOT NULL DEFAULT 0,
+  columns_json TEXT    NOT NULL DEFAULT '[]',
+  sensors_json TEXT    NOT NULL DEFAULT '[]',
+  file_name    TEXT    NOT NULL DEFAULT '',
+  created_at   INTEGER NOT NULL
+);
+CREATE TABLE recording_data (
+  recording_id INTEGER PRIMARY KEY REFERENCES recordings(id) ON DELETE CASCADE,
+  data         BLOB    NOT NULL
+);
+CREATE TABLE jobs (
+  id               INTEGER PRIMARY KEY,
+  recording_id     INTEGER NOT NULL REFERENCES recordings(id),
+  method           TEXT    NOT NULL,
+  device           TEXT    NOT NULL DEFAULT '',
+  config_json      TEXT    NOT NULL DEFAULT '{}',
+  status           TEXT    NOT NULL
+                   CHECK (status IN ('queued', 'running', 'succeeded', 'failed')),
+  attempts         INTEGER NOT NULL DEFAULT 0,
+  lease_owner      TEXT,
+  lease_expires_at INTEGER,
+  created_at       INTEGER NOT NULL,
+  started_at       INTEGER,
+  finished_at      INTEGER,
+  error_code       TEXT,
+  error_message    TEXT,
+  result_json      TEXT
+);
+CREATE INDEX jobs_by_status    ON jobs(status, id);
+CREATE INDEX jobs_by_device    ON jobs(device, id);
+CREATE INDEX jobs_by_recording ON jobs(recording_id);
+)sql";
+
+// Version 2: retry back-off, results with their hash, devices and latest calibrations.
+constexpr const char* kV2 = R"sql(
+ALTER TABLE jobs ADD COLUMN not_before INTEGER NOT NULL DEFAULT 0;
+CREATE INDEX jobs_by_lease  ON jobs(lease_expires_at) WHERE status = 'running';
+CREATE INDEX jobs_by_method ON jobs(method, id);
+
+CREATE TABLE results (
+  job_id     INTEGER PRIMARY KEY REFERENCES jobs(id),
+  result_json TEXT   NOT NULL,
+  sha256     TEXT    NOT NULL,
+  created_at INTEGER NOT NULL
+);
+INSERT INTO results (job_id, result_json, sha256, created_at)
+  SELECT id, result_json, '', COALESCE(finished_at, created_at)
+  FROM jobs WHERE status = 'succeeded' AND result_json IS NOT NULL;
+ALTER TABLE jobs DROP COLUMN result_json;
+
+CREATE TABLE devices (
+  serial     TEXT PRIMARY KEY,
+  first_seen INTEGER NOT NULL
+) WITHOUT ROWID;
+INSERT INTO devices (serial, first_seen)
+  SELECT device, MIN(created_at) FROM (
+    SELECT device, created_at FROM recordings WHERE device <> ''
+    UNION ALL
+    SELECT device, created_at FROM jobs WHERE device <> '')
+  GROUP BY device;
+
+CREATE TABLE device_calibrations (
+  device        TEXT    NOT NULL,
+  method        TEXT    NOT NULL,
+  job_id        INTEGER NOT NULL REFERENCES jobs(id),
+  calibrated_at INTEGER NOT NULL,
+  PRIMARY KEY (device, method)
+) WITHOUT ROWID;
+INSERT INTO device_calibrations (device, method, job_id, calibrated_at)
+  SELECT j.device, j.method, j.id, COALESCE(j.finished_at, j.created_at) FROM jobs j
+  WHERE j.status = 'succeeded' AND j.device <> '' AND j.id = (
+    SELECT k.id FROM jobs k
+    WHERE k.device = j.device AND k.method = j.method AND k.status = 'succeeded'
+    ORDER BY COALESCE(k.finished_at, k.created_at) DESC, k.id DESC LIMIT 1);
+)sql";
+
+// The hashes of results carried over from v1 are computed here (SQLite has no sha256()).
+Status HashCarriedOverResults(Db* db) {
+  Stmt select;
+  Status s = db->PrepareUncached("SELECT job_id, result_json FROM results WHERE sha256 = ''",
+                                 &select);
+  if (!s.ok()) return s;
+  std::vector<std::pair<int64_t, std::string>> rows;
+  for (bool row = true;;) {
+    s = select.Step(&row);
+    if (!s.ok()) return s;
+    if (!row) break;
+    rows.emplace_back(select.ColumnInt(0), select.ColumnText(1));
+  }
+  Stmt update;
+  s = db->PrepareUncached("UPDATE results SET sha256 = ?1 WHERE job_id = ?2", &update);
+  if (!s.ok()) return s;
+  for (const auto& [id, json] : rows) {
+    update.Reset();
+    update.BindText(1, Sha256Hex(json)).BindInt(2, id);
+    s = update.Run();
+    if (!s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+struct Step {
+  const char* sql;
+  Status (*after)(Db*);
+};
+
+const std::vector<Step>& Steps() {
+  static const std::vector<Step> steps = {
+      {kV1, nullptr},
+      {kV2, &HashCarriedOverResults},
+  };
+  return steps;
+}
+
+}  // namespace
+
+Status SchemaVersion(Db* db, int64_t* version) {
+  return db->QueryInt("PRAGMA user_version", version);
+}
+
+Status MigrateSchema(Db* db, int target) {
+  if (target < 0 || target > kSchemaVersion) {
+    return Status::Internal("storage: no schema version " + std::to_string(target));
+  }
+  // Fast path without the write lock: already current (the common case, and works read-only).
+  int64_t version = 0;
+  Status s = SchemaVersion(db, &version);
+  if (!s.ok()) return s;
+  if (version > kSchemaVersion) {
+    return Status::Conflict("storage: " + db->path() + " has schema version " +
+                            std::to_string(version) + ", newer than this calibd supports (" +
+                            std::to_string(kSchemaVersion) + "); upgrade calibd");
+  }
+  if (version >= target) return Status::Ok();
+
+  Transaction txn(db);
+  s = txn.Begin(Transaction::Mode::kImmediate);
+  if (!s.ok()) return s;
+  s = SchemaVersion(db, &version);  // again, under the write lock: another process may have won
+  if (!s.ok()) return s;
+  for (int64_t v = version; v < target; ++v) {
+    const Step& step = Steps()[static_cast<size_t>(v)];
+    s = db->Exec(step.sql);
+    if (!s.ok()) {
+      return Status(s.code(), "storage: migrating schema to version " + std::to_string(v + 1) +
+                                  ": " + s.message());
+    }
+    if (step.after != nullptr) {
+      s = step.after(db);
+      if (!s.ok()) return s;
+    }
+  }
+  if (version < target) {
+    s = db->Exec("PRAGMA user_version = " + std::to_string(target));
+    if (!s.ok()) return s;
+  }
+  return txn.Commit();
+}
+
+}  // namespace calibd::storage

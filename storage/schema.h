@@ -1,0 +1,35 @@
+// The database schema and its forward-only migrations, versioned by PRAGMA user_version.
+//
+// Version history (the DDL of every version stays in schema.cc, so tests can build an old file
+// and migrate it):
+//   0  empty file
+//   1  recordings (+ their bytes in recording_data), jobs with leases, result JSON inside jobs
+//   2  retry back-off (jobs.not_before), results in their own table with a sha256 (ETag),
+//      devices and the latest calibration per device and method, lease index
+//
+// Thread-safety: functions take a Db the caller owns (one thread at a time).
+#ifndef CALIBD_STORAGE_SCHEMA_H_
+#define CALIBD_STORAGE_SCHEMA_H_
+
+#include <cstdint>
+
+#include "core/status.h"
+#include "storage/db.h"
+
+namespace calibd::storage {
+
+inline constexpr int kSchemaVersion = 2;
+
+// Reads PRAGMA user_version.
+Status SchemaVersion(Db* db, int64_t* version);
+
+// Brings the schema from its current version up to `target` (default: the latest), all steps in
+// one BEGIN IMMEDIATE transaction, so a crash or a concurrent opener sees either the old or the
+// new schema, and two processes opening one file at once migrate it once. Forward only: a file at
+// a higher version than `target` is left alone; one newer than this build knows (kSchemaVersion)
+// fails with kConflict. Errors: kBusy, kIoError (e.g. read-only file), kCorruption.
+Status MigrateSchema(Db* db, int target = kSchemaVersion);
+
+}  // namespace calibd::storage
+
+#endif  // CALIBD_STORAGE_SCHEMA_H_

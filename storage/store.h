@@ -1,0 +1,281 @@
+// Store: everything calibd keeps, in one SQLite file — recordings (original bytes, deduplicated
+// by SHA-256), the job queue with leases and retries, results, devices.
+//
+// Durability: WAL with synchronous=FULL. When a write call returns OK its effect is on disk and
+// survives kill -9 and power loss; when it returns an error nothing of it was committed (every
+// write is one transaction: never a half-written recording, job or result).
+//
+// Thread-safety: a Store is thread-safe. Each call borrows a connection from an internal pool
+// (one per concurrently calling thread, opened on demand; idle ones are kept up to
+// Options::max_idle_connections), so readers never wait for writers (WAL) and a long upload does
+// not block reads. Writers are serialised by SQLite's write lock (BEGIN IMMEDIATE, waiting up to
+// Options::busy_timeout_ms, then kBusy). Several processes may open the same file at once.
+// Do not use a Store across fork(): open a new one in the child.
+//
+// Errors (calibd::Status): kNotFound (no such id), kConflict (illegal state transition, e.g.
+// completing a job one does not lease), kInvalidInput (bad argument), kBusy and kIoError
+// (transient / environmental: locked past the timeout, disk full, I/O error, read-only file),
+// kCorruption (damaged file), kTooLarge (recording over SQLite's blob limit). Messages carry
+// SQLite's own text.
+//
+// Times: stored as milliseconds since the Unix epoch from Options::now_ms; reported as ISO-8601
+// UTC strings with milliseconds ("2026-11-22T04:03:46.123Z"), or "" when unset, plus the raw *_ms.
+//
+// Job states: queued -> running (ClaimJob) -> succeeded (CompleteJob) | failed (FailJob
+// non-transient, or transient/lease expiry past max_attempts) | queued (FailJob transient,
+// ReleaseJob, lease expiry). succeeded and failed are final.
+#ifndef CALIBD_STORAGE_STORE_H_
+#define CALIBD_STORAGE_STORE_H_
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/status.h"
+#include "storage/db.h"
+
+namespace calibd::storage {
+
+// Formats milliseconds since the epoch as "YYYY-MM-DDTHH:MM:SS.mmmZ".
+std::string FormatTimestamp(int64_t ms);
+
+struct StoreOptions {
+  // Clock, milliseconds since the Unix epoch. Default: the system clock. Must be thread-safe.
+  // Tests inject a fake clock to expire leases and back-offs without sleeping.
+  std::function<int64_t()> now_ms;
+  // Lock wait before kBusy (per statement / BEGIN IMMEDIATE). Default 5000 ms.
+  int busy_timeout_ms = 5000;
+  // A job is tried at most this many times (claims). A transient failure or an expired lease
+  // on the last attempt makes it failed. Default 5.
+  int max_attempts = 5;
+  // Back-off after the n-th transient failure: min(backoff_base_ms * 2^(n-1), backoff_max_ms).
+  int64_t backoff_base_ms = 1000;    // default 1 s
+  int64_t backoff_max_ms = 300000;   // default 5 min
+  // Open read-only (SQLITE_OPEN_READONLY): reads work, every write fails with kIoError. The file
+  // must exist and be at the current schema version. Default false.
+  bool read_only = false;
+  // > 0: PRAGMA max_page_count on every connection (a size quota; also simulates a full disk).
+  // Default 0 = unlimited.
+  int64_t max_page_count = 0;
+  // Connections kept open when idle. Default 16.
+  int max_idle_connections = 16;
+  // Create the database file's parent directory when missing. Default true.
+  bool create_parent_dir = true;
+};
+
+// A job to enqueue (alone or with its recording).
+struct NewJob {
+  std::string method;       // "pca" | "array" (validated by the server; must be non-empty)
+  std::string device;       // serial; "" = the recording's device
+  std::string config_json;  // the config as JSON text, stored verbatim; "" = "{}"
+};
+
+// A recording to store. Exactly one of `data` and `path` is used: `path` non-empty means the
+// bytes are streamed from that (staged) file in 1 MiB chunks, so memory use does not depend on
+// the recording's size; otherwise `data` is stored (the caller keeps it alive during the call).
+struct NewRecording {
+  std::string_view data;
+  std::string path;
+  // Optional: the lower-case hex SHA-256 of the bytes if the caller already computed it while
+  // staging. A duplicate is then recognised without copying the bytes again; the stored bytes'
+  // hash is still computed and must match (else kIoError: the file changed).
+  std::string sha256;
+  std::string device;              // serial number, "" if unknown
+  std::string layout;              // "pca_averaged" | "pca_raw" | "array" (from the parser)
+  int64_t rows = 0;                // data rows
+  std::string columns_json = "[]"; // JSON array of header names
+  std::string sensors_json = "[]"; // JSON array of sensor / triad names
+  std::string file_name;           // the client's file name, for display only
+  std::optional<NewJob> job;       // enqueued in the same transaction when set
+};
+
+struct JobInfo {
+  int64_t id = 0;
+  int64_t recording_id = 0;
+  std::string method;
+  std::string device;
+  std::string config_json;
+  std::string status;  // "queued" | "running" | "succeeded" | "failed"
+  int64_t attempts = 0;  // claims that counted (ReleaseJob does not count)
+  std::string lease_owner;       // "" unless running
+  std::string lease_expires_at;  // "" unless running
+  std::string created_at, started_at, finished_at;  // "" when unset
+  int64_t lease_expires_at_ms = 0, created_at_ms = 0, started_at_ms = 0, finished_at_ms = 0;
+  int64_t not_before_ms = 0;  // a queued job is not claimable before this time (back-off)
+  std::string error_code;     // last failure ("" if none), e.g. "lease_expired" or the worker's code
+  std::string error_message;
+  std::string result_json;    // "" unless succeeded (and, for ListJobs, include_results)
+  std::string result_sha256;  // hex SHA-256 of result_json, for an ETag
+};
+
+struct RecordingInfo {
+  int64_t id = 0;
+  std::string sha256;  // lower-case hex
+  int64_t bytes = 0;
+  int64_t rows = 0;
+  std::string layout;
+  std::string device;
+  std::string file_name;
+  std::string created_at;
+  int64_t created_at_ms = 0;
+  std::string columns_json, sensors_json;  // JSON arrays as stored
+  // {"layout": ..., "rows": ..., "columns": [...], "sensors": [...]}
+  std::string summary_json;
+  std::optional<JobInfo> job;  // PutRecording: the job enqueued with it, if any
+};
+
+struct JobFilter {
+  std::string device;  // "" = any
+  std::string method;  // "" = any
+  std::string status;  // "" = any; else one of the four states
+  int limit = 50;      // 1..500 (clamped); default 50
+  int64_t before = 0;  // cursor: only jobs with id < before; 0 = from the newest
+  bool include_results = false;  // fill result_json / result_sha256 of succeeded jobs
+};
+
+struct DeviceCalibration {
+  std::string method;
+  int64_t job_id = 0;
+  std::string calibrated_at;  // the job's finished_at
+  int64_t calibrated_at_ms = 0;
+};
+
+struct DeviceInfo {
+  std::string serial;
+  std::string first_seen;
+  int64_t first_seen_ms = 0;
+  std::vector<DeviceCalibration> latest;  // one per method with a succeeded job, by method name
+};
+
+struct QueueCounts {
+  int64_t queued = 0, running = 0, succeeded = 0, failed = 0;
+};
+
+class Store {
+ public:
+  // Opens (creating it and its folder if needed) the database at `path` and migrates its schema
+  // to the latest version (schema.h). Safe to call from several processes at once.
+  // Fails with kIoError (cannot open/create, read-only when a migration is needed), kCorruption
+  // (not a database), kConflict (schema newer than this build), kBusy.
+  static Status Open(const std::string& path, StoreOptions options, std::unique_ptr<Store>* out);
+  ~Store();
+  Store(const Store&) = delete;
+  Store& operator=(const Store&) = delete;
+
+  const std::string& path() const { return path_; }
+  const StoreOptions& options() const { return options_; }
+
+  // ---- Recordings ----
+
+  // Stores a recording unless identical bytes are already stored; then *existed = true and *out
+  // describes the stored one (its id, original device and upload time). r.job, if set, is
+  // enqueued against the (new or existing) recording in the same transaction; its device
+  // defaults to r.device, then to the recording's device. One transaction: after an error nothing
+  // was stored. kInvalidInput for bad arguments (columns/sensors not JSON arrays, job without
+  // method, unreadable path gives kIoError). `out`/`existed` may be null.
+  Status PutRecording(const NewRecording& r, RecordingInfo* out, bool* existed);
+  // Metadata (summary_json filled, job empty). kNotFound.
+  Status GetRecording(int64_t id, RecordingInfo* out);
+  // Streams the original bytes to `sink` in chunks of at most 1 MiB, in order, from one
+  // consistent snapshot. `sink` returns false to stop early (then the call returns OK).
+  // The sink may call other Store methods (it runs on a borrowed connection). kNotFound.
+  Status ReadRecordingData(int64_t id, const std::function<bool(std::string_view chunk)>& sink);
+  // The whole bytes in memory (small recordings, tests, the worker).
+  Status ReadRecordingBytes(int64_t id, std::string* out);
+
+  // ---- Jobs ----
+
+  // Queues a job for a stored recording (kNotFound if it does not exist). Device "" = the
+  // recording's device. The device is remembered in ListDevices.
+  Status EnqueueJob(int64_t recording_id, const std::string& method, const std::string& device,
+                    const std::string& config_json, JobInfo* out);
+
+  // Atomically takes the oldest claimable job: queued with not_before <= now, after first taking
+  // back jobs whose lease has lapsed (as RecoverExpiredLeases). The job becomes running with
+  // lease_owner = worker_id, lease expiry now + lease_ms, attempts + 1, started_at = now.
+  // *claimed = false (and OK) when nothing is claimable. No two callers, in any threads or
+  // processes, get the same job while its lease is valid.
+  Status ClaimJob(const std::string& worker_id, int64_t lease_ms, JobInfo* out, bool* claimed);
+
+  // Extends the lease to now + lease_ms. The holder may renew a lapsed lease as long as nobody
+  // has taken the job back. kConflict if `worker_id` does not hold the job (taken back, finished,
+  // another owner); kNotFound if no such job.
+  Status RenewLease(int64_t job_id, const std::string& worker_id, int64_t lease_ms);
+
+  // Stores the result and marks the job succeeded (finished_at = now, lease cleared), stores the
+  // result's SHA-256 and makes it the device's latest calibration for the method if it finished
+  // last. Idempotent: if the job already succeeded with the identical result, OK and nothing
+  // changes (whoever calls). kConflict: the caller does not hold the job (and it has not succeeded
+  // with this result), or it already succeeded with a different result, or it failed.
+  // kInvalidInput: empty result. kNotFound.
+  Status CompleteJob(int64_t job_id, const std::string& worker_id, const std::string& result_json);
+
+  // Records a failure of the holder's run. transient = true (I/O error, busy database): back to
+  // queued, not claimable before now + back-off, unless attempts >= max_attempts, then failed.
+  // transient = false (the input cannot be calibrated): failed at once. error_code/message are
+  // kept on the job. kConflict if `worker_id` does not hold the job; kNotFound.
+  Status FailJob(int64_t job_id, const std::string& worker_id, const std::string& code,
+                 const std::string& message, bool transient);
+
+  // Graceful shutdown: gives the job back (queued, claimable at once) without counting the
+  // attempt. kConflict if not the holder; kNotFound.
+  Status ReleaseJob(int64_t job_id, const std::string& worker_id);
+
+  // Takes back every running job whose lease expired before now: queued again (claimable at
+  // once), or failed with error_code "lease_expired" when it already used max_attempts.
+  // Call at server start. *recovered (may be null) = jobs taken back.
+  Status RecoverExpiredLeases(int64_t* recovered);
+
+  // One job with its result if succeeded. kNotFound.
+  Status GetJob(int64_t id, JobInfo* out);
+  // Newest first (by id, which only grows: the cursor `before` is stable under inserts).
+  // For the next page pass before = the last returned id.
+  Status ListJobs(const JobFilter& filter, std::vector<JobInfo>* out);
+  // Number of jobs matching filter's device/method/status (limit/before ignored).
+  Status CountJobs(const JobFilter& filter, int64_t* count);
+  // Every device seen (uploads and jobs), by serial, with its latest calibration per method.
+  Status ListDevices(std::vector<DeviceInfo>* out);
+  // The device's latest succeeded job for `method` (by finished time), with result_json and
+  // result_sha256. kNotFound if there is none.
+  Status LatestResult(const std::string& device, const std::string& method, JobInfo* out);
+  // Jobs per state.
+  Status QueueDepth(QueueCounts* out);
+
+  // ---- Maintenance ----
+
+  // PRAGMA integrity_check: *result = "ok" when the file is sound (else SQLite's report).
+  Status IntegrityCheck(std::string* result);
+  // Runs a WAL checkpoint (TRUNCATE), e.g. at shutdown. kBusy if readers prevent it.
+  Status Checkpoint();
+
+ private:
+  class Conn;  // a pooled connection, returned to the pool on destruction
+  Store(std::string path, StoreOptions options);
+  Status Acquire(std::unique_ptr<Db>* db);
+  void Return(std::unique_ptr<Db> db);
+  int64_t Now() const { return options_.now_ms(); }
+
+  Status PutRecordingLocked(Db* db, const NewRecording& r, RecordingInfo* out, bool* existed);
+  Status EnqueueJobLocked(Db* db, int64_t recording_id, const std::string& method,
+                          const std::string& device, const std::string& config_json,
+                          int64_t now, JobInfo* out);
+  Status RecoverLocked(Db* db, int64_t now, int64_t* recovered);
+  Status LoadJob(Db* db, int64_t id, bool with_result, JobInfo* out);
+  Status RequireHolder(Db* db, int64_t job_id, const std::string& worker_id, const char* action,
+                       JobInfo* job);
+
+  std::string path_;
+  StoreOptions options_;
+  Db::Options db_options_;
+  std::mutex mu_;
+  std::vector<std::unique_ptr<Db>> idle_;  // guarded by mu_
+};
+
+}  // namespace calibd::storage
+
+#endif  // CALIBD_STORAGE_STORE_H_
