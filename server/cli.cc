@@ -1,0 +1,271 @@
+#include "server/cli.h"
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "server/array_method.h"
+#include "server/config.h"
+#include "server/pca_method.h"
+#include "server/serve.h"
+
+namespace calibd::server {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+int ExitCodeFor(const Status& s) {
+  switch (s.code()) {
+    case StatusCode::kOk:
+      return kExitOk;
+    case StatusCode::kInvalidInput:
+      return kExitBadInput;
+    case StatusCode::kNotDeterminable:
+      return kExitNotDeterminable;
+    default:
+      return kExitFailure;
+  }
+}
+
+int Report(const Status& s) {
+  std::cerr << "calibd: " << s.ToString() << "\n";
+  return ExitCodeFor(s);
+}
+
+Status ReadFile(const std::string& path, std::string* out) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status::InvalidInput("cannot open file").WithFile(path);
+  out->assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  if (in.bad()) return Status::InvalidInput("cannot read file").WithFile(path);
+  return Status::Ok();
+}
+
+// Streams a recording file through a collecting parser in 1 MiB chunks.
+Status ParseRecordingFile(const std::string& path, RecordingParser* parser) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status::InvalidInput("cannot open file").WithFile(path);
+  std::string buffer(1 << 20, '\0');
+  while (in) {
+    in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+    const std::streamsize got = in.gcount();
+    if (got > 0) {
+      Status s = parser->Feed(std::string_view(buffer.data(), static_cast<size_t>(got)));
+      if (!s.ok()) return s;
+    }
+  }
+  if (in.bad()) return Status::InvalidInput("cannot read file").WithFile(path);
+  return parser->Finish();
+}
+
+// Offline, `accelerometer_calibration` may be a path to a result JSON file: inline it.
+Status InlineCalibrationFile(const std::string& config_path, json* config) {
+  auto it = config->find("accelerometer_calibration");
+  if (it == config->end() || !it->is_string()) return Status::Ok();
+  fs::path path = it->get<std::string>();
+  if (path.is_relative()) path = fs::path(config_path).parent_path() / path;
+  std::string text;
+  Status s = ReadFile(path.string(), &text);
+  if (!s.ok()) return s.WithField("accelerometer_calibration");
+  json result;
+  s = ParseJsonText(text, path.string(), &result);
+  if (!s.ok()) return s;
+  *it = std::move(result);
+  return Status::Ok();
+}
+
+int Calibrate(const std::string& recording_path, const std::string& config_path, bool compact) {
+  std::string config_text;
+  Status s = ReadFile(config_path, &config_text);
+  if (!s.ok()) return Report(s);
+  json config;
+  s = ParseJsonText(config_text, config_path, &config);
+  if (!s.ok()) return Report(s);
+  if (config.is_object()) {
+    s = InlineCalibrationFile(config_path, &config);
+    if (!s.ok()) return Report(s);
+  }
+  CommonConfig common;
+  s = ValidateConfig(config, &common);
+  if (!s.ok()) return Report(s.WithFile(config_path));
+  RecordingParser parser(recording_path, /*collect=*/true);
+  s = ParseRecordingFile(recording_path, &parser);
+  if (!s.ok()) return Report(s);
+  json result;
+  s = CalibrateParsed(&parser, recording_path, config, &result);
+  if (!s.ok()) return Report(s);
+  std::cout << (compact ? result.dump() : result.dump(2)) << "\n";
+  return kExitOk;
+}
+
+// Writes `content` to dir/name atomically (temporary file, then rename).
+Status WriteFileAtomically(const fs::path& dir, const std::string& name,
+                           const std::string& content) {
+  const fs::path target = dir / name;
+  const fs::path temp = dir / ("." + name + ".tmp");
+  {
+    std::ofstream out(temp, std::ios::binary | std::ios::trunc);
+    if (!out) return Status::IoError("cannot write").WithFile(temp.string());
+    out << content;
+    out.flush();
+    if (!out) return Status::IoError("cannot write").WithFile(temp.string());
+  }
+  std::error_code ec;
+  fs::rename(temp, target, ec);
+  if (ec) return Status::IoError("cannot rename: " + ec.message()).WithFile(target.string());
+  return Status::Ok();
+}
+
+int WriteSimulation(const std::string& out_dir, const std::string& csv, const json& config,
+                    const json& truth) {
+  std::error_code ec;
+  fs::create_directories(out_dir, ec);
+  if (ec)
+    return Report(Status::IoError("cannot create directory: " + ec.message()).WithFile(out_dir));
+  for (const auto& [name, content] : {std::pair<std::string, std::string>{"recording.csv", csv},
+                                      {"config.json", config.dump(2) + "\n"},
+                                      {"truth.json", truth.dump(2) + "\n"}}) {
+    Status s = WriteFileAtomically(out_dir, name, content);
+    if (!s.ok()) return Report(s);
+  }
+  std::cerr << "calibd: wrote " << (fs::path(out_dir) / "recording.csv").string() << ", "
+            << "config.json and truth.json\n";
+  return kExitOk;
+}
+
+}  // namespace
+
+int RunCli(int argc, char** argv) {
+  CLI::App app{"calibd: calibration server for multi-sensor inertial systems"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "calibd 0.1.0");
+
+  // serve
+  ServeOptions serve;
+  CLI::App* serve_cmd = app.add_subcommand("serve", "HTTP server plus job workers");
+  serve_cmd->add_option("--db", serve.db_path, "SQLite database file (created with its folder)")
+      ->capture_default_str();
+  serve_cmd->add_option("--listen", serve.listen, "HOST:PORT to listen on")->capture_default_str();
+  serve_cmd->add_option("--workers", serve.workers, "calibration worker threads (0: one per core)")
+      ->check(CLI::Range(0, 256))
+      ->capture_default_str();
+  serve_cmd->add_option("--token-file", serve.token_file,
+                        "file holding the bearer token that writes require");
+  serve_cmd->add_flag("--insecure", serve.insecure,
+                      "allow a non-loopback --listen without a token");
+  serve_cmd->add_option("--max-upload-bytes", serve.max_upload_bytes, "largest accepted upload")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 40))
+      ->capture_default_str();
+  serve_cmd->add_option("--http-threads", serve.http_threads, "HTTP connection threads")
+      ->check(CLI::Range(4, 1024))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--grace-seconds", serve.shutdown_grace_seconds,
+                   "on SIGTERM, how long running jobs may finish before their leases "
+                   "are released")
+      ->check(CLI::Range(0, 3600))
+      ->capture_default_str();
+  serve_cmd->add_flag("!--no-access-log", serve.access_log, "do not log requests to stderr");
+
+  // calibrate
+  std::string recording_path, config_path;
+  bool compact = false;
+  CLI::App* calibrate_cmd =
+      app.add_subcommand("calibrate", "run one calibration offline and print the result JSON");
+  calibrate_cmd->add_option("recording", recording_path, "recording CSV (SPEC §2)")->required();
+  calibrate_cmd->add_option("--config", config_path, "config JSON (SPEC §3)")->required();
+  calibrate_cmd->add_flag("--compact", compact, "print the JSON on one line");
+  calibrate_cmd->footer(
+      "Exit codes: 0 success, 2 bad input (file, line, column on stderr), 3 the data cannot "
+      "determine the parameters (the message says what to record instead).");
+
+  // simulate
+  CLI::App* simulate_cmd =
+      app.add_subcommand("simulate",
+                         "write DIR/recording.csv, DIR/config.json and DIR/truth.json of a paper's "
+                         "simulation set-up (deterministic per seed)");
+  simulate_cmd->require_subcommand(1);
+  std::string out_dir;
+  core::PcaSimulationOptions pca_sim;
+  CLI::App* sim_pca = simulate_cmd->add_subcommand(
+      "pca",
+      "Rupniewski Section IV: 4 gyroscope triads of a_model, axes perturbed, n random "
+      "orientations");
+  sim_pca->add_option("--out", out_dir, "output directory")->required();
+  sim_pca->add_option("--seed", pca_sim.seed, "random seed")->capture_default_str();
+  sim_pca->add_option("-n,--positions", pca_sim.positions, "number of positions n")
+      ->check(CLI::Range(1, 10000000))
+      ->capture_default_str();
+  sim_pca->add_option("--noise", pca_sim.noise_std, "reading noise σ")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_pca->add_option("--magnitude", pca_sim.magnitude, "field magnitude c")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  sim_pca
+      ->add_option("--axis-perturbation", pca_sim.axis_perturbation,
+                   "σ of the perturbation of each sensitivity vector")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+
+  ArraySimulationFileOptions array_sim;
+  CLI::App* sim_array = simulate_cmd->add_subcommand(
+      "array", "Carlsson et al. Section IV: 32 IMUs on a 4x4 grid, top and underside of a PCB");
+  sim_array->add_option("--out", out_dir, "output directory")->required();
+  sim_array->add_option("--seed", array_sim.seed, "random seed")->capture_default_str();
+  sim_array->add_option("-N,--samples", array_sim.samples, "number of samples N")
+      ->check(CLI::Range(1, 100000000))
+      ->capture_default_str();
+  sim_array->add_option("--omega", array_sim.omega_norm_dps, "‖ω‖ in °/s")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_array->add_option("--omega-dot", array_sim.omega_dot_norm_dps2, "‖ω̇‖ in °/s²")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_array->add_option("--accel-noise", array_sim.accel_noise, "σ_a in m/s²")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_array->add_option("--gyro-noise", array_sim.gyro_noise_dps, "σ_g in °/s")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_array
+      ->add_option("--position-perturbation", array_sim.position_perturbation,
+                   "σ of the true positions around the nominal grid, m")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_array->add_option("--gyro-unit", array_sim.gyro_unit, "unit of the gyroscope columns")
+      ->check(CLI::IsMember({"rad/s", "deg/s"}))
+      ->capture_default_str();
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? kExitOk : kExitBadInput;
+  }
+
+  if (*serve_cmd) return RunServe(serve);
+  if (*calibrate_cmd) return Calibrate(recording_path, config_path, compact);
+  if (*sim_pca) {
+    std::string csv;
+    json config, truth;
+    Status s = SimulatePcaFiles(pca_sim, &csv, &config, &truth);
+    if (!s.ok()) return Report(s);
+    return WriteSimulation(out_dir, csv, config, truth);
+  }
+  if (*sim_array) {
+    std::string csv;
+    json config, truth;
+    Status s = SimulateArrayFiles(array_sim, &csv, &config, &truth);
+    if (!s.ok()) return Report(s);
+    return WriteSimulation(out_dir, csv, config, truth);
+  }
+  return kExitFailure;
+}
+
+}  // namespace calibd::server

@@ -1,0 +1,137 @@
+// The HTML pages of SPEC §5: the server fills web/ view structs from storage and serves the
+// rendered documents. No JavaScript; every user string is escaped by web/.
+#include <nlohmann/json.hpp>
+
+#include "server/config.h"
+#include "server/http_util.h"
+#include "storage/store.h"
+#include "web/pages.h"
+
+namespace calibd::server {
+
+using nlohmann::json;
+
+namespace {
+
+web::JobSummary Summarize(const storage::JobInfo& job) {
+  web::JobSummary s;
+  s.id = job.id;
+  s.status = job.status;
+  s.device = job.device;
+  s.method = job.method;
+  s.created_at = job.created_at;
+  s.started_at = job.started_at;
+  s.finished_at = job.finished_at;
+  s.attempts = static_cast<int>(job.attempts);
+  if (job.status != "succeeded") s.error = job.error_message;
+  if (!job.result_json.empty()) {
+    json result;
+    if (ParseJsonText(job.result_json, "result", &result).ok()) s.result = std::move(result);
+  }
+  return s;
+}
+
+void SendPage(httplib::Response& res, int status, std::string html) {
+  res.status = status;
+  res.set_header("Cache-Control", "no-cache");
+  res.set_header(
+      "Content-Security-Policy",
+      "default-src 'none'; style-src 'unsafe-inline'; img-src data:; form-action 'self'");
+  res.set_header("X-Content-Type-Options", "nosniff");
+  res.set_content(std::move(html), "text/html; charset=utf-8");
+}
+
+void SendErrorPage(httplib::Response& res, const Status& s) {
+  int status = s.code() == StatusCode::kNotFound ? 404 : 500;
+  if (s.code() == StatusCode::kBusy || s.code() == StatusCode::kIoError) status = 503;
+  SendPage(res, status,
+           web::RenderErrorPage(status, status == 404 ? s.message()
+                                                      : "the database is unavailable; "
+                                                        "try again shortly"));
+}
+
+bool ParsePositive(const std::string& text, int64_t* out) {
+  if (text.empty() || text.size() > 18 ||
+      text.find_first_not_of("0123456789") != std::string::npos) {
+    return false;
+  }
+  *out = std::stoll(text);
+  return *out > 0;
+}
+
+}  // namespace
+
+void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
+  http->Get("/", [store](const httplib::Request& req, httplib::Response& res) {
+    web::HistoryView view;
+    storage::JobFilter filter;
+    filter.limit = 50;
+    filter.include_results = true;
+    view.filter.device = filter.device = req.get_param_value("device");
+    const std::string method = req.get_param_value("method");
+    const std::string status = req.get_param_value("status");
+    if (method == "pca" || method == "array") view.filter.method = filter.method = method;
+    if (status == "queued" || status == "running" || status == "succeeded" || status == "failed") {
+      view.filter.status = filter.status = status;
+    }
+    if (req.has_param("before") && !ParsePositive(req.get_param_value("before"), &filter.before)) {
+      return SendPage(res, 400, web::RenderErrorPage(400, "'before' must be a job id"));
+    }
+    std::vector<storage::JobInfo> jobs;
+    Status s = store->ListJobs(filter, &jobs);
+    if (!s.ok()) return SendErrorPage(res, s);
+    for (const auto& job : jobs) view.jobs.push_back(Summarize(job));
+    if (static_cast<int>(jobs.size()) == filter.limit) {
+      view.next_before = std::to_string(jobs.back().id);
+    }
+    storage::JobFilter count_filter = filter;
+    if (store->CountJobs(count_filter, &view.total).ok() == false) view.total = -1;
+    std::vector<storage::DeviceInfo> devices;
+    if (store->ListDevices(&devices).ok()) {
+      for (const auto& d : devices) view.devices.push_back(d.serial);
+    }
+    SendPage(res, 200, web::RenderHistoryPage(view));
+  });
+
+  http->Get(R"(/jobs/([^/]+))", [store](const httplib::Request& req, httplib::Response& res) {
+    int64_t id;
+    if (!ParsePositive(req.matches[1], &id)) {
+      return SendPage(res, 404, web::RenderErrorPage(404, "no such job"));
+    }
+    storage::JobInfo job;
+    Status s = store->GetJob(id, &job);
+    if (!s.ok()) return SendErrorPage(res, s);
+    web::JobView view;
+    view.job = Summarize(job);
+    view.recording_id = job.recording_id;
+    storage::RecordingInfo rec;
+    if (store->GetRecording(job.recording_id, &rec).ok()) {
+      view.recording_sha256 = rec.sha256;
+      view.recording_bytes = rec.bytes;
+      view.recording_rows = rec.rows;
+    }
+    json config;
+    if (ParseJsonText(job.config_json, "config", &config).ok()) view.config = std::move(config);
+    SendPage(res, 200, web::RenderJobPage(view));
+  });
+
+  http->Get(R"(/devices/([^/]+))", [store](const httplib::Request& req, httplib::Response& res) {
+    web::DeviceView view;
+    view.serial = req.matches[1];
+    storage::JobFilter filter;
+    filter.device = view.serial;
+    filter.limit = 500;
+    filter.include_results = true;
+    std::vector<storage::JobInfo> jobs;
+    Status s = store->ListJobs(filter, &jobs);
+    if (!s.ok()) return SendErrorPage(res, s);
+    if (jobs.empty()) {
+      return SendPage(
+          res, 404, web::RenderErrorPage(404, "no calibrations for device '" + view.serial + "'"));
+    }
+    for (const auto& job : jobs) view.jobs.push_back(Summarize(job));
+    SendPage(res, 200, web::RenderDevicePage(view));
+  });
+}
+
+}  // namespace calibd::server

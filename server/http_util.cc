@@ -1,0 +1,167 @@
+#include "server/http_util.h"
+
+#include <regex>
+
+namespace calibd::server {
+
+using nlohmann::json;
+
+bool SplitHostPort(const std::string& listen, std::string* host, int* port) {
+  std::string h, p;
+  if (!listen.empty() && listen[0] == '[') {
+    const size_t close = listen.find(']');
+    if (close == std::string::npos || close + 1 >= listen.size() || listen[close + 1] != ':') {
+      return false;
+    }
+    h = listen.substr(1, close - 1);
+    p = listen.substr(close + 2);
+  } else {
+    const size_t colon = listen.rfind(':');
+    if (colon == std::string::npos || colon == 0) return false;
+    h = listen.substr(0, colon);
+    p = listen.substr(colon + 1);
+    if (h.find(':') != std::string::npos) return false;
+  }
+  if (p.empty() || p.size() > 5 || p.find_first_not_of("0123456789") != std::string::npos) {
+    return false;
+  }
+  const int v = std::stoi(p);
+  if (v > 65535) return false;
+  *host = h;
+  *port = v;
+  return true;
+}
+
+void SendError(httplib::Response& res, int status, const std::string& code,
+               const std::string& message, int64_t line, int64_t column, const std::string& field) {
+  json error = {{"code", code}, {"message", message}};
+  if (line > 0) error["line"] = line;
+  if (column > 0) error["column"] = column;
+  if (!field.empty()) error["field"] = field;
+  res.status = status;
+  // dump with replacement: user text in messages may hold invalid UTF-8.
+  res.set_content(json{{"error", error}}.dump(2, ' ', false, json::error_handler_t::replace),
+                  "application/json");
+}
+
+int SendStatus(httplib::Response& res, const Status& s) {
+  int status = 500;
+  switch (s.code()) {
+    case StatusCode::kOk:
+      status = 200;
+      break;
+    case StatusCode::kInvalidInput:
+      status = 400;
+      break;
+    case StatusCode::kNotDeterminable:
+      status = 422;
+      break;
+    case StatusCode::kNotFound:
+      status = 404;
+      break;
+    case StatusCode::kConflict:
+      status = 409;
+      break;
+    case StatusCode::kUnsupportedMedia:
+      status = 415;
+      break;
+    case StatusCode::kTooLarge:
+      status = 413;
+      break;
+    case StatusCode::kBusy:
+      status = 503;
+      break;
+    case StatusCode::kIoError:
+      status = 503;
+      break;
+    case StatusCode::kCorruption:
+      status = 500;
+      break;
+    case StatusCode::kInternal:
+      status = 500;
+      break;
+  }
+  std::string message = s.message();
+  if (status == 500) message = "internal server error";  // no internals to clients
+  if (status == 503) res.set_header("Retry-After", "1");
+  SendError(res, status, StatusCodeName(s.code()), message, s.line(), s.column(), s.field());
+  return status;
+}
+
+std::string ToLower(std::string s) {
+  for (char& c : s) c = static_cast<char>(tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+std::string RouteLabel(const std::string& path) {
+  static const std::pair<std::regex, const char*> kRoutes[] = {
+      {std::regex(R"(/api/v1/recordings)"), "/api/v1/recordings"},
+      {std::regex(R"(/api/v1/recordings/[^/]+)"), "/api/v1/recordings/{id}"},
+      {std::regex(R"(/api/v1/recordings/[^/]+/data)"), "/api/v1/recordings/{id}/data"},
+      {std::regex(R"(/api/v1/jobs)"), "/api/v1/jobs"},
+      {std::regex(R"(/api/v1/jobs/[^/]+)"), "/api/v1/jobs/{id}"},
+      {std::regex(R"(/api/v1/devices)"), "/api/v1/devices"},
+      {std::regex(R"(/api/v1/devices/[^/]+/calibration)"), "/api/v1/devices/{serial}/calibration"},
+      {std::regex(R"((/api/v1)?/healthz)"), "/healthz"},
+      {std::regex(R"((/api/v1)?/metrics)"), "/metrics"},
+      {std::regex(R"(/api/v1/openapi\.json)"), "/api/v1/openapi.json"},
+      {std::regex(R"(/)"), "/"},
+      {std::regex(R"(/jobs/[^/]+)"), "/jobs/{id}"},
+      {std::regex(R"(/devices/[^/]+)"), "/devices/{serial}"},
+      {std::regex(R"(/style\.css)"), "/style.css"},
+  };
+  if (path.size() > 512) return "other";
+  for (const auto& [re, label] : kRoutes) {
+    if (std::regex_match(path, re)) return label;
+  }
+  return "other";
+}
+
+std::string AllowedMethods(const std::string& path) {
+  const std::string route = RouteLabel(path);
+  if (route == "/api/v1/recordings") return "POST";
+  if (route == "/api/v1/jobs") return "GET, POST";
+  if (route == "other") return "";
+  return "GET";
+}
+
+std::string SanitizeForLog(const std::string& s) {
+  std::string out;
+  for (unsigned char c : s.substr(0, 200))
+    out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
+  if (s.size() > 200) out += "...";
+  return out;
+}
+
+std::string UrlEncode(const std::string& s) {
+  static const char* hex = "0123456789ABCDEF";
+  std::string out;
+  for (unsigned char c : s) {
+    if (isalnum(c) || c == '-' || c == '_' || c == '.' || c == '~') {
+      out += static_cast<char>(c);
+    } else {
+      out += '%';
+      out += hex[c >> 4];
+      out += hex[c & 15];
+    }
+  }
+  return out;
+}
+
+bool IfNoneMatchHits(const std::string& header, const std::string& etag) {
+  if (header.empty()) return false;
+  size_t pos = 0;
+  while (pos < header.size()) {
+    size_t comma = header.find(',', pos);
+    if (comma == std::string::npos) comma = header.size();
+    std::string item = header.substr(pos, comma - pos);
+    while (!item.empty() && item.front() == ' ') item.erase(0, 1);
+    while (!item.empty() && item.back() == ' ') item.pop_back();
+    if (item.rfind("W/", 0) == 0) item = item.substr(2);
+    if (item == "*" || item == etag) return true;
+    pos = comma + 1;
+  }
+  return false;
+}
+
+}  // namespace calibd::server

@@ -1,0 +1,53 @@
+// Small HTTP helpers shared by the routes: JSON errors (SPEC §5), status mapping, route labels
+// for metrics, and the OpenAPI document.
+#ifndef CALIBD_SERVER_HTTP_UTIL_H_
+#define CALIBD_SERVER_HTTP_UTIL_H_
+
+#include <httplib.h>
+// httplib.h includes <resolv.h>, whose macro `_res` breaks Eigen's headers (a parameter there is
+// named _res). We never use the resolver state directly.
+#ifdef _res
+#undef _res
+#endif
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "core/status.h"
+
+namespace calibd::storage {
+class Store;
+}
+
+namespace calibd::server {
+
+// "HOST:PORT" or "[V6]:PORT" -> parts. False when malformed (port must be 0..65535).
+bool SplitHostPort(const std::string& listen, std::string* host, int* port);
+
+// Writes {"error": {"code", "message", ["line", "column", "field"]}} with `status`.
+void SendError(httplib::Response& res, int status, const std::string& code,
+               const std::string& message, int64_t line = 0, int64_t column = 0,
+               const std::string& field = {});
+// The HTTP status for a Status code: 400 invalid input, 422 not determinable, 404, 409 conflict,
+// 413, 415, 503 busy, 500 otherwise. Writes the error body and returns the status.
+int SendStatus(httplib::Response& res, const Status& status);
+
+std::string ToLower(std::string s);
+// The route pattern of a path, for metric labels: ids and serials replaced by {id} / {serial},
+// unknown paths collapsed to "other" (so hostile paths cannot grow the label set).
+std::string RouteLabel(const std::string& path);
+// Printable ASCII only, at most 200 characters: safe for a log line.
+std::string SanitizeForLog(const std::string& s);
+std::string UrlEncode(const std::string& s);
+// True when an If-None-Match header value matches `etag` (a list, or "*").
+bool IfNoneMatchHits(const std::string& header, const std::string& etag);
+// "GET, HEAD" style list of the methods a known path allows; "" for an unknown path.
+std::string AllowedMethods(const std::string& path);
+// The OpenAPI 3 description of the HTTP API.
+const nlohmann::json& OpenApiDocument();
+// The HTML pages (SPEC §5): /, /jobs/{id}, /devices/{serial}.
+void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store);
+
+}  // namespace calibd::server
+
+#endif  // CALIBD_SERVER_HTTP_UTIL_H_

@@ -1,0 +1,242 @@
+// The OpenAPI 3 description of the HTTP API (GET /api/v1/openapi.json). Kept true by
+// tests/server/http_api_test.cc, which checks every documented path against the running server.
+#include "server/http_util.h"
+
+namespace calibd::server {
+
+using nlohmann::json;
+
+namespace {
+
+json Ref(const std::string& name) { return {{"$ref", "#/components/schemas/" + name}}; }
+
+json JsonResponse(const std::string& description, const json& schema) {
+  return {{"description", description}, {"content", {{"application/json", {{"schema", schema}}}}}};
+}
+
+json ErrorResponse(const std::string& description) {
+  return JsonResponse(description, Ref("Error"));
+}
+
+json QueryParam(const std::string& name, const std::string& type, const std::string& description,
+                bool required = false) {
+  return {{"name", name},
+          {"in", "query"},
+          {"required", required},
+          {"description", description},
+          {"schema", {{"type", type}}}};
+}
+
+json PathParam(const std::string& name, const std::string& type, const std::string& description) {
+  return {{"name", name},
+          {"in", "path"},
+          {"required", true},
+          {"description", description},
+          {"schema", {{"type", type}}}};
+}
+
+json Build() {
+  json doc;
+  doc["openapi"] = "3.0.3";
+  doc["info"] = {{"title", "calibd"},
+                 {"version", "0.1.0"},
+                 {"description",
+                  "Calibration server for multi-sensor inertial systems (SPEC.md). Writes need "
+                  "'Authorization: Bearer TOKEN' when the server runs with --token-file."}};
+  doc["servers"] = json::array({{{"url", "/api/v1"}}});
+  doc["components"]["securitySchemes"]["bearer"] = {{"type", "http"}, {"scheme", "bearer"}};
+  auto& schemas = doc["components"]["schemas"];
+  schemas["Error"] = {
+      {"type", "object"},
+      {"required", {"error"}},
+      {"properties",
+       {{"error",
+         {{"type", "object"},
+          {"required", {"code", "message"}},
+          {"properties",
+           {{"code", {{"type", "string"}}},
+            {"message", {{"type", "string"}}},
+            {"line", {{"type", "integer"}, {"description", "1-based line of the fault"}}},
+            {"column", {{"type", "integer"}, {"description", "1-based field number"}}},
+            {"field", {{"type", "string"}, {"description", "config key or column name"}}}}}}}}}};
+  schemas["Result"] = {
+      {"type", "object"},
+      {"description", "SPEC §4 result"},
+      {"required", {"method", "parameters", "uncertainty", "diagnostics", "warnings"}},
+      {"properties",
+       {{"method", {{"type", "string"}, {"enum", {"pca", "array"}}}},
+        {"parameters", {{"type", "object"}}},
+        {"uncertainty", {{"type", "object"}}},
+        {"diagnostics", {{"type", "object"}}},
+        {"warnings", {{"type", "array"}, {"items", {{"type", "string"}}}}}}}};
+  schemas["Job"] = {
+      {"type", "object"},
+      {"required", {"id", "status", "method", "created_at", "attempts"}},
+      {"properties",
+       {{"id", {{"type", "integer"}}},
+        {"status", {{"type", "string"}, {"enum", {"queued", "running", "succeeded", "failed"}}}},
+        {"device", {{"type", "string"}, {"nullable", true}}},
+        {"method", {{"type", "string"}}},
+        {"recording_id", {{"type", "integer"}}},
+        {"created_at", {{"type", "string"}, {"format", "date-time"}}},
+        {"started_at", {{"type", "string"}, {"nullable", true}}},
+        {"finished_at", {{"type", "string"}, {"nullable", true}}},
+        {"attempts", {{"type", "integer"}}},
+        {"error", {{"type", "object"}, {"nullable", true}}},
+        {"result", {{"allOf", json::array({Ref("Result")})}, {"nullable", true}}},
+        {"config", {{"type", "object"}}},
+        {"url", {{"type", "string"}}},
+        {"report_url", {{"type", "string"}}}}}};
+  schemas["Recording"] = {
+      {"type", "object"},
+      {"properties",
+       {{"id", {{"type", "integer"}}},
+        {"sha256", {{"type", "string"}}},
+        {"bytes", {{"type", "integer"}}},
+        {"rows", {{"type", "integer"}}},
+        {"layout", {{"type", "string"}, {"enum", {"pca_averaged", "pca_raw", "array"}}}},
+        {"device", {{"type", "string"}, {"nullable", true}}},
+        {"created_at", {{"type", "string"}}},
+        {"columns", {{"type", "array"}, {"items", {{"type", "string"}}}}},
+        {"sensors", {{"type", "array"}, {"items", {{"type", "string"}}}}}}}};
+
+  auto& paths = doc["paths"];
+  json config_params = json::array(
+      {QueryParam("method", "string", "pca | array; without it the recording is only stored"),
+       QueryParam("device", "string", "serial number"),
+       QueryParam("dimension", "integer", "pca: d"),
+       QueryParam("magnitude", "number", "pca: the field's magnitude c"),
+       QueryParam("refine", "boolean", "pca: ML refinement"),
+       QueryParam("bias", "string", "pca: none | estimate"),
+       QueryParam("nominal", "string", "pca: m×d JSON array"),
+       QueryParam("geometry", "string", "array: JSON object {positions, reference}"),
+       QueryParam("accel_noise", "number", "array: σ_a"),
+       QueryParam("gyro_noise", "number", "array: σ_g"),
+       QueryParam("gyro_unit", "string", "array: rad/s | deg/s"),
+       QueryParam("solver", "string", "array: joint | bcd")});
+  paths["/recordings"]["post"] = {
+      {"summary", "Upload a recording (and queue a calibration when a method is given)"},
+      {"security", json::array({{{"bearer", json::array()}}})},
+      {"parameters", config_params},
+      {"requestBody",
+       {{"required", true},
+        {"content",
+         {{"text/csv", {{"schema", {{"type", "string"}}}}},
+          {"multipart/form-data",
+           {{"schema",
+             {{"type", "object"},
+              {"properties",
+               {{"recording", {{"type", "string"}, {"format", "binary"}}},
+                {"config",
+                 {{"type", "string"}, {"description", "config JSON (SPEC §3)"}}}}}}}}}}}}},
+      {"responses",
+       {{"201",
+         JsonResponse("stored (and queued)",
+                      {{"type", "object"},
+                       {"properties", {{"recording", Ref("Recording")}, {"job", Ref("Job")}}}})},
+        {"400", ErrorResponse("malformed recording or config (line, column, field)")},
+        {"401", ErrorResponse("missing or wrong token")},
+        {"411", ErrorResponse("no Content-Length and not chunked")},
+        {"413", ErrorResponse("body larger than --max-upload-bytes")},
+        {"415", ErrorResponse("not text/csv or multipart/form-data, or compressed")},
+        {"503", ErrorResponse("database busy")}}}};
+  paths["/jobs"]["post"] = {
+      {"summary", "Queue a calibration of a stored recording with another config"},
+      {"security", json::array({{{"bearer", json::array()}}})},
+      {"requestBody",
+       {{"required", true},
+        {"content",
+         {{"application/json",
+           {{"schema",
+             {{"type", "object"},
+              {"required", {"recording_id", "config"}},
+              {"properties",
+               {{"recording_id", {{"type", "integer"}}}, {"config", {{"type", "object"}}}}}}}}}}}}},
+      {"responses",
+       {{"202",
+         JsonResponse("queued", {{"type", "object"}, {"properties", {{"job", Ref("Job")}}}})},
+        {"400", ErrorResponse("invalid config")},
+        {"404", ErrorResponse("no such recording")},
+        {"415", ErrorResponse("not application/json")}}}};
+  paths["/jobs"]["get"] = {
+      {"summary", "Jobs, newest first, paginated"},
+      {"parameters", json::array({QueryParam("device", "string", "filter"),
+                                  QueryParam("method", "string", "filter"),
+                                  QueryParam("status", "string", "filter"),
+                                  QueryParam("limit", "integer", "1..500, default 50"),
+                                  QueryParam("before", "integer", "cursor: jobs with smaller ids"),
+                                  QueryParam("include_results", "boolean", "embed results")})},
+      {"responses",
+       {{"200", JsonResponse("a page of jobs; 'next' is the URL of the next page or null",
+                             {{"type", "object"},
+                              {"properties",
+                               {{"jobs", {{"type", "array"}, {"items", Ref("Job")}}},
+                                {"next", {{"type", "string"}, {"nullable", true}}}}}})},
+        {"400", ErrorResponse("bad filter")}}}};
+  paths["/jobs/{id}"]["get"] = {
+      {"summary", "One job with its result"},
+      {"parameters", json::array({PathParam("id", "integer", "job id")})},
+      {"responses",
+       {{"200", JsonResponse("the job", Ref("Job"))}, {"404", ErrorResponse("no such job")}}}};
+  paths["/devices"]["get"] = {
+      {"summary", "Devices with their latest calibration time per method"},
+      {"responses", {{"200", JsonResponse("devices", {{"type", "object"}})}}}};
+  paths["/devices/{serial}/calibration"]["get"] = {
+      {"summary", "The latest succeeded calibration of a device, for production tooling"},
+      {"parameters",
+       json::array({PathParam("serial", "string", "device serial number"),
+                    QueryParam("method", "string", "pca | array (needed when the device has both)"),
+                    QueryParam("format", "string", "json (default) | csv | h"),
+                    {{"name", "If-None-Match"},
+                     {"in", "header"},
+                     {"required", false},
+                     {"schema", {{"type", "string"}}}}})},
+      {"responses",
+       {{"200",
+         {{"description", "the calibration; ETag and Cache-Control: no-cache"},
+          {"content",
+           {{"application/json", {{"schema", {{"type", "object"}}}}},
+            {"text/csv", {{"schema", {{"type", "string"}}}}},
+            {"text/x-c++hdr", {{"schema", {{"type", "string"}}}}}}}}},
+        {"304", {{"description", "not modified (If-None-Match matched the ETag)"}}},
+        {"400", ErrorResponse("bad method or format")},
+        {"404", ErrorResponse("no succeeded calibration")}}}};
+  paths["/recordings/{id}"]["get"] = {
+      {"summary", "Recording metadata"},
+      {"parameters", json::array({PathParam("id", "integer", "recording id")})},
+      {"responses",
+       {{"200", JsonResponse("metadata", Ref("Recording"))},
+        {"404", ErrorResponse("no such recording")}}}};
+  paths["/recordings/{id}/data"]["get"] = {
+      {"summary", "The original bytes"},
+      {"parameters", json::array({PathParam("id", "integer", "recording id")})},
+      {"responses",
+       {{"200",
+         {{"description", "the CSV as uploaded"},
+          {"content", {{"text/csv", {{"schema", {{"type", "string"}}}}}}}}},
+        {"404", ErrorResponse("no such recording")}}}};
+  paths["/healthz"]["get"] = {
+      {"summary", "Liveness (also at /healthz)"},
+      {"responses",
+       {{"200", JsonResponse("alive", {{"type", "object"}})},
+        {"503", JsonResponse("database unavailable", {{"type", "object"}})}}}};
+  paths["/metrics"]["get"] = {
+      {"summary", "Prometheus text format (also at /metrics)"},
+      {"responses",
+       {{"200",
+         {{"description", "metrics"},
+          {"content", {{"text/plain", {{"schema", {{"type", "string"}}}}}}}}}}}};
+  paths["/openapi.json"]["get"] = {
+      {"summary", "This document"},
+      {"responses", {{"200", JsonResponse("OpenAPI 3", {{"type", "object"}})}}}};
+  return doc;
+}
+
+}  // namespace
+
+const json& OpenApiDocument() {
+  static const json doc = Build();
+  return doc;
+}
+
+}  // namespace calibd::server

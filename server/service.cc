@@ -1,0 +1,968 @@
+#include "server/service.h"
+
+#include <arpa/inet.h>
+#include <openssl/evp.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "server/config.h"
+#include "server/exports.h"
+#include "server/http_util.h"
+#include "server/metrics.h"
+#include "server/recording.h"
+#include "server/worker_pool.h"
+#include "storage/store.h"
+
+namespace calibd::server {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+thread_local std::chrono::steady_clock::time_point t_request_start;
+
+// The SHA-256 of an upload, computed while it streams.
+class Sha256 {
+ public:
+  Sha256() : ctx_(EVP_MD_CTX_new()) { EVP_DigestInit_ex(ctx_, EVP_sha256(), nullptr); }
+  ~Sha256() { EVP_MD_CTX_free(ctx_); }
+  void Update(const char* data, size_t len) { EVP_DigestUpdate(ctx_, data, len); }
+  std::string HexDigest() {
+    unsigned char digest[EVP_MAX_MD_SIZE];
+    unsigned int len = 0;
+    EVP_DigestFinal_ex(ctx_, digest, &len);
+    static const char* hex = "0123456789abcdef";
+    std::string out;
+    for (unsigned int i = 0; i < len; ++i) {
+      out += hex[digest[i] >> 4];
+      out += hex[digest[i] & 15];
+    }
+    return out;
+  }
+
+ private:
+  EVP_MD_CTX* ctx_;
+};
+
+// A staged upload file, removed when this goes out of scope.
+class StagingFile {
+ public:
+  StagingFile() = default;
+  ~StagingFile() {
+    if (fd_ >= 0) ::close(fd_);
+    if (!path_.empty()) ::unlink(path_.c_str());
+  }
+  Status Create(const fs::path& dir) {
+    std::string tmpl = (dir / "upload-XXXXXX").string();
+    fd_ = ::mkstemp(tmpl.data());
+    if (fd_ < 0) return Status::IoError("cannot create a staging file in " + dir.string());
+    path_ = tmpl;
+    return Status::Ok();
+  }
+  bool Write(const char* data, size_t len) {
+    while (len > 0) {
+      const ssize_t n = ::write(fd_, data, len);
+      if (n < 0) {
+        if (errno == EINTR) continue;
+        return false;
+      }
+      data += n;
+      len -= static_cast<size_t>(n);
+    }
+    return true;
+  }
+  Status Close() {
+    if (fd_ >= 0 && ::close(fd_) != 0) {
+      fd_ = -1;
+      return Status::IoError("cannot write the staging file");
+    }
+    fd_ = -1;
+    return Status::Ok();
+  }
+  const std::string& path() const { return path_; }
+
+ private:
+  int fd_ = -1;
+  std::string path_;
+};
+
+bool IsLoopback(const std::string& host) {
+  if (host == "localhost") return true;
+  in_addr a4;
+  if (inet_pton(AF_INET, host.c_str(), &a4) == 1) return (ntohl(a4.s_addr) >> 24) == 127;
+  in6_addr a6;
+  if (inet_pton(AF_INET6, host.c_str(), &a6) == 1) return IN6_IS_ADDR_LOOPBACK(&a6);
+  return false;
+}
+
+bool ConstantTimeEquals(const std::string& a, const std::string& b) {
+  unsigned char diff = a.size() == b.size() ? 0 : 1;
+  const size_t n = std::max(a.size(), b.size());
+  for (size_t i = 0; i < n; ++i) {
+    const unsigned char x = i < a.size() ? a[i] : 0;
+    const unsigned char y = i < b.size() ? b[i] : 0;
+    diff |= x ^ y;
+  }
+  return diff == 0;
+}
+
+json NullIfEmpty(const std::string& s) { return s.empty() ? json() : json(s); }
+
+// A job as the API shows it (SPEC §5).
+json JobJson(const storage::JobInfo& job, bool with_result) {
+  json j = {{"id", job.id},
+            {"status", job.status},
+            {"device", NullIfEmpty(job.device)},
+            {"method", job.method},
+            {"recording_id", job.recording_id},
+            {"created_at", NullIfEmpty(job.created_at)},
+            {"started_at", NullIfEmpty(job.started_at)},
+            {"finished_at", NullIfEmpty(job.finished_at)},
+            {"attempts", job.attempts},
+            {"error", json()},
+            {"result", json()},
+            {"url", "/api/v1/jobs/" + std::to_string(job.id)},
+            {"report_url", "/jobs/" + std::to_string(job.id)}};
+  if (!job.error_code.empty() && job.status != "succeeded") {
+    j["error"] = {{"code", job.error_code}, {"message", job.error_message}};
+  }
+  json config;
+  if (ParseJsonText(job.config_json, "config", &config).ok()) j["config"] = std::move(config);
+  if (with_result && !job.result_json.empty()) {
+    json result;
+    if (ParseJsonText(job.result_json, "result", &result).ok()) j["result"] = std::move(result);
+  }
+  return j;
+}
+
+json RecordingJson(const storage::RecordingInfo& r) {
+  json j = {{"id", r.id},
+            {"sha256", r.sha256},
+            {"bytes", r.bytes},
+            {"rows", r.rows},
+            {"layout", r.layout},
+            {"device", NullIfEmpty(r.device)},
+            {"file_name", NullIfEmpty(r.file_name)},
+            {"created_at", NullIfEmpty(r.created_at)},
+            {"url", "/api/v1/recordings/" + std::to_string(r.id)},
+            {"data_url", "/api/v1/recordings/" + std::to_string(r.id) + "/data"}};
+  json columns, sensors;
+  if (ParseJsonText(r.columns_json, "columns", &columns).ok()) j["columns"] = columns;
+  if (ParseJsonText(r.sensors_json, "sensors", &sensors).ok()) j["sensors"] = sensors;
+  return j;
+}
+
+bool ParseId(const std::string& text, int64_t* id) {
+  if (text.empty() || text.size() > 18) return false;
+  int64_t v = 0;
+  for (char c : text) {
+    if (c < '0' || c > '9') return false;
+    v = v * 10 + (c - '0');
+  }
+  *id = v;
+  return v > 0;
+}
+
+}  // namespace
+
+struct Service::Impl {
+  ServeOptions options;
+  std::string host;
+  int requested_port = 0;
+  int bound_port = 0;
+  std::string token;  // empty: no authentication
+  fs::path staging_dir;
+  std::unique_ptr<storage::Store> store;
+  Metrics metrics;
+  std::unique_ptr<WorkerPool> workers;
+  httplib::Server http;
+  std::once_flag shutdown_once;
+  bool shutdown_clean = true;
+
+  void SetupRoutes();
+  bool Authorized(const httplib::Request& req) const;
+  void HandleUpload(const httplib::Request& req, httplib::Response& res,
+                    const httplib::ContentReader& reader);
+  void HandleCreateJob(const httplib::Request& req, httplib::Response& res);
+  void HandleGetJob(const httplib::Request& req, httplib::Response& res);
+  void HandleListJobs(const httplib::Request& req, httplib::Response& res);
+  void HandleDevices(const httplib::Request& req, httplib::Response& res);
+  void HandleLatest(const httplib::Request& req, httplib::Response& res);
+  void HandleRecording(const httplib::Request& req, httplib::Response& res);
+  void HandleRecordingData(const httplib::Request& req, httplib::Response& res);
+  void HandleHealth(const httplib::Request& req, httplib::Response& res);
+  void HandleMetrics(const httplib::Request& req, httplib::Response& res);
+};
+
+Service::Service(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Service::~Service() { Shutdown(); }
+
+std::string ServeOptions::Validate() const {
+  std::string host;
+  int port;
+  if (!SplitHostPort(listen, &host, &port)) {
+    return "--listen must be HOST:PORT (e.g. 127.0.0.1:8080), not '" + listen + "'";
+  }
+  if (workers < 0) return "--workers must be >= 0";
+  if (max_upload_bytes < 1) return "--max-upload-bytes must be >= 1";
+  if (http_threads < 4) return "--http-threads must be >= 4";
+  if (db_path.empty()) return "--db must not be empty";
+  return "";
+}
+
+Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* out) {
+  auto impl = std::make_unique<Impl>();
+  impl->options = options;
+  const std::string problem = options.Validate();
+  if (!problem.empty()) return Status::InvalidInput(problem);
+  SplitHostPort(options.listen, &impl->host, &impl->requested_port);
+  if (!options.token_file.empty()) {
+    std::ifstream in(options.token_file);
+    if (!in) return Status::InvalidInput("cannot read --token-file " + options.token_file);
+    std::getline(in, impl->token);
+    while (!impl->token.empty() && isspace(static_cast<unsigned char>(impl->token.back()))) {
+      impl->token.pop_back();
+    }
+    if (impl->token.size() < 16) {
+      return Status::InvalidInput("the token in --token-file must have at least 16 characters");
+    }
+  }
+  if (!IsLoopback(impl->host) && impl->token.empty() && !options.insecure) {
+    return Status::InvalidInput("refusing to listen on non-loopback address '" + impl->host +
+                                "' without --token-file (use --insecure to override)");
+  }
+  storage::StoreOptions store_options;
+  Status s = storage::Store::Open(options.db_path, store_options, &impl->store);
+  if (!s.ok()) return s;
+  int64_t recovered = 0;
+  s = impl->store->RecoverExpiredLeases(&recovered);
+  if (!s.ok()) return s;
+  if (recovered > 0) {
+    std::cerr << "calibd: took back " << recovered << " job(s) whose lease had lapsed\n";
+  }
+  impl->staging_dir = fs::absolute(options.db_path).parent_path() / "staging";
+  std::error_code ec;
+  fs::create_directories(impl->staging_dir, ec);
+  if (ec)
+    return Status::IoError("cannot create " + impl->staging_dir.string() + ": " + ec.message());
+  for (const auto& entry : fs::directory_iterator(impl->staging_dir, ec)) {
+    fs::remove(entry.path(), ec);  // leftovers of a killed process: never acknowledged
+  }
+  WorkerPoolOptions pool;
+  pool.workers =
+      options.workers > 0 ? options.workers : std::max(1u, std::thread::hardware_concurrency());
+  pool.lease_ms = options.lease_ms;
+  char hostname[256] = "host";
+  gethostname(hostname, sizeof hostname - 1);
+  pool.id_prefix = std::string(hostname) + ":" + std::to_string(getpid()) + ":" +
+                   std::to_string(std::chrono::system_clock::now().time_since_epoch().count());
+  impl->workers = std::make_unique<WorkerPool>(impl->store.get(), &impl->metrics, pool);
+  impl->SetupRoutes();
+  out->reset(new Service(std::move(impl)));
+  return Status::Ok();
+}
+
+Status Service::Bind() {
+  Impl& d = *impl_;
+  if (d.requested_port == 0) {
+    d.bound_port = d.http.bind_to_any_port(d.host);
+    if (d.bound_port <= 0) return Status::IoError("cannot bind " + d.host + " to any port");
+  } else {
+    if (!d.http.bind_to_port(d.host, d.requested_port)) {
+      return Status::IoError("cannot listen on " + d.options.listen +
+                             " (address in use or not available)");
+    }
+    d.bound_port = d.requested_port;
+  }
+  return Status::Ok();
+}
+
+int Service::port() const { return impl_->bound_port; }
+
+void Service::Run() {
+  impl_->workers->Start();
+  impl_->http.listen_after_bind();
+}
+
+bool Service::Shutdown() {
+  Impl& d = *impl_;
+  std::call_once(d.shutdown_once, [&d] {
+    d.http.stop();
+    if (d.workers) {
+      d.shutdown_clean = d.workers->Stop(std::chrono::seconds(d.options.shutdown_grace_seconds));
+    }
+    if (d.shutdown_clean && d.store) {
+      d.store->Checkpoint();
+      d.workers.reset();
+      d.store.reset();
+    }
+  });
+  return d.shutdown_clean;
+}
+
+bool Service::Impl::Authorized(const httplib::Request& req) const {
+  if (token.empty()) return true;
+  const std::string header = req.get_header_value("Authorization");
+  const std::string prefix = "Bearer ";
+  if (header.size() <= prefix.size() || header.compare(0, prefix.size(), prefix) != 0) {
+    return false;
+  }
+  return ConstantTimeEquals(header.substr(prefix.size()), token);
+}
+
+void Service::Impl::SetupRoutes() {
+  http.new_task_queue = [n = options.http_threads] { return new httplib::ThreadPool(n); };
+  http.set_tcp_nodelay(true);
+  http.set_read_timeout(options.read_timeout_seconds, 0);
+  http.set_write_timeout(options.write_timeout_seconds, 0);
+  http.set_keep_alive_timeout(5);
+  http.set_keep_alive_max_count(1000);
+  http.set_payload_max_length(static_cast<size_t>(options.max_upload_bytes));
+
+  // Runs before the body is read: authentication, size and encoding limits.
+  http.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
+    t_request_start = std::chrono::steady_clock::now();
+    const bool write = req.method != "GET" && req.method != "HEAD" && req.method != "OPTIONS";
+    const bool is_upload = req.path == "/api/v1/recordings" && req.method == "POST";
+    if (req.has_header("Content-Encoding")) {
+      const std::string enc = req.get_header_value("Content-Encoding");
+      if (enc != "identity") {
+        res.set_header("Connection", "close");
+        SendError(res, 415, "unsupported_media_type",
+                  "compressed request bodies (Content-Encoding: " + enc.substr(0, 32) +
+                      ") are not accepted; send the body uncompressed");
+        return httplib::Server::HandlerResponse::Handled;
+      }
+    }
+    if (write && req.has_header("Content-Length")) {
+      const std::string text = req.get_header_value("Content-Length");
+      const int64_t limit = is_upload ? options.max_upload_bytes : options.max_json_body_bytes;
+      int64_t length = -1;
+      if (!text.empty() && text.size() <= 19 &&
+          text.find_first_not_of("0123456789") == std::string::npos) {
+        length = std::stoll(text);
+      }
+      if (length < 0) {
+        res.set_header("Connection", "close");
+        SendError(res, 400, "invalid_input", "invalid Content-Length");
+        return httplib::Server::HandlerResponse::Handled;
+      }
+      if (length > limit) {
+        res.set_header("Connection", "close");
+        SendError(res, 413, "too_large",
+                  "the body has " + text + " bytes; the limit is " + std::to_string(limit));
+        return httplib::Server::HandlerResponse::Handled;
+      }
+    }
+    if (write && !req.has_header("Content-Length") &&
+        req.get_header_value("Transfer-Encoding") != "chunked" && req.method != "DELETE") {
+      res.set_header("Connection", "close");
+      SendError(res, 411, "length_required",
+                "a request body needs Content-Length or chunked "
+                "Transfer-Encoding");
+      return httplib::Server::HandlerResponse::Handled;
+    }
+    if (write && !Authorized(req)) {
+      res.set_header("WWW-Authenticate", "Bearer");
+      res.set_header("Connection", "close");
+      SendError(res, 401, "unauthorized", "writes need the header 'Authorization: Bearer TOKEN'");
+      return httplib::Server::HandlerResponse::Handled;
+    }
+    return httplib::Server::HandlerResponse::Unhandled;
+  });
+
+  http.set_exception_handler(
+      [](const httplib::Request&, httplib::Response& res, std::exception_ptr) {
+        // Never exception text: it may reveal internals.
+        SendError(res, 500, "internal", "internal server error");
+      });
+
+  http.set_error_handler(
+      httplib::Server::HandlerWithResponse([](const httplib::Request& req, httplib::Response& res) {
+        if (!res.body.empty()) return httplib::Server::HandlerResponse::Handled;
+        switch (res.status) {
+          case 404:
+            SendError(res, 404, "not_found", "no such resource: " + req.path.substr(0, 200));
+            break;
+          case 413:
+            SendError(res, 413, "too_large", "request body too large");
+            break;
+          case 414:
+            SendError(res, 414, "uri_too_long", "request URI too long");
+            break;
+          case 400:
+            SendError(res, 400, "invalid_input", "malformed request");
+            break;
+          default:
+            SendError(res, res.status, "error", "request failed");
+            break;
+        }
+        return httplib::Server::HandlerResponse::Handled;
+      }));
+
+  http.set_logger([this](const httplib::Request& req, const httplib::Response& res) {
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t_request_start).count();
+    metrics.ObserveRequest(req.method, RouteLabel(req.path), res.status, seconds);
+    if (options.access_log) {
+      char line[160];
+      std::snprintf(line, sizeof line, " %d %zu %.3fms\n", res.status, res.body.size(),
+                    seconds * 1e3);
+      std::cerr << req.remote_addr << " " << req.method << " " << SanitizeForLog(req.path) << line;
+    }
+  });
+
+  http.Post("/api/v1/recordings",
+            [this](const httplib::Request& req, httplib::Response& res,
+                   const httplib::ContentReader& reader) { HandleUpload(req, res, reader); });
+  http.Post("/api/v1/jobs", [this](const httplib::Request& req, httplib::Response& res) {
+    HandleCreateJob(req, res);
+  });
+  http.Get(R"(/api/v1/jobs/([^/]+))",
+           [this](const httplib::Request& req, httplib::Response& res) { HandleGetJob(req, res); });
+  http.Get("/api/v1/jobs", [this](const httplib::Request& req, httplib::Response& res) {
+    HandleListJobs(req, res);
+  });
+  http.Get("/api/v1/devices", [this](const httplib::Request& req, httplib::Response& res) {
+    HandleDevices(req, res);
+  });
+  http.Get(R"(/api/v1/devices/([^/]+)/calibration)",
+           [this](const httplib::Request& req, httplib::Response& res) { HandleLatest(req, res); });
+  http.Get(
+      R"(/api/v1/recordings/([^/]+))",
+      [this](const httplib::Request& req, httplib::Response& res) { HandleRecording(req, res); });
+  http.Get(R"(/api/v1/recordings/([^/]+)/data)",
+           [this](const httplib::Request& req, httplib::Response& res) {
+             HandleRecordingData(req, res);
+           });
+  http.Get("/api/v1/healthz",
+           [this](const httplib::Request& req, httplib::Response& res) { HandleHealth(req, res); });
+  http.Get("/healthz",
+           [this](const httplib::Request& req, httplib::Response& res) { HandleHealth(req, res); });
+  http.Get("/api/v1/metrics", [this](const httplib::Request& req, httplib::Response& res) {
+    HandleMetrics(req, res);
+  });
+  http.Get("/metrics", [this](const httplib::Request& req, httplib::Response& res) {
+    HandleMetrics(req, res);
+  });
+  http.Get("/api/v1/openapi.json", [](const httplib::Request&, httplib::Response& res) {
+    res.set_content(OpenApiDocument().dump(2), "application/json");
+  });
+  RegisterHtmlRoutes(&http, store.get());
+
+  // Known paths with another method: 405 with Allow; everything else: 404.
+  auto not_allowed = [](const httplib::Request& req, httplib::Response& res) {
+    const std::string allow = AllowedMethods(req.path);
+    if (allow.empty()) {
+      SendError(res, 404, "not_found", "no such resource: " + req.path.substr(0, 200));
+      return;
+    }
+    res.set_header("Allow", allow);
+    SendError(res, 405, "method_not_allowed",
+              req.method + " is not allowed on " + req.path.substr(0, 200) + "; allowed: " + allow);
+  };
+  http.Get(".*", not_allowed);
+  http.Post(".*", not_allowed);
+  http.Put(".*", not_allowed);
+  http.Patch(".*", not_allowed);
+  http.Delete(".*", not_allowed);
+  http.Options(".*", not_allowed);
+}
+
+void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response& res,
+                                 const httplib::ContentReader& reader) {
+  int64_t received = 0;
+  auto finish = [&](int status) { metrics.ObserveUpload(received, status); };
+
+  // Config from the query string (text/csv bodies) — validated before the body is read.
+  json config;
+  Status s = ConfigFromQuery(req.params, &config);
+  if (!s.ok()) return finish(SendStatus(res, s));
+
+  const std::string content_type = req.get_header_value("Content-Type");
+  const std::string media = ToLower(content_type.substr(0, content_type.find(';')));
+  const bool multipart = req.is_multipart_form_data();
+  if (!multipart && media != "text/csv" && media != "text/plain" && media != "application/csv" &&
+      media != "application/octet-stream") {
+    res.set_header("Connection", "close");
+    SendError(res, 415, "unsupported_media_type",
+              "send the recording as text/csv, or as multipart/form-data with parts 'recording' "
+              "and 'config'; not '" +
+                  content_type.substr(0, 64) + "'");
+    return finish(415);
+  }
+
+  StagingFile staged;
+  s = staged.Create(staging_dir);
+  if (!s.ok()) return finish(SendStatus(res, s));
+  Sha256 sha;
+  RecordingParser parser("upload", /*collect=*/false);
+  Status parse_status;  // first CSV error
+  Status body_status;   // first other error (size, I/O, multipart shape)
+  std::string file_name;
+
+  auto take_recording_bytes = [&](const char* data, size_t len) {
+    received += static_cast<int64_t>(len);
+    if (received > options.max_upload_bytes) {
+      body_status =
+          Status(StatusCode::kTooLarge, "the upload is larger than the limit of " +
+                                            std::to_string(options.max_upload_bytes) + " bytes");
+      return false;
+    }
+    sha.Update(data, len);
+    if (!staged.Write(data, len)) {
+      body_status = Status::IoError("cannot write the upload to disk");
+      return false;
+    }
+    parse_status = parser.Feed(std::string_view(data, len));
+    return parse_status.ok();
+  };
+
+  bool read_ok;
+  if (multipart) {
+    std::string part;  // name of the current part
+    std::string config_text;
+    bool have_recording = false, have_config = false;
+    read_ok = reader(
+        [&](const httplib::MultipartFormData& header) {
+          part = header.name;
+          if (part == "recording") {
+            if (have_recording) {
+              body_status =
+                  Status::InvalidInput("more than one 'recording' part").WithField("recording");
+              return false;
+            }
+            have_recording = true;
+            file_name = header.filename;
+          } else if (part == "config") {
+            if (have_config) {
+              body_status = Status::InvalidInput("more than one 'config' part").WithField("config");
+              return false;
+            }
+            have_config = true;
+          } else {
+            body_status = Status::InvalidInput("unknown multipart part '" + part.substr(0, 64) +
+                                               "': expected 'recording' and 'config'")
+                              .WithField(part.substr(0, 64));
+            return false;
+          }
+          return true;
+        },
+        [&](const char* data, size_t len) {
+          if (part == "recording") return take_recording_bytes(data, len);
+          received += static_cast<int64_t>(len);
+          if (static_cast<int64_t>(config_text.size() + len) > options.max_json_body_bytes) {
+            body_status = Status(StatusCode::kTooLarge,
+                                 "the config part is larger than " +
+                                     std::to_string(options.max_json_body_bytes) + " bytes");
+            return false;
+          }
+          config_text.append(data, len);
+          return true;
+        });
+    if (read_ok && body_status.ok() && parse_status.ok()) {
+      if (!have_recording) {
+        body_status = Status::InvalidInput("no 'recording' part in the multipart body")
+                          .WithField("recording");
+      } else if (have_config) {
+        json part_config;
+        Status cs = ParseJsonText(config_text, "config", &part_config);
+        if (!cs.ok()) {
+          body_status = cs.WithField("config");
+        } else if (!part_config.is_object()) {
+          body_status =
+              Status::InvalidInput("the config part must be a JSON object").WithField("config");
+        } else {
+          for (auto& [key, value] : part_config.items()) {
+            if (config.contains(key)) {
+              body_status = Status::InvalidInput("key '" + key +
+                                                 "' given both in the query and the config part")
+                                .WithField(key);
+              break;
+            }
+            config[key] = value;
+          }
+        }
+      }
+    }
+  } else {
+    read_ok = reader([&](const char* data, size_t len) { return take_recording_bytes(data, len); });
+  }
+
+  if (!body_status.ok()) {
+    res.set_header("Connection", "close");
+    return finish(SendStatus(res, body_status));
+  }
+  if (!parse_status.ok()) {
+    res.set_header("Connection", "close");
+    return finish(SendStatus(res, parse_status));
+  }
+  if (!read_ok) {
+    // The connection broke or the body was malformed (e.g. bad chunk sizes, truncated multipart).
+    res.set_header("Connection", "close");
+    SendError(res, 400, "invalid_input", "the request body could not be read completely");
+    return finish(400);
+  }
+  s = parser.Finish();
+  if (!s.ok()) return finish(SendStatus(res, s));
+  const RecordingSummary& summary = parser.summary();
+
+  storage::NewRecording rec;
+  rec.path = staged.path();
+  rec.sha256 = sha.HexDigest();
+  rec.layout = LayoutName(summary.layout);
+  rec.rows = summary.rows;
+  rec.columns_json = json(summary.columns).dump();
+  rec.sensors_json = json(summary.sensors).dump();
+  rec.file_name = file_name;
+  CommonConfig common;
+  const bool has_method = config.contains("method");
+  if (has_method) {
+    s = ValidateConfig(config, &common);
+    if (!s.ok()) return finish(SendStatus(res, s));
+    if (common.method != LayoutMethod(summary.layout)) {
+      return finish(SendStatus(res, Status::InvalidInput(std::string("method '") + common.method +
+                                                         "' does not match the recording's " +
+                                                         LayoutName(summary.layout) + " layout")
+                                        .WithField("method")));
+    }
+    rec.job = storage::NewJob{common.method, common.device, config.dump()};
+  } else if (config.contains("device")) {
+    if (!config["device"].is_string()) {
+      return finish(
+          SendStatus(res, Status::InvalidInput("'device' must be a string").WithField("device")));
+    }
+    common.device = config["device"].get<std::string>();
+    for (auto& [key, value] : config.items()) {
+      if (key != "device") {
+        return finish(
+            SendStatus(res, Status::InvalidInput("config key '" + key + "' given without 'method'")
+                                .WithField(key)));
+      }
+    }
+  }
+  rec.device = common.device;
+  s = staged.Close();
+  if (!s.ok()) return finish(SendStatus(res, s));
+
+  storage::RecordingInfo info;
+  bool existed = false;
+  s = store->PutRecording(rec, &info, &existed);
+  if (!s.ok()) return finish(SendStatus(res, s));
+  json body = {{"recording",
+                {{"id", info.id},
+                 {"sha256", info.sha256},
+                 {"bytes", info.bytes},
+                 {"rows", info.rows},
+                 {"layout", info.layout},
+                 {"existed", existed},
+                 {"url", "/api/v1/recordings/" + std::to_string(info.id)}}}};
+  if (info.job) {
+    body["job"] = {{"id", info.job->id},
+                   {"status", info.job->status},
+                   {"url", "/api/v1/jobs/" + std::to_string(info.job->id)},
+                   {"report_url", "/jobs/" + std::to_string(info.job->id)}};
+    res.set_header("Location", "/api/v1/jobs/" + std::to_string(info.job->id));
+    workers->Notify();
+  } else {
+    res.set_header("Location", "/api/v1/recordings/" + std::to_string(info.id));
+  }
+  res.status = 201;
+  res.set_content(body.dump(2), "application/json");
+  finish(201);
+}
+
+void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Response& res) {
+  const std::string media = ToLower(req.get_header_value("Content-Type"));
+  if (media.rfind("application/json", 0) != 0) {
+    SendError(res, 415, "unsupported_media_type", "send the job as application/json");
+    return;
+  }
+  json body;
+  Status s = ParseJsonText(req.body, "request body", &body);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  if (!body.is_object()) {
+    SendError(res, 400, "invalid_input", "the body must be a JSON object");
+    return;
+  }
+  for (auto& [key, value] : body.items()) {
+    if (key != "recording_id" && key != "config") {
+      return (void)SendStatus(
+          res, Status::InvalidInput("unknown key '" + key + "' (expected recording_id, config)")
+                   .WithField(key));
+    }
+  }
+  if (!body.contains("recording_id") || !body["recording_id"].is_number_integer()) {
+    return (void)SendStatus(
+        res, Status::InvalidInput("'recording_id' must be an integer").WithField("recording_id"));
+  }
+  if (!body.contains("config")) {
+    return (void)SendStatus(res, Status::InvalidInput("missing 'config'").WithField("config"));
+  }
+  const int64_t recording_id = body["recording_id"].get<int64_t>();
+  const json& config = body["config"];
+  CommonConfig common;
+  s = ValidateConfig(config, &common);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  storage::RecordingInfo recording;
+  s = store->GetRecording(recording_id, &recording);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  const bool array_layout = recording.layout == "array";
+  if ((common.method == "array") != array_layout) {
+    return (void)SendStatus(
+        res,
+        Status::InvalidInput("method '" + common.method + "' does not match recording " +
+                             std::to_string(recording_id) + "'s " + recording.layout + " layout")
+            .WithField("method"));
+  }
+  storage::JobInfo job;
+  s = store->EnqueueJob(recording_id, common.method, common.device, config.dump(), &job);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  workers->Notify();
+  res.status = 202;
+  res.set_header("Location", "/api/v1/jobs/" + std::to_string(job.id));
+  res.set_content(json{{"job", JobJson(job, false)}}.dump(2), "application/json");
+}
+
+void Service::Impl::HandleGetJob(const httplib::Request& req, httplib::Response& res) {
+  int64_t id;
+  if (!ParseId(req.matches[1], &id)) {
+    SendError(res, 404, "not_found", "no such job");
+    return;
+  }
+  storage::JobInfo job;
+  Status s = store->GetJob(id, &job);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  res.set_content(JobJson(job, true).dump(2), "application/json");
+}
+
+void Service::Impl::HandleListJobs(const httplib::Request& req, httplib::Response& res) {
+  storage::JobFilter filter;
+  for (const auto& [key, value] : req.params) {
+    if (key == "device") {
+      filter.device = value;
+    } else if (key == "method") {
+      if (value != "pca" && value != "array") {
+        return (void)SendStatus(
+            res, Status::InvalidInput("method must be pca or array").WithField("method"));
+      }
+      filter.method = value;
+    } else if (key == "status") {
+      if (value != "queued" && value != "running" && value != "succeeded" && value != "failed") {
+        return (void)SendStatus(
+            res, Status::InvalidInput("status must be queued, running, succeeded or failed")
+                     .WithField("status"));
+      }
+      filter.status = value;
+    } else if (key == "limit") {
+      int64_t limit;
+      if (!ParseId(value, &limit) || limit > 500) {
+        return (void)SendStatus(res,
+                                Status::InvalidInput("limit must be 1..500").WithField("limit"));
+      }
+      filter.limit = static_cast<int>(limit);
+    } else if (key == "before") {
+      if (!ParseId(value, &filter.before)) {
+        return (void)SendStatus(
+            res, Status::InvalidInput("before must be a job id").WithField("before"));
+      }
+    } else if (key == "include_results") {
+      filter.include_results = value == "1" || value == "true";
+    } else {
+      return (void)SendStatus(
+          res, Status::InvalidInput("unknown query parameter '" + key.substr(0, 64) + "'")
+                   .WithField(key.substr(0, 64)));
+    }
+  }
+  std::vector<storage::JobInfo> jobs;
+  Status s = store->ListJobs(filter, &jobs);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  json list = json::array();
+  for (const auto& job : jobs) list.push_back(JobJson(job, filter.include_results));
+  json body = {{"jobs", list}, {"next", json()}};
+  if (static_cast<int>(jobs.size()) == filter.limit && !jobs.empty()) {
+    httplib::Params next = req.params;
+    next.erase("before");
+    next.emplace("before", std::to_string(jobs.back().id));
+    body["next"] = "/api/v1/jobs?" + httplib::detail::params_to_query_str(next);
+  }
+  res.set_content(body.dump(2), "application/json");
+}
+
+void Service::Impl::HandleDevices(const httplib::Request&, httplib::Response& res) {
+  std::vector<storage::DeviceInfo> devices;
+  Status s = store->ListDevices(&devices);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  json list = json::array();
+  for (const auto& d : devices) {
+    json latest = json::object();
+    for (const auto& c : d.latest) {
+      latest[c.method] = {
+          {"job_id", c.job_id},
+          {"calibrated_at", c.calibrated_at},
+          {"url", "/api/v1/devices/" + UrlEncode(d.serial) + "/calibration?method=" + c.method}};
+    }
+    list.push_back({{"serial", d.serial},
+                    {"first_seen", NullIfEmpty(d.first_seen)},
+                    {"latest", latest},
+                    {"url", "/devices/" + UrlEncode(d.serial)}});
+  }
+  res.set_content(json{{"devices", list}}.dump(2), "application/json");
+}
+
+void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response& res) {
+  const std::string serial = req.matches[1];
+  std::string method = req.get_param_value("method");
+  const std::string format = req.has_param("format") ? req.get_param_value("format") : "json";
+  if (format != "json" && format != "csv" && format != "h") {
+    return (void)SendStatus(
+        res, Status::InvalidInput("format must be json, csv or h").WithField("format"));
+  }
+  if (method.empty()) {
+    std::vector<storage::DeviceInfo> devices;
+    Status s = store->ListDevices(&devices);
+    if (!s.ok()) return (void)SendStatus(res, s);
+    std::vector<std::string> methods;
+    for (const auto& d : devices) {
+      if (d.serial != serial) continue;
+      for (const auto& c : d.latest) methods.push_back(c.method);
+    }
+    if (methods.size() > 1) {
+      return (void)SendStatus(res, Status::InvalidInput("device '" + serial +
+                                                        "' has pca and array calibrations: "
+                                                        "add ?method=pca or ?method=array")
+                                       .WithField("method"));
+    }
+    if (methods.empty()) {
+      SendError(res, 404, "not_found", "no succeeded calibration for device '" + serial + "'");
+      return;
+    }
+    method = methods[0];
+  } else if (method != "pca" && method != "array") {
+    return (void)SendStatus(
+        res, Status::InvalidInput("method must be pca or array").WithField("method"));
+  }
+  storage::JobInfo job;
+  Status s = store->LatestResult(serial, method, &job);
+  if (s.code() == StatusCode::kNotFound) {
+    SendError(res, 404, "not_found",
+              "no succeeded " + method + " calibration for device '" + serial + "'");
+    return;
+  }
+  if (!s.ok()) return (void)SendStatus(res, s);
+  const std::string etag = "\"" + job.result_sha256.substr(0, 32) + "-" + format + "\"";
+  res.set_header("ETag", etag);
+  res.set_header("Cache-Control", "no-cache");
+  res.set_header("X-Calibd-Job", std::to_string(job.id));
+  if (IfNoneMatchHits(req.get_header_value("If-None-Match"), etag)) {
+    res.status = 304;
+    return;
+  }
+  json result;
+  s = ParseJsonText(job.result_json, "stored result", &result);
+  if (!s.ok()) return (void)SendStatus(res, Status::Internal("stored result is not JSON"));
+  if (format == "json") {
+    json body = {{"device", serial},
+                 {"method", method},
+                 {"job_id", job.id},
+                 {"calibrated_at", job.finished_at},
+                 {"result", result}};
+    res.set_content(body.dump(2), "application/json");
+    return;
+  }
+  std::string text;
+  if (format == "csv") {
+    s = ResultToCsv(result, &text);
+    if (!s.ok()) return (void)SendStatus(res, s);
+    res.set_header("Content-Disposition",
+                   "attachment; filename=\"calibration-" + std::to_string(job.id) + ".csv\"");
+    res.set_content(text, "text/csv");
+    return;
+  }
+  ExportContext context{job.id, serial, method, job.finished_at};
+  s = ResultToHeader(result, context, &text);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  res.set_header("Content-Disposition",
+                 "attachment; filename=\"calibration-" + std::to_string(job.id) + ".h\"");
+  res.set_content(text, "text/x-c++hdr");
+}
+
+void Service::Impl::HandleRecording(const httplib::Request& req, httplib::Response& res) {
+  int64_t id;
+  if (!ParseId(req.matches[1], &id)) {
+    SendError(res, 404, "not_found", "no such recording");
+    return;
+  }
+  storage::RecordingInfo info;
+  Status s = store->GetRecording(id, &info);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  res.set_content(RecordingJson(info).dump(2), "application/json");
+}
+
+void Service::Impl::HandleRecordingData(const httplib::Request& req, httplib::Response& res) {
+  int64_t id;
+  if (!ParseId(req.matches[1], &id)) {
+    SendError(res, 404, "not_found", "no such recording");
+    return;
+  }
+  storage::RecordingInfo info;
+  Status s = store->GetRecording(id, &info);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  res.set_header("Content-Disposition",
+                 "attachment; filename=\"recording-" + std::to_string(id) + ".csv\"");
+  res.set_header("ETag", "\"" + info.sha256 + "\"");
+  storage::Store* st = store.get();
+  res.set_content_provider(static_cast<size_t>(info.bytes), "text/csv",
+                           [st, id](size_t offset, size_t, httplib::DataSink& sink) {
+                             if (offset != 0)
+                               return false;  // everything is written in the first call
+                             Status rs = st->ReadRecordingData(id, [&sink](std::string_view chunk) {
+                               return sink.write(chunk.data(), chunk.size());
+                             });
+                             return rs.ok();
+                           });
+}
+
+void Service::Impl::HandleHealth(const httplib::Request&, httplib::Response& res) {
+  storage::QueueCounts counts;
+  Status s = store->QueueDepth(&counts);
+  if (!s.ok()) {
+    res.status = 503;
+    res.set_content(json{{"status", "unavailable"}, {"database", s.message()}}.dump(),
+                    "application/json");
+    return;
+  }
+  res.set_content(json{{"status", "ok"},
+                       {"queued", counts.queued},
+                       {"running", counts.running},
+                       {"workers_busy", workers->running_jobs()}}
+                      .dump(),
+                  "application/json");
+}
+
+void Service::Impl::HandleMetrics(const httplib::Request&, httplib::Response& res) {
+  std::map<std::string, std::map<std::string, double>> gauges;
+  storage::QueueCounts counts;
+  if (store->QueueDepth(&counts).ok()) {
+    gauges["calibd_jobs"] = {{"state=\"queued\"", static_cast<double>(counts.queued)},
+                             {"state=\"running\"", static_cast<double>(counts.running)},
+                             {"state=\"succeeded\"", static_cast<double>(counts.succeeded)},
+                             {"state=\"failed\"", static_cast<double>(counts.failed)}};
+  }
+  gauges["calibd_workers_busy"] = {{"", static_cast<double>(workers->running_jobs())}};
+  res.set_content(metrics.Render(gauges, {{"calibd_jobs", "Jobs in the queue by state."},
+                                          {"calibd_workers_busy", "Workers running a job."}}),
+                  "text/plain; version=0.0.4");
+}
+
+}  // namespace calibd::server

@@ -1,0 +1,174 @@
+#include "server/worker_pool.h"
+
+#include <iostream>
+#include <nlohmann/json.hpp>
+
+#include "server/config.h"
+
+namespace calibd::server {
+
+WorkerPool::WorkerPool(storage::Store* store, Metrics* metrics, WorkerPoolOptions options)
+    : store_(store), metrics_(metrics), options_(std::move(options)) {
+  if (options_.workers < 1) options_.workers = 1;
+  if (options_.lease_ms < 300) options_.lease_ms = 300;
+}
+
+WorkerPool::~WorkerPool() {
+  bool started;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    started = started_ && !stopping_;
+  }
+  if (started) Stop(std::chrono::milliseconds(0));
+}
+
+void WorkerPool::Start() {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (started_) return;
+  started_ = true;
+  for (int i = 0; i < options_.workers; ++i) threads_.emplace_back([this, i] { WorkerLoop(i); });
+  renewer_ = std::thread([this] { RenewLoop(); });
+}
+
+void WorkerPool::Notify() {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    ++notifications_;
+  }
+  wake_.notify_one();
+}
+
+int WorkerPool::running_jobs() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return static_cast<int>(active_.size());
+}
+
+bool WorkerPool::Stop(std::chrono::milliseconds grace) {
+  std::unique_lock<std::mutex> lock(mu_);
+  if (!started_) return true;
+  stopping_ = true;
+  wake_.notify_all();
+  const bool all_done = finished_.wait_for(lock, grace, [this] { return busy_workers_ == 0; });
+  if (!all_done) {
+    // Give the still-running jobs back to the queue; their workers' late results will be refused
+    // (kConflict) and the jobs run again after the restart.
+    for (const auto& [job_id, worker_id] : active_) {
+      Status s = store_->ReleaseJob(job_id, worker_id);
+      std::cerr << "calibd: shutdown: released job " << job_id << " ("
+                << (s.ok() ? "it will run again after restart" : s.ToString()) << ")\n";
+    }
+    active_.clear();
+  }
+  lock.unlock();
+  finished_.notify_all();  // wakes the renewer
+  if (all_done) {
+    for (auto& t : threads_) t.join();
+    renewer_.join();
+  } else {
+    for (auto& t : threads_) t.detach();
+    renewer_.join();
+  }
+  threads_.clear();
+  return all_done;
+}
+
+void WorkerPool::WorkerLoop(int index) {
+  const std::string worker_id = options_.id_prefix + "-" + std::to_string(index);
+  uint64_t seen_notifications = 0;
+  while (true) {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (stopping_) return;
+      seen_notifications = notifications_;
+    }
+    storage::JobInfo job;
+    bool claimed = false;
+    Status s = store_->ClaimJob(worker_id, options_.lease_ms, &job, &claimed);
+    if (!s.ok()) std::cerr << "calibd: " << worker_id << ": claim failed: " << s.ToString() << "\n";
+    if (s.ok() && claimed) {
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        if (stopping_) {
+          store_->ReleaseJob(job.id, worker_id);
+          return;
+        }
+        active_[job.id] = worker_id;
+        ++busy_workers_;
+      }
+      RunJob(worker_id, job);
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        active_.erase(job.id);
+        --busy_workers_;
+      }
+      finished_.notify_all();
+      continue;  // look for the next job at once
+    }
+    std::unique_lock<std::mutex> lock(mu_);
+    wake_.wait_for(lock, std::chrono::milliseconds(options_.poll_ms),
+                   [&] { return stopping_ || notifications_ != seen_notifications; });
+  }
+}
+
+void WorkerPool::RenewLoop() {
+  const auto period = std::chrono::milliseconds(options_.lease_ms / 3);
+  std::unique_lock<std::mutex> lock(mu_);
+  while (!stopping_) {
+    finished_.wait_for(lock, period, [this] { return stopping_; });
+    if (stopping_) break;
+    const auto active = active_;
+    lock.unlock();
+    for (const auto& [job_id, worker_id] : active) {
+      Status s = store_->RenewLease(job_id, worker_id, options_.lease_ms);
+      if (!s.ok()) {
+        std::cerr << "calibd: " << worker_id << ": lease of job " << job_id
+                  << " not renewed: " << s.ToString() << "\n";
+      }
+    }
+    lock.lock();
+  }
+}
+
+void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& job) {
+  const auto start = std::chrono::steady_clock::now();
+  auto seconds = [&] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
+  auto fail = [&](const Status& s, bool transient) {
+    Status f =
+        store_->FailJob(job.id, worker_id, StatusCodeName(s.code()), s.ToString(), transient);
+    if (!f.ok()) {
+      std::cerr << "calibd: " << worker_id << ": recording the failure of job " << job.id
+                << " failed: " << f.ToString() << "\n";
+    }
+    metrics_->ObserveJob(job.method, transient ? "retried" : "failed", seconds());
+  };
+
+  std::string bytes;
+  Status s = store_->ReadRecordingBytes(job.recording_id, &bytes);
+  if (!s.ok()) return fail(s, s.IsTransient());
+  nlohmann::json config, result;
+  s = ParseJsonText(job.config_json, "config of job " + std::to_string(job.id), &config);
+  if (s.ok()) {
+    try {
+      s = Calibrate(bytes, "recording " + std::to_string(job.recording_id), config, &result);
+    } catch (const std::bad_alloc&) {
+      s = Status::IoError("out of memory while calibrating");
+    } catch (const std::exception&) {
+      // Never leak exception text to clients: the job says only that it was our fault.
+      s = Status::Internal("internal error while calibrating; please report it");
+    }
+  }
+  if (!s.ok()) return fail(s, s.IsTransient());
+  s = store_->CompleteJob(job.id, worker_id, result.dump());
+  if (!s.ok()) {
+    std::cerr << "calibd: " << worker_id << ": storing the result of job " << job.id
+              << " failed: " << s.ToString() << "\n";
+    if (s.IsTransient()) return fail(s, true);
+    metrics_->ObserveJob(job.method, "released", seconds());
+    return;
+  }
+  metrics_->ObserveJob(job.method, "succeeded", seconds());
+}
+
+}  // namespace calibd::server

@@ -1,0 +1,76 @@
+// WorkerPool: threads that claim calibration jobs from the SQLite queue, run them, and store the
+// result or the reason for failure, renewing their leases while they compute.
+//
+// At least once, idempotent: a job whose lease lapses (process killed, machine hung) is taken
+// back by the store and runs again; results are deterministic, so a second run stores the same
+// result. Failures that are the input's fault (kInvalidInput, kNotDeterminable) fail the job at
+// once; transient ones (kBusy, kIoError) go back to the queue with back-off (storage decides).
+// Thread-safe; never blocks the caller of Notify().
+#ifndef CALIBD_SERVER_WORKER_POOL_H_
+#define CALIBD_SERVER_WORKER_POOL_H_
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <map>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "server/metrics.h"
+#include "storage/store.h"
+
+namespace calibd::server {
+
+struct WorkerPoolOptions {
+  int workers = 1;           // threads; >= 1
+  int64_t lease_ms = 30000;  // lease length; renewed every lease_ms / 3 while a job runs
+  int64_t poll_ms = 500;     // idle workers look for jobs at least this often (Notify wakes)
+  std::string id_prefix;     // worker ids are "<id_prefix>-<n>"; should be unique per process
+};
+
+class WorkerPool {
+ public:
+  // `store` and `metrics` must outlive the pool.
+  WorkerPool(storage::Store* store, Metrics* metrics, WorkerPoolOptions options);
+  ~WorkerPool();  // Stop(0) if still running
+  WorkerPool(const WorkerPool&) = delete;
+  WorkerPool& operator=(const WorkerPool&) = delete;
+
+  void Start();
+  // A job was enqueued: wake an idle worker.
+  void Notify();
+  // Stops claiming, waits up to `grace` for running jobs to finish, then releases the leases of
+  // those still running (they run again on the next start). Returns true when every worker
+  // thread has finished and been joined; false when some are still computing (their threads are
+  // detached: the caller must then end the process without destroying the store).
+  bool Stop(std::chrono::milliseconds grace);
+
+  int running_jobs() const;
+
+ private:
+  void WorkerLoop(int index);
+  void RenewLoop();
+  void RunJob(const std::string& worker_id, const storage::JobInfo& job);
+
+  storage::Store* store_;
+  Metrics* metrics_;
+  WorkerPoolOptions options_;
+
+  mutable std::mutex mu_;
+  std::condition_variable wake_;      // workers wait here for jobs
+  std::condition_variable finished_;  // Stop waits here for running jobs
+  bool stopping_ = false;
+  bool started_ = false;
+  uint64_t notifications_ = 0;
+  std::map<int64_t, std::string> active_;  // job id -> worker id, guarded by mu_
+  int busy_workers_ = 0;
+  std::vector<std::thread> threads_;
+  std::thread renewer_;
+};
+
+}  // namespace calibd::server
+
+#endif  // CALIBD_SERVER_WORKER_POOL_H_
