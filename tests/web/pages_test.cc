@@ -1,0 +1,446 @@
+#include "web/pages.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+namespace calibd::web {
+namespace {
+
+using json = nlohmann::json;
+
+const char kScript[] = "<script>alert(1)</script>";
+const char kImg[] = "\"><img src=x onerror=alert(1)>";
+
+// Deterministic small "noise" for fixtures.
+double Wiggle(int i, double scale) { return scale * std::sin(1.7 * i + 0.3 * i * i); }
+
+// A pca result as calibd would store it: 4 gyroscope triads (12 sensors), d = 3, n = 24,
+// nominal frame, known magnitude.
+json PcaResult(const std::string& sensor_prefix = "g", double scale_shift = 0) {
+  json sensors = json::array(), unc = json::array(), rms = json::array();
+  for (int i = 0; i < 12; ++i) {
+    const int axis = i % 3;
+    std::vector<double> a{0, 0, 0};
+    a[axis] = 1;
+    a[(axis + 1) % 3] = Wiggle(i, 0.01);
+    a[(axis + 2) % 3] = Wiggle(i + 5, 0.01);
+    const double n = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    for (double& v : a) v /= n;
+    const double scale = 1 + Wiggle(i + 11, 0.02) + scale_shift;
+    const std::string name = sensor_prefix + std::to_string(i / 3) + "_" + "xyz"[axis];
+    sensors.push_back({{"name", name},
+                       {"sensitivity", {a[0] * scale, a[1] * scale, a[2] * scale}},
+                       {"scale", scale},
+                       {"axis", a},
+                       {"bias", 0}});
+    unc.push_back({{"name", name},
+                   {"scale_std", 0.0014 + Wiggle(i, 0.0002)},
+                   {"axis_std_rad", 0.0011},
+                   {"bias_std", 0}});
+    rms.push_back(0.0098 + Wiggle(i + 3, 0.001));
+  }
+  json sv = json::array({8.91, 8.52, 8.07});
+  for (int i = 0; i < 9; ++i) sv.push_back(0.052 - 0.003 * i);
+  json mag = json::array();
+  for (int j = 0; j < 24; ++j) mag.push_back(Wiggle(j, 0.012));
+  return {{"method", "pca"},
+          {"parameters",
+           {{"dimension", 3},
+            {"magnitude", 1.0},
+            {"magnitude_known", true},
+            {"frame", "nominal"},
+            {"sensors", sensors}}},
+          {"uncertainty", {{"sensors", unc}}},
+          {"diagnostics",
+           {{"singular_values", sv},
+            {"rank_gap", 8.07 / 0.052},
+            {"positions", 24},
+            {"min_positions", 6},
+            {"g_eigenvalues", {0.0151, 0.0137, 0.0126}},
+            {"residual_rms", rms},
+            {"magnitude_error", mag}}},
+          {"warnings", json::array()}};
+}
+
+json PcaConfig() {
+  json nominal = json::array();
+  for (int i = 0; i < 12; ++i) {
+    std::vector<double> a{0, 0, 0};
+    a[i % 3] = 1;
+    nominal.push_back(a);
+  }
+  return {{"method", "pca"}, {"device", "IMU-0042"}, {"magnitude", 1.0}, {"nominal", nominal}};
+}
+
+// An array result: 32 triads on a 4x4 grid, top and underside, 6.3 mm pitch, 2 mm apart.
+json ArrayResult(size_t excitation_samples = 1000, double shift = 0) {
+  json positions = json::array(), unc = json::array();
+  for (int k = 0; k < 32; ++k) {
+    const double x = 6.3e-3 * (k % 4), y = 6.3e-3 * ((k / 4) % 4), z = k < 16 ? 0 : -2e-3;
+    const double o[3] = {k == 0 ? 0 : Wiggle(k, 1e-3) + shift, k == 0 ? 0 : Wiggle(k + 7, 1e-3),
+                         k == 0 ? 0 : Wiggle(k + 13, 1e-3)};
+    positions.push_back({{"name", "a" + std::to_string(k)},
+                         {"position", {x + o[0], y + o[1], z + o[2]}},
+                         {"offset", {o[0], o[1], o[2]}}});
+    const double s = k == 0 ? 0 : 2.0e-6 + Wiggle(k, 0.3e-6);
+    unc.push_back({{"name", "a" + std::to_string(k)}, {"std", {s, s * 1.1, s * 0.9}}});
+  }
+  json omega = json::array(), omega_dot = json::array();
+  for (size_t n = 0; n < excitation_samples; ++n) {
+    omega.push_back(30 + 5 * std::sin(n * 0.01) + Wiggle(static_cast<int>(n % 1000), 1));
+    omega_dot.push_back(35 + 8 * std::cos(n * 0.013));
+  }
+  return {{"method", "array"},
+          {"parameters", {{"reference", 0}, {"positions", positions}}},
+          {"uncertainty", {{"positions", unc}}},
+          {"diagnostics",
+           {{"solver", "joint"},
+            {"iterations", 5},
+            {"converged", true},
+            {"cost", {5.2e7, 3.1e4, 2.9e3, 2.87e3, 2.869e3}},
+            {"samples", 1000},
+            {"samples_dropped", 3},
+            {"residual_rms", {{"accelerometer", 0.0401}, {"gyroscope", 0.00104}}},
+            {"noise_estimate", {{"accelerometer", 0.0399}, {"gyroscope", 0.00105}}},
+            {"excitation", {{"min_eigenvalue", 1.7e5}, {"verdict", "good"}}},
+            {"omega_norm", omega},
+            {"omega_dot_norm", omega_dot},
+            {"residual_histogram",
+             {{"accelerometer",
+               {{"edges", {-0.12, -0.08, -0.04, 0, 0.04, 0.08, 0.12}},
+                {"counts", {210, 2600, 9400, 9300, 2700, 190}}}}}}}},
+          {"warnings", json::array({"3 samples dropped at gyroscope saturation"})}};
+}
+
+json ArrayConfig() {
+  json pos = json::array();
+  for (int k = 0; k < 32; ++k) {
+    pos.push_back({6.3e-3 * (k % 4), 6.3e-3 * ((k / 4) % 4), k < 16 ? 0 : -2e-3});
+  }
+  return {{"method", "array"},
+          {"device", "ARRAY-7"},
+          {"geometry", {{"positions", pos}, {"reference", 0}}},
+          {"accel_noise", 0.04},
+          {"gyro_noise", 0.06},
+          {"gyro_unit", "deg/s"}};
+}
+
+JobSummary Job(int64_t id, const std::string& device, const std::string& method,
+               const std::string& status, const std::string& created, json result) {
+  JobSummary j;
+  j.id = id;
+  j.device = device;
+  j.method = method;
+  j.status = status;
+  j.created_at = created;
+  if (status != "queued") j.started_at = created;
+  if (status == "succeeded" || status == "failed") j.finished_at = created;
+  j.attempts = status == "queued" ? 0 : 1;
+  j.result = std::move(result);
+  return j;
+}
+
+bool Has(const std::string& page, const std::string& needle) {
+  return page.find(needle) != std::string::npos;
+}
+
+// The page is a complete document with our body class.
+void ExpectDocument(const std::string& page, const std::string& body_class) {
+  EXPECT_EQ(page.rfind("<!doctype html>", 0), 0u);
+  EXPECT_TRUE(Has(page, "<body class=\"" + body_class + "\">"));
+  EXPECT_TRUE(Has(page, "</html>"));
+  EXPECT_FALSE(Has(page, "<script"));
+  EXPECT_FALSE(Has(page, "<link "));  // no external resources
+  EXPECT_FALSE(Has(page, "http://") && !Has(page, "http://www.w3.org/2000/svg"));
+  EXPECT_FALSE(Has(page, "nan\""));
+  EXPECT_FALSE(Has(page, "not be rendered completely"));
+}
+
+// Hostile strings never appear unescaped: no "<script", no "<img", and every "onerror=" is
+// inside an escaped (inert) "&lt;img" text.
+void ExpectNoInjection(const std::string& page) {
+  EXPECT_EQ(page.find("<script"), std::string::npos);
+  EXPECT_EQ(page.find("<img"), std::string::npos);
+  for (size_t p = page.find("onerror="); p != std::string::npos; p = page.find("onerror=", p + 1)) {
+    ASSERT_GE(p, 14u);
+    EXPECT_EQ(page.substr(p - 14, 14), "&lt;img src=x ") << page.substr(p - 14, 40);
+  }
+}
+
+TEST(JobPage, PcaReportHasParametersPlotsAndDownloads) {
+  JobView v;
+  v.job = Job(17, "IMU-0042", "pca", "succeeded", "2026-11-20T09:15:02Z", PcaResult());
+  v.job.finished_at = "2026-11-20T09:15:04.250Z";
+  v.recording_id = 5;
+  v.recording_bytes = 18234;
+  v.recording_rows = 24;
+  v.recording_sha256 = "9f86d081884c7d659a2feaa0c55ad015a3bf4f1b2b0b822cd15d6c15b0f00a08";
+  v.config = PcaConfig();
+  const std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "class=\"table-pca-parameters\""));
+  EXPECT_TRUE(Has(page, "angle to nominal (mrad)"));
+  EXPECT_TRUE(Has(page, "class=\"table-diagnostics\""));
+  for (const char* plot :
+       {"singular-values", "magnitude-error", "residual-rms", "axes-xy", "axes-xz"}) {
+    EXPECT_TRUE(Has(page, std::string("class=\"plot plot-") + plot + "\"")) << plot;
+  }
+  EXPECT_TRUE(Has(page, "href=\"/api/v1/recordings/5/data\""));
+  EXPECT_TRUE(Has(page, "href=\"/api/v1/jobs/17\""));
+  EXPECT_TRUE(Has(page, "/api/v1/devices/IMU-0042/calibration?method=pca&amp;format=csv"));
+  EXPECT_TRUE(Has(page, "/api/v1/devices/IMU-0042/calibration?method=pca&amp;format=h"));
+  EXPECT_TRUE(Has(page, "href=\"/devices/IMU-0042\""));
+  EXPECT_TRUE(Has(page, "class=\"config\""));
+  EXPECT_TRUE(Has(page, "ran 2.2 s"));
+  EXPECT_TRUE(Has(page, "callout-ok"));
+  EXPECT_TRUE(Has(page,
+                  "gap \xCF\x83"
+                  "3/\xCF\x83"
+                  "4 = 155"));
+  EXPECT_LT(page.size(), 300u * 1024u);
+}
+
+TEST(JobPage, ArrayReportHasPositionsCostResidualsAndExcitation) {
+  JobView v;
+  v.job = Job(23, "ARRAY-7", "array", "succeeded", "2026-11-21 10:00:00", ArrayResult());
+  v.recording_id = 9;
+  v.config = ArrayConfig();
+  const std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "class=\"table-array-parameters\""));
+  EXPECT_TRUE(Has(page, "(reference, fixed)"));
+  for (const char* plot :
+       {"cost", "positions-xy", "positions-xz", "position-sigma", "residual-rms",
+        "residual-histogram-accelerometer", "excitation-omega", "excitation-omega-dot"}) {
+    EXPECT_TRUE(Has(page, std::string("class=\"plot plot-") + plot + "\"")) << plot;
+  }
+  EXPECT_FALSE(Has(page, "plot-residual-histogram-gyroscope"));  // not in the result: skipped
+  EXPECT_TRUE(Has(page, "Offsets from nominal magnified \xC3\x97"));
+  EXPECT_TRUE(Has(page, "class=\"ellipses\""));
+  EXPECT_TRUE(Has(page, "3 samples dropped at gyroscope saturation"));
+  EXPECT_TRUE(Has(page, "callout-warn"));
+}
+
+TEST(JobPage, HundredThousandSampleExcitationKeepsPageUnderOneMegabyte) {
+  JobView v;
+  v.job = Job(24, "ARRAY-7", "array", "succeeded", "2026-11-21 10:00:00", ArrayResult(100000));
+  v.config = ArrayConfig();
+  const std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "plot-excitation-omega\""));
+  EXPECT_TRUE(Has(page, "decimated"));
+  EXPECT_LT(page.size(), 1024u * 1024u);
+  EXPECT_LT(page.size(), 400u * 1024u);
+}
+
+TEST(JobPage, FailedJobExplainsReasonAndWhatToRecord) {
+  JobView v;
+  v.job = Job(31, "IMU-0042", "pca", "failed", "2026-11-20T09:20:00Z", json());
+  v.job.error =
+      "only 4 positions: need at least 6 (d(d+1)/2 for d = 3) to determine the sensitivities";
+  v.config = PcaConfig();
+  const std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "callout-error"));
+  EXPECT_TRUE(Has(page, "only 4 positions"));
+  EXPECT_TRUE(Has(page, "What to record instead"));
+  EXPECT_TRUE(Has(page, "Record more static positions"));
+  EXPECT_TRUE(Has(page, "badge-failed"));
+  EXPECT_FALSE(Has(page, "class=\"plot "));
+}
+
+TEST(JobPage, QueuedJobRendersWithoutResult) {
+  JobView v;
+  v.job = Job(40, "", "array", "queued", "2026-11-20T09:20:00Z", json());
+  const std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "badge-queued"));
+  EXPECT_TRUE(Has(page, "This job is queued"));
+}
+
+TEST(JobPage, ResultWithMissingKeysAndWrongTypesStillRenders) {
+  const std::vector<json> broken = {
+      json::object(),
+      json{{"method", "pca"}},
+      json{{"method", "pca"}, {"parameters", "oops"}, {"diagnostics", 42}},
+      json{{"method", "pca"},
+           {"parameters", {{"sensors", {{{"name", 5}, {"scale", "big"}, {"axis", "x"}}}}}},
+           {"uncertainty", {{"sensors", {1, 2, 3}}}},
+           {"diagnostics", {{"singular_values", {"a", nullptr, -1, 0}}, {"rank_gap", "wide"}}},
+           {"warnings", "not a list"}},
+      json{{"method", "array"}},
+      json{{"method", "array"},
+           {"parameters", {{"reference", "zero"}, {"positions", {{{"position", {1}}}, 7}}}},
+           {"diagnostics", {{"cost", {}}, {"residual_rms", 3}, {"excitation", nullptr}}}},
+      json{{"method", "array"}, {"parameters", {{"positions", json::array()}}}},
+      json{{"method", "unknown-method"}},
+      json::array({1, 2, 3}),
+  };
+  int id = 100;
+  for (const auto& result : broken) {
+    JobView v;
+    v.job = Job(id++, "D1", "pca", "succeeded", "not a timestamp", result);
+    v.config = json{{"nominal", "wrong"}, {"geometry", {{"positions", 3}}}};
+    const std::string page = RenderJobPage(v);
+    ExpectDocument(page, "page-job");
+    HistoryView h;
+    h.jobs = {v.job};
+    ExpectDocument(RenderHistoryPage(h), "page-history");
+  }
+}
+
+TEST(HistoryPage, ListsJobsWithFiltersKeyFiguresAndPager) {
+  HistoryView h;
+  h.jobs = {Job(24, "ARRAY-7", "array", "succeeded", "2026-11-21T10:00:00Z", ArrayResult(10)),
+            Job(23, "IMU-0042", "pca", "failed", "2026-11-21T09:00:00Z", json()),
+            Job(22, "IMU-0042", "pca", "succeeded", "2026-11-20T09:15:02Z", PcaResult()),
+            Job(21, "IMU-0042", "pca", "running", "2026-11-20T09:00:00Z", json())};
+  h.jobs[1].error = "rank gap too small";
+  h.filter.method = "pca";
+  h.devices = {"IMU-0042", "ARRAY-7"};
+  h.next_before = "21";
+  const std::string page = RenderHistoryPage(h);
+  ExpectDocument(page, "page-history");
+  EXPECT_TRUE(Has(page, "class=\"table-history\""));
+  EXPECT_TRUE(Has(page, "<form class=\"filters\" method=\"get\" action=\"/\">"));
+  EXPECT_TRUE(Has(page, "<option value=\"pca\" selected>"));
+  EXPECT_TRUE(Has(page, "href=\"/?before=21&amp;method=pca\""));
+  EXPECT_TRUE(Has(page, "class=\"older\""));
+  EXPECT_TRUE(Has(page, "href=\"/devices/ARRAY-7\""));
+  EXPECT_TRUE(Has(page, "href=\"/jobs/22\""));
+  for (const char* s : {"succeeded", "failed", "running"}) {
+    EXPECT_TRUE(Has(page, std::string("badge badge-") + s)) << s;
+  }
+  EXPECT_TRUE(Has(page, "gap 155"));
+  EXPECT_TRUE(Has(page, "offset RMS "));
+  EXPECT_TRUE(Has(page, "\xE2\x9A\xA0 1"));  // the array job's warning flag
+  EXPECT_TRUE(Has(page, "rank gap too small"));
+  // Newest first, as given.
+  EXPECT_LT(page.find("/jobs/24\""), page.find("/jobs/21\""));
+}
+
+TEST(HistoryPage, EmptyHistorySaysSoWithoutPager) {
+  const std::string page = RenderHistoryPage(HistoryView{});
+  ExpectDocument(page, "page-history");
+  EXPECT_TRUE(Has(page, "No calibrations match."));
+  EXPECT_FALSE(Has(page, "class=\"older\""));
+}
+
+TEST(KeyFiguresTest, PcaAndArraySummaries) {
+  EXPECT_EQ(KeyFigures("pca", PcaResult()).find("\xCF\x83(scale) \xE2\x89\xA4 0.1"), 0u)
+      << KeyFigures("pca", PcaResult());
+  const std::string a = KeyFigures("array", ArrayResult(0));
+  EXPECT_NE(a.find("offset RMS"), std::string::npos);
+  EXPECT_NE(a.find("\xC2\xB5m"), std::string::npos);
+  EXPECT_EQ(KeyFigures("pca", json()), "\xE2\x80\x93");
+}
+
+TEST(DevicePage, ShowsCalibrationsAndDriftTablesAndPlots) {
+  DeviceView d;
+  d.serial = "IMU-0042";
+  d.jobs = {Job(3, "IMU-0042", "pca", "succeeded", "2026-03-01T08:00:00Z", PcaResult("g", 2e-4)),
+            Job(1, "IMU-0042", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult()),
+            Job(2, "IMU-0042", "pca", "failed", "2026-02-01T08:00:00Z", json()),
+            Job(4, "IMU-0042", "pca", "succeeded", "2026-04-01T08:00:00Z", PcaResult("g", 5e-4)),
+            Job(5, "IMU-0042", "array", "succeeded", "2026-04-02T08:00:00Z", ArrayResult(0)),
+            Job(6, "IMU-0042", "array", "succeeded", "2026-05-02T08:00:00Z", ArrayResult(0, 3e-6))};
+  const std::string page = RenderDevicePage(d);
+  ExpectDocument(page, "page-device");
+  EXPECT_TRUE(Has(page, "class=\"table-calibrations\""));
+  EXPECT_TRUE(Has(page, "class=\"table-drift-pca\""));
+  EXPECT_TRUE(Has(page, "class=\"table-drift-array\""));
+  for (const char* plot : {"drift-scale", "drift-axis", "drift-position"}) {
+    EXPECT_TRUE(Has(page, std::string("class=\"plot plot-") + plot + "\"")) << plot;
+  }
+  // Drift pairs skip the failed job: 1 -> 3 -> 4.
+  EXPECT_TRUE(Has(page, ">#1</a> \xE2\x86\x92 <a href=\"/jobs/3\">#3</a>"));
+  EXPECT_TRUE(Has(page, ">#3</a> \xE2\x86\x92 <a href=\"/jobs/4\">#4</a>"));
+  EXPECT_TRUE(Has(page, "days since 2026-01-01 08:00 UTC"));
+  // The array shift of 3 µm in x shows up (RMS over 31 moved triads).
+  EXPECT_TRUE(Has(page, ">3.0</td>"));
+  // Calibrations table: newest first.
+  EXPECT_LT(page.find("/jobs/6\""), page.find("/jobs/1\""));
+}
+
+TEST(DevicePage, SingleCalibrationHasNoDrift) {
+  DeviceView d;
+  d.serial = "X";
+  d.jobs = {Job(1, "X", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult())};
+  const std::string page = RenderDevicePage(d);
+  ExpectDocument(page, "page-device");
+  EXPECT_TRUE(Has(page, "Drift needs at least two succeeded calibrations"));
+  ExpectDocument(RenderDevicePage(DeviceView{}), "page-device");
+}
+
+TEST(ErrorPage, EscapesMessageAndLinksHome) {
+  const std::string page = RenderErrorPage(404, std::string("no job ") + kScript + kImg);
+  ExpectDocument(page, "page-error");
+  ExpectNoInjection(page);
+  EXPECT_TRUE(Has(page, "404"));
+  EXPECT_TRUE(Has(page, "Not found"));
+  EXPECT_TRUE(Has(page, "href=\"/\""));
+  EXPECT_TRUE(Has(page, "&lt;script&gt;alert(1)&lt;/script&gt;"));
+}
+
+TEST(Escaping, HostileDeviceAndSensorNamesNeverAppearUnescapedInAnyPage) {
+  for (const std::string& evil :
+       {std::string(kScript), std::string(kImg), std::string(kScript) + kImg + "'\xFF"}) {
+    json pca = PcaResult(evil);
+    pca["warnings"] = json::array({evil});
+    pca["diagnostics"][evil] = evil;
+    json arr = ArrayResult(10);
+    arr["parameters"]["positions"][3]["name"] = evil;
+    arr["uncertainty"]["positions"][3]["name"] = evil;
+    arr["diagnostics"]["solver"] = evil;
+    arr["diagnostics"]["excitation"]["verdict"] = evil;
+    json config = PcaConfig();
+    config["device"] = evil;
+    config[evil] = evil;
+
+    JobView pj;
+    pj.job = Job(1, evil, "pca", "succeeded", evil, pca);
+    pj.config = config;
+    pj.recording_sha256 = evil;
+    JobView aj;
+    aj.job = Job(2, evil, "array", "succeeded", "2026-01-01T00:00:00Z", arr);
+    aj.config = config;
+    JobView fj;
+    fj.job = Job(3, evil, evil, "failed", "2026-01-01T00:00:00Z", json());
+    fj.job.error = evil;
+    JobView sj;  // hostile status and method
+    sj.job = Job(4, evil, evil, evil, evil, json());
+
+    ExpectNoInjection(RenderJobPage(pj));
+    ExpectNoInjection(RenderJobPage(aj));
+    ExpectNoInjection(RenderJobPage(fj));
+    ExpectNoInjection(RenderJobPage(sj));
+
+    HistoryView h;
+    h.jobs = {pj.job, aj.job, fj.job, sj.job};
+    h.filter = {evil, evil, evil};
+    h.devices = {evil};
+    h.next_before = evil;
+    const std::string hp = RenderHistoryPage(h);
+    ExpectNoInjection(hp);
+    EXPECT_TRUE(Has(hp, "/devices/%3Cscript%3E") || Has(hp, "/devices/%22%3E%3Cimg"));
+
+    DeviceView d;
+    d.serial = evil;
+    JobSummary second = pj.job;
+    second.id = 5;
+    second.created_at = "2026-02-01T00:00:00Z";
+    JobSummary a2 = aj.job;
+    a2.id = 6;
+    a2.created_at = "2026-03-01T00:00:00Z";
+    d.jobs = {pj.job, second, aj.job, a2, fj.job};
+    ExpectNoInjection(RenderDevicePage(d));
+    ExpectNoInjection(RenderErrorPage(400, evil));
+  }
+}
+
+}  // namespace
+}  // namespace calibd::web

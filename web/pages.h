@@ -1,0 +1,102 @@
+// The HTML pages of SPEC §5, rendered from plain view structs that the server fills from storage.
+//
+// Each Render* function is pure (data in, a complete HTML5 document out), thread-safe, and never
+// throws: a result JSON with missing keys or keys of the wrong type (old results, failed jobs)
+// renders the parts it can and says "not available" for the rest. Every user-controlled string
+// (device serials, sensor names, labels, error messages, config values) is escaped. Pages need no
+// JavaScript, no external resources, and carry one small embedded stylesheet.
+//
+// DOM hooks for tests and browser checks (stable):
+//   <body class="page-history | page-job | page-device | page-error">
+//   tables:  table.table-history, table.table-pca-parameters, table.table-array-parameters,
+//            table.table-diagnostics, table.table-calibrations, table.table-drift-pca,
+//            table.table-drift-array, table.table-timings
+//   plots:   svg.plot (every plot) plus svg.plot-NAME, NAME one of
+//            pca:   singular-values, magnitude-error, residual-rms, axes-xy, axes-xz
+//            array: cost, positions-xy, positions-xz, position-sigma, residual-rms,
+//                   residual-histogram, excitation-omega, excitation-omega-dot
+//            device: drift-scale, drift-axis, drift-position
+//   other:   form.filters, nav.pager a.older, .callout-error (failure reason),
+//            ul.warnings, ul.downloads, pre.config, span.badge.badge-STATUS
+#ifndef CALIBD_WEB_PAGES_H_
+#define CALIBD_WEB_PAGES_H_
+
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+namespace calibd::web {
+
+// One calibration job as stored (the fields of GET /api/v1/jobs/{id}).
+struct JobSummary {
+  int64_t id = 0;
+  std::string status;       // "queued" | "running" | "succeeded" | "failed" (others shown as is)
+  std::string device;       // serial number; may be empty (no device given)
+  std::string method;       // "pca" | "array" (others shown as is)
+  std::string created_at;   // timestamps as stored: ISO 8601 UTC ("2026-11-22T04:04:04Z" or
+  std::string started_at;   //   "2026-11-22 04:04:04", fractions allowed) or Unix seconds;
+  std::string finished_at;  //   empty when not reached yet
+  int attempts = 0;         // times a worker claimed it
+  std::string error;        // failure message in plain words (failed jobs), else empty
+  nlohmann::json result;    // SPEC §4 result JSON; null when none (queued/running/failed)
+};
+
+// Filters of the history page, echoed into its form. Empty: no filter.
+struct HistoryFilter {
+  std::string device;
+  std::string method;
+  std::string status;
+};
+
+// `/` — the calibration history.
+struct HistoryView {
+  std::vector<JobSummary> jobs;  // one page, newest first (rendered in the given order);
+                                 // result may be null to save memory (key figures then "–")
+  HistoryFilter filter;
+  std::vector<std::string> devices;  // optional: known device serials, offered in the form
+  std::string next_before;  // cursor for the next (older) page; empty: no older page. The link
+                            // is "/?before=CURSOR" plus the active filters.
+  int64_t total = -1;       // total matching jobs when known (-1: unknown)
+};
+
+// `/jobs/{id}` — one calibration report.
+struct JobView {
+  JobSummary job;
+  int64_t recording_id = 0;      // 0: unknown (no recording link)
+  std::string recording_sha256;  // optional
+  int64_t recording_bytes = -1;  // optional (-1 unknown)
+  int64_t recording_rows = -1;   // optional (-1 unknown)
+  nlohmann::json config;         // the job's config (SPEC §3) as given; null when unknown
+};
+
+// `/devices/{serial}` — one device's calibrations and the drift between them.
+struct DeviceView {
+  std::string serial;
+  std::vector<JobSummary> jobs;  // the device's jobs in any order (sorted by the page); results
+                                 // of succeeded jobs are needed for the drift tables and plots
+};
+
+// The history page: filter form (GET, works without JS), table.table-history (device link,
+// method, status badge, created time, key figures, warnings flag), "older" pagination link.
+std::string RenderHistoryPage(const HistoryView& view);
+
+// The report of one job: header (device, method, recording download, config, timings, status or
+// failure reason with advice on what to record instead), parameters with uncertainties,
+// downloads, plots, diagnostics and warnings.
+std::string RenderJobPage(const JobView& view);
+
+// One device: its calibrations over time and the drift of every parameter between successive
+// succeeded calibrations of the same method (tables and plots).
+std::string RenderDevicePage(const DeviceView& view);
+
+// A plain error page (404, 500, ...) with the escaped message and a link back to the history.
+std::string RenderErrorPage(int status, const std::string& message);
+
+// Key figures of a result for tables: pca "σ(scale) ≤ 0.12 % · gap 85", array
+// "offset RMS 812 µm · σ ≤ 2.1 µm"; "–" when not available. Plain text (escape before use).
+std::string KeyFigures(const std::string& method, const nlohmann::json& result);
+
+}  // namespace calibd::web
+
+#endif  // CALIBD_WEB_PAGES_H_
