@@ -1,0 +1,183 @@
+// Schema migrations: from an empty file, from every earlier version (with data), forward only.
+#include "storage/schema.h"
+
+#include <gtest/gtest.h>
+
+#include <thread>
+#include <vector>
+
+#include "storage/sha256.h"
+#include "storage/store.h"
+#include "tests/storage/storage_test_util.h"
+
+namespace calibd::storage {
+namespace {
+
+using testing::TempDir;
+
+std::unique_ptr<Db> OpenDb(const std::string& path) {
+  std::unique_ptr<Db> db;
+  Status s = Db::Open(path, Db::Options(), &db);
+  EXPECT_TRUE(s.ok()) << s.ToString();
+  return db;
+}
+
+int64_t Version(Db* db) {
+  int64_t v = -1;
+  EXPECT_TRUE(SchemaVersion(db, &v).ok());
+  return v;
+}
+
+// The schema as text (tables, indexes), for comparing two files.
+std::string SchemaDump(Db* db) {
+  Stmt st;
+  EXPECT_TRUE(db->PrepareUncached(
+                    "SELECT type || ' ' || name || ': ' || COALESCE(sql, '') FROM sqlite_schema "
+                    "ORDER BY type, name",
+                    &st)
+                  .ok());
+  std::string out;
+  for (bool row = true;;) {
+    EXPECT_TRUE(st.Step(&row).ok());
+    if (!row) break;
+    out += st.ColumnText(0) + "\n";
+  }
+  return out;
+}
+
+TEST(Schema, MigratesAnEmptyFileToTheLatestVersion) {
+  TempDir dir;
+  auto db = OpenDb(dir.File("a.db"));
+  EXPECT_EQ(Version(db.get()), 0);
+  ASSERT_TRUE(MigrateSchema(db.get()).ok());
+  EXPECT_EQ(Version(db.get()), kSchemaVersion);
+  std::string schema = SchemaDump(db.get());
+  for (const char* table : {"table recordings", "table recording_data", "table jobs",
+                            "table results", "table devices", "table device_calibrations",
+                            "index jobs_by_status", "index jobs_by_lease"}) {
+    EXPECT_NE(schema.find(table), std::string::npos) << table << "\n" << schema;
+  }
+  // Migrating again is a no-op.
+  ASSERT_TRUE(MigrateSchema(db.get()).ok());
+  EXPECT_EQ(SchemaDump(db.get()), schema);
+}
+
+TEST(Schema, EveryEarlierVersionMigratesToTheSameSchemaAsAFreshFile) {
+  TempDir dir;
+  auto fresh = OpenDb(dir.File("fresh.db"));
+  ASSERT_TRUE(MigrateSchema(fresh.get()).ok());
+  const std::string expected = SchemaDump(fresh.get());
+  for (int from = 0; from < kSchemaVersion; ++from) {
+    auto db = OpenDb(dir.File("from" + std::to_string(from) + ".db"));
+    ASSERT_TRUE(MigrateSchema(db.get(), from).ok());
+    EXPECT_EQ(Version(db.get()), from);
+    db.reset();
+    // Open as the server would: through Store, which migrates at open.
+    std::unique_ptr<Store> store;
+    Status s = Store::Open(dir.File("from" + std::to_string(from) + ".db"), StoreOptions(), &store);
+    ASSERT_TRUE(s.ok()) << "from v" << from << ": " << s.ToString();
+    store.reset();
+    db = OpenDb(dir.File("from" + std::to_string(from) + ".db"));
+    EXPECT_EQ(Version(db.get()), kSchemaVersion);
+    EXPECT_EQ(SchemaDump(db.get()), expected) << "from v" << from;
+  }
+}
+
+TEST(Schema, Version1DataIsCarriedOverAndUsable) {
+  TempDir dir;
+  const std::string path = dir.File("v1.db");
+  const std::string result = R"({"method":"pca","parameters":{"dimension":3}})";
+  {
+    auto db = OpenDb(path);
+    ASSERT_TRUE(MigrateSchema(db.get(), 1).ok());
+    // What calibd with schema v1 would have written.
+    Stmt st;
+    ASSERT_TRUE(db->PrepareUncached(
+                      "INSERT INTO recordings (id, sha256, bytes, device, layout, rows, created_at) "
+                      "VALUES (1, ?1, 3, 'SN1', 'pca_averaged', 1, 1000)",
+                      &st)
+                    .ok());
+    st.BindText(1, Sha256Hex("abc"));
+    ASSERT_TRUE(st.Run().ok());
+    ASSERT_TRUE(db->Exec("INSERT INTO recording_data VALUES (1, X'616263')").ok());
+    Stmt job;
+    ASSERT_TRUE(db->PrepareUncached(
+                      "INSERT INTO jobs (id, recording_id, method, device, config_json, status, "
+                      "attempts, created_at, started_at, finished_at, result_json) VALUES "
+                      "(1, 1, 'pca', 'SN1', '{}', 'succeeded', 1, 2000, 2100, 2500, ?1),"
+                      "(2, 1, 'pca', 'SN1', '{}', 'succeeded', 1, 2200, 2300, 2400, '{\"old\":1}'),"
+                      "(3, 1, 'array', 'SN2', '{}', 'queued', 0, 3000, NULL, NULL, NULL),"
+                      "(4, 1, 'pca', 'SN1', '{}', 'failed', 1, 3100, 3200, 3300, NULL)",
+                      &job)
+                    .ok());
+    job.BindText(1, result);
+    ASSERT_TRUE(job.Run().ok());
+  }
+  std::unique_ptr<Store> store;
+  StoreOptions o;
+  o.now_ms = [] { return int64_t{10000}; };
+  Status s = Store::Open(path, o, &store);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+
+  std::string bytes;
+  ASSERT_TRUE(store->ReadRecordingBytes(1, &bytes).ok());
+  EXPECT_EQ(bytes, "abc");
+  JobInfo job;
+  ASSERT_TRUE(store->GetJob(1, &job).ok());
+  EXPECT_EQ(job.status, "succeeded");
+  EXPECT_EQ(job.result_json, result);
+  EXPECT_EQ(job.result_sha256, Sha256Hex(result));  // hashed during the migration
+  // Latest calibration: job 1 finished last (2500 > 2400) although job 2 was created later.
+  JobInfo latest;
+  ASSERT_TRUE(store->LatestResult("SN1", "pca", &latest).ok());
+  EXPECT_EQ(latest.id, 1);
+  std::vector<DeviceInfo> devices;
+  ASSERT_TRUE(store->ListDevices(&devices).ok());
+  ASSERT_EQ(devices.size(), 2u);
+  EXPECT_EQ(devices[0].serial, "SN1");
+  EXPECT_EQ(devices[0].first_seen_ms, 1000);
+  EXPECT_EQ(devices[1].serial, "SN2");
+  EXPECT_TRUE(devices[1].latest.empty());
+  // The queued v1 job runs normally.
+  bool claimed = false;
+  ASSERT_TRUE(store->ClaimJob("w", 1000, &job, &claimed).ok());
+  ASSERT_TRUE(claimed);
+  EXPECT_EQ(job.id, 3);
+  ASSERT_TRUE(store->CompleteJob(3, "w", "{}").ok());
+  ASSERT_TRUE(store->LatestResult("SN2", "array", &latest).ok());
+  EXPECT_EQ(latest.id, 3);
+  std::string check;
+  ASSERT_TRUE(store->IntegrityCheck(&check).ok());
+  EXPECT_EQ(check, "ok");
+}
+
+TEST(Schema, NewerSchemaThanThisBuildIsRefused) {
+  TempDir dir;
+  {
+    auto db = OpenDb(dir.File("a.db"));
+    ASSERT_TRUE(db->Exec("PRAGMA user_version = 99").ok());
+  }
+  std::unique_ptr<Store> store;
+  Status s = Store::Open(dir.File("a.db"), StoreOptions(), &store);
+  EXPECT_EQ(s.code(), StatusCode::kConflict);
+  EXPECT_NE(s.message().find("newer"), std::string::npos) << s.message();
+}
+
+TEST(Schema, ConcurrentOpenersMigrateOnce) {
+  TempDir dir;
+  std::vector<std::thread> threads;
+  std::vector<Status> results(4);
+  for (int i = 0; i < 4; ++i) {
+    threads.emplace_back([&, i] {
+      std::unique_ptr<Store> store;
+      results[i] = Store::Open(dir.File("a.db"), StoreOptions(), &store);
+    });
+  }
+  for (auto& t : threads) t.join();
+  for (const Status& s : results) EXPECT_TRUE(s.ok()) << s.ToString();
+  auto db = OpenDb(dir.File("a.db"));
+  EXPECT_EQ(Version(db.get()), kSchemaVersion);
+}
+
+}  // namespace
+}  // namespace calibd::storage
