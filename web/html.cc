@@ -341,6 +341,7 @@ thead th{background:var(--panel);font-weight:600;white-space:nowrap;border-botto
 tbody tr:hover{background:#fafbfc}
 .num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
 td.name{overflow-wrap:anywhere}
+td.time{white-space:nowrap}
 code,pre,.mono{font-family:ui-monospace,SFMono-Regular,Menlo,Consolas,"DejaVu Sans Mono",monospace;
 font-size:.86em}
 pre{background:var(--panel);border:1px solid var(--line);padding:.6rem .8rem;overflow:auto;
@@ -362,7 +363,7 @@ dl.kv{display:grid;grid-template-columns:max-content minmax(0,1fr);gap:.2rem 1.2
 dl.kv dt{color:var(--muted)}
 dl.kv dd{margin:0;overflow-wrap:anywhere}
 ul.warnings li{margin:.2rem 0}
-.plots{display:grid;grid-template-columns:repeat(auto-fit,minmax(min(440px,100%),1fr));gap:1.2rem 1.6rem}
+.plots{display:grid;grid-template-columns:repeat(auto-fill,minmax(min(440px,100%),1fr));gap:1.2rem 1.6rem}
 figure{margin:0;min-width:0}
 figcaption{font-size:.84rem;color:var(--muted);margin-top:.2rem}
 svg.plot{display:block;width:100%;height:auto;max-width:100%}

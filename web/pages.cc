@@ -52,7 +52,14 @@ std::string Str(const json* j) {
 std::string ScalarText(const json* j, int sig = 6) {
   if (j == nullptr || j->is_null()) return kDash;
   if (j->is_boolean()) return j->get<bool>() ? "yes" : "no";
-  if (j->is_number()) return FormatSig(j->get<double>(), sig);
+  if (j->is_number_integer()) return j->dump();
+  if (j->is_number()) {
+    const double v = j->get<double>();
+    if (std::isfinite(v) && v == std::round(v) && std::fabs(v) < 1e15) {
+      return std::to_string(static_cast<long long>(v));
+    }
+    return FormatSig(v, sig);
+  }
   if (j->is_string()) return j->get<std::string>();
   return j->dump(-1, ' ', false, json::error_handler_t::replace);
 }
@@ -72,6 +79,61 @@ bool HasNumbers(const std::vector<double>& v) {
     if (std::isfinite(x)) return true;
   }
   return false;
+}
+
+// Pretty JSON with arrays of scalars kept on one line (configs hold long numeric lists).
+void CompactPretty(const json& j, int depth, std::string* out) {
+  const std::string pad(static_cast<size_t>(2 * (depth + 1)), ' ');
+  const std::string pad_end(static_cast<size_t>(2 * depth), ' ');
+  if (j.is_object() && !j.empty()) {
+    *out += "{\n";
+    size_t i = 0;
+    for (auto it = j.begin(); it != j.end(); ++it, ++i) {
+      *out += pad + json(it.key()).dump(-1, ' ', false, json::error_handler_t::replace) + ": ";
+      CompactPretty(it.value(), depth + 1, out);
+      *out += i + 1 < j.size() ? ",\n" : "\n";
+    }
+    *out += pad_end + "}";
+    return;
+  }
+  if (j.is_array() && !j.empty()) {
+    bool flat = true;
+    for (const auto& v : j) flat = flat && !v.is_structured();
+    bool rows = true;  // an array of flat arrays: one row per line
+    for (const auto& v : j) {
+      rows = rows && v.is_array();
+      if (rows) {
+        for (const auto& w : v) rows = rows && !w.is_structured();
+      }
+    }
+    if (flat) {
+      *out += j.dump(-1, ' ', false, json::error_handler_t::replace);
+      return;
+    }
+    *out += "[\n";
+    for (size_t i = 0; i < j.size(); ++i) {
+      *out += pad;
+      if (rows) {
+        *out += j[i].dump(-1, ' ', false, json::error_handler_t::replace);
+      } else {
+        CompactPretty(j[i], depth + 1, out);
+      }
+      *out += i + 1 < j.size() ? ",\n" : "\n";
+    }
+    *out += pad_end + "]";
+    return;
+  }
+  *out += j.dump(-1, ' ', false, json::error_handler_t::replace);
+}
+
+std::string PrettyJson(const json& j) {
+  try {
+    std::string out;
+    CompactPretty(j, 0, &out);
+    return out;
+  } catch (const std::exception&) {
+    return "(not available)";
+  }
 }
 
 std::string Dump(const json& j, int indent) {
@@ -160,7 +222,12 @@ double NiceFactorBelow(double v) {
   return nice * mag;
 }
 
-std::string FactorText(double k) { return kTimes + FormatSig(k, 3); }
+std::string FactorText(double k) {
+  if (std::isfinite(k) && k >= 1 && k < 1e15 && k == std::round(k)) {
+    return kTimes + std::to_string(static_cast<long long>(k));
+  }
+  return kTimes + FormatSig(k, 3);
+}
 
 std::string Warnings(const json& result) {
   const json* w = Array(Get(result, "warnings"));
@@ -588,7 +655,7 @@ std::string SingularValuePlot(const json& diag, size_t d) {
   o.name = "singular-values";
   o.title = "Singular value spectrum";
   o.x.title = "index i";
-  o.y.title = std::string(kSigma) + "\xE1\xB5\xA2 (reading units)";
+  o.y.title = "singular value (reading units)";
   o.y.type = ScaleType::kLog10;
   o.x.min = 0.5;
   o.x.max = static_cast<double>(std::max<size_t>(sv.size(), d + 1)) + 0.5;
@@ -671,8 +738,7 @@ std::string AxesPlot(const std::vector<PcaSensor>& sensors, int a, int b, double
   o.x.min = o.y.min = -1.25;
   o.x.max = o.y.max = 1.25;
   o.equal_aspect = true;
-  o.height = 440;
-  o.width = 480;
+  o.height = 520;
   const bool labels = sensors.size() <= 16;
   for (const auto& s : sensors) {
     if (s.axis.size() <= static_cast<size_t>(std::max(a, b))) continue;
@@ -732,8 +798,10 @@ std::string PcaReport(const JobView& view) {
     s += "<dt>positions n</dt><dd>" + E(ScalarText(Get(diag, "positions"))) + " (minimum " +
          E(ScalarText(Get(diag, "min_positions"))) + ")</dd></dl>";
     bool has_bias = false;
-    for (const auto& p : sensors)
-      has_bias = has_bias || (std::isfinite(p.bias) && p.bias != 0) || std::isfinite(p.bias_std);
+    for (const auto& p : sensors) {
+      has_bias = has_bias || (std::isfinite(p.bias) && p.bias != 0) ||
+                 (std::isfinite(p.bias_std) && p.bias_std > 0);
+    }
     if (sensors.empty()) {
       s += NotAvailable("Sensor parameters");
     } else {
@@ -969,7 +1037,6 @@ std::string ArrayResidualPlot(const json& diag, const json& config) {
   o.title = "Residual RMS per sensor type";
   o.y.title = "RMS (m/s\xC2\xB2 | rad/s)";
   o.y.type = ScaleType::kLog10;
-  o.width = 480;
   return RenderBarChart(o, {"accelerometer (m/s\xC2\xB2)", "gyroscope (rad/s)"}, series);
 }
 
@@ -998,7 +1065,6 @@ std::string ResidualHistograms(const json& diag) {
                 (std::string(type) == "accelerometer" ? "m/s\xC2\xB2" : "rad/s") + ")";
     o.y.title = "count";
     o.legend = false;
-    o.width = 480;
     out += Figure(RenderHistogram(o, {h}), "Should look Gaussian and centred on zero.");
   }
   return out;
@@ -1200,8 +1266,11 @@ std::string JobBody(const JobView& view) {
   kv += "</dd>" + TimingsHtml(job) + "</dl>";
   out += kv;
   if (!view.config.is_null()) {
-    out += "<details open><summary>Configuration</summary><pre class=\"config\">" +
-           E(Dump(view.config, 2)) + "</pre></details>";
+    const std::string pretty = PrettyJson(view.config);
+    const bool short_config = std::count(pretty.begin(), pretty.end(), '\n') <= 24;
+    out += std::string("<details") + (short_config ? " open" : "") +
+           "><summary>Configuration</summary><pre class=\"config\">" + E(pretty) +
+           "</pre></details>";
   }
   out += Section("downloads", "Downloads", DownloadsHtml(view));
   const bool has_result = job.result.is_object() && !job.result.empty();
@@ -1291,8 +1360,9 @@ std::string HistoryBody(const HistoryView& v) {
         figures = E(Guard("figures", [&] { return KeyFigures(j.method, j.result); }));
       }
       out += "<tr><td>" + JobLink(j.id) + "</td><td class=\"name\">" + DeviceLink(j.device) +
-             "</td><td>" + E(j.method) + "</td><td>" + StatusBadge(j.status) + "</td><td>" +
-             TimeHtml(j.created_at) + "</td><td>" + figures + "</td>" + WarningsCell(j) + "</tr>";
+             "</td><td>" + E(j.method) + "</td><td>" + StatusBadge(j.status) +
+             "</td><td class=\"time\">" + TimeHtml(j.created_at) + "</td><td>" + figures + "</td>" +
+             WarningsCell(j) + "</tr>";
     }
     out += "</tbody></table></div>";
   }
@@ -1577,7 +1647,7 @@ std::string DeviceBody(const DeviceView& v) {
         figures = E(Guard("figures", [&] { return KeyFigures(j.method, j.result); }));
       }
       table += "<tr>" + NumCell(std::to_string(i + 1)) + "<td>" + JobLink(j.id) + "</td><td>" +
-               E(j.method) + "</td><td>" + StatusBadge(j.status) + "</td><td>" +
+               E(j.method) + "</td><td>" + StatusBadge(j.status) + "</td><td class=\"time\">" +
                TimeHtml(j.created_at) + "</td><td>" + figures + "</td>" + WarningsCell(j) + "</tr>";
     }
     table += "</tbody></table></div>";

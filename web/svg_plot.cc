@@ -207,7 +207,7 @@ std::string LegendSvg(const std::vector<LegendEntry>& entries, double x0, double
   size_t shown = 0;
   for (const auto& e : entries) {
     if (shown == kMaxEntries) break;
-    const std::string text = Truncate(e.label, 40);
+    const std::string text = Truncate(e.label, 64);
     const double w = 26 + EstimateTextWidth(text) + 14;
     if (x + w > x1 && x > x0) {
       x = x0;
@@ -268,7 +268,7 @@ void LayoutFrame(const PlotOptions& o, const AxisTicks& yt, size_t legend_entrie
   double label_w = 0;
   for (const auto& l : yt.labels) label_w = std::max(label_w, EstimateTextWidth(l));
   f->left = std::min(12 + label_w + (o.y.title.empty() ? 6 : 22), f->width * 0.4);
-  f->right = 18;
+  f->right = 26;
   f->top = o.title.empty() ? 10 : 28;
   (void)legend_entries_hint;
   f->bottom = 22 + (o.x.title.empty() ? 4 : 18) + extra_bottom + 13.0 * static_cast<double>(notes);
@@ -858,6 +858,8 @@ std::string RenderBarChart(const PlotOptions& o, const std::vector<std::string>&
   if (empty) notes.push_back("No data to plot.");
   AxisOptions yopt = o.y;
   if (ty == ScaleType::kLinear) yopt.include_zero = true;
+  // Log bars start at the axis bottom: keep the smallest bar visibly tall.
+  if (ty == ScaleType::kLog10 && !ey.empty()) ey.Add(ey.lo / 3);
   const auto dy = AxisDomain(yopt, ey);
 
   std::vector<LegendEntry> legend;
@@ -873,7 +875,7 @@ std::string RenderBarChart(const PlotOptions& o, const std::vector<std::string>&
   const size_t nc = categories.size();
   double max_label = 0;
   for (const auto& c : categories)
-    max_label = std::max(max_label, EstimateTextWidth(Truncate(c, 18)));
+    max_label = std::max(max_label, EstimateTextWidth(Truncate(c, 24)));
   Frame f;
   AxisTicks yt = MakeTicks(yopt, dy.first, dy.second);
   LayoutFrame(o, yt, legend.size(), 0, notes.size(), &f);
@@ -925,7 +927,7 @@ std::string RenderBarChart(const PlotOptions& o, const std::vector<std::string>&
   std::string labels = "<g class=\"category-labels\">";
   for (size_t i = 0; i < nc; i += label_every) {
     const double cx = f.px0() + band * (static_cast<double>(i) + 0.5);
-    const std::string text = EscapeText(Truncate(categories[i], 18));
+    const std::string text = EscapeText(Truncate(categories[i], 24));
     if (rotate) {
       const double y = f.py0() + 10;
       labels += "<text x=\"" + N(cx) + "\" y=\"" + N(y) + "\" text-anchor=\"end\" transform=\"" +

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -440,6 +442,51 @@ TEST(Escaping, HostileDeviceAndSensorNamesNeverAppearUnescapedInAnyPage) {
     ExpectNoInjection(RenderDevicePage(d));
     ExpectNoInjection(RenderErrorPage(400, evil));
   }
+}
+
+// Writes the sample pages to $CALIBD_WEB_DUMP_DIR (when set) for a look in a browser.
+TEST(PageSnapshots, WritesSamplePagesWhenAsked) {
+  const char* dir = std::getenv("CALIBD_WEB_DUMP_DIR");
+  if (dir == nullptr) GTEST_SKIP() << "set CALIBD_WEB_DUMP_DIR to write the sample pages";
+  auto write = [&](const std::string& name, const std::string& html) {
+    std::ofstream(std::string(dir) + "/" + name) << html;
+  };
+  JobView p;
+  p.job = Job(17, "IMU-0042", "pca", "succeeded", "2026-11-20T09:15:02Z", PcaResult());
+  p.job.finished_at = "2026-11-20T09:15:04.250Z";
+  p.recording_id = 5;
+  p.recording_bytes = 18234;
+  p.recording_rows = 24;
+  p.config = PcaConfig();
+  write("job_pca.html", RenderJobPage(p));
+  JobView a;
+  a.job = Job(23, "ARRAY-7", "array", "succeeded", "2026-11-21 10:00:00", ArrayResult(100000));
+  a.job.finished_at = "2026-11-21 10:00:03";
+  a.recording_id = 9;
+  a.config = ArrayConfig();
+  write("job_array.html", RenderJobPage(a));
+  JobView f;
+  f.job = Job(31, "IMU-0042", "pca", "failed", "2026-11-20T09:20:00Z", json());
+  f.job.error = "the singular values show no gap between 3 and 4 (rank gap 1.3)";
+  f.config = PcaConfig();
+  write("job_failed.html", RenderJobPage(f));
+  HistoryView h;
+  h.jobs = {
+      a.job, f.job, p.job,
+      Job(12, std::string("IMU ") + kScript, "pca", "running", "2026-11-20T08:00:00Z", json())};
+  h.devices = {"IMU-0042", "ARRAY-7"};
+  h.next_before = "12";
+  write("history.html", RenderHistoryPage(h));
+  DeviceView d;
+  d.serial = "IMU-0042";
+  d.jobs = {Job(3, "IMU-0042", "pca", "succeeded", "2026-03-01T08:00:00Z", PcaResult("g", 2e-4)),
+            Job(1, "IMU-0042", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult()),
+            Job(2, "IMU-0042", "pca", "failed", "2026-02-01T08:00:00Z", json()),
+            Job(4, "IMU-0042", "pca", "succeeded", "2026-04-01T08:00:00Z", PcaResult("g", 5e-4)),
+            Job(5, "IMU-0042", "array", "succeeded", "2026-04-02T08:00:00Z", ArrayResult(0)),
+            Job(6, "IMU-0042", "array", "succeeded", "2026-05-02T08:00:00Z", ArrayResult(0, 3e-6))};
+  write("device.html", RenderDevicePage(d));
+  write("error.html", RenderErrorPage(404, "no job 999"));
 }
 
 }  // namespace
