@@ -1,0 +1,806 @@
+// Implementation notes.
+//
+// Closed form (kNone) — the paper's Algorithm 2: e = first d left singular vectors of m, b = eᵀm,
+// g from the least squares c² = b_jᵀ g b_j, g = qᵀλq, â = λ^{-1/2} q eᵀ.
+// Closed form (kEstimate) — the affine extension of issue #8: the readings lie near the
+// d-dimensional affine subspace μ̄ + span(e) (PCA of the readings centred on their mean μ̄); in
+// coordinates y_j = eᵀ(m_j − μ̄) they lie on the ellipsoid (y − y0)ᵀ M (y − y0) = c², found by an
+// algebraic least-squares fit; with M = LᵀL, v_j = L(y_j − y0), â = L^{-T} eᵀ, b = μ̄ + e y0.
+// For m = d, e is just a rotation of the readings, so the single-triad case needs nothing special.
+//
+// Maximum likelihood / Fisher information. Per sensor parameters θ_i = [a_i; b_i] (p = d or d+1
+// numbers), per position the d−1 tangent directions of v_j on the sphere. With G = a aᵀ and the
+// regressor ṽ_j = [v_j; 1] (or v_j), the information of the tangent block of position j is
+// T_jᵀ G T_j, and eliminating it (Schur complement) leaves, with
+//   P_j = T_j (T_jᵀ G T_j)^{-1} T_jᵀ = G⁻¹ − G⁻¹u uᵀG⁻¹ / (uᵀG⁻¹u),   u = v_j,
+// the reduced information (unit noise) of the sensor parameters
+//   S_ik = δ_ik Σ_j ṽ_j ṽ_jᵀ − Σ_j (a_iᵀ P_j a_k) ṽ_j ṽ_jᵀ,
+// assembled in O(n d² p²) through K = Σ_j vec(P_j) vec(ṽ_j ṽ_jᵀ)ᵀ. S has the d(d−1)/2-dimensional
+// null space of infinitesimal rotations (θ_i → [Ω a_i; 0]); its pseudo-inverse is
+// (S + κ N Nᵀ)^{-1} − N Nᵀ/κ with N an orthonormal basis of that null space. The same reduced
+// system, with the gradient, gives the Gauss-Newton step of `refine`; positions are then
+// re-solved exactly on the sphere (variable projection), so the cost can only go down.
+#include "core/pca.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+#include <Eigen/QR>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+namespace calibd::core {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+
+std::string Fmt(const char* format, double x) {
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), format, x);
+  return buf;
+}
+std::string Num(double x) { return Fmt("%.3g", x); }
+
+// Least squares on the sphere: x minimising |y − aᵀx|² subject to |x| = c, given the
+// eigen-decomposition of G = a aᵀ (positive definite) and r = a y. Lagrange: (G + μI)x = r with
+// μ > −λ_min chosen so that |x| = c (a trust-region style secular equation, safeguarded Newton on
+// 1/|x(μ)|).
+class SphereSolver {
+ public:
+  SphereSolver(const MatrixXd& g, double c) : c_(c) {
+    Eigen::SelfAdjointEigenSolver<MatrixXd> eig(g);
+    lambda_ = eig.eigenvalues();
+    q_ = eig.eigenvectors();
+  }
+
+  VectorXd Solve(const VectorXd& r) const {
+    const int d = static_cast<int>(lambda_.size());
+    const VectorXd rt = q_.transpose() * r;
+    const double lam_min = lambda_(0);
+    const double rnorm = rt.norm();
+    if (rnorm == 0) return c_ * q_.col(0);
+    double lo = -lam_min;
+    double hi = rnorm / c_ - lam_min;  // |x(μ)| <= |r|/(λ_min + μ) <= c from here on
+    auto norm2 = [&](double mu) {
+      double s = 0;
+      for (int k = 0; k < d; ++k) {
+        const double t = rt(k) / (lambda_(k) + mu);
+        s += t * t;
+      }
+      return s;
+    };
+    double mu = (0 > lo && 0 < hi) ? 0.0 : 0.5 * (lo + hi);
+    for (int it = 0; it < 200; ++it) {
+      const double s = norm2(mu);
+      const double xn = std::sqrt(s);
+      if (std::abs(xn - c_) <= 1e-15 * c_) break;
+      if (xn > c_) {
+        lo = mu;
+      } else {
+        hi = mu;
+      }
+      double s3 = 0;
+      for (int k = 0; k < d; ++k) {
+        const double den = lambda_(k) + mu;
+        s3 += rt(k) * rt(k) / (den * den * den);
+      }
+      const double f = 1.0 / xn - 1.0 / c_;
+      const double fp = s3 / (s * xn);
+      double next = mu - f / fp;
+      if (!(next > lo && next < hi) || !std::isfinite(next)) next = 0.5 * (lo + hi);
+      if (next == mu || hi - lo <= 1e-16 * (std::abs(lo) + std::abs(hi))) {
+        mu = next;
+        break;
+      }
+      mu = next;
+    }
+    VectorXd xt(d);
+    for (int k = 0; k < d; ++k) xt(k) = rt(k) / (lambda_(k) + mu);
+    const double xn = xt.norm();
+    if (!(xn >= c_ * (1 - 1e-8)) || !std::isfinite(xn)) {
+      // Hard case (r has no component along the smallest eigenvector): μ = −λ_min and the
+      // missing length goes along that eigenvector.
+      xt(0) = 0;
+      for (int k = 1; k < d; ++k) xt(k) = rt(k) / (lambda_(k) - lam_min);
+      const double rest = xt.squaredNorm();
+      xt(0) = std::sqrt(std::max(0.0, c_ * c_ - rest));
+    }
+    VectorXd x = q_ * xt;
+    const double norm = x.norm();
+    if (norm > 0) x *= c_ / norm;
+    return x;
+  }
+
+ private:
+  double c_;
+  VectorXd lambda_;
+  MatrixXd q_;
+};
+
+// The model state: sensitivities, biases, positions.
+struct Fit {
+  MatrixXd a;  // d×m
+  VectorXd b;  // m
+  MatrixXd v;  // d×n, |v_j| = c
+};
+
+// Optimal positions on the sphere for given a and b.
+MatrixXd ProjectPositions(const MatrixXd& m, const MatrixXd& a, const VectorXd& b, double c) {
+  const SphereSolver solver(a * a.transpose(), c);
+  MatrixXd r = a * (m.colwise() - b);  // d×n
+  MatrixXd v(a.rows(), m.cols());
+  for (Eigen::Index j = 0; j < m.cols(); ++j) v.col(j) = solver.Solve(r.col(j));
+  return v;
+}
+
+MatrixXd Residuals(const MatrixXd& m, const Fit& fit) {
+  MatrixXd r = m - fit.a.transpose() * fit.v;
+  r.colwise() -= fit.b;
+  return r;
+}
+
+double Cost(const MatrixXd& m, const Fit& fit) { return 0.5 * Residuals(m, fit).squaredNorm(); }
+
+// Regressor of sensor parameters θ_i: ṽ_j = [v_j; 1] (with bias) or v_j.
+MatrixXd Regressors(const MatrixXd& v, bool with_bias) {
+  if (!with_bias) return v;
+  MatrixXd vt(v.rows() + 1, v.cols());
+  vt.topRows(v.rows()) = v;
+  vt.row(v.rows()).setOnes();
+  return vt;
+}
+
+// Reduced (Schur-complement) information of θ = vec([a; bᵀ]) at unit noise, positions eliminated.
+// False when G = a aᵀ is singular.
+bool ReducedInformation(const MatrixXd& a, const MatrixXd& v, bool with_bias, MatrixXd* s) {
+  const int d = static_cast<int>(a.rows());
+  const int m = static_cast<int>(a.cols());
+  const int n = static_cast<int>(v.cols());
+  const int p = with_bias ? d + 1 : d;
+  Eigen::LLT<MatrixXd> llt(a * a.transpose());
+  if (llt.info() != Eigen::Success) return false;
+  const MatrixXd gi = llt.solve(MatrixXd::Identity(d, d));
+  MatrixXd vv = MatrixXd::Zero(p, p);
+  MatrixXd k = MatrixXd::Zero(d * d, p * p);
+  VectorXd vt(p);
+  MatrixXd pj(d, d);
+  MatrixXd outer(p, p);
+  for (int j = 0; j < n; ++j) {
+    vt.head(d) = v.col(j);
+    if (with_bias) vt(d) = 1;
+    const VectorXd giu = gi * v.col(j);
+    const double den = v.col(j).dot(giu);
+    pj = gi - giu * giu.transpose() / den;
+    outer.noalias() = vt * vt.transpose();
+    vv += outer;
+    k.noalias() += Eigen::Map<const VectorXd>(pj.data(), d * d) *
+                   Eigen::Map<const VectorXd>(outer.data(), p * p).transpose();
+  }
+  s->setZero(p * m, p * m);
+  VectorXd w(d * d);
+  for (int i = 0; i < m; ++i) {
+    for (int kk = i; kk < m; ++kk) {
+      // w = vec(a_k a_iᵀ)? P(r,s) is stored at r + s*d; a_iᵀ P a_k = Σ a(r,i) a(s,k) P(r,s).
+      for (int ss = 0; ss < d; ++ss) {
+        for (int rr = 0; rr < d; ++rr) w(rr + ss * d) = a(rr, i) * a(ss, kk);
+      }
+      const VectorXd block = -(k.transpose() * w);  // p², column-major p×p
+      for (int q2 = 0; q2 < p; ++q2) {
+        for (int q1 = 0; q1 < p; ++q1) {
+          double x = block(q1 + q2 * p);
+          if (i == kk) x += vv(q1, q2);
+          (*s)(i * p + q1, kk * p + q2) = x;
+          (*s)(kk * p + q2, i * p + q1) = x;
+        }
+      }
+    }
+  }
+  return true;
+}
+
+// Orthonormal basis (p·m × d(d−1)/2) of the rotation gauge: θ_i → [Ω a_i; 0].
+MatrixXd GaugeBasis(const MatrixXd& a, bool with_bias) {
+  const int d = static_cast<int>(a.rows());
+  const int m = static_cast<int>(a.cols());
+  const int p = with_bias ? d + 1 : d;
+  const int ng = d * (d - 1) / 2;
+  MatrixXd nb = MatrixXd::Zero(p * m, ng);
+  int col = 0;
+  for (int r = 0; r < d; ++r) {
+    for (int s = r + 1; s < d; ++s, ++col) {
+      for (int i = 0; i < m; ++i) {
+        nb(i * p + r, col) = a(s, i);
+        nb(i * p + s, col) = -a(r, i);
+      }
+    }
+  }
+  if (ng == 0) return nb;
+  Eigen::HouseholderQR<MatrixXd> qr(nb);
+  return qr.householderQ() * MatrixXd::Identity(p * m, ng);
+}
+
+// Factorisation of S + κ N Nᵀ, giving S⁺ and minimum-norm solutions. ok() false when S is
+// singular beyond the gauge (some parameter not determined by the data).
+class GaugeSolver {
+ public:
+  GaugeSolver(const MatrixXd& s, const MatrixXd& gauge) : nb_(gauge) {
+    kappa_ = s.trace() / static_cast<double>(s.rows());
+    if (!(kappa_ > 0) || !std::isfinite(kappa_)) return;
+    llt_.compute(s + kappa_ * nb_ * nb_.transpose());
+    ok_ = llt_.info() == Eigen::Success && llt_.rcond() > 1e-13;
+  }
+  bool ok() const { return ok_; }
+  VectorXd Solve(const VectorXd& rhs) const {
+    VectorXd x = llt_.solve(rhs);
+    return x - nb_ * (nb_.transpose() * x);
+  }
+  MatrixXd PseudoInverse() const {
+    const Eigen::Index k = nb_.rows();
+    MatrixXd x = llt_.solve(MatrixXd::Identity(k, k));
+    const MatrixXd pr = MatrixXd::Identity(k, k) - nb_ * nb_.transpose();
+    x = pr * x * pr;
+    return 0.5 * (x + x.transpose());
+  }
+
+ private:
+  MatrixXd nb_;
+  double kappa_ = 0;
+  Eigen::LLT<MatrixXd> llt_;
+  bool ok_ = false;
+};
+
+// Left singular vectors (all, m×min(m,n) at least d columns) and singular values of x (m×n),
+// O(n m²) for n >= m through a QR of xᵀ.
+void LeftSvd(const MatrixXd& x, MatrixXd* e, VectorXd* sv) {
+  const Eigen::Index m = x.rows();
+  const Eigen::Index n = x.cols();
+  if (n >= m) {
+    Eigen::HouseholderQR<MatrixXd> qr(x.transpose());
+    const MatrixXd r = qr.matrixQR().topRows(m).triangularView<Eigen::Upper>();
+    Eigen::JacobiSVD<MatrixXd> svd(r.transpose(), Eigen::ComputeFullU);
+    *e = svd.matrixU();
+    *sv = svd.singularValues();
+  } else {
+    Eigen::JacobiSVD<MatrixXd> svd(x, Eigen::ComputeThinU);
+    *e = svd.matrixU();
+    *sv = svd.singularValues();
+  }
+}
+
+// Checks that the readings span d clear dimensions (rank gap). Fills the diagnostics.
+Status CheckRank(const VectorXd& sv, int d, const PcaOptions& options, bool affine,
+                 PcaResult* result) {
+  result->singular_values = sv;
+  const double s1 = sv(0);
+  result->rank_gap = sv.size() > d ? (sv(d) > 0 ? sv(d - 1) / sv(d) : kInf) : kInf;
+  const std::string readings = affine ? "the readings (minus their mean)" : "the readings";
+  if (!(s1 > 0)) {
+    return Status::NotDeterminable(
+        "all readings are " + std::string(affine ? "equal" : "zero") +
+        ": nothing to calibrate; check the recording (were the sensors on, was the field "
+        "applied?)");
+  }
+  const std::string what_instead =
+      " This happens when all positions lie in one plane (e.g. the device was only turned about "
+      "one axis" +
+      std::string(affine ? "" : " through a horizontal field") +
+      "); record orientations spread over the whole sphere, so that the field points in at "
+      "least " +
+      std::to_string(d) + " independent directions.";
+  if (sv(d - 1) <= 1e-10 * s1) {
+    return Status::NotDeterminable(readings + " span fewer than d = " + std::to_string(d) +
+                                   " dimensions (singular value " + std::to_string(d) + " is " +
+                                   Num(sv(d - 1) / s1) + " of the largest)." + what_instead);
+  }
+  if (result->rank_gap < options.min_rank_gap) {
+    return Status::NotDeterminable(
+        "no clear gap between singular values " + std::to_string(d) + " and " +
+        std::to_string(d + 1) + " of " + readings + " (ratio " + Num(result->rank_gap) +
+        ", at least " + Num(options.min_rank_gap) +
+        " needed): the field is not seen in d clearly independent directions above the noise." +
+        what_instead + " If the field is too weak for the noise, average longer per position.");
+  }
+  return Status::Ok();
+}
+
+// Row of the symmetric-matrix design: yᵀ M y = Σ_{k<=l} f_kl M_kl, f = y_k y_l (×2 off-diagonal).
+void QuadraticRow(const VectorXd& y, double* row) {
+  const Eigen::Index d = y.size();
+  int idx = 0;
+  for (Eigen::Index k = 0; k < d; ++k) {
+    for (Eigen::Index l = k; l < d; ++l) row[idx++] = (k == l ? 1.0 : 2.0) * y(k) * y(l);
+  }
+}
+MatrixXd SymmetricFromVector(const VectorXd& x, int d) {
+  MatrixXd g(d, d);
+  int idx = 0;
+  for (int k = 0; k < d; ++k) {
+    for (int l = k; l < d; ++l) g(k, l) = g(l, k) = x(idx++);
+  }
+  return g;
+}
+
+const char* kSpreadAdvice =
+    "record orientations spread over the whole sphere (not all turned about one axis, which puts "
+    "the field on a cone)";
+
+// The paper's Algorithm 2. Fills fit (a, b = 0, v unconstrained) and diagnostics.
+Status ClosedFormBiasFree(const MatrixXd& mm, int d, double c, const PcaOptions& options,
+                          PcaResult* result, Fit* fit) {
+  const int m = static_cast<int>(mm.rows());
+  const int n = static_cast<int>(mm.cols());
+  MatrixXd e_all;
+  VectorXd sv;
+  LeftSvd(mm, &e_all, &sv);
+  Status s = CheckRank(sv, d, options, false, result);
+  if (!s.ok()) return s;
+  const MatrixXd e = e_all.leftCols(d);
+  const MatrixXd b = e.transpose() * mm;  // d×n
+  // Least squares c² = b_jᵀ g b_j, with b scaled to unit RMS for conditioning.
+  const double scale = sv(0) / std::sqrt(static_cast<double>(n));
+  const int nq = d * (d + 1) / 2;
+  MatrixXd design(n, nq);
+  std::vector<double> row(nq);
+  for (int j = 0; j < n; ++j) {
+    QuadraticRow(b.col(j) / scale, row.data());
+    for (int k = 0; k < nq; ++k) design(j, k) = row[k];
+  }
+  const VectorXd rhs = VectorXd::Constant(n, c * c);
+  Eigen::HouseholderQR<MatrixXd> qr(design);
+  const MatrixXd r = qr.matrixQR().topRows(std::min(n, nq)).triangularView<Eigen::Upper>();
+  Eigen::JacobiSVD<MatrixXd> svd(r, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const VectorXd dsv = svd.singularValues();
+  if (dsv.size() < nq || dsv(nq - 1) <= 1e-10 * dsv(0)) {
+    return Status::NotDeterminable(
+        "the positions do not determine the field's quadratic form g (the " + std::to_string(nq) +
+        " equations c² = b_jᵀ g b_j are degenerate): the field directions "
+        "lie on a cone or another quadric; " +
+        kSpreadAdvice + ".");
+  }
+  const VectorXd qtb = (qr.householderQ().transpose() * rhs).head(nq);
+  const VectorXd x = svd.matrixV() * (svd.matrixU().transpose() * qtb).cwiseQuotient(dsv);
+  const MatrixXd g = SymmetricFromVector(x, d) / (scale * scale);
+  Eigen::SelfAdjointEigenSolver<MatrixXd> eig(g);
+  const VectorXd lambda = eig.eigenvalues();
+  result->g_eigenvalues = lambda;
+  if (!(lambda(0) > 1e-12 * std::abs(lambda(d - 1)))) {
+    return Status::NotDeterminable(
+        "g is not positive definite (eigenvalues " + Num(lambda(0)) + " ... " + Num(lambda(d - 1)) +
+        "): the readings are not those of bias-free linear sensors in a field of constant "
+        "magnitude. Likely causes: sensor biases not removed (use bias: estimate, or record the "
+        "static/moving layout), the field changed between positions, or too much noise for so "
+        "few positions; record more positions, " +
+        std::string(kSpreadAdvice) + ".");
+  }
+  const MatrixXd q = eig.eigenvectors().transpose();  // paper: g = qᵀ λ q
+  const VectorXd sqrt_lambda = lambda.cwiseSqrt();
+  fit->a = sqrt_lambda.cwiseInverse().asDiagonal() * q * e.transpose();
+  fit->b = VectorXd::Zero(m);
+  fit->v = sqrt_lambda.asDiagonal() * q * b;
+  return Status::Ok();
+}
+
+// The affine closed form (issue #8): PCA of the centred readings, algebraic ellipsoid fit.
+Status ClosedFormAffine(const MatrixXd& mm, int d, double c, const PcaOptions& options,
+                        PcaResult* result, Fit* fit) {
+  const int n = static_cast<int>(mm.cols());
+  const VectorXd mean = mm.rowwise().mean();
+  const MatrixXd centred = mm.colwise() - mean;
+  MatrixXd e_all;
+  VectorXd sv;
+  LeftSvd(centred, &e_all, &sv);
+  Status s = CheckRank(sv, d, options, true, result);
+  if (!s.ok()) return s;
+  const MatrixXd e = e_all.leftCols(d);
+  const MatrixXd y = e.transpose() * centred;  // d×n, mean zero
+  const double scale = std::sqrt(y.squaredNorm() / n);
+  // Algebraic fit ŷᵀMŷ − 2wᵀŷ + k = 0 on ŷ = y/scale: null vector of the design.
+  const int nq = d * (d + 1) / 2;
+  const int nz = nq + d + 1;
+  MatrixXd design(n, nz);
+  std::vector<double> row(nq);
+  for (int j = 0; j < n; ++j) {
+    const VectorXd yh = y.col(j) / scale;
+    QuadraticRow(yh, row.data());
+    for (int k = 0; k < nq; ++k) design(j, k) = row[k];
+    design.block(j, nq, 1, d) = -2.0 * yh.transpose();
+    design(j, nz - 1) = 1.0;
+  }
+  MatrixXd r;
+  if (n > nz) {
+    Eigen::HouseholderQR<MatrixXd> qr(design);
+    r = qr.matrixQR().topRows(nz).triangularView<Eigen::Upper>();
+  } else {
+    r = design;
+  }
+  Eigen::JacobiSVD<MatrixXd> svd(r, Eigen::ComputeFullV);
+  VectorXd dsv = VectorXd::Zero(nz);
+  dsv.head(svd.singularValues().size()) = svd.singularValues();
+  if (dsv(nz - 2) <= 1e-10 * dsv(0)) {
+    return Status::NotDeterminable(
+        "the positions do not determine the ellipsoid of the readings (its " +
+        std::to_string(nz - 1) +
+        " parameters are degenerate): the field directions lie on a cone or another quadric; " +
+        kSpreadAdvice + ".");
+  }
+  const VectorXd z = svd.matrixV().col(nz - 1);
+  MatrixXd mh = SymmetricFromVector(z.head(nq), d);
+  VectorXd wh = z.segment(nq, d);
+  double kh = z(nz - 1);
+  Eigen::SelfAdjointEigenSolver<MatrixXd> eig0(mh);
+  if (eig0.eigenvalues()(d - 1) < 0) {  // overall sign of the null vector is arbitrary
+    mh = -mh;
+    wh = -wh;
+    kh = -kh;
+  }
+  Eigen::SelfAdjointEigenSolver<MatrixXd> eig1(mh);
+  const VectorXd mu = eig1.eigenvalues();
+  std::string not_ellipsoid =
+      "the readings do not lie on an ellipsoid (algebraic fit gives a quadric that is not "
+      "positive definite";
+  const std::string causes =
+      "): they are not those of linear sensors with constant biases in a field of constant "
+      "magnitude, or there is too much noise for so few positions; record more positions, " +
+      std::string(kSpreadAdvice) + ".";
+  if (!(mu(0) > 1e-12 * mu(d - 1))) {
+    result->g_eigenvalues = mu;
+    return Status::NotDeterminable(not_ellipsoid + ", eigenvalues " + Num(mu(0)) + " ... " +
+                                   Num(mu(d - 1)) + causes);
+  }
+  const VectorXd y0h = mh.llt().solve(wh);
+  const double rho = y0h.dot(mh * y0h) - kh;
+  if (!(rho > 0)) {
+    return Status::NotDeterminable(not_ellipsoid + ": an empty ellipsoid" + causes);
+  }
+  const MatrixXd shape = (c * c / (rho * scale * scale)) * mh;  // (y−y0)ᵀ shape (y−y0) = c²
+  const VectorXd y0 = scale * y0h;
+  Eigen::SelfAdjointEigenSolver<MatrixXd> eig(shape);
+  const VectorXd lambda = eig.eigenvalues();
+  result->g_eigenvalues = lambda;
+  const MatrixXd q = eig.eigenvectors().transpose();
+  const VectorXd sqrt_lambda = lambda.cwiseSqrt();
+  // v = L (y − y0), L = λ^{1/2} q; m ≈ mean + e y = mean + e y0 + e L⁻¹ v.
+  fit->a = sqrt_lambda.cwiseInverse().asDiagonal() * q * e.transpose();
+  fit->b = mean + e * y0;
+  fit->v = sqrt_lambda.asDiagonal() * q * (y.colwise() - y0);
+  return Status::Ok();
+}
+
+// Maximum-likelihood Gauss-Newton (variable projection over positions). Only accepted steps
+// lower the cost, so the result is never worse than the start.
+int Refine(const MatrixXd& mm, double c, bool with_bias, int max_iterations, Fit* fit,
+           double* cost) {
+  const int d = static_cast<int>(fit->a.rows());
+  const int m = static_cast<int>(fit->a.cols());
+  const int p = with_bias ? d + 1 : d;
+  int iterations = 0;
+  for (int it = 0; it < max_iterations; ++it) {
+    const MatrixXd res = Residuals(mm, *fit);  // m×n
+    const MatrixXd g = fit->a * fit->a.transpose();
+    Eigen::LLT<MatrixXd> llt(g);
+    if (llt.info() != Eigen::Success) break;
+    const MatrixXd gi = llt.solve(MatrixXd::Identity(d, d));
+    // w_j = P_j a r_j.
+    const MatrixXd ar = fit->a * res;  // d×n
+    MatrixXd w(d, mm.cols());
+    for (Eigen::Index j = 0; j < mm.cols(); ++j) {
+      const VectorXd giu = gi * fit->v.col(j);
+      const double den = fit->v.col(j).dot(giu);
+      const VectorXd gir = gi * ar.col(j);
+      w.col(j) = gir - giu * (giu.dot(ar.col(j)) / den);
+    }
+    const MatrixXd vt = Regressors(fit->v, with_bias);                              // p×n
+    const MatrixXd rhs_mat = vt * res.transpose() - (vt * w.transpose()) * fit->a;  // p×m
+    MatrixXd s;
+    if (!ReducedInformation(fit->a, fit->v, with_bias, &s)) break;
+    const GaugeSolver solver(s, GaugeBasis(fit->a, with_bias));
+    if (!solver.ok()) break;
+    const VectorXd delta = solver.Solve(Eigen::Map<const VectorXd>(rhs_mat.data(), p * m));
+    const Eigen::Map<const MatrixXd> dtheta(delta.data(), p, m);
+    bool accepted = false;
+    double step = 1.0;
+    for (int half = 0; half < 20; ++half, step *= 0.5) {
+      Fit trial;
+      trial.a = fit->a + step * dtheta.topRows(d);
+      trial.b = with_bias ? VectorXd(fit->b + step * dtheta.row(d).transpose()) : fit->b;
+      trial.v = ProjectPositions(mm, trial.a, trial.b, c);
+      const double trial_cost = Cost(mm, trial);
+      if (trial_cost < *cost) {
+        const double decrease = *cost - trial_cost;
+        *fit = std::move(trial);
+        *cost = trial_cost;
+        accepted = true;
+        ++iterations;
+        if (decrease <= 1e-12 * trial_cost) return iterations;
+        break;
+      }
+    }
+    if (!accepted) break;
+  }
+  return iterations;
+}
+
+Status Fail(Status s, PcaResult* result) {
+  result->usable = false;
+  result->reason = s.message();
+  return s;
+}
+
+}  // namespace
+
+const char* BiasModelName(BiasModel bias) {
+  return bias == BiasModel::kEstimate ? "estimate" : "none";
+}
+
+bool PcaOptions::IsValid(std::string* error) const {
+  auto fail = [error](const std::string& what) {
+    if (error != nullptr) *error = what;
+    return false;
+  };
+  if (dimension < 1 || dimension > kMaxDimension) {
+    return fail("dimension must be between 1 and " + std::to_string(kMaxDimension));
+  }
+  if (magnitude && !(*magnitude > 0 && std::isfinite(*magnitude))) {
+    return fail("magnitude must be a finite number > 0");
+  }
+  if (noise_std && !(*noise_std > 0 && std::isfinite(*noise_std))) {
+    return fail("noise_std must be a finite number > 0");
+  }
+  if (nominal) {
+    if (nominal->rows() != dimension) {
+      return fail("nominal must have dimension = " + std::to_string(dimension) +
+                  " numbers per sensor, not " + std::to_string(nominal->rows()));
+    }
+    if (nominal->cols() < 1) return fail("nominal must have at least one sensor");
+    if (!nominal->allFinite()) return fail("nominal must contain finite numbers only");
+  }
+  if (max_refine_iterations < 1) return fail("max_refine_iterations must be >= 1");
+  if (!(min_rank_gap > 1) || !std::isfinite(min_rank_gap)) {
+    return fail("min_rank_gap must be a finite number > 1");
+  }
+  return true;
+}
+
+Eigen::MatrixXd CanonicalFrame(const Eigen::MatrixXd& a) {
+  const Eigen::Index d = a.rows();
+  Eigen::HouseholderQR<MatrixXd> qr(a);
+  const MatrixXd q = qr.householderQ() * MatrixXd::Identity(d, d);
+  MatrixXd h = q.transpose();
+  const Eigen::Index k = std::min(d, a.cols());
+  for (Eigen::Index i = 0; i < k; ++i) {
+    if (qr.matrixQR()(i, i) < 0) h.row(i) *= -1;
+  }
+  return h;
+}
+
+double CalibrationError(const Eigen::MatrixXd& a_true, const Eigen::MatrixXd& a_hat) {
+  return (CanonicalFrame(a_true) * a_true - CanonicalFrame(a_hat) * a_hat).norm();
+}
+
+Eigen::MatrixXd ProcrustesRotation(const Eigen::MatrixXd& from, const Eigen::MatrixXd& to,
+                                   bool allow_reflection) {
+  Eigen::JacobiSVD<MatrixXd> svd(to * from.transpose(), Eigen::ComputeFullU | Eigen::ComputeFullV);
+  MatrixXd u = svd.matrixU();
+  const MatrixXd& v = svd.matrixV();
+  if (!allow_reflection && (u * v.transpose()).determinant() < 0) {
+    u.col(u.cols() - 1) *= -1;
+  }
+  return u * v.transpose();
+}
+
+Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaResult* result) {
+  *result = PcaResult();
+  std::string error;
+  if (!options.IsValid(&error)) return Fail(Status::InvalidInput("pca options: " + error), result);
+  const MatrixXd& mm = problem.m;
+  const int d = options.dimension;
+  const int m = static_cast<int>(mm.rows());
+  const int n = static_cast<int>(mm.cols());
+  const bool affine = options.bias == BiasModel::kEstimate;
+  const int p = affine ? d + 1 : d;
+  result->dimension = d;
+  result->bias_model = options.bias;
+  result->positions = n;
+  result->min_positions = affine ? d * (d + 3) / 2 : d * (d + 1) / 2;
+  result->magnitude_known = options.magnitude.has_value();
+  const double c = options.magnitude.value_or(1.0);
+  result->magnitude = c;
+  result->noise_std_given = options.noise_std.has_value();
+
+  if (m < 1 || n < 1) {
+    return Fail(Status::InvalidInput("the recording has no readings (" + std::to_string(m) +
+                                     " sensors, " + std::to_string(n) + " positions)"),
+                result);
+  }
+  if (!mm.allFinite()) {
+    return Fail(Status::InvalidInput("readings must be finite numbers"), result);
+  }
+  if (!problem.sensor_names.empty() && static_cast<int>(problem.sensor_names.size()) != m) {
+    return Fail(
+        Status::InvalidInput("sensor_names has " + std::to_string(problem.sensor_names.size()) +
+                             " names for " + std::to_string(m) + " sensors"),
+        result);
+  }
+  if (!problem.position_labels.empty() && static_cast<int>(problem.position_labels.size()) != n) {
+    return Fail(Status::InvalidInput("position_labels has " +
+                                     std::to_string(problem.position_labels.size()) +
+                                     " labels for " + std::to_string(n) + " positions"),
+                result);
+  }
+  for (const VectorXd* x : {&problem.removed_bias, &problem.removed_bias_std}) {
+    if (x->size() != 0 && (x->size() != m || !x->allFinite())) {
+      return Fail(Status::InvalidInput("removed bias (and its std) must have one finite value "
+                                       "per sensor"),
+                  result);
+    }
+  }
+  if (options.nominal && options.nominal->cols() != m) {
+    return Fail(Status::InvalidInput("nominal has " + std::to_string(options.nominal->cols()) +
+                                     " sensors but the recording has " + std::to_string(m))
+                    .WithField("nominal"),
+                result);
+  }
+  if (m < d) {
+    return Fail(Status::NotDeterminable(
+                    std::to_string(m) + " sensor" + (m == 1 ? "" : "s") + " cannot determine " +
+                    std::to_string(d) +
+                    "-dimensional sensitivity vectors: at least d = " + std::to_string(d) +
+                    " sensors are needed (the paper's inequality 17); record with at "
+                    "least " +
+                    std::to_string(d) + " sensors, or set dimension to " + std::to_string(m) +
+                    " if the field only has that many components"),
+                result);
+  }
+  if (n < result->min_positions) {
+    return Fail(
+        Status::NotDeterminable(
+            std::to_string(n) + " position" + (n == 1 ? "" : "s") + " recorded, but dimension " +
+            std::to_string(d) + (affine ? " with unknown biases" : "") + " needs at least " +
+            std::to_string(result->min_positions) + " (" + (affine ? "d(d+3)/2" : "d(d+1)/2") +
+            "); record at least " + std::to_string(result->min_positions) +
+            " positions with orientations spread over the sphere (more is better: the error "
+            "falls as 1/sqrt(n))"),
+        result);
+  }
+
+  // Closed form.
+  Fit fit;
+  Status s = affine ? ClosedFormAffine(mm, d, c, options, result, &fit)
+                    : ClosedFormBiasFree(mm, d, c, options, result, &fit);
+  if (!s.ok()) return Fail(s, result);
+  fit.v = ProjectPositions(mm, fit.a, fit.b, c);
+  result->cost_closed_form = Cost(mm, fit);
+  result->cost = result->cost_closed_form;
+  if (options.refine) {
+    result->refine_iterations =
+        Refine(mm, c, affine, options.max_refine_iterations, &fit, &result->cost);
+    result->refined = result->cost < result->cost_closed_form;
+    if (!result->refined) {
+      result->warnings.push_back(
+          "The maximum-likelihood refinement did not lower the cost; the closed-form estimate is "
+          "reported.");
+    }
+  }
+
+  // Diagnostics at the estimate.
+  const MatrixXd res = Residuals(mm, fit);
+  result->residual_rms = (res.rowwise().squaredNorm() / n).cwiseSqrt();
+  {
+    const MatrixXd g = fit.a * fit.a.transpose();
+    const MatrixXd v_free = g.llt().solve(fit.a * (mm.colwise() - fit.b));
+    result->magnitude_error = v_free.colwise().norm().transpose().array() - c;
+  }
+  result->degrees_of_freedom = m * n - (p * m + (d - 1) * n - d * (d - 1) / 2);
+  if (result->degrees_of_freedom > 0) {
+    result->noise_std_estimated = std::sqrt(2 * result->cost / result->degrees_of_freedom);
+  }
+  result->noise_std = options.noise_std.value_or(result->noise_std_estimated);
+  if (!options.noise_std && result->degrees_of_freedom <= 0) {
+    result->warnings.push_back(
+        "The noise level cannot be estimated: with " + std::to_string(n) + " positions and " +
+        std::to_string(m) + " sensors there is no redundancy (degrees of freedom " +
+        std::to_string(result->degrees_of_freedom) +
+        "), so the uncertainties are undefined; give noise_std or record more positions.");
+  }
+  if (options.noise_std && result->degrees_of_freedom >= 20 &&
+      (result->noise_std_estimated > 2 * *options.noise_std ||
+       result->noise_std_estimated < 0.5 * *options.noise_std)) {
+    result->warnings.push_back("The residuals suggest a noise level of " +
+                               Num(result->noise_std_estimated) + ", not the given noise_std " +
+                               Num(*options.noise_std) +
+                               ": the uncertainties use the given value; check it.");
+  }
+  if (result->rank_gap < 10 * options.min_rank_gap) {
+    result->warnings.push_back(
+        "The gap between singular values " + std::to_string(d) + " and " + std::to_string(d + 1) +
+        " is small (" + Num(result->rank_gap) + "): the positions barely span " +
+        std::to_string(d) +
+        " dimensions above the noise; the estimate may be poor. Record more orientations spread "
+        "over the sphere.");
+  }
+
+  // Uncertainty (frame-free), at unit noise then scaled.
+  MatrixXd cov;
+  bool have_cov = false;
+  if (std::isfinite(result->noise_std)) {
+    MatrixXd info;
+    if (ReducedInformation(fit.a, fit.v, affine, &info)) {
+      const GaugeSolver solver(info, GaugeBasis(fit.a, affine));
+      if (solver.ok()) {
+        cov = result->noise_std * result->noise_std * solver.PseudoInverse();
+        have_cov = true;
+      }
+    }
+    if (!have_cov) {
+      result->warnings.push_back(
+          "The Fisher information is singular beyond the rotation gauge: some parameters are not "
+          "determined by these positions, so uncertainties are undefined.");
+    }
+  }
+
+  // Frame.
+  MatrixXd h;
+  if (options.nominal) {
+    result->frame = "nominal";
+    h = ProcrustesRotation(fit.a, *options.nominal, true);
+    result->reflection = h.determinant() < 0;
+  } else {
+    result->frame = "canonical";
+    h = CanonicalFrame(fit.a);
+  }
+  result->a = h * fit.a;
+  result->v = h * fit.v;
+  result->b = fit.b;
+  if (problem.removed_bias.size() == m) result->b += problem.removed_bias;
+
+  if (!result->magnitude_known) {
+    result->warnings.push_back(
+        "The field magnitude was not given: scale factors are relative (the magnitude is taken as "
+        "1, the paper's Remark 2), and scale_std describes those relative scale factors.");
+  }
+  result->sensors.resize(m);
+  for (int i = 0; i < m; ++i) {
+    PcaSensorEstimate& se = result->sensors[i];
+    se.name = problem.sensor_names.empty() ? "s" + std::to_string(i) : problem.sensor_names[i];
+    se.sensitivity = result->a.col(i);
+    se.scale = se.sensitivity.norm();
+    se.axis = se.sensitivity / se.scale;
+    se.bias = result->b(i);
+    double bias_var = 0;
+    if (problem.removed_bias_std.size() == m) {
+      bias_var += problem.removed_bias_std(i) * problem.removed_bias_std(i);
+    }
+    if (have_cov) {
+      const MatrixXd ca = cov.block(i * p, i * p, d, d);
+      const VectorXd u = fit.a.col(i) / fit.a.col(i).norm();
+      se.scale_std = std::sqrt(std::max(0.0, u.dot(ca * u)));
+      const MatrixXd proj = MatrixXd::Identity(d, d) - u * u.transpose();
+      se.axis_std_rad = std::sqrt(std::max(0.0, (proj * ca * proj).trace())) / fit.a.col(i).norm();
+      if (affine) bias_var += cov(i * p + d, i * p + d);
+    } else if (affine) {
+      bias_var = kNaN;
+    }
+    se.bias_std = std::sqrt(bias_var);
+    if (options.nominal) {
+      const VectorXd nom = options.nominal->col(i);
+      const double cosang = nom.norm() > 0 ? se.axis.dot(nom) / nom.norm() : 1.0;
+      const double deg = std::acos(std::clamp(cosang, -1.0, 1.0)) * 180.0 / M_PI;
+      if (deg > 10) {
+        result->warnings.push_back("Sensor " + se.name + "'s axis is " + Fmt("%.1f", deg) +
+                                   " degrees from its nominal direction: check the nominal "
+                                   "sensitivities and the sensor order.");
+      }
+    }
+  }
+  result->usable = true;
+  return Status::Ok();
+}
+
+}  // namespace calibd::core

@@ -1,0 +1,139 @@
+// The `pca` calibration method: Rupniewski, "PCA-aided calibration of systems comprising multiple
+// unbiased sensors" (../shared/seeds/000_cea3cc86060608ff.txt), plus an affine extension for
+// unknown biases (issue #8).
+//
+// Model, for m single-axis sensors at n static positions under a field of constant magnitude c:
+//   m_ij = a_iᵀ v_j + b_i + η_ij,   |v_j| = c,   η_ij ~ N(0, σ²)
+// with a (d×m) the sensitivity vectors (axis × scale factor, one column per sensor), v (d×n) the
+// field in the body frame at each position, and b (m) the biases (zero for BiasModel::kNone).
+// The data determine a and v only up to a common orthogonal transform (the paper's Remark 1),
+// reflections included; the result is reported in the canonical frame of the paper's Eq. 19 or,
+// given nominal sensitivities, in their frame (orthogonal Procrustes allowing a reflection).
+//
+// Everything here is pure numerics: Eigen in, result structs out. Thread-compatible: concurrent
+// calls on different objects are safe.
+#ifndef CALIBD_CORE_PCA_H_
+#define CALIBD_CORE_PCA_H_
+
+#include <Eigen/Core>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/status.h"
+
+namespace calibd::core {
+
+enum class BiasModel {
+  kNone,      // readings are bias-free (or biases were removed beforehand): the paper's model
+  kEstimate,  // unknown constant biases b_i are estimated with the sensitivities (issue #8)
+};
+const char* BiasModelName(BiasModel bias);  // "none" | "estimate"
+
+struct PcaOptions {
+  int dimension = 3;                // d >= 1 (at most kMaxDimension)
+  std::optional<double> magnitude;  // c > 0; nullopt: unknown -> c = 1, scale factors relative
+                                    // (the paper's Remark 2)
+  std::optional<Eigen::MatrixXd> nominal;  // d×m nominal sensitivity vectors (columns = sensors,
+                                           // like the paper's a); the result is rotated onto them
+                                           // by orthogonal Procrustes allowing a reflection.
+                                           // nullopt: canonical frame (Eq. 19).
+  bool refine = false;                     // maximum-likelihood Gauss-Newton after the closed form
+  BiasModel bias = BiasModel::kNone;       // see BiasModel
+  std::optional<double> noise_std;  // σ of one (averaged) reading, > 0; nullopt: estimated from
+                                    // the residuals
+  int max_refine_iterations = 50;   // >= 1; Gauss-Newton iterations of `refine`
+  double min_rank_gap = 3.0;        // > 1; σ_d/σ_{d+1} below this means "no clear gap"
+
+  static constexpr int kMaxDimension = 32;
+
+  // True when every field is in range; otherwise false and *error names the violated constraint.
+  bool IsValid(std::string* error) const;
+};
+
+struct PcaProblem {
+  Eigen::MatrixXd m;                         // m×n readings (sensors × positions); for the raw
+                                             // layout with biases already removed
+  std::vector<std::string> sensor_names;     // m (may be empty: then "s0", "s1", ...)
+  std::vector<std::string> position_labels;  // n (may be empty)
+  Eigen::VectorXd removed_bias;              // m, bias removed from a static/moving log (empty or
+                                             // zeros if none); reported as each sensor's bias
+  Eigen::VectorXd removed_bias_std;          // m, its standard deviation (empty if none)
+};
+
+// One sensor's calibration. Frame-free quantities (scale, the *_std) do not depend on the frame.
+struct PcaSensorEstimate {
+  std::string name;
+  Eigen::VectorXd sensitivity;  // a_i (d), in the result's frame
+  double scale = 0;             // |a_i| (relative when the magnitude is unknown)
+  Eigen::VectorXd axis;         // a_i / |a_i| (d, unit length)
+  double bias = 0;              // estimated (kEstimate) or removed from a static/moving log, else 0
+  // One standard deviation, from the Fisher information at the estimate; NaN when undefined (the
+  // noise level can be neither given nor estimated, or the information matrix is singular).
+  double scale_std = std::numeric_limits<double>::quiet_NaN();
+  // RMS angle (radians) between the estimated and the true axis after the rotation that best
+  // aligns all axes (the pseudo-inverse gauge, equivalent to a Procrustes fit onto the truth).
+  double axis_std_rad = std::numeric_limits<double>::quiet_NaN();
+  double bias_std = 0;  // 0 when bias is neither estimated nor removed
+};
+
+// Fields start at sentinel values (NaN / empty / -1) and are filled as far as the computation got:
+// on a kNotDeterminable failure the diagnostics computed before the failure are still there.
+struct PcaResult {
+  bool usable = false;      // true iff CalibratePca returned OK: the parameters may be used
+  std::string reason;       // why not usable (the failure message); empty when usable
+  std::string frame;        // "canonical" | "nominal"
+  bool reflection = false;  // nominal frame: the Procrustes fit used a reflection (det = -1)
+  int dimension = 0;        // d
+  double magnitude = std::numeric_limits<double>::quiet_NaN();  // c used (1 when unknown)
+  bool magnitude_known = false;
+  BiasModel bias_model = BiasModel::kNone;
+  Eigen::MatrixXd a;                       // d×m sensitivities in `frame`
+  Eigen::MatrixXd v;                       // d×n field per position in `frame`, |v_j| = c
+  Eigen::VectorXd b;                       // m biases (estimated, removed from the log, or zeros)
+  std::vector<PcaSensorEstimate> sensors;  // m
+
+  // Diagnostics (SPEC §4).
+  Eigen::VectorXd singular_values;  // all min(m,n) singular values of the readings (kEstimate:
+                                    // of the readings minus their mean over positions)
+  double rank_gap = std::numeric_limits<double>::quiet_NaN();  // σ_d/σ_{d+1}; +inf when there
+                                                               // is no σ_{d+1} (e.g. m = d)
+  int positions = -1;                                          // n
+  int min_positions = -1;           // d(d+1)/2 (kNone) or d(d+3)/2 (kEstimate)
+  Eigen::VectorXd g_eigenvalues;    // eigenvalues of g (kNone) or of the ellipsoid shape
+                                    // (kEstimate), ascending; all > 0 for a usable result
+  Eigen::VectorXd residual_rms;     // m: RMS over positions of m_ij - a_iᵀv_j - b_i
+  Eigen::VectorXd magnitude_error;  // n: |v_j| - c with v_j the unconstrained least-squares field
+                                    // given a and b (how far each position is off the sphere)
+  int degrees_of_freedom = -1;      // mn - (p·m + (d-1)n - d(d-1)/2), p = d or d+1
+  double noise_std = std::numeric_limits<double>::quiet_NaN();  // σ used for the uncertainty
+  bool noise_std_given = false;
+  double noise_std_estimated = std::numeric_limits<double>::quiet_NaN();  // NaN if dof <= 0
+  double cost_closed_form = std::numeric_limits<double>::quiet_NaN();  // ½Σr² at the closed form
+  double cost = std::numeric_limits<double>::quiet_NaN();  // ½Σr² at the reported estimate
+  bool refined = false;               // the refinement was run and its estimate is reported
+  int refine_iterations = 0;          // Gauss-Newton iterations taken (0 when not run)
+  std::vector<std::string> warnings;  // plain words, for people
+};
+
+// Runs the calibration. kInvalidInput: bad options or problem (shapes, non-finite numbers, nominal
+// with the wrong size). kNotDeterminable: the data cannot determine the parameters; the message
+// says why and what to record instead. `result` is always written (see PcaResult).
+Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaResult* result);
+
+// The paper's Eq. 19 canonical frame: the orthogonal h (d×d) such that h·a is upper triangular
+// with a non-negative diagonal (QR of a, d×m). Requires a.rows() >= 1.
+Eigen::MatrixXd CanonicalFrame(const Eigen::MatrixXd& a);
+
+// The paper's Eq. 19 calibration error ε = |h·a_true − k·a_hat|_F, both in their canonical frames.
+double CalibrationError(const Eigen::MatrixXd& a_true, const Eigen::MatrixXd& a_hat);
+
+// Orthogonal r (d×d) minimising |r·from − to|_F (orthogonal Procrustes). allow_reflection: any
+// orthogonal r (det ±1, what the data justify); false: a proper rotation (det +1).
+Eigen::MatrixXd ProcrustesRotation(const Eigen::MatrixXd& from, const Eigen::MatrixXd& to,
+                                   bool allow_reflection);
+
+}  // namespace calibd::core
+
+#endif  // CALIBD_CORE_PCA_H_

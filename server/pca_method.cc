@@ -1,0 +1,239 @@
+#include "server/pca_method.h"
+
+#include <cmath>
+#include <cstdio>
+#include <set>
+#include <utility>
+
+namespace calibd::server {
+namespace {
+
+using nlohmann::json;
+
+// A number, or null when it is undefined (NaN/Inf never reach JSON).
+json Num(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
+
+json Vec(const Eigen::VectorXd& x) {
+  json out = json::array();
+  for (Eigen::Index i = 0; i < x.size(); ++i) out.push_back(Num(x(i)));
+  return out;
+}
+
+Status KeyError(const std::string& key, const std::string& message) {
+  return Status::InvalidInput("config key '" + key + "' " + message).WithField(key);
+}
+
+bool IsNumber(const json& x) { return x.is_number() && std::isfinite(x.get<double>()); }
+
+void AppendNumber(std::string* out, double x) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.17g", x);
+  *out += buf;
+}
+
+}  // namespace
+
+Status ParsePcaConfig(const json& config, core::PcaOptions* options) {
+  *options = core::PcaOptions();
+  if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
+  static const std::set<std::string> kKnown = {"method",  "device", "dimension", "magnitude",
+                                               "nominal", "refine", "bias",      "noise_std"};
+  for (const auto& [key, value] : config.items()) {
+    if (kKnown.count(key) == 0) {
+      return KeyError(key,
+                      "is not a pca config key (known: dimension, magnitude, nominal, refine, "
+                      "bias, noise_std, method, device)");
+    }
+  }
+  if (auto it = config.find("dimension"); it != config.end()) {
+    const json& x = *it;
+    if (!x.is_number() || !std::isfinite(x.get<double>()) ||
+        x.get<double>() != std::floor(x.get<double>())) {
+      return KeyError("dimension", "must be an integer (the field's dimension d, usually 3)");
+    }
+    const double dim = x.get<double>();
+    if (dim < 1 || dim > core::PcaOptions::kMaxDimension) {
+      return KeyError("dimension",
+                      "must be between 1 and " + std::to_string(core::PcaOptions::kMaxDimension));
+    }
+    options->dimension = static_cast<int>(dim);
+  }
+  // magnitude, noise_std: a number > 0, or null / absent for "unknown".
+  for (const char* key : {"magnitude", "noise_std"}) {
+    auto it = config.find(key);
+    if (it == config.end() || it->is_null()) continue;
+    if (!IsNumber(*it) || !(it->get<double>() > 0)) {
+      return KeyError(key, "must be a number > 0 (or absent when unknown)");
+    }
+    (std::string(key) == "magnitude" ? options->magnitude : options->noise_std) = it->get<double>();
+  }
+  if (auto it = config.find("refine"); it != config.end()) {
+    if (!it->is_boolean()) return KeyError("refine", "must be true or false");
+    options->refine = it->get<bool>();
+  }
+  if (auto it = config.find("bias"); it != config.end()) {
+    if (!it->is_string() || (*it != "none" && *it != "estimate")) {
+      return KeyError("bias", "must be \"none\" or \"estimate\"");
+    }
+    options->bias = *it == "estimate" ? core::BiasModel::kEstimate : core::BiasModel::kNone;
+  }
+  if (auto it = config.find("nominal"); it != config.end() && !it->is_null()) {
+    const int d = options->dimension;
+    const std::string shape =
+        "must be an array with one row of " + std::to_string(d) + " numbers (dimension) per sensor";
+    if (!it->is_array() || it->empty()) return KeyError("nominal", shape);
+    const int m = static_cast<int>(it->size());
+    Eigen::MatrixXd nominal(d, m);
+    for (int i = 0; i < m; ++i) {
+      const json& row = (*it)[i];
+      if (!row.is_array() || static_cast<int>(row.size()) != d) {
+        return KeyError("nominal", shape + "; row " + std::to_string(i + 1) + " is not");
+      }
+      for (int k = 0; k < d; ++k) {
+        if (!IsNumber(row[k])) {
+          return KeyError("nominal",
+                          shape + "; row " + std::to_string(i + 1) + " has a non-number");
+        }
+        nominal(k, i) = row[k].get<double>();
+      }
+    }
+    if (nominal.colwise().norm().minCoeff() == 0) {
+      return KeyError("nominal", "has a sensor with a zero sensitivity vector");
+    }
+    options->nominal = std::move(nominal);
+  }
+  std::string error;
+  if (!options->IsValid(&error)) return Status::InvalidInput("pca config: " + error);
+  return Status::Ok();
+}
+
+json PcaResultToJson(const core::PcaResult& r) {
+  json params;
+  params["dimension"] = r.dimension;
+  params["magnitude"] = Num(r.magnitude);
+  params["magnitude_known"] = r.magnitude_known;
+  params["frame"] = r.frame;
+  params["bias"] = core::BiasModelName(r.bias_model);
+  json sensors = json::array(), sensor_std = json::array();
+  for (const core::PcaSensorEstimate& s : r.sensors) {
+    sensors.push_back({{"name", s.name},
+                       {"sensitivity", Vec(s.sensitivity)},
+                       {"scale", Num(s.scale)},
+                       {"axis", Vec(s.axis)},
+                       {"bias", Num(s.bias)}});
+    sensor_std.push_back({{"name", s.name},
+                          {"scale_std", Num(s.scale_std)},
+                          {"axis_std_rad", Num(s.axis_std_rad)},
+                          {"bias_std", Num(s.bias_std)}});
+  }
+  params["sensors"] = std::move(sensors);
+
+  json uncertainty;
+  uncertainty["sensors"] = std::move(sensor_std);
+  uncertainty["noise_std"] = Num(r.noise_std);
+
+  json diag;
+  diag["usable"] = r.usable;
+  if (!r.usable) diag["reason"] = r.reason;
+  diag["singular_values"] = Vec(r.singular_values);
+  diag["rank_gap"] = Num(r.rank_gap);  // null when there is no σ_{d+1} (e.g. m = d)
+  diag["positions"] = r.positions;
+  diag["min_positions"] = r.min_positions;
+  diag["g_eigenvalues"] = Vec(r.g_eigenvalues);
+  diag["residual_rms"] = Vec(r.residual_rms);
+  diag["magnitude_error"] = Vec(r.magnitude_error);
+  diag["degrees_of_freedom"] = r.degrees_of_freedom;
+  diag["noise_std"] = Num(r.noise_std);
+  diag["noise_std_given"] = r.noise_std_given;
+  diag["noise_std_estimated"] = Num(r.noise_std_estimated);
+  diag["cost_closed_form"] = Num(r.cost_closed_form);
+  diag["cost"] = Num(r.cost);
+  diag["refined"] = r.refined;
+  diag["refine_iterations"] = r.refine_iterations;
+  diag["reflection"] = r.reflection;
+
+  json out;
+  out["method"] = "pca";
+  out["parameters"] = std::move(params);
+  out["uncertainty"] = std::move(uncertainty);
+  out["diagnostics"] = std::move(diag);
+  out["warnings"] = r.warnings;
+  return out;
+}
+
+Status RunPca(const PcaRecording& recording, const core::PcaOptions& options, json* result) {
+  core::PcaProblem problem;
+  problem.m = recording.readings;
+  problem.sensor_names = recording.sensor_names;
+  problem.position_labels = recording.position_labels;
+  const Eigen::Index m = recording.readings.rows();
+  const Eigen::Index n = recording.readings.cols();
+  if (recording.raw && recording.static_means.rows() == m && recording.static_means.cols() == n &&
+      n > 0) {
+    // The paper's Section IV: b' per position was subtracted; report its mean and standard error.
+    problem.removed_bias = recording.static_means.rowwise().mean();
+    problem.removed_bias_std = Eigen::VectorXd::Zero(m);
+    if (n >= 2) {
+      const Eigen::MatrixXd dev = recording.static_means.colwise() - problem.removed_bias;
+      problem.removed_bias_std =
+          (dev.rowwise().squaredNorm() / static_cast<double>((n - 1) * n)).cwiseSqrt();
+    }
+  }
+  core::PcaResult r;
+  Status s = core::CalibratePca(problem, options, &r);
+  if (!s.ok()) return s;
+  *result = PcaResultToJson(r);
+  (*result)["diagnostics"]["position_labels"] = recording.position_labels;
+  if (recording.raw) {
+    (*result)["diagnostics"]["removed_bias"] = Vec(problem.removed_bias);
+  }
+  return Status::Ok();
+}
+
+Status SimulatePcaFiles(const core::PcaSimulationOptions& options, std::string* csv, json* config,
+                        json* truth) {
+  std::string error;
+  if (!options.IsValid(&error)) return Status::InvalidInput("simulate pca: " + error);
+  const core::PcaSimulation sim = core::SimulatePca(options);
+  const Eigen::Index m = sim.m.rows();
+  const Eigen::Index n = sim.m.cols();
+  csv->clear();
+  csv->reserve(static_cast<size_t>(n * m * 24 + 64));
+  *csv += "# calibd simulate pca: the paper's Section IV set-up, seed " +
+          std::to_string(options.seed) + "\nposition";
+  for (const std::string& name : sim.sensor_names) *csv += "," + name;
+  *csv += "\n";
+  for (Eigen::Index j = 0; j < n; ++j) {
+    *csv += "p" + std::to_string(j + 1);
+    for (Eigen::Index i = 0; i < m; ++i) {
+      *csv += ",";
+      AppendNumber(csv, sim.m(i, j));
+    }
+    *csv += "\n";
+  }
+  json nominal = json::array();
+  for (Eigen::Index i = 0; i < m; ++i) nominal.push_back(Vec(sim.a_model.col(i)));
+  *config = {{"method", "pca"}, {"magnitude", options.magnitude}, {"nominal", nominal}};
+  if (options.bias_std > 0) (*config)["bias"] = "estimate";
+  json sensors = json::array();
+  for (Eigen::Index i = 0; i < m; ++i) {
+    sensors.push_back({{"name", sim.sensor_names[i]},
+                       {"sensitivity", Vec(sim.a_true.col(i))},
+                       {"bias", sim.b(i)}});
+  }
+  json v = json::array();
+  for (Eigen::Index j = 0; j < n; ++j) v.push_back(Vec(sim.v.col(j)));
+  *truth = {{"method", "pca"},
+            {"seed", options.seed},
+            {"sensors", sensors},
+            {"v", v},
+            {"options",
+             {{"positions", options.positions},
+              {"noise_std", options.noise_std},
+              {"axis_perturbation", options.axis_perturbation},
+              {"magnitude", options.magnitude},
+              {"bias_std", options.bias_std}}}};
+  return Status::Ok();
+}
+
+}  // namespace calibd::server

@@ -1,0 +1,45 @@
+// JSON glue of the `pca` method: config keys (SPEC §3) to core::PcaOptions, a parsed recording to
+// the result JSON (SPEC §4), and the simulated recording of `calibd simulate pca`.
+#ifndef CALIBD_SERVER_PCA_METHOD_H_
+#define CALIBD_SERVER_PCA_METHOD_H_
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "core/pca.h"
+#include "core/pca_simulation.h"
+#include "core/status.h"
+#include "server/recording.h"
+
+namespace calibd::server {
+
+// Reads the pca keys of a config object (SPEC §3): dimension, magnitude, nominal (m×d array of
+// arrays, one row per sensor), refine, bias ("none" | "estimate"), noise_std; the common keys
+// method and device are ignored. Unknown keys and wrong types are kInvalidInput with
+// WithField(key) and a message naming the key. The number of sensors is not known here: nominal's
+// column count is checked against d, its row count in RunPca.
+Status ParsePcaConfig(const nlohmann::json& config, core::PcaOptions* options);
+
+// Runs the calibration on a parsed recording and writes the SPEC §4 result:
+//   {"method":"pca","parameters":{...},"uncertainty":{...},"diagnostics":{...},"warnings":[...]}
+// For the raw layout the reported bias of each sensor is the mean over positions of its static
+// means, with the standard error of that mean as bias_std. Values that are undefined (e.g. an
+// uncertainty without a noise estimate, the rank gap when there is no σ_{d+1}) are written as
+// null, never NaN. Deterministic. Errors as core::CalibratePca (the message of a
+// kNotDeterminable says what to record instead).
+Status RunPca(const PcaRecording& recording, const core::PcaOptions& options,
+              nlohmann::json* result);
+
+// The result JSON of an already computed core result (used by RunPca).
+nlohmann::json PcaResultToJson(const core::PcaResult& result);
+
+// For `calibd simulate pca`: the averaged-layout CSV (`position,g0_x,...,g3_z`, %.17g), the
+// config ({"method":"pca","magnitude":c,"nominal": a_model as m×d}, plus "bias":"estimate" when
+// the simulation has biases) and the truth ({"sensors":[{"name","sensitivity","bias"}],"v": n×d,
+// "seed", "options"}). Deterministic for a seed.
+Status SimulatePcaFiles(const core::PcaSimulationOptions& options, std::string* csv,
+                        nlohmann::json* config, nlohmann::json* truth);
+
+}  // namespace calibd::server
+
+#endif  // CALIBD_SERVER_PCA_METHOD_H_
