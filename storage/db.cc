@@ -94,9 +94,9 @@ Stmt& Stmt::BindDouble(int index, double value) {
   return CheckBind(sqlite3_bind_double(stmt_, index, value), index);
 }
 Stmt& Stmt::BindText(int index, std::string_view value) {
-  return CheckBind(sqlite3_bind_text64(stmt_, index, value.data(), value.size(), SQLITE_TRANSIENT,
-                                       SQLITE_UTF8),
-                   index);
+  return CheckBind(
+      sqlite3_bind_text64(stmt_, index, value.data(), value.size(), SQLITE_TRANSIENT, SQLITE_UTF8),
+      index);
 }
 Stmt& Stmt::BindTextOrNull(int index, std::string_view value) {
   return value.empty() ? BindNull(index) : BindText(index, value);
@@ -121,9 +121,9 @@ Status Stmt::Step(bool* row) {
   *row = false;
   if (stmt_ == nullptr) return Status::Internal("storage: step on an unprepared statement");
   if (bind_rc_ != SQLITE_OK) {
-    return StatusFromSqlite(bind_rc_, nullptr,
-                            "binding parameter " + std::to_string(bind_index_) + " of `" +
-                                sqlite3_sql(stmt_) + "`");
+    return StatusFromSqlite(
+        bind_rc_, nullptr,
+        "binding parameter " + std::to_string(bind_index_) + " of `" + sqlite3_sql(stmt_) + "`");
   }
   int rc = sqlite3_step(stmt_);
   if (rc == SQLITE_ROW) {
@@ -204,8 +204,8 @@ Status Db::Open(const std::string& path, const Options& options, std::unique_ptr
     if (!s.ok()) return s;
     std::string mode = row ? st.ColumnText(0) : "";
     if (mode != "wal") {
-      return Status::IoError("storage: open " + path + ": cannot switch to WAL (journal_mode=" +
-                             mode + ")");
+      return Status::IoError("storage: open " + path +
+                             ": cannot switch to WAL (journal_mode=" + mode + ")");
     }
   }
   s = db->Exec(

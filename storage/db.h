@@ -4,11 +4,11 @@
 // result code, mapped as follows (see StatusFromSqlite):
 //   SQLITE_BUSY, SQLITE_LOCKED                         -> kBusy       (transient, retry later)
 //   SQLITE_FULL, SQLITE_IOERR*, SQLITE_READONLY*,
-//   SQLITE_CANTOPEN, SQLITE_PERM, SQLITE_NOLFS         -> kIoError    (environment: disk, permissions)
-//   SQLITE_CORRUPT*, SQLITE_NOTADB                     -> kCorruption (the file is damaged)
-//   SQLITE_CONSTRAINT*                                 -> kConflict   (a uniqueness / foreign key rule)
-//   SQLITE_TOOBIG                                      -> kTooLarge
-//   anything else (SQLITE_ERROR, MISUSE, NOMEM, ...)   -> kInternal   (a bug on our side)
+//   SQLITE_CANTOPEN, SQLITE_PERM, SQLITE_NOLFS         -> kIoError    (environment: disk,
+//   permissions) SQLITE_CORRUPT*, SQLITE_NOTADB                     -> kCorruption (the file is
+//   damaged) SQLITE_CONSTRAINT*                                 -> kConflict   (a uniqueness /
+//   foreign key rule) SQLITE_TOOBIG                                      -> kTooLarge anything else
+//   (SQLITE_ERROR, MISUSE, NOMEM, ...)   -> kInternal   (a bug on our side)
 //
 // Only prepared statements with bound parameters are used; no SQL text is ever built from user
 // input. Statements prepared through Db::Prepare are cached per connection.
@@ -72,8 +72,8 @@ class Stmt {
   bool ColumnIsNull(int col) const;
   int64_t ColumnInt(int col) const;
   double ColumnDouble(int col) const;
-  std::string ColumnText(int col) const;   // empty for NULL
-  std::string ColumnBlob(int col) const;   // empty for NULL
+  std::string ColumnText(int col) const;  // empty for NULL
+  std::string ColumnBlob(int col) const;  // empty for NULL
 
   // Makes the statement reusable (keeps bindings unless ClearBindings).
   void Reset();

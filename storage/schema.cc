@@ -95,8 +95,8 @@ INSERT INTO device_calibrations (device, method, job_id, calibrated_at)
 // The hashes of results carried over from v1 are computed here (SQLite has no sha256()).
 Status HashCarriedOverResults(Db* db) {
   Stmt select;
-  Status s = db->PrepareUncached("SELECT job_id, result_json FROM results WHERE sha256 = ''",
-                                 &select);
+  Status s =
+      db->PrepareUncached("SELECT job_id, result_json FROM results WHERE sha256 = ''", &select);
   if (!s.ok()) return s;
   std::vector<std::pair<int64_t, std::string>> rows;
   for (bool row = true;;) {

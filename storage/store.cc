@@ -211,8 +211,8 @@ Status StreamFileIntoNewRow(Db* db, const NewRecording& r, int fd, int64_t size,
       return Status::IoError("storage: " + r.path + " grew while being stored");
     }
     hasher.Update(std::string_view(buffer.data(), static_cast<size_t>(n)));
-    rc = sqlite3_blob_write(blob.blob, buffer.data(), static_cast<int>(n),
-                            static_cast<int>(offset));
+    rc =
+        sqlite3_blob_write(blob.blob, buffer.data(), static_cast<int>(n), static_cast<int>(offset));
     if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "write recording blob");
     offset += n;
   }
@@ -319,8 +319,8 @@ Status Store::Open(const std::string& path, StoreOptions options, std::unique_pt
     if (!s.ok()) return s;
     if (version != kSchemaVersion) {
       return Status::IoError("storage: " + path + " is opened read-only but has schema version " +
-                             std::to_string(version) + ", not " +
-                             std::to_string(kSchemaVersion) + " (it needs a migration)");
+                             std::to_string(version) + ", not " + std::to_string(kSchemaVersion) +
+                             " (it needs a migration)");
     }
   } else {
     s = MigrateSchema(conn.db());
@@ -328,6 +328,96 @@ Status Store::Open(const std::string& path, StoreOptions options, std::unique_pt
   }
   *out = std::move(store);
   return Status::Ok();
+}
+
+// ---- recordings -------------------------------------------------------------------------------
+
+// ---- group commit --------------------------------------------------------------------------
+
+struct Store::Writer {
+  const std::function<Status(Db*)>* op = nullptr;
+  Status status;
+  bool done = false;
+  std::condition_variable cv;
+};
+
+Status Store::Write(const std::function<Status(Db*)>& op) {
+  Writer self;
+  self.op = &op;
+  std::unique_lock<std::mutex> lock(write_mu_);
+  writers_.push_back(&self);
+  while (!self.done && writers_.front() != &self) self.cv.wait(lock);
+  if (self.done) return self.status;  // a leader ran it for us
+
+  // Leader: take the queued calls (self first) and run them in one transaction.
+  const size_t max_batch = static_cast<size_t>(std::max(options_.max_write_batch, 1));
+  std::vector<Writer*> batch(writers_.begin(),
+                             writers_.begin() + std::min(writers_.size(), max_batch));
+  lock.unlock();
+
+  Conn conn(this);
+  Status s = conn.Open();
+  if (!s.ok()) {
+    for (Writer* w : batch) w->status = s;
+  } else {
+    Db* db = conn.db();
+    std::vector<Writer*> pending = batch;
+    while (!pending.empty()) {
+      Transaction txn(db);
+      s = txn.Begin(Transaction::Mode::kImmediate);
+      if (!s.ok()) {
+        for (Writer* w : pending) w->status = s;
+        break;
+      }
+      bool aborted = false;  // an error made SQLite roll the whole transaction back
+      std::vector<Writer*> ran;
+      for (size_t i = 0; i < pending.size(); ++i) {
+        Writer* w = pending[i];
+        s = db->Exec("SAVEPOINT batch_op");
+        if (s.ok()) {
+          s = (*w->op)(db);
+          if (!db->InTransaction()) {
+            // SQLite already rolled everything back (e.g. SQLITE_FULL, IOERR): this call fails,
+            // the others run again in a fresh transaction.
+            w->status = s.ok() ? Status::IoError("storage: transaction lost") : s;
+            pending.erase(pending.begin() + static_cast<std::ptrdiff_t>(i));
+            aborted = true;
+            break;
+          }
+          Status undo = s.ok() ? db->Exec("RELEASE batch_op")
+                               : db->Exec("ROLLBACK TO batch_op; RELEASE batch_op");
+          if (s.ok()) s = undo;
+          if (!undo.ok() && !db->InTransaction()) {
+            w->status = undo;
+            pending.erase(pending.begin() + static_cast<std::ptrdiff_t>(i));
+            aborted = true;
+            break;
+          }
+        }
+        w->status = s;
+        ran.push_back(w);
+      }
+      if (aborted) continue;  // retry the rest (one fewer each round: terminates)
+      s = txn.Commit();
+      if (!s.ok()) {
+        for (Writer* w : ran) {
+          if (w->status.ok()) w->status = s;  // nothing of the transaction is on disk
+        }
+      }
+      break;
+    }
+  }
+
+  lock.lock();
+  for (Writer* w : batch) {
+    writers_.pop_front();  // the batch is the front of the queue, in order
+    if (w != &self) {
+      w->done = true;
+      w->cv.notify_one();
+    }
+  }
+  if (!writers_.empty()) writers_.front()->cv.notify_one();  // the next leader
+  return self.status;
 }
 
 // ---- recordings -------------------------------------------------------------------------------
@@ -342,14 +432,19 @@ Status Store::PutRecording(const NewRecording& r, RecordingInfo* out, bool* exis
   if (r.job && r.job->method.empty()) {
     return Status::InvalidInput("storage: a job needs a method");
   }
-  Conn conn(this);
-  Status s = conn.Open();
+  // Hash in-memory data on the calling thread, before queueing for the write lock.
+  const std::string sha = r.path.empty() ? Sha256Hex(r.data) : r.sha256;
+  RecordingInfo info;
+  bool duplicate = false;
+  Status s = Write([&](Db* db) { return PutRecordingLocked(db, r, sha, &info, &duplicate); });
   if (!s.ok()) return s;
-  return PutRecordingLocked(conn.db(), r, out, existed);
+  if (out != nullptr) *out = std::move(info);
+  if (existed != nullptr) *existed = duplicate;
+  return Status::Ok();
 }
 
-Status Store::PutRecordingLocked(Db* db, const NewRecording& r, RecordingInfo* out,
-                                 bool* existed) {
+Status Store::PutRecordingLocked(Db* db, const NewRecording& r, const std::string& known_sha,
+                                 RecordingInfo* out, bool* existed) {
   const int64_t now = Now();
   Fd file;
   int64_t size = static_cast<int64_t>(r.data.size());
@@ -370,21 +465,15 @@ Status Store::PutRecordingLocked(Db* db, const NewRecording& r, RecordingInfo* o
                                              " bytes exceeds the limit of " +
                                              std::to_string(limit));
   }
-  // Hash in-memory data before taking the write lock.
-  std::string sha = r.path.empty() ? Sha256Hex(r.data) : r.sha256;
-
-  Transaction txn(db);
-  Status s = txn.Begin(Transaction::Mode::kImmediate);
-  if (!s.ok()) return s;
-
+  Status s;
   int64_t id = 0;
-  if (!sha.empty()) {
-    s = FindBySha(db, sha, &id);
+  if (!known_sha.empty()) {
+    s = FindBySha(db, known_sha, &id);
     if (!s.ok()) return s;
   }
   bool duplicate = id != 0;
   if (!duplicate && r.path.empty()) {
-    s = InsertRecordingRow(db, r, sha, size, now, &id);
+    s = InsertRecordingRow(db, r, known_sha, size, now, &id);
     if (!s.ok()) return s;
     Stmt st;
     s = db->Prepare("INSERT INTO recording_data (recording_id, data) VALUES (?1, ?2)", &st);
@@ -399,7 +488,7 @@ Status Store::PutRecordingLocked(Db* db, const NewRecording& r, RecordingInfo* o
     if (!s.ok()) return s;
     std::string streamed_sha;
     s = StreamFileIntoNewRow(db, r, file.fd, size, now, &id, &streamed_sha);
-    if (!s.ok()) return s;  // the Transaction rolls everything back
+    if (!s.ok()) return s;  // the caller's savepoint rolls everything back
     if (!r.sha256.empty() && r.sha256 != streamed_sha) {
       return Status::IoError("storage: " + r.path + " does not match its announced sha256 (" +
                              r.sha256 + " != " + streamed_sha + "): it changed while staged");
@@ -436,10 +525,8 @@ Status Store::PutRecordingLocked(Db* db, const NewRecording& r, RecordingInfo* o
     if (!s.ok()) return s;
     info.job = std::move(job);
   }
-  s = txn.Commit();
-  if (!s.ok()) return s;
-  if (out != nullptr) *out = std::move(info);
-  if (existed != nullptr) *existed = duplicate;
+  *out = std::move(info);
+  *existed = duplicate;
   return Status::Ok();
 }
 
@@ -531,20 +618,13 @@ Status Store::EnqueueJobLocked(Db* db, int64_t recording_id, const std::string& 
   return LoadJob(db, id, false, out);
 }
 
-Status Store::EnqueueJob(int64_t recording_id, const std::string& method,
-                         const std::string& device, const std::string& config_json,
-                         JobInfo* out) {
-  Conn conn(this);
-  Status s = conn.Open();
-  if (!s.ok()) return s;
-  Db* db = conn.db();
-  Transaction txn(db);
-  s = txn.Begin(Transaction::Mode::kImmediate);
-  if (!s.ok()) return s;
+Status Store::EnqueueJob(int64_t recording_id, const std::string& method, const std::string& device,
+                         const std::string& config_json, JobInfo* out) {
+  if (method.empty()) return Status::InvalidInput("storage: a job needs a method");
   JobInfo job;
-  s = EnqueueJobLocked(db, recording_id, method, device, config_json, Now(), &job);
-  if (!s.ok()) return s;
-  s = txn.Commit();
+  Status s = Write([&](Db* db) {
+    return EnqueueJobLocked(db, recording_id, method, device, config_json, Now(), &job);
+  });
   if (!s.ok()) return s;
   if (out != nullptr) *out = std::move(job);
   return Status::Ok();
@@ -583,17 +663,8 @@ Status Store::RecoverLocked(Db* db, int64_t now, int64_t* recovered) {
 }
 
 Status Store::RecoverExpiredLeases(int64_t* recovered) {
-  Conn conn(this);
-  Status s = conn.Open();
-  if (!s.ok()) return s;
-  Db* db = conn.db();
-  Transaction txn(db);
-  s = txn.Begin(Transaction::Mode::kImmediate);
-  if (!s.ok()) return s;
   int64_t n = 0;
-  s = RecoverLocked(db, Now(), &n);
-  if (!s.ok()) return s;
-  s = txn.Commit();
+  Status s = Write([&](Db* db) { return RecoverLocked(db, Now(), &n); });
   if (!s.ok()) return s;
   if (recovered != nullptr) *recovered = n;
   return Status::Ok();
@@ -604,47 +675,44 @@ Status Store::ClaimJob(const std::string& worker_id, int64_t lease_ms, JobInfo* 
   *claimed = false;
   if (worker_id.empty()) return Status::InvalidInput("storage: worker_id must not be empty");
   if (lease_ms <= 0) return Status::InvalidInput("storage: lease_ms must be positive");
-  Conn conn(this);
-  Status s = conn.Open();
-  if (!s.ok()) return s;
-  Db* db = conn.db();
-  const int64_t now = Now();
-
-  // Cheap check without the write lock, so idle workers polling do not serialise on it.
   {
+    // Cheap check without the write lock, so idle workers polling do not serialise on it.
+    Conn conn(this);
+    Status s = conn.Open();
+    if (!s.ok()) return s;
     Stmt st;
-    s = db->Prepare(
+    s = conn.db()->Prepare(
         "SELECT EXISTS (SELECT 1 FROM jobs WHERE status = 'queued' AND not_before <= ?1) "
         "OR EXISTS (SELECT 1 FROM jobs WHERE status = 'running' AND lease_expires_at <= ?1)",
         &st);
     if (!s.ok()) return s;
-    st.BindInt(1, now);
+    st.BindInt(1, Now());
     bool row = false;
     s = st.Step(&row);
     if (!s.ok()) return s;
     if (!row || st.ColumnInt(0) == 0) return Status::Ok();
   }
-
-  Transaction txn(db);
-  s = txn.Begin(Transaction::Mode::kImmediate);
-  if (!s.ok()) return s;
-  s = RecoverLocked(db, now, nullptr);
-  if (!s.ok()) return s;
-  int64_t id = 0;
-  {
-    Stmt st;
-    s = db->Prepare(
-        "SELECT id FROM jobs WHERE status = 'queued' AND not_before <= ?1 ORDER BY id LIMIT 1",
-        &st);
-    if (!s.ok()) return s;
-    st.BindInt(1, now);
-    bool row = false;
-    s = st.Step(&row);
-    if (!s.ok()) return s;
-    if (row) id = st.ColumnInt(0);
-  }
   JobInfo job;
-  if (id != 0) {
+  bool got = false;
+  Status s = Write([&](Db* db) {
+    got = false;
+    const int64_t now = Now();
+    Status s = RecoverLocked(db, now, nullptr);
+    if (!s.ok()) return s;
+    int64_t id = 0;
+    {
+      Stmt st;
+      s = db->Prepare(
+          "SELECT id FROM jobs WHERE status = 'queued' AND not_before <= ?1 ORDER BY id LIMIT 1",
+          &st);
+      if (!s.ok()) return s;
+      st.BindInt(1, now);
+      bool row = false;
+      s = st.Step(&row);
+      if (!s.ok()) return s;
+      if (row) id = st.ColumnInt(0);
+    }
+    if (id == 0) return Status::Ok();
     Stmt st;
     s = db->Prepare(
         "UPDATE jobs SET status = 'running', lease_owner = ?2, lease_expires_at = ?3, "
@@ -657,10 +725,11 @@ Status Store::ClaimJob(const std::string& worker_id, int64_t lease_ms, JobInfo* 
     if (!s.ok()) return s;
     s = LoadJob(db, id, false, &job);
     if (!s.ok()) return s;
-  }
-  s = txn.Commit();
+    got = true;
+    return Status::Ok();
+  });
   if (!s.ok()) return s;
-  if (id != 0) {
+  if (got) {
     *claimed = true;
     if (out != nullptr) *out = std::move(job);
   }
@@ -684,146 +753,132 @@ Status Store::RequireHolder(Db* db, int64_t job_id, const std::string& worker_id
 
 Status Store::RenewLease(int64_t job_id, const std::string& worker_id, int64_t lease_ms) {
   if (lease_ms <= 0) return Status::InvalidInput("storage: lease_ms must be positive");
-  Conn conn(this);
-  Status s = conn.Open();
-  if (!s.ok()) return s;
-  Db* db = conn.db();
-  Stmt st;
-  s = db->Prepare(
-      "UPDATE jobs SET lease_expires_at = ?3 "
-      "WHERE id = ?1 AND status = 'running' AND lease_owner = ?2",
-      &st);
-  if (!s.ok()) return s;
-  st.BindInt(1, job_id).BindText(2, worker_id).BindInt(3, Now() + lease_ms);
-  s = st.Run();
-  if (!s.ok()) return s;
-  if (db->Changes() == 1) return Status::Ok();
-  JobInfo job;
-  s = RequireHolder(db, job_id, worker_id, "renew the lease of", &job);
-  if (!s.ok()) return s;
-  return Status::Conflict("cannot renew the lease of job " + std::to_string(job_id));
+  return Write([&](Db* db) {
+    Stmt st;
+    Status s = db->Prepare(
+        "UPDATE jobs SET lease_expires_at = ?3 "
+        "WHERE id = ?1 AND status = 'running' AND lease_owner = ?2",
+        &st);
+    if (!s.ok()) return s;
+    st.BindInt(1, job_id).BindText(2, worker_id).BindInt(3, Now() + lease_ms);
+    s = st.Run();
+    if (!s.ok()) return s;
+    if (db->Changes() == 1) return Status::Ok();
+    JobInfo job;
+    s = RequireHolder(db, job_id, worker_id, "renew the lease of", &job);
+    if (!s.ok()) return s;
+    return Status::Conflict("cannot renew the lease of job " + std::to_string(job_id));
+  });
 }
 
 Status Store::CompleteJob(int64_t job_id, const std::string& worker_id,
                           const std::string& result_json) {
   if (result_json.empty()) return Status::InvalidInput("storage: empty result");
   const std::string sha = Sha256Hex(result_json);
-  Conn conn(this);
-  Status s = conn.Open();
-  if (!s.ok()) return s;
-  Db* db = conn.db();
-  Transaction txn(db);
-  s = txn.Begin(Transaction::Mode::kImmediate);
-  if (!s.ok()) return s;
-  JobInfo job;
-  s = LoadJob(db, job_id, false, &job);
-  if (!s.ok()) return s;
-  if (job.status == "succeeded") {
-    if (job.result_sha256 == sha) return Status::Ok();  // the same run again: nothing to do
-    return Status::Conflict("job " + std::to_string(job_id) +
-                            " already succeeded with a different result");
-  }
-  s = RequireHolder(db, job_id, worker_id, "complete", &job);
-  if (!s.ok()) return s;
-  const int64_t now = Now();
-  Stmt st;
-  s = db->Prepare(
-      "INSERT INTO results (job_id, result_json, sha256, created_at) VALUES (?1, ?2, ?3, ?4)",
-      &st);
-  if (!s.ok()) return s;
-  st.BindInt(1, job_id).BindText(2, result_json).BindText(3, sha).BindInt(4, now);
-  s = st.Run();
-  if (!s.ok()) return s;
-  s = db->Prepare(
-      "UPDATE jobs SET status = 'succeeded', finished_at = ?2, lease_owner = NULL, "
-      "lease_expires_at = NULL, error_code = NULL, error_message = NULL WHERE id = ?1",
-      &st);
-  if (!s.ok()) return s;
-  st.BindInt(1, job_id).BindInt(2, now);
-  s = st.Run();
-  if (!s.ok()) return s;
-  if (!job.device.empty()) {
-    s = RememberDevice(db, job.device, now);
+  return Write([&](Db* db) {
+    Status s;
+    JobInfo job;
+    s = LoadJob(db, job_id, false, &job);
     if (!s.ok()) return s;
+    if (job.status == "succeeded") {
+      if (job.result_sha256 == sha) return Status::Ok();  // the same run again: nothing to do
+      return Status::Conflict("job " + std::to_string(job_id) +
+                              " already succeeded with a different result");
+    }
+    s = RequireHolder(db, job_id, worker_id, "complete", &job);
+    if (!s.ok()) return s;
+    const int64_t now = Now();
+    Stmt st;
     s = db->Prepare(
-        "INSERT INTO device_calibrations (device, method, job_id, calibrated_at) "
-        "VALUES (?1, ?2, ?3, ?4) ON CONFLICT (device, method) DO UPDATE SET "
-        "job_id = excluded.job_id, calibrated_at = excluded.calibrated_at "
-        "WHERE excluded.calibrated_at > device_calibrations.calibrated_at OR "
-        "(excluded.calibrated_at = device_calibrations.calibrated_at AND "
-        "excluded.job_id > device_calibrations.job_id)",
+        "INSERT INTO results (job_id, result_json, sha256, created_at) VALUES (?1, ?2, ?3, ?4)",
         &st);
     if (!s.ok()) return s;
-    st.BindText(1, job.device).BindText(2, job.method).BindInt(3, job_id).BindInt(4, now);
+    st.BindInt(1, job_id).BindText(2, result_json).BindText(3, sha).BindInt(4, now);
     s = st.Run();
     if (!s.ok()) return s;
-  }
-  return txn.Commit();
+    s = db->Prepare(
+        "UPDATE jobs SET status = 'succeeded', finished_at = ?2, lease_owner = NULL, "
+        "lease_expires_at = NULL, error_code = NULL, error_message = NULL WHERE id = ?1",
+        &st);
+    if (!s.ok()) return s;
+    st.BindInt(1, job_id).BindInt(2, now);
+    s = st.Run();
+    if (!s.ok()) return s;
+    if (!job.device.empty()) {
+      s = RememberDevice(db, job.device, now);
+      if (!s.ok()) return s;
+      s = db->Prepare(
+          "INSERT INTO device_calibrations (device, method, job_id, calibrated_at) "
+          "VALUES (?1, ?2, ?3, ?4) ON CONFLICT (device, method) DO UPDATE SET "
+          "job_id = excluded.job_id, calibrated_at = excluded.calibrated_at "
+          "WHERE excluded.calibrated_at > device_calibrations.calibrated_at OR "
+          "(excluded.calibrated_at = device_calibrations.calibrated_at AND "
+          "excluded.job_id > device_calibrations.job_id)",
+          &st);
+      if (!s.ok()) return s;
+      st.BindText(1, job.device).BindText(2, job.method).BindInt(3, job_id).BindInt(4, now);
+      s = st.Run();
+      if (!s.ok()) return s;
+    }
+    return Status::Ok();
+  });
 }
 
 Status Store::FailJob(int64_t job_id, const std::string& worker_id, const std::string& code,
                       const std::string& message, bool transient) {
-  Conn conn(this);
-  Status s = conn.Open();
-  if (!s.ok()) return s;
-  Db* db = conn.db();
-  Transaction txn(db);
-  s = txn.Begin(Transaction::Mode::kImmediate);
-  if (!s.ok()) return s;
-  JobInfo job;
-  s = RequireHolder(db, job_id, worker_id, "fail", &job);
-  if (!s.ok()) return s;
-  const int64_t now = Now();
-  const std::string error_code = code.empty() ? std::string("error") : code;
-  Stmt st;
-  if (transient && job.attempts < options_.max_attempts) {
-    s = db->Prepare(
-        "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_expires_at = NULL, "
-        "started_at = NULL, not_before = ?2, error_code = ?3, error_message = ?4 WHERE id = ?1",
-        &st);
+  return Write([&](Db* db) {
+    Status s;
+    JobInfo job;
+    s = RequireHolder(db, job_id, worker_id, "fail", &job);
     if (!s.ok()) return s;
-    st.BindInt(1, job_id)
-        .BindInt(2, now + Backoff(options_, job.attempts))
-        .BindText(3, error_code)
-        .BindText(4, message);
-  } else {
-    std::string final_message = message;
-    if (transient) {
-      final_message = "gave up after " + std::to_string(job.attempts) + " attempts: " + message;
+    const int64_t now = Now();
+    const std::string error_code = code.empty() ? std::string("error") : code;
+    Stmt st;
+    if (transient && job.attempts < options_.max_attempts) {
+      s = db->Prepare(
+          "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_expires_at = NULL, "
+          "started_at = NULL, not_before = ?2, error_code = ?3, error_message = ?4 WHERE id = ?1",
+          &st);
+      if (!s.ok()) return s;
+      st.BindInt(1, job_id)
+          .BindInt(2, now + Backoff(options_, job.attempts))
+          .BindText(3, error_code)
+          .BindText(4, message);
+    } else {
+      std::string final_message = message;
+      if (transient) {
+        final_message = "gave up after " + std::to_string(job.attempts) + " attempts: " + message;
+      }
+      s = db->Prepare(
+          "UPDATE jobs SET status = 'failed', finished_at = ?2, lease_owner = NULL, "
+          "lease_expires_at = NULL, error_code = ?3, error_message = ?4 WHERE id = ?1",
+          &st);
+      if (!s.ok()) return s;
+      st.BindInt(1, job_id).BindInt(2, now).BindText(3, error_code).BindText(4, final_message);
     }
-    s = db->Prepare(
-        "UPDATE jobs SET status = 'failed', finished_at = ?2, lease_owner = NULL, "
-        "lease_expires_at = NULL, error_code = ?3, error_message = ?4 WHERE id = ?1",
-        &st);
+    s = st.Run();
     if (!s.ok()) return s;
-    st.BindInt(1, job_id).BindInt(2, now).BindText(3, error_code).BindText(4, final_message);
-  }
-  s = st.Run();
-  if (!s.ok()) return s;
-  return txn.Commit();
+    return Status::Ok();
+  });
 }
 
 Status Store::ReleaseJob(int64_t job_id, const std::string& worker_id) {
-  Conn conn(this);
-  Status s = conn.Open();
-  if (!s.ok()) return s;
-  Db* db = conn.db();
-  Transaction txn(db);
-  s = txn.Begin(Transaction::Mode::kImmediate);
-  if (!s.ok()) return s;
-  JobInfo job;
-  s = RequireHolder(db, job_id, worker_id, "release", &job);
-  if (!s.ok()) return s;
-  Stmt st;
-  s = db->Prepare(
-      "UPDATE jobs SET status = 'queued', attempts = MAX(attempts - 1, 0), lease_owner = NULL, "
-      "lease_expires_at = NULL, started_at = NULL, not_before = ?2 WHERE id = ?1",
-      &st);
-  if (!s.ok()) return s;
-  st.BindInt(1, job_id).BindInt(2, Now());
-  s = st.Run();
-  if (!s.ok()) return s;
-  return txn.Commit();
+  return Write([&](Db* db) {
+    Status s;
+    JobInfo job;
+    s = RequireHolder(db, job_id, worker_id, "release", &job);
+    if (!s.ok()) return s;
+    Stmt st;
+    s = db->Prepare(
+        "UPDATE jobs SET status = 'queued', attempts = MAX(attempts - 1, 0), lease_owner = NULL, "
+        "lease_expires_at = NULL, started_at = NULL, not_before = ?2 WHERE id = ?1",
+        &st);
+    if (!s.ok()) return s;
+    st.BindInt(1, job_id).BindInt(2, Now());
+    s = st.Run();
+    if (!s.ok()) return s;
+    return Status::Ok();
+  });
 }
 
 Status Store::GetJob(int64_t id, JobInfo* out) {
@@ -874,8 +929,8 @@ Status Store::ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) {
   Stmt st;
   const int limit_param = 1 + (!filter.device.empty()) + (!filter.method.empty()) +
                           (!filter.status.empty()) + (filter.before > 0);
-  s = conn.db()->Prepare(JobSelect(filter.include_results) + where +
-                             "ORDER BY j.id DESC LIMIT ?" + std::to_string(limit_param),
+  s = conn.db()->Prepare(JobSelect(filter.include_results) + where + "ORDER BY j.id DESC LIMIT ?" +
+                             std::to_string(limit_param),
                          &st);
   if (!s.ok()) return s;
   int n = BindFilter(&st, filter, true);
@@ -1011,8 +1066,8 @@ Status Store::Checkpoint() {
   Status s = conn.Open();
   if (!s.ok()) return s;
   int busy = 0, log = 0, done = 0;
-  int rc = sqlite3_wal_checkpoint_v2(conn.db()->handle(), nullptr, SQLITE_CHECKPOINT_TRUNCATE,
-                                     &log, &done);
+  int rc = sqlite3_wal_checkpoint_v2(conn.db()->handle(), nullptr, SQLITE_CHECKPOINT_TRUNCATE, &log,
+                                     &done);
   if (rc != SQLITE_OK) return StatusFromSqlite(rc, conn.db()->handle(), "checkpoint");
   (void)busy;
   return Status::Ok();

@@ -5,12 +5,17 @@
 // survives kill -9 and power loss; when it returns an error nothing of it was committed (every
 // write is one transaction: never a half-written recording, job or result).
 //
-// Thread-safety: a Store is thread-safe. Each call borrows a connection from an internal pool
+// Thread-safety: a Store is thread-safe. Each read borrows a connection from an internal pool
 // (one per concurrently calling thread, opened on demand; idle ones are kept up to
 // Options::max_idle_connections), so readers never wait for writers (WAL) and a long upload does
-// not block reads. Writers are serialised by SQLite's write lock (BEGIN IMMEDIATE, waiting up to
-// Options::busy_timeout_ms, then kBusy). Several processes may open the same file at once.
-// Do not use a Store across fork(): open a new one in the child.
+// not block reads. Writes from the threads of one process go through a group-commit queue
+// (LevelDB-style: the first waiting writer runs the queued calls in one BEGIN IMMEDIATE
+// transaction, one savepoint per call, and one fsync acknowledges them all), so durable writes
+// per second can exceed the disk's fsync rate when calls are concurrent. A call returns only
+// after its transaction committed (or failed). Between processes, SQLite's write lock
+// serialises transactions (waiting up to Options::busy_timeout_ms, then kBusy). Several
+// processes may open the same file at once. Do not use a Store across fork(): open a new one
+// in the child. Output arguments are written only when a call returns OK.
 //
 // Errors (calibd::Status): kNotFound (no such id), kConflict (illegal state transition, e.g.
 // completing a job one does not lease), kInvalidInput (bad argument), kBusy and kIoError
@@ -27,7 +32,9 @@
 #ifndef CALIBD_STORAGE_STORE_H_
 #define CALIBD_STORAGE_STORE_H_
 
+#include <condition_variable>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -54,8 +61,8 @@ struct StoreOptions {
   // on the last attempt makes it failed. Default 5.
   int max_attempts = 5;
   // Back-off after the n-th transient failure: min(backoff_base_ms * 2^(n-1), backoff_max_ms).
-  int64_t backoff_base_ms = 1000;    // default 1 s
-  int64_t backoff_max_ms = 300000;   // default 5 min
+  int64_t backoff_base_ms = 1000;   // default 1 s
+  int64_t backoff_max_ms = 300000;  // default 5 min
   // Open read-only (SQLITE_OPEN_READONLY): reads work, every write fails with kIoError. The file
   // must exist and be at the current schema version. Default false.
   bool read_only = false;
@@ -66,6 +73,10 @@ struct StoreOptions {
   int max_idle_connections = 16;
   // Create the database file's parent directory when missing. Default true.
   bool create_parent_dir = true;
+  // Group commit: concurrent write calls in this process are run in one transaction (each in
+  // its own savepoint, so one call's failure does not affect the others) and share one fsync.
+  // At most this many calls per transaction; 1 disables batching. Default 64.
+  int max_write_batch = 64;
 };
 
 // A job to enqueue (alone or with its recording).
@@ -85,13 +96,13 @@ struct NewRecording {
   // staging. A duplicate is then recognised without copying the bytes again; the stored bytes'
   // hash is still computed and must match (else kIoError: the file changed).
   std::string sha256;
-  std::string device;              // serial number, "" if unknown
-  std::string layout;              // "pca_averaged" | "pca_raw" | "array" (from the parser)
-  int64_t rows = 0;                // data rows
-  std::string columns_json = "[]"; // JSON array of header names
-  std::string sensors_json = "[]"; // JSON array of sensor / triad names
-  std::string file_name;           // the client's file name, for display only
-  std::optional<NewJob> job;       // enqueued in the same transaction when set
+  std::string device;               // serial number, "" if unknown
+  std::string layout;               // "pca_averaged" | "pca_raw" | "array" (from the parser)
+  int64_t rows = 0;                 // data rows
+  std::string columns_json = "[]";  // JSON array of header names
+  std::string sensors_json = "[]";  // JSON array of sensor / triad names
+  std::string file_name;            // the client's file name, for display only
+  std::optional<NewJob> job;        // enqueued in the same transaction when set
 };
 
 struct JobInfo {
@@ -100,14 +111,14 @@ struct JobInfo {
   std::string method;
   std::string device;
   std::string config_json;
-  std::string status;  // "queued" | "running" | "succeeded" | "failed"
-  int64_t attempts = 0;  // claims that counted (ReleaseJob does not count)
+  std::string status;            // "queued" | "running" | "succeeded" | "failed"
+  int64_t attempts = 0;          // claims that counted (ReleaseJob does not count)
   std::string lease_owner;       // "" unless running
   std::string lease_expires_at;  // "" unless running
   std::string created_at, started_at, finished_at;  // "" when unset
   int64_t lease_expires_at_ms = 0, created_at_ms = 0, started_at_ms = 0, finished_at_ms = 0;
   int64_t not_before_ms = 0;  // a queued job is not claimable before this time (back-off)
-  std::string error_code;     // last failure ("" if none), e.g. "lease_expired" or the worker's code
+  std::string error_code;  // last failure ("" if none), e.g. "lease_expired" or the worker's code
   std::string error_message;
   std::string result_json;    // "" unless succeeded (and, for ListJobs, include_results)
   std::string result_sha256;  // hex SHA-256 of result_json, for an ETag
@@ -130,11 +141,11 @@ struct RecordingInfo {
 };
 
 struct JobFilter {
-  std::string device;  // "" = any
-  std::string method;  // "" = any
-  std::string status;  // "" = any; else one of the four states
-  int limit = 50;      // 1..500 (clamped); default 50
-  int64_t before = 0;  // cursor: only jobs with id < before; 0 = from the newest
+  std::string device;            // "" = any
+  std::string method;            // "" = any
+  std::string status;            // "" = any; else one of the four states
+  int limit = 50;                // 1..500 (clamped); default 50
+  int64_t before = 0;            // cursor: only jobs with id < before; 0 = from the newest
   bool include_results = false;  // fill result_json / result_sha256 of succeeded jobs
 };
 
@@ -254,16 +265,22 @@ class Store {
   Status Checkpoint();
 
  private:
-  class Conn;  // a pooled connection, returned to the pool on destruction
+  class Conn;     // a pooled connection, returned to the pool on destruction
+  struct Writer;  // a write call waiting in the group-commit queue
+  // Runs `op` inside a write transaction shared with other queued calls (group commit); `op`
+  // must not begin or commit transactions (savepoints are fine) and may be run again in a fresh
+  // transaction if another call's failure aborted the shared one.
+  Status Write(const std::function<Status(Db*)>& op);
   Store(std::string path, StoreOptions options);
   Status Acquire(std::unique_ptr<Db>* db);
   void Return(std::unique_ptr<Db> db);
   int64_t Now() const { return options_.now_ms(); }
 
-  Status PutRecordingLocked(Db* db, const NewRecording& r, RecordingInfo* out, bool* existed);
+  Status PutRecordingLocked(Db* db, const NewRecording& r, const std::string& sha,
+                            RecordingInfo* out, bool* existed);
   Status EnqueueJobLocked(Db* db, int64_t recording_id, const std::string& method,
-                          const std::string& device, const std::string& config_json,
-                          int64_t now, JobInfo* out);
+                          const std::string& device, const std::string& config_json, int64_t now,
+                          JobInfo* out);
   Status RecoverLocked(Db* db, int64_t now, int64_t* recovered);
   Status LoadJob(Db* db, int64_t id, bool with_result, JobInfo* out);
   Status RequireHolder(Db* db, int64_t job_id, const std::string& worker_id, const char* action,
@@ -274,6 +291,8 @@ class Store {
   Db::Options db_options_;
   std::mutex mu_;
   std::vector<std::unique_ptr<Db>> idle_;  // guarded by mu_
+  std::mutex write_mu_;
+  std::deque<Writer*> writers_;  // guarded by write_mu_; the front one is the leader
 };
 
 }  // namespace calibd::storage

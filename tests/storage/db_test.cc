@@ -50,7 +50,10 @@ TEST(Db, BindsAndReadsEveryTypeIncludingBinaryBlobs) {
   Stmt ins;
   ASSERT_TRUE(db->Prepare("INSERT INTO t VALUES (?1, ?2, ?3, ?4, ?5)", &ins).ok());
   const std::string blob("a\0b\xff", 4);
-  ins.BindInt(1, int64_t{1} << 40).BindDouble(2, 0.25).BindText(3, "héllo").BindBlob(4, blob)
+  ins.BindInt(1, int64_t{1} << 40)
+      .BindDouble(2, 0.25)
+      .BindText(3, "héllo")
+      .BindBlob(4, blob)
       .BindTextOrNull(5, "");
   ASSERT_TRUE(ins.Run().ok());
   EXPECT_EQ(db->Changes(), 1);
@@ -212,8 +215,7 @@ TEST(Db, MapsResultCodesToStatusCodes) {
   EXPECT_EQ(StatusFromSqlite(SQLITE_CANTOPEN, nullptr, "x").code(), StatusCode::kIoError);
   EXPECT_EQ(StatusFromSqlite(SQLITE_CORRUPT, nullptr, "x").code(), StatusCode::kCorruption);
   EXPECT_EQ(StatusFromSqlite(SQLITE_NOTADB, nullptr, "x").code(), StatusCode::kCorruption);
-  EXPECT_EQ(StatusFromSqlite(SQLITE_CONSTRAINT_UNIQUE, nullptr, "x").code(),
-            StatusCode::kConflict);
+  EXPECT_EQ(StatusFromSqlite(SQLITE_CONSTRAINT_UNIQUE, nullptr, "x").code(), StatusCode::kConflict);
   EXPECT_EQ(StatusFromSqlite(SQLITE_TOOBIG, nullptr, "x").code(), StatusCode::kTooLarge);
   EXPECT_EQ(StatusFromSqlite(SQLITE_MISUSE, nullptr, "x").code(), StatusCode::kInternal);
   Status s = StatusFromSqlite(SQLITE_FULL, nullptr, "store recording");

@@ -52,9 +52,9 @@ TEST(Schema, MigratesAnEmptyFileToTheLatestVersion) {
   ASSERT_TRUE(MigrateSchema(db.get()).ok());
   EXPECT_EQ(Version(db.get()), kSchemaVersion);
   std::string schema = SchemaDump(db.get());
-  for (const char* table : {"table recordings", "table recording_data", "table jobs",
-                            "table results", "table devices", "table device_calibrations",
-                            "index jobs_by_status", "index jobs_by_lease"}) {
+  for (const char* table :
+       {"table recordings", "table recording_data", "table jobs", "table results", "table devices",
+        "table device_calibrations", "index jobs_by_status", "index jobs_by_lease"}) {
     EXPECT_NE(schema.find(table), std::string::npos) << table << "\n" << schema;
   }
   // Migrating again is a no-op.
@@ -92,11 +92,12 @@ TEST(Schema, Version1DataIsCarriedOverAndUsable) {
     ASSERT_TRUE(MigrateSchema(db.get(), 1).ok());
     // What calibd with schema v1 would have written.
     Stmt st;
-    ASSERT_TRUE(db->PrepareUncached(
-                      "INSERT INTO recordings (id, sha256, bytes, device, layout, rows, created_at) "
-                      "VALUES (1, ?1, 3, 'SN1', 'pca_averaged', 1, 1000)",
-                      &st)
-                    .ok());
+    ASSERT_TRUE(
+        db->PrepareUncached(
+              "INSERT INTO recordings (id, sha256, bytes, device, layout, rows, created_at) "
+              "VALUES (1, ?1, 3, 'SN1', 'pca_averaged', 1, 1000)",
+              &st)
+            .ok());
     st.BindText(1, Sha256Hex("abc"));
     ASSERT_TRUE(st.Run().ok());
     ASSERT_TRUE(db->Exec("INSERT INTO recording_data VALUES (1, X'616263')").ok());

@@ -650,8 +650,8 @@ TEST_F(StoreTest, TransientFailuresStopAtMaxAttempts) {
 TEST_F(StoreTest, PermanentFailureFailsAtOnceWithTheReason) {
   int64_t id = Enqueue(Put("x"));
   Claim("w1");
-  ASSERT_TRUE(store_->FailJob(id, "w1", "not_determinable", "g is not positive definite", false)
-                  .ok());
+  ASSERT_TRUE(
+      store_->FailJob(id, "w1", "not_determinable", "g is not positive definite", false).ok());
   JobInfo job = Get(id);
   EXPECT_EQ(job.status, "failed");
   EXPECT_EQ(job.attempts, 1);
