@@ -1,0 +1,828 @@
+#include "core/array.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <thread>
+
+namespace calibd::core {
+namespace {
+
+using Vec3 = Eigen::Vector3d;
+using Mat3 = Eigen::Matrix3d;
+using Vec9 = Eigen::Matrix<double, 9, 1>;
+using Mat9 = Eigen::Matrix<double, 9, 9>;
+using Vec12 = Eigen::Matrix<double, 12, 1>;
+using Mat12 = Eigen::Matrix<double, 12, 12>;
+using Mat4 = Eigen::Matrix4d;
+using Mat9x12 = Eigen::Matrix<double, 9, 12>;
+using Mat12x9 = Eigen::Matrix<double, 12, 9>;
+using ConstMap3X = Eigen::Map<const Eigen::Matrix3Xd>;
+
+Mat3 Skew(const Vec3& v) {
+  Mat3 m;
+  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return m;
+}
+
+// A_n = Omega_omega^2 + Omega_omega_dot (the paper's Eq. 8).
+Mat3 MatrixA(const Vec3& omega, const Vec3& omega_dot) {
+  return omega * omega.transpose() - omega.squaredNorm() * Mat3::Identity() + Skew(omega_dot);
+}
+
+// F_i(omega) = d/d omega [omega x (omega x e_i)], so that the Jacobian of the centripetal term
+// of a triad at r is sum_i r_i F_i(omega).
+void CentripetalJacobians(const Vec3& omega, Mat3 F[3]) {
+  for (int i = 0; i < 3; ++i) {
+    F[i] = omega(i) * Mat3::Identity();
+    F[i].col(i) += omega;
+    F[i].row(i) -= 2 * omega.transpose();
+  }
+}
+
+// ----- Threads: fixed chunks of samples, results reduced in chunk order (bit-identical results
+// for any thread count).
+constexpr int64_t kChunk = 256;
+
+int64_t NumChunks(int64_t n) { return (n + kChunk - 1) / kChunk; }
+
+template <class Fn>
+void ForEachChunk(int64_t n, int threads, Fn&& fn) {
+  const int64_t chunks = NumChunks(n);
+  const int workers = static_cast<int>(std::min<int64_t>(threads, chunks));
+  if (workers <= 1) {
+    for (int64_t c = 0; c < chunks; ++c) fn(c, c * kChunk, std::min(n, (c + 1) * kChunk));
+    return;
+  }
+  std::atomic<int64_t> next{0};
+  auto work = [&]() {
+    for (;;) {
+      const int64_t c = next.fetch_add(1);
+      if (c >= chunks) return;
+      fn(c, c * kChunk, std::min(n, (c + 1) * kChunk));
+    }
+  };
+  std::vector<std::thread> pool;
+  pool.reserve(workers - 1);
+  for (int i = 1; i < workers; ++i) pool.emplace_back(work);
+  work();
+  for (auto& t : pool) t.join();
+}
+
+// ----- The usable samples, laid out per sample.
+struct Data {
+  int K = 0;
+  int G = 0;
+  int64_t N = 0;
+  Eigen::MatrixXd ya;        // 3K x N: sample n's accelerometer readings are column n
+  Eigen::Matrix3Xd gbar;     // 3 x N: mean of the gyroscope triads
+  Eigen::VectorXd gscatter;  // N: sum_j |y_g^(j) - gbar|^2
+};
+
+// ----- Per-sample ML motion given the positions (the estimator of Skog et al., ref. [4]):
+// omega_dot and s enter linearly; with centred positions r~_k = r_k - r_bar and s' = s +
+// omega_dot x r_bar they decouple: s' = mean_k z_k, omega_dot = M^-1 sum_k r~_k x z_k, with
+// z_k = y_k - omega x (omega x r_k) and M = sum_k [r~_k]x^T [r~_k]x. Gauss-Newton on omega on the
+// projected (concentrated) cost. Everything that depends only on the geometry is computed once.
+struct MotionModel {
+  int K = 0;
+  Eigen::Matrix3Xd r;        // positions
+  Eigen::Matrix3Xd r_tilde;  // centred
+  Vec3 r_bar = Vec3::Zero();
+  Mat3 M_inv = Mat3::Zero();
+  Mat3 R2 = Mat3::Zero();  // sum_k r_k r_k^T
+  Mat3 Q[3];               // Q_i = sum_k r_ki [r~_k]x
+  bool ok = false;
+
+  explicit MotionModel(const Eigen::Matrix3Xd& positions) : K(positions.cols()), r(positions) {
+    r_bar = r.rowwise().mean();
+    r_tilde = r.colwise() - r_bar;
+    Mat3 M = Mat3::Zero();
+    for (int i = 0; i < 3; ++i) Q[i].setZero();
+    for (int k = 0; k < K; ++k) {
+      const Vec3 rt = r_tilde.col(k);
+      M += rt.squaredNorm() * Mat3::Identity() - rt * rt.transpose();
+      R2 += r.col(k) * r.col(k).transpose();
+      const Mat3 S = Skew(rt);
+      for (int i = 0; i < 3; ++i) Q[i] += r(i, k) * S;
+    }
+    Eigen::LDLT<Mat3> ldlt(M);
+    ok = ldlt.info() == Eigen::Success && (ldlt.vectorD().array() > 0).all();
+    if (ok) M_inv = ldlt.solve(Mat3::Identity());
+  }
+
+  // Solves for (omega, omega_dot, s) of one sample; *omega is the starting point. z: 3K
+  // workspace. Returns the sample's cost (weighted, including the gyro scatter).
+  double Solve(const double* y, const Vec3& gbar, double gscatter, int G, double wa, double wg,
+               int max_iterations, Eigen::Matrix3Xd* z, Vec3* omega, Vec3* omega_dot,
+               Vec3* s) const {
+    const ConstMap3X Y(y, 3, K);
+    Vec3 w = *omega;
+    Vec3 wd, sp;
+    double cost = 0;
+    bool done = false;
+    for (int it = 0;; ++it) {
+      // Evaluate the projected residuals at w.
+      const double ww = w.squaredNorm();
+      // z_k = y_k - (w (w . r_k) - r_k |w|^2)
+      z->noalias() = Y - w * (w.transpose() * r);
+      *z += ww * r;
+      sp = z->rowwise().mean();
+      Vec3 cross_sum = Vec3::Zero();
+      for (int k = 0; k < K; ++k) cross_sum += r_tilde.col(k).cross(z->col(k));
+      wd = M_inv * cross_sum;
+      // e_k = z_k - s' - wd x r~_k = z_k - s' + [r~_k]x wd ... computed in place in z.
+      z->colwise() -= sp;
+      for (int k = 0; k < K; ++k) z->col(k) -= wd.cross(r_tilde.col(k));
+      const Vec3 eg = gbar - w;
+      cost = wa * z->squaredNorm() + wg * (G * eg.squaredNorm() + gscatter);
+      if (done || it >= max_iterations) break;
+      // Gauss-Newton step on omega.
+      Mat3 F[3];
+      CentripetalJacobians(w, F);
+      Mat3 JtJ = Mat3::Zero();
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) JtJ += R2(i, j) * F[i].transpose() * F[j];
+      Mat3 Jsum = Mat3::Zero(), B = Mat3::Zero();
+      for (int i = 0; i < 3; ++i) {
+        Jsum += (K * r_bar(i)) * F[i];
+        B += Q[i] * F[i];
+      }
+      const Mat3 Re = (*z) * r.transpose();  // column i: sum_k r_ki e_k
+      Vec3 rhs = Vec3::Zero();
+      for (int i = 0; i < 3; ++i) rhs += F[i].transpose() * Re.col(i);
+      Mat3 normal = wa * (JtJ - Jsum.transpose() * Jsum / K - B.transpose() * M_inv * B) +
+                    (wg * G) * Mat3::Identity();
+      const Vec3 dw = normal.ldlt().solve(wa * rhs + (wg * G) * eg);
+      if (!dw.allFinite()) break;
+      w += dw;
+      done = dw.norm() <= 1e-14 * (1 + w.norm());
+    }
+    *omega = w;
+    *omega_dot = wd;
+    *s = sp - wd.cross(r_bar);
+    return cost;
+  }
+};
+
+// Per-chunk sums of one motion pass.
+struct MotionSums {
+  double cost = 0;
+  Mat3 AtA = Mat3::Zero();
+  Eigen::Matrix3Xd AtY;  // column k: sum_n A_n^T (y_k - s_n)
+};
+
+struct Weights {
+  double wa = 0;  // 1 / sigma_a^2
+  double wg = 0;  // 1 / sigma_g^2
+};
+
+// Motion step for every sample (x: 9 x N in/out, omega rows used as starting point), plus the
+// sums needed by the closed-form position update of Eq. (9). Returns false if the geometry
+// cannot carry the motion estimator (collinear).
+bool MotionPass(const Data& d, const Eigen::Matrix3Xd& r, const Weights& wt, int threads,
+                int max_gn, Eigen::Matrix<double, 9, Eigen::Dynamic>* x, MotionSums* total) {
+  const MotionModel model(r);
+  if (!model.ok) return false;
+  std::vector<MotionSums> sums(NumChunks(d.N));
+  ForEachChunk(d.N, threads, [&](int64_t c, int64_t begin, int64_t end) {
+    MotionSums& acc = sums[c];
+    acc.AtY = Eigen::Matrix3Xd::Zero(3, d.K);
+    Eigen::Matrix3Xd z(3, d.K);
+    for (int64_t n = begin; n < end; ++n) {
+      Vec3 w = x->col(n).head<3>(), wd, s;
+      acc.cost += model.Solve(d.ya.col(n).data(), d.gbar.col(n), d.gscatter(n), d.G, wt.wa, wt.wg,
+                              max_gn, &z, &w, &wd, &s);
+      x->col(n) << w, wd, s;
+      const Mat3 A = MatrixA(w, wd);
+      acc.AtA.noalias() += A.transpose() * A;
+      const ConstMap3X Y(d.ya.col(n).data(), 3, d.K);
+      z.noalias() = Y;
+      z.colwise() -= s;
+      acc.AtY.noalias() += A.transpose() * z;
+    }
+  });
+  total->cost = 0;
+  total->AtA.setZero();
+  total->AtY = Eigen::Matrix3Xd::Zero(3, d.K);
+  for (const auto& s : sums) {
+    total->cost += s.cost;
+    total->AtA += s.AtA;
+    total->AtY += s.AtY;
+  }
+  return true;
+}
+
+// ----- Joint Gauss-Newton / Levenberg-Marquardt with Schur complement.
+//
+// Per sample the Jacobian of triad k's prediction s + A r_k with respect to x = (omega,
+// omega_dot, s) is J_k = sum_a c_ka E_a with c_k = (1, r_k) and E_0 = [0 0 I],
+// E_i = [F_i -[e_i]x 0]. Hence
+//   H_xx = sum_k J_k^T J_k / sa^2 + G/sg^2 (omega block) = E^T (R (x) I3) E / sa^2 + ...,
+//   R = sum_k c_k c_k^T (4x4, constant over samples),
+//   H_x r_k = sum_a c_ka P_a / sa^2 with P_a = E_a^T A_n,
+// and the reduced matrix S_kl = delta_kl H_rr - sum_ab c_ka c_lb T_ab / sa^4 with
+// T = sum_n P^T H_xx^-1 P (12x12): one 12x12 sum per sample, whatever K.
+struct JointGeometry {
+  Eigen::Matrix<double, 4, Eigen::Dynamic> c;  // 4 x K: (1, r_k)
+  Mat4 Lt = Mat4::Zero();                      // R = Lt^T Lt
+};
+
+JointGeometry MakeJointGeometry(const Eigen::Matrix3Xd& r) {
+  JointGeometry g;
+  const int K = r.cols();
+  g.c.resize(4, K);
+  g.c.row(0).setOnes();
+  g.c.bottomRows(3) = r;
+  const Mat4 R = g.c * g.c.transpose();
+  Eigen::SelfAdjointEigenSolver<Mat4> es(R);
+  const Eigen::Vector4d sq = es.eigenvalues().cwiseMax(0).cwiseSqrt();
+  g.Lt = sq.asDiagonal() * es.eigenvectors().transpose();  // Lt^T Lt = V L V^T = R
+  return g;
+}
+
+struct SampleBlocks {
+  Mat3 A;
+  Mat3 F[3];
+  Mat9 H;
+  Mat9x12 P;
+};
+
+void BuildBlocks(const Vec3& w, const Vec3& wd, const Mat4& Lt, double wa, double wgG, double mu,
+                 SampleBlocks* b) {
+  b->A = MatrixA(w, wd);
+  CentripetalJacobians(w, b->F);
+  Mat12x9 E = Mat12x9::Zero();
+  E.block<3, 3>(0, 6).setIdentity();
+  for (int i = 0; i < 3; ++i) {
+    E.block<3, 3>(3 + 3 * i, 0) = b->F[i];
+    E.block<3, 3>(3 + 3 * i, 3) = -Skew(Vec3::Unit(i));
+  }
+  Mat12x9 Et;
+  for (int a = 0; a < 4; ++a) {
+    Et.block<3, 9>(3 * a, 0) = Lt(a, 0) * E.block<3, 9>(0, 0);
+    for (int bb = 1; bb < 4; ++bb) Et.block<3, 9>(3 * a, 0) += Lt(a, bb) * E.block<3, 9>(3 * bb, 0);
+  }
+  b->H.noalias() = wa * Et.transpose() * Et;
+  b->H.topLeftCorner<3, 3>().diagonal().array() += wgG;
+  if (mu > 0) b->H.diagonal() *= (1 + mu);
+  for (int a = 0; a < 4; ++a)
+    b->P.block<9, 3>(0, 3 * a).noalias() = E.block<3, 9>(3 * a, 0).transpose() * b->A;
+}
+
+struct LinearSums {
+  Mat12 T = Mat12::Zero();
+  Vec12 t = Vec12::Zero();
+  Mat3 AtA = Mat3::Zero();
+  Eigen::Matrix3Xd br;  // 3 x K: sum_n A^T e_k
+  double cost = 0;
+  double ssr_a = 0, ssr_g = 0, lev_g = 0;
+};
+
+// Linearises at (r, x); stores b_x per sample in *bx; returns the sums. With `diagnostics`, also
+// the unweighted residual sums and the gyro leverage (for noise estimates).
+void LinearizePass(const Data& d, const Eigen::Matrix3Xd& r, const JointGeometry& geo,
+                   const Eigen::Matrix<double, 9, Eigen::Dynamic>& x, const Weights& wt, double mu,
+                   bool diagnostics, int threads, Eigen::Matrix<double, 9, Eigen::Dynamic>* bx,
+                   LinearSums* total) {
+  std::vector<LinearSums> sums(NumChunks(d.N));
+  const double wgG = wt.wg * d.G;
+  ForEachChunk(d.N, threads, [&](int64_t c, int64_t begin, int64_t end) {
+    LinearSums& acc = sums[c];
+    acc.br = Eigen::Matrix3Xd::Zero(3, d.K);
+    Eigen::Matrix3Xd e(3, d.K);
+    SampleBlocks b;
+    for (int64_t n = begin; n < end; ++n) {
+      const Vec3 w = x.col(n).head<3>(), wd = x.col(n).segment<3>(3), s = x.col(n).tail<3>();
+      BuildBlocks(w, wd, geo.Lt, wt.wa, wgG, mu, &b);
+      const ConstMap3X Y(d.ya.col(n).data(), 3, d.K);
+      e.noalias() = Y - b.A * r;
+      e.colwise() -= s;
+      const double ssr_a = e.squaredNorm();
+      const Eigen::Matrix<double, 3, 4> f = e * geo.c.transpose();
+      acc.br.noalias() += b.A.transpose() * e;
+      const Vec3 eg = d.gbar.col(n) - w;
+      const double ssr_g = d.G * eg.squaredNorm() + d.gscatter(n);
+      acc.cost += wt.wa * ssr_a + wt.wg * ssr_g;
+      Vec9 g;
+      g.head<3>() = b.F[0].transpose() * f.col(1) + b.F[1].transpose() * f.col(2) +
+                    b.F[2].transpose() * f.col(3);
+      g.segment<3>(3) = Vec3::UnitX().cross(f.col(1)) + Vec3::UnitY().cross(f.col(2)) +
+                        Vec3::UnitZ().cross(f.col(3));
+      g.tail<3>() = f.col(0);
+      g *= wt.wa;
+      g.head<3>() += wgG * eg;
+      bx->col(n) = g;
+      const Eigen::LLT<Mat9> llt(b.H);
+      const Mat9x12 HiP = llt.solve(b.P);
+      acc.T.noalias() += b.P.transpose() * HiP;
+      acc.t.noalias() += HiP.transpose() * g;
+      acc.AtA.noalias() += b.A.transpose() * b.A;
+      if (diagnostics) {
+        acc.ssr_a += ssr_a;
+        acc.ssr_g += ssr_g;
+        Eigen::Matrix<double, 9, 3> unit = Eigen::Matrix<double, 9, 3>::Zero();
+        unit.topRows<3>().setIdentity();
+        acc.lev_g += wgG * llt.solve(unit).topRows<3>().trace();
+      }
+    }
+  });
+  *total = LinearSums();
+  total->br = Eigen::Matrix3Xd::Zero(3, d.K);
+  for (const auto& s : sums) {
+    total->T += s.T;
+    total->t += s.t;
+    total->AtA += s.AtA;
+    total->br += s.br;
+    total->cost += s.cost;
+    total->ssr_a += s.ssr_a;
+    total->ssr_g += s.ssr_g;
+    total->lev_g += s.lev_g;
+  }
+}
+
+// Back-substitution and cost at the trial point (r + dr, x + dx).
+double StepPass(const Data& d, const Eigen::Matrix3Xd& r_trial, const JointGeometry& geo,
+                const Eigen::Matrix<double, 9, Eigen::Dynamic>& x,
+                const Eigen::Matrix<double, 9, Eigen::Dynamic>& bx, const Vec12& dpos,
+                const Weights& wt, double mu, int threads,
+                Eigen::Matrix<double, 9, Eigen::Dynamic>* x_trial) {
+  std::vector<double> sums(NumChunks(d.N), 0.0);
+  const double wgG = wt.wg * d.G;
+  ForEachChunk(d.N, threads, [&](int64_t c, int64_t begin, int64_t end) {
+    Eigen::Matrix3Xd e(3, d.K);
+    SampleBlocks b;
+    double cost = 0;
+    for (int64_t n = begin; n < end; ++n) {
+      BuildBlocks(x.col(n).head<3>(), x.col(n).segment<3>(3), geo.Lt, wt.wa, wgG, mu, &b);
+      const Vec9 rhs = bx.col(n) - wt.wa * (b.P * dpos);
+      const Vec9 xn = x.col(n) + Eigen::LLT<Mat9>(b.H).solve(rhs);
+      x_trial->col(n) = xn;
+      const Vec3 w = xn.head<3>(), s = xn.tail<3>();
+      const Mat3 A = MatrixA(w, xn.segment<3>(3));
+      const ConstMap3X Y(d.ya.col(n).data(), 3, d.K);
+      e.noalias() = Y - A * r_trial;
+      e.colwise() -= s;
+      cost += wt.wa * e.squaredNorm() +
+              wt.wg * (d.G * (d.gbar.col(n) - w).squaredNorm() + d.gscatter(n));
+    }
+    sums[c] = cost;
+  });
+  double total = 0;
+  for (double s : sums) total += s;
+  return total;
+}
+
+// The reduced system over the free triads (all but the reference).
+struct Reduced {
+  Eigen::MatrixXd S;
+  Eigen::VectorXd g;
+  Eigen::MatrixXd Mf;  // 12 x 3(K-1): block (a, j) = c_{a,k_j} I3
+};
+
+Reduced BuildReduced(const LinearSums& L, const JointGeometry& geo, const std::vector<int>& free,
+                     const Weights& wt, double mu) {
+  const int m = static_cast<int>(free.size());
+  Reduced red;
+  red.Mf = Eigen::MatrixXd::Zero(12, 3 * m);
+  for (int j = 0; j < m; ++j)
+    for (int a = 0; a < 4; ++a)
+      red.Mf.block<3, 3>(3 * a, 3 * j) = geo.c(a, free[j]) * Mat3::Identity();
+  Mat3 Hrr = wt.wa * L.AtA;
+  if (mu > 0) Hrr.diagonal() *= (1 + mu);
+  red.S = -(wt.wa * wt.wa) * (red.Mf.transpose() * L.T * red.Mf);
+  red.g = -wt.wa * (red.Mf.transpose() * L.t);
+  for (int j = 0; j < m; ++j) {
+    red.S.block<3, 3>(3 * j, 3 * j) += Hrr;
+    red.g.segment<3>(3 * j) += wt.wa * L.br.col(free[j]);
+  }
+  red.S = 0.5 * (red.S + red.S.transpose());
+  return red;
+}
+
+// ----- Helpers for the result.
+std::string Format(const char* fmt, double a) {
+  char buf[512];
+  std::snprintf(buf, sizeof buf, fmt, a);
+  return buf;
+}
+
+std::string Fmt(double v) { return Format("%.3g", v); }
+
+constexpr char kRecordAdvice[] =
+    "record the array while twisting it by hand about all three axes (changing the rotation axis "
+    "continually, fast turns and sudden stops), for at least a few seconds";
+
+ArrayExcitation ComputeExcitation(const Mat3& AtA, double noise_floor) {
+  ArrayExcitation ex;
+  Eigen::SelfAdjointEigenSolver<Mat3> es(AtA);
+  ex.min_eigenvalue = es.eigenvalues()(0);
+  ex.max_eigenvalue = es.eigenvalues()(2);
+  ex.weakest_direction = es.eigenvectors().col(0);
+  if (ex.weakest_direction.cwiseAbs().maxCoeff() > 0) {
+    // Deterministic sign: largest component positive.
+    Eigen::Index i;
+    ex.weakest_direction.cwiseAbs().maxCoeff(&i);
+    if (ex.weakest_direction(i) < 0) ex.weakest_direction = -ex.weakest_direction;
+  }
+  ex.noise_floor = noise_floor;
+  if (ex.min_eigenvalue >= 100 * noise_floor && ex.min_eigenvalue > 0)
+    ex.verdict = "good";
+  else if (ex.min_eigenvalue >= 3 * noise_floor && ex.min_eigenvalue > 0)
+    ex.verdict = "weak";
+  else
+    ex.verdict = "insufficient";
+  return ex;
+}
+
+double NoiseFloor(const Eigen::Matrix<double, 9, Eigen::Dynamic>& x, const MotionModel& model,
+                  const ArrayOptions& o, int G) {
+  const double per_sample = o.accel_noise * o.accel_noise * model.M_inv.trace();
+  const double sum_w2 = x.topRows<3>().colwise().squaredNorm().sum();
+  return x.cols() * per_sample + 6 * sum_w2 * o.gyro_noise * o.gyro_noise / G;
+}
+
+Status InsufficientExcitation(const ArrayExcitation& ex) {
+  const Vec3& u = ex.weakest_direction;
+  char dir[96];
+  std::snprintf(dir, sizeof dir, "(%.2f, %.2f, %.2f)", u.x(), u.y(), u.z());
+  return Status::NotDeterminable(
+      "the motion does not determine the positions along the direction " + std::string(dir) +
+      ": the smallest eigenvalue of sum A_n^T A_n is " + Fmt(ex.min_eigenvalue) +
+      ", not above what noise alone gives (" + Fmt(ex.noise_floor) +
+      "); this happens when the array rotates about one fixed axis only, or too slowly. "
+      "Instead, " +
+      std::string(kRecordAdvice) + ".");
+}
+
+}  // namespace
+
+const char* ArraySolverName(ArraySolver solver) {
+  return solver == ArraySolver::kBcd ? "bcd" : "joint";
+}
+
+const char* ArrayTerminationName(ArrayTermination t) {
+  switch (t) {
+    case ArrayTermination::kNotRun:
+      return "not_run";
+    case ArrayTermination::kConvergence:
+      return "convergence";
+    case ArrayTermination::kNoProgress:
+      return "no_progress";
+    case ArrayTermination::kMaxIterations:
+      return "max_iterations";
+    case ArrayTermination::kUserStopped:
+      return "user_stopped";
+  }
+  return "unknown";
+}
+
+bool ArrayOptions::IsValid(std::string* error) const {
+  auto fail = [&](const std::string& m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (!(accel_noise > 0) || !std::isfinite(accel_noise))
+    return fail("accel_noise must be a finite number > 0 (m/s^2)");
+  if (!(gyro_noise > 0) || !std::isfinite(gyro_noise))
+    return fail("gyro_noise must be a finite number > 0 (rad/s)");
+  if (gyro_saturation && (!(*gyro_saturation > 0) || !std::isfinite(*gyro_saturation)))
+    return fail("gyro_saturation must be a finite number > 0 (rad/s)");
+  if (max_iterations < 0) return fail("max_iterations must be >= 0 (0: solver default)");
+  if (!(tolerance >= 0 && tolerance < 1)) return fail("tolerance must be >= 0 and < 1");
+  if (threads < 0) return fail("threads must be >= 0 (0: hardware concurrency)");
+  return true;
+}
+
+std::string ArrayResult::BriefReport() const {
+  char buf[512];
+  std::snprintf(buf, sizeof buf,
+                "array: %s, solver %s, termination %s, %d iterations, cost %.6g -> %.6g, "
+                "%lld samples (%lld dropped)",
+                usable ? "usable" : "not usable", ArraySolverName(solver),
+                ArrayTerminationName(termination), iterations, cost.empty() ? 0.0 : cost.front(),
+                cost.empty() ? 0.0 : cost.back(), static_cast<long long>(samples),
+                static_cast<long long>(samples_dropped));
+  return buf;
+}
+
+Status CalibrateArray(const ArrayProblem& problem, const ArrayOptions& options,
+                      ArrayResult* result) {
+  *result = ArrayResult();
+  result->solver = options.solver;
+  std::string error;
+  if (!options.IsValid(&error)) return Status::InvalidInput(error);
+
+  // ----- Shapes and values.
+  const int K = static_cast<int>(problem.nominal_positions.cols());
+  const int64_t N_in = problem.accel.rows();
+  if (problem.accel.cols() != 3 * K)
+    return Status::InvalidInput("accel has " + std::to_string(problem.accel.cols()) +
+                                " columns; 3 per triad of the geometry's " + std::to_string(K) +
+                                " positions means " + std::to_string(3 * K));
+  if (problem.gyro.cols() % 3 != 0)
+    return Status::InvalidInput("gyro has " + std::to_string(problem.gyro.cols()) +
+                                " columns, not a multiple of 3");
+  const int G = static_cast<int>(problem.gyro.cols() / 3);
+  if (G > 0 && problem.gyro.rows() != N_in)
+    return Status::InvalidInput("gyro has " + std::to_string(problem.gyro.rows()) +
+                                " rows but accel has " + std::to_string(N_in));
+  if (!problem.accel_names.empty() && static_cast<int>(problem.accel_names.size()) != K)
+    return Status::InvalidInput("accel_names has " + std::to_string(problem.accel_names.size()) +
+                                " names for " + std::to_string(K) + " triads");
+  if (K > 0 && (problem.reference < 0 || problem.reference >= K))
+    return Status::InvalidInput("reference " + std::to_string(problem.reference) +
+                                " is not a triad index in [0, " + std::to_string(K) + ")");
+  if (!problem.nominal_positions.allFinite())
+    return Status::InvalidInput("nominal positions contain NaN or Inf");
+  if (!problem.accel.allFinite()) return Status::InvalidInput("accel contains NaN or Inf");
+  if (!problem.gyro.allFinite()) return Status::InvalidInput("gyro contains NaN or Inf");
+
+  result->reference = problem.reference;
+  result->gyro_triads = G;
+  for (int k = 0; k < K; ++k)
+    result->names.push_back(problem.accel_names.empty() ? "a" + std::to_string(k)
+                                                        : problem.accel_names[k]);
+
+  // ----- Structural determinability.
+  auto not_determinable = [&](const std::string& why) {
+    result->usable = false;
+    result->reason = why;
+    return Status::NotDeterminable(why);
+  };
+  if (G == 0)
+    return not_determinable(
+        "no gyroscope triad: the array's angular velocity cannot be separated from the positions; "
+        "record with at least one gyroscope triad (columns g0_x, g0_y, g0_z)");
+  if (K < 3)
+    return not_determinable("only " + std::to_string(K) +
+                            " accelerometer triad(s): at least 3 triads that are not on one line "
+                            "are needed to determine the motion");
+  {
+    const MotionModel model(problem.nominal_positions);
+    Eigen::SelfAdjointEigenSolver<Mat3> es(model.r_tilde * model.r_tilde.transpose());
+    const Eigen::Vector3d ev = es.eigenvalues();
+    if (!model.ok || ev(1) <= 1e-12 * ev(2))
+      return not_determinable(
+          "the accelerometer triads' nominal positions lie on one line: the angular acceleration "
+          "about that line cannot be determined; mount at least 3 triads that span a plane");
+  }
+
+  // ----- Usable samples.
+  Data d;
+  d.K = K;
+  d.G = G;
+  std::vector<int64_t> keep;
+  keep.reserve(N_in);
+  for (int64_t n = 0; n < N_in; ++n) {
+    if (options.gyro_saturation &&
+        problem.gyro.row(n).cwiseAbs().maxCoeff() >= *options.gyro_saturation)
+      continue;
+    keep.push_back(n);
+  }
+  d.N = static_cast<int64_t>(keep.size());
+  result->samples = d.N;
+  result->samples_dropped = N_in - d.N;
+  if (d.N < 3) {
+    std::string why = "only " + std::to_string(d.N) + " usable sample(s)";
+    if (result->samples_dropped > 0)
+      why += " (" + std::to_string(result->samples_dropped) +
+             " dropped because a gyroscope reached gyro_saturation)";
+    return not_determinable(
+        why + "; at least 3 are needed: " + kRecordAdvice +
+        (result->samples_dropped > 0 ? ", turning below the gyroscopes' range" : ""));
+  }
+  d.ya.resize(3 * K, d.N);
+  d.gbar.resize(3, d.N);
+  d.gscatter.resize(d.N);
+  for (int64_t i = 0; i < d.N; ++i) {
+    const int64_t n = keep[i];
+    d.ya.col(i) = problem.accel.row(n).transpose();
+    Vec3 mean = Vec3::Zero();
+    for (int j = 0; j < G; ++j) mean += problem.gyro.row(n).segment<3>(3 * j).transpose();
+    mean /= G;
+    double scatter = 0;
+    for (int j = 0; j < G; ++j)
+      scatter += (problem.gyro.row(n).segment<3>(3 * j).transpose() - mean).squaredNorm();
+    d.gbar.col(i) = mean;
+    d.gscatter(i) = scatter;
+  }
+  keep.clear();
+  keep.shrink_to_fit();
+
+  const int threads = options.threads > 0
+                          ? options.threads
+                          : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const Weights wt{1 / (options.accel_noise * options.accel_noise),
+                   1 / (options.gyro_noise * options.gyro_noise)};
+  const int max_iterations =
+      options.max_iterations > 0
+          ? options.max_iterations
+          : (options.solver == ArraySolver::kJoint ? ArrayOptions::kDefaultJointIterations
+                                                   : ArrayOptions::kDefaultBcdIterations);
+  const double tol = options.tolerance;
+  std::vector<int> free;
+  for (int k = 0; k < K; ++k)
+    if (k != problem.reference) free.push_back(k);
+
+  // ----- Start: nominal positions, per-sample ML motion from the gyroscope mean.
+  Eigen::Matrix3Xd r = problem.nominal_positions;
+  Eigen::Matrix<double, 9, Eigen::Dynamic> x =
+      Eigen::Matrix<double, 9, Eigen::Dynamic>::Zero(9, d.N);
+  x.topRows<3>() = d.gbar;
+  MotionSums ms;
+  MotionPass(d, r, wt, threads, 50, &x, &ms);
+  result->cost.push_back(ms.cost);
+  {
+    const MotionModel model(r);
+    const ArrayExcitation ex = ComputeExcitation(ms.AtA, NoiseFloor(x, model, options, G));
+    if (ex.verdict == "insufficient") {
+      result->excitation = ex;
+      const Status s = InsufficientExcitation(ex);
+      result->reason = s.message();
+      return s;
+    }
+  }
+
+  auto max_abs = [](const Eigen::Matrix3Xd& m) { return m.cwiseAbs().maxCoeff(); };
+  ArrayTermination termination = ArrayTermination::kMaxIterations;
+  int iterations = 0;
+
+  if (options.solver == ArraySolver::kBcd) {
+    // The paper's Algorithm 1: position update (Eq. 9) from the current motion, then the motion
+    // step (5) at the new positions; the profile cost is recorded after every sweep.
+    for (iterations = 1; iterations <= max_iterations; ++iterations) {
+      const Eigen::LDLT<Mat3> C(ms.AtA);
+      for (int k : free) r.col(k) = C.solve(ms.AtY.col(k));
+      const double previous = ms.cost;
+      MotionPass(d, r, wt, threads, 50, &x, &ms);
+      result->cost.push_back(ms.cost);
+      if (options.callback && !options.callback(iterations, r)) {
+        termination = ArrayTermination::kUserStopped;
+        break;
+      }
+      if (tol > 0 && previous - ms.cost <= tol * ms.cost) {
+        termination = ArrayTermination::kConvergence;
+        break;
+      }
+    }
+    iterations = std::min(iterations, max_iterations);
+  } else {
+    Eigen::Matrix<double, 9, Eigen::Dynamic> bx(9, d.N), x_trial(9, d.N);
+    double cost = ms.cost;
+    double mu = 1e-8;
+    for (iterations = 1; iterations <= max_iterations; ++iterations) {
+      const JointGeometry geo = MakeJointGeometry(r);
+      LinearSums L;
+      LinearizePass(d, r, geo, x, wt, mu, false, threads, &bx, &L);
+      const Reduced red = BuildReduced(L, geo, free, wt, mu);
+      const Eigen::LLT<Eigen::MatrixXd> llt(red.S);
+      bool accepted = false;
+      double step = std::numeric_limits<double>::infinity();
+      if (llt.info() == Eigen::Success) {
+        const Eigen::VectorXd dr = llt.solve(red.g);
+        if (dr.allFinite()) {
+          Eigen::Matrix3Xd r_trial = r;
+          for (size_t j = 0; j < free.size(); ++j) r_trial.col(free[j]) += dr.segment<3>(3 * j);
+          const Vec12 dpos = red.Mf * dr;
+          const double trial_cost =
+              StepPass(d, r_trial, geo, x, bx, dpos, wt, mu, threads, &x_trial);
+          step = dr.cwiseAbs().maxCoeff();
+          if (std::isfinite(trial_cost) && trial_cost < cost) {
+            accepted = true;
+            const double decrease = cost - trial_cost;
+            cost = trial_cost;
+            r = r_trial;
+            x.swap(x_trial);
+            mu = std::max(mu / 10, 1e-15);
+            result->cost.push_back(cost);
+            if (options.callback && !options.callback(iterations, r)) {
+              termination = ArrayTermination::kUserStopped;
+              break;
+            }
+            if (tol > 0 && (decrease <= tol * cost || step <= tol * (max_abs(r) + tol))) {
+              termination = ArrayTermination::kConvergence;
+              break;
+            }
+          }
+        }
+      }
+      if (!accepted) {
+        result->cost.push_back(cost);
+        if (tol > 0 && step <= tol * (max_abs(r) + tol)) {
+          termination = ArrayTermination::kConvergence;
+          break;
+        }
+        mu *= 10;
+        if (mu > 1e10) {
+          termination = ArrayTermination::kNoProgress;
+          break;
+        }
+      }
+    }
+    iterations = std::min(iterations, max_iterations);
+  }
+  result->iterations = iterations;
+  result->termination = termination;
+  result->converged =
+      termination == ArrayTermination::kConvergence || termination == ArrayTermination::kNoProgress;
+
+  // ----- Diagnostics at the estimate: reduced Fisher information (CRB), residuals, excitation.
+  const JointGeometry geo = MakeJointGeometry(r);
+  Eigen::Matrix<double, 9, Eigen::Dynamic> bx(9, d.N);
+  LinearSums L;
+  LinearizePass(d, r, geo, x, wt, 0.0, true, threads, &bx, &L);
+  bx.resize(9, 0);
+  const MotionModel model(r);
+  result->excitation = ComputeExcitation(L.AtA, NoiseFloor(x, model, options, G));
+
+  result->positions = r;
+  result->offsets = r - problem.nominal_positions;
+  result->position_std = Eigen::Matrix3Xd::Zero(3, K);
+  result->omega_norm = x.topRows<3>().colwise().norm().transpose();
+  result->omega_dot_norm = x.middleRows<3>(3).colwise().norm().transpose();
+  int64_t parallel = 0;
+  for (int64_t n = 0; n < d.N; ++n) {
+    const Vec3 w = x.col(n).head<3>(), wd = x.col(n).segment<3>(3);
+    if (w.cross(wd).norm() < 0.1 * w.norm() * wd.norm()) ++parallel;
+  }
+  result->parallel_fraction = static_cast<double>(parallel) / d.N;
+
+  const double n_accel = 3.0 * K * d.N, n_gyro = 3.0 * G * d.N;
+  result->residual_rms_accel = std::sqrt(L.ssr_a / n_accel);
+  result->residual_rms_gyro = std::sqrt(L.ssr_g / n_gyro);
+  const double dof_g = n_gyro - L.lev_g;
+  const double dof_a = n_accel - 9.0 * d.N - 3.0 * (K - 1) + L.lev_g;
+  result->noise_estimate_accel = dof_a > 0 ? std::sqrt(L.ssr_a / dof_a) : 0;
+  result->noise_estimate_gyro = dof_g > 0 ? std::sqrt(L.ssr_g / dof_g) : 0;
+
+  if (result->excitation.verdict == "insufficient") {
+    const Status s = InsufficientExcitation(result->excitation);
+    result->reason = s.message();
+    return s;
+  }
+  const Reduced red = BuildReduced(L, geo, free, wt, 0.0);
+  const Eigen::LLT<Eigen::MatrixXd> llt(red.S);
+  if (llt.info() != Eigen::Success) {
+    return not_determinable(
+        "the Fisher information of the positions is singular at the estimate: the recording "
+        "does not determine every position; " +
+        std::string(kRecordAdvice));
+  }
+  result->position_covariance = llt.solve(Eigen::MatrixXd::Identity(red.S.rows(), red.S.cols()));
+  for (size_t j = 0; j < free.size(); ++j)
+    result->position_std.col(free[j]) =
+        result->position_covariance.diagonal().segment<3>(3 * j).cwiseMax(0).cwiseSqrt();
+
+  // ----- Warnings and verdict.
+  auto& warnings = result->warnings;
+  if (result->samples_dropped > 0)
+    warnings.push_back(std::to_string(result->samples_dropped) + " of " + std::to_string(N_in) +
+                       " samples dropped because a gyroscope reached gyro_saturation (" +
+                       Fmt(*options.gyro_saturation) + " rad/s)");
+  if (termination == ArrayTermination::kMaxIterations)
+    warnings.push_back("reached max_iterations (" + std::to_string(max_iterations) +
+                       ") before the tolerance was met: the positions are usable but not fully "
+                       "converged; raise max_iterations" +
+                       (options.solver == ArraySolver::kBcd ? " or use solver \"joint\"" : ""));
+  if (termination == ArrayTermination::kUserStopped)
+    warnings.push_back("stopped by the caller before convergence");
+  auto check_noise = [&](const char* what, double estimate, double configured, const char* unit) {
+    if (estimate > 2 * configured || estimate < configured / 2)
+      warnings.push_back(std::string(what) + " noise estimated from the residuals (" +
+                         Fmt(estimate) + " " + unit + ") differs from the configured " +
+                         Fmt(configured) + " " + unit +
+                         " by more than 2x: the reported uncertainties assume the configured "
+                         "value; check the noise setting, the units and the sensors");
+  };
+  check_noise("accelerometer", result->noise_estimate_accel, options.accel_noise, "m/s^2");
+  if (dof_g > 0.5)
+    check_noise("gyroscope", result->noise_estimate_gyro, options.gyro_noise, "rad/s");
+  if (result->excitation.verdict == "weak")
+    warnings.push_back("weak excitation: the smallest eigenvalue of sum A_n^T A_n (" +
+                       Fmt(result->excitation.min_eigenvalue) +
+                       ") is less than 100x what noise "
+                       "alone gives (" +
+                       Fmt(result->excitation.noise_floor) +
+                       "); positions along the weakest direction are poorly determined; " +
+                       kRecordAdvice);
+  if (result->parallel_fraction > 0.5)
+    warnings.push_back(
+        Format("omega and omega_dot are nearly parallel in %.0f%% of the samples "
+               "(each A_n then has rank 2, the paper's Lemma 1): vary the rotation "
+               "axis while turning",
+               100 * result->parallel_fraction));
+  result->usable = true;
+  result->reason = result->converged
+                       ? std::string("converged (") + ArrayTerminationName(termination) + ")"
+                       : std::string("not converged (") + ArrayTerminationName(termination) +
+                             "): positions usable, see warnings";
+  return Status::Ok();
+}
+
+}  // namespace calibd::core

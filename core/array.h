@@ -1,0 +1,161 @@
+// The `array` method: maximum-likelihood positions of the accelerometer triads of an inertial
+// sensor array from a free-motion recording (Carlsson, Skog, Jaldén, "On-the-fly geometric
+// calibration of inertial sensor arrays", seed 004).
+//
+// Model (the paper's Eqs. 1, 2 and 8), per time sample n, accelerometer triad k, gyro triad j:
+//   y_a,n^(k) = s_n + A_n r_k + eps_a,   A_n = Omega_{omega_n}^2 + Omega_{omega_dot_n},
+//   y_g,n^(j) = omega_n + eps_g,
+// with eps_a ~ N(0, sigma_a^2 I3), eps_g ~ N(0, sigma_g^2 I3). Unknowns: the motion
+// x_n = (omega_n, omega_dot_n, s_n) of every sample and the positions r_k of all triads but the
+// reference, which is held at its nominal position (Eq. 1 does not depend on the origin).
+//
+// Cost minimised by both solvers (the negative log-likelihood, times 2, up to a constant):
+//   C = sum_n [ sum_k |y_a,n^(k) - s_n - A_n r_k|^2 / sigma_a^2
+//             + sum_j |y_g,n^(j) - omega_n|^2 / sigma_g^2 ]
+// At the optimum C is close to its degrees of freedom 3(K+G)N - 9N - 3(K-1) when the configured
+// noise levels are right.
+//
+// Solvers:
+//  - kJoint (default): Levenberg-Marquardt over all 9N + 3(K-1) unknowns. The 9x9 block of each
+//    sample is eliminated by a Schur complement onto the 3(K-1) positions; since the Jacobian of a
+//    triad is affine in its position, the reduced matrix is accumulated from one 12x12 sum per
+//    sample, so one iteration costs O(N K) time (residuals) and O(N) for the algebra, memory
+//    O(N K) (the data) plus O(N) (motion), never a (9N)^2 matrix.
+//  - kBcd: the paper's Algorithm 1 (block coordinate descent): per-sample ML motion given the
+//    positions, then the closed-form position update of Eq. (9). Converges linearly and slowly.
+// Both start from the nominal positions and the per-sample ML motion there.
+//
+// Uncertainty: the inverse of the reduced (Schur) Fisher information at the estimate, i.e. the
+// Cramer-Rao bound of the positions given the configured sigma_a, sigma_g.
+//
+// Thread-safety: CalibrateArray is reentrant; it uses up to options.threads worker threads and
+// its result does not depend on the number of threads (fixed chunking, ordered reductions).
+#ifndef CALIBD_CORE_ARRAY_H_
+#define CALIBD_CORE_ARRAY_H_
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/status.h"
+
+namespace calibd::core {
+
+enum class ArraySolver { kJoint, kBcd };
+const char* ArraySolverName(ArraySolver solver);  // "joint" | "bcd"
+
+struct ArrayOptions {
+  // Accelerometer noise sigma_a, m/s^2, per axis. Required, > 0.
+  double accel_noise = 0;
+  // Gyroscope noise sigma_g, rad/s, per axis. Required, > 0.
+  double gyro_noise = 0;
+  // rad/s. When set (> 0), samples with any gyroscope |component| >= it are dropped and counted.
+  std::optional<double> gyro_saturation;
+  // Which optimiser. Default: joint Levenberg-Marquardt with Schur complement.
+  ArraySolver solver = ArraySolver::kJoint;
+  // Iteration limit (LM iterations for joint, sweeps of Algorithm 1 for bcd). 0 = solver default:
+  // kDefaultJointIterations (50) or kDefaultBcdIterations (500). Reaching it is not a failure:
+  // the result is kept with converged = false and a warning. >= 0.
+  int max_iterations = 0;
+  static constexpr int kDefaultJointIterations = 50;
+  static constexpr int kDefaultBcdIterations = 500;
+  // Converged when an iteration decreases the cost by at most tolerance * cost, or (joint) moves
+  // no position by more than tolerance * (largest |position| + tolerance). 0 = never stop early
+  // (only max_iterations, or no representable progress, ends the run). >= 0, < 1.
+  double tolerance = 1e-10;
+  // Worker threads; 0 = std::thread::hardware_concurrency(). >= 0.
+  int threads = 0;
+  // Called after every iteration with the iteration number (1-based) and the current positions
+  // (3 x K); returning false stops the solver (termination kUserStopped, converged = false).
+  // Optional; used by benchmarks to stop when a target accuracy is reached.
+  std::function<bool(int iteration, const Eigen::Matrix3Xd& positions)> callback;
+
+  bool IsValid(std::string* error) const;
+};
+
+struct ArrayProblem {
+  Eigen::Matrix3Xd nominal_positions;    // 3 x K, metres; the solvers' starting point
+  int reference = 0;                     // triad held fixed at its nominal position
+  Eigen::MatrixXd accel;                 // N x 3K (a0_x a0_y a0_z a1_x ...) m/s^2
+  Eigen::MatrixXd gyro;                  // N x 3G rad/s (all G triads measure the same omega)
+  std::vector<std::string> accel_names;  // K names ("a0"...); empty: "a<k>" is used
+};
+
+enum class ArrayTermination {
+  kNotRun,         // sentinel: CalibrateArray failed before solving
+  kConvergence,    // tolerance met
+  kNoProgress,     // joint: no step decreased the cost any more (numerical optimum)
+  kMaxIterations,  // iteration limit reached: usable, converged = false
+  kUserStopped,    // the callback returned false
+};
+const char* ArrayTerminationName(ArrayTermination termination);
+
+struct ArrayExcitation {
+  // Eigenvalues of sum_n A_n^T A_n at the estimate ((rad/s)^4 scale), ascending.
+  double min_eigenvalue = 0;
+  double max_eigenvalue = 0;
+  // What noise alone would contribute to min_eigenvalue: sum_n sigma_a^2 tr(M^-1)
+  // + 6 |omega_n|^2 sigma_g^2 / G, M = sum_k [r~_k]x^T [r~_k]x (centred positions).
+  double noise_floor = 0;
+  // Unit direction of the least excited position component (eigenvector of min_eigenvalue).
+  Eigen::Vector3d weakest_direction = Eigen::Vector3d::Zero();
+  // "good" (min_eigenvalue >= 100 noise_floor), "weak" (>= 3 noise_floor: warning),
+  // "insufficient" (kNotDeterminable).
+  std::string verdict = "insufficient";
+};
+
+struct ArrayResult {
+  // Whether positions may be used, and why (or why not).
+  bool usable = false;
+  std::string reason;
+
+  int reference = 0;
+  std::vector<std::string> names;       // K triad names
+  Eigen::Matrix3Xd positions;           // 3 x K estimates, metres (reference = nominal)
+  Eigen::Matrix3Xd offsets;             // positions - nominal
+  Eigen::Matrix3Xd position_std;        // 3 x K, sqrt(diag(CRB)); 0 for the reference
+  Eigen::MatrixXd position_covariance;  // 3(K-1) square CRB, triads in order without reference
+
+  ArraySolver solver = ArraySolver::kJoint;
+  ArrayTermination termination = ArrayTermination::kNotRun;
+  int iterations = 0;  // LM iterations (accepted or not) / BCD sweeps
+  bool converged = false;
+  std::vector<double> cost;  // cost C before the first and after every iteration
+
+  int64_t samples = 0;          // usable samples N
+  int64_t samples_dropped = 0;  // dropped for gyroscope saturation
+  int gyro_triads = 0;          // G
+
+  double residual_rms_accel = 0;  // sqrt(mean of squared accel residual components)
+  double residual_rms_gyro = 0;
+  double noise_estimate_accel = 0;  // from residuals, corrected for degrees of freedom
+  double noise_estimate_gyro = 0;
+
+  ArrayExcitation excitation;
+  // Fraction of samples with |omega x omega_dot| < 0.1 |omega||omega_dot| (Lemma 1: A_n rank 2).
+  double parallel_fraction = 0;
+
+  Eigen::VectorXd omega_norm;      // N, |omega_n| rad/s (estimates, for plots)
+  Eigen::VectorXd omega_dot_norm;  // N, |omega_dot_n| rad/s^2
+
+  std::vector<std::string> warnings;
+
+  // One line: usable, solver, termination, iterations, cost, samples.
+  std::string BriefReport() const;
+};
+
+// Estimates the triad positions. Errors:
+//  - kInvalidInput: options not valid, shapes inconsistent, reference out of range, NaN/Inf.
+//  - kNotDeterminable (message says why and what motion to record): fewer than 3 usable samples,
+//    fewer than 3 triads or triads on one line, no gyroscope triad, sum A_n^T A_n not exceeding
+//    the noise floor in some direction (e.g. rotation about one fixed axis only).
+// On kNotDeterminable, *result still carries whatever diagnostics were computed (usable = false).
+Status CalibrateArray(const ArrayProblem& problem, const ArrayOptions& options,
+                      ArrayResult* result);
+
+}  // namespace calibd::core
+
+#endif  // CALIBD_CORE_ARRAY_H_
