@@ -16,7 +16,7 @@ namespace calibd::server {
 // Reads the array keys of a config object (SPEC §3): geometry {"positions": [[x,y,z], ...K],
 // "reference": k (default 0)}, accel_noise (m/s²), gyro_noise (in gyro_unit), gyro_unit
 // ("rad/s" default | "deg/s"), gyro_saturation (in gyro_unit), solver ("joint" | "bcd"),
-// max_iterations (integer >= 0, 0 = solver default), tolerance (>= 0), threads (integer >= 0).
+// max_iterations (integer >= 0, 0 = solver default), tolerance (>= 0, < 1).
 // The common keys method and device are ignored. accelerometer_calibration is recognised but not
 // supported yet (kInvalidInput, issue #8). Unknown keys, missing required keys (geometry,
 // accel_noise, gyro_noise) and wrong types or values are kInvalidInput with WithField(key) and a

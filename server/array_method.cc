@@ -1,0 +1,346 @@
+#include "server/array_method.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "core/array_simulation.h"
+
+namespace calibd::server {
+namespace {
+
+using nlohmann::json;
+
+Status KeyError(const std::string& key, const std::string& message) {
+  return Status::InvalidInput("config key '" + key + "': " + message).WithField(key);
+}
+
+// A finite JSON number.
+Status ReadNumber(const json& v, const std::string& key, double* out) {
+  if (!v.is_number()) return KeyError(key, "must be a number, not " + std::string(v.type_name()));
+  *out = v.get<double>();
+  if (!std::isfinite(*out)) return KeyError(key, "must be finite");
+  return Status::Ok();
+}
+
+Status ReadPositive(const json& v, const std::string& key, double* out) {
+  Status s = ReadNumber(v, key, out);
+  if (!s.ok()) return s;
+  if (!(*out > 0)) return KeyError(key, "must be > 0");
+  return Status::Ok();
+}
+
+// An integral JSON number (1000 or 1000.0) within [lo, hi].
+Status ReadInteger(const json& v, const std::string& key, int64_t lo, int64_t hi, int64_t* out) {
+  double d = 0;
+  Status s = ReadNumber(v, key, &d);
+  if (!s.ok()) return s;
+  if (d != std::floor(d) || d < static_cast<double>(lo) || d > static_cast<double>(hi))
+    return KeyError(
+        key, "must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+  *out = static_cast<int64_t>(d);
+  return Status::Ok();
+}
+
+Status ReadString(const json& v, const std::string& key, std::string* out) {
+  if (!v.is_string()) return KeyError(key, "must be a string, not " + std::string(v.type_name()));
+  *out = v.get<std::string>();
+  return Status::Ok();
+}
+
+Status ParseGeometry(const json& g, core::ArrayProblem* problem) {
+  if (!g.is_object())
+    return KeyError("geometry",
+                    "must be an object {\"positions\": [[x,y,z], ...], "
+                    "\"reference\": k}, not " +
+                        std::string(g.type_name()));
+  for (auto it = g.begin(); it != g.end(); ++it)
+    if (it.key() != "positions" && it.key() != "reference")
+      return KeyError("geometry." + it.key(),
+                      "unknown key (geometry has \"positions\" and \"reference\")");
+  auto p = g.find("positions");
+  if (p == g.end())
+    return KeyError("geometry.positions", "missing: nominal positions [[x,y,z], ...] in metres");
+  if (!p->is_array() || p->empty())
+    return KeyError("geometry.positions", "must be a non-empty array of [x,y,z] arrays (metres)");
+  const int K = static_cast<int>(p->size());
+  problem->nominal_positions.resize(3, K);
+  for (int k = 0; k < K; ++k) {
+    const json& row = (*p)[k];
+    const std::string key = "geometry.positions[" + std::to_string(k) + "]";
+    if (!row.is_array() || row.size() != 3)
+      return KeyError(key, "must be an array of 3 numbers [x,y,z] (metres)");
+    for (int i = 0; i < 3; ++i) {
+      Status s = ReadNumber(row[i], key, &problem->nominal_positions(i, k));
+      if (!s.ok()) return s;
+    }
+  }
+  problem->reference = 0;
+  auto r = g.find("reference");
+  if (r != g.end()) {
+    int64_t ref = 0;
+    Status s = ReadInteger(*r, "geometry.reference", 0, K - 1, &ref);
+    if (!s.ok()) return s;
+    problem->reference = static_cast<int>(ref);
+  }
+  return Status::Ok();
+}
+
+json Num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+json Vec(const Eigen::Vector3d& v) { return json::array({Num(v.x()), Num(v.y()), Num(v.z())}); }
+
+std::string FormatG17(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  return buf;
+}
+
+}  // namespace
+
+Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
+                        core::ArrayOptions* options, bool* gyro_in_degrees) {
+  if (!config.is_object())
+    return Status::InvalidInput("the config must be a JSON object, not " +
+                                std::string(config.type_name()));
+  *options = core::ArrayOptions();
+  *gyro_in_degrees = false;
+  static const char* const kKeys[] = {"method",
+                                      "device",
+                                      "geometry",
+                                      "accel_noise",
+                                      "gyro_noise",
+                                      "gyro_unit",
+                                      "gyro_saturation",
+                                      "solver",
+                                      "max_iterations",
+                                      "tolerance",
+                                      "accelerometer_calibration"};
+  for (auto it = config.begin(); it != config.end(); ++it) {
+    if (std::find_if(std::begin(kKeys), std::end(kKeys),
+                     [&](const char* k) { return it.key() == k; }) == std::end(kKeys))
+      return KeyError(it.key(),
+                      "unknown key for method array (known: geometry, accel_noise, gyro_noise, "
+                      "gyro_unit, gyro_saturation, solver, max_iterations, tolerance, "
+                      "accelerometer_calibration, method, device)");
+  }
+  // Units first: they apply to gyro_noise and gyro_saturation.
+  if (auto u = config.find("gyro_unit"); u != config.end()) {
+    std::string unit;
+    Status s = ReadString(*u, "gyro_unit", &unit);
+    if (!s.ok()) return s;
+    if (unit == "deg/s")
+      *gyro_in_degrees = true;
+    else if (unit != "rad/s")
+      return KeyError("gyro_unit", "must be \"rad/s\" or \"deg/s\", not \"" + unit + "\"");
+  }
+  const double gyro_scale = *gyro_in_degrees ? core::kDegree : 1.0;
+
+  auto g = config.find("geometry");
+  if (g == config.end())
+    return KeyError("geometry", "missing: {\"positions\": [[x,y,z], ...], \"reference\": 0}");
+  Status s = ParseGeometry(*g, geometry_part);
+  if (!s.ok()) return s;
+
+  auto a = config.find("accel_noise");
+  if (a == config.end()) return KeyError("accel_noise", "missing: sigma_a in m/s^2");
+  s = ReadPositive(*a, "accel_noise", &options->accel_noise);
+  if (!s.ok()) return s;
+
+  auto gn = config.find("gyro_noise");
+  if (gn == config.end()) return KeyError("gyro_noise", "missing: sigma_g in gyro_unit");
+  s = ReadPositive(*gn, "gyro_noise", &options->gyro_noise);
+  if (!s.ok()) return s;
+  options->gyro_noise *= gyro_scale;
+
+  if (auto it = config.find("gyro_saturation"); it != config.end() && !it->is_null()) {
+    double v = 0;
+    s = ReadPositive(*it, "gyro_saturation", &v);
+    if (!s.ok()) return s;
+    options->gyro_saturation = v * gyro_scale;
+  }
+  if (auto it = config.find("solver"); it != config.end()) {
+    std::string solver;
+    s = ReadString(*it, "solver", &solver);
+    if (!s.ok()) return s;
+    if (solver == "joint")
+      options->solver = core::ArraySolver::kJoint;
+    else if (solver == "bcd")
+      options->solver = core::ArraySolver::kBcd;
+    else
+      return KeyError("solver", "must be \"joint\" or \"bcd\", not \"" + solver + "\"");
+  }
+  if (auto it = config.find("max_iterations"); it != config.end()) {
+    int64_t v = 0;
+    s = ReadInteger(*it, "max_iterations", 0, 1000000, &v);
+    if (!s.ok()) return s;
+    options->max_iterations = static_cast<int>(v);
+  }
+  if (auto it = config.find("tolerance"); it != config.end()) {
+    s = ReadNumber(*it, "tolerance", &options->tolerance);
+    if (!s.ok()) return s;
+    if (!(options->tolerance >= 0 && options->tolerance < 1))
+      return KeyError("tolerance", "must be >= 0 and < 1 (0: never stop early)");
+  }
+  if (config.contains("accelerometer_calibration"))
+    return KeyError("accelerometer_calibration",
+                    "not supported yet (issue #8): correct the accelerometer readings before "
+                    "uploading, or remove the key");
+  std::string error;
+  if (!options->IsValid(&error)) return Status::InvalidInput(error);
+  return Status::Ok();
+}
+
+Status RunArray(const ArrayRecording& recording, const json& config, json* result) {
+  core::ArrayProblem problem;
+  core::ArrayOptions options;
+  bool degrees = false;
+  Status s = ParseArrayConfig(config, &problem, &options, &degrees);
+  if (!s.ok()) return s;
+  const int K = static_cast<int>(problem.nominal_positions.cols());
+  const int K_rec = static_cast<int>(recording.accel_names.size());
+  if (K_rec != K)
+    return Status::InvalidInput("the recording has " + std::to_string(K_rec) +
+                                " accelerometer triads but geometry.positions has " +
+                                std::to_string(K) + " positions")
+        .WithField("geometry.positions");
+  problem.accel = recording.accel;
+  problem.gyro = recording.gyro;
+  if (degrees) problem.gyro *= core::kDegree;
+  problem.accel_names = recording.accel_names;
+
+  core::ArrayResult r;
+  s = core::CalibrateArray(problem, options, &r);
+  if (!s.ok()) return s;
+
+  const double gyro_out = degrees ? 1 / core::kDegree : 1.0;
+  json positions = json::array(), stds = json::array();
+  for (int k = 0; k < K; ++k) {
+    positions.push_back({{"name", r.names[k]},
+                         {"position", Vec(r.positions.col(k))},
+                         {"offset", Vec(r.offsets.col(k))}});
+    stds.push_back({{"name", r.names[k]}, {"std", Vec(r.position_std.col(k))}});
+  }
+  const double std_rms = K > 1 ? std::sqrt(r.position_std.squaredNorm() / (3.0 * (K - 1))) : 0.0;
+
+  json cost = json::array();
+  for (double c : r.cost) cost.push_back(Num(c));
+  const int64_t N = r.samples;
+  const int64_t stride = std::max<int64_t>(1, (N + 1999) / 2000);
+  json omega = json::array(), omega_dot = json::array();
+  for (int64_t n = 0; n < N; n += stride) {
+    omega.push_back(Num(r.omega_norm(n)));
+    omega_dot.push_back(Num(r.omega_dot_norm(n)));
+  }
+  json warnings = json::array();
+  for (const auto& w : r.warnings) warnings.push_back(w);
+
+  *result = {{"method", "array"},
+             {"parameters", {{"reference", r.reference}, {"positions", positions}}},
+             {"uncertainty", {{"positions", stds}, {"std_rms", Num(std_rms)}}},
+             {"diagnostics",
+              {{"solver", core::ArraySolverName(r.solver)},
+               {"iterations", r.iterations},
+               {"converged", r.converged},
+               {"termination", core::ArrayTerminationName(r.termination)},
+               {"cost", cost},
+               {"samples", r.samples},
+               {"samples_dropped", r.samples_dropped},
+               {"gyro_triads", r.gyro_triads},
+               {"gyro_unit", degrees ? "deg/s" : "rad/s"},
+               {"residual_rms",
+                {{"accelerometer", Num(r.residual_rms_accel)},
+                 {"gyroscope", Num(r.residual_rms_gyro * gyro_out)}}},
+               {"noise_estimate",
+                {{"accelerometer", Num(r.noise_estimate_accel)},
+                 {"gyroscope", Num(r.noise_estimate_gyro * gyro_out)}}},
+               {"noise_configured",
+                {{"accelerometer", Num(options.accel_noise)},
+                 {"gyroscope", Num(options.gyro_noise * gyro_out)}}},
+               {"excitation",
+                {{"min_eigenvalue", Num(r.excitation.min_eigenvalue)},
+                 {"max_eigenvalue", Num(r.excitation.max_eigenvalue)},
+                 {"noise_floor", Num(r.excitation.noise_floor)},
+                 {"weakest_direction", Vec(r.excitation.weakest_direction)},
+                 {"verdict", r.excitation.verdict}}},
+               {"parallel_fraction", Num(r.parallel_fraction)},
+               {"motion",
+                {{"stride", stride},
+                 {"omega_norm", omega},
+                 {"omega_dot_norm", omega_dot},
+                 {"units", {{"omega_norm", "rad/s"}, {"omega_dot_norm", "rad/s^2"}}}}}}},
+             {"warnings", warnings}};
+  return Status::Ok();
+}
+
+Status SimulateArrayFiles(const ArraySimulationFileOptions& options, std::string* csv, json* config,
+                          json* truth) {
+  if (options.gyro_unit != "rad/s" && options.gyro_unit != "deg/s")
+    return Status::InvalidInput("gyro_unit must be \"rad/s\" or \"deg/s\", not \"" +
+                                options.gyro_unit + "\"");
+  core::ArraySimulationOptions so;
+  so.samples = options.samples;
+  so.omega_norm = options.omega_norm_dps * core::kDegree;
+  so.omega_dot_norm = options.omega_dot_norm_dps2 * core::kDegree;
+  so.accel_noise = options.accel_noise;
+  so.gyro_noise = options.gyro_noise_dps * core::kDegree;
+  so.position_perturbation = options.position_perturbation;
+  so.seed = options.seed;
+  core::ArraySimulation sim;
+  Status s = core::SimulateArray(so, &sim);
+  if (!s.ok()) return s;
+  const bool degrees = options.gyro_unit == "deg/s";
+  const double gyro_scale = degrees ? 1 / core::kDegree : 1.0;
+  const int K = static_cast<int>(sim.problem.nominal_positions.cols());
+  const int G = static_cast<int>(sim.gyro_names.size());
+
+  std::string out = "t";
+  for (int k = 0; k < K; ++k)
+    for (const char* axis : {"_x", "_y", "_z"}) out += "," + sim.problem.accel_names[k] + axis;
+  for (int j = 0; j < G; ++j)
+    for (const char* axis : {"_x", "_y", "_z"}) out += "," + sim.gyro_names[j] + axis;
+  out += '\n';
+  const int64_t N = sim.problem.accel.rows();
+  out.reserve(out.size() + N * (3 * (K + G) + 1) * 24);
+  for (int64_t n = 0; n < N; ++n) {
+    out += FormatG17(static_cast<double>(n) / 100);
+    for (int c = 0; c < 3 * K; ++c) {
+      out += ',';
+      out += FormatG17(sim.problem.accel(n, c));
+    }
+    for (int c = 0; c < 3 * G; ++c) {
+      out += ',';
+      out += FormatG17(sim.problem.gyro(n, c) * gyro_scale);
+    }
+    out += '\n';
+  }
+  *csv = std::move(out);
+
+  json nominal = json::array(), true_positions = json::array();
+  for (int k = 0; k < K; ++k) {
+    nominal.push_back(Vec(sim.problem.nominal_positions.col(k)));
+    true_positions.push_back(
+        {{"name", sim.problem.accel_names[k]}, {"position", Vec(sim.true_positions.col(k))}});
+  }
+  *config = {
+      {"method", "array"},
+      {"geometry", {{"positions", nominal}, {"reference", sim.problem.reference}}},
+      {"accel_noise", options.accel_noise},
+      {"gyro_noise", degrees ? options.gyro_noise_dps : options.gyro_noise_dps * core::kDegree},
+      {"gyro_unit", options.gyro_unit}};
+  *truth = {{"method", "array"},
+            {"reference", sim.problem.reference},
+            {"positions", true_positions},
+            {"seed", options.seed},
+            {"options",
+             {{"samples", options.samples},
+              {"omega_norm_dps", options.omega_norm_dps},
+              {"omega_dot_norm_dps2", options.omega_dot_norm_dps2},
+              {"accel_noise", options.accel_noise},
+              {"gyro_noise_dps", options.gyro_noise_dps},
+              {"position_perturbation", options.position_perturbation},
+              {"gyro_unit", options.gyro_unit}}}};
+  return Status::Ok();
+}
+
+}  // namespace calibd::server
