@@ -1436,6 +1436,15 @@ std::string PairTimeCell(const JobSummary& a, const JobSummary& b) {
   return "<td>" + s + "</td>";
 }
 
+// Drift tables list at most the newest kMaxDriftPairs pairs (the plots show all calibrations).
+constexpr size_t kMaxDriftPairs = 60;
+size_t FirstDriftPair(size_t n) { return n > kMaxDriftPairs + 1 ? n - kMaxDriftPairs : 1; }
+std::string OmittedPairsNote(size_t n) {
+  if (n <= kMaxDriftPairs + 1) return "";
+  return "<p class=\"muted small\">" + std::to_string(n - 1 - kMaxDriftPairs) +
+         " older pairs not listed; the plots show every calibration.</p>";
+}
+
 std::string PcaDrift(const std::vector<const JobSummary*>& jobs) {
   std::vector<std::vector<PcaSensor>> sensors;
   for (const auto* j : jobs) sensors.push_back(ReadPcaSensors(j->result, json(), 3));
@@ -1453,7 +1462,7 @@ std::string PcaDrift(const std::vector<const JobSummary*>& jobs) {
     return nullptr;
   };
   std::string rows;
-  for (size_t k = 1; k < jobs.size(); ++k) {
+  for (size_t k = FirstDriftPair(jobs.size()); k < jobs.size(); ++k) {
     double worst_scale = kNaN, worst_angle = kNaN;
     std::string ws, wa, detail;
     for (const auto& n : names) {
@@ -1489,7 +1498,7 @@ std::string PcaDrift(const std::vector<const JobSummary*>& jobs) {
       "<th>when</th><th class=\"num\">largest \xCE\x94scale (ppm)</th><th>sensor</th>"
       "<th class=\"num\">largest axis change (mrad)</th><th>sensor</th><th>per sensor</th></tr>"
       "</thead><tbody>" +
-      rows + "</tbody></table></div>";
+      rows + "</tbody></table></div>" + OmittedPairsNote(jobs.size());
   // Plots over time, relative to the first calibration.
   const TimeAxis ax = MakeTimeAxis(jobs);
   std::vector<Series> scale_series, axis_series;
@@ -1542,7 +1551,7 @@ std::string ArrayDrift(const std::vector<const JobSummary*>& jobs) {
     return nullptr;
   };
   std::string rows;
-  for (size_t k = 1; k < jobs.size(); ++k) {
+  for (size_t k = FirstDriftPair(jobs.size()); k < jobs.size(); ++k) {
     double worst = kNaN, sum = 0;
     size_t n_used = 0;
     std::string wn, detail;
@@ -1579,7 +1588,7 @@ std::string ArrayDrift(const std::vector<const JobSummary*>& jobs) {
       "</th><th>when</th><th class=\"num\">RMS |\xCE\x94position| (\xC2\xB5m)</th>"
       "<th class=\"num\">largest |\xCE\x94position| (\xC2\xB5m)</th><th>triad</th>"
       "<th>per triad</th></tr></thead><tbody>" +
-      rows + "</tbody></table></div>";
+      rows + "</tbody></table></div>" + OmittedPairsNote(jobs.size());
   const TimeAxis ax = MakeTimeAxis(jobs);
   std::vector<Series> series;
   for (const auto& n : names) {

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -376,6 +377,22 @@ TEST(DevicePage, SingleCalibrationHasNoDrift) {
   ExpectDocument(page, "page-device");
   EXPECT_TRUE(Has(page, "Drift needs at least two succeeded calibrations"));
   ExpectDocument(RenderDevicePage(DeviceView{}), "page-device");
+}
+
+TEST(DevicePage, ManyCalibrationsKeepThePageSmall) {
+  DeviceView d;
+  d.serial = "ARRAY-7";
+  char ts[32];
+  for (int i = 0; i < 300; ++i) {
+    std::snprintf(ts, sizeof(ts), "2026-%02d-%02dT08:00:00Z", 1 + i / 28, 1 + i % 28);
+    d.jobs.push_back(
+        Job(i + 1, "ARRAY-7", "array", "succeeded", ts, ArrayResult(0, 1e-7 * (i % 7))));
+  }
+  const std::string page = RenderDevicePage(d);
+  ExpectDocument(page, "page-device");
+  EXPECT_TRUE(Has(page, "239 older pairs not listed"));
+  EXPECT_TRUE(Has(page, "plot-drift-position"));
+  EXPECT_LT(page.size(), 2u * 1024u * 1024u);
 }
 
 TEST(ErrorPage, EscapesMessageAndLinksHome) {
