@@ -130,17 +130,28 @@ struct MotionModel {
       // Evaluate the projected residuals at w.
       const double ww = w.squaredNorm();
       // z_k = y_k - (w (w . r_k) - r_k |w|^2)
-      z->noalias() = Y - w * (w.transpose() * r);
-      *z += ww * r;
-      sp = z->rowwise().mean();
-      Vec3 cross_sum = Vec3::Zero();
-      for (int k = 0; k < K; ++k) cross_sum += r_tilde.col(k).cross(z->col(k));
+      Vec3 z_sum = Vec3::Zero(), cross_sum = Vec3::Zero();
+      for (int k = 0; k < K; ++k) {
+        const Vec3 rk = r.col(k);
+        const Vec3 zk = Y.col(k) - w * w.dot(rk) + ww * rk;
+        z->col(k) = zk;
+        z_sum += zk;
+        cross_sum += r_tilde.col(k).cross(zk);
+      }
+      sp = z_sum / K;
       wd = M_inv * cross_sum;
-      // e_k = z_k - s' - wd x r~_k = z_k - s' + [r~_k]x wd ... computed in place in z.
-      z->colwise() -= sp;
-      for (int k = 0; k < K; ++k) z->col(k) -= wd.cross(r_tilde.col(k));
+      // e_k = z_k - s' - wd x r~_k, in place in z; Re = sum_k e_k r_k^T.
+      double ssr = 0;
+      Mat3 Re = Mat3::Zero();
+      for (int k = 0; k < K; ++k) {
+        const Vec3 ek = z->col(k) - sp - wd.cross(r_tilde.col(k));
+        ssr += ek.squaredNorm();
+        Re.col(0) += r(0, k) * ek;
+        Re.col(1) += r(1, k) * ek;
+        Re.col(2) += r(2, k) * ek;
+      }
       const Vec3 eg = gbar - w;
-      cost = wa * z->squaredNorm() + wg * (G * eg.squaredNorm() + gscatter);
+      cost = wa * ssr + wg * (G * eg.squaredNorm() + gscatter);
       if (done || it >= max_iterations) break;
       // Gauss-Newton step on omega.
       Mat3 F[3];
@@ -153,7 +164,6 @@ struct MotionModel {
         Jsum += (K * r_bar(i)) * F[i];
         B += Q[i] * F[i];
       }
-      const Mat3 Re = (*z) * r.transpose();  // column i: sum_k r_ki e_k
       Vec3 rhs = Vec3::Zero();
       for (int i = 0; i < 3; ++i) rhs += F[i].transpose() * Re.col(i);
       Mat3 normal = wa * (JtJ - Jsum.transpose() * Jsum / K - B.transpose() * M_inv * B) +
@@ -200,11 +210,10 @@ bool MotionPass(const Data& d, const Eigen::Matrix3Xd& r, const Weights& wt, int
                               max_gn, &z, &w, &wd, &s);
       x->col(n) << w, wd, s;
       const Mat3 A = MatrixA(w, wd);
-      acc.AtA.noalias() += A.transpose() * A;
+      acc.AtA.noalias() += A.transpose().lazyProduct(A);
       const ConstMap3X Y(d.ya.col(n).data(), 3, d.K);
-      z.noalias() = Y;
-      z.colwise() -= s;
-      acc.AtY.noalias() += A.transpose() * z;
+      const Mat3 At = A.transpose();
+      for (int k = 0; k < d.K; ++k) acc.AtY.col(k).noalias() += At.lazyProduct(Y.col(k) - s);
     }
   });
   total->cost = 0;
@@ -246,6 +255,53 @@ JointGeometry MakeJointGeometry(const Eigen::Matrix3Xd& r) {
   return g;
 }
 
+// L^-1 of the Cholesky factor H = L L^T of a symmetric positive definite 9x9 matrix (fixed-size
+// loops: Eigen's general solvers cost more than the arithmetic at this size). A non-positive
+// pivot (H not positive definite: cannot happen with >= 3 non-collinear triads and a gyroscope)
+// gives NaN, which the callers' finiteness checks catch.
+Mat9 CholeskyFactor(const Mat9& H) {
+  Mat9 L = Mat9::Zero();
+  for (int j = 0; j < 9; ++j) {
+    double d = H(j, j);
+    for (int k = 0; k < j; ++k) d -= L(j, k) * L(j, k);
+    const double ljj = std::sqrt(d);  // NaN when d < 0
+    L(j, j) = ljj;
+    for (int i = j + 1; i < 9; ++i) {
+      double v = H(i, j);
+      for (int k = 0; k < j; ++k) v -= L(i, k) * L(j, k);
+      L(i, j) = v / ljj;
+    }
+  }
+  return L;
+}
+
+// H^-1 b by forward and back substitution with the Cholesky factor L.
+Vec9 CholeskySolve(const Mat9& L, Vec9 b) {
+  for (int i = 0; i < 9; ++i) {
+    for (int k = 0; k < i; ++k) b(i) -= L(i, k) * b(k);
+    b(i) /= L(i, i);
+  }
+  for (int i = 8; i >= 0; --i) {
+    for (int k = i + 1; k < 9; ++k) b(i) -= L(k, i) * b(k);
+    b(i) /= L(i, i);
+  }
+  return b;
+}
+
+Mat9 InverseCholeskyFactor(const Mat9& H) {
+  const Mat9 L = CholeskyFactor(H);
+  Mat9 Li = Mat9::Zero();
+  for (int j = 0; j < 9; ++j) {
+    Li(j, j) = 1 / L(j, j);
+    for (int i = j + 1; i < 9; ++i) {
+      double v = 0;
+      for (int k = j; k < i; ++k) v -= L(i, k) * Li(k, j);
+      Li(i, j) = v / L(i, i);
+    }
+  }
+  return Li;
+}
+
 struct SampleBlocks {
   Mat3 A;
   Mat3 F[3];
@@ -268,11 +324,11 @@ void BuildBlocks(const Vec3& w, const Vec3& wd, const Mat4& Lt, double wa, doubl
     Et.block<3, 9>(3 * a, 0) = Lt(a, 0) * E.block<3, 9>(0, 0);
     for (int bb = 1; bb < 4; ++bb) Et.block<3, 9>(3 * a, 0) += Lt(a, bb) * E.block<3, 9>(3 * bb, 0);
   }
-  b->H.noalias() = wa * Et.transpose() * Et;
+  b->H.noalias() = wa * Et.transpose().lazyProduct(Et);
   b->H.topLeftCorner<3, 3>().diagonal().array() += wgG;
   if (mu > 0) b->H.diagonal() *= (1 + mu);
   for (int a = 0; a < 4; ++a)
-    b->P.block<9, 3>(0, 3 * a).noalias() = E.block<3, 9>(3 * a, 0).transpose() * b->A;
+    b->P.block<9, 3>(0, 3 * a).noalias() = E.block<3, 9>(3 * a, 0).transpose().lazyProduct(b->A);
 }
 
 struct LinearSums {
@@ -295,17 +351,25 @@ void LinearizePass(const Data& d, const Eigen::Matrix3Xd& r, const JointGeometry
   ForEachChunk(d.N, threads, [&](int64_t c, int64_t begin, int64_t end) {
     LinearSums& acc = sums[c];
     acc.br = Eigen::Matrix3Xd::Zero(3, d.K);
-    Eigen::Matrix3Xd e(3, d.K);
     SampleBlocks b;
     for (int64_t n = begin; n < end; ++n) {
       const Vec3 w = x.col(n).head<3>(), wd = x.col(n).segment<3>(3), s = x.col(n).tail<3>();
       BuildBlocks(w, wd, geo.Lt, wt.wa, wgG, mu, &b);
       const ConstMap3X Y(d.ya.col(n).data(), 3, d.K);
-      e.noalias() = Y - b.A * r;
-      e.colwise() -= s;
-      const double ssr_a = e.squaredNorm();
-      const Eigen::Matrix<double, 3, 4> f = e * geo.c.transpose();
-      acc.br.noalias() += b.A.transpose() * e;
+      // Residuals e_k = y_k - s - A r_k; f = sum_k e_k c_k^T; br_k += A^T e_k.
+      double ssr_a = 0;
+      Eigen::Matrix<double, 3, 4> f = Eigen::Matrix<double, 3, 4>::Zero();
+      const Mat3 At = b.A.transpose();
+      for (int k = 0; k < d.K; ++k) {
+        const Vec3 rk = r.col(k);
+        const Vec3 ek = Y.col(k) - s - b.A.lazyProduct(rk);
+        ssr_a += ek.squaredNorm();
+        f.col(0) += ek;
+        f.col(1) += rk(0) * ek;
+        f.col(2) += rk(1) * ek;
+        f.col(3) += rk(2) * ek;
+        acc.br.col(k).noalias() += At.lazyProduct(ek);
+      }
       const Vec3 eg = d.gbar.col(n) - w;
       const double ssr_g = d.G * eg.squaredNorm() + d.gscatter(n);
       acc.cost += wt.wa * ssr_a + wt.wg * ssr_g;
@@ -318,17 +382,18 @@ void LinearizePass(const Data& d, const Eigen::Matrix3Xd& r, const JointGeometry
       g *= wt.wa;
       g.head<3>() += wgG * eg;
       bx->col(n) = g;
-      const Eigen::LLT<Mat9> llt(b.H);
-      const Mat9x12 HiP = llt.solve(b.P);
-      acc.T.noalias() += b.P.transpose() * HiP;
-      acc.t.noalias() += HiP.transpose() * g;
-      acc.AtA.noalias() += b.A.transpose() * b.A;
+      // H = L L^T; with Z = L^-1 P and u = L^-1 g: P^T H^-1 P = Z^T Z, P^T H^-1 g = Z^T u.
+      const Mat9 Linv = InverseCholeskyFactor(b.H);
+      const Mat9x12 Z = Linv.lazyProduct(b.P);
+      const Vec9 u = Linv.lazyProduct(g);
+      acc.T.noalias() += Z.transpose().lazyProduct(Z);
+      acc.t.noalias() += Z.transpose().lazyProduct(u);
+      acc.AtA.noalias() += At.lazyProduct(b.A);
       if (diagnostics) {
         acc.ssr_a += ssr_a;
         acc.ssr_g += ssr_g;
-        Eigen::Matrix<double, 9, 3> unit = Eigen::Matrix<double, 9, 3>::Zero();
-        unit.topRows<3>().setIdentity();
-        acc.lev_g += wgG * llt.solve(unit).topRows<3>().trace();
+        // tr([H^-1]_omega,omega) = squared norm of the first 3 columns of L^-1.
+        acc.lev_g += wgG * Linv.leftCols<3>().squaredNorm();
       }
     }
   });
@@ -355,21 +420,22 @@ double StepPass(const Data& d, const Eigen::Matrix3Xd& r_trial, const JointGeome
   std::vector<double> sums(NumChunks(d.N), 0.0);
   const double wgG = wt.wg * d.G;
   ForEachChunk(d.N, threads, [&](int64_t c, int64_t begin, int64_t end) {
-    Eigen::Matrix3Xd e(3, d.K);
     SampleBlocks b;
     double cost = 0;
     for (int64_t n = begin; n < end; ++n) {
       BuildBlocks(x.col(n).head<3>(), x.col(n).segment<3>(3), geo.Lt, wt.wa, wgG, mu, &b);
-      const Vec9 rhs = bx.col(n) - wt.wa * (b.P * dpos);
-      const Vec9 xn = x.col(n) + Eigen::LLT<Mat9>(b.H).solve(rhs);
+      const Vec9 rhs = bx.col(n) - wt.wa * b.P.lazyProduct(dpos);
+      const Vec9 xn = x.col(n) + CholeskySolve(CholeskyFactor(b.H), rhs);
       x_trial->col(n) = xn;
       const Vec3 w = xn.head<3>(), s = xn.tail<3>();
       const Mat3 A = MatrixA(w, xn.segment<3>(3));
       const ConstMap3X Y(d.ya.col(n).data(), 3, d.K);
-      e.noalias() = Y - A * r_trial;
-      e.colwise() -= s;
-      cost += wt.wa * e.squaredNorm() +
-              wt.wg * (d.G * (d.gbar.col(n) - w).squaredNorm() + d.gscatter(n));
+      double ssr_a = 0;
+      for (int k = 0; k < d.K; ++k) {
+        const Vec3 rk = r_trial.col(k);
+        ssr_a += (Y.col(k) - s - A.lazyProduct(rk)).squaredNorm();
+      }
+      cost += wt.wa * ssr_a + wt.wg * (d.G * (d.gbar.col(n) - w).squaredNorm() + d.gscatter(n));
     }
     sums[c] = cost;
   });
