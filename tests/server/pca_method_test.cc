@@ -25,7 +25,9 @@ std::set<std::string> Keys(const json& object) {
 
 // Every number in the tree is finite (NaN/Inf must have become null).
 void ExpectNoNonFinite(const json& x) {
-  if (x.is_number_float()) EXPECT_TRUE(std::isfinite(x.get<double>()));
+  if (x.is_number_float()) {
+    EXPECT_TRUE(std::isfinite(x.get<double>()));
+  }
   if (x.is_structured()) {
     for (const auto& item : x) ExpectNoNonFinite(item);
   }
