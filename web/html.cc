@@ -239,6 +239,7 @@ std::string FormatSI(double v, std::string_view unit, int sig) {
 
 std::string FormatDuration(double seconds) {
   if (!std::isfinite(seconds) || seconds < 0) return "\xE2\x80\x93";
+  if (seconds > 1e12) return FormatSig(seconds / 86400, 3) + " d";
   char buf[64];
   if (seconds < 60) {
     return FormatSig(seconds, seconds < 10 ? 2 : 3) + " s";

@@ -163,7 +163,7 @@ std::string JobLink(int64_t id) {
 }
 
 std::string FormatUnixTime(double t, bool seconds) {
-  if (!std::isfinite(t)) return kDash;
+  if (!std::isfinite(t) || std::fabs(t) > 1e12) return kDash;
   const auto tt = static_cast<time_t>(std::floor(t));
   std::tm tm{};
   if (gmtime_r(&tt, &tm) == nullptr) return kDash;

@@ -30,6 +30,7 @@ constexpr const char* kDashes[] = {"", "6 3", "2 2", "8 3 2 3"};
 // Compact coordinate: one decimal, no trailing ".0".
 std::string N(double v) {
   if (!std::isfinite(v)) v = 0;
+  v = std::max(-1e6, std::min(1e6, v));  // far outside any viewBox: clamp, keep the SVG small
   char buf[32];
   std::snprintf(buf, sizeof(buf), "%.1f", v);
   std::string s(buf);
@@ -970,7 +971,7 @@ Histogram MakeHistogram(const std::vector<double>& values, int bins, std::string
   h.label = std::move(label);
   Extent e;
   for (double v : values) e.Add(v);
-  if (e.empty() || bins < 1) return h;
+  if (e.empty() || bins < 1 || !std::isfinite(e.hi - e.lo)) return h;
   double lo = e.lo, hi = e.hi;
   if (!(hi > lo)) {
     const double pad = lo == 0 ? 0.5 : std::fabs(lo) * 0.05;
@@ -982,8 +983,10 @@ Histogram MakeHistogram(const std::vector<double>& values, int bins, std::string
   h.counts.assign(static_cast<size_t>(bins), 0);
   for (double v : values) {
     if (!std::isfinite(v)) continue;
-    auto k = static_cast<int64_t>(std::floor((v - lo) / (hi - lo) * bins));
-    k = std::max<int64_t>(0, std::min<int64_t>(bins - 1, k));
+    double pos = std::floor((v - lo) / (hi - lo) * bins);
+    if (!std::isfinite(pos)) continue;
+    pos = std::max(0.0, std::min(static_cast<double>(bins - 1), pos));
+    const auto k = static_cast<int64_t>(pos);
     h.counts[static_cast<size_t>(k)] += 1;
   }
   return h;

@@ -296,6 +296,25 @@ TEST(BarChart, LogAxisSkipsNonPositiveAndHandlesNoCategories) {
   EXPECT_NE(many.find("rotate(-40"), std::string::npos);
 }
 
+TEST(XYPlot, ExtremeMagnitudesStayFiniteAndSmall) {
+  Series s;
+  s.x = {-1e308, 0, 1e308, 4.9e-324};
+  s.y = {1e308, -1e308, 4.9e-324, 0};
+  s.y_err = {1e308, 1e308, 1e308, 1e308};
+  s.ellipses = {{1e308, 1e308, 1e308}, {-1, 0, -1}, {0, 0, 0}, {1, 2, 3}};
+  PlotOptions o;
+  o.name = "extreme";
+  const std::string svg = RenderXYPlot(o, {s});
+  ExpectValidSvg(svg, "extreme");
+  EXPECT_LT(svg.size(), 20000u);
+  o.y.type = ScaleType::kLog10;
+  o.x.type = ScaleType::kLog10;
+  ExpectValidSvg(RenderXYPlot(o, {s}), "extreme");
+  ExpectValidSvg(RenderBarChart(o, {"a", "b"}, {{"v", {1e308, 4.9e-324}, {1e308}, 3}}), "extreme");
+  ExpectValidSvg(RenderHistogram(o, {MakeHistogram({-1e308, 1e308}, 10)}), "extreme");
+  EXPECT_EQ(FormatDuration(1e300).find("d"), FormatDuration(1e300).size() - 1);
+}
+
 TEST(HistogramTest, CountsAllFiniteValuesAndRendersDegenerateOnes) {
   const Histogram h = MakeHistogram({0, 1, 2, 3, NAN, 4}, 4);
   ASSERT_EQ(h.counts.size(), 4u);
