@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cstring>
 #include <ctime>
+#include <exception>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <utility>
@@ -129,7 +130,7 @@ Status LoadRecording(Db* db, int64_t id, RecordingInfo* out) {
   auto sensors = nlohmann::json::parse(info.sensors_json, nullptr, false);
   summary["columns"] = columns.is_discarded() ? nlohmann::json::array() : columns;
   summary["sensors"] = sensors.is_discarded() ? nlohmann::json::array() : sensors;
-  info.summary_json = summary.dump();
+  info.summary_json = summary.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   *out = std::move(info);
   return Status::Ok();
 }
@@ -375,7 +376,11 @@ Status Store::Write(const std::function<Status(Db*)>& op) {
         Writer* w = pending[i];
         s = db->Exec("SAVEPOINT batch_op");
         if (s.ok()) {
-          s = (*w->op)(db);
+          try {
+            s = (*w->op)(db);
+          } catch (const std::exception& e) {  // never leave the queue without a leader
+            s = Status::Internal(std::string("storage: unexpected exception: ") + e.what());
+          }
           if (!db->InTransaction()) {
             // SQLite already rolled everything back (e.g. SQLITE_FULL, IOERR): this call fails,
             // the others run again in a fresh transaction.
