@@ -94,7 +94,7 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
   });
 
   http->Get(R"(/jobs/([^/]+))", [store](const httplib::Request& req, httplib::Response& res) {
-    int64_t id;
+    int64_t id = 0;
     if (!ParsePositive(req.matches[1], &id)) {
       return SendPage(res, 404, web::RenderErrorPage(404, "no such job"));
     }

@@ -735,7 +735,7 @@ void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Respon
 }
 
 void Service::Impl::HandleGetJob(const httplib::Request& req, httplib::Response& res) {
-  int64_t id;
+  int64_t id = 0;
   if (!ParseId(req.matches[1], &id)) {
     SendError(res, 404, "not_found", "no such job");
     return;
@@ -898,7 +898,7 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
 }
 
 void Service::Impl::HandleRecording(const httplib::Request& req, httplib::Response& res) {
-  int64_t id;
+  int64_t id = 0;
   if (!ParseId(req.matches[1], &id)) {
     SendError(res, 404, "not_found", "no such recording");
     return;
@@ -910,7 +910,7 @@ void Service::Impl::HandleRecording(const httplib::Request& req, httplib::Respon
 }
 
 void Service::Impl::HandleRecordingData(const httplib::Request& req, httplib::Response& res) {
-  int64_t id;
+  int64_t id = 0;
   if (!ParseId(req.matches[1], &id)) {
     SendError(res, 404, "not_found", "no such recording");
     return;

@@ -1,0 +1,99 @@
+#!/usr/bin/env bash
+# Renders every HTML page of a real server in Debian's headless Chromium: a screenshot per page
+# (kept in $CALIBD_SCREENSHOT_DIR when set) and checks of the DOM dump for the expected tables
+# and plots. Usage: browser_pages.sh CALIBD_BINARY
+set -euo pipefail
+bin=$(realpath "$1")
+chromium=$(command -v chromium || true)
+[ -n "$chromium" ] || { echo "chromium is not installed (scripts/setup.sh installs it)"; exit 1; }
+tmp=$(mktemp -d)
+shots=${CALIBD_SCREENSHOT_DIR:-$tmp/shots}
+mkdir -p "$shots"
+server_pid=
+cleanup() {
+  [ -n "$server_pid" ] && kill "$server_pid" 2>/dev/null && wait "$server_pid" 2>/dev/null
+  rm -rf "$tmp"
+}
+trap cleanup EXIT
+
+"$bin" serve --db "$tmp/calibd.db" --listen 127.0.0.1:0 --no-access-log 2>"$tmp/server.log" &
+server_pid=$!
+port=
+for _ in $(seq 1 100); do
+  port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\).*|\1|p' "$tmp/server.log")
+  [ -n "$port" ] && break
+  sleep 0.1
+done
+[ -n "$port" ] || { cat "$tmp/server.log"; exit 1; }
+base=http://127.0.0.1:$port
+
+"$bin" simulate pca --out "$tmp/pca" --seed 3 --positions 60 2>/dev/null
+"$bin" simulate array --out "$tmp/array" --seed 3 --samples 1000 2>/dev/null
+upload() {  # upload DIR DEVICE -> job id
+  curl -sf -F "recording=@$1/recording.csv" -F "config=@$1/config.json" \
+    "$base/api/v1/recordings?device=$2" | sed -n 's/.*"id": \([0-9]*\),.*/\1/p' | tail -n 1
+}
+wait_job() {
+  for _ in $(seq 1 600); do
+    curl -sf "$base/api/v1/jobs/$1" | grep -q '"status": "\(succeeded\|failed\)"' && return 0
+    sleep 0.1
+  done
+  echo "job $1 did not finish"; exit 1
+}
+j1=$(upload "$tmp/pca" 'SN-<script>alert(1)</script>')
+wait_job "$j1"
+"$bin" simulate pca --out "$tmp/pca2" --seed 4 --positions 60 2>/dev/null
+j2=$(upload "$tmp/pca2" 'SN-<script>alert(1)</script>')
+wait_job "$j2"
+j3=$(upload "$tmp/array" 'ARRAY-1')
+wait_job "$j3"
+# A failed job: too few positions.
+printf 'position,s1,s2,s3\np1,1,0,0\np2,0,1,0\n' >"$tmp/bad.csv"
+j4=$(curl -sf -H 'Content-Type: text/csv' --data-binary @"$tmp/bad.csv" \
+  "$base/api/v1/recordings?method=pca&device=%22%3E%3Cimg%20src%3Dx%20onerror%3Dalert(1)%3E" |
+  sed -n 's/.*"id": \([0-9]*\),.*/\1/p' | tail -n 1)
+wait_job "$j4"
+
+render() {  # render NAME PATH -> DOM dump in $tmp/NAME.html, screenshot in $shots/NAME.png
+  local flags=(--headless --no-sandbox --disable-gpu --disable-background-networking
+    --disable-component-update --disable-sync --no-first-run --disable-quic
+    --user-data-dir="$tmp/profile-$1" --window-size=1280,2400 --hide-scrollbars)
+  timeout 120 "$chromium" "${flags[@]}" --dump-dom "$base$2" >"$tmp/$1.html" 2>/dev/null
+  timeout 120 "$chromium" "${flags[@]}" --screenshot="$shots/$1.png" "$base$2" >/dev/null 2>&1
+  [ -s "$shots/$1.png" ] || { echo "no screenshot of $2"; exit 1; }
+}
+passed=0 failed=0
+expect() {  # expect NAME PATTERN...
+  local name=$1; shift
+  for pattern in "$@"; do
+    if grep -q -- "$pattern" "$tmp/$name.html"; then passed=$((passed + 1)); else
+      failed=$((failed + 1)); echo "FAIL: $name: no '$pattern'"; fi
+  done
+}
+reject() {  # reject NAME PATTERN...: hostile markup must never reach the DOM as markup
+  local name=$1; shift
+  for pattern in "$@"; do
+    if grep -q -- "$pattern" "$tmp/$name.html"; then
+      failed=$((failed + 1)); echo "FAIL: $name: found '$pattern'"; else passed=$((passed + 1)); fi
+  done
+}
+render history /
+render pca "/jobs/$j2"
+render array "/jobs/$j3"
+render failed "/jobs/$j4"
+render device "/devices/SN-%3Cscript%3Ealert(1)%3C%2Fscript%3E"
+render missing /jobs/999999
+
+expect history 'class="page-history' 'table-history' 'form class="filters\|class="filters'
+expect pca 'class="page-job' 'table-pca-parameters' 'plot-singular-values' 'plot-magnitude-error' \
+  'plot-residual-rms' 'plot-axes-xy' 'plot-axes-xz' 'table-diagnostics'
+expect array 'table-array-parameters' 'plot-cost' 'plot-positions-xy' 'plot-positions-xz'
+expect failed 'callout-error' 'badge-failed'
+expect device 'class="page-device' 'table-calibrations' 'table-drift-pca'
+expect missing 'class="page-error'
+for page in history pca array failed device; do
+  reject "$page" '<script' '<img' 'onerror='
+done
+echo "browser pages: screenshots in $shots"
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]
