@@ -6,7 +6,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -293,6 +295,67 @@ TEST(JobPage, ResultWithMissingKeysAndWrongTypesStillRenders) {
     HistoryView h;
     h.jobs = {v.job};
     ExpectDocument(RenderHistoryPage(h), "page-history");
+  }
+}
+
+// Replaces one randomly chosen value anywhere in `j` by a value of a random other type.
+void Mutate(json* j, std::mt19937* rng) {
+  std::vector<json*> nodes;
+  std::vector<json*> stack{j};
+  while (!stack.empty()) {
+    json* n = stack.back();
+    stack.pop_back();
+    nodes.push_back(n);
+    if (n->is_structured()) {
+      for (auto& c : *n) stack.push_back(&c);
+    }
+  }
+  json* target = nodes[(*rng)() % nodes.size()];
+  switch ((*rng)() % 7) {
+    case 0:
+      *target = nullptr;
+      break;
+    case 1:
+      *target = "<b>x</b>";
+      break;
+    case 2:
+      *target = -1e300;
+      break;
+    case 3:
+      *target = json::array({1, "a", nullptr});
+      break;
+    case 4:
+      *target = json::object({{"k", 1}});
+      break;
+    case 5:
+      *target = std::numeric_limits<double>::quiet_NaN();
+      break;
+    default:
+      *target = 0;
+      break;
+  }
+}
+
+TEST(JobPage, RandomlyCorruptedResultsAlwaysRender) {
+  std::mt19937 rng(12345);
+  for (int round = 0; round < 300; ++round) {
+    JobView v;
+    const bool pca = round % 2 == 0;
+    json result = pca ? PcaResult() : ArrayResult(50);
+    json config = pca ? PcaConfig() : ArrayConfig();
+    for (int m = 0; m < 1 + round % 5; ++m) Mutate(&result, &rng);
+    if (round % 3 == 0) Mutate(&config, &rng);
+    v.job = Job(round, "D", pca ? "pca" : "array", "succeeded", "2026-01-01T00:00:00Z", result);
+    v.config = config;
+    const std::string page = RenderJobPage(v);
+    ExpectDocument(page, "page-job");
+    EXPECT_FALSE(Has(page, "<b>"));
+    DeviceView d;
+    d.serial = "D";
+    d.jobs = {v.job, v.job};
+    d.jobs[1].id = round + 1000;
+    d.jobs[1].created_at = "2026-02-01T00:00:00Z";
+    ExpectDocument(RenderDevicePage(d), "page-device");
   }
 }
 
