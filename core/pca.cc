@@ -717,6 +717,36 @@ Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaRes
                                Num(*options.noise_std) +
                                ": the uncertainties use the given value; check it.");
   }
+  {
+    // Outlying positions: |v_j| far from c compared with the spread of the others (robust:
+    // median absolute deviation), e.g. the device moved while a reading was averaged.
+    const VectorXd& err = result->magnitude_error;
+    std::vector<double> sorted(err.data(), err.data() + n);
+    std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
+    const double med = sorted[n / 2];
+    for (double& x : sorted) x = std::abs(x - med);
+    std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
+    const double spread = 1.4826 * sorted[n / 2];
+    std::string outliers;
+    int count = 0;
+    for (int j = 0; j < n && n >= 10; ++j) {
+      if (std::abs(err(j) - med) > 6 * spread && std::abs(err(j)) > 1e-9 * c) {
+        if (++count <= 10) {
+          outliers += (outliers.empty() ? "" : ", ") + (problem.position_labels.empty()
+                                                            ? std::to_string(j + 1)
+                                                            : problem.position_labels[j]);
+        }
+      }
+    }
+    if (count > 0) {
+      result->warnings.push_back(
+          std::to_string(count) + " position" + (count == 1 ? "" : "s") + " (" + outliers +
+          (count > 10 ? ", ..." : "") +
+          ") disagree with a field of constant magnitude far more than the others (see "
+          "magnitude_error): was the device moving, or the field disturbed, while averaging? "
+          "Consider re-recording or removing them.");
+    }
+  }
   if (result->rank_gap < 10 * options.min_rank_gap) {
     result->warnings.push_back(
         "The gap between singular values " + std::to_string(d) + " and " + std::to_string(d + 1) +

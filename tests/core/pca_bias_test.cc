@@ -296,6 +296,34 @@ TEST(PcaBiasEstimate, ReportedUncertaintyMatchesMonteCarloSpread) {
   }
 }
 
+// The single-triad case (m = d = 3, n = 30): reported bias and scale uncertainties are honest.
+TEST(PcaBiasEstimate, ReportedUncertaintyIsHonestForOneTriad) {
+  const Triad t = MakeTriad(3, 30, 9.81, 0.0, 0.3, 5);
+  const double sigma = 0.02;
+  const int trials = 300;
+  VectorXd bias_sq = VectorXd::Zero(3), scale_sq = VectorXd::Zero(3);
+  VectorXd rep_bias = VectorXd::Zero(3), rep_scale = VectorXd::Zero(3);
+  for (int k = 0; k < trials; ++k) {
+    PcaRandom rng(40000 + k);
+    PcaResult r;
+    ASSERT_TRUE(
+        CalibratePca(Problem(t.m + sigma * rng.NormalMatrix(3, 30)), Affine(3, 9.81), &r).ok());
+    for (int i = 0; i < 3; ++i) {
+      bias_sq(i) += std::pow(r.b(i) - t.b(i), 2) / trials;
+      scale_sq(i) += std::pow(r.sensors[i].scale - t.a.col(i).norm(), 2) / trials;
+      rep_bias(i) += r.sensors[i].bias_std / trials;
+      rep_scale(i) += r.sensors[i].scale_std / trials;
+    }
+  }
+  for (int i = 0; i < 3; ++i) {
+    const double rb = std::sqrt(bias_sq(i)) / rep_bias(i);
+    const double rs = std::sqrt(scale_sq(i)) / rep_scale(i);
+    std::printf("triad axis %d observed/reported: bias %.3f, scale %.3f\n", i, rb, rs);
+    EXPECT_NEAR(rb, 1.0, 0.2);
+    EXPECT_NEAR(rs, 1.0, 0.2);
+  }
+}
+
 TEST(PcaBiasEstimate, RefineNeverRaisesTheCost) {
   for (int t = 0; t < 30; ++t) {
     const Triad tr = MakeTriad(3, 12, 1.0, 0.05, 0.2, 300 + t);

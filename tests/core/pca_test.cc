@@ -258,6 +258,23 @@ TEST(PcaCalibration, UncertaintyUndefinedWithoutRedundancyAndNoNoiseGiven) {
   EXPECT_TRUE(warned);
 }
 
+TEST(PcaCalibration, WarnsAboutPositionsOffTheSphere) {
+  PcaSimulationOptions so;
+  so.noise_std = 0.001;
+  const PcaSimulation sim = SimulatePca(so);
+  PcaProblem p = Problem(sim.m);
+  for (int j = 0; j < so.positions; ++j) p.position_labels.push_back("pos" + std::to_string(j));
+  PcaResult r;
+  ASSERT_TRUE(CalibratePca(p, KnownMagnitude(3, 1.0), &r).ok());
+  for (const auto& w : r.warnings) EXPECT_EQ(w.find("constant magnitude"), std::string::npos) << w;
+  p.m.col(17) *= 1.05;  // the field was 5% stronger at one position
+  ASSERT_TRUE(CalibratePca(p, KnownMagnitude(3, 1.0), &r).ok());
+  bool warned = false;
+  for (const auto& w : r.warnings) warned |= w.find("1 position (pos17)") != std::string::npos;
+  EXPECT_TRUE(warned);
+  EXPECT_NEAR(r.magnitude_error(17), 0.05, 0.01);
+}
+
 TEST(PcaProcrustes, ReflectionBeatsProperRotationOnMirroredEstimate) {
   PcaRandom rng(8);
   const MatrixXd a = PcaModelSensitivities() + 0.01 * rng.NormalMatrix(3, 12);
