@@ -124,7 +124,7 @@ TEST(ParseArrayConfig, ErrorsNameTheKey) {
 
 ArrayRecording RecordingFromCsv(const std::string& csv) {
   RecordingParser parser("recording.csv", true);
-  const Status s = ParseRecording(csv, "recording.csv", &parser);
+  const Status s = ParseRecording(csv, &parser);
   EXPECT_TRUE(s.ok()) << s.ToString();
   ArrayRecording rec;
   EXPECT_TRUE(parser.TakeArray(&rec).ok());
