@@ -21,7 +21,7 @@ trap cleanup EXIT
 "$bin" serve --db "$tmp/calibd.db" --listen 127.0.0.1:0 --no-access-log 2>"$tmp/server.log" &
 server_pid=$!
 for _ in $(seq 1 100); do
-  port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\).*|\1|p' "$tmp/server.log")
+  port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\).*|\1|p' "$tmp/server.log" 2>/dev/null || true)
   [ -n "$port" ] && break; sleep 0.1
 done
 base=http://127.0.0.1:$port

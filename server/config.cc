@@ -74,6 +74,11 @@ Status ParseJsonText(std::string_view text, const std::string& what, json* out) 
 Status ConfigFromQuery(const std::multimap<std::string, std::string>& params, json* config) {
   *config = json::object();
   for (const auto& [key, value] : params) {
+    if (!IsValidUtf8(key) || !IsValidUtf8(value)) {
+      return Status::InvalidInput("query parameter '" + std::string(IsValidUtf8(key) ? key : "?") +
+                                  "' is not valid UTF-8")
+          .WithField(IsValidUtf8(key) ? key : "");
+    }
     if (config->contains(key)) {
       return Status::InvalidInput("query parameter '" + key + "' given more than once")
           .WithField(key);

@@ -32,6 +32,10 @@ bool SplitHostPort(const std::string& listen, std::string* host, int* port) {
   return true;
 }
 
+std::string JsonBody(const json& value) {
+  return value.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
+}
+
 void SendError(httplib::Response& res, int status, const std::string& code,
                const std::string& message, int64_t line, int64_t column, const std::string& field) {
   json error = {{"code", code}, {"message", message}};
@@ -40,8 +44,7 @@ void SendError(httplib::Response& res, int status, const std::string& code,
   if (!field.empty()) error["field"] = field;
   res.status = status;
   // dump with replacement: user text in messages may hold invalid UTF-8.
-  res.set_content(json{{"error", error}}.dump(2, ' ', false, json::error_handler_t::replace),
-                  "application/json");
+  res.set_content(JsonBody(json{{"error", error}}), "application/json");
 }
 
 int SendStatus(httplib::Response& res, const Status& s) {

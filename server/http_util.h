@@ -28,6 +28,9 @@ bool SplitHostPort(const std::string& listen, std::string* host, int* port);
 void SendError(httplib::Response& res, int status, const std::string& code,
                const std::string& message, int64_t line = 0, int64_t column = 0,
                const std::string& field = {});
+// `value` as pretty JSON text with a final newline; invalid UTF-8 in strings is replaced (never
+// throws).
+std::string JsonBody(const nlohmann::json& value);
 // The HTTP status for a Status code: 400 invalid input, 422 not determinable, 404, 409 conflict,
 // 413, 415, 503 busy, 500 otherwise. Writes the error body and returns the status.
 int SendStatus(httplib::Response& res, const Status& status);

@@ -91,6 +91,9 @@ class RecordingParser {
   std::unique_ptr<Impl> impl_;
 };
 
+// True when `s` is well-formed UTF-8 (no overlong forms, surrogates or values past U+10FFFF).
+bool IsValidUtf8(std::string_view s);
+
 // Convenience: parse a whole buffer (collecting).
 Status ParseRecording(std::string_view bytes, RecordingParser* parser);
 

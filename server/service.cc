@@ -456,7 +456,7 @@ void Service::Impl::SetupRoutes() {
     HandleMetrics(req, res);
   });
   http.Get("/api/v1/openapi.json", [](const httplib::Request&, httplib::Response& res) {
-    res.set_content(OpenApiDocument().dump(2), "application/json");
+    res.set_content(JsonBody(OpenApiDocument()), "application/json");
   });
   RegisterHtmlRoutes(&http, store.get());
 
@@ -636,7 +636,8 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
                                                          LayoutName(summary.layout) + " layout")
                                         .WithField("method")));
     }
-    rec.job = storage::NewJob{common.method, common.device, config.dump()};
+    rec.job = storage::NewJob{common.method, common.device,
+                              config.dump(-1, ' ', false, json::error_handler_t::replace)};
   } else if (config.contains("device")) {
     if (!config["device"].is_string()) {
       return finish(
@@ -678,7 +679,7 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     res.set_header("Location", "/api/v1/recordings/" + std::to_string(info.id));
   }
   res.status = 201;
-  res.set_content(body.dump(2), "application/json");
+  res.set_content(JsonBody(body), "application/json");
   finish(201);
 }
 
@@ -726,12 +727,13 @@ void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Respon
             .WithField("method"));
   }
   storage::JobInfo job;
-  s = store->EnqueueJob(recording_id, common.method, common.device, config.dump(), &job);
+  s = store->EnqueueJob(recording_id, common.method, common.device,
+                        config.dump(-1, ' ', false, json::error_handler_t::replace), &job);
   if (!s.ok()) return (void)SendStatus(res, s);
   workers->Notify();
   res.status = 202;
   res.set_header("Location", "/api/v1/jobs/" + std::to_string(job.id));
-  res.set_content(json{{"job", JobJson(job, false)}}.dump(2), "application/json");
+  res.set_content(JsonBody(json{{"job", JobJson(job, false)}}), "application/json");
 }
 
 void Service::Impl::HandleGetJob(const httplib::Request& req, httplib::Response& res) {
@@ -743,7 +745,7 @@ void Service::Impl::HandleGetJob(const httplib::Request& req, httplib::Response&
   storage::JobInfo job;
   Status s = store->GetJob(id, &job);
   if (!s.ok()) return (void)SendStatus(res, s);
-  res.set_content(JobJson(job, true).dump(2), "application/json");
+  res.set_content(JsonBody(JobJson(job, true)), "application/json");
 }
 
 void Service::Impl::HandleListJobs(const httplib::Request& req, httplib::Response& res) {
@@ -796,7 +798,7 @@ void Service::Impl::HandleListJobs(const httplib::Request& req, httplib::Respons
     next.emplace("before", std::to_string(jobs.back().id));
     body["next"] = "/api/v1/jobs?" + httplib::detail::params_to_query_str(next);
   }
-  res.set_content(body.dump(2), "application/json");
+  res.set_content(JsonBody(body), "application/json");
 }
 
 void Service::Impl::HandleDevices(const httplib::Request&, httplib::Response& res) {
@@ -817,7 +819,7 @@ void Service::Impl::HandleDevices(const httplib::Request&, httplib::Response& re
                     {"latest", latest},
                     {"url", "/devices/" + UrlEncode(d.serial)}});
   }
-  res.set_content(json{{"devices", list}}.dump(2), "application/json");
+  res.set_content(JsonBody(json{{"devices", list}}), "application/json");
 }
 
 void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response& res) {
@@ -877,7 +879,7 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
                  {"job_id", job.id},
                  {"calibrated_at", job.finished_at},
                  {"result", result}};
-    res.set_content(body.dump(2), "application/json");
+    res.set_content(JsonBody(body), "application/json");
     return;
   }
   std::string text;
@@ -906,7 +908,7 @@ void Service::Impl::HandleRecording(const httplib::Request& req, httplib::Respon
   storage::RecordingInfo info;
   Status s = store->GetRecording(id, &info);
   if (!s.ok()) return (void)SendStatus(res, s);
-  res.set_content(RecordingJson(info).dump(2), "application/json");
+  res.set_content(JsonBody(RecordingJson(info)), "application/json");
 }
 
 void Service::Impl::HandleRecordingData(const httplib::Request& req, httplib::Response& res) {
@@ -938,7 +940,7 @@ void Service::Impl::HandleHealth(const httplib::Request&, httplib::Response& res
   Status s = store->QueueDepth(&counts);
   if (!s.ok()) {
     res.status = 503;
-    res.set_content(json{{"status", "unavailable"}, {"database", s.message()}}.dump(),
+    res.set_content(JsonBody(json{{"status", "unavailable"}, {"database", s.message()}}),
                     "application/json");
     return;
   }

@@ -160,7 +160,8 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
     }
   }
   if (!s.ok()) return fail(s, s.IsTransient());
-  s = store_->CompleteJob(job.id, worker_id, result.dump());
+  s = store_->CompleteJob(job.id, worker_id,
+                          result.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
   if (!s.ok()) {
     std::cerr << "calibd: " << worker_id << ": storing the result of job " << job.id
               << " failed: " << s.ToString() << "\n";

@@ -167,7 +167,10 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{"gyro only", "g0_x,g0_y,g0_z\n", 1, 0, "no accelerometer columns"},
         BadCase{"unterminated quote", "position,\"s1\n", 1, 2, "unterminated quoted field"},
         BadCase{"no rows", "# only a comment\nposition,s1\n", 2, 0, "no data rows"},
-        BadCase{"empty file", "", 0, 0, "no header line"}),
+        BadCase{"empty file", "", 0, 0, "no header line"},
+        BadCase{"invalid utf8 label", "position,s1\n\xC3(,1\n", 2, 1, "not valid UTF-8"},
+        BadCase{"invalid utf8 name", "position,s\xFF\n", 1, 2, "not valid UTF-8"},
+        BadCase{"overlong utf8", "position,s\xC0\xAF\n", 1, 2, "not valid UTF-8"}),
     [](const ::testing::TestParamInfo<BadCase>& info) {
       std::string name = info.param.name;
       for (char& ch : name) {
@@ -191,6 +194,15 @@ TEST(RecordingParser, RejectsOverlongLineWithoutBufferingIt) {
   // The error is sticky.
   EXPECT_FALSE(parser.Feed("\n").ok());
   EXPECT_FALSE(parser.Finish().ok());
+}
+
+TEST(Utf8, AcceptsWellFormedAndRejectsMalformedSequences) {
+  EXPECT_TRUE(IsValidUtf8("plain ascii"));
+  EXPECT_TRUE(IsValidUtf8("\xC2\xB5m \xE2\x80\x94 \xF0\x9F\x98\x80"));  // µm — 😀
+  EXPECT_FALSE(IsValidUtf8("\xE2\x80"));                                // truncated
+  EXPECT_FALSE(IsValidUtf8("\xED\xA0\x80"));                            // surrogate
+  EXPECT_FALSE(IsValidUtf8("\xF4\x90\x80\x80"));                        // past U+10FFFF
+  EXPECT_FALSE(IsValidUtf8("\x80"));                                    // lone continuation
 }
 
 TEST(RecordingParser, RejectsTooManyColumns) {

@@ -20,7 +20,7 @@ trap cleanup EXIT
 server_pid=$!
 port=
 for _ in $(seq 1 100); do
-  port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\).*|\1|p' "$tmp/server.log")
+  port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\).*|\1|p' "$tmp/server.log" 2>/dev/null || true)
   [ -n "$port" ] && break
   sleep 0.1
 done
