@@ -54,6 +54,7 @@ constexpr const char* kV2 = R"sql(
 ALTER TABLE jobs ADD COLUMN not_before INTEGER NOT NULL DEFAULT 0;
 CREATE INDEX jobs_by_lease  ON jobs(lease_expires_at) WHERE status = 'running';
 CREATE INDEX jobs_by_method ON jobs(method, id);
+CREATE INDEX jobs_by_device_method ON jobs(device, method, id);
 
 CREATE TABLE results (
   job_id     INTEGER PRIMARY KEY REFERENCES jobs(id),

@@ -2,8 +2,10 @@
 // by SHA-256), the job queue with leases and retries, results, devices.
 //
 // Durability: WAL with synchronous=FULL. When a write call returns OK its effect is on disk and
-// survives kill -9 and power loss; when it returns an error nothing of it was committed (every
-// write is one transaction: never a half-written recording, job or result).
+// survives kill -9 and power loss (given a disk that honours fdatasync); when it returns an error
+// nothing of it was committed (every write call is atomic — its own savepoint in a committed
+// transaction — never a half-written recording, job or result, and another call's failure in the
+// same group commit does not affect it).
 //
 // Thread-safety: a Store is thread-safe. Each read borrows a connection from an internal pool
 // (one per concurrently calling thread, opened on demand; idle ones are kept up to
