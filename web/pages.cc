@@ -431,6 +431,25 @@ const char* DiagnosticMeaning(const std::string& key) {
       {"samples", "samples used"},
       {"samples_dropped", "samples dropped (saturation, non-finite)"},
       {"noise_estimate", "noise level estimated from the residuals"},
+      {"termination", "why the solver stopped"},
+      {"usable", "whether the preconditions of the method hold"},
+      {"reason", "why the result is not usable"},
+      {"noise_std", "reading noise \xCF\x83 used for the uncertainties"},
+      {"noise_std_estimated", "reading noise \xCF\x83 estimated from the residuals"},
+      {"degrees_of_freedom", "residual degrees of freedom"},
+      {"refined", "maximum-likelihood refinement ran after the closed form"},
+      {"reflection", "the Procrustes fit onto the nominal axes needed a reflection"},
+      {"noise_configured.accelerometer", "\xCF\x83_a from the config"},
+      {"noise_configured.gyroscope", "\xCF\x83_g from the config"},
+      {"excitation.verdict", "whether the motion determines every position direction"},
+      {"excitation.min_eigenvalue",
+       "smallest eigenvalue of \xCE\xA3 A\xE2\x82\x99\xE1\xB5\x80"
+       "A\xE2\x82\x99"},
+      {"excitation.noise_floor", "eigenvalues below this are not determined"},
+      {"excitation.weakest_direction", "direction of the smallest eigenvalue"},
+      {"motion.stride", "every stride-th sample kept for the excitation plots"},
+      {"parallel_fraction", "share of the work run in parallel"},
+      {"gyro_triads", "gyroscope triads used"},
       {"excitation",
        "smallest eigenvalue of \xCE\xA3 A\xE2\x82\x99\xE1\xB5\x80"
        "A\xE2\x82\x99 and a verdict"},
@@ -488,8 +507,7 @@ void DiagnosticRows(const std::string& prefix, const json& obj, int depth, std::
     }
     const std::string top = prefix.empty() ? it.key() : prefix.substr(0, prefix.find('.'));
     *rows += "<tr><th scope=\"row\" class=\"mono\">" + E(key) + "</th><td>" + value +
-             "</td><td class=\"muted small\">" + E(DiagnosticMeaning(key == top ? key : top)) +
-             "</td></tr>";
+             "</td><td class=\"muted small\">" + E(DiagnosticMeaning(key)) + "</td></tr>";
   }
 }
 
@@ -690,7 +708,7 @@ std::string MagnitudeErrorPlot(const json& diag, bool magnitude_known) {
   return RenderXYPlot(o, {s});
 }
 
-std::string ResidualRmsPlot(const std::vector<PcaSensor>& sensors) {
+std::string ResidualRmsPlot(const std::vector<PcaSensor>& sensors, double noise_std) {
   std::vector<std::string> names;
   BarSeries b;
   b.label = "residual RMS";
@@ -704,6 +722,9 @@ std::string ResidualRmsPlot(const std::vector<PcaSensor>& sensors) {
   o.x.title = "sensor";
   o.y.title = "residual RMS (reading units)";
   o.legend = false;
+  if (std::isfinite(noise_std) && noise_std > 0) {
+    o.ref_lines.push_back({false, noise_std, "noise \xCF\x83 = " + FormatSig(noise_std, 3), true});
+  }
   return RenderBarChart(o, names, {b});
 }
 
@@ -821,7 +842,8 @@ std::string PcaReport(const JobView& view) {
     figs += Figure(MagnitudeErrorPlot(diag ? *diag : json(),
                                       mk != nullptr && mk->is_boolean() && mk->get<bool>()),
                    "Should scatter around zero at the noise level; outliers are bad positions.");
-    figs += Figure(ResidualRmsPlot(sensors), "Should be near each sensor's noise level.");
+    figs += Figure(ResidualRmsPlot(sensors, Num(Get(diag, "noise_std"))),
+                   "Should be near each sensor's noise level.");
     bool have_nominal = false;
     double max_dev = 0;
     for (const auto& s : sensors) {
@@ -1019,12 +1041,25 @@ std::string PositionSigmaPlot(const std::vector<Triad>& triads) {
   return RenderBarChart(o, names, {sx, sy, sz});
 }
 
+// Unit of the gyroscope figures of an array result: diagnostics.gyro_unit, else the config's.
+std::string GyroUnit(const json& diag, const json& config) {
+  std::string u = Str(Get(diag, "gyro_unit"));
+  if (u.empty()) u = Str(Get(config, "gyro_unit"));
+  return u == "deg/s" ? "\xC2\xB0/s" : "rad/s";
+}
+
 std::string ArrayResidualPlot(const json& diag, const json& config) {
   const json* rms = Get(diag, "residual_rms");
   const json* noise = Get(diag, "noise_estimate");
-  double cfg_a = Num(Get(config, "accel_noise"));
-  double cfg_g = Num(Get(config, "gyro_noise"));
-  if (Str(Get(config, "gyro_unit")) == "deg/s") cfg_g *= kPi / 180;
+  const json* configured = Get(diag, "noise_configured");
+  // Configured σ: from the result (in the gyro unit), else from the config (same unit).
+  double cfg_a = Num(Get(configured, "accelerometer"));
+  double cfg_g = Num(Get(configured, "gyroscope"));
+  if (configured == nullptr) {
+    cfg_a = Num(Get(config, "accel_noise"));
+    cfg_g = Num(Get(config, "gyro_noise"));
+  }
+  const std::string gu = GyroUnit(diag, config);
   BarSeries r{"residual RMS", {Num(Get(rms, "accelerometer")), Num(Get(rms, "gyroscope"))}, {}, 0};
   BarSeries n{
       "noise estimate", {Num(Get(noise, "accelerometer")), Num(Get(noise, "gyroscope"))}, {}, 1};
@@ -1035,9 +1070,9 @@ std::string ArrayResidualPlot(const json& diag, const json& config) {
   PlotOptions o;
   o.name = "residual-rms";
   o.title = "Residual RMS per sensor type";
-  o.y.title = "RMS (m/s\xC2\xB2 | rad/s)";
+  o.y.title = "RMS (m/s\xC2\xB2 | " + gu + ")";
   o.y.type = ScaleType::kLog10;
-  return RenderBarChart(o, {"accelerometer (m/s\xC2\xB2)", "gyroscope (rad/s)"}, series);
+  return RenderBarChart(o, {"accelerometer (m/s\xC2\xB2)", "gyroscope (" + gu + ")"}, series);
 }
 
 // Residual histograms, when the result carries them: diagnostics.residual_histogram.TYPE as
@@ -1085,8 +1120,16 @@ std::string ExcitationPlots(const json& diag) {
        "Angular acceleration \xE2\x80\x96\xCF\x89\xCC\x87\xE2\x80\x96 per sample",
        "\xE2\x80\x96\xCF\x89\xCC\x87\xE2\x80\x96 (rad/s\xC2\xB2)"}};
   const json* exc = Get(diag, "excitation");
+  const json* motion = Get(diag, "motion");
   for (const auto& it : items) {
-    const json* arr = Array(Get(diag, it.key));
+    // diagnostics.motion.KEY (every stride-th sample), or diagnostics.KEY / excitation.KEY.
+    double stride = 1;
+    const json* arr = Array(Get(motion, it.key));
+    if (arr != nullptr) {
+      const double st = Num(Get(motion, "stride"));
+      if (std::isfinite(st) && st >= 1) stride = st;
+    }
+    if (arr == nullptr) arr = Array(Get(diag, it.key));
     if (arr == nullptr) arr = Array(Get(exc, it.key));
     if (arr == nullptr) continue;
     const auto y = NumArray(arr);
@@ -1100,7 +1143,7 @@ std::string ExcitationPlots(const json& diag) {
       s.x = t;
     } else {
       s.x.resize(y.size());
-      for (size_t i = 0; i < y.size(); ++i) s.x[i] = static_cast<double>(i);
+      for (size_t i = 0; i < y.size(); ++i) s.x[i] = static_cast<double>(i) * stride;
     }
     PlotOptions o;
     o.name = it.name;
@@ -1130,12 +1173,19 @@ std::string ArrayReport(const JobView& view) {
     s += "<dt>reference triad</dt><dd>" + E(ref_name) + " (held at its nominal position)</dd>";
     s += "<dt>solver</dt><dd>" + E(ScalarText(Get(diag, "solver"))) + ", " +
          E(ScalarText(Get(diag, "iterations"))) +
-         " iterations, converged: " + E(ScalarText(Get(diag, "converged"))) + "</dd>";
+         " iterations, converged: " + E(ScalarText(Get(diag, "converged"))) +
+         (Get(diag, "termination") != nullptr ? " (" + E(ScalarText(Get(diag, "termination"))) + ")"
+                                              : std::string()) +
+         "</dd>";
     s += "<dt>samples</dt><dd>" + E(ScalarText(Get(diag, "samples"))) + " used, " +
          E(ScalarText(Get(diag, "samples_dropped"))) + " dropped</dd>";
     const json* exc = Get(diag, "excitation");
     s += "<dt>excitation</dt><dd>" + E(ScalarText(Get(exc, "verdict"))) + " (smallest eigenvalue " +
-         E(ScalarText(Get(exc, "min_eigenvalue"), 4)) + ")</dd>";
+         E(ScalarText(Get(exc, "min_eigenvalue"), 4)) +
+         (Get(exc, "noise_floor") != nullptr
+              ? ", noise floor " + E(ScalarText(Get(exc, "noise_floor"), 4))
+              : std::string()) +
+         ")</dd>";
     const ArrayFigures f = ComputeArrayFigures(result);
     s += "<dt>RMS offset from nominal</dt><dd>" + FormatMicrometres(f.rms_offset) + "</dd>";
     s += "<dt>worst position " + std::string(kSigma) + "</dt><dd>" +
@@ -1225,6 +1275,15 @@ std::string StatusCallout(const JobView& view) {
            ". Reload the page to see the result when it has finished.</p></div>";
   }
   if (job.status == "succeeded") {
+    // A pca result whose preconditions failed (diagnostics.usable == false) says why.
+    const json* usable = Get(Get(job.result, "diagnostics"), "usable");
+    if (usable != nullptr && usable->is_boolean() && !usable->get<bool>()) {
+      const std::string reason = Str(Get(Get(job.result, "diagnostics"), "reason"));
+      return "<div class=\"callout callout-error\"><p><strong>The result is not usable.</strong>"
+             "</p><p class=\"failure-reason\">" +
+             E(reason.empty() ? std::string("The method's preconditions do not hold.") : reason) +
+             "</p></div>";
+    }
     const size_t w = WarningCount(job.result);
     if (w > 0) {
       return "<div class=\"callout callout-warn\"><p><strong>Succeeded with " + std::to_string(w) +

@@ -851,6 +851,9 @@ std::string RenderBarChart(const PlotOptions& o, const std::vector<std::string>&
       }
     }
   }
+  for (const auto& r : o.ref_lines) {
+    if (!r.vertical && Usable(r.at, ty)) ey.Add(r.at);
+  }
   if (non_finite > 0) notes.push_back(PluralNote(non_finite, "non-finite value(s) not shown."));
   if (skipped > 0) {
     notes.push_back(PluralNote(skipped, "zero or negative value(s) not shown on the log axis."));
@@ -923,6 +926,19 @@ std::string RenderBarChart(const PlotOptions& o, const std::vector<std::string>&
       body += "<path class=\"error-bars\" d=\"" + errs +
               "\" stroke=\"#1c232b\" stroke-width=\"1\" fill=\"none\"/>";
     }
+  }
+  // Horizontal reference lines (e.g. the noise level).
+  for (const auto& r : o.ref_lines) {
+    if (r.vertical || !Usable(r.at, ty)) continue;
+    const double y = sy(r.at);
+    body += "<g class=\"ref-line\"><line x1=\"" + N(f.px0()) + "\" y1=\"" + N(y) + "\" x2=\"" +
+            N(f.px1()) + "\" y2=\"" + N(y) + "\" stroke=\"#6b7580\" stroke-width=\"1.2\"" +
+            std::string(r.dashed ? " stroke-dasharray=\"5 4\"" : "") + "/>";
+    if (!r.label.empty()) {
+      body += "<text x=\"" + N(f.px1() - 4) + "\" y=\"" + N(y - 4) +
+              "\" text-anchor=\"end\" fill=\"" + kMuted + "\">" + EscapeText(r.label) + "</text>";
+    }
+    body += "</g>";
   }
   // Category labels.
   std::string labels = "<g class=\"category-labels\">";

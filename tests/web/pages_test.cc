@@ -67,7 +67,9 @@ json PcaResult(const std::string& sensor_prefix = "g", double scale_shift = 0) {
             {"min_positions", 6},
             {"g_eigenvalues", {0.0151, 0.0137, 0.0126}},
             {"residual_rms", rms},
-            {"magnitude_error", mag}}},
+            {"magnitude_error", mag},
+            {"usable", true},
+            {"noise_std", 0.01}}},
           {"warnings", json::array()}};
 }
 
@@ -99,26 +101,37 @@ json ArrayResult(size_t excitation_samples = 1000, double shift = 0) {
     omega.push_back(30 + 5 * std::sin(n * 0.01) + Wiggle(static_cast<int>(n % 1000), 1));
     omega_dot.push_back(35 + 8 * std::cos(n * 0.013));
   }
-  return {{"method", "array"},
-          {"parameters", {{"reference", 0}, {"positions", positions}}},
-          {"uncertainty", {{"positions", unc}}},
-          {"diagnostics",
-           {{"solver", "joint"},
-            {"iterations", 5},
-            {"converged", true},
-            {"cost", {5.2e7, 3.1e4, 2.9e3, 2.87e3, 2.869e3}},
-            {"samples", 1000},
-            {"samples_dropped", 3},
-            {"residual_rms", {{"accelerometer", 0.0401}, {"gyroscope", 0.00104}}},
-            {"noise_estimate", {{"accelerometer", 0.0399}, {"gyroscope", 0.00105}}},
-            {"excitation", {{"min_eigenvalue", 1.7e5}, {"verdict", "good"}}},
-            {"omega_norm", omega},
-            {"omega_dot_norm", omega_dot},
-            {"residual_histogram",
-             {{"accelerometer",
-               {{"edges", {-0.12, -0.08, -0.04, 0, 0.04, 0.08, 0.12}},
-                {"counts", {210, 2600, 9400, 9300, 2700, 190}}}}}}}},
-          {"warnings", json::array({"3 samples dropped at gyroscope saturation"})}};
+  json r = {{"method", "array"},
+            {"parameters", {{"reference", 0}, {"positions", positions}}},
+            {"uncertainty", {{"positions", unc}}},
+            {"diagnostics",
+             {{"solver", "joint"},
+              {"iterations", 5},
+              {"converged", true},
+              {"cost", {5.2e7, 3.1e4, 2.9e3, 2.87e3, 2.869e3}},
+              {"samples", 1000},
+              {"samples_dropped", 3},
+              {"residual_rms", {{"accelerometer", 0.0401}, {"gyroscope", 0.0597}}},
+              {"noise_estimate", {{"accelerometer", 0.0399}, {"gyroscope", 0.0602}}},
+              {"excitation", {{"min_eigenvalue", 1.7e5}, {"verdict", "good"}}},
+              {"termination", "converged"},
+              {"gyro_unit", "deg/s"},
+              {"noise_configured", {{"accelerometer", 0.04}, {"gyroscope", 0.06}}},
+              {"residual_histogram",
+               {{"accelerometer",
+                 {{"edges", {-0.12, -0.08, -0.04, 0, 0.04, 0.08, 0.12}},
+                  {"counts", {210, 2600, 9400, 9300, 2700, 190}}}}}}}},
+            {"warnings", json::array({"3 samples dropped at gyroscope saturation"})}};
+  // As the server stores it: at most 2000 points, every stride-th sample, under "motion"; older
+  // results had the full arrays directly in diagnostics.
+  if (excitation_samples <= 2000) {
+    r["diagnostics"]["motion"] = {
+        {"stride", 1}, {"omega_norm", omega}, {"omega_dot_norm", omega_dot}};
+  } else {
+    r["diagnostics"]["omega_norm"] = omega;
+    r["diagnostics"]["omega_dot_norm"] = omega_dot;
+  }
+  return r;
 }
 
 json ArrayConfig() {
@@ -226,6 +239,8 @@ TEST(JobPage, ArrayReportHasPositionsCostResidualsAndExcitation) {
   EXPECT_FALSE(Has(page, "plot-residual-histogram-gyroscope"));  // not in the result: skipped
   EXPECT_TRUE(Has(page, "Offsets from nominal magnified \xC3\x97"));
   EXPECT_TRUE(Has(page, "class=\"ellipses\""));
+  EXPECT_TRUE(Has(page, "gyroscope (\xC2\xB0/s)"));
+  EXPECT_TRUE(Has(page, "(converged)"));
   EXPECT_TRUE(Has(page, "3 samples dropped at gyroscope saturation"));
   EXPECT_TRUE(Has(page, "callout-warn"));
 }
@@ -256,6 +271,19 @@ TEST(JobPage, FailedJobExplainsReasonAndWhatToRecord) {
   EXPECT_TRUE(Has(page, "Record more static positions"));
   EXPECT_TRUE(Has(page, "badge-failed"));
   EXPECT_FALSE(Has(page, "class=\"plot "));
+}
+
+TEST(JobPage, UnusablePcaResultSaysWhy) {
+  JobView v;
+  json r = PcaResult();
+  r["diagnostics"]["usable"] = false;
+  r["diagnostics"]["reason"] = "g is not positive definite";
+  v.job = Job(32, "IMU-0042", "pca", "succeeded", "2026-11-20T09:20:00Z", r);
+  const std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "The result is not usable."));
+  EXPECT_TRUE(Has(page, "g is not positive definite"));
+  EXPECT_TRUE(Has(page, "noise \xCF\x83 = 0.0100"));
 }
 
 TEST(JobPage, QueuedJobRendersWithoutResult) {
