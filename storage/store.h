@@ -176,6 +176,7 @@ class Store {
   // Fails with kIoError (cannot open/create, read-only when a migration is needed), kCorruption
   // (not a database), kConflict (schema newer than this build), kBusy.
   static Status Open(const std::string& path, StoreOptions options, std::unique_ptr<Store>* out);
+  // Closes the pooled connections. Every call must have returned (no call may be in flight).
   ~Store();
   Store(const Store&) = delete;
   Store& operator=(const Store&) = delete;
@@ -212,7 +213,8 @@ class Store {
   // back jobs whose lease has lapsed (as RecoverExpiredLeases). The job becomes running with
   // lease_owner = worker_id, lease expiry now + lease_ms, attempts + 1, started_at = now.
   // *claimed = false (and OK) when nothing is claimable. No two callers, in any threads or
-  // processes, get the same job while its lease is valid.
+  // processes, get the same job while its lease is valid. worker_id must be unique among all
+  // live workers on the file (e.g. "host:pid:n"): the lease checks compare it.
   Status ClaimJob(const std::string& worker_id, int64_t lease_ms, JobInfo* out, bool* claimed);
 
   // Extends the lease to now + lease_ms. The holder may renew a lapsed lease as long as nobody
