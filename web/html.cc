@@ -343,6 +343,8 @@ tbody tr:hover{background:#fafbfc}
 .num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
 td.name{overflow-wrap:anywhere}
 td.time{white-space:nowrap}
+table.table-diagnostics td{overflow-wrap:anywhere}
+table.table-diagnostics th{white-space:normal}
 code,pre,.mono{font-family:ui-monospace,SFMono-Regular,Menlo,Consolas,"DejaVu Sans Mono",monospace;
 font-size:.86em}
 pre{background:var(--panel);border:1px solid var(--line);padding:.6rem .8rem;overflow:auto;

@@ -462,6 +462,13 @@ std::string SummariseArray(const json& arr) {
   if (arr.empty()) return "(empty)";
   bool all_numbers = true;
   for (const auto& v : arr) all_numbers = all_numbers && v.is_number();
+  bool all_strings = true;
+  for (const auto& v : arr) all_strings = all_strings && v.is_string();
+  if (all_strings && arr.size() > 8) {
+    std::string s = std::to_string(arr.size()) + " labels: ";
+    for (size_t i = 0; i < 5; ++i) s += arr[i].get<std::string>() + ", ";
+    return E(s + "\xE2\x80\xA6, " + arr.back().get<std::string>());
+  }
   if (!all_numbers) {
     std::string s = Dump(arr, -1);
     if (s.size() > 300) s = s.substr(0, 300) + "\xE2\x80\xA6";

@@ -14,10 +14,25 @@
 //   plots:   svg.plot (every plot) plus svg.plot-NAME, NAME one of
 //            pca:   singular-values, magnitude-error, residual-rms, axes-xy, axes-xz
 //            array: cost, positions-xy, positions-xz, position-sigma, residual-rms,
-//                   residual-histogram, excitation-omega, excitation-omega-dot
+//                   residual-histogram-accelerometer, residual-histogram-gyroscope (only when
+//                   the result carries histograms), excitation-omega, excitation-omega-dot
+//                   (only when it carries diagnostics.motion.omega_norm / omega_dot_norm)
 //            device: drift-scale, drift-axis, drift-position
-//   other:   form.filters, nav.pager a.older, .callout-error (failure reason),
-//            ul.warnings, ul.downloads, pre.config, span.badge.badge-STATUS
+//            (pca axes-xz only for d >= 3; every other listed plot is always present on a
+//            succeeded job of that method, saying "no data" when its keys are missing)
+//   other:   form.filters, nav.pager a.older, .callout-error .failure-reason (failed job, or
+//            pca diagnostics.usable == false), ul.advice (what to record instead),
+//            ul.warnings, ul.downloads, pre.config, span.badge.badge-STATUS,
+//            table.table-drift-detail (inside <details>, per sensor / triad)
+//
+// Result keys read beyond SPEC §4 (all optional): pca diagnostics.usable, .reason, .noise_std
+// (drawn as a line on the residual plot); array diagnostics.termination, .gyro_unit,
+// .noise_configured{accelerometer,gyroscope}, .excitation.noise_floor,
+// .motion{stride, omega_norm[], omega_dot_norm[]} (older results: omega_norm / omega_dot_norm
+// directly in diagnostics; optional diagnostics.t or .time per sample for a time axis),
+// .residual_histogram.{accelerometer,gyroscope} = {"edges": [...], "counts": [...]} or raw
+// .residuals.{accelerometer,gyroscope} arrays. config.nominal (pca, m×d rows) gives the angle to
+// nominal; config.geometry.positions (array) the nominal positions (else position − offset).
 #ifndef CALIBD_WEB_PAGES_H_
 #define CALIBD_WEB_PAGES_H_
 
