@@ -18,8 +18,9 @@
 //                   the result carries histograms), excitation-omega, excitation-omega-dot
 //                   (only when it carries diagnostics.motion.omega_norm / omega_dot_norm)
 //            device: drift-scale, drift-axis, drift-position
-//            (pca axes-xz only for d >= 3; every other listed plot is always present on a
-//            succeeded job of that method, saying "no data" when its keys are missing)
+//            (pca axes-xz only for d >= 3; array positions-* and position-sigma only when the
+//            result has positions; the others are always present on a job with a result of
+//            that method, saying "no data" when their keys are missing)
 //   other:   form.filters, nav.pager a.older, .callout-error .failure-reason (failed job, or
 //            pca diagnostics.usable == false), ul.advice (what to record instead),
 //            ul.warnings, ul.downloads, pre.config, span.badge.badge-STATUS,
