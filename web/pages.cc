@@ -1717,7 +1717,7 @@ std::string DeviceBody(const DeviceView& v) {
       if (j.status == "failed") {
         std::string e = j.error;
         if (e.size() > 90) e = e.substr(0, 90) + "\xE2\x80\xA6";
-        figures = "<span class=\"muted\">" + E(e) + "</span>";
+        figures = "<span class=\"muted\">" + E(e.empty() ? std::string("failed") : e) + "</span>";
       } else {
         figures = E(Guard("figures", [&] { return KeyFigures(j.method, j.result); }));
       }
