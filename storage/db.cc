@@ -53,6 +53,7 @@ Stmt::Stmt(Stmt&& other) noexcept
     : stmt_(std::exchange(other.stmt_, nullptr)),
       db_(other.db_),
       owned_(other.owned_),
+      in_use_(std::exchange(other.in_use_, nullptr)),
       bind_rc_(other.bind_rc_),
       bind_index_(other.bind_index_) {}
 
@@ -62,6 +63,7 @@ Stmt& Stmt::operator=(Stmt&& other) noexcept {
     stmt_ = std::exchange(other.stmt_, nullptr);
     db_ = other.db_;
     owned_ = other.owned_;
+    in_use_ = std::exchange(other.in_use_, nullptr);
     bind_rc_ = other.bind_rc_;
     bind_index_ = other.bind_index_;
   }
@@ -75,8 +77,10 @@ void Stmt::Release() {
   } else {
     sqlite3_reset(stmt_);
     sqlite3_clear_bindings(stmt_);
+    if (in_use_ != nullptr) *in_use_ = false;
   }
   stmt_ = nullptr;
+  in_use_ = nullptr;
 }
 
 Stmt& Stmt::CheckBind(int rc, int index) {
@@ -222,7 +226,7 @@ Status Db::Open(const std::string& path, const Options& options, std::unique_ptr
 }
 
 Db::~Db() {
-  for (auto& [sql, stmt] : cache_) sqlite3_finalize(stmt);
+  for (auto& [sql, cached] : cache_) sqlite3_finalize(cached.stmt);
   cache_.clear();
   if (db_ != nullptr) sqlite3_close_v2(db_);
 }
@@ -246,9 +250,11 @@ Status Db::Prepare(std::string_view sql, Stmt* out) {
     int rc = sqlite3_prepare_v3(db_, key.data(), static_cast<int>(key.size()),
                                 SQLITE_PREPARE_PERSISTENT, &stmt, nullptr);
     if (rc != SQLITE_OK) return StatusFromSqlite(rc, db_, "prepare `" + key + "`");
-    it = cache_.emplace(std::move(key), stmt).first;
+    it = cache_.emplace(std::move(key), Cached{stmt, false}).first;
   }
-  *out = Stmt(it->second, db_, /*owned=*/false);
+  if (it->second.in_use) return PrepareUncached(sql, out);
+  it->second.in_use = true;
+  *out = Stmt(it->second.stmt, db_, /*owned=*/false, &it->second.in_use);
   return Status::Ok();
 }
 

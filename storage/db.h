@@ -81,14 +81,16 @@ class Stmt {
 
  private:
   friend class Db;
-  Stmt(sqlite3_stmt* stmt, sqlite3* db, bool owned) : stmt_(stmt), db_(db), owned_(owned) {}
+  Stmt(sqlite3_stmt* stmt, sqlite3* db, bool owned, bool* in_use = nullptr)
+      : stmt_(stmt), db_(db), owned_(owned), in_use_(in_use) {}
   void Release();
   Stmt& CheckBind(int rc, int index);
 
   sqlite3_stmt* stmt_ = nullptr;
   sqlite3* db_ = nullptr;
   bool owned_ = false;
-  int bind_rc_ = 0;  // first binding error, SQLITE_OK if none
+  bool* in_use_ = nullptr;  // the cache entry's flag, cleared on release (borrowed only)
+  int bind_rc_ = 0;         // first binding error, SQLITE_OK if none
   int bind_index_ = 0;
 };
 
@@ -121,7 +123,8 @@ class Db {
   Status Exec(std::string_view sql);
 
   // Prepares `sql` or takes it from this connection's cache. The returned Stmt is reset and has
-  // no bindings. `sql` must be a constant, never built from user input.
+  // no bindings. `sql` must be a constant, never built from user input. If a Stmt for the same
+  // text is still alive (nested use), a fresh uncached one is returned instead.
   Status Prepare(std::string_view sql, Stmt* out);
   // Prepares an uncached statement (finalized by the Stmt's destructor).
   Status PrepareUncached(std::string_view sql, Stmt* out);
@@ -139,7 +142,11 @@ class Db {
   Db() = default;
   sqlite3* db_ = nullptr;
   std::string path_;
-  std::unordered_map<std::string, sqlite3_stmt*> cache_;
+  struct Cached {
+    sqlite3_stmt* stmt = nullptr;
+    bool in_use = false;
+  };
+  std::unordered_map<std::string, Cached> cache_;
 };
 
 // A transaction scope: Begin, then Commit; the destructor rolls back if not committed.

@@ -87,6 +87,27 @@ TEST(Db, CachedStatementComesBackResetWithoutBindings) {
   }
 }
 
+TEST(Db, NestedUseOfTheSameSqlGetsItsOwnStatement) {
+  TempDir dir;
+  auto db = OpenOrDie(dir.File("a.db"));
+  ASSERT_TRUE(db->Exec("CREATE TABLE t (x); INSERT INTO t VALUES (1), (2)").ok());
+  const char* sql = "SELECT x FROM t ORDER BY x";
+  Stmt outer;
+  ASSERT_TRUE(db->Prepare(sql, &outer).ok());
+  bool row = false;
+  ASSERT_TRUE(outer.Step(&row).ok());
+  EXPECT_EQ(outer.ColumnInt(0), 1);
+  {
+    Stmt inner;  // same text while `outer` is mid-result: must not reset it
+    ASSERT_TRUE(db->Prepare(sql, &inner).ok());
+    ASSERT_TRUE(inner.Step(&row).ok());
+    EXPECT_EQ(inner.ColumnInt(0), 1);
+  }
+  ASSERT_TRUE(outer.Step(&row).ok());
+  ASSERT_TRUE(row);
+  EXPECT_EQ(outer.ColumnInt(0), 2);
+}
+
 TEST(Db, SyntaxErrorIsInternalWithSqliteMessage) {
   TempDir dir;
   auto db = OpenOrDie(dir.File("a.db"));
