@@ -3,6 +3,8 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <Eigen/LU>
+#include <Eigen/SVD>
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -888,6 +890,55 @@ Status CalibrateArray(const ArrayProblem& problem, const ArrayOptions& options,
                        ? std::string("converged (") + ArrayTerminationName(termination) + ")"
                        : std::string("not converged (") + ArrayTerminationName(termination) +
                              "): positions usable, see warnings";
+  return Status::Ok();
+}
+
+double AccelerometerConditionNumber(const AccelerometerTriadModel& model) {
+  if (!model.sensitivity.allFinite()) return std::numeric_limits<double>::infinity();
+  const Eigen::Vector3d sv = Eigen::JacobiSVD<Mat3>(model.sensitivity).singularValues();
+  if (!(sv(2) > 0)) return std::numeric_limits<double>::infinity();
+  return sv(0) / sv(2);
+}
+
+Status CorrectAccelerometerReadings(const std::vector<AccelerometerTriadModel>& models,
+                                    const std::vector<std::string>& names, Eigen::MatrixXd* accel) {
+  const int K = static_cast<int>(models.size());
+  if (accel->cols() != 3 * K)
+    return Status::InvalidInput("accelerometer calibration: " + std::to_string(K) +
+                                " triad models for " + std::to_string(accel->cols()) +
+                                " accelerometer columns (3 per triad)");
+  std::vector<Mat3> inverse_transpose(K);
+  for (int k = 0; k < K; ++k) {
+    const std::string name =
+        static_cast<int>(names.size()) == K ? names[k] : "a" + std::to_string(k);
+    const AccelerometerTriadModel& m = models[k];
+    if (!m.sensitivity.allFinite() || !m.bias.allFinite())
+      return Status::InvalidInput("accelerometer calibration of triad " + name +
+                                  ": sensitivities and biases must be finite numbers");
+    const double cond = AccelerometerConditionNumber(m);
+    if (!(cond <= kMaxAccelerometerConditionNumber)) {
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%.3g", cond);
+      return Status::InvalidInput(
+          "accelerometer calibration of triad " + name + ": its 3x3 sensitivity block (" + name +
+          "_x, " + name + "_y, " + name + "_z) is " +
+          (std::isfinite(cond) ? "ill-conditioned (condition number " + std::string(buf) + " > " +
+                                     "1000): its three axes are nearly coplanar"
+                               : std::string("singular: its three axes do not span space")) +
+          "; the readings cannot be corrected (recalibrate the triad)");
+    }
+    inverse_transpose[k] = m.sensitivity.transpose().inverse();
+  }
+  const Eigen::Index N = accel->rows();
+  for (int k = 0; k < K; ++k) {
+    const Mat3& t = inverse_transpose[k];
+    const Vec3 b = models[k].bias;
+    for (Eigen::Index n = 0; n < N; ++n) {
+      const Vec3 y(((*accel)(n, 3 * k)), (*accel)(n, 3 * k + 1), (*accel)(n, 3 * k + 2));
+      const Vec3 f = t * (y - b);
+      for (int i = 0; i < 3; ++i) (*accel)(n, 3 * k + i) = f(i);
+    }
+  }
   return Status::Ok();
 }
 

@@ -147,6 +147,33 @@ struct ArrayResult {
   std::string BriefReport() const;
 };
 
+// Affine model of one accelerometer triad, as a `pca` calibration with `bias: estimate` in the
+// body (nominal) frame reports it: reading_i = a_i^T f + b_i for the axes i = x, y, z, with f the
+// specific force in the body frame (m/s^2). `sensitivity` holds the sensitivity vectors a_x, a_y,
+// a_z as COLUMNS (A = [a_x a_y a_z]), so the readings are y = A^T f + b and the corrected specific
+// force is f = A^-T (y - b). An ideal triad has A = I, b = 0.
+struct AccelerometerTriadModel {
+  Eigen::Matrix3d sensitivity = Eigen::Matrix3d::Identity();  // A, columns a_x, a_y, a_z
+  Eigen::Vector3d bias = Eigen::Vector3d::Zero();             // b, m/s^2
+};
+
+// Largest condition number (sigma_max / sigma_min of A) accepted by CorrectAccelerometerReadings.
+// A real triad is close to 1; beyond this the three axes are nearly coplanar.
+inline constexpr double kMaxAccelerometerConditionNumber = 1e3;
+
+// Condition number sigma_max / sigma_min of a triad's sensitivity block; +inf when it is singular
+// or not finite.
+double AccelerometerConditionNumber(const AccelerometerTriadModel& model);
+
+// Replaces the raw readings of every triad k by f = A_k^-T (y - b_k), in place. accel is N x 3K
+// (a0_x a0_y a0_z a1_x ...), models has K entries. kInvalidInput when the counts disagree, or when
+// a model is not finite or its condition number exceeds kMaxAccelerometerConditionNumber (message
+// names the triad by names[k] when names has K entries, else "a<k>"). On error accel is unchanged.
+// The noise of the corrected readings is A_k^-T eps: for |A_k - I| << 1 still ~ sigma_a, so the
+// array fit keeps its isotropic model.
+Status CorrectAccelerometerReadings(const std::vector<AccelerometerTriadModel>& models,
+                                    const std::vector<std::string>& names, Eigen::MatrixXd* accel);
+
 // Estimates the triad positions. Errors:
 //  - kInvalidInput: options not valid, shapes inconsistent, reference out of range, NaN/Inf.
 //  - kNotDeterminable (message says why and what motion to record): fewer than 3 usable samples,

@@ -1,9 +1,27 @@
 #include "core/array_simulation.h"
 
 #include <Eigen/Geometry>
+#include <Eigen/SVD>
 #include <cmath>
 
 namespace calibd::core {
+namespace {
+
+// The seed of an independent random stream derived from the user's seed (SplitMix64 finaliser).
+uint64_t StreamSeed(uint64_t seed, uint64_t stream) {
+  uint64_t z = seed + stream * 0x9E3779B97F4A7C15ULL;
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+  return z ^ (z >> 31);
+}
+constexpr uint64_t kAccelErrorStream = 1;
+constexpr uint64_t kStaticStream = 2;
+
+bool HasAccelErrors(const ArraySimulationOptions& o) {
+  return o.accel_bias > 0 || o.accel_scale_error > 0 || o.accel_misalignment > 0;
+}
+
+}  // namespace
 
 double GaussianRng::Uniform() { return static_cast<double>(engine_() >> 11) * 0x1.0p-53; }
 
@@ -46,6 +64,11 @@ bool ArraySimulationOptions::IsValid(std::string* error) const {
   if (!ok(gyro_noise)) return fail("gyro_noise must be a finite number >= 0");
   if (!ok(position_perturbation)) return fail("position_perturbation must be a finite number >= 0");
   if (reference < 0 || reference >= 32) return fail("reference must be a triad index in [0, 32)");
+  if (!ok(accel_bias)) return fail("accel_bias must be a finite number >= 0");
+  if (!ok(accel_scale_error) || accel_scale_error >= 0.5)
+    return fail("accel_scale_error must be a finite number >= 0 and < 0.5");
+  if (!ok(accel_misalignment) || accel_misalignment >= 0.5)
+    return fail("accel_misalignment must be a finite number >= 0 and < 0.5 (rad)");
   return true;
 }
 
@@ -63,7 +86,8 @@ Eigen::Matrix3Xd PaperArrayNominalPositions() {
 void SimulateArrayReadings(const Eigen::Matrix3Xd& positions, const Eigen::Matrix3Xd& omega,
                            const Eigen::Matrix3Xd& omega_dot, const Eigen::Matrix3Xd& s,
                            double accel_noise, double gyro_noise, int gyro_triads, GaussianRng* rng,
-                           Eigen::MatrixXd* accel, Eigen::MatrixXd* gyro) {
+                           Eigen::MatrixXd* accel, Eigen::MatrixXd* gyro,
+                           const std::vector<AccelerometerTriadModel>* accel_models) {
   const int K = positions.cols();
   const int64_t N = omega.cols();
   accel->resize(N, 3 * K);
@@ -72,7 +96,9 @@ void SimulateArrayReadings(const Eigen::Matrix3Xd& positions, const Eigen::Matri
     const Eigen::Vector3d w = omega.col(n), wd = omega_dot.col(n);
     for (int k = 0; k < K; ++k) {
       const Eigen::Vector3d r = positions.col(k);
-      const Eigen::Vector3d y = s.col(n) + w.cross(w.cross(r)) + wd.cross(r);
+      Eigen::Vector3d y = s.col(n) + w.cross(w.cross(r)) + wd.cross(r);
+      if (accel_models != nullptr)
+        y = (*accel_models)[k].sensitivity.transpose() * y + (*accel_models)[k].bias;
       for (int i = 0; i < 3; ++i) (*accel)(n, 3 * k + i) = y(i) + accel_noise * rng->Normal();
     }
     for (int j = 0; j < gyro_triads; ++j)
@@ -107,6 +133,9 @@ Status SimulateArray(const ArraySimulationOptions& options, ArraySimulation* out
     out->problem.accel_names.push_back("a" + std::to_string(k));
     out->gyro_names.push_back("g" + std::to_string(k));
   }
+  out->accel_models = SimulateAccelerometerModels(options);
+  const std::vector<AccelerometerTriadModel>* models =
+      HasAccelErrors(options) ? &out->accel_models : nullptr;
   Eigen::MatrixXd accel, gyro;
   for (int64_t n = 0; n < N; ++n) {
     out->omega.col(n) = options.omega_norm * rng.UnitVector();
@@ -114,9 +143,65 @@ Status SimulateArray(const ArraySimulationOptions& options, ArraySimulation* out
     out->s.col(n) = options.specific_force_norm * rng.UnitVector();
     SimulateArrayReadings(out->true_positions, out->omega.col(n), out->omega_dot.col(n),
                           out->s.col(n), options.accel_noise, options.gyro_noise, K, &rng, &accel,
-                          &gyro);
+                          &gyro, models);
     out->problem.accel.row(n) = accel.row(0);
     out->problem.gyro.row(n) = gyro.row(0);
+  }
+  return Status::Ok();
+}
+
+std::vector<AccelerometerTriadModel> SimulateAccelerometerModels(
+    const ArraySimulationOptions& options) {
+  const int K = static_cast<int>(PaperArrayNominalPositions().cols());
+  std::vector<AccelerometerTriadModel> models(K);
+  if (!HasAccelErrors(options)) return models;
+  GaussianRng rng(StreamSeed(options.seed, kAccelErrorStream));
+  // Draws per triad, always all of them (so each sigma changes only its own errors): 3 scale
+  // errors, 6 misalignments (row-major off-diagonal), 3 biases.
+  Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+  for (AccelerometerTriadModel& m : models) {
+    Eigen::Vector3d scale;
+    for (int i = 0; i < 3; ++i) scale(i) = 1 + options.accel_scale_error * rng.Normal();
+    Eigen::Matrix3d tilt = Eigen::Matrix3d::Identity();
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        if (i != j) tilt(i, j) = options.accel_misalignment * rng.Normal();
+    for (int i = 0; i < 3; ++i) m.bias(i) = options.accel_bias * rng.Normal();
+    m.sensitivity = (scale.asDiagonal() * tilt).transpose();  // A_k^T = diag(1 + s)(I + M)
+    sum += m.sensitivity;
+  }
+  // Remove the common rotation: with sum = U S V^T, Q = V U^T makes sum_k Q A_k = V S V^T.
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const Eigen::Matrix3d q = svd.matrixV() * svd.matrixU().transpose();
+  for (AccelerometerTriadModel& m : models) m.sensitivity = q * m.sensitivity;
+  return models;
+}
+
+Status SimulateArrayStatic(const ArraySimulationOptions& options, int positions, double noise_std,
+                           double gravity, ArrayStaticSimulation* out) {
+  std::string error;
+  if (!options.IsValid(&error)) return Status::InvalidInput(error);
+  if (positions < 1) return Status::InvalidInput("static positions must be >= 1");
+  if (!(std::isfinite(noise_std) && noise_std >= 0))
+    return Status::InvalidInput("static noise must be a finite number >= 0");
+  if (!(std::isfinite(gravity) && gravity > 0))
+    return Status::InvalidInput("gravity must be a finite number > 0");
+  out->models = SimulateAccelerometerModels(options);
+  const int K = static_cast<int>(out->models.size());
+  out->sensor_names.clear();
+  for (int k = 0; k < K; ++k)
+    for (const char* axis : {"_x", "_y", "_z"})
+      out->sensor_names.push_back("a" + std::to_string(k) + axis);
+  GaussianRng rng(StreamSeed(options.seed, kStaticStream));
+  out->field.resize(3, positions);
+  out->readings.resize(3 * K, positions);
+  for (int j = 0; j < positions; ++j) {
+    const Eigen::Vector3d f = gravity * rng.UnitVector();
+    out->field.col(j) = f;
+    for (int k = 0; k < K; ++k) {
+      const Eigen::Vector3d y = out->models[k].sensitivity.transpose() * f + out->models[k].bias;
+      for (int i = 0; i < 3; ++i) out->readings(3 * k + i, j) = y(i) + noise_std * rng.Normal();
+    }
   }
   return Status::Ok();
 }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <map>
 
 #include "core/array_simulation.h"
 
@@ -96,10 +97,197 @@ std::string FormatG17(double v) {
   return buf;
 }
 
+constexpr const char* kCalibrationKey = "accelerometer_calibration";
+
+Status CalibrationError(const std::string& message) { return KeyError(kCalibrationKey, message); }
+
+std::string FormatG(double v, int digits = 4) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.*g", digits, v);
+  return buf;
+}
+
 }  // namespace
 
+json ArrayAccelerometerCalibration::ToJson() const {
+  if (!present) return nullptr;
+  return {{"job", job},
+          {"sensors", sensors},
+          {"frame", frame},
+          {"bias", bias.empty() ? json(nullptr) : json(bias)},
+          {"magnitude", Num(magnitude)},
+          {"max_condition_number", Num(max_condition_number)}};
+}
+
+Status ParseAccelerometerCalibration(const json& value, int triads,
+                                     ArrayAccelerometerCalibration* out) {
+  *out = ArrayAccelerometerCalibration();
+  if (value.is_string())
+    return CalibrationError(
+        "a path to a pca result file is only read by `calibd calibrate` (offline); give the pca "
+        "result object inline, or over HTTP {\"job\": ID} of a succeeded pca job");
+  if (!value.is_object())
+    return CalibrationError(
+        "must be a pca result object (the result JSON of a pca calibration in the nominal "
+        "frame), not " +
+        std::string(value.type_name()));
+  const json* result = &value;
+  if (value.contains("job")) {
+    const json& id = value["job"];
+    if (!id.is_number_integer() || id.get<int64_t>() <= 0)
+      return CalibrationError("\"job\" must be the integer id of a succeeded pca job");
+    auto r = value.find("result");
+    if (r == value.end())
+      return CalibrationError(
+          "{\"job\": " + id.dump() +
+          "} is only resolvable over HTTP (the server inserts that job's result); offline, give "
+          "the pca result object inline or a path to its JSON file");
+    for (auto it = value.begin(); it != value.end(); ++it)
+      if (it.key() != "job" && it.key() != "result")
+        return CalibrationError("unknown key '" + it.key() +
+                                "' next to \"job\" (expected {\"job\": ID, \"result\": {...}})");
+    out->job = id;
+    result = &*r;
+  } else {
+    out->job = nullptr;
+  }
+  if (!result->is_object())
+    return CalibrationError("the calibration result must be a JSON object, not " +
+                            std::string(result->type_name()));
+  auto method = result->find("method");
+  if (method == result->end() || !method->is_string() || *method != "pca")
+    return CalibrationError("is not a pca result (expected \"method\": \"pca\"" +
+                            (method == result->end()
+                                 ? std::string(", the key is missing)")
+                                 : ", found " + method->dump().substr(0, 40) + ")") +
+                            "; give the result of a pca calibration of the accelerometers");
+  if (auto d = result->find("diagnostics"); d != result->end() && d->is_object() &&
+                                            d->contains("usable") && (*d)["usable"].is_boolean() &&
+                                            !(*d)["usable"].get<bool>())
+    return CalibrationError("the pca result is marked not usable (diagnostics.usable false)");
+  auto params_it = result->find("parameters");
+  if (params_it == result->end() || !params_it->is_object())
+    return CalibrationError("the pca result has no \"parameters\" object");
+  const json& params = *params_it;
+  auto dim = params.find("dimension");
+  if (dim == params.end() || !dim->is_number())
+    return CalibrationError("the pca result has no parameters.dimension");
+  if (dim->get<double>() != 3)
+    return CalibrationError("the pca result has dimension " + dim->dump() +
+                            "; accelerometer triads need dimension 3");
+  auto frame = params.find("frame");
+  if (frame == params.end() || !frame->is_string())
+    return CalibrationError("the pca result has no parameters.frame");
+  out->frame = frame->get<std::string>();
+  if (out->frame != "nominal")
+    return CalibrationError(
+        "the pca result is in the \"" + out->frame +
+        "\" frame: its axes would not line up with the gyroscopes. Calibrate with \"nominal\" "
+        "(one row per accelerometer axis, e.g. [1,0,0],[0,1,0],[0,0,1] per triad) so the result "
+        "is in the array's body frame");
+  auto known = params.find("magnitude_known");
+  if (known != params.end() && known->is_boolean() && !known->get<bool>())
+    return CalibrationError(
+        "the pca result was computed without a known magnitude: its scale factors are only "
+        "relative. Calibrate with \"magnitude\": 9.80665 (local gravity, m/s^2)");
+  auto magnitude = params.find("magnitude");
+  if (magnitude == params.end() || !magnitude->is_number() ||
+      !std::isfinite(magnitude->get<double>()) || !(magnitude->get<double>() > 0))
+    return CalibrationError("the pca result has no parameters.magnitude > 0");
+  out->magnitude = magnitude->get<double>();
+  if (std::abs(out->magnitude - 9.80665) > 0.1)
+    out->warnings.push_back(
+        "accelerometer_calibration: the pca field magnitude is " + FormatG(out->magnitude) +
+        ", not gravity in m/s^2 (~9.81): the corrected accelerations are in the magnitude's "
+        "units while the array expects m/s^2");
+  if (auto b = params.find("bias"); b != params.end() && b->is_string()) {
+    out->bias = b->get<std::string>();
+    if (out->bias == "none")
+      out->warnings.push_back(
+          "accelerometer_calibration: the pca result assumed bias-free readings (bias: none): "
+          "accelerometer biases are not corrected; calibrate with \"bias\": \"estimate\"");
+  }
+  auto sensors = params.find("sensors");
+  if (sensors == params.end() || !sensors->is_array())
+    return CalibrationError("the pca result has no parameters.sensors array");
+  std::map<std::string, int> index;
+  for (size_t i = 0; i < sensors->size(); ++i) {
+    const json& sensor = (*sensors)[i];
+    const std::string where = "parameters.sensors[" + std::to_string(i) + "]";
+    if (!sensor.is_object() || !sensor.contains("name") || !sensor["name"].is_string())
+      return CalibrationError(where + " has no \"name\" string");
+    const std::string name = sensor["name"].get<std::string>();
+    if (!index.emplace(name, static_cast<int>(i)).second)
+      return CalibrationError("the pca result names sensor '" + name + "' twice");
+  }
+  std::vector<std::string> missing;
+  int used = 0;
+  out->triads.assign(triads, core::AccelerometerTriadModel());
+  static const char* const kAxes[] = {"_x", "_y", "_z"};
+  for (int k = 0; k < triads; ++k)
+    for (int i = 0; i < 3; ++i) {
+      const std::string name = "a" + std::to_string(k) + kAxes[i];
+      auto it = index.find(name);
+      if (it == index.end()) {
+        missing.push_back(name);
+        continue;
+      }
+      ++used;
+      const json& sensor = (*sensors)[it->second];
+      const json* a = sensor.contains("sensitivity") ? &sensor["sensitivity"] : nullptr;
+      if (a == nullptr || !a->is_array() || a->size() != 3)
+        return CalibrationError("sensor '" + name + "' has no sensitivity of 3 numbers");
+      for (int j = 0; j < 3; ++j) {
+        const json& v = (*a)[j];
+        if (!v.is_number() || !std::isfinite(v.get<double>()))
+          return CalibrationError("sensor '" + name + "' has a sensitivity that is not 3 finite " +
+                                  "numbers (" + a->dump().substr(0, 80) + ")");
+        out->triads[k].sensitivity(j, i) = v.get<double>();  // column i = a_i
+      }
+      auto b = sensor.find("bias");
+      if (b != sensor.end() && !b->is_null()) {
+        if (!b->is_number() || !std::isfinite(b->get<double>()))
+          return CalibrationError("sensor '" + name + "' has a bias that is not a finite number");
+        out->triads[k].bias(i) = b->get<double>();
+      }
+    }
+  if (!missing.empty()) {
+    std::string list;
+    const size_t shown = std::min<size_t>(missing.size(), 12);
+    for (size_t i = 0; i < shown; ++i) list += (i ? ", " : "") + missing[i];
+    if (missing.size() > shown) list += " and " + std::to_string(missing.size() - shown) + " more";
+    return CalibrationError(
+        "the pca result has no sensor for " + std::to_string(missing.size()) + " of the " +
+        std::to_string(3 * triads) + " accelerometer columns: missing " + list +
+        " (its sensors must be named like the array's columns, aK_x, aK_y, aK_z)");
+  }
+  for (int k = 0; k < triads; ++k) {
+    const double cond = core::AccelerometerConditionNumber(out->triads[k]);
+    const std::string name = "a" + std::to_string(k);
+    if (!(cond <= core::kMaxAccelerometerConditionNumber))
+      return CalibrationError("triad " + name + ": the 3x3 block of sensitivity vectors of " +
+                              name + "_x, " + name + "_y, " + name + "_z is " +
+                              (std::isfinite(cond)
+                                   ? "ill-conditioned (condition number " + FormatG(cond) + " > " +
+                                         FormatG(core::kMaxAccelerometerConditionNumber) +
+                                         "): the three axes are nearly coplanar"
+                                   : std::string("singular: the three axes do not span space")) +
+                              "; the readings cannot be corrected");
+    out->max_condition_number = std::max(out->max_condition_number, cond);
+  }
+  const int ignored = static_cast<int>(sensors->size()) - used;
+  if (ignored > 0)
+    out->warnings.push_back("accelerometer_calibration: " + std::to_string(ignored) +
+                            " sensor(s) of the pca result are not accelerometer columns of this "
+                            "array and were ignored");
+  out->sensors = used;
+  out->present = true;
+  return Status::Ok();
+}
+
 Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
-                        core::ArrayOptions* options, bool* gyro_in_degrees) {
+                        core::ArrayOptions* options, bool* gyro_in_degrees,
+                        ArrayAccelerometerCalibration* calibration) {
   if (!config.is_object())
     return Status::InvalidInput("the config must be a JSON object, not " +
                                 std::string(config.type_name()));
@@ -182,10 +370,13 @@ Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
     if (!(options->tolerance >= 0 && options->tolerance < 1))
       return KeyError("tolerance", "must be >= 0 and < 1 (0: never stop early)");
   }
-  if (config.contains("accelerometer_calibration"))
-    return KeyError("accelerometer_calibration",
-                    "not supported yet (issue #8): correct the accelerometer readings before "
-                    "uploading, or remove the key");
+  ArrayAccelerometerCalibration parsed;
+  if (auto it = config.find(kCalibrationKey); it != config.end() && !it->is_null()) {
+    s = ParseAccelerometerCalibration(
+        *it, static_cast<int>(geometry_part->nominal_positions.cols()), &parsed);
+    if (!s.ok()) return s;
+  }
+  if (calibration != nullptr) *calibration = std::move(parsed);
   std::string error;
   if (!options->IsValid(&error)) return Status::InvalidInput(error);
   return Status::Ok();
@@ -195,7 +386,8 @@ Status RunArray(const ArrayRecording& recording, const json& config, json* resul
   core::ArrayProblem problem;
   core::ArrayOptions options;
   bool degrees = false;
-  Status s = ParseArrayConfig(config, &problem, &options, &degrees);
+  ArrayAccelerometerCalibration calibration;
+  Status s = ParseArrayConfig(config, &problem, &options, &degrees, &calibration);
   if (!s.ok()) return s;
   const int K = static_cast<int>(problem.nominal_positions.cols());
   const int K_rec = static_cast<int>(recording.accel_names.size());
@@ -208,6 +400,10 @@ Status RunArray(const ArrayRecording& recording, const json& config, json* resul
   problem.gyro = recording.gyro;
   if (degrees) problem.gyro *= core::kDegree;
   problem.accel_names = recording.accel_names;
+  if (calibration.present) {
+    s = core::CorrectAccelerometerReadings(calibration.triads, problem.accel_names, &problem.accel);
+    if (!s.ok()) return s.WithField(kCalibrationKey);
+  }
 
   core::ArrayResult r;
   s = core::CalibrateArray(problem, options, &r);
@@ -234,6 +430,7 @@ Status RunArray(const ArrayRecording& recording, const json& config, json* resul
   }
   json warnings = json::array();
   for (const auto& w : r.warnings) warnings.push_back(w);
+  for (const auto& w : calibration.warnings) warnings.push_back(w);
 
   *result = {{"method", "array"},
              {"parameters", {{"reference", r.reference}, {"positions", positions}}},
@@ -268,16 +465,15 @@ Status RunArray(const ArrayRecording& recording, const json& config, json* resul
                 {{"stride", stride},
                  {"omega_norm", omega},
                  {"omega_dot_norm", omega_dot},
-                 {"units", {{"omega_norm", "rad/s"}, {"omega_dot_norm", "rad/s^2"}}}}}}},
+                 {"units", {{"omega_norm", "rad/s"}, {"omega_dot_norm", "rad/s^2"}}}}},
+               {"accelerometer_calibration", calibration.ToJson()}}},
              {"warnings", warnings}};
   return Status::Ok();
 }
 
-Status SimulateArrayFiles(const ArraySimulationFileOptions& options, std::string* csv, json* config,
-                          json* truth) {
-  if (options.gyro_unit != "rad/s" && options.gyro_unit != "deg/s")
-    return Status::InvalidInput("gyro_unit must be \"rad/s\" or \"deg/s\", not \"" +
-                                options.gyro_unit + "\"");
+namespace {
+
+core::ArraySimulationOptions CoreSimulationOptions(const ArraySimulationFileOptions& options) {
   core::ArraySimulationOptions so;
   so.samples = options.samples;
   so.omega_norm = options.omega_norm_dps * core::kDegree;
@@ -286,6 +482,24 @@ Status SimulateArrayFiles(const ArraySimulationFileOptions& options, std::string
   so.gyro_noise = options.gyro_noise_dps * core::kDegree;
   so.position_perturbation = options.position_perturbation;
   so.seed = options.seed;
+  so.accel_bias = options.accel_bias;
+  so.accel_scale_error = options.accel_scale_error;
+  so.accel_misalignment = options.accel_misalignment;
+  return so;
+}
+
+bool HasAccelErrors(const ArraySimulationFileOptions& o) {
+  return o.accel_bias > 0 || o.accel_scale_error > 0 || o.accel_misalignment > 0;
+}
+
+}  // namespace
+
+Status SimulateArrayFiles(const ArraySimulationFileOptions& options, std::string* csv, json* config,
+                          json* truth) {
+  if (options.gyro_unit != "rad/s" && options.gyro_unit != "deg/s")
+    return Status::InvalidInput("gyro_unit must be \"rad/s\" or \"deg/s\", not \"" +
+                                options.gyro_unit + "\"");
+  const core::ArraySimulationOptions so = CoreSimulationOptions(options);
   core::ArraySimulation sim;
   Status s = core::SimulateArray(so, &sim);
   if (!s.ok()) return s;
@@ -340,6 +554,57 @@ Status SimulateArrayFiles(const ArraySimulationFileOptions& options, std::string
               {"gyro_noise_dps", options.gyro_noise_dps},
               {"position_perturbation", options.position_perturbation},
               {"gyro_unit", options.gyro_unit}}}};
+  if (HasAccelErrors(options)) {
+    json& o = (*truth)["options"];
+    o["accel_bias"] = options.accel_bias;
+    o["accel_scale_error"] = options.accel_scale_error;
+    o["accel_misalignment"] = options.accel_misalignment;
+    json sensors = json::array();
+    for (int k = 0; k < K; ++k)
+      for (int i = 0; i < 3; ++i)
+        sensors.push_back({{"name", sim.problem.accel_names[k] + "_" + "xyz"[i]},
+                           {"sensitivity", Vec(sim.accel_models[k].sensitivity.col(i))},
+                           {"bias", sim.accel_models[k].bias(i)}});
+    (*truth)["accelerometer_sensors"] = std::move(sensors);
+  }
+  return Status::Ok();
+}
+
+Status SimulateArrayStaticFiles(const ArraySimulationFileOptions& options, int positions,
+                                std::string* csv, json* config) {
+  if (options.static_samples < 1)
+    return Status::InvalidInput("static_samples (readings averaged per position) must be >= 1");
+  if (positions < 1) return Status::InvalidInput("static positions must be >= 1");
+  const core::ArraySimulationOptions so = CoreSimulationOptions(options);
+  core::ArrayStaticSimulation sim;
+  const double noise = options.accel_noise / std::sqrt(static_cast<double>(options.static_samples));
+  Status s = core::SimulateArrayStatic(so, positions, noise, core::kStandardGravity, &sim);
+  if (!s.ok()) return s;
+  const int m = static_cast<int>(sim.sensor_names.size());
+  std::string out = "# calibd simulate array: static orientations of the same board, seed " +
+                    std::to_string(options.seed) + ", each row the mean of " +
+                    std::to_string(options.static_samples) + " samples\nposition";
+  for (const std::string& name : sim.sensor_names) out += "," + name;
+  out += '\n';
+  for (int j = 0; j < positions; ++j) {
+    out += "p" + std::to_string(j + 1);
+    for (int i = 0; i < m; ++i) {
+      out += ',';
+      out += FormatG17(sim.readings(i, j));
+    }
+    out += '\n';
+  }
+  *csv = std::move(out);
+  json nominal = json::array();
+  for (int i = 0; i < m; ++i) {
+    json row = {0, 0, 0};
+    row[i % 3] = 1;
+    nominal.push_back(row);
+  }
+  *config = {{"method", "pca"},
+             {"magnitude", core::kStandardGravity},
+             {"bias", "estimate"},
+             {"nominal", std::move(nominal)}};
   return Status::Ok();
 }
 

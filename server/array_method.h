@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "core/array.h"
 #include "core/status.h"
@@ -13,17 +14,54 @@
 
 namespace calibd::server {
 
+// The accelerometer calibration an array fit uses (SPEC §3 `accelerometer_calibration`, issue #8).
+struct ArrayAccelerometerCalibration {
+  bool present = false;  // the config has (a valid) accelerometer_calibration
+  nlohmann::json job;    // the pca job's id when given as {"job": ID, "result": {...}}, else null
+  std::string frame;     // the pca result's parameters.frame ("nominal")
+  std::string bias;      // its parameters.bias ("estimate" | "none"; "" when absent)
+  double magnitude = 0;  // its parameters.magnitude (m/s^2 expected)
+  int sensors = 0;       // sensors used: 3K (a0_x ... a{K-1}_z)
+  double max_condition_number = 0;                    // over the K sensitivity blocks
+  std::vector<core::AccelerometerTriadModel> triads;  // K, triad order (a0, a1, ...)
+  std::vector<std::string> warnings;                  // for the result's warnings
+
+  // {"job": ID or null, "sensors", "frame", "bias", "magnitude", "max_condition_number"}, or
+  // null when !present: the array result's diagnostics.accelerometer_calibration.
+  nlohmann::json ToJson() const;
+};
+
+// Reads an accelerometer_calibration value for an array of `triads` accelerometer triads named
+// a0 ... a{triads-1}. Accepted: a pca result object (SPEC §4, "method": "pca"), or
+// {"job": ID, "result": {pca result}} (what the server makes of the user's {"job": ID}).
+// Convention, from the pca model m_i = a_iᵀ v + b_i (parameters.sensors[i].sensitivity = a_i,
+// .bias = b_i): triad k's block A_k = [a_x a_y a_z] (sensitivity vectors of aK_x, aK_y, aK_z as
+// columns), readings y = A_kᵀ f + b_k, corrected f = A_k⁻ᵀ (y − b_k)
+// (core::AccelerometerTriadModel). Errors, all kInvalidInput with
+// WithField("accelerometer_calibration") and a message starting "config key
+// 'accelerometer_calibration': ": not an object (a string path is resolved only by `calibd
+// calibrate`); a bare {"job": ID} (only resolvable over HTTP); not a pca result; dimension
+// != 3; frame not "nominal" (a canonical-frame result's axes do not line up with the gyroscopes);
+// magnitude unknown; sensors malformed, duplicated or missing (the missing names are listed);
+// a triad's 3×3 block singular or ill-conditioned (condition number >
+// core::kMaxAccelerometerConditionNumber). Sensors other than aK_x/y/z are ignored (warning).
+Status ParseAccelerometerCalibration(const nlohmann::json& value, int triads,
+                                     ArrayAccelerometerCalibration* out);
+
 // Reads the array keys of a config object (SPEC §3): geometry {"positions": [[x,y,z], ...K],
 // "reference": k (default 0)}, accel_noise (m/s²), gyro_noise (in gyro_unit), gyro_unit
 // ("rad/s" default | "deg/s"), gyro_saturation (in gyro_unit), solver ("joint" | "bcd"),
 // max_iterations (integer >= 0, 0 = solver default), tolerance (>= 0, < 1).
-// The common keys method and device are ignored. accelerometer_calibration is recognised but not
-// supported yet (kInvalidInput, issue #8). Unknown keys, missing required keys (geometry,
-// accel_noise, gyro_noise) and wrong types or values are kInvalidInput with WithField(key) and a
-// message naming the key. Fills geometry_part->nominal_positions and ->reference only; with
-// deg/s, gyro_noise and gyro_saturation are converted to rad/s and *gyro_in_degrees is set.
+// accelerometer_calibration (optional, see ParseAccelerometerCalibration; checked against the
+// geometry's triad count). The common keys method and device are ignored. Unknown keys, missing
+// required keys (geometry, accel_noise, gyro_noise) and wrong types or values are kInvalidInput
+// with WithField(key) and a message naming the key. Fills geometry_part->nominal_positions and
+// ->reference only; with deg/s, gyro_noise and gyro_saturation are converted to rad/s and
+// *gyro_in_degrees is set. calibration may be null (validation only); otherwise it is reset and
+// filled (present = false without the key).
 Status ParseArrayConfig(const nlohmann::json& config, core::ArrayProblem* geometry_part,
-                        core::ArrayOptions* options, bool* gyro_in_degrees);
+                        core::ArrayOptions* options, bool* gyro_in_degrees,
+                        ArrayAccelerometerCalibration* calibration = nullptr);
 
 // Runs the calibration on a parsed recording (gyro columns converted from deg/s when configured)
 // and writes the SPEC §4 result:
@@ -40,6 +78,11 @@ Status ParseArrayConfig(const nlohmann::json& config, core::ArrayProblem* geomet
 //                   "parallel_fraction",
 //                   "motion":{"stride","omega_norm":[...],"omega_dot_norm":[...]}},
 //    "warnings":[...]}
+//                   "accelerometer_calibration": null | {"job", "sensors", "frame", "bias",
+//                                                        "magnitude", "max_condition_number"}},
+// With an accelerometer_calibration, each triad's readings are corrected (f = A_k⁻ᵀ(y − b_k))
+// before the fit; accel_noise stays the σ_a of the raw readings (the correction changes it by
+// the scale errors, ~1%, which the isotropic model ignores).
 // Metres, m/s², rad/s (gyroscope figures in the configured gyro_unit). "motion" holds at most
 // 2000 points (every stride-th usable sample). No NaN/Inf (null instead). Deterministic.
 // The recording's triad count must equal the geometry's (kInvalidInput naming both).
@@ -57,14 +100,34 @@ struct ArraySimulationFileOptions {
   double position_perturbation = 0.001;  // sigma_r, m
   uint64_t seed = 1;
   std::string gyro_unit = "rad/s";  // unit of the gyro columns and config ("rad/s" | "deg/s")
+  // Per-triad accelerometer errors (core::ArraySimulationOptions, SimulateAccelerometerModels):
+  // the same board (seed) in SimulateArrayFiles and SimulateArrayStaticFiles. Default 0: ideal.
+  double accel_bias = 0;          // sigma of each bias, m/s²
+  double accel_scale_error = 0;   // sigma of each relative scale-factor error
+  double accel_misalignment = 0;  // sigma of each axis tilt, rad
+  // Static recording (SimulateArrayStaticFiles): readings averaged over this many samples per
+  // position, so the noise is accel_noise / sqrt(static_samples). >= 1.
+  int64_t static_samples = 1000;
 };
 
 // The CSV text (header t,a0_x..a31_z,g0_x..g31_z, %.17g, t = n / 100 s), the config
 // ({"method":"array","geometry":{"positions": NOMINAL, "reference":0},"accel_noise",
 // "gyro_noise","gyro_unit"}) and the truth ({"positions":[{"name","position"}], "seed",
-// "options"}). Deterministic for a seed.
+// "options"}). Deterministic for a seed. With accelerometer errors, truth also has
+// "accelerometer_sensors": [{"name": "a0_x", "sensitivity": [3], "bias"}, ...] (the pca truth
+// format, body frame) and options records accel_bias, accel_scale_error, accel_misalignment.
 Status SimulateArrayFiles(const ArraySimulationFileOptions& options, std::string* csv,
                           nlohmann::json* config, nlohmann::json* truth);
+
+// The static multi-orientation recording of the SAME simulated board (same seed-derived
+// accelerometer errors) for a `pca` calibration with unknown biases: CSV in the pca averaged
+// layout "position,a0_x,...,a31_z" (rows p1..pn, %.17g), gravity 9.80665 m/s² in `positions`
+// random orientations, noise accel_noise / sqrt(static_samples); config {"method":"pca",
+// "magnitude":9.80665,"bias":"estimate","nominal": identity block per triad (96 rows)}.
+// Its pca result (frame nominal) is an accelerometer_calibration for SimulateArrayFiles' config.
+// kInvalidInput for positions < 1, static_samples < 1 or invalid options.
+Status SimulateArrayStaticFiles(const ArraySimulationFileOptions& options, int positions,
+                                std::string* csv, nlohmann::json* config);
 
 }  // namespace calibd::server
 

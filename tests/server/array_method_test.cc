@@ -119,7 +119,7 @@ TEST(ParseArrayConfig, ErrorsNameTheKey) {
   ExpectKeyError(c, "geometry.origin", "unknown key");
   c = BaseConfig();
   c["accelerometer_calibration"] = json::object();
-  ExpectKeyError(c, "accelerometer_calibration", "not supported yet");
+  ExpectKeyError(c, "accelerometer_calibration", "is not a pca result");
 }
 
 ArrayRecording RecordingFromCsv(const std::string& csv) {
