@@ -64,7 +64,8 @@ struct RecordingSummary {
 struct RecordingLimits {
   int64_t max_line_bytes = 1 << 20;  // a longer line is an error (guards memory)
   int64_t max_columns = 4096;        // more header fields is an error
-  int64_t max_positions = 1000000;   // pca: more distinct position labels is an error
+  // pca: more distinct position labels is an error (bounds the parser's memory: ~200 B each).
+  int64_t max_positions = 200000;
 };
 
 class RecordingParser {

@@ -15,8 +15,11 @@ struct ServeOptions {
   bool insecure = false;                   // allow a non-loopback address without a token
   int64_t max_upload_bytes = int64_t{512} << 20;   // larger uploads: 413
   int64_t max_json_body_bytes = int64_t{1} << 20;  // POST /jobs bodies and config parts
-  int http_threads = 32;            // connection threads: a few slow clients cannot starve others
-  int read_timeout_seconds = 30;    // per read on a connection
+  // Connection threads. cpp-httplib gives each open connection a thread, so this bounds how many
+  // slow or idle clients are served at once before /healthz waits; idle threads cost little
+  // memory (their stacks are virtual until touched).
+  int http_threads = 128;
+  int read_timeout_seconds = 10;    // per read on a connection (slow clients are cut off)
   int write_timeout_seconds = 30;   // per write on a connection
   int64_t lease_ms = 30000;         // job lease; renewed every third of it while a job runs
   int shutdown_grace_seconds = 20;  // on SIGTERM, running jobs may finish within this time

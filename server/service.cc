@@ -173,6 +173,44 @@ bool ParseId(const std::string& text, int64_t* id) {
   return v > 0;
 }
 
+// Over HTTP, an array config may name its accelerometer calibration by a succeeded pca job:
+// {"accelerometer_calibration": {"job": ID}} becomes {"job": ID, "result": {...}} before the job
+// is stored, so the job is self-contained (its result cannot change under it) and says which
+// calibration it used.
+Status ResolveCalibrationReference(storage::Store* store, json* config) {
+  if (!config->is_object()) return Status::Ok();
+  auto it = config->find("accelerometer_calibration");
+  if (it == config->end() || !it->is_object() || !it->contains("job") || it->contains("result")) {
+    return Status::Ok();
+  }
+  const json& ref = (*it)["job"];
+  if (!ref.is_number_integer() || it->size() != 1) {
+    return Status::InvalidInput(
+               "'accelerometer_calibration' must be a pca result or {\"job\": ID} of a "
+               "succeeded pca job")
+        .WithField("accelerometer_calibration");
+  }
+  const int64_t id = ref.get<int64_t>();
+  storage::JobInfo job;
+  Status s = store->GetJob(id, &job);
+  if (s.code() == StatusCode::kNotFound) {
+    return Status::InvalidInput("accelerometer_calibration: there is no job " + std::to_string(id))
+        .WithField("accelerometer_calibration");
+  }
+  if (!s.ok()) return s;
+  if (job.method != "pca" || job.status != "succeeded") {
+    return Status::InvalidInput("accelerometer_calibration: job " + std::to_string(id) + " is a " +
+                                job.status + " " + job.method +
+                                " job; it must be a succeeded pca job")
+        .WithField("accelerometer_calibration");
+  }
+  json result;
+  s = ParseJsonText(job.result_json, "result of job " + std::to_string(id), &result);
+  if (!s.ok()) return Status::Internal("stored result is not JSON");
+  *it = json{{"job", id}, {"result", std::move(result)}};
+  return Status::Ok();
+}
+
 }  // namespace
 
 struct Service::Impl {
@@ -364,8 +402,11 @@ void Service::Impl::SetupRoutes() {
         return httplib::Server::HandlerResponse::Handled;
       }
     }
-    if (write && !req.has_header("Content-Length") &&
-        req.get_header_value("Transfer-Encoding") != "chunked" && req.method != "DELETE") {
+    // Only uploads may stream a chunked body (cut off at the upload limit by our reader);
+    // cpp-httplib would buffer any other chunked body whole, so those need a Content-Length.
+    const bool chunked = ToLower(req.get_header_value("Transfer-Encoding")) == "chunked";
+    if (write && !req.has_header("Content-Length") && (!chunked || !is_upload) &&
+        req.method != "DELETE") {
       res.set_header("Connection", "close");
       SendError(res, 411, "length_required",
                 "a request body needs Content-Length or chunked "
@@ -628,6 +669,8 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
   CommonConfig common;
   const bool has_method = config.contains("method");
   if (has_method) {
+    s = ResolveCalibrationReference(store.get(), &config);
+    if (!s.ok()) return finish(SendStatus(res, s));
     s = ValidateConfig(config, &common);
     if (!s.ok()) return finish(SendStatus(res, s));
     if (common.method != LayoutMethod(summary.layout)) {
@@ -711,7 +754,9 @@ void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Respon
     return (void)SendStatus(res, Status::InvalidInput("missing 'config'").WithField("config"));
   }
   const int64_t recording_id = body["recording_id"].get<int64_t>();
-  const json& config = body["config"];
+  json& config = body["config"];
+  s = ResolveCalibrationReference(store.get(), &config);
+  if (!s.ok()) return (void)SendStatus(res, s);
   CommonConfig common;
   s = ValidateConfig(config, &common);
   if (!s.ok()) return (void)SendStatus(res, s);

@@ -397,6 +397,50 @@ TEST(HttpApiLimits, ChunkedUploadOverTheLimitIs413) {
   EXPECT_TRUE(std::filesystem::is_empty(server.dir() / "staging"));
 }
 
+int64_t ProcStatusKiB(const char* key) {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind(key, 0) == 0) return std::stoll(line.substr(std::string(key).size()));
+  }
+  return 0;
+}
+
+// A 100 MB upload streams through the parser and the staging file into SQLite: the server (this
+// process) never holds it whole, so its peak RSS grows by far less than the upload's size.
+TEST(HttpApiLimits, LargeUploadIsStreamedWithBoundedMemory) {
+  TestServer server;
+  ASSERT_EQ(server.error(), "");
+  // The raw static/moving layout, as a long rotary-table log: 1000 rows per phase and position.
+  const std::string header = "position,phase,s1\n";
+  const size_t kRowBytes = 21, kRows = 5000000;  // "p002500,moving,1.000\n"
+  const size_t total = header.size() + kRowBytes * kRows;
+  const int64_t rss_before = ProcStatusKiB("VmRSS:");
+  auto client = server.Client();
+  auto res = client.Post(
+      "/api/v1/recordings?device=BIG", total,
+      [&](size_t offset, size_t, httplib::DataSink& sink) {
+        std::string block;
+        if (offset == 0) block = header;
+        size_t row = offset == 0 ? 0 : (offset - header.size()) / kRowBytes;
+        char line[32];
+        while (block.size() < (1 << 20) && row < kRows) {
+          std::snprintf(line, sizeof line, "p%06zu,%s,1.000\n", row / 2000,
+                        (row / 1000) % 2 ? "moving" : "static");
+          ++row;
+          block += line;
+        }
+        return sink.write(block.data(), block.size());
+      },
+      "text/csv");
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 201) << res->body;
+  EXPECT_EQ(Body(res)["recording"]["bytes"], total);
+  EXPECT_EQ(Body(res)["recording"]["rows"], kRows);
+  const int64_t growth_kib = ProcStatusKiB("VmHWM:") - rss_before;
+  EXPECT_LT(growth_kib, 64 * 1024) << "peak RSS grew by " << growth_kib / 1024 << " MiB";
+}
+
 TEST(HttpApiAuth, WritesNeedTheBearerTokenReadsDoNot) {
   testing::TempDir dir;
   const auto token_file = dir.path() / "token";
