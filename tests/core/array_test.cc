@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
 #include <cmath>
 #include <thread>
 
@@ -440,6 +441,157 @@ TEST(ArrayCalibration, OtherReferenceTriad) {
   ASSERT_TRUE(CalibrateArray(sim.problem, PaperOptions(), &r).ok());
   EXPECT_EQ(r.positions.col(5), sim.problem.nominal_positions.col(5));
   EXPECT_LT(Rmse(r, sim.true_positions), 3 * RmsStd(r));
+}
+
+// --- Accelerometer sensor errors and their correction (issue #8) ---
+
+ArraySimulationOptions ErrorOptions(int64_t n, uint64_t seed) {
+  ArraySimulationOptions so;
+  so.samples = n;
+  so.seed = seed;
+  so.accel_bias = 0.1;
+  so.accel_scale_error = 0.01;
+  so.accel_misalignment = 0.005;
+  return so;
+}
+
+TEST(ArrayAccelerometerErrors, DefaultsAreIdealAndLeaveTheReadingsUnchanged) {
+  ArraySimulationOptions so;
+  so.samples = 20;
+  so.seed = 9;
+  ArraySimulation sim;
+  ASSERT_TRUE(SimulateArray(so, &sim).ok());
+  ASSERT_EQ(sim.accel_models.size(), 32u);
+  for (const AccelerometerTriadModel& m : sim.accel_models) {
+    EXPECT_EQ(m.sensitivity, Eigen::Matrix3d::Identity());
+    EXPECT_EQ(m.bias, Eigen::Vector3d::Zero());
+  }
+  // The errors come from their own stream: the motion, positions, gyroscopes and noise of the
+  // main stream are the same with and without them.
+  ArraySimulation with;
+  ASSERT_TRUE(SimulateArray(ErrorOptions(20, 9), &with).ok());
+  EXPECT_EQ(with.true_positions, sim.true_positions);
+  EXPECT_EQ(with.omega, sim.omega);
+  EXPECT_EQ(with.problem.gyro, sim.problem.gyro);
+  EXPECT_GT((with.problem.accel - sim.problem.accel).cwiseAbs().maxCoeff(), 0.05);
+}
+
+TEST(ArrayAccelerometerErrors, ModelsAreDeterministicWithTheRequestedSpread) {
+  const std::vector<AccelerometerTriadModel> a = SimulateAccelerometerModels(ErrorOptions(10, 3));
+  const std::vector<AccelerometerTriadModel> b = SimulateAccelerometerModels(ErrorOptions(5000, 3));
+  const std::vector<AccelerometerTriadModel> c = SimulateAccelerometerModels(ErrorOptions(10, 4));
+  ASSERT_EQ(a.size(), 32u);
+  double bias2 = 0, scale2 = 0, tilt2 = 0;
+  Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+  for (int k = 0; k < 32; ++k) {
+    EXPECT_EQ(a[k].sensitivity, b[k].sensitivity);  // independent of N: the same board
+    EXPECT_EQ(a[k].bias, b[k].bias);
+    EXPECT_NE(a[k].bias, c[k].bias);
+    bias2 += a[k].bias.squaredNorm();
+    for (int i = 0; i < 3; ++i) {
+      const Eigen::Vector3d axis = a[k].sensitivity.col(i);
+      scale2 += std::pow(axis.norm() - 1, 2);
+      tilt2 += (axis.squaredNorm() - axis(i) * axis(i)) / axis.squaredNorm();  // sin^2 of tilt
+    }
+    sum += a[k].sensitivity;
+  }
+  EXPECT_NEAR(std::sqrt(bias2 / 96), 0.1, 0.02);
+  EXPECT_NEAR(std::sqrt(scale2 / 96), 0.01, 0.002);
+  EXPECT_NEAR(std::sqrt(tilt2 / 192), 0.005, 0.001);  // two tilt angles per axis
+  // No common rotation: sum_k A_k is symmetric, so Procrustes onto identity blocks gives I.
+  EXPECT_LT((sum - sum.transpose()).norm(), 1e-12);
+  EXPECT_GT(sum.eigenvalues().real().minCoeff(), 0);
+}
+
+TEST(ArrayAccelerometerErrors, CorrectionInvertsTheModelExactly) {
+  ArraySimulationOptions so = ErrorOptions(100, 17);
+  so.accel_noise = 0;
+  so.gyro_noise = 0;
+  ArraySimulation with, ideal;
+  ASSERT_TRUE(SimulateArray(so, &with).ok());
+  so.accel_bias = so.accel_scale_error = so.accel_misalignment = 0;
+  ASSERT_TRUE(SimulateArray(so, &ideal).ok());
+  Eigen::MatrixXd accel = with.problem.accel;
+  ASSERT_TRUE(CorrectAccelerometerReadings(with.accel_models, {}, &accel).ok());
+  EXPECT_LT((accel - ideal.problem.accel).cwiseAbs().maxCoeff(), 1e-12);
+  // Then the fit recovers the positions exactly.
+  ArrayProblem p = with.problem;
+  p.accel = accel;
+  ArrayResult r;
+  ASSERT_TRUE(CalibrateArray(p, PaperOptions(), &r).ok());
+  EXPECT_LT((r.positions - with.true_positions).cwiseAbs().maxCoeff(), 1e-9);
+  // Uncorrected, the same data give positions off by ~0.1 mm.
+  ASSERT_TRUE(CalibrateArray(with.problem, PaperOptions(), &r).ok());
+  EXPECT_GT((r.positions - with.true_positions).cwiseAbs().maxCoeff(), 1e-5);
+}
+
+TEST(ArrayAccelerometerErrors, CorrectionRejectsBadModels) {
+  const Eigen::MatrixXd original = Eigen::MatrixXd::Random(5, 9);
+  std::vector<AccelerometerTriadModel> models(3);
+  Eigen::MatrixXd accel = original;
+  // Count mismatch.
+  Status s = CorrectAccelerometerReadings(std::vector<AccelerometerTriadModel>(2), {}, &accel);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+  EXPECT_NE(s.message().find("2 triad models for 9"), std::string::npos) << s.message();
+  // Singular: a2_z parallel to a2_x.
+  models[2].sensitivity.col(2) = models[2].sensitivity.col(0);
+  s = CorrectAccelerometerReadings(models, {"a0", "a1", "a2"}, &accel);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+  EXPECT_NE(s.message().find("triad a2"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("singular"), std::string::npos) << s.message();
+  EXPECT_TRUE(std::isinf(AccelerometerConditionNumber(models[2])));
+  // Ill-conditioned: nearly coplanar axes.
+  models[2].sensitivity.col(2) = models[2].sensitivity.col(0) + Eigen::Vector3d(0, 0, 1e-5);
+  s = CorrectAccelerometerReadings(models, {}, &accel);
+  EXPECT_NE(s.message().find("ill-conditioned"), std::string::npos) << s.message();
+  EXPECT_GT(AccelerometerConditionNumber(models[2]), kMaxAccelerometerConditionNumber);
+  // Not finite.
+  models[2] = AccelerometerTriadModel();
+  models[1].bias(0) = std::nan("");
+  s = CorrectAccelerometerReadings(models, {}, &accel);
+  EXPECT_NE(s.message().find("finite"), std::string::npos) << s.message();
+  EXPECT_EQ(accel, original);  // untouched on every error
+  // Identity models leave the readings as they are.
+  models[1] = AccelerometerTriadModel();
+  ASSERT_TRUE(CorrectAccelerometerReadings(models, {}, &accel).ok());
+  EXPECT_EQ(accel, original);
+  EXPECT_DOUBLE_EQ(AccelerometerConditionNumber(models[0]), 1.0);
+}
+
+TEST(ArrayAccelerometerErrors, StaticRecordingOfTheSameBoard) {
+  const ArraySimulationOptions so = ErrorOptions(1000, 23);
+  ArraySimulation sim;
+  ASSERT_TRUE(SimulateArray(so, &sim).ok());
+  ArrayStaticSimulation st, again;
+  ASSERT_TRUE(SimulateArrayStatic(so, 400, 0.002, kStandardGravity, &st).ok());
+  ASSERT_TRUE(SimulateArrayStatic(so, 400, 0.002, kStandardGravity, &again).ok());
+  EXPECT_EQ(st.readings, again.readings);
+  ASSERT_EQ(st.readings.rows(), 96);
+  ASSERT_EQ(st.readings.cols(), 400);
+  ASSERT_EQ(st.sensor_names.size(), 96u);
+  EXPECT_EQ(st.sensor_names[0], "a0_x");
+  EXPECT_EQ(st.sensor_names[95], "a31_z");
+  double noise2 = 0;
+  for (int k = 0; k < 32; ++k) {
+    EXPECT_EQ(st.models[k].sensitivity, sim.accel_models[k].sensitivity);
+    EXPECT_EQ(st.models[k].bias, sim.accel_models[k].bias);
+    for (int j = 0; j < 400; ++j) {
+      EXPECT_NEAR(st.field.col(j).norm(), kStandardGravity, 1e-12);
+      const Eigen::Vector3d clean =
+          st.models[k].sensitivity.transpose() * st.field.col(j) + st.models[k].bias;
+      noise2 += (st.readings.block<3, 1>(3 * k, j) - clean).squaredNorm();
+    }
+  }
+  EXPECT_NEAR(std::sqrt(noise2 / (96 * 400)), 0.002, 0.0001);
+  EXPECT_EQ(SimulateArrayStatic(so, 0, 0.002, kStandardGravity, &st).code(),
+            StatusCode::kInvalidInput);
+  EXPECT_EQ(SimulateArrayStatic(so, 10, -1, kStandardGravity, &st).code(),
+            StatusCode::kInvalidInput);
+  ArraySimulationOptions bad = so;
+  bad.accel_scale_error = -0.1;
+  std::string error;
+  EXPECT_FALSE(bad.IsValid(&error));
+  EXPECT_NE(error.find("accel_scale_error"), std::string::npos);
 }
 
 }  // namespace
