@@ -242,6 +242,39 @@ int RunCli(int argc, char** argv) {
       ->check(CLI::IsMember({"rad/s", "deg/s"}))
       ->capture_default_str();
 
+  sim_pca
+      ->add_option("--bias", pca_sim.bias_std,
+                   "σ of a constant bias added to each sensor (the config then says "
+                   "bias: estimate)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_array
+      ->add_option("--accel-bias", array_sim.accel_bias,
+                   "σ of each accelerometer bias, m/s² (a per-triad error of the board)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_array
+      ->add_option("--accel-scale-error", array_sim.accel_scale_error,
+                   "σ of each accelerometer's relative scale-factor error")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_array
+      ->add_option("--accel-misalignment", array_sim.accel_misalignment,
+                   "σ of each accelerometer axis tilt, rad")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  int static_positions = 0;
+  sim_array
+      ->add_option("--static-positions", static_positions,
+                   "also write static.csv and static_config.json: the same board in n static "
+                   "orientations, for a pca calibration with bias: estimate")
+      ->check(CLI::Range(0, 1000000));
+  sim_array
+      ->add_option("--static-samples", array_sim.static_samples,
+                   "samples averaged per static position (noise σ_a/√samples)")
+      ->check(CLI::Range(int64_t{1}, int64_t{1000000000}))
+      ->capture_default_str();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -263,7 +296,20 @@ int RunCli(int argc, char** argv) {
     json config, truth;
     Status s = SimulateArrayFiles(array_sim, &csv, &config, &truth);
     if (!s.ok()) return Report(s);
-    return WriteSimulation(out_dir, csv, config, truth);
+    const int code = WriteSimulation(out_dir, csv, config, truth);
+    if (code != kExitOk || static_positions == 0) return code;
+    std::string static_csv;
+    json static_config;
+    s = SimulateArrayStaticFiles(array_sim, static_positions, &static_csv, &static_config);
+    if (!s.ok()) return Report(s);
+    for (const auto& [name, content] :
+         {std::pair<std::string, std::string>{"static.csv", static_csv},
+          {"static_config.json", static_config.dump(2) + "\n"}}) {
+      s = WriteFileAtomically(out_dir, name, content);
+      if (!s.ok()) return Report(s);
+    }
+    std::cerr << "calibd: wrote static.csv and static_config.json\n";
+    return kExitOk;
   }
   return kExitFailure;
 }

@@ -327,6 +327,55 @@ TEST_F(HttpApi, RerunWithAnotherConfigAndListJobsNewestFirstWithCursor) {
   EXPECT_EQ(Body(bad)["error"]["line"], 1);
 }
 
+// The whole workflow of issue #8 over HTTP: a static pca calibration with unknown biases, then an
+// array job that names it by job id; the array result records which calibration it used.
+TEST_F(HttpApi, ArrayJobUsesAPcaJobAsAccelerometerCalibration) {
+  auto client = server_.Client();
+  ArraySimulationFileOptions sim;
+  sim.samples = 400;
+  sim.accel_bias = 0.1;
+  sim.accel_scale_error = 0.01;
+  sim.accel_misalignment = 0.01;
+  std::string static_csv, array_csv;
+  json static_config, array_config, truth;
+  ASSERT_TRUE(SimulateArrayStaticFiles(sim, 30, &static_csv, &static_config).ok());
+  ASSERT_TRUE(SimulateArrayFiles(sim, &array_csv, &array_config, &truth).ok());
+  static_config["device"] = "BOARD-9";
+  auto up = client.Post(
+      "/api/v1/recordings",
+      httplib::MultipartFormDataItems{{"recording", static_csv, "static.csv", "text/csv"},
+                                      {"config", static_config.dump(), "", "application/json"}});
+  ASSERT_TRUE(up);
+  ASSERT_EQ(up->status, 201) << up->body;
+  const int64_t pca_job = Body(up)["job"]["id"];
+  ASSERT_EQ(server_.WaitForJob(pca_job)["status"], "succeeded");
+
+  array_config["device"] = "BOARD-9";
+  array_config["accelerometer_calibration"] = {{"job", pca_job}};
+  auto arr = client.Post(
+      "/api/v1/recordings",
+      httplib::MultipartFormDataItems{{"recording", array_csv, "array.csv", "text/csv"},
+                                      {"config", array_config.dump(), "", "application/json"}});
+  ASSERT_TRUE(arr);
+  ASSERT_EQ(arr->status, 201) << arr->body;
+  json job = server_.WaitForJob(Body(arr)["job"]["id"]);
+  ASSERT_EQ(job["status"], "succeeded") << job.dump();
+  EXPECT_EQ(job["config"]["accelerometer_calibration"]["job"], pca_job);
+  EXPECT_EQ(job["result"]["diagnostics"]["accelerometer_calibration"]["job"], pca_job);
+
+  // References that cannot work are refused at once, naming the key.
+  const int64_t rec = Body(arr)["recording"]["id"];
+  for (const json& ref : {json{{"job", 999}}, json{{"job", job["id"]}}, json{{"job", "x"}}}) {
+    json config = array_config;
+    config["accelerometer_calibration"] = ref;
+    auto res = client.Post("/api/v1/jobs", json{{"recording_id", rec}, {"config", config}}.dump(),
+                           "application/json");
+    ASSERT_TRUE(res);
+    EXPECT_EQ(res->status, 400) << ref.dump() << " " << res->body;
+    EXPECT_EQ(Body(res)["error"]["field"], "accelerometer_calibration") << res->body;
+  }
+}
+
 TEST_F(HttpApi, UnknownRoutesAre404AndWrongMethodsAre405) {
   auto client = server_.Client();
   auto missing = client.Get("/api/v1/nothing");
