@@ -3,7 +3,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "core/array_simulation.h"
 #include "server/recording.h"
@@ -255,6 +257,287 @@ TEST(RunArray, NotDeterminableAndDecimatedMotion) {
   EXPECT_LE(result["diagnostics"]["motion"]["omega_norm"].size(), 2000u);
   EXPECT_GE(result["diagnostics"]["motion"]["omega_norm"].size(), 1000u);
   EXPECT_EQ(result["diagnostics"]["motion"]["stride"], 3);
+}
+
+// --- accelerometer_calibration (issue #8) ---
+
+// A pca result (SPEC §4) in the nominal frame for triads a0..a{K-1}: triad k's sensor i has the
+// sensitivity column i of a_k and the bias b_k(i).
+json PcaResult(const std::vector<core::AccelerometerTriadModel>& models) {
+  json sensors = json::array(), stds = json::array();
+  for (size_t k = 0; k < models.size(); ++k)
+    for (int i = 0; i < 3; ++i) {
+      const Eigen::Vector3d a = models[k].sensitivity.col(i);
+      const std::string name = "a" + std::to_string(k) + "_" + "xyz"[i];
+      sensors.push_back({{"name", name},
+                         {"sensitivity", {a(0), a(1), a(2)}},
+                         {"scale", a.norm()},
+                         {"axis", {a(0) / a.norm(), a(1) / a.norm(), a(2) / a.norm()}},
+                         {"bias", models[k].bias(i)}});
+      stds.push_back(
+          {{"name", name}, {"scale_std", 1e-4}, {"axis_std_rad", 1e-4}, {"bias_std", 1e-4}});
+    }
+  return {{"method", "pca"},
+          {"parameters",
+           {{"dimension", 3},
+            {"magnitude", 9.80665},
+            {"magnitude_known", true},
+            {"frame", "nominal"},
+            {"bias", "estimate"},
+            {"sensors", sensors}}},
+          {"uncertainty", {{"sensors", stds}}},
+          {"diagnostics", {{"usable", true}}},
+          {"warnings", json::array()}};
+}
+
+json IdealPcaResult(int triads = 32) {
+  return PcaResult(std::vector<core::AccelerometerTriadModel>(triads));
+}
+
+// The index of sensor `name` in a PcaResult.
+json& Sensor(json& pca, const std::string& name) {
+  for (json& s : pca["parameters"]["sensors"])
+    if (s["name"] == name) return s;
+  ADD_FAILURE() << name;
+  return pca;
+}
+
+void ExpectCalibrationError(const json& calibration, const std::string& phrase) {
+  json c = BaseConfig();
+  c["accelerometer_calibration"] = calibration;
+  ExpectKeyError(c, "accelerometer_calibration", phrase);
+}
+
+TEST(AccelerometerCalibration, ReadsTheSensitivityVectorsAsColumns) {
+  std::vector<core::AccelerometerTriadModel> models(32);
+  models[3].sensitivity << 1.01, 0.02, -0.01,  //
+      0.005, 0.99, 0.03,                       //
+      -0.02, 0.01, 1.02;
+  models[3].bias << 0.1, -0.2, 0.3;
+  ArrayAccelerometerCalibration cal;
+  Status s = ParseAccelerometerCalibration(PcaResult(models), 32, &cal);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  EXPECT_TRUE(cal.present);
+  EXPECT_TRUE(cal.job.is_null());
+  EXPECT_EQ(cal.sensors, 96);
+  EXPECT_EQ(cal.frame, "nominal");
+  EXPECT_EQ(cal.bias, "estimate");
+  EXPECT_DOUBLE_EQ(cal.magnitude, 9.80665);
+  ASSERT_EQ(cal.triads.size(), 32u);
+  EXPECT_EQ(cal.triads[3].sensitivity, models[3].sensitivity);  // a3_y's vector is column 1
+  EXPECT_EQ(cal.triads[3].bias, models[3].bias);
+  EXPECT_EQ(cal.triads[0].sensitivity, Eigen::Matrix3d::Identity());
+  EXPECT_GT(cal.max_condition_number, 1.0);
+  EXPECT_TRUE(cal.warnings.empty());
+  // The server's form {"job": ID, "result": {...}} gives the same, and records the job.
+  ArrayAccelerometerCalibration by_job;
+  ASSERT_TRUE(
+      ParseAccelerometerCalibration({{"job", 12}, {"result", PcaResult(models)}}, 32, &by_job)
+          .ok());
+  EXPECT_EQ(by_job.job, 12);
+  EXPECT_EQ(by_job.triads[3].sensitivity, models[3].sensitivity);
+  const json j = by_job.ToJson();
+  EXPECT_EQ(j["job"], 12);
+  EXPECT_EQ(j["sensors"], 96);
+  EXPECT_EQ(j["frame"], "nominal");
+  EXPECT_TRUE(ArrayAccelerometerCalibration().ToJson().is_null());
+  // Through ParseArrayConfig; null means none.
+  json c = BaseConfig();
+  c["accelerometer_calibration"] = PcaResult(models);
+  core::ArrayProblem p;
+  core::ArrayOptions o;
+  bool deg = false;
+  ASSERT_TRUE(ParseArrayConfig(c, &p, &o, &deg, &cal).ok());
+  EXPECT_TRUE(cal.present);
+  EXPECT_TRUE(ParseArrayConfig(c, &p, &o, &deg).ok());  // validation only
+  c["accelerometer_calibration"] = nullptr;
+  ASSERT_TRUE(ParseArrayConfig(c, &p, &o, &deg, &cal).ok());
+  EXPECT_FALSE(cal.present);
+}
+
+TEST(AccelerometerCalibration, ErrorsSayWhatIsWrong) {
+  ExpectCalibrationError("static/result.json", "only read by `calibd calibrate`");
+  ExpectCalibrationError(42, "must be a pca result object");
+  ExpectCalibrationError({{"job", 5}}, "only resolvable over HTTP");
+  ExpectCalibrationError({{"job", "5"}, {"result", IdealPcaResult()}}, "integer id");
+  ExpectCalibrationError({{"job", 5}, {"result", IdealPcaResult()}, {"note", 1}},
+                         "unknown key 'note'");
+  ExpectCalibrationError({{"job", 5}, {"result", "x"}}, "must be a JSON object");
+
+  json pca = IdealPcaResult();
+  pca["method"] = "array";
+  ExpectCalibrationError(pca, "is not a pca result");
+  pca = IdealPcaResult();
+  pca.erase("parameters");
+  ExpectCalibrationError(pca, "no \"parameters\"");
+  pca = IdealPcaResult();
+  pca["parameters"]["dimension"] = 2;
+  ExpectCalibrationError(pca, "dimension 2");
+  pca = IdealPcaResult();
+  pca["parameters"]["frame"] = "canonical";
+  ExpectCalibrationError(pca, "would not line up with the gyroscopes");
+  pca = IdealPcaResult();
+  pca["parameters"]["magnitude_known"] = false;
+  ExpectCalibrationError(pca, "only relative");
+  pca = IdealPcaResult();
+  pca["diagnostics"]["usable"] = false;
+  ExpectCalibrationError(pca, "not usable");
+
+  // Names: the missing ones are listed.
+  pca = IdealPcaResult();
+  json& sensors = pca["parameters"]["sensors"];
+  sensors.erase(95);  // a31_z
+  sensors.erase(16);  // a5_y
+  ExpectCalibrationError(pca, "missing a5_y, a31_z");
+  pca = IdealPcaResult();
+  for (json& s : pca["parameters"]["sensors"])
+    s["name"] = "acc" + s["name"].get<std::string>().substr(1);
+  ExpectCalibrationError(pca, "no sensor for 96 of the 96 accelerometer columns: missing a0_x");
+  ExpectCalibrationError(pca, "and 84 more");
+  pca = IdealPcaResult();
+  Sensor(pca, "a7_x")["name"] = "a7_y";
+  ExpectCalibrationError(pca, "names sensor 'a7_y' twice");
+  pca = IdealPcaResult();
+  Sensor(pca, "a2_y")["sensitivity"] = {1, 0};
+  ExpectCalibrationError(pca, "sensor 'a2_y' has no sensitivity of 3 numbers");
+  pca = IdealPcaResult();
+  Sensor(pca, "a2_y")["bias"] = "0.1";
+  ExpectCalibrationError(pca, "sensor 'a2_y' has a bias that is not a finite number");
+  // A geometry with fewer triads than the result: extra sensors are ignored.
+  ArrayAccelerometerCalibration cal;
+  ASSERT_TRUE(ParseAccelerometerCalibration(IdealPcaResult(), 31, &cal).ok());
+  EXPECT_EQ(cal.sensors, 93);
+  ASSERT_EQ(cal.warnings.size(), 1u);
+  EXPECT_NE(cal.warnings[0].find("3 sensor(s)"), std::string::npos) << cal.warnings[0];
+  // ... but a geometry with more triads lacks sensors.
+  EXPECT_EQ(ParseAccelerometerCalibration(IdealPcaResult(), 33, &cal).field(),
+            "accelerometer_calibration");
+
+  // Singular and ill-conditioned triad blocks.
+  pca = IdealPcaResult();
+  Sensor(pca, "a9_z")["sensitivity"] = {1, 0, 0};  // = a9_x
+  ExpectCalibrationError(pca,
+                         "triad a9: the 3x3 block of sensitivity vectors of a9_x, a9_y, "
+                         "a9_z is singular");
+  pca = IdealPcaResult();
+  Sensor(pca, "a9_z")["sensitivity"] = {1, 0, 1e-5};
+  ExpectCalibrationError(pca, "ill-conditioned");
+
+  // Suspicious but usable: warnings.
+  pca = IdealPcaResult();
+  pca["parameters"]["magnitude"] = 1.0;
+  pca["parameters"]["bias"] = "none";
+  ASSERT_TRUE(ParseAccelerometerCalibration(pca, 32, &cal).ok());
+  ASSERT_EQ(cal.warnings.size(), 2u);
+  EXPECT_NE(cal.warnings[0].find("not gravity in m/s^2"), std::string::npos) << cal.warnings[0];
+  EXPECT_NE(cal.warnings[1].find("bias: none"), std::string::npos) << cal.warnings[1];
+}
+
+TEST(AccelerometerCalibration, TheTrueModelsMakeTheFitExact) {
+  // Noise-free readings of a board with sensor errors; the calibration holding the true models
+  // (in the pca result's convention) must give the positions to 1e-9 m. A transposed or
+  // sign-flipped convention would leave errors of ~10 um.
+  ArraySimulationFileOptions so;
+  so.samples = 300;
+  so.seed = 31;
+  so.accel_noise = 0;
+  so.gyro_noise_dps = 0;
+  so.accel_bias = 0.2;
+  so.accel_scale_error = 0.02;
+  so.accel_misalignment = 0.01;
+  std::string csv;
+  json config, truth;
+  ASSERT_TRUE(SimulateArrayFiles(so, &csv, &config, &truth).ok());
+  ASSERT_EQ(truth["accelerometer_sensors"].size(), 96u);
+  EXPECT_EQ(truth["options"]["accel_bias"], 0.2);
+  config["accel_noise"] = 0.04;
+  config["gyro_noise"] = 0.001;
+  json pca = IdealPcaResult();
+  for (int i = 0; i < 96; ++i) {
+    json& s = pca["parameters"]["sensors"][i];
+    ASSERT_EQ(s["name"], truth["accelerometer_sensors"][i]["name"]);
+    s["sensitivity"] = truth["accelerometer_sensors"][i]["sensitivity"];
+    s["bias"] = truth["accelerometer_sensors"][i]["bias"];
+  }
+  const ArrayRecording rec = RecordingFromCsv(csv);
+  auto max_error = [&](const json& result) {
+    double e = 0;
+    for (int k = 0; k < 32; ++k)
+      for (int i = 0; i < 3; ++i)
+        e = std::max(e, std::abs(result["parameters"]["positions"][k]["position"][i].get<double>() -
+                                 truth["positions"][k]["position"][i].get<double>()));
+    return e;
+  };
+  json plain, calibrated;
+  ASSERT_TRUE(RunArray(rec, config, &plain).ok());
+  EXPECT_GT(max_error(plain), 1e-4);
+  EXPECT_TRUE(plain["diagnostics"]["accelerometer_calibration"].is_null());
+  config["accelerometer_calibration"] = pca;
+  const Status s = RunArray(rec, config, &calibrated);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  EXPECT_LT(max_error(calibrated), 1e-9);
+  const json& used = calibrated["diagnostics"]["accelerometer_calibration"];
+  EXPECT_TRUE(used["job"].is_null());
+  EXPECT_EQ(used["sensors"], 96);
+  EXPECT_EQ(used["frame"], "nominal");
+  EXPECT_EQ(used["bias"], "estimate");
+  EXPECT_DOUBLE_EQ(used["magnitude"].get<double>(), 9.80665);
+  EXPECT_TRUE(used["max_condition_number"].is_number());
+  // Its warnings reach the result.
+  config["accelerometer_calibration"]["parameters"]["bias"] = "none";
+  ASSERT_TRUE(RunArray(rec, config, &calibrated).ok());
+  bool warned = false;
+  for (const json& w : calibrated["warnings"])
+    warned |= w.get<std::string>().find("bias: none") != std::string::npos;
+  EXPECT_TRUE(warned) << calibrated["warnings"].dump();
+}
+
+TEST(SimulateArrayStaticFiles, PcaLayoutAndConfigOfTheSameBoard) {
+  ArraySimulationFileOptions so;
+  so.seed = 8;
+  so.accel_bias = 0.1;
+  so.static_samples = 400;  // noise 0.04 / 20 = 0.002
+  std::string csv, csv2;
+  json config, config2, array_config, truth;
+  ASSERT_TRUE(SimulateArrayStaticFiles(so, 30, &csv, &config).ok());
+  ASSERT_TRUE(SimulateArrayStaticFiles(so, 30, &csv2, &config2).ok());
+  EXPECT_EQ(csv, csv2);
+  EXPECT_EQ(config["method"], "pca");
+  EXPECT_EQ(config["bias"], "estimate");
+  EXPECT_DOUBLE_EQ(config["magnitude"].get<double>(), 9.80665);
+  ASSERT_EQ(config["nominal"].size(), 96u);
+  EXPECT_EQ(config["nominal"][0], json({1, 0, 0}));
+  EXPECT_EQ(config["nominal"][4], json({0, 1, 0}));
+  EXPECT_EQ(config["nominal"][95], json({0, 0, 1}));
+  RecordingParser parser("static.csv", true);
+  ASSERT_TRUE(ParseRecording(csv, &parser).ok());
+  PcaRecording rec;
+  ASSERT_TRUE(parser.TakePca(&rec).ok());
+  ASSERT_EQ(rec.readings.rows(), 96);
+  ASSERT_EQ(rec.readings.cols(), 30);
+  EXPECT_EQ(rec.sensor_names[0], "a0_x");
+  EXPECT_EQ(rec.sensor_names[95], "a31_z");
+  EXPECT_EQ(rec.position_labels[29], "p30");
+  // The biases of the array simulation's board are in the static readings: the mean over
+  // orientations of each triad's readings is near its bias (gravity averages out roughly).
+  ASSERT_TRUE(SimulateArrayFiles(so, &csv2, &array_config, &truth).ok());
+  double agree = 0, total = 0;
+  for (int i = 0; i < 96; ++i) {
+    const double b = truth["accelerometer_sensors"][i]["bias"];
+    agree += b * (rec.readings.row(i).mean());
+    total += b * b;
+  }
+  EXPECT_GT(agree, 0.3 * total);
+  // Errors.
+  EXPECT_EQ(SimulateArrayStaticFiles(so, 0, &csv, &config).code(), StatusCode::kInvalidInput);
+  so.static_samples = 0;
+  EXPECT_EQ(SimulateArrayStaticFiles(so, 30, &csv, &config).code(), StatusCode::kInvalidInput);
+  // Without sensor errors the truth has no accelerometer_sensors (outputs as before).
+  so = ArraySimulationFileOptions();
+  so.samples = 10;
+  ASSERT_TRUE(SimulateArrayFiles(so, &csv2, &array_config, &truth).ok());
+  EXPECT_FALSE(truth.contains("accelerometer_sensors"));
+  EXPECT_FALSE(truth["options"].contains("accel_bias"));
 }
 
 }  // namespace
