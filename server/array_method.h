@@ -45,6 +45,10 @@ struct ArrayAccelerometerCalibration {
 // magnitude unknown; sensors malformed, duplicated or missing (the missing names are listed);
 // a triad's 3×3 block singular or ill-conditioned (condition number >
 // core::kMaxAccelerometerConditionNumber). Sensors other than aK_x/y/z are ignored (warning).
+// Warnings (not errors): magnitude far from 9.80665 (units), bias "none" (biases not corrected).
+// The pca nominal frame is the best orthogonal fit of all the triads' axes onto the nominal; the
+// array fit assumes it is the gyroscopes' frame (a common accelerometer-to-gyroscope rotation is
+// not observable from static data and is not estimated).
 Status ParseAccelerometerCalibration(const nlohmann::json& value, int triads,
                                      ArrayAccelerometerCalibration* out);
 
