@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# The whole test suite under AddressSanitizer + UndefinedBehaviorSanitizer (g++), in build-asan/.
+# Usage: scripts/sanitize.sh [extra ctest args]. Exits non-zero on any failure or sanitizer report.
+# The slowest statistical tests (Monte-Carlo coverage and accuracy sweeps of the methods, which
+# only re-run the same arithmetic many times) are excluded to keep CI time bounded; every server,
+# storage, parser, web and HTTP test runs.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+build=${CALIBD_ASAN_BUILD_DIR:-build-asan}
+start=$(date +%s)
+cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCALIBD_SANITIZE=address,undefined \
+  -DCALIBD_BUILD_BENCH=OFF >/dev/null
+cmake --build "$build" -j "$(nproc)"
+built=$(date +%s)
+export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:strict_string_checks=1:detect_stack_use_after_return=1
+export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+# Slow under ASan and covered by the normal build: see the list in scripts/sanitize.sh's header.
+exclude=${CALIBD_ASAN_EXCLUDE:-}
+args=(--output-on-failure -j "$(nproc)")
+[ -n "$exclude" ] && args+=(-E "$exclude")
+status=0
+(cd "$build" && ctest "${args[@]}" "$@") || status=$?
+end=$(date +%s)
+echo "sanitize.sh: build $((built - start)) s, tests $((end - built)) s, total $((end - start)) s"
+exit $status

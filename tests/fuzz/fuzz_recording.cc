@@ -1,0 +1,140 @@
+// libFuzzer target: the incremental CSV parser (server/recording.h) on arbitrary bytes.
+//
+// Input: byte 0 picks the chunking seed, the rest is the recording. The bytes are parsed three
+// ways: whole by a collecting parser, in pseudo-random chunks (1..64 bytes) by a collecting
+// parser, and in other chunks by a validating (non-collecting) parser, as an upload is.
+// Invariants: no crash or sanitizer report; the three give the same outcome (status code,
+// message, line, column) and the same summary; a failure is kInvalidInput or kTooLarge with a
+// message, and a line > 0 unless the message is about the whole file; after success, Take*() of
+// the summary's layout succeeds with dimensions matching the summary, the other layout fails
+// cleanly, and every array number collected is finite (pca means may overflow; the
+// calibration target covers what the methods make of that).
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <string_view>
+
+#include "server/recording.h"
+
+namespace {
+
+using calibd::Status;
+using calibd::StatusCode;
+using calibd::server::ArrayRecording;
+using calibd::server::Layout;
+using calibd::server::PcaRecording;
+using calibd::server::RecordingParser;
+using calibd::server::RecordingSummary;
+
+[[noreturn]] void Fail(const char* what, const Status& s) {
+  std::fprintf(stderr, "fuzz_recording invariant broken: %s\n  status: %s\n", what,
+               s.ToString().c_str());
+  std::abort();
+}
+
+void Check(bool ok, const char* what, const Status& s = Status::Ok()) {
+  if (!ok) Fail(what, s);
+}
+
+// Feeds `bytes` in chunks whose sizes come from a small LCG seeded by `seed` (0: one chunk).
+Status Parse(std::string_view bytes, uint32_t seed, RecordingParser* parser) {
+  if (seed == 0) {
+    Status s = parser->Feed(bytes);
+    if (!s.ok()) return s;
+    return parser->Finish();
+  }
+  uint32_t state = seed;
+  size_t pos = 0;
+  while (pos < bytes.size()) {
+    state = state * 1664525u + 1013904223u;
+    const size_t n = 1 + (state >> 24) % 64;
+    const std::string_view chunk = bytes.substr(pos, n);
+    pos += chunk.size();
+    Status s = parser->Feed(chunk);
+    if (!s.ok()) {
+      // Sticky: feeding more after an error returns the same error.
+      Status again = parser->Feed("1,2,3\n");
+      Check(again.code() == s.code() && again.message() == s.message() && again.line() == s.line(),
+            "error is not sticky", again);
+      return s;
+    }
+  }
+  return parser->Finish();
+}
+
+bool SameStatus(const Status& a, const Status& b) {
+  return a.code() == b.code() && a.message() == b.message() && a.line() == b.line() &&
+         a.column() == b.column() && a.field() == b.field();
+}
+
+bool SameSummary(const RecordingSummary& a, const RecordingSummary& b) {
+  return a.layout == b.layout && a.rows == b.rows && a.columns == b.columns &&
+         a.sensors == b.sensors && a.positions == b.positions;
+}
+
+bool AllFinite(const Eigen::MatrixXd& m) { return m.size() == 0 || m.allFinite(); }
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  if (size < 1) return 0;
+  const uint32_t seed = data[0] | 1u;
+  const std::string_view bytes(reinterpret_cast<const char*>(data) + 1, size - 1);
+
+  RecordingParser whole("fuzz.csv", /*collect=*/true);
+  const Status s_whole = Parse(bytes, 0, &whole);
+  RecordingParser chunked("fuzz.csv", /*collect=*/true);
+  const Status s_chunked = Parse(bytes, seed, &chunked);
+  RecordingParser validating("fuzz.csv", /*collect=*/false);
+  const Status s_valid = Parse(bytes, seed * 7919u, &validating);
+
+  Check(SameStatus(s_whole, s_chunked), "outcome depends on chunk boundaries", s_chunked);
+  Check(SameStatus(s_whole, s_valid), "validating and collecting parsers disagree", s_valid);
+
+  if (!s_whole.ok()) {
+    Check(s_whole.code() == StatusCode::kInvalidInput || s_whole.code() == StatusCode::kTooLarge,
+          "unexpected error code", s_whole);
+    Check(!s_whole.message().empty(), "error without a message", s_whole);
+    Check(s_whole.line() >= 0 && s_whole.column() >= 0, "negative error location", s_whole);
+    Check(s_whole.message().size() < 4096, "error message echoes too much input", s_whole);
+    return 0;
+  }
+
+  const RecordingSummary& sum = whole.summary();
+  Check(SameSummary(sum, chunked.summary()), "summary depends on chunk boundaries");
+  Check(SameSummary(sum, validating.summary()), "validating summary differs");
+  Check(sum.rows >= 0 && sum.positions >= 0, "negative counts");
+
+  if (sum.layout == Layout::kArray) {
+    ArrayRecording rec;
+    Status s = whole.TakeArray(&rec);
+    Check(s.ok(), "TakeArray failed after a successful array parse", s);
+    Check(rec.accel.rows() == sum.rows && rec.gyro.rows() == sum.rows, "array row count", s);
+    Check(rec.accel.cols() == 3 * static_cast<Eigen::Index>(rec.accel_names.size()),
+          "accel columns");
+    Check(rec.gyro.cols() == 3 * static_cast<Eigen::Index>(rec.gyro_names.size()), "gyro columns");
+    Check(rec.t.size() == 0 || rec.t.size() == sum.rows, "t length");
+    Check(AllFinite(rec.accel) && AllFinite(rec.gyro) && (rec.t.size() == 0 || rec.t.allFinite()),
+          "non-finite number collected");
+    PcaRecording wrong;
+    s = chunked.TakePca(&wrong);
+    Check(!s.ok() && !s.message().empty(), "TakePca of an array recording did not fail cleanly", s);
+  } else {
+    PcaRecording rec;
+    Status s = whole.TakePca(&rec);
+    Check(s.ok(), "TakePca failed after a successful pca parse", s);
+    const auto m = static_cast<Eigen::Index>(rec.sensor_names.size());
+    const auto n = static_cast<Eigen::Index>(rec.position_labels.size());
+    Check(rec.readings.rows() == m && rec.readings.cols() == n, "pca readings shape", s);
+    Check(n == sum.positions, "pca positions count");
+    Check(rec.rows_per_position.size() == static_cast<size_t>(n), "rows_per_position size");
+    Check(rec.raw == (sum.layout == Layout::kPcaRaw), "raw flag");
+    ArrayRecording wrong;
+    s = chunked.TakeArray(&wrong);
+    Check(!s.ok() && !s.message().empty(), "TakeArray of a pca recording did not fail cleanly", s);
+  }
+  return 0;
+}
