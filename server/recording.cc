@@ -8,6 +8,7 @@
 #include <array>
 #include <charconv>
 #include <cmath>
+#include <cstring>
 #include <unordered_map>
 
 namespace calibd::server {
@@ -64,6 +65,61 @@ bool ParseTriadColumn(std::string_view name, char* kind, int* index, int* axis) 
 }
 
 }  // namespace
+
+bool ParseDecimalFast(std::string_view text, double* value) {
+  // Clinger's fast path: a decimal with at most 19 significant digits whose integer mantissa M
+  // is exactly representable (M <= 2^53) and whose decimal exponent E has |E| <= 22 is the
+  // correctly rounded M * 10^E or M / 10^-E, one IEEE operation on two exact operands.
+  static constexpr double kPow10[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
+                                      1e8,  1e9,  1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+                                      1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+  const char* p = text.data();
+  const char* const end = p + text.size();
+  const bool negative = p < end && *p == '-';
+  if (negative) ++p;
+  uint64_t mantissa = 0;
+  int digits = 0, exponent = 0;
+  const char* start = p;
+  // Counting every digit (leading zeros too) keeps the loop branch-light; the rare number with
+  // more than 19 digits in all goes to std::from_chars.
+  for (; p < end && static_cast<unsigned>(*p - '0') < 10; ++p) {
+    mantissa = mantissa * 10 + static_cast<uint64_t>(*p - '0');
+    ++digits;
+  }
+  bool any = p > start;
+  if (p < end && *p == '.') {
+    ++p;
+    const char* frac = p;
+    for (; p < end && static_cast<unsigned>(*p - '0') < 10; ++p) {
+      mantissa = mantissa * 10 + static_cast<uint64_t>(*p - '0');
+      ++digits;
+    }
+    exponent = -static_cast<int>(p - frac);
+    any = any || p > frac;
+  }
+  if (!any) return false;
+  if (p < end && (*p == 'e' || *p == 'E')) {
+    ++p;
+    bool exp_negative = false;
+    if (p < end && (*p == '+' || *p == '-')) exp_negative = *p++ == '-';
+    const char* exp_start = p;
+    int e = 0;
+    for (; p < end && *p >= '0' && *p <= '9'; ++p) {
+      e = e * 10 + (*p - '0');
+      if (e > 10000) return false;
+    }
+    if (p == exp_start) return false;
+    exponent += exp_negative ? -e : e;
+  }
+  if (p != end || digits > 19 || mantissa > (uint64_t{1} << 53) || exponent < -22 ||
+      exponent > 22) {
+    return false;
+  }
+  double v = static_cast<double>(mantissa);
+  v = exponent < 0 ? v / kPow10[-exponent] : v * kPow10[exponent];
+  *value = negative ? -v : v;
+  return true;
+}
 
 bool IsValidUtf8(std::string_view s) {
   size_t i = 0;
@@ -127,6 +183,7 @@ struct RecordingParser::Impl {
   };
   std::vector<Position> positions;
   std::unordered_map<std::string, size_t> position_index;
+  size_t last_position = 0;                    // index of the previous row's position
   std::vector<double> moving_sum, static_sum;  // n*m, position-major (collect only)
   std::vector<double> row_values;              // reused
 
@@ -150,6 +207,7 @@ struct RecordingParser::Impl {
   Status Split(std::string_view line) {
     fields.clear();
     unquoted.clear();
+    if (line.find('"') == std::string_view::npos) return SplitUnquoted(line);
     size_t pos = 0;
     while (true) {
       if (static_cast<int64_t>(fields.size()) >= limits.max_columns) {
@@ -203,11 +261,30 @@ struct RecordingParser::Impl {
     return Status::Ok();
   }
 
+  // The common case: no quotes anywhere in the line, so fields end at commas.
+  Status SplitUnquoted(std::string_view line) {
+    const char* p = line.data();
+    const char* const end = p + line.size();
+    while (true) {
+      if (static_cast<int64_t>(fields.size()) >= limits.max_columns) {
+        return Fail("more than " + std::to_string(limits.max_columns) + " columns",
+                    static_cast<int64_t>(fields.size()) + 1);
+      }
+      const char* comma = static_cast<const char*>(memchr(p, ',', static_cast<size_t>(end - p)));
+      const char* field_end = comma ? comma : end;
+      fields.push_back(TrimSpaces(std::string_view(p, static_cast<size_t>(field_end - p))));
+      if (!comma) break;
+      p = comma + 1;
+    }
+    return Status::Ok();
+  }
+
   Status ParseNumber(std::string_view text, int64_t column, const std::string& name,
                      double* value) {
     if (text.empty()) return Fail("empty cell in column '" + name + "'", column, name);
     std::string_view digits = text;
     if (digits.front() == '+') digits.remove_prefix(1);
+    if (ParseDecimalFast(digits, value)) return Status::Ok();
     const char* end = digits.data() + digits.size();
     auto [ptr, ec] = std::from_chars(digits.data(), end, *value);
     if (ec == std::errc::result_out_of_range) {
@@ -356,9 +433,13 @@ struct RecordingParser::Impl {
           ParseNumber(f[col], static_cast<int64_t>(col) + 1, summary.sensors[i], &row_values[i]);
       if (!s.ok()) return s;
     }
-    auto it = position_index.find(std::string(f[0]));
+    // Rows of one position usually come together: try the previous row's position first.
     size_t p;
-    if (it == position_index.end()) {
+    if (!positions.empty() && positions[last_position].label == f[0]) {
+      p = last_position;
+    } else if (auto it = position_index.find(std::string(f[0])); it != position_index.end()) {
+      p = it->second;
+    } else {
       if (static_cast<int64_t>(positions.size()) >= limits.max_positions) {
         return Fail("more than " + std::to_string(limits.max_positions) + " distinct positions", 1,
                     "position");
@@ -370,9 +451,8 @@ struct RecordingParser::Impl {
         moving_sum.resize(moving_sum.size() + sensor_count, 0.0);
         static_sum.resize(static_sum.size() + sensor_count, 0.0);
       }
-    } else {
-      p = it->second;
     }
+    last_position = p;
     Position& pos = positions[p];
     ++pos.rows;
     (moving ? pos.moving_rows : pos.static_rows)++;

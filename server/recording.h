@@ -92,6 +92,11 @@ class RecordingParser {
   std::unique_ptr<Impl> impl_;
 };
 
+// Parses a plain decimal ("-12.5e-3") exactly as std::from_chars would, when it can do so by
+// Clinger's fast path (<= 19 significant digits, mantissa <= 2^53, |exponent| <= 22); returns
+// false, leaving *value alone, for everything else (the caller then uses std::from_chars).
+bool ParseDecimalFast(std::string_view text, double* value);
+
 // True when `s` is well-formed UTF-8 (no overlong forms, surrogates or values past U+10FFFF).
 bool IsValidUtf8(std::string_view s);
 

@@ -4,6 +4,10 @@
 
 #include <gtest/gtest.h>
 
+#include <charconv>
+#include <cmath>
+#include <cstring>
+#include <random>
 #include <string>
 
 namespace calibd::server {
@@ -194,6 +198,50 @@ TEST(RecordingParser, RejectsOverlongLineWithoutBufferingIt) {
   // The error is sticky.
   EXPECT_FALSE(parser.Feed("\n").ok());
   EXPECT_FALSE(parser.Finish().ok());
+}
+
+// The fast decimal path must give bit-identical results to std::from_chars wherever it answers.
+TEST(ParseDecimalFast, AgreesBitForBitWithFromChars) {
+  std::mt19937_64 rng(42);
+  std::uniform_real_distribution<double> mantissa(-1, 1);
+  std::uniform_int_distribution<int> exponent(-30, 30), precision(1, 17);
+  int fast = 0;
+  char buf[64];
+  for (int i = 0; i < 200000; ++i) {
+    const double x = mantissa(rng) * std::pow(10.0, exponent(rng));
+    const int prec = precision(rng);
+    switch (i % 3) {
+      case 0:
+        std::snprintf(buf, sizeof buf, "%.*g", prec, x);
+        break;
+      case 1:
+        std::snprintf(buf, sizeof buf, "%.*f", prec % 10, x);
+        break;
+      default:
+        std::snprintf(buf, sizeof buf, "%.*e", prec, x);
+        break;
+    }
+    const std::string_view text(buf);
+    double expected = 0, got = 0;
+    auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), expected);
+    ASSERT_EQ(ec, std::errc()) << text;
+    if (ParseDecimalFast(text, &got)) {
+      ++fast;
+      ASSERT_EQ(std::memcmp(&got, &expected, sizeof got), 0) << text;
+    }
+  }
+  EXPECT_GT(fast, 100000);  // the common sensor formats take the fast path
+  for (const char* odd : {"", "-", ".", "e5", "1e", "1e+", "--1", "1.2.3", "0x10", "nan", "inf",
+                          "12345678901234567890", "1e23", "1e-23", "9007199254740993"}) {
+    double v = 7;
+    EXPECT_FALSE(ParseDecimalFast(odd, &v)) << odd;
+    EXPECT_EQ(v, 7) << odd;
+  }
+  double v;
+  ASSERT_TRUE(ParseDecimalFast("-0", &v));
+  EXPECT_TRUE(std::signbit(v));
+  ASSERT_TRUE(ParseDecimalFast("000123.4500", &v));
+  EXPECT_EQ(v, 123.45);
 }
 
 TEST(Utf8, AcceptsWellFormedAndRejectsMalformedSequences) {
