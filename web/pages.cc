@@ -1329,7 +1329,26 @@ std::string JobBody(const JobView& view) {
   } else {
     kv += kDash;
   }
-  kv += "</dd>" + TimingsHtml(job) + "</dl>";
+  kv += "</dd>";
+  // An array job that used a pca calibration of its accelerometers links to it (issue #8).
+  const json* accel_cal = Get(Get(job.result, "diagnostics"), "accelerometer_calibration");
+  if (accel_cal != nullptr && accel_cal->is_object()) {
+    kv += "<dt>accelerometers</dt><dd class=\"accelerometer-calibration\">";
+    const json* cal_job = Get(accel_cal, "job");
+    if (cal_job != nullptr && cal_job->is_number_integer()) {
+      const std::string id = std::to_string(cal_job->get<int64_t>());
+      kv +=
+          "corrected with the pca calibration of <a href=\"/jobs/" + id + "\">job #" + id + "</a>";
+    } else {
+      kv += "corrected with a pca calibration given inline";
+    }
+    const json* sensors = Get(accel_cal, "sensors");
+    if (sensors != nullptr && sensors->is_number_integer()) {
+      kv += " (" + std::to_string(sensors->get<int64_t>()) + " sensors)";
+    }
+    kv += "</dd>";
+  }
+  kv += TimingsHtml(job) + "</dl>";
   out += kv;
   if (!view.config.is_null()) {
     const std::string pretty = PrettyJson(view.config);

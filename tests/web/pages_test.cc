@@ -245,6 +245,20 @@ TEST(JobPage, ArrayReportHasPositionsCostResidualsAndExcitation) {
   EXPECT_TRUE(Has(page, "callout-warn"));
 }
 
+TEST(JobPage, ArrayReportLinksTheAccelerometerCalibrationItUsed) {
+  JobView v;
+  json result = ArrayResult();
+  result["diagnostics"]["accelerometer_calibration"] = {
+      {"job", 17}, {"sensors", 96}, {"frame", "nominal"}};
+  v.job = Job(23, "ARRAY-7", "array", "succeeded", "2026-11-21 10:00:00", result);
+  const std::string page = RenderJobPage(v);
+  EXPECT_TRUE(Has(page, "<a href=\"/jobs/17\">job #17</a>")) << page.substr(0, 3000);
+  EXPECT_TRUE(Has(page, "(96 sensors)"));
+  result["diagnostics"]["accelerometer_calibration"] = nullptr;  // none used: no line
+  v.job.result = result;
+  EXPECT_FALSE(Has(RenderJobPage(v), "accelerometer-calibration"));
+}
+
 TEST(JobPage, HundredThousandSampleExcitationKeepsPageUnderOneMegabyte) {
   JobView v;
   v.job = Job(24, "ARRAY-7", "array", "succeeded", "2026-11-21 10:00:00", ArrayResult(100000));
