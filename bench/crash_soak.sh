@@ -55,7 +55,7 @@ def start():
         try:
             if request("GET", "/healthz", timeout=1)[0] == 200:
                 return p
-        except OSError:
+        except (OSError, http.client.HTTPException):
             pass
         time.sleep(0.01)
     sys.exit("crash_soak: the server did not start within 30 s")
@@ -66,7 +66,16 @@ counter = [0]
 attempts = [0]
 stop = threading.Event()
 
+alive_ok = [True]
+
 def uploader(k):
+    try:
+        upload_loop()
+    except BaseException:
+        alive_ok[0] = False
+        raise
+
+def upload_loop():
     while not stop.is_set():
         with lock:
             counter[0] += 1
@@ -79,8 +88,8 @@ def uploader(k):
             status, answer = request(
                 "POST", f"/api/v1/recordings?method=pca&device=SOAK-{n % 5}&magnitude=1", body,
                 {"Content-Type": "text/csv"})
-        except OSError:
-            time.sleep(0.005)   # the server is down: retry after the restart
+        except (OSError, http.client.HTTPException):
+            time.sleep(0.005)   # killed mid-request, or down: retry after the restart
             continue
         if status == 201:
             a = json.loads(answer)
@@ -107,6 +116,8 @@ for i in range(kills):
 stop.set()
 for t in threads:
     t.join()
+    if not alive_ok[0]:
+        sys.exit("crash_soak: an uploader thread died")
 soak_seconds = time.time() - t0
 
 # Drain: every job (acknowledged or committed but unanswered) must end; a job whose lease was
