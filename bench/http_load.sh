@@ -46,11 +46,12 @@ http {
 NGINX
 nginx -c "$tmp/nginx.conf" && nginx_started=1
 
-echo "## GET latest calibration ($(wc -c <"$tmp/latest.json") bytes JSON), wrk -t2 -d10s --latency"
+echo "## GET latest calibration ($(wc -c <"$tmp/latest.json") bytes JSON), wrk -t2 (-t1 for one connection) -d10s --latency"
 for c in 1 16 64; do
   for target in calibd nginx; do
     u=$url; [ $target = nginx ] && u=http://127.0.0.1:18089/latest.json
-    out=$(wrk -t2 -c$c -d10s --latency "$u")
+    t=2; [ "$c" -lt 2 ] && t=1
+    out=$(wrk -t$t -c$c -d10s --latency "$u")
     rps=$(echo "$out" | sed -n 's/^Requests\/sec: *//p')
     p50=$(echo "$out" | awk '$1=="50%"{print $2}')
     p99=$(echo "$out" | awk '$1=="99%"{print $2}')
@@ -68,7 +69,7 @@ for name, size in (("1mb", 1 << 20), ("100mb", 100 << 20)):
         f.write("position," + ",".join(f"s{i}" for i in range(12)) + "\n")
         written, p = 0, 0
         while written < size:
-            line = f"p{p}," + ",".join(f"{random.gauss(0, 1):.9f}" for _ in range(12)) + "\n"
+            line = f"p{p // 1000}," + ",".join(f"{random.gauss(0, 1):.9f}" for _ in range(12)) + "\n"
             f.write(line); written += len(line); p += 1
 PY
 for name in 1mb 100mb; do

@@ -14,6 +14,8 @@ duration=${1:-60}
 build=${CALIBD_FUZZ_BUILD_DIR:-build-fuzz}
 targets=${CALIBD_FUZZ_TARGETS:-fuzz_recording fuzz_config fuzz_calibrate fuzz_multipart}
 
+command -v clang++ >/dev/null && dpkg-query -W libclang-rt-14-dev >/dev/null 2>&1 ||
+  { apt-get update -qq && apt-get install -y -qq clang libclang-rt-14-dev >/dev/null; }
 CC=clang CXX=clang++ cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCALIBD_FUZZ=ON \
   -DCALIBD_SANITIZE=address,undefined -DCALIBD_BUILD_TESTS=OFF -DCALIBD_BUILD_BENCH=OFF >/dev/null
 # shellcheck disable=SC2086
