@@ -5,22 +5,15 @@ set -euo pipefail
 bin=$(realpath "$1")
 src=$(realpath "$2")
 tmp=$(mktemp -d)
-server_pid=
+# shellcheck source=/dev/null
+source "$(dirname "$0")/../lib/serve.sh"
 cleanup() {
-  [ -n "$server_pid" ] && kill "$server_pid" 2>/dev/null && wait "$server_pid" 2>/dev/null
+  stop_calibd
   rm -rf "$tmp"
 }
 trap cleanup EXIT
 
-"$bin" serve --db "$tmp/calibd.db" --listen 127.0.0.1:0 --no-access-log 2>"$tmp/server.log" &
-server_pid=$!
-port=
-for _ in $(seq 1 100); do
-  port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\).*|\1|p' "$tmp/server.log" 2>/dev/null || true)
-  [ -n "$port" ] && break
-  sleep 0.1
-done
-[ -n "$port" ] || { echo "server did not start:"; cat "$tmp/server.log"; exit 1; }
+start_calibd "$bin"
 
 sed -n '/<!-- walkthrough:begin -->/,/<!-- walkthrough:end -->/p' "$src/README.md" |
   grep -v -e '^<!--' -e '^```' |

@@ -7,25 +7,17 @@ bin=$(realpath "$1")
 chromium=$(command -v chromium || true)
 [ -n "$chromium" ] || { echo "chromium is not installed (scripts/setup.sh installs it)"; exit 1; }
 tmp=$(mktemp -d)
+# shellcheck source=/dev/null
+source "$(dirname "$0")/../lib/serve.sh"
 shots=${CALIBD_SCREENSHOT_DIR:-$tmp/shots}
 mkdir -p "$shots"
-server_pid=
 cleanup() {
-  [ -n "$server_pid" ] && kill "$server_pid" 2>/dev/null && wait "$server_pid" 2>/dev/null
+  stop_calibd
   rm -rf "$tmp"
 }
 trap cleanup EXIT
 
-"$bin" serve --db "$tmp/calibd.db" --listen 127.0.0.1:0 --no-access-log 2>"$tmp/server.log" &
-server_pid=$!
-port=
-for _ in $(seq 1 100); do
-  port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\).*|\1|p' "$tmp/server.log" 2>/dev/null || true)
-  [ -n "$port" ] && break
-  sleep 0.1
-done
-[ -n "$port" ] || { cat "$tmp/server.log"; exit 1; }
-base=http://127.0.0.1:$port
+start_calibd "$bin"
 
 "$bin" simulate pca --out "$tmp/pca" --seed 3 --positions 60 2>/dev/null
 "$bin" simulate array --out "$tmp/array" --seed 3 --samples 1000 2>/dev/null
