@@ -21,11 +21,9 @@ namespace {
 using json = nlohmann::json;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kPi = 3.14159265358979323846;
-constexpr const char* kDash = "\xE2\x80\x93";     // –
-constexpr const char* kPlusMinus = " \xC2\xB1 ";  // ±
-constexpr const char* kSigma = "\xCF\x83";        // σ
-constexpr const char* kMicro = "\xC2\xB5";        // µ
-constexpr const char* kTimes = "\xC3\x97";        // ×
+constexpr const char* kDash = "\xE2\x80\x93";  // –
+constexpr const char* kSigma = "\xCF\x83";     // σ
+constexpr const char* kTimes = "\xC3\x97";     // ×
 
 // ---------------------------------------------------------------------------------------------
 // Defensive JSON access: never throws, wrong types read as "absent".

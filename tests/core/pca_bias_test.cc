@@ -282,7 +282,7 @@ TEST(PcaBiasEstimate, ReportedUncertaintyMatchesMonteCarloSpread) {
       rep_bias(i) += r.sensors[i].bias_std / trials;
     }
   }
-  auto stddev = [trials](const std::vector<double>& x) {
+  auto stddev = [](const std::vector<double>& x) {
     double mean = 0, var = 0;
     for (double s : x) mean += s / trials;
     for (double s : x) var += (s - mean) * (s - mean) / (trials - 1);

@@ -16,6 +16,7 @@
 #include "server/array_method.h"
 #include "server/pca_method.h"
 #include "storage/store.h"
+#include "tests/lib/sanitizer.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {
@@ -116,8 +117,8 @@ json WaitForStatus(ServerProcess& server, int64_t id, const std::set<std::string
   return job;
 }
 
-// An array job that computes for a while (BCD, many sweeps): a job that is "running" long
-// enough to be interrupted.
+// An array job that computes for a while (BCD, many sweeps; seconds in any build): a job that is
+// "running" long enough to be interrupted.
 httplib::MultipartFormDataItems SlowArrayUpload(uint64_t seed) {
   ArraySimulationFileOptions sim;
   sim.samples = 1000;
@@ -126,7 +127,7 @@ httplib::MultipartFormDataItems SlowArrayUpload(uint64_t seed) {
   json config, truth;
   EXPECT_TRUE(SimulateArrayFiles(sim, &csv, &config, &truth).ok());
   config["solver"] = "bcd";
-  config["max_iterations"] = 2000;
+  config["max_iterations"] = 2000 / sanitizer::kComputeSlowdown;
   config["tolerance"] = 0;
   config["device"] = "SLOW";
   return {{"recording", csv, "slow.csv", "text/csv"},
@@ -193,7 +194,7 @@ TEST(ServeProcess, KillNineNeverLosesAnAcknowledgedUploadOrJob) {
   std::set<int64_t> jobs;
   std::mt19937_64 rng(20261122);
   uint64_t seed = 100;
-  const int kKills = 10;
+  const int kKills = sanitizer::kAddressSanitizer ? 10 : 20;  // bench/crash_soak.sh does 200
   for (int round = 0; round < kKills; ++round) {
     ServerProcess server(db, {"--workers", "2"});
     ASSERT_GT(server.port(), 0) << server.log();
