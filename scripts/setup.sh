@@ -7,6 +7,7 @@ packages=(
   libeigen3-dev nlohmann-json3-dev libcpp-httplib-dev libcli11-dev
   libsqlite3-dev sqlite3 libssl-dev zlib1g-dev libbrotli-dev
   libgtest-dev libgmock-dev libbenchmark-dev
+  clang libclang-rt-14-dev
   curl procps python3 chromium fonts-dejavu-core
 )
 missing=()

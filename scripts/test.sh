@@ -1,7 +1,20 @@
 #!/usr/bin/env bash
-# The README's test command: installs dependencies, builds everything, runs every test.
+# The README's test command (and CI's, .ci/run): installs dependencies, then
+#   1. builds everything in build/ (Release) and runs every test;
+#   2. builds again with clang + ASan + UBSan in build-sanitize/ and runs the suite there
+#      (scripts/sanitize.sh), including a replay of the committed fuzz corpora;
+#   3. fuzzes each libFuzzer target for $CALIBD_FUZZ_SECONDS (default 60) s (tests/fuzz/run.sh).
+# About 15 minutes on 2 idle cores (bench/README.md, "Sanitizers and fuzzing").
 set -euo pipefail
 cd "$(dirname "$0")/.."
+start=$(date +%s)
 scripts/setup.sh
 scripts/build.sh
-cd build && ctest --output-on-failure -j "$(nproc)"
+(cd build && ctest --output-on-failure -j "$(nproc)")
+normal=$(date +%s)
+scripts/sanitize.sh
+sanitized=$(date +%s)
+tests/fuzz/run.sh "${CALIBD_FUZZ_SECONDS:-60}"
+end=$(date +%s)
+echo "test.sh: normal build + tests $((normal - start)) s, sanitizers $((sanitized - normal)) s," \
+  "fuzzing $((end - sanitized)) s, total $((end - start)) s"

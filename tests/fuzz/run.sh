@@ -1,31 +1,31 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer targets (clang, ASan + UBSan) in build-fuzz/ and runs each for DURATION
-# seconds (default 60) on a temporary copy of its committed corpus (tests/fuzz/corpus/<target>),
-# so the repository is never modified. Exits non-zero when any target finds a crash, a sanitizer
-# report, a broken invariant, a timeout or an out-of-memory; the reproducers are kept in
-# build-fuzz/artifacts/ (replay one: build-fuzz/tests/fuzz/<target> <file>).
+# Builds the libFuzzer targets (clang, ASan + UBSan) in build-sanitize/ (scripts/build-sanitize.sh)
+# and runs each for DURATION seconds (default 60), $CALIBD_FUZZ_JOBS at a time (default: the
+# number of cores), on a temporary copy of its committed corpus (tests/fuzz/corpus/<target>), so
+# the repository is never modified. Part of scripts/test.sh. Exits non-zero when any target finds
+# a crash, a sanitizer report, a broken invariant, a timeout or an out-of-memory; the reproducers
+# are kept in build-sanitize/artifacts/. A finding becomes a regression test by adding its
+# reproducer to the target's corpus: ctest replays every corpus file (fuzz_corpus.<target>).
 #
 #   tests/fuzz/run.sh [DURATION]
 #   CALIBD_FUZZ_TARGETS="fuzz_config fuzz_recording" tests/fuzz/run.sh 30
 #   CALIBD_FUZZ_MERGE=1 tests/fuzz/run.sh 600   # also merge new coverage into the committed corpus
+#   build-sanitize/tests/fuzz/<target> <file>    # replay one input
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 duration=${1:-60}
-build=${CALIBD_FUZZ_BUILD_DIR:-build-fuzz}
+build=${CALIBD_SANITIZE_BUILD_DIR:-build-sanitize}
 targets=${CALIBD_FUZZ_TARGETS:-fuzz_recording fuzz_config fuzz_calibrate fuzz_multipart}
+jobs=${CALIBD_FUZZ_JOBS:-$(nproc)}
 
-command -v clang++ >/dev/null && dpkg-query -W libclang-rt-14-dev >/dev/null 2>&1 ||
-  { apt-get update -qq && apt-get install -y -qq clang libclang-rt-14-dev >/dev/null; }
-CC=clang CXX=clang++ cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCALIBD_FUZZ=ON \
-  -DCALIBD_SANITIZE=address,undefined -DCALIBD_BUILD_TESTS=OFF -DCALIBD_BUILD_BENCH=OFF >/dev/null
+scripts/setup.sh
 # shellcheck disable=SC2086
-cmake --build "$build" -j "$(nproc)" --target $targets
+scripts/build-sanitize.sh --target $targets
 
-# Per target: the largest input, the time one input may take (ASan builds are slow).
+# Per target: the largest input.
 max_len() {
   case $1 in
-    fuzz_config) echo 4096 ;;
-    fuzz_calibrate) echo 4096 ;;
+    fuzz_config | fuzz_calibrate) echo 4096 ;;
     *) echo 16384 ;;
   esac
 }
@@ -37,27 +37,39 @@ trap 'rm -rf "$work"' EXIT
 export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1:allocator_may_return_null=1}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 
+# Fuzzes one target; its exit status goes to $work/<target>.status, its log to <target>.log.
+fuzz_one() {
+  local t=$1 corpus=$work/$1 status=0
+  mkdir -p "$corpus" "$work/tmp-$t"
+  cp -r tests/fuzz/corpus/"$t"/. "$corpus"/
+  # -timeout: one input may take 20 s (ASan); TMPDIR: fuzz_multipart's server database.
+  TMPDIR=$work/tmp-$t "$build/tests/fuzz/$t" "$corpus" -max_total_time="$duration" \
+    -max_len="$(max_len "$t")" -timeout=20 -rss_limit_mb=2560 -print_final_stats=1 \
+    -artifact_prefix="$artifacts/$t-" -close_fd_mask=0 >"$work/$t.log" 2>&1 || status=$?
+  if [ "${CALIBD_FUZZ_MERGE:-0}" = 1 ] && [ $status -eq 0 ]; then
+    TMPDIR=$work/tmp-$t "$build/tests/fuzz/$t" -merge=1 -max_len="$(max_len "$t")" \
+      tests/fuzz/corpus/"$t" "$corpus" >>"$work/$t.merge.log" 2>&1
+  fi
+  echo $status >"$work/$t.status"
+}
+
+echo "fuzz: $targets, ${duration} s each, $jobs at a time"
+for t in $targets; do
+  while [ "$(jobs -rp | wc -l)" -ge "$jobs" ]; do wait -n || true; done
+  fuzz_one "$t" &
+done
+wait
+
 failed=()
 for t in $targets; do
-  corpus=$work/$t
-  mkdir -p "$corpus"
-  cp -r tests/fuzz/corpus/"$t"/. "$corpus"/
-  echo "=== $t: ${duration} s, corpus $(find "$corpus" -type f | wc -l) files"
-  status=0
-  # TMPDIR: fuzz_multipart's server database lives there and goes away with $work.
-  TMPDIR=$work "$build/tests/fuzz/$t" "$corpus" -max_total_time="$duration" \
-    -max_len="$(max_len "$t")" -timeout=20 -rss_limit_mb=2560 -print_final_stats=1 \
-    -artifact_prefix="$artifacts/$t-" -close_fd_mask=0 2>"$work/$t.log" || status=$?
+  status=$(cat "$work/$t.status" 2>/dev/null || echo 1)
+  echo "=== $t: corpus $(find tests/fuzz/corpus/"$t" -type f | wc -l) files, exit $status"
   grep -E "^(stat::number_of_executed_units|stat::average_exec_per_sec|stat::peak_rss_mb)|#[0-9]+ +DONE" \
     "$work/$t.log" || true
-  if [ $status -ne 0 ]; then
+  if [ "$status" -ne 0 ]; then
     failed+=("$t")
     echo "!!! $t found a problem (exit $status); log tail:"
     tail -n 60 "$work/$t.log"
-  fi
-  if [ "${CALIBD_FUZZ_MERGE:-0}" = 1 ] && [ $status -eq 0 ]; then
-    "$build/tests/fuzz/$t" -merge=1 -max_len="$(max_len "$t")" tests/fuzz/corpus/"$t" "$corpus" \
-      2>/dev/null
   fi
 done
 if [ ${#failed[@]} -gt 0 ]; then
