@@ -66,58 +66,111 @@ bool ParseTriadColumn(std::string_view name, char* kind, int* index, int* axis) 
 
 }  // namespace
 
-bool ParseDecimalFast(std::string_view text, double* value) {
+namespace {
+
+// Appends the decimal digits starting at p to *mantissa (wrapping past 2^64: the caller rejects
+// more than 19 digits anyway) and returns the first non-digit. Where 8 bytes are readable it
+// works on a word at a time (SWAR): one load finds the run of up to 8 leading digits and three
+// multiplications turn it into a number, so a typical sensor value costs no per-digit loop.
+inline const char* AccumulateDigits(const char* p, const char* end, uint64_t* mantissa) {
+  static constexpr uint64_t kPow10[] = {1,      10,      100,      1000,     10000,
+                                        100000, 1000000, 10000000, 100000000};
+  uint64_t m = *mantissa;
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+  while (end - p >= 8) {
+    uint64_t chunk;
+    std::memcpy(&chunk, p, 8);  // byte 0 is the first character
+    // A byte is a digit when its high nibble is 3 and stays 3 after adding 6. A carry out of a
+    // non-digit byte can only disturb the bytes after it, which are not used.
+    const uint64_t non_digit =
+        ((chunk & 0xF0F0F0F0F0F0F0F0u) ^ 0x3030303030303030u) |
+        (((chunk + 0x0606060606060606u) & 0xF0F0F0F0F0F0F0F0u) ^ 0x3030303030303030u);
+    const int n = non_digit == 0 ? 8 : __builtin_ctzll(non_digit) / 8;  // leading digits
+    // The n digit values moved to the top bytes (zeros before them are leading zeros), then
+    // combined pairwise: 10·d0 + d1 in every other byte, then all eight as one number. No
+    // branch on n (0 included): digit counts vary from number to number.
+    const uint64_t values = chunk - 0x3030303030303030u;
+    uint64_t d = n == 0 ? 0 : values << (8 * (8 - n));
+    d = d * 10 + (d >> 8);
+    d = (((d & 0x000000FF000000FFu) * (100 + (1000000ull << 32))) +
+         (((d >> 16) & 0x000000FF000000FFu) * (1 + (10000ull << 32)))) >>
+        32;
+    m = m * kPow10[n] + d;
+    p += n;
+    if (n < 8) {
+      *mantissa = m;
+      return p;
+    }
+  }
+#endif
+  for (; p < end && static_cast<unsigned>(*p - '0') < 10; ++p) {
+    m = m * 10 + static_cast<uint64_t>(*p - '0');
+  }
+  *mantissa = m;
+  return p;
+}
+
+// Inlined into the row reader; ParseDecimalPrefixFast below is the exported name.
+inline const char* DecimalPrefixFast(const char* p, const char* end, double* value) {
   // Clinger's fast path: a decimal with at most 19 significant digits whose integer mantissa M
   // is exactly representable (M <= 2^53) and whose decimal exponent E has |E| <= 22 is the
   // correctly rounded M * 10^E or M / 10^-E, one IEEE operation on two exact operands.
   static constexpr double kPow10[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
                                       1e8,  1e9,  1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
                                       1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
-  const char* p = text.data();
-  const char* const end = p + text.size();
   const bool negative = p < end && *p == '-';
-  if (negative) ++p;
+  p += negative;  // branch-free: signs are random in sensor data
   uint64_t mantissa = 0;
-  int digits = 0, exponent = 0;
-  const char* start = p;
-  // Counting every digit (leading zeros too) keeps the loop branch-light; the rare number with
+  int exponent = 0;
+  const char* const start = p;
+  // Counting every digit (leading zeros too) keeps the loops branch-light; the rare number with
   // more than 19 digits in all goes to std::from_chars.
-  for (; p < end && static_cast<unsigned>(*p - '0') < 10; ++p) {
-    mantissa = mantissa * 10 + static_cast<uint64_t>(*p - '0');
-    ++digits;
-  }
-  bool any = p > start;
+  p = AccumulateDigits(p, end, &mantissa);
+  ptrdiff_t digits = p - start;
   if (p < end && *p == '.') {
     ++p;
-    const char* frac = p;
-    for (; p < end && static_cast<unsigned>(*p - '0') < 10; ++p) {
-      mantissa = mantissa * 10 + static_cast<uint64_t>(*p - '0');
-      ++digits;
-    }
+    const char* const frac = p;
+    p = AccumulateDigits(p, end, &mantissa);
     exponent = -static_cast<int>(p - frac);
-    any = any || p > frac;
+    digits += p - frac;
   }
-  if (!any) return false;
+  if (digits == 0) return nullptr;
   if (p < end && (*p == 'e' || *p == 'E')) {
     ++p;
     bool exp_negative = false;
     if (p < end && (*p == '+' || *p == '-')) exp_negative = *p++ == '-';
-    const char* exp_start = p;
+    const char* const exp_start = p;
     int e = 0;
-    for (; p < end && *p >= '0' && *p <= '9'; ++p) {
+    for (; p < end && static_cast<unsigned>(*p - '0') < 10; ++p) {
       e = e * 10 + (*p - '0');
-      if (e > 10000) return false;
+      if (e > 10000) return nullptr;
     }
-    if (p == exp_start) return false;
+    if (p == exp_start) return nullptr;
     exponent += exp_negative ? -e : e;
   }
-  if (p != end || digits > 19 || mantissa > (uint64_t{1} << 53) || exponent < -22 ||
-      exponent > 22) {
-    return false;
+  if (digits > 19 || mantissa > (uint64_t{1} << 53) || exponent < -22 || exponent > 22) {
+    return nullptr;
   }
   double v = static_cast<double>(mantissa);
   v = exponent < 0 ? v / kPow10[-exponent] : v * kPow10[exponent];
-  *value = negative ? -v : v;
+  uint64_t bits;  // v >= 0: set the sign bit without a branch (-0 stays -0)
+  std::memcpy(&bits, &v, sizeof bits);
+  bits |= static_cast<uint64_t>(negative) << 63;
+  std::memcpy(value, &bits, sizeof bits);
+  return p;
+}
+
+}  // namespace
+
+const char* ParseDecimalPrefixFast(const char* p, const char* end, double* value) {
+  return DecimalPrefixFast(p, end, value);
+}
+
+bool ParseDecimalFast(std::string_view text, double* value) {
+  const char* const end = text.data() + text.size();
+  double v = 0;
+  if (ParseDecimalPrefixFast(text.data(), end, &v) != end) return false;
+  *value = v;
   return true;
 }
 
@@ -433,20 +486,27 @@ struct RecordingParser::Impl {
           ParseNumber(f[col], static_cast<int64_t>(col) + 1, summary.sensors[i], &row_values[i]);
       if (!s.ok()) return s;
     }
+    return CommitPcaRow(f[0], moving) ? Status::Ok() : error;
+  }
+
+  // Adds the row in row_values, of position `label`, to its position; false (and `error`) when
+  // that would be one position too many.
+  bool CommitPcaRow(std::string_view label, bool moving) {
     // Rows of one position usually come together: try the previous row's position first.
     size_t p;
-    if (!positions.empty() && positions[last_position].label == f[0]) {
+    if (!positions.empty() && positions[last_position].label == label) {
       p = last_position;
-    } else if (auto it = position_index.find(std::string(f[0])); it != position_index.end()) {
+    } else if (auto it = position_index.find(std::string(label)); it != position_index.end()) {
       p = it->second;
     } else {
       if (static_cast<int64_t>(positions.size()) >= limits.max_positions) {
-        return Fail("more than " + std::to_string(limits.max_positions) + " distinct positions", 1,
-                    "position");
+        Fail("more than " + std::to_string(limits.max_positions) + " distinct positions", 1,
+             "position");
+        return false;
       }
       p = positions.size();
-      position_index.emplace(std::string(f[0]), p);
-      positions.push_back({std::string(f[0]), line_no});
+      position_index.emplace(std::string(label), p);
+      positions.push_back({std::string(label), line_no});
       if (collect) {
         moving_sum.resize(moving_sum.size() + sensor_count, 0.0);
         static_sum.resize(static_sum.size() + sensor_count, 0.0);
@@ -460,7 +520,7 @@ struct RecordingParser::Impl {
       double* sum = (moving ? moving_sum.data() : static_sum.data()) + p * sensor_count;
       for (size_t i = 0; i < sensor_count; ++i) sum[i] += row_values[i];
     }
-    return Status::Ok();
+    return true;
   }
 
   Status ArrayRow() {
@@ -477,30 +537,103 @@ struct RecordingParser::Impl {
       Status s = ParseNumber(f[i], static_cast<int64_t>(i) + 1, summary.columns[i], dst);
       if (!s.ok()) return s;
     }
+    CommitArrayRow(t);
+    return Status::Ok();
+  }
+
+  void CommitArrayRow(double t) {
     if (collect) {
       array_values.insert(array_values.end(), row_values.begin(), row_values.end());
       if (has_t) t_values.push_back(t);
     }
-    return Status::Ok();
   }
 
-  Status Line(std::string_view line) {
+  // The one-pass reader for the common row: plain numbers (no spaces, quotes or '+') after
+  // single commas, read straight from the line. It returns kFallback, having changed nothing but
+  // row_values, for any other row (quotes included); the general path (Split, ParseNumber) then
+  // reads that row and names any error. Both paths give bit-identical values.
+  static const char* NextNumber(const char* p, const char* end, bool last, double* value) {
+    p = DecimalPrefixFast(p, end, value);
+    if (p == nullptr) return nullptr;
+    if (last) return p == end ? p : nullptr;
+    return p < end && *p == ',' ? p + 1 : nullptr;
+  }
+
+  // kRead: the row is read; kFallback: take the general path; kFailed: `error` says why.
+  enum class Fast { kRead, kFallback, kFailed };
+
+  Fast FastPcaRow(std::string_view line) {
+    const char* p = line.data();
+    const char* const end = p + line.size();
+    // The label: one pass that also notes quotes and non-ASCII bytes (labels are short).
+    const char* q = p;
+    bool quote = false, ascii = true;
+    for (; q < end && *q != ','; ++q) {
+      quote |= *q == '"';
+      ascii &= static_cast<unsigned char>(*q) < 0x80;
+    }
+    if (q == end || q == p) return Fast::kFallback;
+    const std::string_view label(p, static_cast<size_t>(q - p));
+    if (quote || label.front() == ' ' || label.front() == '\t' || label.back() == ' ' ||
+        label.back() == '\t' || (!ascii && !IsValidUtf8(label))) {
+      return Fast::kFallback;
+    }
+    p = q + 1;
+    bool moving = true;
+    if (first_sensor_col == 2) {
+      if (end - p >= 7 && std::memcmp(p, "static,", 7) == 0) {
+        moving = false;
+      } else if (!(end - p >= 7 && std::memcmp(p, "moving,", 7) == 0)) {
+        return Fast::kFallback;
+      }
+      p += 7;
+    }
+    for (size_t i = 0; i < sensor_count; ++i) {
+      p = NextNumber(p, end, i + 1 == sensor_count, &row_values[i]);
+      if (p == nullptr) return Fast::kFallback;
+    }
+    return CommitPcaRow(label, moving) ? Fast::kRead : Fast::kFailed;
+  }
+
+  Fast FastArrayRow(std::string_view line) {
+    const char* p = line.data();
+    const char* const end = p + line.size();
+    double t = 0;
+    const size_t n = column_target.size();
+    for (size_t i = 0; i < n; ++i) {
+      const int target = column_target[i];
+      p = NextNumber(p, end, i + 1 == n, target < 0 ? &t : &row_values[target]);
+      if (p == nullptr) return Fast::kFallback;
+    }
+    CommitArrayRow(t);
+    return Fast::kRead;
+  }
+
+  // Reads one physical line; false when it is invalid, and then `error` says why (every error
+  // goes through Fail). A bool, not a Status, because this runs once per row.
+  bool Line(std::string_view line) {
     ++line_no;
     if (at_start) {
       at_start = false;
       if (line.size() >= 3 && line.substr(0, 3) == "\xEF\xBB\xBF") line.remove_prefix(3);
     }
     if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
-    if (!line.empty() && line.front() == '#') return Status::Ok();
-    if (TrimSpaces(line).empty()) return Status::Ok();
-    Status s = Split(line);
-    if (!s.ok()) return s;
+    if (!line.empty() && line.front() == '#') return true;
+    if (TrimSpaces(line).empty()) return true;
+    if (have_header && limits.one_pass_rows) {
+      const Fast fast = summary.layout == Layout::kArray ? FastArrayRow(line) : FastPcaRow(line);
+      if (fast != Fast::kFallback) {
+        ++summary.rows;
+        return fast == Fast::kRead;
+      }
+    }
+    if (!Split(line).ok()) return false;
     if (!have_header) {
       have_header = true;
-      return Header();
+      return Header().ok();
     }
     ++summary.rows;
-    return summary.layout == Layout::kArray ? ArrayRow() : PcaRow();
+    return (summary.layout == Layout::kArray ? ArrayRow() : PcaRow()).ok();
   }
 
   Status Feed(std::string_view chunk) {
@@ -522,15 +655,14 @@ struct RecordingParser::Impl {
         ++line_no;
         return Fail("line longer than " + std::to_string(limits.max_line_bytes) + " bytes");
       }
-      Status s;
       if (carry.empty()) {
-        s = Line(piece);
+        if (!Line(piece)) return error;
       } else {
         carry.append(piece);
-        s = Line(carry);
+        const bool ok = Line(carry);
         carry.clear();
+        if (!ok) return error;
       }
-      if (!s.ok()) return s;
     }
     return Status::Ok();
   }
@@ -541,8 +673,7 @@ struct RecordingParser::Impl {
     if (!carry.empty()) {
       std::string last = std::move(carry);
       carry.clear();
-      Status s = Line(last);
-      if (!s.ok()) return s;
+      if (!Line(last)) return error;
     }
     finished = true;
     if (!have_header) {

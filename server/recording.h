@@ -66,6 +66,10 @@ struct RecordingLimits {
   int64_t max_columns = 4096;        // more header fields is an error
   // pca: more distinct position labels is an error (bounds the parser's memory: ~200 B each).
   int64_t max_positions = 200000;
+  // Not a limit: read plain rows (numbers after single commas, no spaces or quotes) in one pass.
+  // false sends every row through the general path; the outcome is identical either way (the
+  // tests and the fuzz_recording target compare the two), only slower.
+  bool one_pass_rows = true;
 };
 
 class RecordingParser {
@@ -96,6 +100,11 @@ class RecordingParser {
 // Clinger's fast path (<= 19 significant digits, mantissa <= 2^53, |exponent| <= 22); returns
 // false, leaving *value alone, for everything else (the caller then uses std::from_chars).
 bool ParseDecimalFast(std::string_view text, double* value);
+
+// The same for the longest prefix of [p, end) shaped [-]digits[.digits][(e|E)[+|-]digits]:
+// returns the end of that prefix, or nullptr (leaving *value alone) when there is no such prefix
+// or it is outside the fast path. The recording parser's one-pass row reader is built on it.
+const char* ParseDecimalPrefixFast(const char* p, const char* end, double* value);
 
 // True when `s` is well-formed UTF-8 (no overlong forms, surrogates or values past U+10FFFF).
 bool IsValidUtf8(std::string_view s);

@@ -1,10 +1,12 @@
 // libFuzzer target: the incremental CSV parser (server/recording.h) on arbitrary bytes.
 //
-// Input: byte 0 picks the chunking seed, the rest is the recording. The bytes are parsed three
-// ways: whole by a collecting parser, in pseudo-random chunks (1..64 bytes) by a collecting
-// parser, and in other chunks by a validating (non-collecting) parser, as an upload is.
-// Invariants: no crash or sanitizer report; the three give the same outcome (status code,
-// message, line, column) and the same summary; a failure is kInvalidInput or kTooLarge with a
+// Input: byte 0 picks the chunking seed, the rest is the recording. The bytes are parsed four
+// ways: whole by a collecting parser, whole by a collecting parser without the one-pass row
+// reader (RecordingLimits::one_pass_rows = false), in pseudo-random chunks (1..64 bytes) by a
+// collecting parser, and in other chunks by a validating (non-collecting) parser, as an upload is.
+// Invariants: no crash or sanitizer report; the four give the same outcome (status code,
+// message, line, column) and the same summary, and the one-pass and general readers collect
+// bit-identical numbers; a failure is kInvalidInput or kTooLarge with a
 // message, and a line > 0 unless the message is about the whole file; after success, Take*() of
 // the summary's layout succeeds with dimensions matching the summary, the other layout fails
 // cleanly, and every array number collected is finite (pca means may overflow; the
@@ -14,6 +16,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <string>
 #include <string_view>
 
@@ -77,6 +80,12 @@ bool SameSummary(const RecordingSummary& a, const RecordingSummary& b) {
 
 bool AllFinite(const Eigen::MatrixXd& m) { return m.size() == 0 || m.allFinite(); }
 
+template <typename A, typename B>
+bool SameBits(const A& a, const B& b) {
+  return a.rows() == b.rows() && a.cols() == b.cols() &&
+         (a.size() == 0 || std::memcmp(a.data(), b.data(), sizeof(double) * a.size()) == 0);
+}
+
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -86,11 +95,16 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
 
   RecordingParser whole("fuzz.csv", /*collect=*/true);
   const Status s_whole = Parse(bytes, 0, &whole);
+  calibd::server::RecordingLimits general_limits;
+  general_limits.one_pass_rows = false;
+  RecordingParser general("fuzz.csv", /*collect=*/true, general_limits);
+  const Status s_general = Parse(bytes, 0, &general);
   RecordingParser chunked("fuzz.csv", /*collect=*/true);
   const Status s_chunked = Parse(bytes, seed, &chunked);
   RecordingParser validating("fuzz.csv", /*collect=*/false);
   const Status s_valid = Parse(bytes, seed * 7919u, &validating);
 
+  Check(SameStatus(s_whole, s_general), "one-pass and general row readers disagree", s_general);
   Check(SameStatus(s_whole, s_chunked), "outcome depends on chunk boundaries", s_chunked);
   Check(SameStatus(s_whole, s_valid), "validating and collecting parsers disagree", s_valid);
 
@@ -104,6 +118,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   }
 
   const RecordingSummary& sum = whole.summary();
+  Check(SameSummary(sum, general.summary()), "one-pass and general summaries differ");
   Check(SameSummary(sum, chunked.summary()), "summary depends on chunk boundaries");
   Check(SameSummary(sum, validating.summary()), "validating summary differs");
   Check(sum.rows >= 0 && sum.positions >= 0, "negative counts");
@@ -119,6 +134,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     Check(rec.t.size() == 0 || rec.t.size() == sum.rows, "t length");
     Check(AllFinite(rec.accel) && AllFinite(rec.gyro) && (rec.t.size() == 0 || rec.t.allFinite()),
           "non-finite number collected");
+    ArrayRecording by_general;
+    Check(general.TakeArray(&by_general).ok(), "TakeArray of the general reader failed");
+    Check(SameBits(rec.accel, by_general.accel) && SameBits(rec.gyro, by_general.gyro) &&
+              SameBits(rec.t, by_general.t),
+          "one-pass and general readers collected different numbers");
     PcaRecording wrong;
     s = chunked.TakePca(&wrong);
     Check(!s.ok() && !s.message().empty(), "TakePca of an array recording did not fail cleanly", s);
@@ -132,6 +152,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     Check(n == sum.positions, "pca positions count");
     Check(rec.rows_per_position.size() == static_cast<size_t>(n), "rows_per_position size");
     Check(rec.raw == (sum.layout == Layout::kPcaRaw), "raw flag");
+    PcaRecording by_general;
+    Check(general.TakePca(&by_general).ok(), "TakePca of the general reader failed");
+    Check(SameBits(rec.readings, by_general.readings) &&
+              SameBits(rec.static_means, by_general.static_means) &&
+              rec.position_labels == by_general.position_labels &&
+              rec.rows_per_position == by_general.rows_per_position,
+          "one-pass and general readers collected different numbers");
     ArrayRecording wrong;
     s = chunked.TakeArray(&wrong);
     Check(!s.ok() && !s.message().empty(), "TakeArray of a pca recording did not fail cleanly", s);

@@ -200,6 +200,129 @@ TEST(RecordingParser, RejectsOverlongLineWithoutBufferingIt) {
   EXPECT_FALSE(parser.Finish().ok());
 }
 
+// Long digit runs go eight at a time (SWAR): integers and fractions of every length, with and
+// without leading zeros, must still match std::from_chars bit for bit.
+TEST(ParseDecimalFast, DigitRunsOfEveryLengthAgreeWithFromChars) {
+  std::mt19937_64 rng(7);
+  int fast = 0;
+  for (int i = 0; i < 100000; ++i) {
+    const int int_digits = static_cast<int>(rng() % 21), frac_digits = static_cast<int>(rng() % 21);
+    const int zeros = static_cast<int>(rng() % 10);
+    std::string text = (rng() % 2) ? "-" : "";
+    text.append(zeros, '0');
+    for (int d = 0; d < int_digits; ++d) text.push_back(static_cast<char>('0' + rng() % 10));
+    if (frac_digits > 0 || int_digits + zeros == 0) text.push_back('.');
+    for (int d = 0; d < frac_digits; ++d) text.push_back(static_cast<char>('0' + rng() % 10));
+    if (int_digits + zeros + frac_digits == 0) text.push_back('0');
+    double expected = 0, got = 0;
+    auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), expected);
+    ASSERT_EQ(ec, std::errc()) << text;
+    ASSERT_EQ(ptr, text.data() + text.size()) << text;
+    if (ParseDecimalFast(text, &got)) {
+      ++fast;
+      ASSERT_EQ(std::memcmp(&got, &expected, sizeof got), 0) << text;
+    }
+  }
+  EXPECT_GT(fast, 20000);
+  double v = 0;
+  ASSERT_TRUE(ParseDecimalFast("9007199254740992", &v));  // 2^53: the largest fast mantissa
+  EXPECT_EQ(v, 9007199254740992.0);
+  EXPECT_FALSE(ParseDecimalFast("9007199254740993", &v));
+  EXPECT_FALSE(ParseDecimalFast("12345678901234567890", &v));
+}
+
+// The prefix form stops at the first character after the number, or refuses.
+TEST(ParseDecimalPrefixFast, StopsAfterTheNumber) {
+  double v = 0;
+  const std::string text = "-12345678.125,7";
+  const char* stop = ParseDecimalPrefixFast(text.data(), text.data() + text.size(), &v);
+  ASSERT_NE(stop, nullptr);
+  EXPECT_EQ(*stop, ',');
+  EXPECT_EQ(v, -12345678.125);
+  for (const std::string odd : {",1", "-,1", "1e,2", "1e+,2", "99999999999999999999,1"}) {
+    v = 7;
+    EXPECT_EQ(ParseDecimalPrefixFast(odd.data(), odd.data() + odd.size(), &v), nullptr) << odd;
+    EXPECT_EQ(v, 7) << odd;
+  }
+}
+
+// Plain rows take the one-pass reader, rows with spaces (or any row, with one_pass_rows = false)
+// the general path (Split + ParseNumber): the same numbers must give bit-identical recordings
+// either way, in both layouts.
+TEST(RecordingParser, OnePassAndGeneralPathsGiveIdenticalRecordings) {
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> normal;
+  auto number = [&]() {
+    char buf[64];
+    const int style = static_cast<int>(rng() % 4);
+    const double x = normal(rng) * std::pow(10.0, static_cast<double>(rng() % 7) - 3);
+    if (style == 0) std::snprintf(buf, sizeof buf, "%.9g", x);
+    if (style == 1) std::snprintf(buf, sizeof buf, "%.17g", x);
+    if (style == 2) std::snprintf(buf, sizeof buf, "%.6e", x);
+    if (style == 3) std::snprintf(buf, sizeof buf, "%.25f", x);  // > 19 digits: from_chars
+    return std::string(buf);
+  };
+  std::string plain_pca = "position,phase,s1,s2,s3\n", padded_pca = plain_pca;
+  std::string plain_array = "t,a0_x,a0_y,a0_z,g0_x,g0_y,g0_z\n", padded_array = plain_array;
+  for (int row = 0; row < 3000; ++row) {
+    const std::string label = "p" + std::to_string(row / 40);
+    const char* phase = (row / 20) % 2 ? "moving" : "static";
+    plain_pca += label + "," + phase;
+    padded_pca += label + "," + phase;
+    for (int i = 0; i < 3; ++i) {
+      const std::string x = number();
+      plain_pca += "," + x;
+      padded_pca += ", " + x + " ";
+    }
+    plain_pca += "\n";
+    padded_pca += "\n";
+    for (int i = 0; i < 7; ++i) {
+      const std::string x = number();
+      plain_array += (i ? "," : "") + x;
+      padded_array += (i ? ", " : " ") + x + " ";
+    }
+    plain_array += "\n";
+    padded_array += "\n";
+  }
+  RecordingLimits general_only;
+  general_only.one_pass_rows = false;
+  {
+    RecordingParser one_pass("plain.csv", true), general("plain.csv", true, general_only);
+    ASSERT_TRUE(ParseAll(plain_pca, &one_pass).ok());
+    ASSERT_TRUE(ParseAll(plain_pca, &general).ok());
+    PcaRecording a, b;
+    ASSERT_TRUE(one_pass.TakePca(&a).ok());
+    ASSERT_TRUE(general.TakePca(&b).ok());
+    ASSERT_EQ(a.readings.size(), b.readings.size());
+    EXPECT_EQ(std::memcmp(a.readings.data(), b.readings.data(), 8 * a.readings.size()), 0);
+  }
+  auto bits_equal = [](const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+    return a.rows() == b.rows() && a.cols() == b.cols() &&
+           std::memcmp(a.data(), b.data(), sizeof(double) * a.size()) == 0;
+  };
+  RecordingParser plain("plain.csv", true), padded("padded.csv", true);
+  ASSERT_TRUE(ParseAll(plain_pca, &plain).ok());
+  ASSERT_TRUE(ParseAll(padded_pca, &padded).ok());
+  PcaRecording a, b;
+  ASSERT_TRUE(plain.TakePca(&a).ok());
+  ASSERT_TRUE(padded.TakePca(&b).ok());
+  EXPECT_TRUE(bits_equal(a.readings, b.readings));
+  EXPECT_TRUE(bits_equal(a.static_means, b.static_means));
+  EXPECT_EQ(a.position_labels, b.position_labels);
+  EXPECT_EQ(a.rows_per_position, b.rows_per_position);
+
+  RecordingParser plain_arr("plain.csv", true), padded_arr("padded.csv", true);
+  ASSERT_TRUE(ParseAll(plain_array, &plain_arr).ok());
+  ASSERT_TRUE(ParseAll(padded_array, &padded_arr).ok());
+  ArrayRecording c, d;
+  ASSERT_TRUE(plain_arr.TakeArray(&c).ok());
+  ASSERT_TRUE(padded_arr.TakeArray(&d).ok());
+  EXPECT_TRUE(bits_equal(c.accel, d.accel));
+  EXPECT_TRUE(bits_equal(c.gyro, d.gyro));
+  EXPECT_TRUE(bits_equal(c.t, d.t));
+  EXPECT_EQ(c.t.size(), 3000);
+}
+
 // The fast decimal path must give bit-identical results to std::from_chars wherever it answers.
 TEST(ParseDecimalFast, AgreesBitForBitWithFromChars) {
   std::mt19937_64 rng(42);
