@@ -1,11 +1,14 @@
 // The job queue under contention: threads of one process and separate processes claiming from
 // one SQLite file. Every job must be claimed and completed exactly once, none lost.
 #include <gtest/gtest.h>
+#include <poll.h>
+#include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <fstream>
 #include <map>
 #include <mutex>
@@ -67,6 +70,10 @@ std::vector<int64_t> Work(Store* store, const std::string& worker, std::atomic<i
       continue;
     }
     claimed_ids.push_back(job.id);
+    // The job "runs" briefly, as a real one computes between claim and completion. Without it a
+    // worker pair in one process can hold the write lock back to back, and SQLite's busy
+    // handler (which polls; it does not queue) may leave another process no job at all.
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
     s = store->CompleteJob(job.id, worker, "{\"job\":" + std::to_string(job.id) + "}");
     if (!s.ok()) {
       ADD_FAILURE() << worker << " completing " << job.id << ": " << s.ToString();
@@ -130,6 +137,11 @@ TEST(QueueConcurrency, TwoProcessesWithTwoThreadsEachCompleteEachJobExactlyOnce)
     ids = SeedJobs(store.get());
   }  // closed before fork: children open their own
 
+  // A start barrier: each child reports when its store is open and waits for "go", so that a
+  // slow start (a sanitizer build, a loaded machine) cannot leave one process all the jobs.
+  int ready[2], go[2];
+  ASSERT_EQ(pipe(ready), 0);
+  ASSERT_EQ(pipe(go), 0);
   std::vector<pid_t> children;
   for (int p = 0; p < 2; ++p) {
     pid_t pid = fork();
@@ -137,6 +149,8 @@ TEST(QueueConcurrency, TwoProcessesWithTwoThreadsEachCompleteEachJobExactlyOnce)
     if (pid == 0) {
       std::unique_ptr<Store> store;
       if (!Store::Open(path, StoreOptions(), &store).ok()) _exit(10);
+      char byte = 'r';
+      if (write(ready[1], &byte, 1) != 1 || read(go[0], &byte, 1) != 1) _exit(12);
       std::atomic<int> errors{0};
       std::vector<std::vector<int64_t>> per_thread(2);
       std::vector<std::thread> threads;
@@ -156,6 +170,25 @@ TEST(QueueConcurrency, TwoProcessesWithTwoThreadsEachCompleteEachJobExactlyOnce)
     }
     children.push_back(pid);
   }
+  close(ready[1]);
+  close(go[0]);
+  int ready_children = 0;
+  char bytes[2];
+  while (ready_children < 2) {
+    pollfd pfd{ready[0], POLLIN, 0};
+    if (poll(&pfd, 1, 60000) <= 0) break;  // a child hangs: give up below
+    const ssize_t got = read(ready[0], bytes, sizeof bytes);
+    if (got <= 0) break;  // both children died
+    ready_children += static_cast<int>(got);
+  }
+  if (ready_children < 2) {
+    for (pid_t pid : children) kill(pid, SIGKILL);
+    for (pid_t pid : children) waitpid(pid, nullptr, 0);
+    FAIL() << "a child did not open the store";
+  }
+  ASSERT_EQ(write(go[1], "gg", 2), 2);
+  close(ready[0]);
+  close(go[1]);
   for (pid_t pid : children) {
     int status = 0;
     ASSERT_EQ(waitpid(pid, &status, 0), pid);
