@@ -2,29 +2,25 @@
 # HTTP load figures for bench/README.md: GET latest calibration with wrk at 1/16/64 connections
 # beside nginx serving the same bytes as a static file; upload throughput for 1 MB and 100 MB
 # recordings with the server's peak RSS. Installs wrk and nginx from Debian if missing.
-# Usage: bench/http_load.sh [build/calibd]   (run from the repository root, as root)
+# Usage: bench/http_load.sh [build/calibd]   (as root)
 set -euo pipefail
 bin=$(realpath "${1:-build/calibd}")
 for p in wrk nginx-light curl; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" ||
     { apt-get update -qq && apt-get install -y -qq wrk nginx-light curl >/dev/null; break; }
 done
+cd "$(dirname "$0")/.."
 tmp=$(mktemp -d)
-server_pid= nginx_started=
+nginx_started=
+# shellcheck source=tests/lib/serve.sh
+source tests/lib/serve.sh
 cleanup() {
-  [ -n "$server_pid" ] && kill "$server_pid" 2>/dev/null && wait "$server_pid" 2>/dev/null
+  stop_calibd
   [ -n "$nginx_started" ] && nginx -c "$tmp/nginx.conf" -s stop 2>/dev/null
   rm -rf "$tmp"
 }
 trap cleanup EXIT
-
-"$bin" serve --db "$tmp/calibd.db" --listen 127.0.0.1:0 --no-access-log 2>"$tmp/server.log" &
-server_pid=$!
-for _ in $(seq 1 100); do
-  port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\).*|\1|p' "$tmp/server.log" 2>/dev/null || true)
-  [ -n "$port" ] && break; sleep 0.1
-done
-base=http://127.0.0.1:$port
+start_calibd "$bin"
 "$bin" simulate pca --out "$tmp/pca" --seed 1 --positions 100 2>/dev/null
 curl -sf -F "recording=@$tmp/pca/recording.csv" -F "config=@$tmp/pca/config.json" \
   "$base/api/v1/recordings?device=SN-LOAD" >/dev/null
