@@ -284,43 +284,43 @@ TEST(RecordingParser, OnePassAndGeneralPathsGiveIdenticalRecordings) {
     plain_array += "\n";
     padded_array += "\n";
   }
-  RecordingLimits general_only;
-  general_only.one_pass_rows = false;
-  {
-    RecordingParser one_pass("plain.csv", true), general("plain.csv", true, general_only);
-    ASSERT_TRUE(ParseAll(plain_pca, &one_pass).ok());
-    ASSERT_TRUE(ParseAll(plain_pca, &general).ok());
-    PcaRecording a, b;
-    ASSERT_TRUE(one_pass.TakePca(&a).ok());
-    ASSERT_TRUE(general.TakePca(&b).ok());
-    ASSERT_EQ(a.readings.size(), b.readings.size());
-    EXPECT_EQ(std::memcmp(a.readings.data(), b.readings.data(), 8 * a.readings.size()), 0);
-  }
-  auto bits_equal = [](const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+  auto bits_equal = [](const auto& a, const auto& b) {
     return a.rows() == b.rows() && a.cols() == b.cols() &&
            std::memcmp(a.data(), b.data(), sizeof(double) * a.size()) == 0;
   };
-  RecordingParser plain("plain.csv", true), padded("padded.csv", true);
-  ASSERT_TRUE(ParseAll(plain_pca, &plain).ok());
-  ASSERT_TRUE(ParseAll(padded_pca, &padded).ok());
-  PcaRecording a, b;
-  ASSERT_TRUE(plain.TakePca(&a).ok());
-  ASSERT_TRUE(padded.TakePca(&b).ok());
-  EXPECT_TRUE(bits_equal(a.readings, b.readings));
-  EXPECT_TRUE(bits_equal(a.static_means, b.static_means));
-  EXPECT_EQ(a.position_labels, b.position_labels);
-  EXPECT_EQ(a.rows_per_position, b.rows_per_position);
-
-  RecordingParser plain_arr("plain.csv", true), padded_arr("padded.csv", true);
-  ASSERT_TRUE(ParseAll(plain_array, &plain_arr).ok());
-  ASSERT_TRUE(ParseAll(padded_array, &padded_arr).ok());
-  ArrayRecording c, d;
-  ASSERT_TRUE(plain_arr.TakeArray(&c).ok());
-  ASSERT_TRUE(padded_arr.TakeArray(&d).ok());
-  EXPECT_TRUE(bits_equal(c.accel, d.accel));
-  EXPECT_TRUE(bits_equal(c.gyro, d.gyro));
-  EXPECT_TRUE(bits_equal(c.t, d.t));
-  EXPECT_EQ(c.t.size(), 3000);
+  RecordingLimits one_pass, general;
+  general.one_pass_rows = false;
+  // Parses `a` with limits `la` and `b` with `lb`; the recordings must be the same, bit for bit.
+  auto expect_same_pca = [&](const std::string& a, RecordingLimits la, const std::string& b,
+                             RecordingLimits lb) {
+    RecordingParser pa("a.csv", true, la), pb("b.csv", true, lb);
+    ASSERT_TRUE(ParseAll(a, &pa).ok());
+    ASSERT_TRUE(ParseAll(b, &pb).ok());
+    PcaRecording ra, rb;
+    ASSERT_TRUE(pa.TakePca(&ra).ok());
+    ASSERT_TRUE(pb.TakePca(&rb).ok());
+    EXPECT_TRUE(bits_equal(ra.readings, rb.readings));
+    EXPECT_TRUE(bits_equal(ra.static_means, rb.static_means));
+    EXPECT_EQ(ra.position_labels, rb.position_labels);
+    EXPECT_EQ(ra.rows_per_position, rb.rows_per_position);
+  };
+  auto expect_same_array = [&](const std::string& a, RecordingLimits la, const std::string& b,
+                               RecordingLimits lb) {
+    RecordingParser pa("a.csv", true, la), pb("b.csv", true, lb);
+    ASSERT_TRUE(ParseAll(a, &pa).ok());
+    ASSERT_TRUE(ParseAll(b, &pb).ok());
+    ArrayRecording ra, rb;
+    ASSERT_TRUE(pa.TakeArray(&ra).ok());
+    ASSERT_TRUE(pb.TakeArray(&rb).ok());
+    EXPECT_TRUE(bits_equal(ra.accel, rb.accel));
+    EXPECT_TRUE(bits_equal(ra.gyro, rb.gyro));
+    EXPECT_TRUE(bits_equal(ra.t, rb.t));
+    EXPECT_EQ(ra.t.size(), 3000);
+  };
+  expect_same_pca(plain_pca, one_pass, plain_pca, general);
+  expect_same_pca(plain_pca, one_pass, padded_pca, one_pass);
+  expect_same_array(plain_array, one_pass, plain_array, general);
+  expect_same_array(plain_array, one_pass, padded_array, one_pass);
 }
 
 // The fast decimal path must give bit-identical results to std::from_chars wherever it answers.
