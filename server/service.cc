@@ -2,11 +2,14 @@
 
 #include <arpa/inet.h>
 #include <openssl/evp.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -218,7 +221,8 @@ struct Service::Impl {
   std::string host;
   int requested_port = 0;
   int bound_port = 0;
-  std::string token;  // empty: no authentication
+  int listen_fd = -1;  // the listening socket, noted by the socket-options hook (Bind)
+  std::string token;   // empty: no authentication
   fs::path staging_dir;
   std::unique_ptr<storage::Store> store;
   Metrics metrics;
@@ -310,8 +314,21 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
   return Status::Ok();
 }
 
+// cpp-httplib 0.11 listens with a backlog of 5, and its default socket options set SO_REUSEPORT
+// on Linux, which lets a second calibd bind the same port and silently take half the requests
+// to another database. Bind sets SO_REUSEADDR only (a restart may reuse a port in TIME_WAIT),
+// and then listens again with this backlog (Linux updates it in place): with 5, connections
+// opened in a burst had their handshake dropped and waited a 1 s retransmission (wrk, 64
+// connections: p99 0.7-0.9 s).
+constexpr int kListenBacklog = 1024;
+
 Status Service::Bind() {
   Impl& d = *impl_;
+  d.http.set_socket_options([&d](socket_t sock) {
+    int yes = 1;
+    setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+    d.listen_fd = sock;  // the last socket tried is the one that binds
+  });
   if (d.requested_port == 0) {
     d.bound_port = d.http.bind_to_any_port(d.host);
     if (d.bound_port <= 0) return Status::IoError("cannot bind " + d.host + " to any port");
@@ -321,6 +338,9 @@ Status Service::Bind() {
                              " (address in use or not available)");
     }
     d.bound_port = d.requested_port;
+  }
+  if (d.listen_fd >= 0 && ::listen(d.listen_fd, kListenBacklog) != 0) {
+    return Status::IoError(std::string("cannot set the listen backlog: ") + strerror(errno));
   }
   return Status::Ok();
 }

@@ -22,6 +22,9 @@ inline constexpr bool kAddressSanitizer = false;
 // Factor for memory bounds such as "RSS grows by < 64 MiB": ASan's own bookkeeping is not ours.
 inline constexpr int kMemoryBoundScale = kAddressSanitizer ? 2 : 1;
 
+// Factor for wall-clock bounds on work the server does (not on timeouts it must honour).
+inline constexpr double kTimeBoundScale = kAddressSanitizer ? 2 : 1;
+
 // Divisor for the work a test gives a job that must merely be running "for a while".
 inline constexpr int kComputeSlowdown = kAddressSanitizer ? 20 : 1;
 

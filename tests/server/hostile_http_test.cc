@@ -3,12 +3,17 @@
 // /healthz keeps answering within a second (cpp-httplib 0.11.4's known weaknesses are guarded by
 // our pre-routing checks, our own readers and limits).
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -258,6 +263,53 @@ TEST_F(HostileHttp, EveryCaseIsRefusedAndMemoryStaysBounded) {
   const int64_t growth_kib = RssKiB() - rss_before;
   EXPECT_LT(growth_kib, sanitizer::kMemoryBoundScale * 64 * 1024)
       << "RSS grew by " << growth_kib << " KiB";
+}
+
+// A burst of connections, as when a production line's tools all start at once: every one is
+// accepted and answered without a handshake retransmission. cpp-httplib listens with a backlog
+// of 5; beyond it the kernel dropped handshakes and those requests waited a 1 s retransmission
+// (Service::Bind raises the backlog).
+TEST_F(HostileHttp, ABurstOfConnectionsIsAnsweredWithoutHandshakeRetransmissions) {
+  constexpr int kConnections = 256;
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<int> fds;
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(static_cast<uint16_t>(server_.port()));
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  for (int i = 0; i < kConnections; ++i) {  // all at once: non-blocking connects
+    const int fd = socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK, 0);
+    ASSERT_GE(fd, 0);
+    fds.push_back(fd);
+    const int r = connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
+    ASSERT_TRUE(r == 0 || errno == EINPROGRESS) << strerror(errno);
+  }
+  const std::string request = "GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n";
+  double slowest = 0;
+  int answered = 0;
+  for (int fd : fds) {
+    pollfd pfd{fd, POLLOUT, 0};
+    ASSERT_EQ(poll(&pfd, 1, 10000), 1) << "connect did not complete";
+    const int flags = fcntl(fd, F_GETFL);
+    fcntl(fd, F_SETFL, flags & ~O_NONBLOCK);
+    timeval tv{10, 0};
+    setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    ASSERT_EQ(send(fd, request.data(), request.size(), MSG_NOSIGNAL),
+              static_cast<ssize_t>(request.size()));
+  }
+  for (int fd : fds) {
+    std::string response;
+    char buf[4096];
+    for (ssize_t n; (n = recv(fd, buf, sizeof buf, 0)) > 0;) response.append(buf, n);
+    close(fd);
+    if (response.rfind("HTTP/1.1 200", 0) == 0) ++answered;
+    slowest = std::max(
+        slowest, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  }
+  EXPECT_EQ(answered, kConnections);
+  // A dropped handshake costs >= 1 s (the kernel's initial retransmission timeout).
+  EXPECT_LT(slowest, 0.9 * sanitizer::kTimeBoundScale)
+      << "the last answer came after " << slowest << " s";
 }
 
 TEST_F(HostileHttp, SlowClientsDoNotStarveHealthz) {

@@ -536,6 +536,29 @@ TEST(HttpApiSecurity, RefusesNonLoopbackWithoutTokenUnlessInsecure) {
   EXPECT_TRUE(Service::Create(options, &service).ok());
 }
 
+// cpp-httplib's default socket options set SO_REUSEPORT, under which a second calibd could bind
+// the same port and take half the requests to another database. Bind must refuse it.
+TEST(HttpApiSecurity, ASecondServerOnTheSamePortIsRefused) {
+  TestServer first;
+  ASSERT_EQ(first.error(), "");
+  ServeOptions options;
+  options.db_path = (first.dir() / "second.db").string();
+  options.listen = "127.0.0.1:" + std::to_string(first.port());
+  options.workers = 1;
+  options.access_log = false;
+  std::unique_ptr<Service> second;
+  ASSERT_TRUE(Service::Create(options, &second).ok());
+  const Status s = second->Bind();
+  EXPECT_EQ(s.code(), StatusCode::kIoError) << s.ToString();
+  EXPECT_NE(s.message().find("address in use"), std::string::npos) << s.ToString();
+  // The first server still answers every request.
+  for (int i = 0; i < 20; ++i) {
+    auto res = first.Client().Get("/healthz");
+    ASSERT_TRUE(res);
+    EXPECT_EQ(res->status, 200);
+  }
+}
+
 TEST_F(HttpApi, OpenApiDocumentsEveryRouteTheServerHas) {
   auto client = server_.Client();
   json doc = Body(client.Get("/api/v1/openapi.json"));
