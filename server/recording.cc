@@ -8,6 +8,7 @@
 #include <array>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <unordered_map>
 
@@ -37,11 +38,39 @@ std::string_view TrimSpaces(std::string_view s) {
   return s;
 }
 
-// Shortens a user string for an error message, so a hostile 1 MiB field does not echo back whole.
+// Shortens a user string for an error message, so a hostile 1 MiB field does not echo back
+// whole; control characters are shown as '?'.
 std::string Excerpt(std::string_view s) {
   constexpr size_t kMax = 40;
-  if (s.size() <= kMax) return std::string(s);
-  return std::string(s.substr(0, kMax)) + "...";
+  std::string out(s.substr(0, kMax));
+  for (char& c : out) {
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = '?';
+  }
+  return s.size() <= kMax ? out : out + "...";
+}
+
+// The first C0 control character or DEL in `s` (NUL, tab, CR, ...), or -1. Names and labels are
+// exported into CSV files, C headers and HTML, so they must be printable.
+int FirstControlCharacter(std::string_view s) {
+  for (char c : s) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u < 0x20 || u == 0x7f) return u;
+  }
+  return -1;
+}
+
+std::string ControlName(int c) {
+  switch (c) {
+    case 0: return "NUL (0x00)";
+    case '\t': return "TAB (0x09)";
+    case '\r': return "CR (0x0d)";
+    case '\n': return "LF (0x0a)";
+    default: {
+      char text[16];
+      std::snprintf(text, sizeof text, "0x%02x", c);
+      return text;
+    }
+  }
 }
 
 // Parses "a12_x" style names. kind is 'a' or 'g'; returns false if the name has another form.
@@ -361,6 +390,11 @@ struct RecordingParser::Impl {
       if (!IsValidUtf8(f[i])) {
         return Fail("column name is not valid UTF-8", static_cast<int64_t>(i) + 1);
       }
+      if (const int c = FirstControlCharacter(f[i]); c >= 0) {
+        return Fail("column name '" + Excerpt(f[i]) + "' contains the control character " +
+                        ControlName(c) + "; names must be printable",
+                    static_cast<int64_t>(i) + 1);
+      }
     }
     summary.columns.assign(f.begin(), f.end());
     if (f.size() == 1 && f[0].empty()) return Fail("empty header line");
@@ -472,6 +506,11 @@ struct RecordingParser::Impl {
     }
     if (f[0].empty()) return Fail("empty position label", 1, "position");
     if (!IsValidUtf8(f[0])) return Fail("position label is not valid UTF-8", 1, "position");
+    if (const int c = FirstControlCharacter(f[0]); c >= 0) {
+      return Fail("position label '" + Excerpt(f[0]) + "' contains the control character " +
+                      ControlName(c) + "; labels must be printable",
+                  1, "position");
+    }
     bool moving = true;
     if (first_sensor_col == 2) {
       if (f[1] == "static") {
@@ -567,14 +606,16 @@ struct RecordingParser::Impl {
     const char* const end = p + line.size();
     // The label: one pass that also notes quotes and non-ASCII bytes (labels are short).
     const char* q = p;
-    bool quote = false, ascii = true;
+    bool quote = false, ascii = true, control = false;
     for (; q < end && *q != ','; ++q) {
+      const auto u = static_cast<unsigned char>(*q);
       quote |= *q == '"';
-      ascii &= static_cast<unsigned char>(*q) < 0x80;
+      ascii &= u < 0x80;
+      control |= u < 0x20 || u == 0x7f;
     }
     if (q == end || q == p) return Fast::kFallback;
     const std::string_view label(p, static_cast<size_t>(q - p));
-    if (quote || label.front() == ' ' || label.front() == '\t' || label.back() == ' ' ||
+    if (quote || control || label.front() == ' ' || label.front() == '\t' || label.back() == ' ' ||
         label.back() == '\t' || (!ascii && !IsValidUtf8(label))) {
       return Fast::kFallback;
     }

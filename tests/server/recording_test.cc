@@ -174,7 +174,14 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{"empty file", "", 0, 0, "no header line"},
         BadCase{"invalid utf8 label", "position,s1\n\xC3(,1\n", 2, 1, "not valid UTF-8"},
         BadCase{"invalid utf8 name", "position,s\xFF\n", 1, 2, "not valid UTF-8"},
-        BadCase{"overlong utf8", "position,s\xC0\xAF\n", 1, 2, "not valid UTF-8"}),
+        BadCase{"overlong utf8", "position,s\xC0\xAF\n", 1, 2, "not valid UTF-8"},
+        BadCase{"nul in name", std::string("position,s\0x\n", 13), 1, 2,
+                "control character NUL"},
+        BadCase{"escape in name", "position,s\x1b[31m\n", 1, 2, "control character 0x1b"},
+        BadCase{"nul in label", std::string("position,s1\np\0q,1\n", 18), 2, 1,
+                "control character NUL"},
+        BadCase{"tab in label", "position,s1\np\tq,1\n", 2, 1, "control character TAB"},
+        BadCase{"del in label", "position,s1\np\x7fq,1\n", 2, 1, "control character 0x7f"}),
     [](const ::testing::TestParamInfo<BadCase>& info) {
       std::string name = info.param.name;
       for (char& ch : name) {
