@@ -382,7 +382,8 @@ Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
   return Status::Ok();
 }
 
-Status RunArray(const ArrayRecording& recording, const json& config, json* result) {
+Status RunArray(const ArrayRecording& recording, const json& config, json* result,
+                const std::atomic<bool>* cancel) {
   core::ArrayProblem problem;
   core::ArrayOptions options;
   bool degrees = false;
@@ -405,6 +406,9 @@ Status RunArray(const ArrayRecording& recording, const json& config, json* resul
     if (!s.ok()) return s.WithField(kCalibrationKey);
   }
 
+  if (cancel != nullptr) {
+    options.callback = [cancel](int, const Eigen::Matrix3Xd&) { return !cancel->load(); };
+  }
   core::ArrayResult r;
   s = core::CalibrateArray(problem, options, &r);
   if (!s.ok()) return s;

@@ -3,6 +3,7 @@
 #ifndef CALIBD_SERVER_ARRAY_METHOD_H_
 #define CALIBD_SERVER_ARRAY_METHOD_H_
 
+#include <atomic>
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -91,8 +92,9 @@ Status ParseArrayConfig(const nlohmann::json& config, core::ArrayProblem* geomet
 // 2000 points (every stride-th usable sample). No NaN/Inf (null instead). Deterministic.
 // The recording's triad count must equal the geometry's (kInvalidInput naming both).
 // Errors as core::CalibrateArray otherwise.
+// `cancel` (optional): the solver stops at its next iteration once it is true.
 Status RunArray(const ArrayRecording& recording, const nlohmann::json& config,
-                nlohmann::json* result);
+                nlohmann::json* result, const std::atomic<bool>* cancel = nullptr);
 
 // For `calibd simulate array`.
 struct ArraySimulationFileOptions {

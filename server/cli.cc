@@ -161,8 +161,25 @@ int RunCli(int argc, char** argv) {
   serve_cmd->add_option("--max-upload-bytes", serve.max_upload_bytes, "largest accepted upload")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 40))
       ->capture_default_str();
-  serve_cmd->add_option("--http-threads", serve.http_threads, "HTTP connection threads")
+  serve_cmd
+      ->add_option("--http-threads", serve.http_threads,
+                   "threads that process requests (slow and idle connections hold none)")
       ->check(CLI::Range(4, 1024))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--head-timeout-seconds", serve.head_timeout_seconds,
+                   "a request's line and headers must arrive within this (else 408)")
+      ->check(CLI::Range(1, 300))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--max-connections-per-client", serve.max_connections_per_client,
+                   "open connections per client address (503 beyond)")
+      ->check(CLI::Range(1, 900))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--max-requests-per-client", serve.max_requests_per_client,
+                   "requests in progress per client address (more wait their turn)")
+      ->check(CLI::Range(1, 1024))
       ->capture_default_str();
   serve_cmd
       ->add_option("--grace-seconds", serve.shutdown_grace_seconds,

@@ -140,7 +140,7 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
 }
 
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, const json& config,
-                       json* result) {
+                       json* result, const std::atomic<bool>* cancel) {
   CommonConfig common;
   Status s = ValidateConfig(config, &common);
   if (!s.ok()) return s;
@@ -164,15 +164,15 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
   ArrayRecording recording;
   s = parser->TakeArray(&recording);
   if (!s.ok()) return s;
-  return RunArray(recording, config, result);
+  return RunArray(recording, config, result, cancel);
 }
 
 Status Calibrate(std::string_view recording, const std::string& file_name, const json& config,
-                 json* result) {
+                 json* result, const std::atomic<bool>* cancel) {
   RecordingParser parser(file_name, /*collect=*/true);
   Status s = ParseRecording(recording, &parser);
   if (!s.ok()) return s;
-  return CalibrateParsed(&parser, file_name, config, result);
+  return CalibrateParsed(&parser, file_name, config, result, cancel);
 }
 
 }  // namespace calibd::server

@@ -3,6 +3,7 @@
 #ifndef CALIBD_SERVER_CONFIG_H_
 #define CALIBD_SERVER_CONFIG_H_
 
+#include <atomic>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -41,12 +42,16 @@ Status ValidateConfig(const nlohmann::json& config, CommonConfig* common);
 // Parses the recording bytes (collecting), checks the layout matches the config's method, runs the
 // calibration and writes the result JSON (SPEC §4). kInvalidInput for bad bytes or config,
 // kNotDeterminable when the data cannot determine the parameters.
+// `cancel` (optional): when it becomes true the computation stops early (the result is then
+// meaningless and must be discarded).
 Status Calibrate(std::string_view recording, const std::string& file_name,
-                 const nlohmann::json& config, nlohmann::json* result);
+                 const nlohmann::json& config, nlohmann::json* result,
+                 const std::atomic<bool>* cancel = nullptr);
 
 // The same, from a parser that has already been fed and finished (collecting).
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name,
-                       const nlohmann::json& config, nlohmann::json* result);
+                       const nlohmann::json& config, nlohmann::json* result,
+                       const std::atomic<bool>* cancel = nullptr);
 
 }  // namespace calibd::server
 

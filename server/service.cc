@@ -19,7 +19,9 @@
 
 #include "server/config.h"
 #include "server/exports.h"
+#include "server/http_server.h"
 #include "server/http_util.h"
+#include "server/instance.h"
 #include "server/metrics.h"
 #include "server/recording.h"
 #include "server/worker_pool.h"
@@ -225,13 +227,17 @@ struct Service::Impl {
   std::string token;   // empty: no authentication
   fs::path staging_dir;
   std::unique_ptr<storage::Store> store;
+  std::unique_ptr<ProcessInstance> instance;  // after store: removed before the store closes
   Metrics metrics;
   std::unique_ptr<WorkerPool> workers;
-  httplib::Server http;
+  std::unique_ptr<HttpServer> http;  // destroyed first: its request threads use the rest
   std::once_flag shutdown_once;
   bool shutdown_clean = true;
 
   void SetupRoutes();
+  // Takes back at once the jobs of calibd processes of this host that died (kill -9, crash)
+  // while holding them, instead of waiting for their leases to expire (ProcessInstance).
+  void ReapDeadProcesses();
   bool Authorized(const httplib::Request& req) const;
   void HandleUpload(const httplib::Request& req, httplib::Response& res,
                     const httplib::ContentReader& reader);
@@ -258,6 +264,9 @@ std::string ServeOptions::Validate() const {
   if (workers < 0) return "--workers must be >= 0";
   if (max_upload_bytes < 1) return "--max-upload-bytes must be >= 1";
   if (http_threads < 4) return "--http-threads must be >= 4";
+  if (head_timeout_seconds < 1) return "--head-timeout-seconds must be >= 1";
+  if (max_connections_per_client < 1) return "--max-connections-per-client must be >= 1";
+  if (max_requests_per_client < 1) return "--max-requests-per-client must be >= 1";
   if (db_path.empty()) return "--db must not be empty";
   return "";
 }
@@ -292,23 +301,28 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
   if (recovered > 0) {
     std::cerr << "calibd: took back " << recovered << " job(s) whose lease had lapsed\n";
   }
-  impl->staging_dir = fs::absolute(options.db_path).parent_path() / "staging";
-  std::error_code ec;
-  fs::create_directories(impl->staging_dir, ec);
-  if (ec)
-    return Status::IoError("cannot create " + impl->staging_dir.string() + ": " + ec.message());
-  for (const auto& entry : fs::directory_iterator(impl->staging_dir, ec)) {
-    fs::remove(entry.path(), ec);  // leftovers of a killed process: never acknowledged
-  }
+  s = ProcessInstance::Create(fs::absolute(options.db_path).parent_path() / "staging",
+                              &impl->instance);
+  if (!s.ok()) return s;
+  impl->staging_dir = impl->instance->staging_dir();
+  impl->ReapDeadProcesses();
   WorkerPoolOptions pool;
   pool.workers =
       options.workers > 0 ? options.workers : std::max(1u, std::thread::hardware_concurrency());
   pool.lease_ms = options.lease_ms;
-  char hostname[256] = "host";
-  gethostname(hostname, sizeof hostname - 1);
-  pool.id_prefix = std::string(hostname) + ":" + std::to_string(getpid()) + ":" +
-                   std::to_string(std::chrono::system_clock::now().time_since_epoch().count());
+  pool.id_prefix = impl->instance->id();
+  pool.housekeeping = [d = impl.get()] { d->ReapDeadProcesses(); };
   impl->workers = std::make_unique<WorkerPool>(impl->store.get(), &impl->metrics, pool);
+  HttpLimits limits;
+  limits.threads = options.http_threads;
+  limits.read_timeout_ms = options.read_timeout_seconds * 1000;
+  limits.write_timeout_ms = options.write_timeout_seconds * 1000;
+  limits.head_timeout_ms = options.head_timeout_seconds * 1000;
+  limits.max_connections_per_client = options.max_connections_per_client;
+  limits.max_requests_per_client = options.max_requests_per_client;
+  const std::string problem_http = limits.Validate();
+  if (!problem_http.empty()) return Status::InvalidInput(problem_http);
+  impl->http = std::make_unique<HttpServer>(limits);
   impl->SetupRoutes();
   out->reset(new Service(std::move(impl)));
   return Status::Ok();
@@ -324,16 +338,16 @@ constexpr int kListenBacklog = 1024;
 
 Status Service::Bind() {
   Impl& d = *impl_;
-  d.http.set_socket_options([&d](socket_t sock) {
+  d.http->set_socket_options([&d](socket_t sock) {
     int yes = 1;
     setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
     d.listen_fd = sock;  // the last socket tried is the one that binds
   });
   if (d.requested_port == 0) {
-    d.bound_port = d.http.bind_to_any_port(d.host);
+    d.bound_port = d.http->bind_to_any_port(d.host);
     if (d.bound_port <= 0) return Status::IoError("cannot bind " + d.host + " to any port");
   } else {
-    if (!d.http.bind_to_port(d.host, d.requested_port)) {
+    if (!d.http->bind_to_port(d.host, d.requested_port)) {
       return Status::IoError("cannot listen on " + d.options.listen +
                              " (address in use or not available)");
     }
@@ -349,23 +363,39 @@ int Service::port() const { return impl_->bound_port; }
 
 void Service::Run() {
   impl_->workers->Start();
-  impl_->http.listen_after_bind();
+  impl_->http->listen_after_bind();
 }
 
 bool Service::Shutdown() {
   Impl& d = *impl_;
   std::call_once(d.shutdown_once, [&d] {
-    d.http.stop();
+    // First the HTTP side, waiting for requests in progress (their handlers use the store and
+    // the worker pool), then the workers, then the store.
+    d.http->Shutdown(d.options.shutdown_grace_seconds * 1000);
     if (d.workers) {
       d.shutdown_clean = d.workers->Stop(std::chrono::seconds(d.options.shutdown_grace_seconds));
     }
-    if (d.shutdown_clean && d.store) {
+    if (d.store) {
       d.store->Checkpoint();
       d.workers.reset();
       d.store.reset();
     }
   });
   return d.shutdown_clean;
+}
+
+void Service::Impl::ReapDeadProcesses() {
+  instance->ReapDead([this](const std::string& id) {
+    int64_t n = 0;
+    Status s = store->ExpireLeasesOf(id + "-", &n);  // worker ids are "<id>-<n>"
+    if (!s.ok()) {
+      std::cerr << "calibd: cannot take back the jobs of dead process " << id << ": "
+                << s.ToString() << "\n";
+    } else if (n > 0) {
+      std::cerr << "calibd: took back " << n << " job(s) of dead process " << id << "\n";
+    }
+    return s;
+  });
 }
 
 bool Service::Impl::Authorized(const httplib::Request& req) const {
@@ -379,16 +409,12 @@ bool Service::Impl::Authorized(const httplib::Request& req) const {
 }
 
 void Service::Impl::SetupRoutes() {
-  http.new_task_queue = [n = options.http_threads] { return new httplib::ThreadPool(n); };
-  http.set_tcp_nodelay(true);
-  http.set_read_timeout(options.read_timeout_seconds, 0);
-  http.set_write_timeout(options.write_timeout_seconds, 0);
-  http.set_keep_alive_timeout(5);
-  http.set_keep_alive_max_count(1000);
+  httplib::Server& http = *this->http;
   http.set_payload_max_length(static_cast<size_t>(options.max_upload_bytes));
 
-  // Runs before the body is read: authentication, size and encoding limits.
-  http.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
+  // Runs before the body is read (also before "100 Continue"): authentication, size and encoding
+  // limits. A refused request's connection is closed, so its body is never read as a request.
+  this->http->SetRequestFilter([this](const httplib::Request& req, httplib::Response& res) {
     t_request_start = std::chrono::steady_clock::now();
     const bool write = req.method != "GET" && req.method != "HEAD" && req.method != "OPTIONS";
     const bool is_upload = req.path == "/api/v1/recordings" && req.method == "POST";
@@ -471,15 +497,19 @@ void Service::Impl::SetupRoutes() {
         return httplib::Server::HandlerResponse::Handled;
       }));
 
-  http.set_logger([this](const httplib::Request& req, const httplib::Response& res) {
+  this->http->SetAccessLogger([this](const httplib::Request& req, const httplib::Response& res) {
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t_request_start).count();
     metrics.ObserveRequest(req.method, RouteLabel(req.path), res.status, seconds);
     if (options.access_log) {
-      char line[160];
-      std::snprintf(line, sizeof line, " %d %zu %.3fms\n", res.status, res.body.size(),
+      char tail[96];
+      std::snprintf(tail, sizeof tail, " %d %zu %.3fms\n", res.status, res.body.size(),
                     seconds * 1e3);
-      std::cerr << req.remote_addr << " " << req.method << " " << SanitizeForLog(req.path) << line;
+      // One write per line, so lines from concurrent requests never interleave.
+      const std::string line = SanitizeForLog(req.remote_addr.empty() ? "-" : req.remote_addr) +
+                               " " + SanitizeForLog(req.method.empty() ? "-" : req.method) + " " +
+                               SanitizeForLog(req.path.empty() ? "-" : req.path) + tail;
+      [[maybe_unused]] ssize_t n = ::write(STDERR_FILENO, line.data(), line.size());
     }
   });
 
@@ -1034,9 +1064,26 @@ void Service::Impl::HandleMetrics(const httplib::Request&, httplib::Response& re
                              {"state=\"failed\"", static_cast<double>(counts.failed)}};
   }
   gauges["calibd_workers_busy"] = {{"", static_cast<double>(workers->running_jobs())}};
-  res.set_content(metrics.Render(gauges, {{"calibd_jobs", "Jobs in the queue by state."},
-                                          {"calibd_workers_busy", "Workers running a job."}}),
-                  "text/plain; version=0.0.4");
+  const HttpCounters c = http->counters();
+  gauges["calibd_http_connections"] = {
+      {"state=\"open\"", static_cast<double>(c.open_connections)},
+      {"state=\"receiving_head\"", static_cast<double>(c.pending_heads)},
+      {"state=\"in_request\"", static_cast<double>(c.requests_in_progress)}};
+  // Counters since the start (Prometheus reads them as gauges here; rate() works on both).
+  gauges["calibd_http_refusals"] = {
+      {"reason=\"connections_per_client\"", static_cast<double>(c.refused_connections)},
+      {"reason=\"requests_per_client_waited\"", static_cast<double>(c.delayed_requests)},
+      {"reason=\"head_timeout\"", static_cast<double>(c.head_timeouts)},
+      {"reason=\"head_too_large\"", static_cast<double>(c.heads_too_large)},
+      {"reason=\"lingering_close\"", static_cast<double>(c.lingering_closes)}};
+  res.set_content(
+      metrics.Render(gauges, {{"calibd_jobs", "Jobs in the queue by state."},
+                              {"calibd_workers_busy", "Workers running a job."},
+                              {"calibd_http_connections", "Client connections by state."},
+                              {"calibd_http_refusals",
+                               "Connections refused or closed by the front end since the start, by "
+                               "reason."}}),
+      "text/plain; version=0.0.4");
 }
 
 }  // namespace calibd::server

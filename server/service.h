@@ -26,9 +26,10 @@ class Service {
   int port() const;
   // Serves until Shutdown(). Returns after the HTTP server has stopped.
   void Run();
-  // Graceful stop; safe from any thread, idempotent. Returns false when some job was still
-  // computing after the grace period (its lease was released; the process should exit without
-  // running destructors, see WorkerPool::Stop).
+  // Graceful stop; safe from any thread, idempotent. Waits for requests in progress and running
+  // jobs (within the grace period; then jobs are released and cancelled), and closes the
+  // database: afterwards no thread of the service runs. Returns false when some job was
+  // released rather than finished.
   bool Shutdown();
 
  private:

@@ -50,24 +50,19 @@ bool WorkerPool::Stop(std::chrono::milliseconds grace) {
   wake_.notify_all();
   const bool all_done = finished_.wait_for(lock, grace, [this] { return busy_workers_ == 0; });
   if (!all_done) {
-    // Give the still-running jobs back to the queue; their workers' late results will be refused
-    // (kConflict) and the jobs run again after the restart.
-    for (const auto& [job_id, worker_id] : active_) {
-      Status s = store_->ReleaseJob(job_id, worker_id);
+    // Give the still-running jobs back to the queue and cancel their computation; they run again
+    // after the restart (a late result would be refused anyway: kConflict).
+    for (const auto& [job_id, active] : active_) {
+      active.cancel->store(true);
+      Status s = store_->ReleaseJob(job_id, active.worker_id);
       std::cerr << "calibd: shutdown: released job " << job_id << " ("
                 << (s.ok() ? "it will run again after restart" : s.ToString()) << ")\n";
     }
-    active_.clear();
   }
   lock.unlock();
   finished_.notify_all();  // wakes the renewer
-  if (all_done) {
-    for (auto& t : threads_) t.join();
-    renewer_.join();
-  } else {
-    for (auto& t : threads_) t.detach();
-    renewer_.join();
-  }
+  for (auto& t : threads_) t.join();
+  renewer_.join();
   threads_.clear();
   return all_done;
 }
@@ -86,16 +81,17 @@ void WorkerPool::WorkerLoop(int index) {
     Status s = store_->ClaimJob(worker_id, options_.lease_ms, &job, &claimed);
     if (!s.ok()) std::cerr << "calibd: " << worker_id << ": claim failed: " << s.ToString() << "\n";
     if (s.ok() && claimed) {
+      auto cancel = std::make_shared<std::atomic<bool>>(false);
       {
         std::lock_guard<std::mutex> lock(mu_);
         if (stopping_) {
           store_->ReleaseJob(job.id, worker_id);
           return;
         }
-        active_[job.id] = worker_id;
+        active_[job.id] = Active{worker_id, cancel};
         ++busy_workers_;
       }
-      RunJob(worker_id, job);
+      RunJob(worker_id, job, *cancel);
       {
         std::lock_guard<std::mutex> lock(mu_);
         active_.erase(job.id);
@@ -118,18 +114,25 @@ void WorkerPool::RenewLoop() {
     if (stopping_) break;
     const auto active = active_;
     lock.unlock();
-    for (const auto& [job_id, worker_id] : active) {
-      Status s = store_->RenewLease(job_id, worker_id, options_.lease_ms);
+    for (const auto& [job_id, job] : active) {
+      Status s = store_->RenewLease(job_id, job.worker_id, options_.lease_ms);
       if (!s.ok()) {
-        std::cerr << "calibd: " << worker_id << ": lease of job " << job_id
+        std::cerr << "calibd: " << job.worker_id << ": lease of job " << job_id
                   << " not renewed: " << s.ToString() << "\n";
       }
+      if (s.code() == StatusCode::kConflict || s.code() == StatusCode::kNotFound) {
+        // Taken back (the lease lapsed and another worker claimed it, or it was released):
+        // whatever this run computes would be refused, so stop computing.
+        job.cancel->store(true);
+      }
     }
+    if (options_.housekeeping) options_.housekeeping();
     lock.lock();
   }
 }
 
-void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& job) {
+void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& job,
+                        const std::atomic<bool>& cancel) {
   const auto start = std::chrono::steady_clock::now();
   auto seconds = [&] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -151,13 +154,19 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
   s = ParseJsonText(job.config_json, "config of job " + std::to_string(job.id), &config);
   if (s.ok()) {
     try {
-      s = Calibrate(bytes, "recording " + std::to_string(job.recording_id), config, &result);
+      s = Calibrate(bytes, "recording " + std::to_string(job.recording_id), config, &result,
+                    &cancel);
     } catch (const std::bad_alloc&) {
       s = Status::IoError("out of memory while calibrating");
     } catch (const std::exception&) {
       // Never leak exception text to clients: the job says only that it was our fault.
       s = Status::Internal("internal error while calibrating; please report it");
     }
+  }
+  if (cancel.load()) {
+    // Released at shutdown or taken back: the job runs again elsewhere or after the restart.
+    metrics_->ObserveJob(job.method, "cancelled", seconds());
+    return;
   }
   if (!s.ok()) return fail(s, s.IsTransient());
   s = store_->CompleteJob(job.id, worker_id,

@@ -5,6 +5,8 @@
 // back by the store and runs again; results are deterministic, so a second run stores the same
 // result. Failures that are the input's fault (kInvalidInput, kNotDeterminable) fail the job at
 // once; transient ones (kBusy, kIoError) go back to the queue with back-off (storage decides).
+// A running job is cancelled (its computation stops at the next check, nothing is stored) when
+// its lease is lost (taken back by another process) and on Stop after the grace period.
 // Thread-safe; never blocks the caller of Notify().
 #ifndef CALIBD_SERVER_WORKER_POOL_H_
 #define CALIBD_SERVER_WORKER_POOL_H_
@@ -13,7 +15,9 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -29,6 +33,9 @@ struct WorkerPoolOptions {
   int64_t lease_ms = 30000;  // lease length; renewed every lease_ms / 3 while a job runs
   int64_t poll_ms = 500;     // idle workers look for jobs at least this often (Notify wakes)
   std::string id_prefix;     // worker ids are "<id_prefix>-<n>"; should be unique per process
+  // Optional: run by the lease renewer thread every lease_ms / 3 (e.g. taking back the jobs of
+  // dead processes). Must not block for long.
+  std::function<void()> housekeeping;
 };
 
 class WorkerPool {
@@ -43,9 +50,9 @@ class WorkerPool {
   // A job was enqueued: wake an idle worker.
   void Notify();
   // Stops claiming, waits up to `grace` for running jobs to finish, then releases the leases of
-  // those still running (they run again on the next start). Returns true when every worker
-  // thread has finished and been joined; false when some are still computing (their threads are
-  // detached: the caller must then end the process without destroying the store).
+  // those still running (they run again on the next start), cancels them, and joins every
+  // thread: when Stop returns, no thread of the pool touches the store. Returns true when every
+  // job finished within the grace period, false when some were released.
   bool Stop(std::chrono::milliseconds grace);
 
   int running_jobs() const;
@@ -53,7 +60,13 @@ class WorkerPool {
  private:
   void WorkerLoop(int index);
   void RenewLoop();
-  void RunJob(const std::string& worker_id, const storage::JobInfo& job);
+  void RunJob(const std::string& worker_id, const storage::JobInfo& job,
+              const std::atomic<bool>& cancel);
+
+  struct Active {
+    std::string worker_id;
+    std::shared_ptr<std::atomic<bool>> cancel;  // set on shutdown or when the lease is lost
+  };
 
   storage::Store* store_;
   Metrics* metrics_;
@@ -65,7 +78,7 @@ class WorkerPool {
   bool stopping_ = false;
   bool started_ = false;
   uint64_t notifications_ = 0;
-  std::map<int64_t, std::string> active_;  // job id -> worker id, guarded by mu_
+  std::map<int64_t, Active> active_;  // job id -> its worker, guarded by mu_
   int busy_workers_ = 0;
   std::vector<std::thread> threads_;
   std::thread renewer_;

@@ -675,6 +675,28 @@ Status Store::RecoverExpiredLeases(int64_t* recovered) {
   return Status::Ok();
 }
 
+Status Store::ExpireLeasesOf(const std::string& owner_prefix, int64_t* taken_back) {
+  if (owner_prefix.empty()) return Status::InvalidInput("storage: owner_prefix must not be empty");
+  int64_t n = 0;
+  Status s = Write([&](Db* db) {
+    const int64_t now = Now();
+    Stmt st;
+    Status s = db->Prepare(
+        "UPDATE jobs SET lease_expires_at = ?1 WHERE status = 'running' AND "
+        "substr(lease_owner, 1, length(?2)) = ?2 AND lease_expires_at > ?1",
+        &st);
+    if (!s.ok()) return s;
+    st.BindInt(1, now).BindText(2, owner_prefix);
+    s = st.Run();
+    if (!s.ok()) return s;
+    n = db->Changes();
+    return n > 0 ? RecoverLocked(db, now, nullptr) : Status::Ok();
+  });
+  if (!s.ok()) return s;
+  if (taken_back != nullptr) *taken_back = n;
+  return Status::Ok();
+}
+
 Status Store::ClaimJob(const std::string& worker_id, int64_t lease_ms, JobInfo* out,
                        bool* claimed) {
   *claimed = false;

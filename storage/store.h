@@ -246,6 +246,13 @@ class Store {
   // Call at server start. *recovered (may be null) = jobs taken back.
   Status RecoverExpiredLeases(int64_t* recovered);
 
+  // The holder of some leases is known to be dead (same host, its process gone): every running
+  // job whose lease_owner starts with `owner_prefix` is taken back at once, exactly as if its
+  // lease had expired now (queued again, or failed past max_attempts). Leases of live holders
+  // elsewhere still run out their time. *taken_back (may be null) = jobs taken back.
+  // kInvalidInput for an empty prefix.
+  Status ExpireLeasesOf(const std::string& owner_prefix, int64_t* taken_back);
+
   // One job with its result if succeeded. kNotFound.
   Status GetJob(int64_t id, JobInfo* out);
   // Newest first (by id, which only grows: the cursor `before` is stable under inserts).

@@ -29,7 +29,8 @@ namespace {
 using calibd::server::ServeOptions;
 using calibd::server::Service;
 
-Service* g_service = nullptr;  // lives until the process exits
+Service* g_service = nullptr;  // shut down and destroyed at exit (StopServer)
+std::thread* g_runner = nullptr;
 int g_port = 0;
 std::string g_dir;
 
@@ -41,6 +42,20 @@ std::string g_dir;
 void RemoveDir() {
   std::error_code ec;
   if (!g_dir.empty()) std::filesystem::remove_all(g_dir, ec);
+}
+
+// At exit (libFuzzer calls exit() when its time or run budget is spent), before static objects
+// are destroyed and the database folder is removed: the service stops its threads and closes
+// the database, as `calibd serve` does on SIGTERM. Without this, request and worker threads ran
+// on while exit() destroyed what they used.
+void StopServer() {
+  if (g_service == nullptr) return;
+  g_service->Shutdown();
+  if (g_runner != nullptr) g_runner->join();
+  delete g_service;
+  g_service = nullptr;
+  delete g_runner;
+  g_runner = nullptr;
 }
 
 httplib::Client MakeClient() {
@@ -74,7 +89,8 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
   if (!s.ok()) Fail("Service::Bind: " + s.ToString());
   g_service = service.release();
   g_port = g_service->port();
-  std::thread([] { g_service->Run(); }).detach();
+  g_runner = new std::thread([] { g_service->Run(); });
+  std::atexit(StopServer);  // runs before RemoveDir (registered earlier)
   for (int i = 0; i < 500; ++i) {
     auto res = MakeClient().Get("/healthz");
     if (res && res->status == 200) return 0;

@@ -26,6 +26,8 @@ namespace calibd::server {
 namespace {
 
 using nlohmann::json;
+using testing::RawConnection;
+using testing::StatusOf;
 using testing::TestServer;
 
 int64_t RssKiB() {
@@ -35,68 +37,6 @@ int64_t RssKiB() {
     if (line.rfind("VmRSS:", 0) == 0) return std::stoll(line.substr(6));
   }
   return 0;
-}
-
-// A raw TCP connection to the server.
-class RawConnection {
- public:
-  explicit RawConnection(int port) {
-    fd_ = socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in addr{};
-    addr.sin_family = AF_INET;
-    addr.sin_port = htons(static_cast<uint16_t>(port));
-    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    if (connect(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
-      close(fd_);
-      fd_ = -1;
-    }
-    timeval tv{10, 0};
-    setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-    setsockopt(fd_, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
-  }
-  ~RawConnection() {
-    if (fd_ >= 0) close(fd_);
-  }
-  bool ok() const { return fd_ >= 0; }
-  // Sends all of `data`; false when the server closed the connection meanwhile.
-  bool Send(const std::string& data) {
-    size_t sent = 0;
-    while (sent < data.size()) {
-      const ssize_t n = send(fd_, data.data() + sent, data.size() - sent, MSG_NOSIGNAL);
-      if (n <= 0) return false;
-      sent += static_cast<size_t>(n);
-    }
-    return true;
-  }
-  // Reads one response (headers and Content-Length body), or until the peer closes, `limit`
-  // bytes or the timeout; returns what came.
-  std::string Receive(size_t limit = 1 << 20) {
-    std::string out;
-    char buf[8192];
-    while (out.size() < limit) {
-      const size_t end = out.find("\r\n\r\n");
-      if (end != std::string::npos) {
-        const size_t at = out.find("Content-Length: ");
-        if (at != std::string::npos && at < end &&
-            out.size() >= end + 4 + std::stoul(out.substr(at + 16))) {
-          break;
-        }
-      }
-      const ssize_t n = recv(fd_, buf, sizeof buf, 0);
-      if (n <= 0) break;
-      out.append(buf, static_cast<size_t>(n));
-    }
-    return out;
-  }
-
- private:
-  int fd_ = -1;
-};
-
-// The status code of a raw HTTP answer, or 0 if the connection was closed without one.
-int StatusOf(const std::string& response) {
-  if (response.rfind("HTTP/1.1 ", 0) != 0) return 0;
-  return std::atoi(response.c_str() + 9);
 }
 
 class HostileHttp : public ::testing::Test {

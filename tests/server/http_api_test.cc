@@ -234,8 +234,7 @@ TEST_F(HttpApi, MalformedCsvIs400WithLineAndColumnAndNothingStored) {
   EXPECT_EQ(Body(client.Get("/api/v1/jobs"))["jobs"].size(), 0u);
   EXPECT_EQ(client.Get("/api/v1/recordings/1")->status, 404);
   // No staged file is left behind.
-  const auto staging = server_.dir() / "staging";
-  EXPECT_TRUE(std::filesystem::is_empty(staging));
+  EXPECT_EQ(testing::StagedUploads(server_.dir()), 0);
 }
 
 TEST_F(HttpApi, InvalidConfigIs400NamingTheKey) {
@@ -451,7 +450,7 @@ TEST(HttpApiLimits, ChunkedUploadOverTheLimitIs413) {
     EXPECT_EQ(res->status, 413) << res->body;
   }
   EXPECT_EQ(server.Client().Get("/healthz")->status, 200);
-  EXPECT_TRUE(std::filesystem::is_empty(server.dir() / "staging"));
+  EXPECT_EQ(testing::StagedUploads(server.dir()), 0);
 }
 
 int64_t ProcStatusKiB(const char* key) {

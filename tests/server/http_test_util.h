@@ -2,10 +2,16 @@
 #ifndef CALIBD_TESTS_SERVER_HTTP_TEST_UTIL_H_
 #define CALIBD_TESTS_SERVER_HTTP_TEST_UTIL_H_
 
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -33,6 +39,17 @@ class TempDir {
  private:
   std::filesystem::path path_;
 };
+
+// Files of uploads being staged under a server's database folder (the per-process lock files of
+// server/instance.h are not uploads).
+inline int StagedUploads(const std::filesystem::path& db_dir) {
+  int n = 0;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(db_dir / "staging", ec)) {
+    if (e.is_regular_file() && e.path().extension() != ".lock") ++n;
+  }
+  return n;
+}
 
 // The in-process server: Service on 127.0.0.1:0, served by a background thread.
 class TestServer {
@@ -105,6 +122,84 @@ class TestServer {
   std::thread thread_;
   std::string error_;
 };
+
+// A raw TCP connection to the server.
+class RawConnection {
+ public:
+  explicit RawConnection(int port) {
+    fd_ = socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_port = htons(static_cast<uint16_t>(port));
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (connect(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
+      close(fd_);
+      fd_ = -1;
+    }
+    timeval tv{10, 0};
+    setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    setsockopt(fd_, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
+  }
+  ~RawConnection() {
+    if (fd_ >= 0) close(fd_);
+  }
+  bool ok() const { return fd_ >= 0; }
+  int fd() const { return fd_; }
+  // True when the server has closed the connection: a read sees the end within `timeout_ms`
+  // (after any bytes still in flight, which are returned in *rest).
+  bool ClosedByPeer(int timeout_ms, std::string* rest = nullptr) {
+    char buf[8192];
+    const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+    while (std::chrono::steady_clock::now() < end) {
+      pollfd p{fd_, POLLIN, 0};
+      if (poll(&p, 1, 50) <= 0) continue;
+      const ssize_t n = recv(fd_, buf, sizeof buf, MSG_DONTWAIT);
+      if (n == 0) return true;
+      if (n < 0) return errno == ECONNRESET;
+      if (rest != nullptr) rest->append(buf, static_cast<size_t>(n));
+    }
+    return false;
+  }
+  // Sends all of `data`; false when the server closed the connection meanwhile.
+  bool Send(const std::string& data) {
+    size_t sent = 0;
+    while (sent < data.size()) {
+      const ssize_t n = send(fd_, data.data() + sent, data.size() - sent, MSG_NOSIGNAL);
+      if (n <= 0) return false;
+      sent += static_cast<size_t>(n);
+    }
+    return true;
+  }
+  // Reads one response (headers and Content-Length body), or until the peer closes, `limit`
+  // bytes or the timeout; returns what came.
+  std::string Receive(size_t limit = 1 << 20) {
+    std::string out;
+    char buf[8192];
+    while (out.size() < limit) {
+      const size_t end = out.find("\r\n\r\n");
+      if (end != std::string::npos) {
+        const size_t at = out.find("Content-Length: ");
+        if (at != std::string::npos && at < end &&
+            out.size() >= end + 4 + std::stoul(out.substr(at + 16))) {
+          break;
+        }
+      }
+      const ssize_t n = recv(fd_, buf, sizeof buf, 0);
+      if (n <= 0) break;
+      out.append(buf, static_cast<size_t>(n));
+    }
+    return out;
+  }
+
+ private:
+  int fd_ = -1;
+};
+
+// The status code of a raw HTTP answer, or 0 if the connection was closed without one.
+inline int StatusOf(const std::string& response) {
+  if (response.rfind("HTTP/1.1 ", 0) != 0) return 0;
+  return std::atoi(response.c_str() + 9);
+}
 
 }  // namespace calibd::server::testing
 

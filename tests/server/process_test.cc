@@ -185,6 +185,52 @@ TEST(ServeProcess, SigtermAfterTheGracePeriodReleasesTheJobWhichRunsAfterRestart
   again.Signal(SIGTERM);
 }
 
+// A job whose process was killed runs again as soon as a process of the same host starts on the
+// database, not after its 30 s lease; a job held by a live process is left alone.
+TEST(ServeProcess, KillNineJobRunsAgainAtOnceAfterRestartButALiveHoldersJobIsLeftAlone) {
+  testing::TempDir dir;
+  const std::string db = (dir.path() / "calibd.db").string();
+  int64_t id = 0;
+  {
+    ServerProcess server(db, {"--workers", "1"});  // the default 30 s lease
+    ASSERT_GT(server.port(), 0) << server.log();
+    auto res = server.Client().Post("/api/v1/recordings", SlowArrayUpload(3));
+    ASSERT_TRUE(res);
+    ASSERT_EQ(res->status, 201) << res->body;
+    id = json::parse(res->body)["job"]["id"];
+    json job = WaitForStatus(server, id, {"running", "succeeded"});
+    ASSERT_EQ(job["status"], "running") << "the job finished before it could be interrupted";
+
+    // A second live process on the same database does not take the running job.
+    ServerProcess other(db, {"--workers", "1"});
+    ASSERT_GT(other.port(), 0) << other.log();
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    job = GetJob(other.Client(), id);
+    EXPECT_EQ(job["attempts"], 1) << job.dump();
+    other.Signal(SIGTERM);
+
+    server.Signal(SIGKILL);
+  }
+  const auto restart = std::chrono::steady_clock::now();
+  ServerProcess again(db, {"--workers", "1"});
+  ASSERT_GT(again.port(), 0) << again.log();
+  // Taken back at start, not after the lease: the second attempt begins long before 30 s.
+  json job;
+  double waited = 0;
+  for (auto client = again.Client(); waited < 40;
+       std::this_thread::sleep_for(std::chrono::milliseconds(20))) {
+    job = GetJob(client, id);
+    waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - restart).count();
+    if (job.is_object() && job["attempts"] >= 2) break;
+  }
+  EXPECT_LT(waited, 15.0) << "the job waited for its lease to expire: " << job.dump();
+  EXPECT_NE(again.log().find("of dead process"), std::string::npos) << again.log();
+  job = WaitForStatus(again, id, {"succeeded", "failed"}, 120000);
+  EXPECT_EQ(job["status"], "succeeded");
+  EXPECT_EQ(job["attempts"], 2);
+  again.Signal(SIGTERM);
+}
+
 // kill -9 at random moments while uploads stream in and jobs run: every upload answered 201 is
 // there byte-exact afterwards, the file is sound, and every job ends succeeded exactly once.
 TEST(ServeProcess, KillNineNeverLosesAnAcknowledgedUploadOrJob) {
