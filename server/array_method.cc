@@ -612,4 +612,36 @@ Status SimulateArrayStaticFiles(const ArraySimulationFileOptions& options, int p
   return Status::Ok();
 }
 
+namespace {
+
+class Array : public Method {
+ public:
+  const char* name() const override { return "array"; }
+  const char* summary() const override {
+    return "positions of the accelerometer triads of an inertial sensor array from a free, "
+           "hand-twisted recording (Carlsson, Skog, Jalden: maximum likelihood)";
+  }
+  bool Reads(Layout layout) const override { return layout == Layout::kArray; }
+  Status ValidateConfig(const nlohmann::json& config) const override {
+    core::ArrayProblem geometry;
+    core::ArrayOptions options;
+    bool degrees = false;
+    return ParseArrayConfig(config, &geometry, &options, &degrees);
+  }
+  Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
+             nlohmann::json* result) const override {
+    ArrayRecording recording;
+    Status s = parser->TakeArray(&recording);
+    if (!s.ok()) return s;
+    return RunArray(recording, config, result, ctx.cancel);
+  }
+};
+
+}  // namespace
+
+const Method& ArrayMethod() {
+  static const Array method;
+  return method;
+}
+
 }  // namespace calibd::server

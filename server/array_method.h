@@ -11,9 +11,13 @@
 
 #include "core/array.h"
 #include "core/status.h"
+#include "server/method.h"
 #include "server/recording.h"
 
 namespace calibd::server {
+
+// The `array` method for the registry (server/method.h): reads the array layout.
+const Method& ArrayMethod();
 
 // The accelerometer calibration an array fit uses (SPEC §3 `accelerometer_calibration`, issue #8).
 struct ArrayAccelerometerCalibration {

@@ -2,8 +2,7 @@
 
 #include <cctype>
 
-#include "server/array_method.h"
-#include "server/pca_method.h"
+#include "server/method.h"
 
 namespace calibd::server {
 
@@ -102,10 +101,13 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
   auto method = config.find("method");
   if (method == config.end()) {
-    return Status::InvalidInput("missing key 'method' (\"pca\" or \"array\")").WithField("method");
+    return Status::InvalidInput("missing key 'method' (" + MethodNamesForMessage() + ")")
+        .WithField("method");
   }
-  if (!method->is_string() || (*method != "pca" && *method != "array")) {
-    return Status::InvalidInput("'method' must be \"pca\" or \"array\", not " +
+  const Method* m =
+      method->is_string() ? FindMethod(method->get_ref<const std::string&>()) : nullptr;
+  if (m == nullptr) {
+    return Status::InvalidInput("'method' must be " + MethodNamesForMessage() + ", not " +
                                 method->dump().substr(0, 60))
         .WithField("method");
   }
@@ -129,14 +131,7 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
     }
     common->device = serial;
   }
-  if (common->method == "pca") {
-    core::PcaOptions options;
-    return ParsePcaConfig(config, &options);
-  }
-  core::ArrayProblem geometry;
-  core::ArrayOptions options;
-  bool degrees = false;
-  return ParseArrayConfig(config, &geometry, &options, &degrees);
+  return m->ValidateConfig(config);
 }
 
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, const json& config,
@@ -144,27 +139,18 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
   CommonConfig common;
   Status s = ValidateConfig(config, &common);
   if (!s.ok()) return s;
+  const Method* method = FindMethod(common.method);
   const Layout layout = parser->summary().layout;
-  if (common.method != LayoutMethod(layout)) {
+  if (!method->Reads(layout)) {
     return Status::InvalidInput(std::string("the config says method '") + common.method +
                                 "' but the recording has the " + LayoutName(layout) +
-                                " layout (SPEC §2)")
+                                " layout, which it cannot read (SPEC §2)")
         .WithFile(file_name)
         .WithField("method");
   }
-  if (common.method == "pca") {
-    PcaRecording recording;
-    s = parser->TakePca(&recording);
-    if (!s.ok()) return s;
-    core::PcaOptions options;
-    s = ParsePcaConfig(config, &options);
-    if (!s.ok()) return s;
-    return RunPca(recording, options, result);
-  }
-  ArrayRecording recording;
-  s = parser->TakeArray(&recording);
-  if (!s.ok()) return s;
-  return RunArray(recording, config, result, cancel);
+  RunContext context;
+  context.cancel = cancel;
+  return method->Run(parser, config, context, result);
 }
 
 Status Calibrate(std::string_view recording, const std::string& file_name, const json& config,

@@ -4,6 +4,7 @@
 
 #include "server/config.h"
 #include "server/http_util.h"
+#include "server/method.h"
 #include "storage/store.h"
 #include "web/pages.h"
 
@@ -70,7 +71,9 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
     view.filter.device = filter.device = req.get_param_value("device");
     const std::string method = req.get_param_value("method");
     const std::string status = req.get_param_value("status");
-    if (method == "pca" || method == "array") view.filter.method = filter.method = method;
+    if (FindMethod(method) != nullptr) view.filter.method = filter.method = method;
+    view.methods.clear();
+    for (const Method* m : AllMethods()) view.methods.push_back(m->name());
     if (status == "queued" || status == "running" || status == "succeeded" || status == "failed") {
       view.filter.status = filter.status = status;
     }

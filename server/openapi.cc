@@ -1,6 +1,7 @@
 // The OpenAPI 3 description of the HTTP API (GET /api/v1/openapi.json). Kept true by
 // tests/server/http_api_test.cc, which checks every documented path against the running server.
 #include "server/http_util.h"
+#include "server/method.h"
 
 namespace calibd::server {
 
@@ -36,6 +37,8 @@ json PathParam(const std::string& name, const std::string& type, const std::stri
 }
 
 json Build() {
+  json method_names = json::array();
+  for (const Method* m : AllMethods()) method_names.push_back(m->name());
   json doc;
   doc["openapi"] = "3.0.3";
   doc["info"] = {{"title", "calibd"},
@@ -64,7 +67,7 @@ json Build() {
       {"description", "SPEC §4 result"},
       {"required", {"method", "parameters", "uncertainty", "diagnostics", "warnings"}},
       {"properties",
-       {{"method", {{"type", "string"}, {"enum", {"pca", "array"}}}},
+       {{"method", {{"type", "string"}, {"enum", method_names}}},
         {"parameters", {{"type", "object"}}},
         {"uncertainty", {{"type", "object"}}},
         {"diagnostics", {{"type", "object"}}},

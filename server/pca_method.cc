@@ -236,4 +236,39 @@ Status SimulatePcaFiles(const core::PcaSimulationOptions& options, std::string* 
   return Status::Ok();
 }
 
+namespace {
+
+class Pca : public Method {
+ public:
+  const char* name() const override { return "pca"; }
+  const char* summary() const override {
+    return "sensitivity vectors (axis x scale) and biases of m single-axis sensors from static "
+           "positions (Rupniewski, PCA-aided calibration)";
+  }
+  bool Reads(Layout layout) const override {
+    return layout == Layout::kPcaAveraged || layout == Layout::kPcaRaw;
+  }
+  Status ValidateConfig(const nlohmann::json& config) const override {
+    core::PcaOptions options;
+    return ParsePcaConfig(config, &options);
+  }
+  Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext&,
+             nlohmann::json* result) const override {
+    PcaRecording recording;
+    Status s = parser->TakePca(&recording);
+    if (!s.ok()) return s;
+    core::PcaOptions options;
+    s = ParsePcaConfig(config, &options);
+    if (!s.ok()) return s;
+    return RunPca(recording, options, result);
+  }
+};
+
+}  // namespace
+
+const Method& PcaMethod() {
+  static const Pca method;
+  return method;
+}
+
 }  // namespace calibd::server

@@ -9,9 +9,13 @@
 #include "core/pca.h"
 #include "core/pca_simulation.h"
 #include "core/status.h"
+#include "server/method.h"
 #include "server/recording.h"
 
 namespace calibd::server {
+
+// The `pca` method for the registry (server/method.h): reads the pca_averaged and pca_raw layouts.
+const Method& PcaMethod();
 
 // Reads the pca keys of a config object (SPEC §3): dimension, magnitude, nominal (m×d array of
 // arrays, one row per sensor), refine, bias ("none" | "estimate"), noise_std; the common keys

@@ -26,7 +26,15 @@ const char* LayoutName(Layout layout) {
   return "unknown";
 }
 
-const char* LayoutMethod(Layout layout) { return layout == Layout::kArray ? "array" : "pca"; }
+bool LayoutFromName(std::string_view name, Layout* layout) {
+  for (Layout l : {Layout::kPcaAveraged, Layout::kPcaRaw, Layout::kArray}) {
+    if (name == LayoutName(l)) {
+      *layout = l;
+      return true;
+    }
+  }
+  return false;
+}
 
 namespace {
 
@@ -61,10 +69,14 @@ int FirstControlCharacter(std::string_view s) {
 
 std::string ControlName(int c) {
   switch (c) {
-    case 0: return "NUL (0x00)";
-    case '\t': return "TAB (0x09)";
-    case '\r': return "CR (0x0d)";
-    case '\n': return "LF (0x0a)";
+    case 0:
+      return "NUL (0x00)";
+    case '\t':
+      return "TAB (0x09)";
+    case '\r':
+      return "CR (0x0d)";
+    case '\n':
+      return "LF (0x0a)";
     default: {
       char text[16];
       std::snprintf(text, sizeof text, "0x%02x", c);

@@ -23,8 +23,9 @@ enum class Layout {
   kPcaRaw,       // position,phase,s1,...,sm   (phase: static | moving)
   kArray,        // [t,]aK_x,aK_y,aK_z,...,gJ_x,gJ_y,gJ_z  (any column order)
 };
-const char* LayoutName(Layout layout);    // "pca_averaged", "pca_raw", "array"
-const char* LayoutMethod(Layout layout);  // "pca" or "array"
+const char* LayoutName(Layout layout);  // "pca_averaged", "pca_raw", "array"
+// The inverse of LayoutName; false for an unknown name.
+bool LayoutFromName(std::string_view name, Layout* layout);
 
 // A pca recording reduced to one column per position.
 struct PcaRecording {

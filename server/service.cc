@@ -22,6 +22,7 @@
 #include "server/http_server.h"
 #include "server/http_util.h"
 #include "server/instance.h"
+#include "server/method.h"
 #include "server/metrics.h"
 #include "server/recording.h"
 #include "server/worker_pool.h"
@@ -723,9 +724,9 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     if (!s.ok()) return finish(SendStatus(res, s));
     s = ValidateConfig(config, &common);
     if (!s.ok()) return finish(SendStatus(res, s));
-    if (common.method != LayoutMethod(summary.layout)) {
+    if (!FindMethod(common.method)->Reads(summary.layout)) {
       return finish(SendStatus(res, Status::InvalidInput(std::string("method '") + common.method +
-                                                         "' does not match the recording's " +
+                                                         "' cannot read the recording's " +
                                                          LayoutName(summary.layout) + " layout")
                                         .WithField("method")));
     }
@@ -813,11 +814,11 @@ void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Respon
   storage::RecordingInfo recording;
   s = store->GetRecording(recording_id, &recording);
   if (!s.ok()) return (void)SendStatus(res, s);
-  const bool array_layout = recording.layout == "array";
-  if ((common.method == "array") != array_layout) {
+  Layout layout;
+  if (!LayoutFromName(recording.layout, &layout) || !FindMethod(common.method)->Reads(layout)) {
     return (void)SendStatus(
         res,
-        Status::InvalidInput("method '" + common.method + "' does not match recording " +
+        Status::InvalidInput("method '" + common.method + "' cannot read recording " +
                              std::to_string(recording_id) + "'s " + recording.layout + " layout")
             .WithField("method"));
   }

@@ -1407,9 +1407,10 @@ std::string HistoryBody(const HistoryView& v) {
     for (const auto& d : v.devices) out += "<option value=\"" + A(d) + "\">";
     out += "</datalist>";
   }
-  out += "<label>method<select name=\"method\">" + Option("", "any", v.filter.method) +
-         Option("pca", "pca", v.filter.method) + Option("array", "array", v.filter.method);
-  if (!v.filter.method.empty() && v.filter.method != "pca" && v.filter.method != "array") {
+  out += "<label>method<select name=\"method\">" + Option("", "any", v.filter.method);
+  for (const std::string& m : v.methods) out += Option(m, m, v.filter.method);
+  if (!v.filter.method.empty() &&
+      std::find(v.methods.begin(), v.methods.end(), v.filter.method) == v.methods.end()) {
     out += Option(v.filter.method, v.filter.method, v.filter.method);
   }
   out +=

@@ -71,6 +71,7 @@ struct HistoryView {
                                  // result may be null to save memory (key figures then "–")
   HistoryFilter filter;
   std::vector<std::string> devices;  // optional: known device serials, offered in the form
+  std::vector<std::string> methods = {"pca", "array"};  // offered in the form's method filter
   std::string next_before;  // cursor for the next (older) page; empty: no older page. The link
                             // is "/?before=CURSOR" plus the active filters.
   int64_t total = -1;       // total matching jobs when known (-1: unknown)

@@ -1,0 +1,57 @@
+// Method: one calibration method as the server sees it — which recording layouts it reads, its
+// config keys (checked before a job is queued), and how it runs on a parsed recording — and the
+// registry of all of them (server/methods.cc).
+//
+// Adding a method: its numerics in core/, its adapter server/<name>_method.{h,cc} (config keys to
+// core options, core result to the SPEC §4 result JSON, a class implementing Method), and one
+// line in AllMethods(). The CLI's `calibrate`, the upload and job routes, the job list filters and
+// the OpenAPI document find methods through the registry.
+#ifndef CALIBD_SERVER_METHOD_H_
+#define CALIBD_SERVER_METHOD_H_
+
+#include <atomic>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/status.h"
+#include "server/recording.h"
+
+namespace calibd::server {
+
+// What a run may consult besides its inputs.
+struct RunContext {
+  // When it becomes true the method stops early; its result is then discarded. May be null.
+  const std::atomic<bool>* cancel = nullptr;
+};
+
+class Method {
+ public:
+  virtual ~Method() = default;
+  // The config's `method` value ("pca", ...).
+  virtual const char* name() const = 0;
+  // One line for people: what it estimates from what.
+  virtual const char* summary() const = 0;
+  // Whether it can calibrate a recording of this layout (a log may suit several methods).
+  virtual bool Reads(Layout layout) const = 0;
+  // The method's own config keys (the common keys method and device are checked by the caller;
+  // unknown keys are errors). kInvalidInput naming the key (Status::field()).
+  virtual Status ValidateConfig(const nlohmann::json& config) const = 0;
+  // Takes the recording from a finished, collecting parser of a layout it Reads(), and writes the
+  // SPEC §4 result. kInvalidInput (config or data that cannot be used as given),
+  // kNotDeterminable (the data cannot determine the parameters; the message says what to record).
+  virtual Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
+                     nlohmann::json* result) const = 0;
+};
+
+// Every method, in the order users see them. Never empty; the pointers live for the process.
+const std::vector<const Method*>& AllMethods();
+// The method named `name`, or null.
+const Method* FindMethod(std::string_view name);
+// "\"pca\", \"array\" or ..." for messages.
+std::string MethodNamesForMessage();
+
+}  // namespace calibd::server
+
+#endif  // CALIBD_SERVER_METHOD_H_
