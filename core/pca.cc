@@ -658,6 +658,10 @@ int Refine(const MatrixXd& mm, double c, bool with_bias, int max_iterations,
   return iterations;
 }
 
+// Caps of PcaCoverage: within 60° of an axis direction, within 30° of an edge direction.
+constexpr double kAxisCapCos = 0.5;
+constexpr double kEdgeCapCos = 0.8660254037844386;
+
 // Coverage of the sphere by the field directions (see PcaCoverage). v: d×n in the result's frame;
 // frame_note names the frame's axes for the advice.
 PcaCoverage Coverage(const MatrixXd& v, bool with_bias, const std::string& frame_note) {
@@ -725,9 +729,9 @@ PcaCoverage Coverage(const MatrixXd& v, bool with_bias, const std::string& frame
     }
     return cov;
   }
-  // d = 3: 18 caps.
+  // d = 3: positions near each axis direction and between each pair of axes.
   const char* axis_name[3] = {"x", "y", "z"};
-  std::vector<VectorXd> dirs;
+  std::vector<Eigen::Vector3d> dirs;
   for (int k = 0; k < 3; ++k) {
     for (int sgn : {1, -1}) {
       cov.cap_names.push_back(std::string(sgn > 0 ? "+" : "-") + axis_name[k]);
@@ -747,54 +751,74 @@ PcaCoverage Coverage(const MatrixXd& v, bool with_bias, const std::string& frame
   }
   cov.cap_positions.assign(dirs.size(), 0);
   for (int j = 0; j < n; ++j) {
-    int best = 0;
-    for (size_t c = 1; c < dirs.size(); ++c) {
-      if (u.col(j).dot(dirs[c]) > u.col(j).dot(dirs[best])) best = static_cast<int>(c);
+    for (size_t c = 0; c < dirs.size(); ++c) {
+      const double cos_angle = u.col(j).dot(dirs[c]);
+      if (cos_angle >= (c < 6 ? kAxisCapCos : kEdgeCapCos)) ++cov.cap_positions[c];
     }
-    ++cov.cap_positions[best];
   }
   if (cov.verdict != PcaCoverageVerdict::kPoor) return cov;
   std::vector<std::string> parts;
-  // Empty axis caps, both signs together where both are empty.
+  std::vector<bool> named(6, false);
+  auto name_axis = [&](int k, int sign_index) {  // sign_index 0: +, 1: −
+    if (named[2 * k + sign_index]) return;
+    named[2 * k + sign_index] = true;
+    parts.push_back(std::string("with the ") + (sign_index == 0 ? "+" : "-") + axis_name[k] +
+                    " axis up");
+  };
+  // Axis directions with no position near them, both signs together where both are missing.
   for (int k = 0; k < 3; ++k) {
     const bool plus = cov.cap_positions[2 * k] == 0, minus = cov.cap_positions[2 * k + 1] == 0;
     if (plus && minus) {
+      named[2 * k] = named[2 * k + 1] = true;
       parts.push_back(std::string("with the +") + axis_name[k] + " and with the -" + axis_name[k] +
                       " axis up");
     } else if (plus || minus) {
-      parts.push_back(std::string("with the ") + (plus ? "+" : "-") + axis_name[k] + " axis up");
+      name_axis(k, plus ? 0 : 1);
     }
   }
-  if (poor_scatter && parts.empty()) {
+  // The sparser side of an axis: the one with fewer positions near it.
+  auto sparse_side = [&](int k) {
+    return cov.cap_positions[2 * k] <= cov.cap_positions[2 * k + 1] ? 0 : 1;
+  };
+  if (poor_scatter) {
     // The sparse direction is the eigenvector of the smallest scatter eigenvalue.
     Eigen::Index k;
     scatter.eigenvectors().col(0).cwiseAbs().maxCoeff(&k);
-    parts.push_back(std::string("with the +") + axis_name[k] + " or the -" + axis_name[k] +
-                    " axis up");
+    if (!named[2 * k] && !named[2 * k + 1]) {
+      named[2 * k] = named[2 * k + 1] = true;
+      parts.push_back(std::string("with the +") + axis_name[k] + " and with the -" + axis_name[k] +
+                      " axis up");
+    }
   }
   if (poor_design) {
-    // Pairs of axes with no position in between (their u_k u_l term, the angle between the
-    // axes, then rests on positions near the axes only).
-    std::vector<std::string> empty_pairs;
+    // Pairs of axes with (almost) no position in between: the information on their u_k u_l term
+    // (the angle between the axes), Σ_j 2 u_k² u_l² / n, below 0.3 of its uniform expectation
+    // 2/15.
+    std::vector<int> empty_pairs;
     for (int pi = 0; pi < 3; ++pi) {
-      int count = 0;
-      for (int c = 0; c < 4; ++c) count += cov.cap_positions[6 + 4 * pi + c];
-      if (count == 0) {
-        empty_pairs.push_back(std::string("the ") + axis_name[pairs[pi][0]] + " and " +
-                              axis_name[pairs[pi][1]] + " axes");
-      }
+      const auto uk = u.row(pairs[pi][0]).array(), ul = u.row(pairs[pi][1]).array();
+      const double info = 2 * (uk * uk * ul * ul).sum() / n;
+      if (info < 0.3 * 2.0 / 15.0) empty_pairs.push_back(pi);
     }
     if (empty_pairs.empty()) {
       // The weakest direction of the design: its largest term names what is missing.
       const VectorXd w = li.transpose() * relative.eigenvectors().col(0);
       Eigen::Index k;
       w.cwiseAbs().maxCoeff(&k);
-      int fidx = 0;
-      for (int a = 0; a < 3; ++a) {
-        for (int b = a; b < 3; ++b, ++fidx) {
-          if (fidx == k && a != b) {
-            empty_pairs.push_back(std::string("the ") + axis_name[a] + " and " + axis_name[b] +
-                                  " axes");
+      if (k >= nq) {  // a linear term (bias): the sparse side of that axis
+        name_axis(static_cast<int>(k - nq), sparse_side(static_cast<int>(k - nq)));
+      } else {
+        int fidx = 0;
+        for (int a = 0; a < 3; ++a) {
+          for (int b = a; b < 3; ++b, ++fidx) {
+            if (fidx != k) continue;
+            if (a == b) {
+              name_axis(a, sparse_side(a));
+            } else {
+              for (int pi = 0; pi < 3; ++pi) {
+                if (pairs[pi][0] == a && pairs[pi][1] == b) empty_pairs.push_back(pi);
+              }
+            }
           }
         }
       }
@@ -802,14 +826,15 @@ PcaCoverage Coverage(const MatrixXd& v, bool with_bias, const std::string& frame
     if (!empty_pairs.empty()) {
       std::string list;
       for (size_t i = 0; i < empty_pairs.size(); ++i) {
-        list += (i == 0                        ? ""
-                 : i + 1 == empty_pairs.size() ? " and between "
-                                               : ", between ") +
-                empty_pairs[i];
+        const int pi = empty_pairs[i];
+        list += std::string(i == 0                        ? ""
+                            : i + 1 == empty_pairs.size() ? " and "
+                                                          : ", ") +
+                "the " + axis_name[pairs[pi][0]] + " and " + axis_name[pairs[pi][1]] + " axes";
       }
+      const int p0 = empty_pairs[0];
       parts.push_back("tilted about 45 degrees between " + list + " (e.g. with the +" +
-                      (empty_pairs[0].substr(4, 1)) + "+" + empty_pairs[0].substr(10, 1) +
-                      " direction up)");
+                      axis_name[pairs[p0][0]] + "+" + axis_name[pairs[p0][1]] + " direction up)");
     }
   }
   if (parts.empty()) parts.push_back("spread over the whole sphere");
@@ -956,10 +981,13 @@ Eigen::MatrixXd ProcrustesRotation(const Eigen::MatrixXd& from, const Eigen::Mat
   return u * v.transpose();
 }
 
-Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaResult* result) {
-  *result = PcaResult();
-  std::string error;
-  if (!options.IsValid(&error)) return Fail(Status::InvalidInput("pca options: " + error), result);
+namespace {
+
+// CalibratePca on readings divided by `unit` (a power of two, so exactly): every number of the
+// result is in those units until CalibratePca multiplies it back. Messages quote readings in the
+// caller's units.
+Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, double unit,
+                       PcaResult* result) {
   const MatrixXd& mm = problem.m;
   const int d = options.dimension;
   const int m = static_cast<int>(mm.rows());
@@ -1111,8 +1139,8 @@ Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaRes
       (result->noise_std_estimated > 2 * *options.noise_std ||
        result->noise_std_estimated < 0.5 * *options.noise_std)) {
     result->warnings.push_back("The residuals suggest a noise level of " +
-                               Num(result->noise_std_estimated) + ", not the given noise_std " +
-                               Num(*options.noise_std) +
+                               Num(unit * result->noise_std_estimated) +
+                               ", not the given noise_std " + Num(unit * *options.noise_std) +
                                ": the uncertainties use the given value; check it.");
   }
   {
@@ -1292,6 +1320,51 @@ Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaRes
   }
   result->usable = true;
   return Status::Ok();
+}
+
+}  // namespace
+
+Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaResult* result) {
+  *result = PcaResult();
+  std::string error;
+  if (!options.IsValid(&error)) return Fail(Status::InvalidInput("pca options: " + error), result);
+  // Equilibrate the readings: divide them by the power of two nearest their largest magnitude,
+  // exactly, so that neither squares nor products of readings overflow or underflow and every
+  // tolerance below is relative. The result is multiplied back at the end.
+  const double largest =
+      problem.m.size() > 0 && problem.m.allFinite() ? problem.m.cwiseAbs().maxCoeff() : 0.0;
+  if (!(largest > 0) || !std::isfinite(largest))
+    return CalibrateScaled(problem, options, 1.0, result);
+  const double unit = std::ldexp(1.0, std::ilogb(largest));
+  PcaProblem scaled;
+  scaled.m = problem.m / unit;
+  scaled.sensor_names = problem.sensor_names;
+  scaled.position_labels = problem.position_labels;
+  scaled.removed_bias = problem.removed_bias / unit;
+  scaled.removed_bias_std = problem.removed_bias_std / unit;
+  PcaOptions scaled_options = options;
+  if (options.noise_std) scaled_options.noise_std = *options.noise_std / unit;
+  const Status s = CalibrateScaled(scaled, scaled_options, unit, result);
+  // Back to the caller's units: sensitivities, biases, noise and costs scale with the readings;
+  // g (and the ellipsoid's shape) with their inverse square; the field and angles not at all.
+  PcaResult& r = *result;
+  r.a *= unit;
+  r.b *= unit;
+  r.singular_values *= unit;
+  r.g_eigenvalues /= unit * unit;
+  r.residual_rms *= unit;
+  r.noise_std *= unit;
+  r.noise_std_estimated *= unit;
+  r.cost_closed_form *= unit * unit;
+  r.cost *= unit * unit;
+  for (PcaSensorEstimate& se : r.sensors) {
+    se.sensitivity *= unit;
+    se.scale *= unit;
+    se.bias *= unit;
+    se.scale_std *= unit;
+    se.bias_std *= unit;
+  }
+  return s;
 }
 
 }  // namespace calibd::core

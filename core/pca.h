@@ -107,9 +107,11 @@ struct PcaProblem {
 //    the linear terms u_k): what the sensitivity matrix's shape (scale factors, angles between
 //    axes) and the biases are estimated from. The six faces of a box, for instance, leave the
 //    u_k u_l terms (k ≠ l), the angles between axes, to the other positions alone.
-// For d = 3 the directions are also counted in 18 caps (each u_j in the cap of the nearest of the
-// 6 axis directions ±x, ±y, ±z and 12 edge directions such as +x+y, i.e. 45° between two axes),
-// and the advice names, in the axes of the result's frame, the empty ones that matter.
+// For d = 3 the positions are also counted in 18 caps (overlapping): within 60° of each of the 6
+// axis directions ±x, ±y, ±z, and within 30° of each of the 12 edge directions such as +x+y (45°
+// between two axes); the advice names, in the axes of the result's frame, the missing directions
+// that matter: axis directions with no position near them (both signs where both are missing),
+// the sparse direction of the scatter, pairs of axes with no position in between.
 enum class PcaCoverageVerdict {
   kUnknown,  // not computed (no estimate)
   kGood,
@@ -119,13 +121,13 @@ const char* PcaCoverageVerdictName(PcaCoverageVerdict verdict);  // "unknown" | 
 
 struct PcaCoverage {
   static constexpr double kMinScatter = 0.3;
-  static constexpr double kMinDesign = 0.2;
+  static constexpr double kMinDesign = 0.05;
 
   PcaCoverageVerdict verdict = PcaCoverageVerdict::kUnknown;
   Eigen::VectorXd scatter_eigenvalues;  // d, ascending, sum 1 (uniform: 1/d each)
   double scatter_min = std::numeric_limits<double>::quiet_NaN();  // d × smallest, in [0, 1]
   double design_min = std::numeric_limits<double>::quiet_NaN();   // >= 0 (uniform: about 1)
-  std::vector<std::string> cap_names;  // d = 3: "+x", "-x", ..., "+x+y", "+x-y", ... (18)
+  std::vector<std::string> cap_names;  // d = 3: "+x", "-x", ..., "-z", "+x+y", "+x-y", ... (18)
   std::vector<int> cap_positions;      // positions in each cap (same order)
   std::string advice;  // what to add, in words ("add positions with the -y axis up"); empty when
                        // good
