@@ -1143,6 +1143,8 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
                                ", not the given noise_std " + Num(unit * *options.noise_std) +
                                ": the uncertainties use the given value; check it.");
   }
+  std::string outlier_warning;
+  int outlier_count = 0;
   {
     // Outlying positions: |v_j| far from c compared with the spread of the others (robust:
     // median absolute deviation), e.g. the device moved while a reading was averaged.
@@ -1165,12 +1167,12 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
       }
     }
     if (count > 0) {
-      result->warnings.push_back(
-          std::to_string(count) + " position" + (count == 1 ? "" : "s") + " (" + outliers +
-          (count > 10 ? ", ..." : "") +
-          ") disagree with a field of constant magnitude far more than the others (see "
-          "magnitude_error): was the device moving, or the field disturbed, while averaging? "
-          "Consider re-recording or removing them.");
+      // Pushed after the coverage is known (a poorly spread set also leaves positions off).
+      outlier_warning = std::to_string(count) + " position" + (count == 1 ? "" : "s") + " (" +
+                        outliers + (count > 10 ? ", ..." : "") +
+                        ") disagree with a field of constant magnitude far more than the others "
+                        "(see magnitude_error): ";
+      outlier_count = count;
     }
   }
   if (result->rank_gap < 10 * options.min_rank_gap) {
@@ -1297,6 +1299,18 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
         ", 1 for a uniform spread): some parameters rest on very few positions, so a small error "
         "there moves the estimate far; " +
         result->coverage.advice + ".");
+  }
+  if (!outlier_warning.empty()) {
+    const bool poor = result->coverage.verdict == PcaCoverageVerdict::kPoor;
+    result->warnings.push_back(
+        outlier_warning +
+        (poor ? "the orientations are poorly spread (see the coverage warning), so a few "
+                "positions decide the fit and the others cannot agree with it; or was the device "
+                "moving, or the field disturbed, while averaging? Add the advised positions "
+                "before removing any."
+              : "was the device moving, or the field disturbed, while averaging? Consider "
+                "re-recording or removing " +
+                    std::string(outlier_count == 1 ? "it." : "them.")));
   }
 
   // Guards: a usable result has finite parameters.
