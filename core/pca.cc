@@ -681,20 +681,17 @@ PcaCoverage Coverage(const MatrixXd& v, bool with_bias, const std::string& frame
   // Design of the quadric fit: f = [u_k u_l (×√2 for k < l); u_k with biases].
   const int nq = d * (d + 1) / 2;
   const int nf = nq + (with_bias ? d : 0);
-  auto features = [&](const VectorXd& x) {
-    VectorXd f(nf);
+  MatrixXd f(nf, n);
+  for (int j = 0; j < n; ++j) {
     int idx = 0;
     for (int k = 0; k < d; ++k) {
-      for (int l = k; l < d; ++l) f(idx++) = (k == l ? 1.0 : std::sqrt(2.0)) * x(k) * x(l);
+      for (int l = k; l < d; ++l) f(idx++, j) = (k == l ? 1.0 : std::sqrt(2.0)) * u(k, j) * u(l, j);
     }
-    if (with_bias) f.tail(d) = x;
-    return f;
-  };
-  MatrixXd design = MatrixXd::Zero(nf, nf);
-  for (int j = 0; j < n; ++j) {
-    const VectorXd f = features(u.col(j));
-    design.noalias() += f * f.transpose() / n;
+    if (with_bias) f.col(j).tail(d) = u.col(j);
   }
+  MatrixXd design = MatrixXd::Zero(nf, nf);
+  design.selfadjointView<Eigen::Lower>().rankUpdate(f, 1.0 / n);
+  design = design.selfadjointView<Eigen::Lower>();
   // Its expectation for uniform directions: E u_k⁴ = 3/(d(d+2)), E u_k²u_l² = 1/(d(d+2)),
   // E u_k² = 1/d, odd moments 0.
   MatrixXd uniform = MatrixXd::Zero(nf, nf);
