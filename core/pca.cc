@@ -20,6 +20,19 @@
 // (S + κ N Nᵀ)^{-1} − N Nᵀ/κ with N an orthonormal basis of that null space. The same reduced
 // system, with the gradient, gives the Gauss-Newton step of `refine`; positions are then
 // re-solved exactly on the sphere (variable projection), so the cost can only go down.
+//
+// Cost (issue #14). S is (pm)×(pm), but only its pseudo-inverse's p×p diagonal blocks are read
+// (every reported σ is per sensor). S = I ⊗ V − W C Wᵀ: block diagonal (V = Σ_j ṽ_j ṽ_jᵀ, the
+// same for every sensor) minus a rank-n(d−1) coupling through the positions. kDense forms and
+// factorises S (O((pm)³), O((pm)²) memory, the only way before); kLowRank applies Woodbury to
+// S + κNNᵀ = D + Y Λ Yᵀ, Y = [W N] of r = n(d−1) + d(d−1)/2 columns: an r×r system and
+// O(pm·r) memory, linear in the number of sensors. Both give the same S⁺, hence the same σ.
+//
+// Scaling. CalibratePca divides the readings by a power of two near their largest magnitude
+// (exact) and the Fisher information is built in the coordinates θ'_i = [c·a_i; b_i] with the
+// positions on the unit sphere: one common factor on all sensitivity columns and one on all bias
+// columns keeps the minimum-norm gauge, so σ are unchanged while S no longer mixes the scales
+// 1 and c² (at c = 1e-6 the bias columns were 1e12 times the others and the σ came out NaN).
 #include "core/pca.h"
 
 #include <Eigen/Cholesky>
