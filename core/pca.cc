@@ -1335,6 +1335,18 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
     non_finite = "residual";
   else if (!std::isfinite(result->cost))
     non_finite = "cost";
+  if (non_finite.empty()) {
+    for (const PcaSensorEstimate& se : result->sensors) {
+      if (!(std::isfinite(se.scale) && se.scale > 0) || !se.axis.allFinite()) {
+        return Fail(
+            Status::NotDeterminable(
+                "sensor " + se.name + "'s axis is undefined: its sensitivity is " + Num(se.scale) +
+                " (its readings do not change with the orientation: a dead or "
+                "disconnected sensor?); check it, or remove it from the recording"),
+            result);
+      }
+    }
+  }
   if (!non_finite.empty()) {
     return Fail(Status::NotDeterminable(
                     "the computed " + non_finite +

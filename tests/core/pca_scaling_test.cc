@@ -373,5 +373,29 @@ TEST(PcaGuards, UndefinedSigmaIsNaNNeverZero) {
   }
 }
 
+// A sensor whose readings never change has no axis: never a usable result with a NaN axis; the
+// message names the sensor.
+TEST(PcaGuards, DeadSensorIsNotUsableAndNamed) {
+  PcaSimulationOptions so;
+  so.positions = 30;
+  so.noise_std = 0;
+  const PcaSimulation sim = SimulatePca(so);
+  for (BiasModel bias : {BiasModel::kNone, BiasModel::kEstimate}) {
+    PcaProblem p;
+    p.m = sim.m;
+    p.m.row(4).setZero();
+    p.sensor_names = sim.sensor_names;
+    PcaOptions o;
+    o.magnitude = 1.0;
+    o.bias = bias;
+    PcaResult r;
+    const Status s = CalibratePca(p, o, &r);
+    EXPECT_EQ(s.code(), StatusCode::kNotDeterminable);
+    EXPECT_FALSE(r.usable);
+    EXPECT_NE(s.message().find(sim.sensor_names[4] + "'s axis is undefined"), std::string::npos)
+        << s.message();
+  }
+}
+
 }  // namespace
 }  // namespace calibd::core
