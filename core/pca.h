@@ -33,8 +33,9 @@ const char* BiasModelName(BiasModel bias);  // "none" | "estimate"
 
 // How the uncertainty (and each `refine` step) handles the reduced Fisher information S of the
 // p·m sensor parameters (p = d, or d + 1 with biases), the n positions eliminated. S is the
-// block-diagonal Σ_j ṽ_j ṽ_jᵀ per sensor minus a rank-r coupling through the positions,
-// r = n(d−1), plus the d(d−1)/2-dimensional rotation gauge. Both solvers give the same σ.
+// block-diagonal Σ_j ṽ_j ṽ_jᵀ per sensor minus a rank-n(d−1) coupling through the positions, and
+// has the d(d−1)/2-dimensional rotation gauge as null space; r = n(d−1) + d(d−1)/2 below. Both
+// solvers give the same σ (to rounding).
 enum class PcaInformationSolver {
   kAuto,     // the cheaper of the two for the problem's size (see EstimatePcaCost)
   kDense,    // S as one dense (pm)×(pm) matrix: O((pm)³) time, O((pm)²) memory; few sensors
@@ -120,6 +121,9 @@ enum class PcaCoverageVerdict {
 const char* PcaCoverageVerdictName(PcaCoverageVerdict verdict);  // "unknown" | "good" | "poor"
 
 struct PcaCoverage {
+  // Thresholds of a poor verdict. For 30 random orientations (biases estimated) the 1 % quantiles
+  // are about 0.48 (scatter_min) and 0.08 (design_min); for the 6 faces of a box plus 4 positions
+  // near faces, design_min is about 0.01.
   static constexpr double kMinScatter = 0.3;
   static constexpr double kMinDesign = 0.05;
 
