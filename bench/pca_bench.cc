@@ -1,5 +1,12 @@
-// pca end to end (closed form, diagnostics and Fisher uncertainty) on the paper's Section IV
-// set-up: m = 12 sensors, n positions. Run: build/pca_bench
+// pca end to end (closed form, diagnostics, coverage and Fisher uncertainty).
+//  - BM_PcaClosedForm / Refined / BiasEstimate: the paper's Section IV set-up, m = 12 sensors,
+//    n positions (the argument).
+//  - BM_PcaManySensors: m sensors (the first argument: 1000 or 10 000) × 12 positions, random unit
+//    axes with 5 % gain spread, noise 1 % of the field; second argument 1 = bias estimation;
+//    third argument the information solver (0 auto = low rank here, 1 the dense solver that was
+//    the only one before issue #14).
+// Run: build/bench/pca_bench; peak memory of one case:
+//   /usr/bin/time -v build/bench/pca_bench --benchmark_filter='BM_PcaManySensors/1000/1/0'
 #include <benchmark/benchmark.h>
 
 #include "core/pca.h"
@@ -9,8 +16,10 @@ namespace {
 
 using calibd::core::BiasModel;
 using calibd::core::CalibratePca;
+using calibd::core::PcaInformationSolver;
 using calibd::core::PcaOptions;
 using calibd::core::PcaProblem;
+using calibd::core::PcaRandom;
 using calibd::core::PcaResult;
 using calibd::core::PcaSimulationOptions;
 using calibd::core::SimulatePca;
@@ -42,6 +51,42 @@ void BM_PcaBiasEstimate(benchmark::State& state) { Run(state, false, BiasModel::
 BENCHMARK(BM_PcaClosedForm)->Arg(100)->Arg(1000)->Arg(100000)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_PcaRefined)->Arg(100)->Arg(1000)->Arg(100000)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_PcaBiasEstimate)->Arg(100)->Arg(1000)->Arg(100000)->Unit(benchmark::kMillisecond);
+
+void BM_PcaManySensors(benchmark::State& state) {
+  const int m = static_cast<int>(state.range(0));
+  const int n = 12;
+  const bool bias = state.range(1) != 0;
+  const double c = 9.81;
+  PcaRandom rng(m + 17);
+  Eigen::MatrixXd a(3, m);
+  for (int i = 0; i < m; ++i) a.col(i) = (1 + 0.05 * rng.Normal()) * rng.UnitVector(3);
+  PcaProblem problem;
+  problem.m = a.transpose() * rng.SphereColumns(3, n, c) + 0.01 * c * rng.NormalMatrix(m, n);
+  if (bias) problem.m.colwise() += 0.1 * Eigen::VectorXd(rng.NormalMatrix(m, 1));
+  PcaOptions options;
+  options.magnitude = c;
+  options.bias = bias ? BiasModel::kEstimate : BiasModel::kNone;
+  options.information_solver =
+      state.range(2) == 1 ? PcaInformationSolver::kDense : PcaInformationSolver::kAuto;
+  options.max_flops = 0;  // measure, do not refuse
+  options.max_memory_bytes = 0;
+  PcaResult result;
+  for (auto _ : state) {
+    if (!CalibratePca(problem, options, &result).ok()) state.SkipWithError(result.reason.c_str());
+    benchmark::DoNotOptimize(result.sensors.data());
+  }
+  state.counters["estimated_MB"] = result.cost_estimate.bytes / 1e6;
+  state.counters["estimated_Gflop"] = result.cost_estimate.flops / 1e9;
+  state.counters["scale_std_0"] = result.sensors.empty() ? 0 : result.sensors[0].scale_std;
+}
+BENCHMARK(BM_PcaManySensors)
+    ->Args({1000, 0, 0})
+    ->Args({1000, 1, 0})
+    ->Args({10000, 0, 0})
+    ->Args({10000, 1, 0})
+    ->Args({1000, 0, 1})
+    ->Args({1000, 1, 1})
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -20,6 +20,19 @@
 // (S + κ N Nᵀ)^{-1} − N Nᵀ/κ with N an orthonormal basis of that null space. The same reduced
 // system, with the gradient, gives the Gauss-Newton step of `refine`; positions are then
 // re-solved exactly on the sphere (variable projection), so the cost can only go down.
+//
+// Cost (issue #14). S is (pm)×(pm), but only its pseudo-inverse's p×p diagonal blocks are read
+// (every reported σ is per sensor). S = I ⊗ V − W C Wᵀ: block diagonal (V = Σ_j ṽ_j ṽ_jᵀ, the
+// same for every sensor) minus a rank-n(d−1) coupling through the positions. kDense forms and
+// factorises S (O((pm)³), O((pm)²) memory, the only way before); kLowRank applies Woodbury to
+// S + κNNᵀ = D + Y Λ Yᵀ, Y = [W N] of r = n(d−1) + d(d−1)/2 columns: an r×r system and
+// O(pm·r) memory, linear in the number of sensors. Both give the same S⁺, hence the same σ.
+//
+// Scaling. CalibratePca divides the readings by a power of two near their largest magnitude
+// (exact) and the Fisher information is built in the coordinates θ'_i = [c·a_i; b_i] with the
+// positions on the unit sphere: one common factor on all sensitivity columns and one on all bias
+// columns keeps the minimum-norm gauge, so σ are unchanged while S no longer mixes the scales
+// 1 and c² (at c = 1e-6 the bias columns were 1e12 times the others and the σ came out NaN).
 #include "core/pca.h"
 
 #include <Eigen/Cholesky>
@@ -226,34 +239,163 @@ MatrixXd GaugeBasis(const MatrixXd& a, bool with_bias) {
   return qr.householderQ() * MatrixXd::Identity(p * m, ng);
 }
 
-// Factorisation of S + κ N Nᵀ, giving S⁺ and minimum-norm solutions. ok() false when S is
-// singular beyond the gauge (some parameter not determined by the data).
-class GaugeSolver {
+// S⁺ (the pseudo-inverse of the reduced information at unit noise, in the equilibrated
+// coordinates θ'_i = [c·a_i; b_i], regressors ṽ_j = [u_j; 1] with u_j = v_j/c on the unit sphere)
+// through M = S + κ N Nᵀ: with N an orthonormal basis of the gauge null space, S⁺ = M⁻¹ − N Nᵀ/κ.
+// The equilibration scales all sensitivity columns by one factor c and the bias columns by 1, so
+// the minimum-norm gauge (hence every σ) is unchanged while S no longer mixes the scales 1 and c².
+// ok() false when S is singular beyond the gauge (some parameter not determined by the data).
+class ReducedFisher {
  public:
-  GaugeSolver(const MatrixXd& s, const MatrixXd& gauge) : nb_(gauge) {
-    kappa_ = s.trace() / static_cast<double>(s.rows());
-    if (!(kappa_ > 0) || !std::isfinite(kappa_)) return;
-    llt_.compute(s + kappa_ * nb_ * nb_.transpose());
-    ok_ = llt_.info() == Eigen::Success && llt_.rcond() > 1e-13;
+  ReducedFisher(const MatrixXd& a, const MatrixXd& u, bool with_bias, PcaInformationSolver solver)
+      : d_(static_cast<int>(a.rows())),
+        m_(static_cast<int>(a.cols())),
+        n_(static_cast<int>(u.cols())),
+        p_(with_bias ? d_ + 1 : d_) {
+    nb_ = GaugeBasis(a, with_bias);
+    if (solver == PcaInformationSolver::kLowRank) {
+      InitLowRank(a, u, with_bias);
+    } else {
+      InitDense(a, u, with_bias);
+    }
   }
   bool ok() const { return ok_; }
+
+  // S⁺ rhs (the minimum-norm solution of S x = rhs).
   VectorXd Solve(const VectorXd& rhs) const {
-    VectorXd x = llt_.solve(rhs);
+    VectorXd x;
+    if (low_rank_) {
+      x.resize(rhs.size());
+      for (int i = 0; i < m_; ++i) x.segment(i * p_, p_) = vi_ * rhs.segment(i * p_, p_);
+      const VectorXd t = q_.transpose() * (b_.transpose() * rhs);
+      x -= b_ * (q_ * t.cwiseQuotient(lambda_));
+    } else {
+      x = llt_.solve(rhs);
+    }
     return x - nb_ * (nb_.transpose() * x);
   }
-  MatrixXd PseudoInverse() const {
-    const Eigen::Index k = nb_.rows();
-    MatrixXd x = llt_.solve(MatrixXd::Identity(k, k));
-    const MatrixXd pr = MatrixXd::Identity(k, k) - nb_ * nb_.transpose();
-    x = pr * x * pr;
-    return 0.5 * (x + x.transpose());
+
+  // The p×p diagonal blocks of S⁺, one per sensor: all that the reported σ need.
+  std::vector<MatrixXd> DiagonalBlocks() const {
+    std::vector<MatrixXd> blocks(m_);
+    const int np = p_ * m_;
+    if (low_rank_) {
+      const MatrixXd bq = b_ * q_;  // (pm)×r
+      const VectorXd inv = lambda_.cwiseInverse();
+      for (int i = 0; i < m_; ++i) {
+        const auto bqi = bq.middleRows(i * p_, p_);
+        blocks[i] = vi_ - bqi * inv.asDiagonal() * bqi.transpose();
+      }
+    } else {
+      MatrixXd e = MatrixXd::Zero(np, p_);
+      for (int i = 0; i < m_; ++i) {
+        e.middleRows(i * p_, p_).setIdentity();
+        blocks[i] = llt_.solve(e).middleRows(i * p_, p_);
+        e.middleRows(i * p_, p_).setZero();
+      }
+    }
+    for (int i = 0; i < m_; ++i) {
+      const auto ni = nb_.middleRows(i * p_, p_);
+      blocks[i] -= ni * ni.transpose() / kappa_;
+      blocks[i] = 0.5 * (blocks[i] + blocks[i].transpose()).eval();
+    }
+    return blocks;
   }
 
  private:
+  void InitDense(const MatrixXd& a, const MatrixXd& u, bool with_bias) {
+    MatrixXd s;
+    if (!ReducedInformation(a, u, with_bias, &s)) return;
+    kappa_ = s.trace() / static_cast<double>(s.rows());
+    if (!(kappa_ > 0) || !std::isfinite(kappa_)) return;
+    s.noalias() += kappa_ * nb_ * nb_.transpose();
+    llt_.compute(s);
+    ok_ = llt_.info() == Eigen::Success && llt_.rcond() > 1e-13;
+  }
+
+  // M = D + Y Λ Yᵀ with D = I ⊗ V, V = Σ_j ṽ_j ṽ_jᵀ; Y = [W N], W's column block j the p·m × (d−1)
+  // matrix with sensor rows ṽ_j (a_iᵀ T_j) (T_j an orthonormal basis of the tangent space at u_j),
+  // Λ = diag(−(T_jᵀ G T_j)⁻¹ ..., κ I). Woodbury: M⁻¹ = D⁻¹ − B K⁻¹ Bᵀ, B = D⁻¹ Y,
+  // K = Λ⁻¹ + Yᵀ D⁻¹ Y (r×r, symmetric indefinite, factorised by its eigen-decomposition). Y's
+  // columns are scaled to unit norm first (the same M), which equilibrates K. M is positive
+  // definite iff K has exactly n(d−1) negative and d(d−1)/2 positive eigenvalues (Haynsworth
+  // inertia additivity), and det M = det D det Λ det K, so K's conditioning stands for M's.
+  void InitLowRank(const MatrixXd& a, const MatrixXd& u, bool with_bias) {
+    low_rank_ = true;
+    const int d = d_, m = m_, n = n_, p = p_;
+    const int nt = n * (d - 1);
+    const int ng = d * (d - 1) / 2;
+    const int r = nt + ng;
+    const int np = p * m;
+    const MatrixXd g = a * a.transpose();
+    MatrixXd vv = MatrixXd::Zero(p, p);
+    VectorXd vt(p);
+    double vt_sq = 0;
+    for (int j = 0; j < n; ++j) {
+      vt.head(d) = u.col(j);
+      if (with_bias) vt(d) = 1;
+      vv.noalias() += vt * vt.transpose();
+      vt_sq += vt.squaredNorm();
+    }
+    Eigen::LLT<MatrixXd> vllt(vv);
+    if (vllt.info() != Eigen::Success) return;
+    vi_ = vllt.solve(MatrixXd::Identity(p, p));
+    // trace S = m trace V − Σ_j trace(P_j G) |ṽ_j|², trace(P_j G) = d − 1.
+    kappa_ = (m * vv.trace() - (d - 1) * vt_sq) / static_cast<double>(np);
+    if (!(kappa_ > 0) || !std::isfinite(kappa_)) return;
+    if (r == 0) {  // d = 1: no positions to eliminate, no gauge; M = D
+      b_.setZero(np, 0);
+      q_.setZero(0, 0);
+      ok_ = true;
+      return;
+    }
+    MatrixXd y(np, r);
+    MatrixXd lambda_inv = MatrixXd::Zero(r, r);
+    for (int j = 0; j < n && d > 1; ++j) {
+      Eigen::HouseholderQR<MatrixXd> qr(u.col(j));
+      const MatrixXd t = (qr.householderQ() * MatrixXd::Identity(d, d)).rightCols(d - 1);
+      const MatrixXd at = a.transpose() * t;  // m×(d−1): a_iᵀ T_j
+      vt.head(d) = u.col(j);
+      if (with_bias) vt(d) = 1;
+      for (int i = 0; i < m; ++i) {
+        y.block(i * p, j * (d - 1), p, d - 1).noalias() = vt * at.row(i);
+      }
+      lambda_inv.block(j * (d - 1), j * (d - 1), d - 1, d - 1) = -t.transpose() * g * t;
+    }
+    y.rightCols(ng) = nb_;
+    lambda_inv.bottomRightCorner(ng, ng).diagonal().setConstant(1.0 / kappa_);
+    VectorXd e = y.colwise().norm().transpose();
+    for (int k = 0; k < r; ++k) e(k) = e(k) > 0 ? 1.0 / e(k) : 1.0;
+    y = y * e.asDiagonal();
+    lambda_inv = e.asDiagonal() * lambda_inv * e.asDiagonal();
+    b_.resize(np, r);
+    for (int i = 0; i < m; ++i) b_.middleRows(i * p, p).noalias() = vi_ * y.middleRows(i * p, p);
+    MatrixXd k = lambda_inv;
+    k.noalias() += y.transpose() * b_;
+    y.resize(0, 0);
+    Eigen::SelfAdjointEigenSolver<MatrixXd> eig(0.5 * (k + k.transpose()));
+    if (eig.info() != Eigen::Success) return;
+    lambda_ = eig.eigenvalues();
+    q_ = eig.eigenvectors();
+    const double largest = lambda_.cwiseAbs().maxCoeff();
+    int negative = 0;
+    for (int kk = 0; kk < r; ++kk) {
+      if (!(std::abs(lambda_(kk)) > 1e-13 * largest)) return;
+      if (lambda_(kk) < 0) ++negative;
+    }
+    ok_ = negative == nt && std::isfinite(largest);
+  }
+
+  int d_, m_, n_, p_;
   MatrixXd nb_;
   double kappa_ = 0;
-  Eigen::LLT<MatrixXd> llt_;
   bool ok_ = false;
+  bool low_rank_ = false;
+  Eigen::LLT<MatrixXd> llt_;  // dense: M
+  MatrixXd vi_;               // low rank: V⁻¹
+  MatrixXd b_;                // low rank: D⁻¹ Y (pm × r)
+  VectorXd lambda_;           // low rank: eigenvalues of K
+  MatrixXd q_;                // low rank: eigenvectors of K
 };
 
 // Left singular vectors (all, m×min(m,n) at least d columns) and singular values of x (m×n),
@@ -475,8 +617,8 @@ Status ClosedFormAffine(const MatrixXd& mm, int d, double c, const PcaOptions& o
 
 // Maximum-likelihood Gauss-Newton (variable projection over positions). Only accepted steps
 // lower the cost, so the result is never worse than the start.
-int Refine(const MatrixXd& mm, double c, bool with_bias, int max_iterations, Fit* fit,
-           double* cost) {
+int Refine(const MatrixXd& mm, double c, bool with_bias, int max_iterations,
+           PcaInformationSolver solver_kind, Fit* fit, double* cost) {
   const int d = static_cast<int>(fit->a.rows());
   const int m = static_cast<int>(fit->a.cols());
   const int p = with_bias ? d + 1 : d;
@@ -496,14 +638,16 @@ int Refine(const MatrixXd& mm, double c, bool with_bias, int max_iterations, Fit
       const VectorXd gir = gi * ar.col(j);
       w.col(j) = gir - giu * (giu.dot(ar.col(j)) / den);
     }
-    const MatrixXd vt = Regressors(fit->v, with_bias);                              // p×n
-    const MatrixXd rhs_mat = vt * res.transpose() - (vt * w.transpose()) * fit->a;  // p×m
-    MatrixXd s;
-    if (!ReducedInformation(fit->a, fit->v, with_bias, &s)) break;
-    const GaugeSolver solver(s, GaugeBasis(fit->a, with_bias));
+    // In the equilibrated coordinates θ' = [c·a; b] (see ReducedFisher): u = v/c, w' = w/c.
+    const MatrixXd a_eq = c * fit->a;
+    const MatrixXd u = fit->v / c;
+    const MatrixXd vt = Regressors(u, with_bias);                                       // p×n
+    const MatrixXd rhs_mat = vt * res.transpose() - (vt * (w / c).transpose()) * a_eq;  // p×m
+    const ReducedFisher solver(a_eq, u, with_bias, solver_kind);
     if (!solver.ok()) break;
     const VectorXd delta = solver.Solve(Eigen::Map<const VectorXd>(rhs_mat.data(), p * m));
-    const Eigen::Map<const MatrixXd> dtheta(delta.data(), p, m);
+    MatrixXd dtheta = Eigen::Map<const MatrixXd>(delta.data(), p, m);
+    dtheta.topRows(d) /= c;
     bool accepted = false;
     double step = 1.0;
     for (int half = 0; half < 20; ++half, step *= 0.5) {
@@ -527,6 +671,191 @@ int Refine(const MatrixXd& mm, double c, bool with_bias, int max_iterations, Fit
   return iterations;
 }
 
+// Caps of PcaCoverage: within 60° of an axis direction, within 30° of an edge direction.
+constexpr double kAxisCapCos = 0.5;
+constexpr double kEdgeCapCos = 0.8660254037844386;
+
+// Coverage of the sphere by the field directions (see PcaCoverage). v: d×n in the result's frame;
+// frame_note names the frame's axes for the advice.
+PcaCoverage Coverage(const MatrixXd& v, bool with_bias, const std::string& frame_note) {
+  PcaCoverage cov;
+  const int d = static_cast<int>(v.rows());
+  const int n = static_cast<int>(v.cols());
+  if (n < 1 || d < 1 || !v.allFinite()) return cov;
+  MatrixXd u = v;
+  for (int j = 0; j < n; ++j) {
+    const double norm = u.col(j).norm();
+    if (!(norm > 0)) return cov;
+    u.col(j) /= norm;
+  }
+  Eigen::SelfAdjointEigenSolver<MatrixXd> scatter(u * u.transpose() / n);
+  cov.scatter_eigenvalues = scatter.eigenvalues();
+  cov.scatter_min = d * std::max(0.0, cov.scatter_eigenvalues(0));
+  // Design of the quadric fit: f = [u_k u_l (×√2 for k < l); u_k with biases].
+  const int nq = d * (d + 1) / 2;
+  const int nf = nq + (with_bias ? d : 0);
+  MatrixXd f(nf, n);
+  for (int j = 0; j < n; ++j) {
+    int idx = 0;
+    for (int k = 0; k < d; ++k) {
+      for (int l = k; l < d; ++l) f(idx++, j) = (k == l ? 1.0 : std::sqrt(2.0)) * u(k, j) * u(l, j);
+    }
+    if (with_bias) f.col(j).tail(d) = u.col(j);
+  }
+  MatrixXd design = MatrixXd::Zero(nf, nf);
+  design.selfadjointView<Eigen::Lower>().rankUpdate(f, 1.0 / n);
+  design = design.selfadjointView<Eigen::Lower>();
+  // Its expectation for uniform directions: E u_k⁴ = 3/(d(d+2)), E u_k²u_l² = 1/(d(d+2)),
+  // E u_k² = 1/d, odd moments 0.
+  MatrixXd uniform = MatrixXd::Zero(nf, nf);
+  const double q = 1.0 / (d * (d + 2.0));
+  std::vector<int> diag_index;
+  int idx = 0;
+  for (int k = 0; k < d; ++k) {
+    for (int l = k; l < d; ++l, ++idx) {
+      if (k == l) {
+        diag_index.push_back(idx);
+      } else {
+        uniform(idx, idx) = 2 * q;
+      }
+    }
+  }
+  for (int k : diag_index) {
+    for (int l : diag_index) uniform(k, l) = (k == l ? 3 : 1) * q;
+  }
+  if (with_bias) uniform.bottomRightCorner(d, d).diagonal().setConstant(1.0 / d);
+  const Eigen::LLT<MatrixXd> llt(uniform);
+  const MatrixXd li = llt.matrixL().solve(MatrixXd::Identity(nf, nf));
+  Eigen::SelfAdjointEigenSolver<MatrixXd> relative(li * design * li.transpose());
+  cov.design_min = std::max(0.0, relative.eigenvalues()(0));
+  const bool poor_scatter = cov.scatter_min < PcaCoverage::kMinScatter;
+  const bool poor_design = cov.design_min < PcaCoverage::kMinDesign;
+  cov.verdict = poor_scatter || poor_design ? PcaCoverageVerdict::kPoor : PcaCoverageVerdict::kGood;
+  if (d != 3) {
+    if (cov.verdict == PcaCoverageVerdict::kPoor) {
+      cov.advice =
+          "add positions with the field in directions between and opposite to those recorded, "
+          "spread over the whole sphere";
+    }
+    return cov;
+  }
+  // d = 3: positions near each axis direction and between each pair of axes.
+  const char* axis_name[3] = {"x", "y", "z"};
+  std::vector<Eigen::Vector3d> dirs;
+  for (int k = 0; k < 3; ++k) {
+    for (int sgn : {1, -1}) {
+      cov.cap_names.push_back(std::string(sgn > 0 ? "+" : "-") + axis_name[k]);
+      dirs.push_back(sgn * Eigen::Vector3d::Unit(k));
+    }
+  }
+  const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+  for (const auto& pr : pairs) {
+    for (int s1 : {1, -1}) {
+      for (int s2 : {1, -1}) {
+        cov.cap_names.push_back(std::string(s1 > 0 ? "+" : "-") + axis_name[pr[0]] +
+                                (s2 > 0 ? "+" : "-") + axis_name[pr[1]]);
+        dirs.push_back((s1 * Eigen::Vector3d::Unit(pr[0]) + s2 * Eigen::Vector3d::Unit(pr[1])) /
+                       std::sqrt(2.0));
+      }
+    }
+  }
+  cov.cap_positions.assign(dirs.size(), 0);
+  for (int j = 0; j < n; ++j) {
+    for (size_t c = 0; c < dirs.size(); ++c) {
+      const double cos_angle = u.col(j).dot(dirs[c]);
+      if (cos_angle >= (c < 6 ? kAxisCapCos : kEdgeCapCos)) ++cov.cap_positions[c];
+    }
+  }
+  if (cov.verdict != PcaCoverageVerdict::kPoor) return cov;
+  std::vector<std::string> parts;
+  std::vector<bool> named(6, false);
+  auto name_axis = [&](int k, int sign_index) {  // sign_index 0: +, 1: −
+    if (named[2 * k + sign_index]) return;
+    named[2 * k + sign_index] = true;
+    parts.push_back(std::string("with the ") + (sign_index == 0 ? "+" : "-") + axis_name[k] +
+                    " axis up");
+  };
+  // Axis directions with no position near them, both signs together where both are missing.
+  for (int k = 0; k < 3; ++k) {
+    const bool plus = cov.cap_positions[2 * k] == 0, minus = cov.cap_positions[2 * k + 1] == 0;
+    if (plus && minus) {
+      named[2 * k] = named[2 * k + 1] = true;
+      parts.push_back(std::string("with the +") + axis_name[k] + " and with the -" + axis_name[k] +
+                      " axis up");
+    } else if (plus || minus) {
+      name_axis(k, plus ? 0 : 1);
+    }
+  }
+  // The sparser side of an axis: the one with fewer positions near it.
+  auto sparse_side = [&](int k) {
+    return cov.cap_positions[2 * k] <= cov.cap_positions[2 * k + 1] ? 0 : 1;
+  };
+  if (poor_scatter) {
+    // The sparse direction is the eigenvector of the smallest scatter eigenvalue.
+    Eigen::Index k;
+    scatter.eigenvectors().col(0).cwiseAbs().maxCoeff(&k);
+    if (!named[2 * k] && !named[2 * k + 1]) {
+      named[2 * k] = named[2 * k + 1] = true;
+      parts.push_back(std::string("with the +") + axis_name[k] + " and with the -" + axis_name[k] +
+                      " axis up");
+    }
+  }
+  if (poor_design) {
+    // Pairs of axes with (almost) no position in between: the information on their u_k u_l term
+    // (the angle between the axes), Σ_j 2 u_k² u_l² / n, below 0.3 of its uniform expectation
+    // 2/15.
+    std::vector<int> empty_pairs;
+    for (int pi = 0; pi < 3; ++pi) {
+      const auto uk = u.row(pairs[pi][0]).array(), ul = u.row(pairs[pi][1]).array();
+      const double info = 2 * (uk * uk * ul * ul).sum() / n;
+      if (info < 0.3 * 2.0 / 15.0) empty_pairs.push_back(pi);
+    }
+    if (empty_pairs.empty()) {
+      // The weakest direction of the design: its largest term names what is missing.
+      const VectorXd w = li.transpose() * relative.eigenvectors().col(0);
+      Eigen::Index k;
+      w.cwiseAbs().maxCoeff(&k);
+      if (k >= nq) {  // a linear term (bias): the sparse side of that axis
+        name_axis(static_cast<int>(k - nq), sparse_side(static_cast<int>(k - nq)));
+      } else {
+        int fidx = 0;
+        for (int a = 0; a < 3; ++a) {
+          for (int b = a; b < 3; ++b, ++fidx) {
+            if (fidx != k) continue;
+            if (a == b) {
+              name_axis(a, sparse_side(a));
+            } else {
+              for (int pi = 0; pi < 3; ++pi) {
+                if (pairs[pi][0] == a && pairs[pi][1] == b) empty_pairs.push_back(pi);
+              }
+            }
+          }
+        }
+      }
+    }
+    if (!empty_pairs.empty()) {
+      std::string list;
+      for (size_t i = 0; i < empty_pairs.size(); ++i) {
+        const int pi = empty_pairs[i];
+        list += std::string(i == 0                        ? ""
+                            : i + 1 == empty_pairs.size() ? " and "
+                                                          : ", ") +
+                "the " + axis_name[pairs[pi][0]] + " and " + axis_name[pairs[pi][1]] + " axes";
+      }
+      const int p0 = empty_pairs[0];
+      parts.push_back("tilted about 45 degrees between " + list + " (e.g. with the +" +
+                      axis_name[pairs[p0][0]] + "+" + axis_name[pairs[p0][1]] + " direction up)");
+    }
+  }
+  if (parts.empty()) parts.push_back("spread over the whole sphere");
+  cov.advice = "add positions ";
+  for (size_t i = 0; i < parts.size(); ++i) {
+    cov.advice += (i == 0 ? "" : i + 1 == parts.size() ? ", and " : ", ") + parts[i];
+  }
+  cov.advice += " (" + frame_note + ")";
+  return cov;
+}
+
 Status Fail(Status s, PcaResult* result) {
   result->usable = false;
   result->reason = s.message();
@@ -537,6 +866,67 @@ Status Fail(Status s, PcaResult* result) {
 
 const char* BiasModelName(BiasModel bias) {
   return bias == BiasModel::kEstimate ? "estimate" : "none";
+}
+
+const char* PcaInformationSolverName(PcaInformationSolver solver) {
+  switch (solver) {
+    case PcaInformationSolver::kDense:
+      return "dense";
+    case PcaInformationSolver::kLowRank:
+      return "low_rank";
+    default:
+      return "auto";
+  }
+}
+
+const char* PcaCoverageVerdictName(PcaCoverageVerdict verdict) {
+  switch (verdict) {
+    case PcaCoverageVerdict::kGood:
+      return "good";
+    case PcaCoverageVerdict::kPoor:
+      return "poor";
+    default:
+      return "unknown";
+  }
+}
+
+PcaCost EstimatePcaCost(int m, int n, int d, BiasModel bias, PcaInformationSolver solver) {
+  const double mm = std::max(m, 0), nn = std::max(n, 0), dd = std::max(d, 1);
+  const double p = bias == BiasModel::kEstimate ? dd + 1 : dd;
+  const double np = p * mm;
+  const double ng = dd * (dd - 1) / 2;
+  const double r = nn * (dd - 1) + ng;
+  const double k = std::min(mm, nn);
+  const double nq = dd * (dd + 1) / 2 + dd + 1;
+  // Shared: SVD of the readings (QR + small SVD), the quadric fit, positions on the sphere,
+  // residuals, diagnostics, the gauge basis; a handful of m×n copies of the readings.
+  const double shared_flops = 4 * mm * nn * k + 30 * k * k * k + 2 * nn * nq * nq +
+                              60 * mm * nn * dd + 4 * np * ng * ng + 200 * nn * dd * dd;
+  const double shared_bytes = 8 * (6 * mm * nn + mm * k + 2 * np * ng + nn * nq);
+  const double step_shared = 20 * mm * nn * dd;  // residuals, gradient, one projection
+  // Dense: assemble S (m² blocks), Cholesky, p·m solves for the diagonal blocks.
+  const double dense_flops = mm * mm * dd * dd * p * p + np * np * ng * 2 + np * np * np / 3;
+  const double dense_bytes = 8 * (2 * np * np + dd * dd * p * p);
+  // Low rank: Y and D⁻¹Y, K = Λ⁻¹ + Yᵀ D⁻¹ Y, its eigen-decomposition.
+  const double low_flops = 2 * np * r * r + 9 * r * r * r + 4 * np * r * p;
+  const double low_bytes = 8 * (2 * np * r + 4 * r * r);
+  PcaCost cost;
+  cost.solver = solver;
+  if (solver == PcaInformationSolver::kAuto) {
+    cost.solver = low_flops + 2 * np * r * r < dense_flops + 2 * np * np * np
+                      ? PcaInformationSolver::kLowRank
+                      : PcaInformationSolver::kDense;
+  }
+  if (cost.solver == PcaInformationSolver::kLowRank) {
+    cost.flops = shared_flops + low_flops + 2 * np * r * r;  // + B·Q for the blocks
+    cost.flops_per_refine_iteration = step_shared + low_flops;
+    cost.bytes = shared_bytes + low_bytes;
+  } else {
+    cost.flops = shared_flops + dense_flops + 2 * np * np * np;  // + the block solves
+    cost.flops_per_refine_iteration = step_shared + dense_flops;
+    cost.bytes = shared_bytes + dense_bytes;
+  }
+  return cost;
 }
 
 bool PcaOptions::IsValid(std::string* error) const {
@@ -562,6 +952,12 @@ bool PcaOptions::IsValid(std::string* error) const {
     if (!nominal->allFinite()) return fail("nominal must contain finite numbers only");
   }
   if (max_refine_iterations < 1) return fail("max_refine_iterations must be >= 1");
+  if (!(max_memory_bytes >= 0) || !std::isfinite(max_memory_bytes)) {
+    return fail("max_memory_bytes must be a finite number >= 0 (0: no limit)");
+  }
+  if (!(max_flops >= 0) || !std::isfinite(max_flops)) {
+    return fail("max_flops must be a finite number >= 0 (0: no limit)");
+  }
   if (!(min_rank_gap > 1) || !std::isfinite(min_rank_gap)) {
     return fail("min_rank_gap must be a finite number > 1");
   }
@@ -595,10 +991,13 @@ Eigen::MatrixXd ProcrustesRotation(const Eigen::MatrixXd& from, const Eigen::Mat
   return u * v.transpose();
 }
 
-Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaResult* result) {
-  *result = PcaResult();
-  std::string error;
-  if (!options.IsValid(&error)) return Fail(Status::InvalidInput("pca options: " + error), result);
+namespace {
+
+// CalibratePca on readings divided by `unit` (a power of two, so exactly): every number of the
+// result is in those units until CalibratePca multiplies it back. Messages quote readings in the
+// caller's units.
+Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, double unit,
+                       PcaResult* result) {
   const MatrixXd& mm = problem.m;
   const int d = options.dimension;
   const int m = static_cast<int>(mm.rows());
@@ -670,6 +1069,43 @@ Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaRes
         result);
   }
 
+  // Budget, before any work.
+  result->cost_estimate = EstimatePcaCost(m, n, d, options.bias, options.information_solver);
+  {
+    const PcaCost& cost = result->cost_estimate;
+    const double flops =
+        cost.flops +
+        (options.refine ? options.max_refine_iterations * cost.flops_per_refine_iteration : 0.0);
+    const std::string size = std::to_string(m) + " sensors × " + std::to_string(n) +
+                             " positions (dimension " + std::to_string(d) +
+                             (affine ? ", biases estimated" : "") + ")";
+    if (options.max_memory_bytes > 0 && cost.bytes > options.max_memory_bytes) {
+      return Fail(Status::NotDeterminable(
+                      "the problem is too large: " + size + " needs about " +
+                      Num(cost.bytes / (1024.0 * 1024)) +
+                      " MiB of working memory, more than "
+                      "the limit max_memory_bytes = " +
+                      Num(options.max_memory_bytes / (1024.0 * 1024)) +
+                      " MiB; split the sensors into smaller groups (each with the same positions) "
+                      "or record fewer positions")
+                      .WithField("max_memory_bytes"),
+                  result);
+    }
+    if (options.max_flops > 0 && flops > options.max_flops) {
+      return Fail(Status::NotDeterminable(
+                      "the problem is too large: " + size + " needs about " + Num(flops) +
+                      " floating-point operations" +
+                      (options.refine ? " (with max_refine_iterations = " +
+                                            std::to_string(options.max_refine_iterations) + ")"
+                                      : std::string()) +
+                      ", more than the limit max_flops = " + Num(options.max_flops) +
+                      "; split the sensors into smaller groups (each with the same positions), "
+                      "record fewer positions, or refine with fewer iterations")
+                      .WithField("max_flops"),
+                  result);
+    }
+  }
+
   // Closed form.
   Fit fit;
   Status s = affine ? ClosedFormAffine(mm, d, c, options, result, &fit)
@@ -679,8 +1115,8 @@ Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaRes
   result->cost_closed_form = Cost(mm, fit);
   result->cost = result->cost_closed_form;
   if (options.refine) {
-    result->refine_iterations =
-        Refine(mm, c, affine, options.max_refine_iterations, &fit, &result->cost);
+    result->refine_iterations = Refine(mm, c, affine, options.max_refine_iterations,
+                                       result->cost_estimate.solver, &fit, &result->cost);
     result->refined = result->cost < result->cost_closed_form;
     if (!result->refined) {
       result->warnings.push_back(
@@ -713,10 +1149,12 @@ Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaRes
       (result->noise_std_estimated > 2 * *options.noise_std ||
        result->noise_std_estimated < 0.5 * *options.noise_std)) {
     result->warnings.push_back("The residuals suggest a noise level of " +
-                               Num(result->noise_std_estimated) + ", not the given noise_std " +
-                               Num(*options.noise_std) +
+                               Num(unit * result->noise_std_estimated) +
+                               ", not the given noise_std " + Num(unit * *options.noise_std) +
                                ": the uncertainties use the given value; check it.");
   }
+  std::string outlier_warning;
+  int outlier_count = 0;
   {
     // Outlying positions: |v_j| far from c compared with the spread of the others (robust:
     // median absolute deviation), e.g. the device moved while a reading was averaged.
@@ -739,12 +1177,12 @@ Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaRes
       }
     }
     if (count > 0) {
-      result->warnings.push_back(
-          std::to_string(count) + " position" + (count == 1 ? "" : "s") + " (" + outliers +
-          (count > 10 ? ", ..." : "") +
-          ") disagree with a field of constant magnitude far more than the others (see "
-          "magnitude_error): was the device moving, or the field disturbed, while averaging? "
-          "Consider re-recording or removing them.");
+      // Pushed after the coverage is known (a poorly spread set also leaves positions off).
+      outlier_warning = std::to_string(count) + " position" + (count == 1 ? "" : "s") + " (" +
+                        outliers + (count > 10 ? ", ..." : "") +
+                        ") disagree with a field of constant magnitude far more than the others "
+                        "(see magnitude_error): ";
+      outlier_count = count;
     }
   }
   if (result->rank_gap < 10 * options.min_rank_gap) {
@@ -756,34 +1194,40 @@ Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaRes
         "over the sphere.");
   }
 
-  // Uncertainty (frame-free), at unit noise then scaled.
-  MatrixXd cov;
-  bool have_cov = false;
+  // Uncertainty (frame-free), at unit noise then scaled; the p×p diagonal blocks of S⁺ in the
+  // equilibrated coordinates θ'_i = [c·a_i; b_i] (see ReducedFisher).
+  std::vector<MatrixXd> cov_blocks;
   if (std::isfinite(result->noise_std)) {
-    MatrixXd info;
-    if (ReducedInformation(fit.a, fit.v, affine, &info)) {
-      const GaugeSolver solver(info, GaugeBasis(fit.a, affine));
-      if (solver.ok()) {
-        cov = result->noise_std * result->noise_std * solver.PseudoInverse();
-        have_cov = true;
-      }
-    }
-    if (!have_cov) {
+    const ReducedFisher solver(c * fit.a, fit.v / c, affine, result->cost_estimate.solver);
+    if (solver.ok()) {
+      cov_blocks = solver.DiagonalBlocks();
+      VectorXd unscale = VectorXd::Constant(p, 1.0 / c);
+      if (affine) unscale(d) = 1;
+      const double var = result->noise_std * result->noise_std;
+      for (MatrixXd& blk : cov_blocks)
+        blk = var * unscale.asDiagonal() * blk * unscale.asDiagonal();
+    } else {
       result->warnings.push_back(
           "The Fisher information is singular beyond the rotation gauge: some parameters are not "
           "determined by these positions, so uncertainties are undefined.");
     }
   }
+  const bool have_cov = !cov_blocks.empty();
 
   // Frame.
   MatrixXd h;
+  std::string frame_note;
   if (options.nominal) {
     result->frame = "nominal";
     h = ProcrustesRotation(fit.a, *options.nominal, true);
     result->reflection = h.determinant() < 0;
+    frame_note = "axes of the nominal frame";
   } else {
     result->frame = "canonical";
     h = CanonicalFrame(fit.a);
+    frame_note =
+        "axes of the canonical frame: x along the first sensor's axis, y in the plane of "
+        "the first two";
   }
   result->a = h * fit.a;
   result->v = h * fit.v;
@@ -795,6 +1239,15 @@ Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaRes
         "The field magnitude was not given: scale factors are relative (the magnitude is taken as "
         "1, the paper's Remark 2), and scale_std describes those relative scale factors.");
   }
+  std::string undefined_std;  // sensors whose variance came out negative or not finite
+  int undefined_count = 0;
+  // sqrt of a variance; NaN (never 0) when it is not a finite number >= 0 up to rounding.
+  auto std_of = [&](double variance, double scale, const std::string& name) {
+    if (std::isfinite(variance) && variance >= -1e-10 * scale)
+      return std::sqrt(std::max(0.0, variance));
+    if (++undefined_count <= 5) undefined_std += (undefined_std.empty() ? "" : ", ") + name;
+    return kNaN;
+  };
   result->sensors.resize(m);
   for (int i = 0; i < m; ++i) {
     PcaSensorEstimate& se = result->sensors[i];
@@ -808,16 +1261,25 @@ Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaRes
       bias_var += problem.removed_bias_std(i) * problem.removed_bias_std(i);
     }
     if (have_cov) {
-      const MatrixXd ca = cov.block(i * p, i * p, d, d);
-      const VectorXd u = fit.a.col(i) / fit.a.col(i).norm();
-      se.scale_std = std::sqrt(std::max(0.0, u.dot(ca * u)));
+      const MatrixXd& blk = cov_blocks[i];
+      const MatrixXd ca = blk.topLeftCorner(d, d);
+      const double norm = fit.a.col(i).norm();
+      const VectorXd u = fit.a.col(i) / norm;
+      const double tr = std::abs(ca.trace());
+      se.scale_std = std_of(u.dot(ca * u), tr, se.name);
       const MatrixXd proj = MatrixXd::Identity(d, d) - u * u.transpose();
-      se.axis_std_rad = std::sqrt(std::max(0.0, (proj * ca * proj).trace())) / fit.a.col(i).norm();
-      if (affine) bias_var += cov(i * p + d, i * p + d);
+      se.axis_std_rad = std_of((proj * ca * proj).trace(), tr, se.name) / norm;
+      if (affine) {
+        bias_var += blk(d, d);
+        se.bias_std = std_of(bias_var, std::abs(blk(d, d)), se.name);
+      } else {
+        se.bias_std = std::sqrt(bias_var);
+      }
     } else if (affine) {
-      bias_var = kNaN;
+      se.bias_std = kNaN;
+    } else {
+      se.bias_std = std::sqrt(bias_var);
     }
-    se.bias_std = std::sqrt(bias_var);
     if (options.nominal) {
       const VectorXd nom = options.nominal->col(i);
       const double cosang = nom.norm() > 0 ? se.axis.dot(nom) / nom.norm() : 1.0;
@@ -829,8 +1291,116 @@ Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaRes
       }
     }
   }
+  if (undefined_count > 0) {
+    result->warnings.push_back(
+        "The uncertainty of " + std::to_string(undefined_count) + " sensor" +
+        (undefined_count == 1 ? "" : "s") + " (" + undefined_std +
+        (undefined_count > 5 ? ", ..." : "") +
+        ") is undefined: the Fisher information is numerically singular for them (a variance "
+        "came out negative or not finite); their *_std are NaN.");
+  }
+
+  // Coverage of the sphere, in the result's frame.
+  result->coverage = Coverage(result->v, affine, frame_note);
+  if (result->coverage.verdict == PcaCoverageVerdict::kPoor) {
+    result->warnings.push_back(
+        "The orientations are poorly spread over the sphere (coverage: scatter_min " +
+        Num(result->coverage.scatter_min) + ", design_min " + Num(result->coverage.design_min) +
+        ", 1 for a uniform spread): some parameters rest on very few positions, so a small error "
+        "there moves the estimate far; " +
+        result->coverage.advice + ".");
+  }
+  if (!outlier_warning.empty()) {
+    const bool poor = result->coverage.verdict == PcaCoverageVerdict::kPoor;
+    result->warnings.push_back(
+        outlier_warning +
+        (poor ? "the orientations are poorly spread (see the coverage warning), so a few "
+                "positions decide the fit and the others cannot agree with it; or was the device "
+                "moving, or the field disturbed, while averaging? Add the advised positions "
+                "before removing any."
+              : "was the device moving, or the field disturbed, while averaging? Consider "
+                "re-recording or removing " +
+                    std::string(outlier_count == 1 ? "it." : "them.")));
+  }
+
+  // Guards: a usable result has finite parameters.
+  std::string non_finite;
+  if (!result->a.allFinite())
+    non_finite = "sensitivity";
+  else if (!result->b.allFinite())
+    non_finite = "bias";
+  else if (!result->v.allFinite())
+    non_finite = "field per position";
+  else if (!result->residual_rms.allFinite())
+    non_finite = "residual";
+  else if (!std::isfinite(result->cost))
+    non_finite = "cost";
+  if (non_finite.empty()) {
+    for (const PcaSensorEstimate& se : result->sensors) {
+      if (!(std::isfinite(se.scale) && se.scale > 0) || !se.axis.allFinite()) {
+        return Fail(
+            Status::NotDeterminable(
+                "sensor " + se.name + "'s axis is undefined: its sensitivity is " + Num(se.scale) +
+                " (its readings do not change with the orientation: a dead or "
+                "disconnected sensor?); check it, or remove it from the recording"),
+            result);
+      }
+    }
+  }
+  if (!non_finite.empty()) {
+    return Fail(Status::NotDeterminable(
+                    "the computed " + non_finite +
+                    " is not a finite number: the readings are too ill-conditioned for double "
+                    "precision (check their units and range, and that the field was applied)"),
+                result);
+  }
   result->usable = true;
   return Status::Ok();
+}
+
+}  // namespace
+
+Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaResult* result) {
+  *result = PcaResult();
+  std::string error;
+  if (!options.IsValid(&error)) return Fail(Status::InvalidInput("pca options: " + error), result);
+  // Equilibrate the readings: divide them by the power of two nearest their largest magnitude,
+  // exactly, so that neither squares nor products of readings overflow or underflow and every
+  // tolerance below is relative. The result is multiplied back at the end.
+  const double largest =
+      problem.m.size() > 0 && problem.m.allFinite() ? problem.m.cwiseAbs().maxCoeff() : 0.0;
+  if (!(largest > 0) || !std::isfinite(largest))
+    return CalibrateScaled(problem, options, 1.0, result);
+  const double unit = std::ldexp(1.0, std::ilogb(largest));
+  PcaProblem scaled;
+  scaled.m = problem.m / unit;
+  scaled.sensor_names = problem.sensor_names;
+  scaled.position_labels = problem.position_labels;
+  scaled.removed_bias = problem.removed_bias / unit;
+  scaled.removed_bias_std = problem.removed_bias_std / unit;
+  PcaOptions scaled_options = options;
+  if (options.noise_std) scaled_options.noise_std = *options.noise_std / unit;
+  const Status s = CalibrateScaled(scaled, scaled_options, unit, result);
+  // Back to the caller's units: sensitivities, biases, noise and costs scale with the readings;
+  // g (and the ellipsoid's shape) with their inverse square; the field and angles not at all.
+  PcaResult& r = *result;
+  r.a *= unit;
+  r.b *= unit;
+  r.singular_values *= unit;
+  r.g_eigenvalues /= unit * unit;
+  r.residual_rms *= unit;
+  r.noise_std *= unit;
+  r.noise_std_estimated *= unit;
+  r.cost_closed_form *= unit * unit;
+  r.cost *= unit * unit;
+  for (PcaSensorEstimate& se : r.sensors) {
+    se.sensitivity *= unit;
+    se.scale *= unit;
+    se.bias *= unit;
+    se.scale_std *= unit;
+    se.bias_std *= unit;
+  }
+  return s;
 }
 
 }  // namespace calibd::core

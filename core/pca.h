@@ -31,6 +31,35 @@ enum class BiasModel {
 };
 const char* BiasModelName(BiasModel bias);  // "none" | "estimate"
 
+// How the uncertainty (and each `refine` step) handles the reduced Fisher information S of the
+// p·m sensor parameters (p = d, or d + 1 with biases), the n positions eliminated. S is the
+// block-diagonal Σ_j ṽ_j ṽ_jᵀ per sensor minus a rank-n(d−1) coupling through the positions, and
+// has the d(d−1)/2-dimensional rotation gauge as null space; r = n(d−1) + d(d−1)/2 below. Both
+// solvers give the same σ (to rounding).
+enum class PcaInformationSolver {
+  kAuto,     // the cheaper of the two for the problem's size (see EstimatePcaCost)
+  kDense,    // S as one dense (pm)×(pm) matrix: O((pm)³) time, O((pm)²) memory; few sensors
+  kLowRank,  // block diagonal plus low rank (Woodbury): O(pm·r²) time, O(pm·r) memory; many
+             // sensors, few positions
+};
+const char* PcaInformationSolverName(PcaInformationSolver solver);  // "auto"|"dense"|"low_rank"
+
+// What CalibratePca will cost, estimated from the sizes alone (before any reading is looked at),
+// so that a caller can refuse a problem at once. Figures are upper estimates within a small
+// factor: `bytes` the peak working memory beyond the readings themselves, `flops` the
+// floating-point operations of the closed form, diagnostics and uncertainty, and
+// `flops_per_refine_iteration` those of one `refine` step.
+struct PcaCost {
+  double bytes = 0;
+  double flops = 0;
+  double flops_per_refine_iteration = 0;
+  PcaInformationSolver solver = PcaInformationSolver::kAuto;  // the solver used (kAuto resolved)
+};
+
+// m sensors, n positions, dimension d. solver kAuto picks the one with fewer flops.
+PcaCost EstimatePcaCost(int m, int n, int d, BiasModel bias,
+                        PcaInformationSolver solver = PcaInformationSolver::kAuto);
+
 struct PcaOptions {
   int dimension = 3;                // d >= 1 (at most kMaxDimension)
   std::optional<double> magnitude;  // c > 0; nullopt: unknown -> c = 1, scale factors relative
@@ -45,6 +74,13 @@ struct PcaOptions {
                                     // the residuals
   int max_refine_iterations = 50;   // >= 1; Gauss-Newton iterations of `refine`
   double min_rank_gap = 3.0;        // > 1; σ_d/σ_{d+1} below this means "no clear gap"
+  PcaInformationSolver information_solver = PcaInformationSolver::kAuto;  // see the enum
+  // Budget: a problem whose EstimatePcaCost exceeds either limit is refused at once with
+  // kNotDeterminable (field "max_memory_bytes" or "max_flops") naming the limit and the estimate.
+  // 0 means no limit.
+  double max_memory_bytes = 1024.0 * 1024 * 1024;  // >= 0; default 1 GiB
+  double max_flops = 1e12;  // >= 0; default 1e12 (minutes on one core), counting every refine
+                            // iteration allowed by max_refine_iterations
 
   static constexpr int kMaxDimension = 32;
 
@@ -62,6 +98,45 @@ struct PcaProblem {
   Eigen::VectorXd removed_bias_std;          // m, its standard deviation (empty if none)
 };
 
+// How well the static positions span the sphere: the field directions u_j = v_j/|v_j| of the
+// estimate, in the result's frame. Two numbers, both 1 for orientations spread uniformly at random
+// over the sphere (in expectation) and 0 for a degenerate set:
+//  - scatter: the eigenvalues of Σ u_j u_jᵀ / n (ascending, sum 1); scatter_min = d × the smallest
+//    (0: all positions in a plane, e.g. turned about one axis only);
+//  - design_min: the smallest eigenvalue of the quadric fit's design Σ f_j f_jᵀ / n relative to
+//    its uniform-sphere expectation, f_j = the quadratic terms u_k u_l (and with bias estimation
+//    the linear terms u_k): what the sensitivity matrix's shape (scale factors, angles between
+//    axes) and the biases are estimated from. The six faces of a box, for instance, leave the
+//    u_k u_l terms (k ≠ l), the angles between axes, to the other positions alone.
+// For d = 3 the positions are also counted in 18 caps (overlapping): within 60° of each of the 6
+// axis directions ±x, ±y, ±z, and within 30° of each of the 12 edge directions such as +x+y (45°
+// between two axes); the advice names, in the axes of the result's frame, the missing directions
+// that matter: axis directions with no position near them (both signs where both are missing),
+// the sparse direction of the scatter, pairs of axes with no position in between.
+enum class PcaCoverageVerdict {
+  kUnknown,  // not computed (no estimate)
+  kGood,
+  kPoor,  // scatter_min < kMinScatter or design_min < kMinDesign: add the advised positions
+};
+const char* PcaCoverageVerdictName(PcaCoverageVerdict verdict);  // "unknown" | "good" | "poor"
+
+struct PcaCoverage {
+  // Thresholds of a poor verdict. For 30 random orientations (biases estimated) the 1 % quantiles
+  // are about 0.48 (scatter_min) and 0.08 (design_min); for the 6 faces of a box plus 4 positions
+  // near faces, design_min is about 0.01.
+  static constexpr double kMinScatter = 0.3;
+  static constexpr double kMinDesign = 0.05;
+
+  PcaCoverageVerdict verdict = PcaCoverageVerdict::kUnknown;
+  Eigen::VectorXd scatter_eigenvalues;  // d, ascending, sum 1 (uniform: 1/d each)
+  double scatter_min = std::numeric_limits<double>::quiet_NaN();  // d × smallest, in [0, 1]
+  double design_min = std::numeric_limits<double>::quiet_NaN();   // >= 0 (uniform: about 1)
+  std::vector<std::string> cap_names;  // d = 3: "+x", "-x", ..., "-z", "+x+y", "+x-y", ... (18)
+  std::vector<int> cap_positions;      // positions in each cap (same order)
+  std::string advice;  // what to add, in words ("add positions with the -y axis up"); empty when
+                       // good
+};
+
 // One sensor's calibration. Frame-free quantities (scale, the *_std) do not depend on the frame.
 struct PcaSensorEstimate {
   std::string name;
@@ -75,11 +150,15 @@ struct PcaSensorEstimate {
   // RMS angle (radians) between the estimated and the true axis after the rotation that best
   // aligns all axes (the pseudo-inverse gauge, equivalent to a Procrustes fit onto the truth).
   double axis_std_rad = std::numeric_limits<double>::quiet_NaN();
-  double bias_std = 0;  // 0 when bias is neither estimated nor removed
+  // 0 when the bias is neither estimated nor removed (it is then zero by assumption); NaN when
+  // estimated but undefined.
+  double bias_std = 0;
 };
 
 // Fields start at sentinel values (NaN / empty / -1) and are filled as far as the computation got:
 // on a kNotDeterminable failure the diagnostics computed before the failure are still there.
+// A usable result has finite parameters (a, v, b, scale, axis, bias); an uncertainty is either
+// finite or NaN (undefined, with a warning saying why), never a made-up 0 or an infinity.
 struct PcaResult {
   bool usable = false;      // true iff CalibratePca returned OK: the parameters may be used
   std::string reason;       // why not usable (the failure message); empty when usable
@@ -114,12 +193,18 @@ struct PcaResult {
   double cost = std::numeric_limits<double>::quiet_NaN();  // ½Σr² at the reported estimate
   bool refined = false;               // the refinement was run and its estimate is reported
   int refine_iterations = 0;          // Gauss-Newton iterations taken (0 when not run)
+  PcaCost cost_estimate;              // EstimatePcaCost of this problem (solver resolved)
+  PcaCoverage coverage;               // how well the positions span the sphere
   std::vector<std::string> warnings;  // plain words, for people
 };
 
 // Runs the calibration. kInvalidInput: bad options or problem (shapes, non-finite numbers, nominal
-// with the wrong size). kNotDeterminable: the data cannot determine the parameters; the message
-// says why and what to record instead. `result` is always written (see PcaResult).
+// with the wrong size). kNotDeterminable: the data cannot determine the parameters (the message
+// says why and what to record instead), a computed value is not finite (the message names it), or
+// the problem exceeds the options' budget (field "max_memory_bytes" or "max_flops"; nothing is
+// computed). `result` is always written (see PcaResult). Cost: O(m·n·d² + m·p·r²) time and
+// O(m·n + m·p·r) memory with the low-rank solver (r = n(d−1) + d(d−1)/2), so linear in the number
+// of sensors for a fixed number of positions.
 Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaResult* result);
 
 // The paper's Eq. 19 canonical frame: the orthogonal h (d×d) such that h·a is upper triangular

@@ -494,3 +494,125 @@ TEST(PcaSimulationTest, DeterministicPerSeedAndMatchesOptions) {
 
 }  // namespace
 }  // namespace calibd::core
+
+namespace calibd::core {
+namespace {
+
+// One triad with biases (an accelerometer), small gain and axis errors, in the nominal frame
+// (nominal = identity), so that the coverage names the triad's own axes.
+PcaResult CalibrateTriad(const MatrixXd& directions, uint64_t seed, double sigma = 0.01) {
+  PcaRandom rng(seed);
+  const double c = 9.81;
+  const MatrixXd a = MatrixXd::Identity(3, 3) + 0.02 * rng.NormalMatrix(3, 3);
+  const VectorXd b = 0.2 * rng.NormalMatrix(3, 1);
+  MatrixXd readings = a.transpose() * (c * directions);
+  readings.colwise() += b;
+  readings += sigma * rng.NormalMatrix(3, static_cast<int>(directions.cols()));
+  PcaOptions o = KnownMagnitude(3, c);
+  o.bias = BiasModel::kEstimate;
+  o.nominal = MatrixXd::Identity(3, 3);
+  PcaResult r;
+  const Status s = CalibratePca(Problem(readings), o, &r);
+  EXPECT_TRUE(s.ok()) << s.message();
+  return r;
+}
+
+bool HasWarning(const PcaResult& r, const std::string& fragment) {
+  for (const std::string& w : r.warnings) {
+    if (w.find(fragment) != std::string::npos) return true;
+  }
+  return false;
+}
+
+// The six faces of a box and four more positions near faces (what the user recorded): the
+// angles between axes rest on four barely tilted positions. Poor, and the advice asks for
+// positions between the axes.
+TEST(PcaCoverage, BoxFacesPlusNearFacePositionsArePoorlySpread) {
+  const int seeds = 30;
+  for (int s = 0; s < seeds; ++s) {
+    PcaRandom rng(7000 + s);
+    MatrixXd u(3, 10);
+    u.leftCols(3) = MatrixXd::Identity(3, 3);
+    u.block(0, 3, 3, 3) = -MatrixXd::Identity(3, 3);
+    for (int k = 0; k < 4; ++k) {
+      const VectorXd tilted =
+          u.col(static_cast<int>(rng.Uniform() * 6)) + 0.15 * rng.NormalMatrix(3, 1);
+      u.col(6 + k) = tilted.normalized();
+    }
+    const PcaResult r = CalibrateTriad(u, 100 + s);
+    const PcaCoverage& cov = r.coverage;
+    EXPECT_EQ(cov.verdict, PcaCoverageVerdict::kPoor) << "seed " << s;
+    EXPECT_LT(cov.design_min, PcaCoverage::kMinDesign);
+    EXPECT_GT(cov.scatter_min, PcaCoverage::kMinScatter);  // the axes themselves are all there
+    EXPECT_NE(cov.advice.find("tilted about 45 degrees between"), std::string::npos) << cov.advice;
+    EXPECT_NE(cov.advice.find("nominal frame"), std::string::npos);
+    EXPECT_TRUE(HasWarning(r, "poorly spread")) << "seed " << s;
+    ASSERT_EQ(cov.cap_names.size(), 18u);
+    for (int k = 0; k < 6; ++k) EXPECT_GE(cov.cap_positions[k], 1) << cov.cap_names[k];
+  }
+}
+
+// 30 random orientations: good on every one of 50 seeds (the 1 % quantile of design_min with
+// biases is about 0.08 against the threshold 0.05), with no advice and no warning.
+TEST(PcaCoverage, ThirtyRandomOrientationsAreWellSpread) {
+  for (int s = 0; s < 50; ++s) {
+    PcaRandom rng(8000 + s);
+    const PcaResult r = CalibrateTriad(rng.SphereColumns(3, 30, 1.0), 200 + s);
+    EXPECT_EQ(r.coverage.verdict, PcaCoverageVerdict::kGood)
+        << "seed " << s << " scatter_min " << r.coverage.scatter_min << " design_min "
+        << r.coverage.design_min;
+    EXPECT_TRUE(r.coverage.advice.empty());
+    EXPECT_FALSE(HasWarning(r, "poorly spread"));
+    EXPECT_NEAR(r.coverage.scatter_eigenvalues.sum(), 1.0, 1e-12);
+  }
+}
+
+// Every position with the -y axis (nearly) down: the advice names -y, and only that sign.
+TEST(PcaCoverage, MissingHemisphereIsNamedWithItsSign) {
+  PcaRandom rng(91);
+  MatrixXd u = rng.SphereColumns(3, 24, 1.0);
+  for (int j = 0; j < u.cols(); ++j) u(1, j) = std::abs(u(1, j)) + 0.05;
+  u.colwise().normalize();
+  const PcaResult r = CalibrateTriad(u, 92);
+  EXPECT_EQ(r.coverage.verdict, PcaCoverageVerdict::kPoor);
+  EXPECT_NE(r.coverage.advice.find("with the -y axis up"), std::string::npos) << r.coverage.advice;
+  EXPECT_EQ(r.coverage.advice.find("+y"), std::string::npos) << r.coverage.advice;
+  EXPECT_EQ(r.coverage.cap_positions[3], 0);  // "-y"
+  EXPECT_EQ(r.coverage.cap_names[3], "-y");
+}
+
+// Turned about z only, tilted at most 17 degrees: both +z and -z are missing, and the scatter's
+// smallest eigenvalue (along z) says so.
+TEST(PcaCoverage, MissingAxisNamesBothSigns) {
+  PcaRandom rng(93);
+  MatrixXd u(3, 24);
+  for (int j = 0; j < u.cols(); ++j) {
+    const double phi = 2 * M_PI * rng.Uniform();
+    const double z = 0.3 * (2 * rng.Uniform() - 1);
+    u.col(j) << std::sqrt(1 - z * z) * std::cos(phi), std::sqrt(1 - z * z) * std::sin(phi), z;
+  }
+  const PcaResult r = CalibrateTriad(u, 94, 0.001);
+  EXPECT_EQ(r.coverage.verdict, PcaCoverageVerdict::kPoor);
+  EXPECT_LT(r.coverage.scatter_min, PcaCoverage::kMinScatter);
+  EXPECT_NE(r.coverage.advice.find("with the +z and with the -z axis up"), std::string::npos)
+      << r.coverage.advice;
+}
+
+// The numbers themselves: the 6 faces and 8 corners of a cube have an exactly isotropic scatter.
+TEST(PcaCoverage, ScatterOfCubeFacesAndCornersIsIsotropic) {
+  MatrixXd u(3, 14);
+  for (int j = 0; j < 8; ++j) {
+    u.col(j) << (j & 1 ? 1 : -1), (j & 2 ? 1 : -1), (j & 4 ? 1 : -1);
+    u.col(j) /= std::sqrt(3.0);
+  }
+  u.block(0, 8, 3, 3) = MatrixXd::Identity(3, 3);
+  u.block(0, 11, 3, 3) = -MatrixXd::Identity(3, 3);
+  PcaOptions o = KnownMagnitude(3, 1.0);
+  PcaResult r;
+  ASSERT_TRUE(CalibratePca(Problem(MatrixXd(u)), o, &r).ok()) << r.reason;
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(r.coverage.scatter_eigenvalues(k), 1.0 / 3, 1e-12);
+  EXPECT_NEAR(r.coverage.scatter_min, 1.0, 1e-12);
+}
+
+}  // namespace
+}  // namespace calibd::core
