@@ -13,7 +13,7 @@
 // band's geometric centre τ_c = √(T_min T_max) is (0.664 B)², the IEEE 952 floor. The curve is
 // flat within a few percent over the middle of the band and falls off outside it.
 //
-// Deterministic per seed on every platform (PcaRandom: std::mt19937_64 + Box-Muller); channel c
+// Deterministic per seed on every platform (std::mt19937_64 + Marsaglia's polar method); channel c
 // draws from its own stream seeded with (seed, c), so adding channels does not change the others.
 #ifndef CALIBD_CORE_NOISE_SIMULATION_H_
 #define CALIBD_CORE_NOISE_SIMULATION_H_
