@@ -8,9 +8,9 @@
 // i.e. every cluster start k is used (the "overlapping" estimator). With the cumulative sum S each
 // cluster time costs O(n), independent of m. Precision: the samples are centred on their mean
 // (accumulated in long double) before S is formed, S is accumulated in long double and stored as
-// double, and the squares are summed in blocks of 1024 into a long double total; the result agrees
-// with a direct O(n·m) summation to ~1e-12 relative for hours-long logs with large offsets
-// (tests/core/allan_test.cc).
+// double, and the squares are summed in blocks of 8192 (double) added to a long double total per
+// cluster size; the result agrees with a direct O(n·m) summation to ~1e-12 relative for hours-long
+// logs with large offsets (tests/core/allan_test.cc).
 //
 // Confidence intervals: the chi-square interval of Riley §5.3 (Eq. 48),
 //   σ² · edf / χ²(1 − α/2, edf) ≤ σ²_true ≤ σ² · edf / χ²(α/2, edf),
