@@ -39,8 +39,20 @@
 // and terms still computed for the report but usable = false.
 //
 // Memory: the samples are read in place (float, not copied); per worker thread one double per
-// sample (the cumulative sum) while a channel is processed. Time: O(n · cluster times) per
-// channel; channels run on `threads` threads and the result does not depend on their number.
+// sample (the cumulative sum) while a channel is processed, and one double per sample for the
+// median Δt when timestamps are given. Time: O(n · cluster times) per channel (bench/noise_bench:
+// 2 h at 400 Hz, 6 channels, ~0.5 s of CPU); channels run on `threads` threads and the result
+// does not depend on their number.
+//
+// SPEC §7 result JSON from NoiseResult (for the server):
+//   parameters.channels[i]  {name, unit, white_noise: white_noise.value, bias_instability:
+//                            bias_instability.value, bias_instability_tau, random_walk:
+//                            random_walk.value}  (nullopt → null, with the channel's warning)
+//   uncertainty.channels[i] {name, white_noise_std: white_noise.std, bias_instability_std,
+//                            random_walk_std}
+//   diagnostics             rate, samples, allan[i] = {name, tau, adev, adev_lower, adev_upper}
+//                            from channels[i].allan; also stationary, jitter, per-channel status
+//   verdict / warnings      usable + reason, warnings
 #ifndef CALIBD_CORE_NOISE_H_
 #define CALIBD_CORE_NOISE_H_
 
