@@ -88,8 +88,10 @@ TEST(NoiseEstimate, WhiteNoiseWithinAFewPercentFromAnHourAt200Hz) {
 
 // Many short logs (N and K both clearly visible): the reported 1σ of N and K, and the Allan
 // intervals, cover the truth at their nominal rate.
-TEST(NoiseEstimate, UncertaintiesAndIntervalsCoverTheTruthAtTheNominalRate) {
+void ExpectNominalCoverage(int taus_per_decade) {
   const int seeds = 200;
+  NoiseOptions options;
+  options.taus_per_decade = taus_per_decade;
   const double truth_n = 1e-3, truth_k = 5e-4, truth_b = 1e-4;
   NoiseSimulationOptions base = Sim(50, 600, truth_n, truth_k, truth_b, 0);
   base.gauss_markov_per_decade = 1;  // the truth is exact whatever the bank
@@ -101,7 +103,7 @@ TEST(NoiseEstimate, UncertaintiesAndIntervalsCoverTheTruthAtTheNominalRate) {
     o.seed = 5000 + s;
     const NoiseSimulation sim = SimulateNoise(o);
     NoiseResult r;
-    const Status status = EstimateNoise(Problem(sim), NoiseOptions(), &r);
+    const Status status = EstimateNoise(Problem(sim), options, &r);
     stationary += r.stationary;
     if (!status.ok()) continue;
     const NoiseChannelResult& c = r.channels[0];
@@ -138,6 +140,14 @@ TEST(NoiseEstimate, UncertaintiesAndIntervalsCoverTheTruthAtTheNominalRate) {
     // Riley's EDF is rough at the last point (m = n/4, edf ≈ 2-5): ±0.12 there.
     EXPECT_NEAR(rate, kOneSigma, 8 * m[j] <= n ? CoverageTolerance(seeds) : 0.12) << m[j];
   }
+}
+
+TEST(NoiseEstimate, UncertaintiesAndIntervalsCoverTheTruthAtTheNominalRate) {
+  ExpectNominalCoverage(0);  // octaves
+}
+
+TEST(NoiseEstimate, UncertaintiesCoverTheTruthWithTenTausPerDecade) {
+  ExpectNominalCoverage(10);  // 3.3 times as many, more strongly correlated points
 }
 
 TEST(NoiseEstimate, BiasInstabilityFromTheFlatFloor) {
