@@ -10,6 +10,7 @@
 
 #include "server/array_method.h"
 #include "server/config.h"
+#include "server/noise_method.h"
 #include "server/pca_method.h"
 #include "server/serve.h"
 
@@ -292,6 +293,36 @@ int RunCli(int argc, char** argv) {
       ->check(CLI::Range(int64_t{1}, int64_t{1000000000}))
       ->capture_default_str();
 
+  NoiseSimulationFileOptions noise_sim;
+  CLI::App* sim_noise = simulate_cmd->add_subcommand(
+      "noise", "one IMU at rest: a stationary log with known white noise and random walk");
+  sim_noise->add_option("--out", out_dir, "output directory")->required();
+  sim_noise->add_option("--seed", noise_sim.seed, "random seed")->capture_default_str();
+  sim_noise->add_option("--rate", noise_sim.rate, "samples per second")
+      ->check(CLI::Range(1.0, 100000.0))
+      ->capture_default_str();
+  sim_noise->add_option("--seconds", noise_sim.seconds, "log length, s")
+      ->check(CLI::Range(1.0, 1e6))
+      ->capture_default_str();
+  sim_noise->add_option("--accel-noise", noise_sim.accel_noise, "accelerometer N, m/s²/√Hz")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_noise
+      ->add_option("--accel-random-walk", noise_sim.accel_random_walk, "accelerometer K, m/s³/√Hz")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_noise->add_option("--gyro-noise", noise_sim.gyro_noise, "gyroscope N, rad/s/√Hz")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_noise->add_option("--gyro-random-walk", noise_sim.gyro_random_walk, "gyroscope K, rad/s²/√Hz")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_noise
+      ->add_option("--bias-instability", noise_sim.bias_instability,
+                   "B of every channel, as a multiple of its N (0: none)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -305,6 +336,13 @@ int RunCli(int argc, char** argv) {
     std::string csv;
     json config, truth;
     Status s = SimulatePcaFiles(pca_sim, &csv, &config, &truth);
+    if (!s.ok()) return Report(s);
+    return WriteSimulation(out_dir, csv, config, truth);
+  }
+  if (*sim_noise) {
+    std::string csv;
+    json config, truth;
+    Status s = SimulateNoiseFiles(noise_sim, &csv, &config, &truth);
     if (!s.ok()) return Report(s);
     return WriteSimulation(out_dir, csv, config, truth);
   }

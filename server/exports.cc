@@ -133,10 +133,96 @@ Status ResultToCsv(const json& result, std::string* out) {
         csv << "," << (std.is_array() && k < std.size() ? Num(std[k]) : "");
       csv << "\n";
     }
+  } else if (method == "noise") {
+    const json& channels = Get(params, "channels");
+    if (!channels.is_array()) return Status::Internal("stored noise result has no channels");
+    const json& uch = Get(unc, "channels");
+    csv << "name,unit,white_noise,white_noise_std,bias_instability,bias_instability_std,"
+           "bias_instability_tau,random_walk,random_walk_std\n";
+    for (size_t i = 0; i < channels.size(); ++i) {
+      const json& c = channels[i];
+      const json& u = uch.is_array() && i < uch.size() ? uch[i] : json();
+      const json& name = Get(c, "name");
+      const json& unit = Get(c, "unit");
+      // A term the log could not show stays empty (null in JSON), never 0.
+      csv << CsvField(name.is_string() ? name.get<std::string>() : "") << ","
+          << CsvField(unit.is_string() ? unit.get<std::string>() : "") << ","
+          << Num(Get(c, "white_noise")) << "," << Num(Get(u, "white_noise_std")) << ","
+          << Num(Get(c, "bias_instability")) << "," << Num(Get(u, "bias_instability_std")) << ","
+          << Num(Get(c, "bias_instability_tau")) << "," << Num(Get(c, "random_walk")) << ","
+          << Num(Get(u, "random_walk_std")) << "\n";
+    }
   } else {
     return Status::Internal("stored result has an unknown method");
   }
   *out = csv.str();
+  return Status::Ok();
+}
+
+Status ResultToKalibrYaml(const json& result, const ExportContext& context, std::string* out) {
+  const std::string method =
+      Get(result, "method").is_string() ? result["method"].get<std::string>() : "";
+  if (method != "noise") {
+    return Status::InvalidInput("format=yaml (Kalibr imu.yaml) is available for noise results")
+        .WithField("format");
+  }
+  const json& channels = Get(Get(result, "parameters"), "channels");
+  if (!channels.is_array()) return Status::Internal("stored noise result has no channels");
+  // Per sensor type the largest of its axes (Kalibr takes one figure for all three; the largest
+  // keeps a filter from trusting the sensor more than its worst axis allows).
+  struct Worst {
+    double value = -1;
+    std::string axis;
+    std::vector<std::string> missing;
+  };
+  Worst worst[2][2];  // [accelerometer, gyroscope][white_noise, random_walk]
+  bool seen[2] = {false, false};
+  for (const json& c : channels) {
+    const std::string name = Get(c, "name").is_string() ? c["name"].get<std::string>() : "";
+    if (name.empty() || (name[0] != 'a' && name[0] != 'g')) continue;
+    const int type = name[0] == 'a' ? 0 : 1;
+    seen[type] = true;
+    const char* keys[2] = {"white_noise", "random_walk"};
+    for (int k = 0; k < 2; ++k) {
+      const json& v = Get(c, keys[k]);
+      if (!v.is_number()) {
+        worst[type][k].missing.push_back(name);
+      } else if (v.get<double>() > worst[type][k].value) {
+        worst[type][k].value = v.get<double>();
+        worst[type][k].axis = name;
+      }
+    }
+  }
+  std::ostringstream y;
+  y << "# Kalibr IMU noise model (imu.yaml), from calibd noise job " << context.job_id
+    << " of device '" << CommentSafe(context.device) << "', finished "
+    << CommentSafe(context.finished_at) << ".\n"
+    << "# Each figure is the largest over the sensor's axes; the Allan deviation, the other\n"
+    << "# axes and the 1-sigma uncertainties are in format=json.\n";
+  const char* type_names[2] = {"accelerometer", "gyroscope"};
+  const char* units[2][2] = {{"m/s^2/sqrt(Hz)", "m/s^3/sqrt(Hz)"},
+                             {"rad/s/sqrt(Hz)", "rad/s^2/sqrt(Hz)"}};
+  const char* keys[2] = {"noise_density", "random_walk"};
+  for (int type = 0; type < 2; ++type) {
+    if (!seen[type]) continue;
+    for (int k = 0; k < 2; ++k) {
+      const Worst& w = worst[type][k];
+      if (!w.missing.empty()) {
+        std::string list;
+        for (const auto& m : w.missing) list += (list.empty() ? "" : ", ") + m;
+        return Status::NotDeterminable(
+            std::string("the log does not show the ") + (k == 0 ? "white noise" : "random walk") +
+            " of " + list + " (see the result's warnings for how long a log would): Kalibr's " +
+            type_names[type] + "_" + keys[k] + " cannot be written");
+      }
+      y << type_names[type] << "_" << keys[k] << ": " << Num(json(w.value)) << "  # "
+        << units[type][k] << ", " << w.axis << "\n";
+    }
+  }
+  const json& rate = Get(Get(result, "diagnostics"), "rate");
+  y << "rostopic: /imu0\n"
+    << "update_rate: " << Num(rate) << "  # Hz\n";
+  *out = y.str();
   return Status::Ok();
 }
 

@@ -23,6 +23,12 @@ struct ExportContext {
 // array: name,x,y,z,offset_x,offset_y,offset_z,std_x,std_y,std_z. Full double precision.
 // kInternal if the result lacks the SPEC keys (a stored result always has them).
 Status ResultToCsv(const nlohmann::json& result, std::string* out);
+// Kalibr's imu.yaml (accelerometer_/gyroscope_noise_density and _random_walk, the largest over
+// the axes, update_rate) of a noise result. kInvalidInput for other methods; kNotDeterminable
+// when a figure is null (the log could not show it).
+Status ResultToKalibrYaml(const nlohmann::json& result, const ExportContext& context,
+                          std::string* out);
+
 // A self-contained C++17 header: `namespace calibd_calibration { constexpr ... }`, with the job
 // id, date and device in a comment. Strings from users are sanitised for comments and escaped in
 // string literals.

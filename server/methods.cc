@@ -1,6 +1,7 @@
 // The registry of calibration methods (server/method.h): one line per method.
 #include "server/array_method.h"
 #include "server/method.h"
+#include "server/noise_method.h"
 #include "server/pca_method.h"
 
 namespace calibd::server {
@@ -9,6 +10,7 @@ const std::vector<const Method*>& AllMethods() {
   static const std::vector<const Method*> methods = {
       &PcaMethod(),
       &ArrayMethod(),
+      &NoiseMethod(),
   };
   return methods;
 }

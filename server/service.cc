@@ -922,9 +922,9 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
   const std::string serial = req.matches[1];
   std::string method = req.get_param_value("method");
   const std::string format = req.has_param("format") ? req.get_param_value("format") : "json";
-  if (format != "json" && format != "csv" && format != "h") {
+  if (format != "json" && format != "csv" && format != "h" && format != "yaml") {
     return (void)SendStatus(
-        res, Status::InvalidInput("format must be json, csv or h").WithField("format"));
+        res, Status::InvalidInput("format must be json, csv, h or yaml").WithField("format"));
   }
   if (method.empty()) {
     std::vector<storage::DeviceInfo> devices;
@@ -937,8 +937,8 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     }
     if (methods.size() > 1) {
       return (void)SendStatus(res, Status::InvalidInput("device '" + serial +
-                                                        "' has pca and array calibrations: "
-                                                        "add ?method=pca or ?method=array")
+                                                        "' has calibrations of several "
+                                                        "methods: add ?method=NAME")
                                        .WithField("method"));
     }
     if (methods.empty()) {
@@ -946,9 +946,9 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
       return;
     }
     method = methods[0];
-  } else if (method != "pca" && method != "array") {
+  } else if (FindMethod(method) == nullptr) {
     return (void)SendStatus(
-        res, Status::InvalidInput("method must be pca or array").WithField("method"));
+        res, Status::InvalidInput("method must be " + MethodNamesForMessage()).WithField("method"));
   }
   storage::JobInfo job;
   Status s = store->LatestResult(serial, method, &job);
@@ -995,6 +995,18 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     return;
   }
   ExportContext context{job.id, serial, method, job.finished_at};
+  if (format == "yaml") {
+    s = ResultToKalibrYaml(result, context, &text);
+    if (!s.ok()) return (void)SendStatus(res, s);
+    res.set_header("Content-Disposition", "attachment; filename=\"imu.yaml\"");
+    res.set_content(text, "application/yaml");
+    return;
+  }
+  if (method == "noise") {
+    return (void)SendStatus(
+        res,
+        Status::InvalidInput("the noise method exports json, csv and yaml").WithField("format"));
+  }
   s = ResultToHeader(result, context, &text);
   if (!s.ok()) return (void)SendStatus(res, s);
   res.set_header("Content-Disposition",

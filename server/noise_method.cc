@@ -1,0 +1,208 @@
+#include "server/noise_method.h"
+
+#include <cmath>
+#include <cstdio>
+#include <set>
+
+#include "server/inertial_log.h"
+
+namespace calibd::server {
+
+using nlohmann::json;
+
+namespace {
+
+json Num(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
+json Opt(const std::optional<double>& x) { return x ? Num(*x) : json(nullptr); }
+json Nums(const std::vector<double>& v) {
+  json out = json::array();
+  for (double x : v) out.push_back(Num(x));
+  return out;
+}
+
+Status ParseNoiseConfig(const json& config, core::NoiseOptions* options, InertialUnits* units) {
+  if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
+  static const std::set<std::string> kKnown = {"method", "device", "accel_unit", "gyro_unit",
+                                               "taus_per_decade"};
+  for (const auto& [key, value] : config.items()) {
+    if (kKnown.count(key) == 0) {
+      return Status::InvalidInput("config key '" + key +
+                                  "' is not a noise config key (known: accel_unit, gyro_unit, "
+                                  "taus_per_decade, method, device)")
+          .WithField(key);
+    }
+  }
+  *options = core::NoiseOptions();
+  if (auto it = config.find("taus_per_decade"); it != config.end()) {
+    const bool integral = it->is_number() && std::isfinite(it->get<double>()) &&
+                          it->get<double>() == std::floor(it->get<double>());
+    if (!integral || it->get<double>() < 0 || it->get<double>() > 100) {
+      return Status::InvalidInput(
+                 "config key 'taus_per_decade' must be an integer 0..100 (0: octave spacing)")
+          .WithField("taus_per_decade");
+    }
+    options->taus_per_decade = static_cast<int>(it->get<double>());
+  }
+  std::string error;
+  if (!options->IsValid(&error)) return Status::InvalidInput(error);
+  return ParseInertialUnits(config, units);
+}
+
+class Noise : public Method {
+ public:
+  const char* name() const override { return "noise"; }
+  const char* summary() const override {
+    return "white noise density, bias instability and random walk of every channel of a long "
+           "stationary log (Allan deviation, IEEE Std 952)";
+  }
+  bool Reads(Layout layout) const override { return layout == Layout::kArray; }
+  Status ValidateConfig(const json& config) const override {
+    core::NoiseOptions options;
+    InertialUnits units;
+    return ParseNoiseConfig(config, &options, &units);
+  }
+  Status Run(RecordingParser* parser, const json& config, const RunContext&,
+             json* result) const override {
+    core::NoiseOptions options;
+    InertialUnits units;
+    Status s = ParseNoiseConfig(config, &options, &units);
+    if (!s.ok()) return s;
+    ArrayRecording log;
+    s = parser->TakeArray(&log);
+    if (!s.ok()) return s;
+    s = CheckLogTimes(log, "noise");
+    if (!s.ok()) return s;
+    // The samples as floats in SI, one column per channel (the analysis reads them in place);
+    // the parser's doubles are released channel by channel group.
+    const Eigen::Index n = log.t.size();
+    const Eigen::Index na = log.accel.cols(), ng = log.gyro.cols();
+    Eigen::MatrixXf samples(n, na + ng);
+    samples.leftCols(na) = (log.accel * units.accel).cast<float>();
+    log.accel.resize(0, 0);
+    samples.rightCols(ng) = (log.gyro * units.gyro).cast<float>();
+    log.gyro.resize(0, 0);
+    core::NoiseProblem problem;
+    problem.samples = n;
+    problem.times = log.t.data();
+    static const char kAxes[] = {'x', 'y', 'z'};
+    for (Eigen::Index c = 0; c < na + ng; ++c) {
+      const bool accel = c < na;
+      const Eigen::Index triad = (accel ? c : c - na) / 3;
+      const std::string base = accel ? log.accel_names[triad] : log.gyro_names[triad];
+      problem.channels.push_back(
+          {base + "_" + kAxes[c % 3], accel ? "m/s^2" : "rad/s", samples.col(c).data()});
+    }
+    core::NoiseResult r;
+    s = core::EstimateNoise(problem, options, &r);
+    if (!s.ok()) return s;
+    *result = NoiseResultToJson(r, options.taus_per_decade);
+    (*result)["diagnostics"]["units"] = {{"accel_unit", units.accel_text},
+                                         {"gyro_unit", units.gyro_text}};
+    return Status::Ok();
+  }
+};
+
+}  // namespace
+
+json NoiseResultToJson(const core::NoiseResult& r, int taus_per_decade) {
+  json params = json::array(), stds = json::array(), allan = json::array(),
+       channels = json::array();
+  for (const core::NoiseChannelResult& c : r.channels) {
+    params.push_back({{"name", c.name},
+                      {"unit", c.unit},
+                      {"white_noise", Opt(c.white_noise.value)},
+                      {"bias_instability", Opt(c.bias_instability.value)},
+                      {"bias_instability_tau", Opt(c.bias_instability_tau)},
+                      {"random_walk", Opt(c.random_walk.value)}});
+    stds.push_back({{"name", c.name},
+                    {"white_noise_std", Opt(c.white_noise.std)},
+                    {"bias_instability_std", Opt(c.bias_instability.std)},
+                    {"random_walk_std", Opt(c.random_walk.std)}});
+    allan.push_back({{"name", c.name},
+                     {"tau", Nums(c.allan.tau)},
+                     {"adev", Nums(c.allan.adev)},
+                     {"adev_lower", Nums(c.allan.adev_lower)},
+                     {"adev_upper", Nums(c.allan.adev_upper)},
+                     {"fitted_adev", Nums(c.fitted_adev)}});
+    channels.push_back({{"name", c.name},
+                        {"status", core::NoiseChannelStatusName(c.status)},
+                        {"reason", c.reason},
+                        {"fit_points", c.fit_points},
+                        {"fit_chi2", Num(c.fit_chi2)},
+                        {"mean", Num(c.mean)}});
+  }
+  json warnings = json::array();
+  for (const std::string& w : r.warnings) warnings.push_back(w);
+  return {
+      {"method", "noise"},
+      {"model",
+       "per channel, the Allan variance sigma^2(tau) = N^2/tau + (0.664 B)^2 + K^2 tau/3 "
+       "(IEEE Std 952): N white noise density (unit/sqrt(Hz)), B bias instability (unit), K "
+       "random walk (unit/s/sqrt(Hz)); Kalibr's noise_density = N, random_walk = K"},
+      {"parameters", {{"channels", params}}},
+      {"uncertainty", {{"channels", stds}}},
+      {"diagnostics",
+       {{"rate", Num(r.rate)},
+        {"samples", r.samples},
+        {"duration", Num(r.duration)},
+        {"jitter", Num(r.jitter)},
+        {"stationary", r.stationary},
+        {"taus_per_decade", taus_per_decade},
+        {"confidence", r.channels.empty() ? json(nullptr) : Num(r.channels[0].allan.confidence)},
+        {"channels", channels},
+        {"allan", allan}}},
+      {"warnings", warnings}};
+}
+
+Status SimulateNoiseFiles(const NoiseSimulationFileOptions& o, std::string* csv, json* config,
+                          json* truth) {
+  core::NoiseSimulationOptions sim;
+  sim.rate = o.rate;
+  sim.duration = o.seconds;
+  sim.seed = o.seed;
+  static const char kAxes[] = {'x', 'y', 'z'};
+  json channels = json::array();
+  for (int c = 0; c < 6; ++c) {
+    core::NoiseSimulationChannel ch;
+    const bool accel = c < 3;
+    ch.name = std::string(accel ? "a0_" : "g0_") + kAxes[c % 3];
+    ch.unit = accel ? "m/s^2" : "rad/s";
+    ch.white_noise = accel ? o.accel_noise : o.gyro_noise;
+    ch.random_walk = accel ? o.accel_random_walk : o.gyro_random_walk;
+    ch.bias_instability = o.bias_instability * ch.white_noise;
+    ch.offset = c == 2 ? 9.80665 : 0;  // lying flat: gravity on z
+    sim.channels.push_back(ch);
+    channels.push_back({{"name", ch.name},
+                        {"unit", ch.unit},
+                        {"white_noise", ch.white_noise},
+                        {"random_walk", ch.random_walk},
+                        {"bias_instability", ch.bias_instability}});
+  }
+  std::string error;
+  if (!sim.IsValid(&error)) return Status::InvalidInput(error);
+  const core::NoiseSimulation log = core::SimulateNoise(sim);
+  csv->clear();
+  csv->reserve(static_cast<size_t>(log.samples.rows()) * 90);
+  *csv += "t,a0_x,a0_y,a0_z,g0_x,g0_y,g0_z\n";
+  char line[256];
+  for (Eigen::Index i = 0; i < log.samples.rows(); ++i) {
+    const auto& x = log.samples;
+    const int n = std::snprintf(line, sizeof line, "%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n",
+                                log.times[i], x(i, 0), x(i, 1), x(i, 2), x(i, 3), x(i, 4), x(i, 5));
+    csv->append(line, static_cast<size_t>(n));
+  }
+  *config = {{"method", "noise"}};
+  *truth = {{"method", "noise"},
+            {"rate", o.rate},
+            {"seconds", o.seconds},
+            {"seed", o.seed},
+            {"channels", channels}};
+  return Status::Ok();
+}
+
+const Method& NoiseMethod() {
+  static const Noise method;
+  return method;
+}
+
+}  // namespace calibd::server
