@@ -208,11 +208,12 @@ const char* BlockLmTerminationName(BlockLmTermination termination);
 
 struct BlockLmSummary {
   BlockLmTermination termination = BlockLmTermination::kNotRun;
-  int iterations = 0;            // LM iterations, accepted or not
-  int accepted_iterations = 0;   // of which the step was accepted
-  std::vector<double> cost;      // C at the start and after every iteration
-  double damping = 0;            // mu at the end
-  double gradient_max_norm = 0;  // max-norm of the gradient of C at the last linearisation
+  int iterations = 0;                    // LM iterations, accepted or not
+  int accepted_iterations = 0;           // of which the step was accepted
+  std::vector<double> cost;              // C at the start and after every iteration
+  double damping = 0;                    // mu at the end
+  double initial_gradient_max_norm = 0;  // max-norm of the gradient of C at the start
+  double gradient_max_norm = 0;          // the same at the last linearisation
 
   double initial_cost() const { return cost.empty() ? 0 : cost.front(); }
   double final_cost() const { return cost.empty() ? 0 : cost.back(); }
@@ -289,6 +290,7 @@ class BlockLm {
     double cost = lin.cost;
     summary.cost.push_back(cost);
     summary.gradient_max_norm = lin.gradient_max_norm;
+    summary.initial_gradient_max_norm = lin.gradient_max_norm;
     const double gradient0 = lin.gradient_max_norm;
     if (!std::isfinite(cost)) {
       summary.termination = BlockLmTermination::kNumericalFailure;
