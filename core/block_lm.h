@@ -142,9 +142,15 @@ Eigen::Matrix<double, B, 1> CholeskySolve(const Eigen::Matrix<double, B, B>& L,
   return b;
 }
 
-// L^-1 for H = L L^T (lower triangular).
+// L^-1 for H = L L^T (lower triangular). Inlined into the Schur pass (as a call it costs 5-8 %
+// of an array calibration).
+#if defined(__GNUC__)
+#define CALIBD_ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define CALIBD_ALWAYS_INLINE inline
+#endif
 template <int B>
-Eigen::Matrix<double, B, B> InverseCholeskyFactor(const Eigen::Matrix<double, B, B>& H) {
+CALIBD_ALWAYS_INLINE Eigen::Matrix<double, B, B> InverseCholeskyFactor(const Eigen::Matrix<double, B, B>& H) {
   const Eigen::Matrix<double, B, B> L = CholeskyFactor<B>(H);
   Eigen::Matrix<double, B, B> Li = Eigen::Matrix<double, B, B>::Zero();
   for (int j = 0; j < B; ++j) {
