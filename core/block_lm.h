@@ -150,7 +150,8 @@ Eigen::Matrix<double, B, 1> CholeskySolve(const Eigen::Matrix<double, B, B>& L,
 #define CALIBD_ALWAYS_INLINE inline
 #endif
 template <int B>
-CALIBD_ALWAYS_INLINE Eigen::Matrix<double, B, B> InverseCholeskyFactor(const Eigen::Matrix<double, B, B>& H) {
+CALIBD_ALWAYS_INLINE Eigen::Matrix<double, B, B> InverseCholeskyFactor(
+    const Eigen::Matrix<double, B, B>& H) {
   const Eigen::Matrix<double, B, B> L = CholeskyFactor<B>(H);
   Eigen::Matrix<double, B, B> Li = Eigen::Matrix<double, B, B>::Zero();
   for (int j = 0; j < B; ++j) {
@@ -429,17 +430,16 @@ class BlockLm {
       b.C.resize(B, q);
       Eigen::Matrix<double, B, Q> Z(B, q);
       for (int64_t n = begin; n < end; ++n) {
-        BlockVector g;
         if (evaluate) {
           problem_.Linearize(n, x.col(n), context, &b, &acc.sums);
           acc.cost += b.cost;
-          g = b.g;
-          if (!information) g_.col(n) = g;
-          acc.g_max = std::max(acc.g_max, g.cwiseAbs().maxCoeff());
+          if (!information) g_.col(n) = b.g;
+          acc.g_max = std::max(acc.g_max, b.g.cwiseAbs().maxCoeff());
         } else {
           problem_.BlockMatrices(n, x.col(n), context, &b);
-          g = g_.col(n);
+          b.g = g_.col(n);
         }
+        const BlockVector& g = b.g;
         if (mu > 0) b.H.diagonal() *= (1 + mu);
         // H = L L^T; with Z = L^-1 C and u = L^-1 g: C^T H^-1 C = Z^T Z, C^T H^-1 g = Z^T u.
         const BlockMatrix Linv = InverseCholeskyFactor<B>(b.H);
