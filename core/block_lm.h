@@ -278,7 +278,7 @@ class BlockLm {
   // Called after every accepted step with the iteration number and p; false stops the solver.
   using Callback = std::function<bool(int iteration, const SharedState& p)>;
 
-  // options must be valid (BlockLmOptions::IsValid).
+  // options must be valid (BlockLmOptions::IsValid). Keeps a reference to problem.
   BlockLm(const Problem& problem, const BlockLmOptions& options)
       : problem_(problem),
         options_(options),
@@ -559,7 +559,7 @@ class JacobianBlockProblem {
     Eigen::VectorXd g;
   };
 
-  explicit JacobianBlockProblem(const Functor& f) : f_(f) {}
+  explicit JacobianBlockProblem(const Functor& f) : f_(f) {}  // keeps a reference to f
 
   int64_t NumBlocks() const { return f_.NumBlocks(); }
   int SharedDim() const { return f_.SharedDim(); }
