@@ -1,7 +1,10 @@
 // Benchmarks of the array method (core/array.h) on the paper's Section IV set-up, K = 32 triads.
 //
-//   BM_ArrayJoint/N             joint LM + Schur complement, time to convergence (default
-//                               tolerance), RMSE vs truth, iterations, extra peak memory
+//   BM_ArrayJoint/N             joint LM + Schur complement (core/block_lm.h), time to
+//                               convergence (default tolerance), RMSE vs truth, iterations,
+//                               extra peak memory
+//   BM_ArrayJointOneThread/N    the same on one thread: CPU time of the calling thread, the
+//                               figure least disturbed by other load (before/after comparisons)
 //   BM_ArrayBcdToJointAccuracy/N  the paper's BCD, stopped (callback) when every coordinate is
 //                               within 0.1 sqrt(CRB) of the joint estimate: the same accuracy
 //   BM_ArrayBcdSweep/N          time of one BCD sweep (for N where running BCD to the joint's
@@ -13,6 +16,7 @@
 
 #include <cmath>
 #include <ctime>
+#include <limits>
 #include <map>
 
 #include "core/array.h"
@@ -73,6 +77,28 @@ void BM_ArrayJoint(benchmark::State& state) {
   state.counters["peak_rss_delta_MB"] = PeakRssMb() - rss_before;
 }
 
+double ThreadCpuSeconds() {
+  timespec t;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return t.tv_sec + 1e-9 * t.tv_nsec;
+}
+
+void BM_ArrayJointOneThread(benchmark::State& state) {
+  const ArraySimulation& sim = Simulation(state.range(0));
+  ArrayOptions o = Options();
+  o.threads = 1;
+  ArrayResult r;
+  double min_cpu = std::numeric_limits<double>::infinity();
+  for (auto _ : state) {
+    const double cpu0 = ThreadCpuSeconds();
+    calibd::core::CalibrateArray(sim.problem, o, &r);
+    min_cpu = std::min(min_cpu, ThreadCpuSeconds() - cpu0);
+  }
+  state.counters["min_cpu_ms"] = 1e3 * min_cpu;
+  state.counters["iterations"] = r.iterations;
+  state.counters["rmse_um"] = 1e6 * Rmse(r.positions, sim.true_positions);
+}
+
 void BM_ArrayBcdToJointAccuracy(benchmark::State& state) {
   const ArraySimulation& sim = Simulation(state.range(0));
   ArrayResult joint, r;
@@ -109,6 +135,11 @@ void BM_ArrayBcdSweep(benchmark::State& state) {
 
 BENCHMARK(BM_ArrayJoint)
     ->Arg(1000)
+    ->Arg(10000)
+    ->Arg(100000)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK(BM_ArrayJointOneThread)
     ->Arg(10000)
     ->Arg(100000)
     ->Unit(benchmark::kMillisecond)

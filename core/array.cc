@@ -6,11 +6,12 @@
 #include <Eigen/LU>
 #include <Eigen/SVD>
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <thread>
+
+#include "core/block_lm.h"
 
 namespace calibd::core {
 namespace {
@@ -45,35 +46,6 @@ void CentripetalJacobians(const Vec3& omega, Mat3 F[3]) {
     F[i].col(i) += omega;
     F[i].row(i) -= 2 * omega.transpose();
   }
-}
-
-// ----- Threads: fixed chunks of samples, results reduced in chunk order (bit-identical results
-// for any thread count).
-constexpr int64_t kChunk = 256;
-
-int64_t NumChunks(int64_t n) { return (n + kChunk - 1) / kChunk; }
-
-template <class Fn>
-void ForEachChunk(int64_t n, int threads, Fn&& fn) {
-  const int64_t chunks = NumChunks(n);
-  const int workers = static_cast<int>(std::min<int64_t>(threads, chunks));
-  if (workers <= 1) {
-    for (int64_t c = 0; c < chunks; ++c) fn(c, c * kChunk, std::min(n, (c + 1) * kChunk));
-    return;
-  }
-  std::atomic<int64_t> next{0};
-  auto work = [&]() {
-    for (;;) {
-      const int64_t c = next.fetch_add(1);
-      if (c >= chunks) return;
-      fn(c, c * kChunk, std::min(n, (c + 1) * kChunk));
-    }
-  };
-  std::vector<std::thread> pool;
-  pool.reserve(workers - 1);
-  for (int i = 1; i < workers; ++i) pool.emplace_back(work);
-  work();
-  for (auto& t : pool) t.join();
 }
 
 // ----- The usable samples, laid out per sample.
@@ -194,15 +166,17 @@ struct Weights {
   double wg = 0;  // 1 / sigma_g^2
 };
 
+using MotionStates = Eigen::Matrix<double, 9, Eigen::Dynamic>;  // column n: (omega, omega_dot, s)
+
 // Motion step for every sample (x: 9 x N in/out, omega rows used as starting point), plus the
 // sums needed by the closed-form position update of Eq. (9). Returns false if the geometry
 // cannot carry the motion estimator (collinear).
-bool MotionPass(const Data& d, const Eigen::Matrix3Xd& r, const Weights& wt, int threads,
-                int max_gn, Eigen::Matrix<double, 9, Eigen::Dynamic>* x, MotionSums* total) {
+bool MotionPass(const Data& d, const Eigen::Matrix3Xd& r, const Weights& wt,
+                const ChunkRunner& runner, int max_gn, MotionStates* x, MotionSums* total) {
   const MotionModel model(r);
   if (!model.ok) return false;
-  std::vector<MotionSums> sums(NumChunks(d.N));
-  ForEachChunk(d.N, threads, [&](int64_t c, int64_t begin, int64_t end) {
+  std::vector<MotionSums> sums(runner.NumChunks(d.N));
+  runner.ForEachChunk(d.N, [&](int64_t c, int64_t begin, int64_t end) {
     MotionSums& acc = sums[c];
     acc.AtY = Eigen::Matrix3Xd::Zero(3, d.K);
     Eigen::Matrix3Xd z(3, d.K);
@@ -229,249 +203,185 @@ bool MotionPass(const Data& d, const Eigen::Matrix3Xd& r, const Weights& wt, int
   return true;
 }
 
-// ----- Joint Gauss-Newton / Levenberg-Marquardt with Schur complement.
+// ----- The joint ML problem for the block solver (core/block_lm.h): one 9-dimensional block
+// x_n = (omega, omega_dot, s) per sample, shared parameters the positions of the free triads.
 //
-// Per sample the Jacobian of triad k's prediction s + A r_k with respect to x = (omega,
-// omega_dot, s) is J_k = sum_a c_ka E_a with c_k = (1, r_k) and E_0 = [0 0 I],
-// E_i = [F_i -[e_i]x 0]. Hence
+// Per sample the Jacobian of triad k's prediction s + A r_k with respect to x_n is
+// J_k = sum_a c_ka E_a with c_k = (1, r_k) and E_0 = [0 0 I], E_i = [F_i -[e_i]x 0]. Hence
 //   H_xx = sum_k J_k^T J_k / sa^2 + G/sg^2 (omega block) = E^T (R (x) I3) E / sa^2 + ...,
 //   R = sum_k c_k c_k^T (4x4, constant over samples),
 //   H_x r_k = sum_a c_ka P_a / sa^2 with P_a = E_a^T A_n,
-// and the reduced matrix S_kl = delta_kl H_rr - sum_ab c_ka c_lb T_ab / sa^4 with
-// T = sum_n P^T H_xx^-1 P (12x12): one 12x12 sum per sample, whatever K.
-struct JointGeometry {
-  Eigen::Matrix<double, 4, Eigen::Dynamic> c;  // 4 x K: (1, r_k)
-  Mat4 Lt = Mat4::Zero();                      // R = Lt^T Lt
-};
+// i.e. H_x,r = (1/sa^2) P_n Mf in the block solver's compressed form: C_n = P_n (9 x 12), lift
+// Mf (12 x 3(K-1), block (a, j) = c_{a,k_j} I3), weight 1/sa^2. The reduced matrix then needs
+// one 12x12 sum per sample, whatever K. H_rr is block diagonal, sum_n A_n^T A_n / sa^2 for
+// every free triad.
+class PositionsProblem {
+ public:
+  static constexpr int kBlockDim = 9;
+  static constexpr int kBlockStateDim = 9;
+  static constexpr int kCouplingDim = 12;
+  using SharedState = Eigen::Matrix3Xd;  // 3 x K, all positions (the reference stays fixed)
+  using Normal = BlockNormal<9, 12>;
+  struct Context {
+    Eigen::Matrix3Xd r;                          // positions
+    Eigen::Matrix<double, 4, Eigen::Dynamic> c;  // 4 x K: (1, r_k)
+    Mat4 Lt = Mat4::Zero();                      // R = Lt^T Lt
+  };
+  struct Sums {
+    Mat3 AtA = Mat3::Zero();
+    Eigen::Matrix3Xd br;          // 3 x K: sum_n A_n^T e_n,k
+    double ssr_a = 0, ssr_g = 0;  // unweighted residual sums of squares
+    double lev_g = 0;             // gyro leverage sum_n tr(H^-1 of omega) G / sg^2 (Factored)
+  };
 
-JointGeometry MakeJointGeometry(const Eigen::Matrix3Xd& r) {
-  JointGeometry g;
-  const int K = r.cols();
-  g.c.resize(4, K);
-  g.c.row(0).setOnes();
-  g.c.bottomRows(3) = r;
-  const Mat4 R = g.c * g.c.transpose();
-  Eigen::SelfAdjointEigenSolver<Mat4> es(R);
-  const Eigen::Vector4d sq = es.eigenvalues().cwiseMax(0).cwiseSqrt();
-  g.Lt = sq.asDiagonal() * es.eigenvectors().transpose();  // Lt^T Lt = V L V^T = R
-  return g;
-}
+  PositionsProblem(const Data& d, const Weights& wt, const std::vector<int>& free)
+      : d_(d), wt_(wt), wgG_(wt.wg * d.G), free_(free) {}
 
-// L^-1 of the Cholesky factor H = L L^T of a symmetric positive definite 9x9 matrix (fixed-size
-// loops: Eigen's general solvers cost more than the arithmetic at this size). A non-positive
-// pivot (H not positive definite: cannot happen with >= 3 non-collinear triads and a gyroscope)
-// gives NaN, which the callers' finiteness checks catch.
-Mat9 CholeskyFactor(const Mat9& H) {
-  Mat9 L = Mat9::Zero();
-  for (int j = 0; j < 9; ++j) {
-    double d = H(j, j);
-    for (int k = 0; k < j; ++k) d -= L(j, k) * L(j, k);
-    const double ljj = std::sqrt(d);  // NaN when d < 0
-    L(j, j) = ljj;
-    for (int i = j + 1; i < 9; ++i) {
-      double v = H(i, j);
-      for (int k = 0; k < j; ++k) v -= L(i, k) * L(j, k);
-      L(i, j) = v / ljj;
+  int64_t NumBlocks() const { return d_.N; }
+  int SharedDim() const { return 3 * static_cast<int>(free_.size()); }
+  int CouplingDim() const { return 12; }
+
+  Context MakeContext(const Eigen::Matrix3Xd& r) const {
+    Context g;
+    const int K = r.cols();
+    g.r = r;
+    g.c.resize(4, K);
+    g.c.row(0).setOnes();
+    g.c.bottomRows(3) = r;
+    const Mat4 R = g.c * g.c.transpose();
+    Eigen::SelfAdjointEigenSolver<Mat4> es(R);
+    const Eigen::Vector4d sq = es.eigenvalues().cwiseMax(0).cwiseSqrt();
+    g.Lt = sq.asDiagonal() * es.eigenvectors().transpose();  // Lt^T Lt = V L V^T = R
+    return g;
+  }
+
+  Sums MakeSums() const {
+    Sums s;
+    s.br = Eigen::Matrix3Xd::Zero(3, d_.K);
+    return s;
+  }
+
+  void Merge(const Sums& from, Sums* into) const {
+    into->AtA += from.AtA;
+    into->br += from.br;
+    into->ssr_a += from.ssr_a;
+    into->ssr_g += from.ssr_g;
+    into->lev_g += from.lev_g;
+  }
+
+  void Linearize(int64_t n, const Vec9& x, const Context& ctx, Normal* out, Sums* sums) const {
+    Mat3 A, F[3];
+    Blocks(x, ctx, &A, F, out);
+    const Vec3 w = x.head<3>(), s = x.tail<3>();
+    const ConstMap3X Y(d_.ya.col(n).data(), 3, d_.K);
+    // Residuals e_k = y_k - s - A r_k; f = sum_k e_k c_k^T; br_k += A^T e_k.
+    double ssr_a = 0;
+    Eigen::Matrix<double, 3, 4> f = Eigen::Matrix<double, 3, 4>::Zero();
+    const Mat3 At = A.transpose();
+    for (int k = 0; k < d_.K; ++k) {
+      const Vec3 rk = ctx.r.col(k);
+      const Vec3 ek = Y.col(k) - s - A.lazyProduct(rk);
+      ssr_a += ek.squaredNorm();
+      f.col(0) += ek;
+      f.col(1) += rk(0) * ek;
+      f.col(2) += rk(1) * ek;
+      f.col(3) += rk(2) * ek;
+      sums->br.col(k).noalias() += At.lazyProduct(ek);
+    }
+    const Vec3 eg = d_.gbar.col(n) - w;
+    const double ssr_g = d_.G * eg.squaredNorm() + d_.gscatter(n);
+    out->cost = wt_.wa * ssr_a + wt_.wg * ssr_g;
+    Vec9& g = out->g;
+    g.head<3>() =
+        F[0].transpose() * f.col(1) + F[1].transpose() * f.col(2) + F[2].transpose() * f.col(3);
+    g.segment<3>(3) = Vec3::UnitX().cross(f.col(1)) + Vec3::UnitY().cross(f.col(2)) +
+                      Vec3::UnitZ().cross(f.col(3));
+    g.tail<3>() = f.col(0);
+    g *= wt_.wa;
+    g.head<3>() += wgG_ * eg;
+    sums->AtA.noalias() += At.lazyProduct(A);
+    sums->ssr_a += ssr_a;
+    sums->ssr_g += ssr_g;
+  }
+
+  void BlockMatrices(int64_t, const Vec9& x, const Context& ctx, Normal* out) const {
+    Mat3 A, F[3];
+    Blocks(x, ctx, &A, F, out);
+  }
+
+  double Cost(int64_t n, const Vec9& x, const Context& ctx) const {
+    const Vec3 w = x.head<3>(), s = x.tail<3>();
+    const Mat3 A = MatrixA(w, x.segment<3>(3));
+    const ConstMap3X Y(d_.ya.col(n).data(), 3, d_.K);
+    double ssr_a = 0;
+    for (int k = 0; k < d_.K; ++k) {
+      const Vec3 rk = ctx.r.col(k);
+      ssr_a += (Y.col(k) - s - A.lazyProduct(rk)).squaredNorm();
+    }
+    return wt_.wa * ssr_a + wt_.wg * (d_.G * (d_.gbar.col(n) - w).squaredNorm() + d_.gscatter(n));
+  }
+
+  // tr([H^-1]_omega,omega) = squared norm of the first 3 columns of L^-1.
+  void Factored(int64_t, const Mat9& L_inverse, Sums* sums) const {
+    sums->lev_g += wgG_ * L_inverse.leftCols<3>().squaredNorm();
+  }
+
+  void AssembleShared(const Sums& sums, const Context& ctx, SharedNormal* out) const {
+    const int m = static_cast<int>(free_.size());
+    out->lift = Eigen::MatrixXd::Zero(12, 3 * m);
+    for (int j = 0; j < m; ++j)
+      for (int a = 0; a < 4; ++a)
+        out->lift.block<3, 3>(3 * a, 3 * j) = ctx.c(a, free_[j]) * Mat3::Identity();
+    out->coupling_weight = wt_.wa;
+    const Mat3 Hrr = wt_.wa * sums.AtA;
+    out->H = Eigen::MatrixXd::Zero(3 * m, 3 * m);
+    out->g.resize(3 * m);
+    for (int j = 0; j < m; ++j) {
+      out->H.block<3, 3>(3 * j, 3 * j) = Hrr;
+      out->g.segment<3>(3 * j) = wt_.wa * sums.br.col(free_[j]);
     }
   }
-  return L;
-}
 
-// H^-1 b by forward and back substitution with the Cholesky factor L.
-Vec9 CholeskySolve(const Mat9& L, Vec9 b) {
-  for (int i = 0; i < 9; ++i) {
-    for (int k = 0; k < i; ++k) b(i) -= L(i, k) * b(k);
-    b(i) /= L(i, i);
-  }
-  for (int i = 8; i >= 0; --i) {
-    for (int k = i + 1; k < 9; ++k) b(i) -= L(k, i) * b(k);
-    b(i) /= L(i, i);
-  }
-  return b;
-}
+  Vec9 PlusBlock(const Vec9& x, const Vec9& dx) const { return x + dx; }
 
-Mat9 InverseCholeskyFactor(const Mat9& H) {
-  const Mat9 L = CholeskyFactor(H);
-  Mat9 Li = Mat9::Zero();
-  for (int j = 0; j < 9; ++j) {
-    Li(j, j) = 1 / L(j, j);
-    for (int i = j + 1; i < 9; ++i) {
-      double v = 0;
-      for (int k = j; k < i; ++k) v -= L(i, k) * Li(k, j);
-      Li(i, j) = v / L(i, i);
+  Eigen::Matrix3Xd PlusShared(const Eigen::Matrix3Xd& r, const Eigen::VectorXd& dr) const {
+    Eigen::Matrix3Xd out = r;
+    for (size_t j = 0; j < free_.size(); ++j) out.col(free_[j]) += dr.segment<3>(3 * j);
+    return out;
+  }
+
+  double SharedMaxNorm(const Eigen::Matrix3Xd& r) const { return r.cwiseAbs().maxCoeff(); }
+
+ private:
+  // A_n, the F_i, H_xx (undamped) and P_n (into out->C) at x.
+  void Blocks(const Vec9& x, const Context& ctx, Mat3* A, Mat3 F[3], Normal* out) const {
+    const Vec3 w = x.head<3>(), wd = x.segment<3>(3);
+    *A = MatrixA(w, wd);
+    CentripetalJacobians(w, F);
+    Mat12x9 E = Mat12x9::Zero();
+    E.block<3, 3>(0, 6).setIdentity();
+    for (int i = 0; i < 3; ++i) {
+      E.block<3, 3>(3 + 3 * i, 0) = F[i];
+      E.block<3, 3>(3 + 3 * i, 3) = -Skew(Vec3::Unit(i));
     }
-  }
-  return Li;
-}
-
-struct SampleBlocks {
-  Mat3 A;
-  Mat3 F[3];
-  Mat9 H;
-  Mat9x12 P;
-};
-
-void BuildBlocks(const Vec3& w, const Vec3& wd, const Mat4& Lt, double wa, double wgG, double mu,
-                 SampleBlocks* b) {
-  b->A = MatrixA(w, wd);
-  CentripetalJacobians(w, b->F);
-  Mat12x9 E = Mat12x9::Zero();
-  E.block<3, 3>(0, 6).setIdentity();
-  for (int i = 0; i < 3; ++i) {
-    E.block<3, 3>(3 + 3 * i, 0) = b->F[i];
-    E.block<3, 3>(3 + 3 * i, 3) = -Skew(Vec3::Unit(i));
-  }
-  Mat12x9 Et;
-  for (int a = 0; a < 4; ++a) {
-    Et.block<3, 9>(3 * a, 0) = Lt(a, 0) * E.block<3, 9>(0, 0);
-    for (int bb = 1; bb < 4; ++bb) Et.block<3, 9>(3 * a, 0) += Lt(a, bb) * E.block<3, 9>(3 * bb, 0);
-  }
-  b->H.noalias() = wa * Et.transpose().lazyProduct(Et);
-  b->H.topLeftCorner<3, 3>().diagonal().array() += wgG;
-  if (mu > 0) b->H.diagonal() *= (1 + mu);
-  for (int a = 0; a < 4; ++a)
-    b->P.block<9, 3>(0, 3 * a).noalias() = E.block<3, 9>(3 * a, 0).transpose().lazyProduct(b->A);
-}
-
-struct LinearSums {
-  Mat12 T = Mat12::Zero();
-  Vec12 t = Vec12::Zero();
-  Mat3 AtA = Mat3::Zero();
-  Eigen::Matrix3Xd br;  // 3 x K: sum_n A^T e_k
-  double cost = 0;
-  double ssr_a = 0, ssr_g = 0, lev_g = 0;
-};
-
-// Linearises at (r, x); stores b_x per sample in *bx; returns the sums. With `diagnostics`, also
-// the unweighted residual sums and the gyro leverage (for noise estimates).
-void LinearizePass(const Data& d, const Eigen::Matrix3Xd& r, const JointGeometry& geo,
-                   const Eigen::Matrix<double, 9, Eigen::Dynamic>& x, const Weights& wt, double mu,
-                   bool diagnostics, int threads, Eigen::Matrix<double, 9, Eigen::Dynamic>* bx,
-                   LinearSums* total) {
-  std::vector<LinearSums> sums(NumChunks(d.N));
-  const double wgG = wt.wg * d.G;
-  ForEachChunk(d.N, threads, [&](int64_t c, int64_t begin, int64_t end) {
-    LinearSums& acc = sums[c];
-    acc.br = Eigen::Matrix3Xd::Zero(3, d.K);
-    SampleBlocks b;
-    for (int64_t n = begin; n < end; ++n) {
-      const Vec3 w = x.col(n).head<3>(), wd = x.col(n).segment<3>(3), s = x.col(n).tail<3>();
-      BuildBlocks(w, wd, geo.Lt, wt.wa, wgG, mu, &b);
-      const ConstMap3X Y(d.ya.col(n).data(), 3, d.K);
-      // Residuals e_k = y_k - s - A r_k; f = sum_k e_k c_k^T; br_k += A^T e_k.
-      double ssr_a = 0;
-      Eigen::Matrix<double, 3, 4> f = Eigen::Matrix<double, 3, 4>::Zero();
-      const Mat3 At = b.A.transpose();
-      for (int k = 0; k < d.K; ++k) {
-        const Vec3 rk = r.col(k);
-        const Vec3 ek = Y.col(k) - s - b.A.lazyProduct(rk);
-        ssr_a += ek.squaredNorm();
-        f.col(0) += ek;
-        f.col(1) += rk(0) * ek;
-        f.col(2) += rk(1) * ek;
-        f.col(3) += rk(2) * ek;
-        acc.br.col(k).noalias() += At.lazyProduct(ek);
-      }
-      const Vec3 eg = d.gbar.col(n) - w;
-      const double ssr_g = d.G * eg.squaredNorm() + d.gscatter(n);
-      acc.cost += wt.wa * ssr_a + wt.wg * ssr_g;
-      Vec9 g;
-      g.head<3>() = b.F[0].transpose() * f.col(1) + b.F[1].transpose() * f.col(2) +
-                    b.F[2].transpose() * f.col(3);
-      g.segment<3>(3) = Vec3::UnitX().cross(f.col(1)) + Vec3::UnitY().cross(f.col(2)) +
-                        Vec3::UnitZ().cross(f.col(3));
-      g.tail<3>() = f.col(0);
-      g *= wt.wa;
-      g.head<3>() += wgG * eg;
-      bx->col(n) = g;
-      // H = L L^T; with Z = L^-1 P and u = L^-1 g: P^T H^-1 P = Z^T Z, P^T H^-1 g = Z^T u.
-      const Mat9 Linv = InverseCholeskyFactor(b.H);
-      const Mat9x12 Z = Linv.lazyProduct(b.P);
-      const Vec9 u = Linv.lazyProduct(g);
-      acc.T.noalias() += Z.transpose().lazyProduct(Z);
-      acc.t.noalias() += Z.transpose().lazyProduct(u);
-      acc.AtA.noalias() += At.lazyProduct(b.A);
-      if (diagnostics) {
-        acc.ssr_a += ssr_a;
-        acc.ssr_g += ssr_g;
-        // tr([H^-1]_omega,omega) = squared norm of the first 3 columns of L^-1.
-        acc.lev_g += wgG * Linv.leftCols<3>().squaredNorm();
-      }
+    const Mat4& Lt = ctx.Lt;
+    Mat12x9 Et;
+    for (int a = 0; a < 4; ++a) {
+      Et.block<3, 9>(3 * a, 0) = Lt(a, 0) * E.block<3, 9>(0, 0);
+      for (int bb = 1; bb < 4; ++bb)
+        Et.block<3, 9>(3 * a, 0) += Lt(a, bb) * E.block<3, 9>(3 * bb, 0);
     }
-  });
-  *total = LinearSums();
-  total->br = Eigen::Matrix3Xd::Zero(3, d.K);
-  for (const auto& s : sums) {
-    total->T += s.T;
-    total->t += s.t;
-    total->AtA += s.AtA;
-    total->br += s.br;
-    total->cost += s.cost;
-    total->ssr_a += s.ssr_a;
-    total->ssr_g += s.ssr_g;
-    total->lev_g += s.lev_g;
-  }
-}
-
-// Back-substitution and cost at the trial point (r + dr, x + dx).
-double StepPass(const Data& d, const Eigen::Matrix3Xd& r_trial, const JointGeometry& geo,
-                const Eigen::Matrix<double, 9, Eigen::Dynamic>& x,
-                const Eigen::Matrix<double, 9, Eigen::Dynamic>& bx, const Vec12& dpos,
-                const Weights& wt, double mu, int threads,
-                Eigen::Matrix<double, 9, Eigen::Dynamic>* x_trial) {
-  std::vector<double> sums(NumChunks(d.N), 0.0);
-  const double wgG = wt.wg * d.G;
-  ForEachChunk(d.N, threads, [&](int64_t c, int64_t begin, int64_t end) {
-    SampleBlocks b;
-    double cost = 0;
-    for (int64_t n = begin; n < end; ++n) {
-      BuildBlocks(x.col(n).head<3>(), x.col(n).segment<3>(3), geo.Lt, wt.wa, wgG, mu, &b);
-      const Vec9 rhs = bx.col(n) - wt.wa * b.P.lazyProduct(dpos);
-      const Vec9 xn = x.col(n) + CholeskySolve(CholeskyFactor(b.H), rhs);
-      x_trial->col(n) = xn;
-      const Vec3 w = xn.head<3>(), s = xn.tail<3>();
-      const Mat3 A = MatrixA(w, xn.segment<3>(3));
-      const ConstMap3X Y(d.ya.col(n).data(), 3, d.K);
-      double ssr_a = 0;
-      for (int k = 0; k < d.K; ++k) {
-        const Vec3 rk = r_trial.col(k);
-        ssr_a += (Y.col(k) - s - A.lazyProduct(rk)).squaredNorm();
-      }
-      cost += wt.wa * ssr_a + wt.wg * (d.G * (d.gbar.col(n) - w).squaredNorm() + d.gscatter(n));
-    }
-    sums[c] = cost;
-  });
-  double total = 0;
-  for (double s : sums) total += s;
-  return total;
-}
-
-// The reduced system over the free triads (all but the reference).
-struct Reduced {
-  Eigen::MatrixXd S;
-  Eigen::VectorXd g;
-  Eigen::MatrixXd Mf;  // 12 x 3(K-1): block (a, j) = c_{a,k_j} I3
-};
-
-Reduced BuildReduced(const LinearSums& L, const JointGeometry& geo, const std::vector<int>& free,
-                     const Weights& wt, double mu) {
-  const int m = static_cast<int>(free.size());
-  Reduced red;
-  red.Mf = Eigen::MatrixXd::Zero(12, 3 * m);
-  for (int j = 0; j < m; ++j)
+    out->H.noalias() = wt_.wa * Et.transpose().lazyProduct(Et);
+    out->H.topLeftCorner<3, 3>().diagonal().array() += wgG_;
     for (int a = 0; a < 4; ++a)
-      red.Mf.block<3, 3>(3 * a, 3 * j) = geo.c(a, free[j]) * Mat3::Identity();
-  Mat3 Hrr = wt.wa * L.AtA;
-  if (mu > 0) Hrr.diagonal() *= (1 + mu);
-  red.S = -(wt.wa * wt.wa) * (red.Mf.transpose() * L.T * red.Mf);
-  red.g = -wt.wa * (red.Mf.transpose() * L.t);
-  for (int j = 0; j < m; ++j) {
-    red.S.block<3, 3>(3 * j, 3 * j) += Hrr;
-    red.g.segment<3>(3 * j) += wt.wa * L.br.col(free[j]);
+      out->C.block<9, 3>(0, 3 * a).noalias() = E.block<3, 9>(3 * a, 0).transpose().lazyProduct(*A);
   }
-  red.S = 0.5 * (red.S + red.S.transpose());
-  return red;
-}
+
+  const Data& d_;
+  Weights wt_;
+  double wgG_;
+  std::vector<int> free_;
+};
 
 // ----- Helpers for the result.
 std::string Format(const char* fmt, double a) {
@@ -528,6 +438,299 @@ Status InsufficientExcitation(const ArrayExcitation& ex) {
       std::string(kRecordAdvice) + ".");
 }
 
+// ----- The steps of CalibrateArray.
+
+Status NotDeterminable(const std::string& why, ArrayResult* result) {
+  result->usable = false;
+  result->reason = why;
+  return Status::NotDeterminable(why);
+}
+
+// Shapes and values of the input; records the reference, G and the triad names.
+Status ValidateInput(const ArrayProblem& problem, const ArrayOptions& options,
+                     ArrayResult* result) {
+  std::string error;
+  if (!options.IsValid(&error)) return Status::InvalidInput(error);
+  const int K = static_cast<int>(problem.nominal_positions.cols());
+  const int64_t N = problem.accel.rows();
+  if (problem.accel.cols() != 3 * K)
+    return Status::InvalidInput("accel has " + std::to_string(problem.accel.cols()) +
+                                " columns; 3 per triad of the geometry's " + std::to_string(K) +
+                                " positions means " + std::to_string(3 * K));
+  if (problem.gyro.cols() % 3 != 0)
+    return Status::InvalidInput("gyro has " + std::to_string(problem.gyro.cols()) +
+                                " columns, not a multiple of 3");
+  const int G = static_cast<int>(problem.gyro.cols() / 3);
+  if (G > 0 && problem.gyro.rows() != N)
+    return Status::InvalidInput("gyro has " + std::to_string(problem.gyro.rows()) +
+                                " rows but accel has " + std::to_string(N));
+  if (!problem.accel_names.empty() && static_cast<int>(problem.accel_names.size()) != K)
+    return Status::InvalidInput("accel_names has " + std::to_string(problem.accel_names.size()) +
+                                " names for " + std::to_string(K) + " triads");
+  if (K > 0 && (problem.reference < 0 || problem.reference >= K))
+    return Status::InvalidInput("reference " + std::to_string(problem.reference) +
+                                " is not a triad index in [0, " + std::to_string(K) + ")");
+  if (!problem.nominal_positions.allFinite())
+    return Status::InvalidInput("nominal positions contain NaN or Inf");
+  if (!problem.accel.allFinite()) return Status::InvalidInput("accel contains NaN or Inf");
+  if (!problem.gyro.allFinite()) return Status::InvalidInput("gyro contains NaN or Inf");
+
+  result->reference = problem.reference;
+  result->gyro_triads = G;
+  for (int k = 0; k < K; ++k)
+    result->names.push_back(problem.accel_names.empty() ? "a" + std::to_string(k)
+                                                        : problem.accel_names[k]);
+  return Status::Ok();
+}
+
+// Structural determinability: a gyroscope, at least 3 triads, not on one line.
+Status CheckGeometry(const ArrayProblem& problem, int G, ArrayResult* result) {
+  const int K = static_cast<int>(problem.nominal_positions.cols());
+  if (G == 0)
+    return NotDeterminable(
+        "no gyroscope triad: the array's angular velocity cannot be separated from the positions; "
+        "record with at least one gyroscope triad (columns g0_x, g0_y, g0_z)",
+        result);
+  if (K < 3)
+    return NotDeterminable("only " + std::to_string(K) +
+                               " accelerometer triad(s): at least 3 triads that are not on one "
+                               "line are needed to determine the motion",
+                           result);
+  const MotionModel model(problem.nominal_positions);
+  Eigen::SelfAdjointEigenSolver<Mat3> es(model.r_tilde * model.r_tilde.transpose());
+  const Eigen::Vector3d ev = es.eigenvalues();
+  if (!model.ok || ev(1) <= 1e-12 * ev(2))
+    return NotDeterminable(
+        "the accelerometer triads' nominal positions lie on one line: the angular acceleration "
+        "about that line cannot be determined; mount at least 3 triads that span a plane",
+        result);
+  return Status::Ok();
+}
+
+// The samples without gyroscope saturation, laid out per sample (Data), with the gyroscope
+// mean and scatter; at least 3 are needed.
+Status CollectSamples(const ArrayProblem& problem, const ArrayOptions& options, Data* d,
+                      ArrayResult* result) {
+  const int K = static_cast<int>(problem.nominal_positions.cols());
+  const int G = static_cast<int>(problem.gyro.cols() / 3);
+  const int64_t N_in = problem.accel.rows();
+  d->K = K;
+  d->G = G;
+  std::vector<int64_t> keep;
+  keep.reserve(N_in);
+  for (int64_t n = 0; n < N_in; ++n) {
+    if (options.gyro_saturation &&
+        problem.gyro.row(n).cwiseAbs().maxCoeff() >= *options.gyro_saturation)
+      continue;
+    keep.push_back(n);
+  }
+  d->N = static_cast<int64_t>(keep.size());
+  result->samples = d->N;
+  result->samples_dropped = N_in - d->N;
+  if (d->N < 3) {
+    std::string why = "only " + std::to_string(d->N) + " usable sample(s)";
+    if (result->samples_dropped > 0)
+      why += " (" + std::to_string(result->samples_dropped) +
+             " dropped because a gyroscope reached gyro_saturation)";
+    return NotDeterminable(
+        why + "; at least 3 are needed: " + kRecordAdvice +
+            (result->samples_dropped > 0 ? ", turning below the gyroscopes' range" : ""),
+        result);
+  }
+  d->ya.resize(3 * K, d->N);
+  d->gbar.resize(3, d->N);
+  d->gscatter.resize(d->N);
+  for (int64_t i = 0; i < d->N; ++i) {
+    const int64_t n = keep[i];
+    d->ya.col(i) = problem.accel.row(n).transpose();
+    Vec3 mean = Vec3::Zero();
+    for (int j = 0; j < G; ++j) mean += problem.gyro.row(n).segment<3>(3 * j).transpose();
+    mean /= G;
+    double scatter = 0;
+    for (int j = 0; j < G; ++j)
+      scatter += (problem.gyro.row(n).segment<3>(3 * j).transpose() - mean).squaredNorm();
+    d->gbar.col(i) = mean;
+    d->gscatter(i) = scatter;
+  }
+  return Status::Ok();
+}
+
+// What the iterations of either solver produced.
+struct SolverRun {
+  ArrayTermination termination = ArrayTermination::kMaxIterations;
+  int iterations = 0;
+};
+
+// The paper's Algorithm 1: position update (Eq. 9) from the current motion, then the motion step
+// (5) at the new positions; the profile cost is recorded after every sweep. ms: the sums of the
+// motion pass at the start.
+SolverRun RunBcd(const Data& d, const ArrayOptions& options, const ChunkRunner& runner,
+                 const Weights& wt, int max_iterations, const std::vector<int>& free,
+                 Eigen::Matrix3Xd* r, MotionStates* x, MotionSums* ms, ArrayResult* result) {
+  SolverRun run;
+  const double tol = options.tolerance;
+  for (run.iterations = 1; run.iterations <= max_iterations; ++run.iterations) {
+    const Eigen::LDLT<Mat3> C(ms->AtA);
+    for (int k : free) r->col(k) = C.solve(ms->AtY.col(k));
+    const double previous = ms->cost;
+    MotionPass(d, *r, wt, runner, 50, x, ms);
+    result->cost.push_back(ms->cost);
+    if (options.callback && !options.callback(run.iterations, *r)) {
+      run.termination = ArrayTermination::kUserStopped;
+      break;
+    }
+    if (tol > 0 && previous - ms->cost <= tol * ms->cost) {
+      run.termination = ArrayTermination::kConvergence;
+      break;
+    }
+  }
+  run.iterations = std::min(run.iterations, max_iterations);
+  return run;
+}
+
+BlockLmOptions JointSolverOptions(const ArrayOptions& options, int max_iterations, int threads) {
+  BlockLmOptions o;
+  o.max_iterations = max_iterations;
+  o.cost_tolerance = options.tolerance;
+  o.step_tolerance = options.tolerance;
+  o.gradient_tolerance = 0;
+  o.initial_damping = 1e-8;
+  o.min_damping = 1e-15;
+  o.max_damping = 1e10;
+  o.threads = threads;
+  o.executor = options.executor;
+  return o;
+}
+
+// Joint Levenberg-Marquardt over motion and positions (core/block_lm.h). result->cost gets the
+// cost of every iteration after the first entry (already there).
+SolverRun RunJoint(const PositionsProblem& joint, const BlockLmOptions& lm_options,
+                   const ArrayOptions& options, Eigen::Matrix3Xd* r, MotionStates* x,
+                   ArrayResult* result) {
+  BlockLm<PositionsProblem> solver(joint, lm_options);
+  const BlockLmSummary summary = solver.Solve(x, r, options.callback);
+  result->cost.insert(result->cost.end(), summary.cost.begin() + 1, summary.cost.end());
+  SolverRun run;
+  run.iterations = summary.iterations;
+  switch (summary.termination) {
+    case BlockLmTermination::kCostTolerance:
+    case BlockLmTermination::kStepTolerance:
+    case BlockLmTermination::kGradientTolerance:
+      run.termination = ArrayTermination::kConvergence;
+      break;
+    case BlockLmTermination::kNoProgress:
+      run.termination = ArrayTermination::kNoProgress;
+      break;
+    case BlockLmTermination::kUserStopped:
+      run.termination = ArrayTermination::kUserStopped;
+      break;
+    case BlockLmTermination::kNumericalFailure:
+      run.termination = ArrayTermination::kNumericalFailure;
+      break;
+    case BlockLmTermination::kNotRun:
+    case BlockLmTermination::kMaxIterations:
+      run.termination = ArrayTermination::kMaxIterations;
+      break;
+  }
+  return run;
+}
+
+// Everything the result reports at the estimate (r, x) except warnings: motion summaries,
+// residuals, noise estimates, excitation and the CRB of the positions from the reduced Fisher
+// information.
+Status Diagnose(const ArrayProblem& problem, const ArrayOptions& options, const Data& d,
+                const PositionsProblem& joint, const BlockLmOptions& lm_options,
+                const std::vector<int>& free, const Eigen::Matrix3Xd& r, const MotionStates& x,
+                double* gyro_dof, ArrayResult* result) {
+  const int K = d.K;
+  BlockLm<PositionsProblem> solver(joint, lm_options);
+  BlockLmInformation info;
+  PositionsProblem::Sums L;
+  solver.ComputeSharedInformation(x, r, &info, &L);
+  const MotionModel model(r);
+  result->excitation = ComputeExcitation(L.AtA, NoiseFloor(x, model, options, d.G));
+
+  result->positions = r;
+  result->offsets = r - problem.nominal_positions;
+  result->position_std = Eigen::Matrix3Xd::Zero(3, K);
+  result->omega_norm = x.topRows<3>().colwise().norm().transpose();
+  result->omega_dot_norm = x.middleRows<3>(3).colwise().norm().transpose();
+  int64_t parallel = 0;
+  for (int64_t n = 0; n < d.N; ++n) {
+    const Vec3 w = x.col(n).head<3>(), wd = x.col(n).segment<3>(3);
+    if (w.cross(wd).norm() < 0.1 * w.norm() * wd.norm()) ++parallel;
+  }
+  result->parallel_fraction = static_cast<double>(parallel) / d.N;
+
+  const double n_accel = 3.0 * K * d.N, n_gyro = 3.0 * d.G * d.N;
+  result->residual_rms_accel = std::sqrt(L.ssr_a / n_accel);
+  result->residual_rms_gyro = std::sqrt(L.ssr_g / n_gyro);
+  const double dof_g = n_gyro - L.lev_g;
+  *gyro_dof = dof_g;
+  const double dof_a = n_accel - 9.0 * d.N - 3.0 * (K - 1) + L.lev_g;
+  result->noise_estimate_accel = dof_a > 0 ? std::sqrt(L.ssr_a / dof_a) : 0;
+  result->noise_estimate_gyro = dof_g > 0 ? std::sqrt(L.ssr_g / dof_g) : 0;
+
+  if (result->excitation.verdict == "insufficient") {
+    const Status s = InsufficientExcitation(result->excitation);
+    result->reason = s.message();
+    return s;
+  }
+  if (!InvertInformation(info.information, &result->position_covariance))
+    return NotDeterminable(
+        "the Fisher information of the positions is singular at the estimate: the recording "
+        "does not determine every position; " +
+            std::string(kRecordAdvice),
+        result);
+  for (size_t j = 0; j < free.size(); ++j)
+    result->position_std.col(free[j]) =
+        result->position_covariance.diagonal().segment<3>(3 * j).cwiseMax(0).cwiseSqrt();
+  return Status::Ok();
+}
+
+// gyro_dof: degrees of freedom of the gyroscope residuals (from Diagnose).
+void AddWarnings(const ArrayOptions& options, int64_t samples_in, int max_iterations,
+                 double gyro_dof, ArrayResult* result) {
+  auto& warnings = result->warnings;
+  if (result->samples_dropped > 0)
+    warnings.push_back(std::to_string(result->samples_dropped) + " of " +
+                       std::to_string(samples_in) +
+                       " samples dropped because a gyroscope reached gyro_saturation (" +
+                       Fmt(*options.gyro_saturation) + " rad/s)");
+  if (result->termination == ArrayTermination::kMaxIterations)
+    warnings.push_back("reached max_iterations (" + std::to_string(max_iterations) +
+                       ") before the tolerance was met: the positions are usable but not fully "
+                       "converged; raise max_iterations" +
+                       (options.solver == ArraySolver::kBcd ? " or use solver \"joint\"" : ""));
+  if (result->termination == ArrayTermination::kUserStopped)
+    warnings.push_back("stopped by the caller before convergence");
+  auto check_noise = [&](const char* what, double estimate, double configured, const char* unit) {
+    if (estimate > 2 * configured || estimate < configured / 2)
+      warnings.push_back(std::string(what) + " noise estimated from the residuals (" +
+                         Fmt(estimate) + " " + unit + ") differs from the configured " +
+                         Fmt(configured) + " " + unit +
+                         " by more than 2x: the reported uncertainties assume the configured "
+                         "value; check the noise setting, the units and the sensors");
+  };
+  check_noise("accelerometer", result->noise_estimate_accel, options.accel_noise, "m/s^2");
+  if (gyro_dof > 0.5)
+    check_noise("gyroscope", result->noise_estimate_gyro, options.gyro_noise, "rad/s");
+  if (result->excitation.verdict == "weak")
+    warnings.push_back("weak excitation: the smallest eigenvalue of sum A_n^T A_n (" +
+                       Fmt(result->excitation.min_eigenvalue) +
+                       ") is less than 100x what noise "
+                       "alone gives (" +
+                       Fmt(result->excitation.noise_floor) +
+                       "); positions along the weakest direction are poorly determined; " +
+                       kRecordAdvice);
+  if (result->parallel_fraction > 0.5)
+    warnings.push_back(
+        Format("omega and omega_dot are nearly parallel in %.0f%% of the samples "
+               "(each A_n then has rank 2, the paper's Lemma 1): vary the rotation "
+               "axis while turning",
+               100 * result->parallel_fraction));
+}
+
 }  // namespace
 
 const char* ArraySolverName(ArraySolver solver) {
@@ -546,6 +749,8 @@ const char* ArrayTerminationName(ArrayTermination t) {
       return "max_iterations";
     case ArrayTermination::kUserStopped:
       return "user_stopped";
+    case ArrayTermination::kNumericalFailure:
+      return "numerical_failure";
   }
   return "unknown";
 }
@@ -583,109 +788,15 @@ Status CalibrateArray(const ArrayProblem& problem, const ArrayOptions& options,
                       ArrayResult* result) {
   *result = ArrayResult();
   result->solver = options.solver;
-  std::string error;
-  if (!options.IsValid(&error)) return Status::InvalidInput(error);
-
-  // ----- Shapes and values.
-  const int K = static_cast<int>(problem.nominal_positions.cols());
-  const int64_t N_in = problem.accel.rows();
-  if (problem.accel.cols() != 3 * K)
-    return Status::InvalidInput("accel has " + std::to_string(problem.accel.cols()) +
-                                " columns; 3 per triad of the geometry's " + std::to_string(K) +
-                                " positions means " + std::to_string(3 * K));
-  if (problem.gyro.cols() % 3 != 0)
-    return Status::InvalidInput("gyro has " + std::to_string(problem.gyro.cols()) +
-                                " columns, not a multiple of 3");
-  const int G = static_cast<int>(problem.gyro.cols() / 3);
-  if (G > 0 && problem.gyro.rows() != N_in)
-    return Status::InvalidInput("gyro has " + std::to_string(problem.gyro.rows()) +
-                                " rows but accel has " + std::to_string(N_in));
-  if (!problem.accel_names.empty() && static_cast<int>(problem.accel_names.size()) != K)
-    return Status::InvalidInput("accel_names has " + std::to_string(problem.accel_names.size()) +
-                                " names for " + std::to_string(K) + " triads");
-  if (K > 0 && (problem.reference < 0 || problem.reference >= K))
-    return Status::InvalidInput("reference " + std::to_string(problem.reference) +
-                                " is not a triad index in [0, " + std::to_string(K) + ")");
-  if (!problem.nominal_positions.allFinite())
-    return Status::InvalidInput("nominal positions contain NaN or Inf");
-  if (!problem.accel.allFinite()) return Status::InvalidInput("accel contains NaN or Inf");
-  if (!problem.gyro.allFinite()) return Status::InvalidInput("gyro contains NaN or Inf");
-
-  result->reference = problem.reference;
-  result->gyro_triads = G;
-  for (int k = 0; k < K; ++k)
-    result->names.push_back(problem.accel_names.empty() ? "a" + std::to_string(k)
-                                                        : problem.accel_names[k]);
-
-  // ----- Structural determinability.
-  auto not_determinable = [&](const std::string& why) {
-    result->usable = false;
-    result->reason = why;
-    return Status::NotDeterminable(why);
-  };
-  if (G == 0)
-    return not_determinable(
-        "no gyroscope triad: the array's angular velocity cannot be separated from the positions; "
-        "record with at least one gyroscope triad (columns g0_x, g0_y, g0_z)");
-  if (K < 3)
-    return not_determinable("only " + std::to_string(K) +
-                            " accelerometer triad(s): at least 3 triads that are not on one line "
-                            "are needed to determine the motion");
-  {
-    const MotionModel model(problem.nominal_positions);
-    Eigen::SelfAdjointEigenSolver<Mat3> es(model.r_tilde * model.r_tilde.transpose());
-    const Eigen::Vector3d ev = es.eigenvalues();
-    if (!model.ok || ev(1) <= 1e-12 * ev(2))
-      return not_determinable(
-          "the accelerometer triads' nominal positions lie on one line: the angular acceleration "
-          "about that line cannot be determined; mount at least 3 triads that span a plane");
-  }
-
-  // ----- Usable samples.
+  if (Status s = ValidateInput(problem, options, result); !s.ok()) return s;
+  if (Status s = CheckGeometry(problem, result->gyro_triads, result); !s.ok()) return s;
   Data d;
-  d.K = K;
-  d.G = G;
-  std::vector<int64_t> keep;
-  keep.reserve(N_in);
-  for (int64_t n = 0; n < N_in; ++n) {
-    if (options.gyro_saturation &&
-        problem.gyro.row(n).cwiseAbs().maxCoeff() >= *options.gyro_saturation)
-      continue;
-    keep.push_back(n);
-  }
-  d.N = static_cast<int64_t>(keep.size());
-  result->samples = d.N;
-  result->samples_dropped = N_in - d.N;
-  if (d.N < 3) {
-    std::string why = "only " + std::to_string(d.N) + " usable sample(s)";
-    if (result->samples_dropped > 0)
-      why += " (" + std::to_string(result->samples_dropped) +
-             " dropped because a gyroscope reached gyro_saturation)";
-    return not_determinable(
-        why + "; at least 3 are needed: " + kRecordAdvice +
-        (result->samples_dropped > 0 ? ", turning below the gyroscopes' range" : ""));
-  }
-  d.ya.resize(3 * K, d.N);
-  d.gbar.resize(3, d.N);
-  d.gscatter.resize(d.N);
-  for (int64_t i = 0; i < d.N; ++i) {
-    const int64_t n = keep[i];
-    d.ya.col(i) = problem.accel.row(n).transpose();
-    Vec3 mean = Vec3::Zero();
-    for (int j = 0; j < G; ++j) mean += problem.gyro.row(n).segment<3>(3 * j).transpose();
-    mean /= G;
-    double scatter = 0;
-    for (int j = 0; j < G; ++j)
-      scatter += (problem.gyro.row(n).segment<3>(3 * j).transpose() - mean).squaredNorm();
-    d.gbar.col(i) = mean;
-    d.gscatter(i) = scatter;
-  }
-  keep.clear();
-  keep.shrink_to_fit();
+  if (Status s = CollectSamples(problem, options, &d, result); !s.ok()) return s;
 
   const int threads = options.threads > 0
                           ? options.threads
                           : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const ChunkRunner runner(threads, options.executor);
   const Weights wt{1 / (options.accel_noise * options.accel_noise),
                    1 / (options.gyro_noise * options.gyro_noise)};
   const int max_iterations =
@@ -693,202 +804,52 @@ Status CalibrateArray(const ArrayProblem& problem, const ArrayOptions& options,
           ? options.max_iterations
           : (options.solver == ArraySolver::kJoint ? ArrayOptions::kDefaultJointIterations
                                                    : ArrayOptions::kDefaultBcdIterations);
-  const double tol = options.tolerance;
   std::vector<int> free;
-  for (int k = 0; k < K; ++k)
+  for (int k = 0; k < d.K; ++k)
     if (k != problem.reference) free.push_back(k);
 
-  // ----- Start: nominal positions, per-sample ML motion from the gyroscope mean.
+  // Start: nominal positions, per-sample ML motion from the gyroscope mean.
   Eigen::Matrix3Xd r = problem.nominal_positions;
-  Eigen::Matrix<double, 9, Eigen::Dynamic> x =
-      Eigen::Matrix<double, 9, Eigen::Dynamic>::Zero(9, d.N);
+  MotionStates x = MotionStates::Zero(9, d.N);
   x.topRows<3>() = d.gbar;
   MotionSums ms;
-  MotionPass(d, r, wt, threads, 50, &x, &ms);
+  MotionPass(d, r, wt, runner, 50, &x, &ms);
   result->cost.push_back(ms.cost);
-  {
-    const MotionModel model(r);
-    const ArrayExcitation ex = ComputeExcitation(ms.AtA, NoiseFloor(x, model, options, G));
-    if (ex.verdict == "insufficient") {
-      result->excitation = ex;
-      const Status s = InsufficientExcitation(ex);
-      result->reason = s.message();
-      return s;
-    }
-  }
-
-  auto max_abs = [](const Eigen::Matrix3Xd& m) { return m.cwiseAbs().maxCoeff(); };
-  ArrayTermination termination = ArrayTermination::kMaxIterations;
-  int iterations = 0;
-
-  if (options.solver == ArraySolver::kBcd) {
-    // The paper's Algorithm 1: position update (Eq. 9) from the current motion, then the motion
-    // step (5) at the new positions; the profile cost is recorded after every sweep.
-    for (iterations = 1; iterations <= max_iterations; ++iterations) {
-      const Eigen::LDLT<Mat3> C(ms.AtA);
-      for (int k : free) r.col(k) = C.solve(ms.AtY.col(k));
-      const double previous = ms.cost;
-      MotionPass(d, r, wt, threads, 50, &x, &ms);
-      result->cost.push_back(ms.cost);
-      if (options.callback && !options.callback(iterations, r)) {
-        termination = ArrayTermination::kUserStopped;
-        break;
-      }
-      if (tol > 0 && previous - ms.cost <= tol * ms.cost) {
-        termination = ArrayTermination::kConvergence;
-        break;
-      }
-    }
-    iterations = std::min(iterations, max_iterations);
-  } else {
-    Eigen::Matrix<double, 9, Eigen::Dynamic> bx(9, d.N), x_trial(9, d.N);
-    double cost = ms.cost;
-    double mu = 1e-8;
-    for (iterations = 1; iterations <= max_iterations; ++iterations) {
-      const JointGeometry geo = MakeJointGeometry(r);
-      LinearSums L;
-      LinearizePass(d, r, geo, x, wt, mu, false, threads, &bx, &L);
-      const Reduced red = BuildReduced(L, geo, free, wt, mu);
-      const Eigen::LLT<Eigen::MatrixXd> llt(red.S);
-      bool accepted = false;
-      double step = std::numeric_limits<double>::infinity();
-      if (llt.info() == Eigen::Success) {
-        const Eigen::VectorXd dr = llt.solve(red.g);
-        if (dr.allFinite()) {
-          Eigen::Matrix3Xd r_trial = r;
-          for (size_t j = 0; j < free.size(); ++j) r_trial.col(free[j]) += dr.segment<3>(3 * j);
-          const Vec12 dpos = red.Mf * dr;
-          const double trial_cost =
-              StepPass(d, r_trial, geo, x, bx, dpos, wt, mu, threads, &x_trial);
-          step = dr.cwiseAbs().maxCoeff();
-          if (std::isfinite(trial_cost) && trial_cost < cost) {
-            accepted = true;
-            const double decrease = cost - trial_cost;
-            cost = trial_cost;
-            r = r_trial;
-            x.swap(x_trial);
-            mu = std::max(mu / 10, 1e-15);
-            result->cost.push_back(cost);
-            if (options.callback && !options.callback(iterations, r)) {
-              termination = ArrayTermination::kUserStopped;
-              break;
-            }
-            if (tol > 0 && (decrease <= tol * cost || step <= tol * (max_abs(r) + tol))) {
-              termination = ArrayTermination::kConvergence;
-              break;
-            }
-          }
-        }
-      }
-      if (!accepted) {
-        result->cost.push_back(cost);
-        if (tol > 0 && step <= tol * (max_abs(r) + tol)) {
-          termination = ArrayTermination::kConvergence;
-          break;
-        }
-        mu *= 10;
-        if (mu > 1e10) {
-          termination = ArrayTermination::kNoProgress;
-          break;
-        }
-      }
-    }
-    iterations = std::min(iterations, max_iterations);
-  }
-  result->iterations = iterations;
-  result->termination = termination;
-  result->converged =
-      termination == ArrayTermination::kConvergence || termination == ArrayTermination::kNoProgress;
-
-  // ----- Diagnostics at the estimate: reduced Fisher information (CRB), residuals, excitation.
-  const JointGeometry geo = MakeJointGeometry(r);
-  Eigen::Matrix<double, 9, Eigen::Dynamic> bx(9, d.N);
-  LinearSums L;
-  LinearizePass(d, r, geo, x, wt, 0.0, true, threads, &bx, &L);
-  bx.resize(9, 0);
-  const MotionModel model(r);
-  result->excitation = ComputeExcitation(L.AtA, NoiseFloor(x, model, options, G));
-
-  result->positions = r;
-  result->offsets = r - problem.nominal_positions;
-  result->position_std = Eigen::Matrix3Xd::Zero(3, K);
-  result->omega_norm = x.topRows<3>().colwise().norm().transpose();
-  result->omega_dot_norm = x.middleRows<3>(3).colwise().norm().transpose();
-  int64_t parallel = 0;
-  for (int64_t n = 0; n < d.N; ++n) {
-    const Vec3 w = x.col(n).head<3>(), wd = x.col(n).segment<3>(3);
-    if (w.cross(wd).norm() < 0.1 * w.norm() * wd.norm()) ++parallel;
-  }
-  result->parallel_fraction = static_cast<double>(parallel) / d.N;
-
-  const double n_accel = 3.0 * K * d.N, n_gyro = 3.0 * G * d.N;
-  result->residual_rms_accel = std::sqrt(L.ssr_a / n_accel);
-  result->residual_rms_gyro = std::sqrt(L.ssr_g / n_gyro);
-  const double dof_g = n_gyro - L.lev_g;
-  const double dof_a = n_accel - 9.0 * d.N - 3.0 * (K - 1) + L.lev_g;
-  result->noise_estimate_accel = dof_a > 0 ? std::sqrt(L.ssr_a / dof_a) : 0;
-  result->noise_estimate_gyro = dof_g > 0 ? std::sqrt(L.ssr_g / dof_g) : 0;
-
-  if (result->excitation.verdict == "insufficient") {
-    const Status s = InsufficientExcitation(result->excitation);
+  const ArrayExcitation start =
+      ComputeExcitation(ms.AtA, NoiseFloor(x, MotionModel(r), options, d.G));
+  if (start.verdict == "insufficient") {
+    result->excitation = start;
+    const Status s = InsufficientExcitation(start);
     result->reason = s.message();
     return s;
   }
-  const Reduced red = BuildReduced(L, geo, free, wt, 0.0);
-  const Eigen::LLT<Eigen::MatrixXd> llt(red.S);
-  if (llt.info() != Eigen::Success) {
-    return not_determinable(
-        "the Fisher information of the positions is singular at the estimate: the recording "
-        "does not determine every position; " +
-        std::string(kRecordAdvice));
-  }
-  result->position_covariance = llt.solve(Eigen::MatrixXd::Identity(red.S.rows(), red.S.cols()));
-  for (size_t j = 0; j < free.size(); ++j)
-    result->position_std.col(free[j]) =
-        result->position_covariance.diagonal().segment<3>(3 * j).cwiseMax(0).cwiseSqrt();
 
-  // ----- Warnings and verdict.
-  auto& warnings = result->warnings;
-  if (result->samples_dropped > 0)
-    warnings.push_back(std::to_string(result->samples_dropped) + " of " + std::to_string(N_in) +
-                       " samples dropped because a gyroscope reached gyro_saturation (" +
-                       Fmt(*options.gyro_saturation) + " rad/s)");
-  if (termination == ArrayTermination::kMaxIterations)
-    warnings.push_back("reached max_iterations (" + std::to_string(max_iterations) +
-                       ") before the tolerance was met: the positions are usable but not fully "
-                       "converged; raise max_iterations" +
-                       (options.solver == ArraySolver::kBcd ? " or use solver \"joint\"" : ""));
-  if (termination == ArrayTermination::kUserStopped)
-    warnings.push_back("stopped by the caller before convergence");
-  auto check_noise = [&](const char* what, double estimate, double configured, const char* unit) {
-    if (estimate > 2 * configured || estimate < configured / 2)
-      warnings.push_back(std::string(what) + " noise estimated from the residuals (" +
-                         Fmt(estimate) + " " + unit + ") differs from the configured " +
-                         Fmt(configured) + " " + unit +
-                         " by more than 2x: the reported uncertainties assume the configured "
-                         "value; check the noise setting, the units and the sensors");
-  };
-  check_noise("accelerometer", result->noise_estimate_accel, options.accel_noise, "m/s^2");
-  if (dof_g > 0.5)
-    check_noise("gyroscope", result->noise_estimate_gyro, options.gyro_noise, "rad/s");
-  if (result->excitation.verdict == "weak")
-    warnings.push_back("weak excitation: the smallest eigenvalue of sum A_n^T A_n (" +
-                       Fmt(result->excitation.min_eigenvalue) +
-                       ") is less than 100x what noise "
-                       "alone gives (" +
-                       Fmt(result->excitation.noise_floor) +
-                       "); positions along the weakest direction are poorly determined; " +
-                       kRecordAdvice);
-  if (result->parallel_fraction > 0.5)
-    warnings.push_back(
-        Format("omega and omega_dot are nearly parallel in %.0f%% of the samples "
-               "(each A_n then has rank 2, the paper's Lemma 1): vary the rotation "
-               "axis while turning",
-               100 * result->parallel_fraction));
+  const PositionsProblem joint(d, wt, free);
+  const BlockLmOptions lm_options = JointSolverOptions(options, max_iterations, threads);
+  const SolverRun run =
+      options.solver == ArraySolver::kBcd
+          ? RunBcd(d, options, runner, wt, max_iterations, free, &r, &x, &ms, result)
+          : RunJoint(joint, lm_options, options, &r, &x, result);
+  result->iterations = run.iterations;
+  result->termination = run.termination;
+  result->converged = run.termination == ArrayTermination::kConvergence ||
+                      run.termination == ArrayTermination::kNoProgress;
+  if (run.termination == ArrayTermination::kNumericalFailure)
+    return NotDeterminable(
+        "the joint solver found no step with a finite cost (numerical failure): the recording "
+        "or the noise settings are degenerate; " +
+            std::string(kRecordAdvice),
+        result);
+
+  double gyro_dof = 0;
+  if (Status s = Diagnose(problem, options, d, joint, lm_options, free, r, x, &gyro_dof, result);
+      !s.ok())
+    return s;
+  AddWarnings(options, problem.accel.rows(), max_iterations, gyro_dof, result);
   result->usable = true;
   result->reason = result->converged
-                       ? std::string("converged (") + ArrayTerminationName(termination) + ")"
-                       : std::string("not converged (") + ArrayTerminationName(termination) +
+                       ? std::string("converged (") + ArrayTerminationName(run.termination) + ")"
+                       : std::string("not converged (") + ArrayTerminationName(run.termination) +
                              "): positions usable, see warnings";
   return Status::Ok();
 }

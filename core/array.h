@@ -16,11 +16,12 @@
 // noise levels are right.
 //
 // Solvers:
-//  - kJoint (default): Levenberg-Marquardt over all 9N + 3(K-1) unknowns. The 9x9 block of each
-//    sample is eliminated by a Schur complement onto the 3(K-1) positions; since the Jacobian of a
-//    triad is affine in its position, the reduced matrix is accumulated from one 12x12 sum per
-//    sample, so one iteration costs O(N K) time (residuals) and O(N) for the algebra, memory
-//    O(N K) (the data) plus O(N) (motion), never a (9N)^2 matrix.
+//  - kJoint (default): Levenberg-Marquardt over all 9N + 3(K-1) unknowns with the block solver
+//    of core/block_lm.h. The 9x9 block of each sample is eliminated by a Schur complement onto
+//    the 3(K-1) positions; since the Jacobian of a triad is affine in its position, the reduced
+//    matrix is accumulated from one 12x12 sum per sample, so one iteration costs O(N K) time
+//    (residuals) and O(N) for the algebra, memory O(N K) (the data) plus O(N) (motion), never a
+//    (9N)^2 matrix.
 //  - kBcd: the paper's Algorithm 1 (block coordinate descent): per-sample ML motion given the
 //    positions, then the closed-form position update of Eq. (9). Converges linearly and slowly.
 // Both start from the nominal positions and the per-sample ML motion there.
@@ -40,6 +41,7 @@
 #include <string>
 #include <vector>
 
+#include "core/block_lm.h"
 #include "core/status.h"
 
 namespace calibd::core {
@@ -68,8 +70,12 @@ struct ArrayOptions {
   double tolerance = 1e-10;
   // Worker threads; 0 = std::thread::hardware_concurrency(). >= 0.
   int threads = 0;
-  // Called after every iteration with the iteration number (1-based) and the current positions
-  // (3 x K); returning false stops the solver (termination kUserStopped, converged = false).
+  // Optional: runs the solver's parallel chunks instead of `threads` new threads (e.g. a pool
+  // shared by all jobs; core/block_lm.h). The result does not depend on it.
+  TaskExecutor executor;
+  // Called after every BCD sweep or accepted joint step with the iteration number (1-based) and
+  // the current positions (3 x K); returning false stops the solver (termination kUserStopped,
+  // converged = false).
   // Optional; used by benchmarks to stop when a target accuracy is reached.
   std::function<bool(int iteration, const Eigen::Matrix3Xd& positions)> callback;
 
@@ -85,11 +91,12 @@ struct ArrayProblem {
 };
 
 enum class ArrayTermination {
-  kNotRun,         // sentinel: CalibrateArray failed before solving
-  kConvergence,    // tolerance met
-  kNoProgress,     // joint: no step decreased the cost any more (numerical optimum)
-  kMaxIterations,  // iteration limit reached: usable, converged = false
-  kUserStopped,    // the callback returned false
+  kNotRun,            // sentinel: CalibrateArray failed before solving
+  kConvergence,       // tolerance met
+  kNoProgress,        // joint: no step decreased the cost any more (numerical optimum)
+  kMaxIterations,     // iteration limit reached: usable, converged = false
+  kUserStopped,       // the callback returned false
+  kNumericalFailure,  // joint: no trial point had a finite cost (CalibrateArray: kNotDeterminable)
 };
 const char* ArrayTerminationName(ArrayTermination termination);
 

@@ -128,6 +128,24 @@ TEST(ArrayCalibration, ResultIsBitIdenticalForAnyThreadCount) {
   EXPECT_EQ(one.position_std, three.position_std);
 }
 
+// A caller-provided executor (e.g. a shared pool) runs the solver's chunks: same result.
+TEST(ArrayCalibration, ExternalExecutorGivesTheIdenticalResult) {
+  const ArraySimulation sim = Simulate(2000, 17);
+  ArrayOptions o = PaperOptions();
+  o.threads = 2;
+  ArrayResult own, pooled;
+  ASSERT_TRUE(CalibrateArray(sim.problem, o, &own).ok());
+  int64_t tasks_run = 0;
+  o.executor = [&](int64_t tasks, const std::function<void(int64_t)>& task) {
+    for (int64_t c = tasks - 1; c >= 0; --c, ++tasks_run) task(c);
+  };
+  ASSERT_TRUE(CalibrateArray(sim.problem, o, &pooled).ok());
+  EXPECT_GT(tasks_run, 0);
+  EXPECT_EQ(own.positions, pooled.positions);
+  EXPECT_EQ(own.cost, pooled.cost);
+  EXPECT_EQ(own.position_covariance, pooled.position_covariance);
+}
+
 TEST(ArrayCalibration, RmseFallsAsInverseSquareRootOfN) {
   // N and 16 N over 8 trials each: the RMSE ratio must be 4 +- 0.8.
   double se_small = 0, se_large = 0;
