@@ -72,10 +72,11 @@ struct StaticData {
   double n = 0;     // samples
 };
 struct RotationData {
-  int j = 0;                    // from static j to j+1
-  int64_t first = 0, last = 0;  // samples
-  double sum_c2 = 0;            // Σ c_k² (s²): variance factor of the integrated noise
-  double weight = 1;            // 1/σ_θ
+  int j = 0;                           // from static j to j+1
+  int64_t first = 0, last = 0;         // samples
+  double sum_c2 = 0;                   // Σ c_k² (s²): variance factor of the integrated noise
+  double weight = 1;                   // 1/σ_θ
+  std::vector<Eigen::Vector4d> steps;  // per step k: ½(y_k + y_{k+1}) (3), Δt_k
 };
 
 struct State {
@@ -99,20 +100,31 @@ struct Problem {
   int Size() const { return kShared + 2 * static_cast<int>(statics.size()); }
 };
 
+std::vector<Eigen::Vector4d> Steps(const VectorXd& t, const Eigen::MatrixX3d& y, int64_t first,
+                                   int64_t last) {
+  std::vector<Eigen::Vector4d> steps(static_cast<size_t>(std::max<int64_t>(0, last - first)));
+  for (int64_t i = first; i < last; ++i) {
+    Eigen::Vector4d& st = steps[static_cast<size_t>(i - first)];
+    for (int a = 0; a < 3; ++a) st(a) = 0.5 * (y(i, a) + y(i + 1, a));
+    st(3) = t(i + 1) - t(i);
+  }
+  return steps;
+}
+
 // Integrates one rotation; with s != nullptr also the sums of the analytic Jacobian:
 // s[l] = Σ_k P_k J_r(φ_k) Δt_k x_k,l (l = 0..2), s[3] = Σ_k P_k J_r(φ_k) Δt_k.
-Matrix3d Integrate(const VectorXd& t, const Eigen::MatrixX3d& y, const Matrix3d& m,
-                   const Vector3d& bias, int64_t first, int64_t last, Matrix3d* s) {
+Matrix3d IntegrateSteps(const std::vector<Eigen::Vector4d>& steps, const Matrix3d& m,
+                        const Vector3d& bias, Matrix3d* s) {
   Matrix3d r = Matrix3d::Identity(), e, jr;
   if (s != nullptr) {
     for (int l = 0; l < 4; ++l) s[l].setZero();
   }
-  for (int64_t i = first; i < last; ++i) {
-    const double dt = t(i + 1) - t(i);
-    const Vector3d x = 0.5 * (y.row(i) + y.row(i + 1)).transpose() - bias;
+  for (const Eigen::Vector4d& st : steps) {
+    const double dt = st(3);
+    const Vector3d x = st.head<3>() - bias;
     const Vector3d phi = m * x * dt;
     ExpAndJr(phi, &e, s != nullptr ? &jr : nullptr);
-    r = r * e;
+    r = (r * e).eval();
     if (s != nullptr) {
       const Matrix3d q = r * jr * dt;
       s[3] += q;
@@ -120,6 +132,11 @@ Matrix3d Integrate(const VectorXd& t, const Eigen::MatrixX3d& y, const Matrix3d&
     }
   }
   return r;
+}
+
+Matrix3d Integrate(const VectorXd& t, const Eigen::MatrixX3d& y, const Matrix3d& m,
+                   const Vector3d& bias, int64_t first, int64_t last, Matrix3d* s) {
+  return IntegrateSteps(Steps(t, y, first, last), m, bias, s);
 }
 
 // ½ Σ r² at `x`; with h/grad, the Gauss-Newton matrix JᵀJ and gradient Jᵀr (full size).
@@ -183,8 +200,7 @@ double Evaluate(const Problem& pr, const State& x, MatrixXd* h, VectorXd* grad) 
     MatrixXd jb(3, 16);
     Matrix3d s[4];
     for (const RotationData& rot : pr.rotations) {
-      const Matrix3d r =
-          Integrate(*pr.t, *pr.gyro, x.mg, x.bg, rot.first, rot.last, jac ? s : nullptr);
+      const Matrix3d r = IntegrateSteps(rot.steps, x.mg, x.bg, jac ? s : nullptr);
       const Vector3d v = r.transpose() * x.u[rot.j];
       const Vector3d res = rot.weight * (v - x.u[rot.j + 1]);
       cost += 0.5 * res.squaredNorm();
@@ -260,7 +276,7 @@ LmSummary Minimize(const Problem& pr, int max_iterations, State* x) {
       cost = Evaluate(pr, *x, &h, &g);
       sum.cost.push_back(cost);
       lambda = std::max(lambda / 5, 1e-12);
-      if (decrease <= 1e-12 * cost || step_norm2 <= 1e-20 * (cost + 1e-300)) {
+      if (decrease <= 1e-9 * cost || step_norm2 <= 1e-20 * (cost + 1e-300)) {
         sum.converged = true;
         break;
       }
@@ -553,6 +569,7 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
             0.5 * ((i > r.first ? t(i) - t(i - 1) : 0) + (i < r.last ? t(i + 1) - t(i) : 0));
         r.sum_c2 += c * c;
       }
+      r.steps = Steps(t, yg, r.first, r.last);
       pr.rotations.push_back(r);
     }
     res->rotations.push_back(rd);

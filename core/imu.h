@@ -30,7 +30,7 @@
 //     here because the rate is only known at the samples. Residual Rᵀu_j − u_{j+1}, weighted by
 //     the integrated gyroscope noise. Levenberg-Marquardt from the nominal conversion with
 //     analytic Jacobians (right-perturbation of the product of exponentials; checked against
-//     finite differences in tests).
+//     finite differences when developed; a wrong Jacobian fails the Monte-Carlo σ test).
 //  5. Joint maximum likelihood over all parameters (P, b_a, M_g, b_g) and all u_j with every
 //     residual (accelerometer statics, gyroscope statics for kStatics, rotations). 1σ from the
 //     inverse Fisher information at the estimate (u_j marginalised), propagated to b, K, T.

@@ -59,6 +59,7 @@ Status SimulateImu(const ImuSimulationOptions& o, ImuSimulation* out) {
   std::string error;
   if (!o.IsValid(&error)) return Status::InvalidInput("imu simulation: " + error);
   GaussianRng rng(o.seed);
+  GaussianRng noise(o.noise_seed != 0 ? o.noise_seed : o.seed * 0x9E3779B97F4A7C15ULL + 1);
   ImuSimulation& s = *out;
   s = ImuSimulation();
 
@@ -139,8 +140,8 @@ Status SimulateImu(const ImuSimulationOptions& o, ImuSimulation* out) {
     const Eigen::Vector3d f = rk.transpose() * up;
     Eigen::Vector3d ya = ma_inv * f + s.accel_truth.bias + s.accel_truth.bias_drift * tk;
     Eigen::Vector3d yg = mg_inv * omega + s.gyro_truth.bias + s.gyro_truth.bias_drift * tk;
-    for (int i = 0; i < 3; ++i) ya(i) += an * rng.Normal();
-    for (int i = 0; i < 3; ++i) yg(i) += gn * rng.Normal();
+    for (int i = 0; i < 3; ++i) ya(i) += an * noise.Normal();
+    for (int i = 0; i < 3; ++i) yg(i) += gn * noise.Normal();
     if (o.quantize) {
       ya = ya.array().round();
       yg = yg.array().round();

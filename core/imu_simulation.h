@@ -47,7 +47,9 @@ struct ImuSimulationOptions {
   double gyro_bias_drift = 0;   // rad/s per s, linear drift along a random direction, >= 0
   double accel_bias_drift = 0;  // m/s² per s, same
   bool quantize = false;        // round readings to whole reading units (counts)
-  uint64_t seed = 1;
+  uint64_t seed = 1;            // sensor errors and motion
+  uint64_t noise_seed = 0;      // the noise stream; 0: derived from seed (set it to vary only the
+                                // noise of one board and one motion, e.g. for Monte Carlo)
 
   bool IsValid(std::string* error) const;
 };
