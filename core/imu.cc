@@ -762,6 +762,15 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
       return Fail(Status::NotDeterminable(m.str()), ImuTermination::kImplausible, res);
     }
   }
+  if (!(res->gyro_direction_rms_after <= o.max_direction_error)) {
+    std::ostringstream m;
+    m.precision(3);
+    m << "after calibration the gravity direction still misses by " << res->gyro_direction_rms_after
+      << " rad RMS per rotation (limit " << o.max_direction_error
+      << "): the gyroscope does not explain the rotations: wrong gyro_unit (deg/s vs rad/s?), "
+         "saturation or a wrong time column";
+    return Fail(Status::NotDeterminable(m.str()), ImuTermination::kImplausible, res);
+  }
   res->usable = true;
   res->reason.clear();
   res->termination = max_iter ? ImuTermination::kMaxIterations : ImuTermination::kConverged;
@@ -831,6 +840,7 @@ bool ImuOptions::IsValid(std::string* error) const {
   if (gyro_noise && !pos(*gyro_noise)) return fail("gyro_noise must be a finite number > 0");
   if (max_iterations < 1) return fail("max_iterations must be >= 1");
   if (!pos(max_scale_deviation)) return fail("max_scale_deviation must be > 0");
+  if (!pos(max_direction_error)) return fail("max_direction_error must be > 0 (rad)");
   if (!(accel_saturation_low < accel_saturation_high) ||
       !(gyro_saturation_low < gyro_saturation_high)) {
     return fail("saturation_low must be below saturation_high");

@@ -90,6 +90,10 @@ struct ImuOptions {
   bool joint_refinement = true;  // step 5; false: stop after the separate fits (σ still joint)
   int max_iterations = 100;      // >= 1, per Levenberg-Marquardt stage
   double max_scale_deviation = 0.25;  // > 0: |K/unit − 1| above this is implausible (units?)
+  // > 0 rad: an RMS gravity-direction error per rotation above this after calibration means the
+  // gyroscope model does not explain the rotations (wrong gyro_unit aliasing whole turns,
+  // saturation, a time base error): implausible.
+  double max_direction_error = 0.05;
 
   bool IsValid(std::string* error) const;
 };
