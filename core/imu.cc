@@ -35,7 +35,8 @@ Matrix3d Skew(const Vector3d& v) {
 // Exp(φ) = I + A[φ]× + B[φ]×², and the right Jacobian J_r(φ) = I − B[φ]× + C[φ]×²
 // (A = sinθ/θ, B = (1−cosθ)/θ², C = (θ−sinθ)/θ³), series below θ = 0.05 (error < 1e-17).
 inline void ExpAndJr(const Vector3d& phi, Matrix3d* e, Matrix3d* jr) {
-  const double t2 = phi.squaredNorm();
+  const double x = phi.x(), y = phi.y(), z = phi.z();
+  const double t2 = x * x + y * y + z * z;
   double a, b, c;
   if (t2 < 2.5e-3) {
     a = 1 - t2 / 6 * (1 - t2 / 20 * (1 - t2 / 42 * (1 - t2 / 72)));
@@ -47,11 +48,30 @@ inline void ExpAndJr(const Vector3d& phi, Matrix3d* e, Matrix3d* jr) {
     b = (1 - co) / t2;
     c = (th - s) / (t2 * th);
   }
-  const Matrix3d k = Skew(phi);
-  Matrix3d k2 = phi * phi.transpose();
-  k2.diagonal().array() -= t2;
-  *e = Matrix3d::Identity() + a * k + b * k2;
-  if (jr != nullptr) *jr = Matrix3d::Identity() - b * k + c * k2;
+  // [φ]×² = φφᵀ − θ²I.
+  const double xx = x * x - t2, yy = y * y - t2, zz = z * z - t2, xy = x * y, xz = x * z,
+               yz = y * z;
+  Matrix3d& E = *e;
+  E(0, 0) = 1 + b * xx;
+  E(1, 1) = 1 + b * yy;
+  E(2, 2) = 1 + b * zz;
+  E(0, 1) = b * xy - a * z;
+  E(1, 0) = b * xy + a * z;
+  E(0, 2) = b * xz + a * y;
+  E(2, 0) = b * xz - a * y;
+  E(1, 2) = b * yz - a * x;
+  E(2, 1) = b * yz + a * x;
+  if (jr == nullptr) return;
+  Matrix3d& J = *jr;
+  J(0, 0) = 1 + c * xx;
+  J(1, 1) = 1 + c * yy;
+  J(2, 2) = 1 + c * zz;
+  J(0, 1) = c * xy + b * z;
+  J(1, 0) = c * xy - b * z;
+  J(0, 2) = c * xz - b * y;
+  J(2, 0) = c * xz + b * y;
+  J(1, 2) = c * yz + b * x;
+  J(2, 1) = c * yz - b * x;
 }
 
 Mat32 TangentBasis(const Vector3d& u) {
@@ -267,13 +287,19 @@ LmSummary Minimize(const Problem& pr, int max_iterations, State* x) {
     const VectorXd delta = dscale.cwiseProduct(as.ldlt().solve(dscale.cwiseProduct(rhs)));
     if (!delta.allFinite()) break;
     const State y = Plus(*x, delta);
-    const double new_cost = Evaluate(pr, y, nullptr, nullptr);
+    // The trial point is evaluated with its Jacobian: most steps are accepted, and one pass over
+    // the rotations with the Jacobian is cheaper than a cost pass and a Jacobian pass.
+    MatrixXd h_new;
+    VectorXd g_new;
+    const double new_cost = Evaluate(pr, y, &h_new, &g_new);
     const double step_norm2 = delta.dot(h * delta);  // ‖J δ‖²
     if (std::isfinite(new_cost) && new_cost < cost) {
       const double decrease = cost - new_cost;
       *x = y;
       ++sum.iterations;
-      cost = Evaluate(pr, *x, &h, &g);
+      cost = new_cost;
+      h.swap(h_new);
+      g.swap(g_new);
       sum.cost.push_back(cost);
       lambda = std::max(lambda / 5, 1e-12);
       if (decrease <= 1e-9 * cost || step_norm2 <= 1e-20 * (cost + 1e-300)) {
