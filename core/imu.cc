@@ -535,7 +535,6 @@ Status Fail(Status s, ImuTermination term, ImuResult* r) {
 Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions& o, AccelFit fit,
               ImuResult* res) {
   const StaticDetection& det = res->detection;
-  const Eigen::MatrixX3d& ya = *imu.accel;
   const Eigen::MatrixX3d& yg = *imu.gyro;
   Problem pr = fit.pr;
   State x = fit.x;
@@ -768,7 +767,6 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
          "during statics or a wrong model): the uncertainty is optimistic by that factor";
     res->warnings.push_back(w.str());
   }
-  (void)ya;
 
   // Plausibility.
   for (int i = 0; i < 3; ++i) {

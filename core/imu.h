@@ -20,7 +20,9 @@
 //     The candidate with the smallest χ²/dof of this fit is kept (imu_tk kept the smallest
 //     cost); diagnostics list every trial.
 //  3. Gyroscope bias: GyroBiasModel::kStatics (default) — the mean of all static samples (a
-//     constant bias); kEstimate — unknowns of the rotation fit only (started at that mean).
+//     constant bias; the joint step 5 keeps the static residuals and lets the rotations refine
+//     it slightly, as maximum likelihood requires); kEstimate — unknowns of the rotation fit
+//     only, started at that mean, no static residuals (a bias that is not constant enough).
 //  4. Gyroscope M_g: integrate the calibrated rate over each rotation between consecutive statics
 //     (from the last sample of static j to the first of static j+1, at the log's own sample
 //     times) with the closed-form exponential map per step,
@@ -32,7 +34,10 @@
 //     analytic Jacobians (right-perturbation of the product of exponentials; checked against
 //     finite differences when developed; a wrong Jacobian fails the Monte-Carlo σ test).
 //  5. Joint maximum likelihood over all parameters (P, b_a, M_g, b_g) and all u_j with every
-//     residual (accelerometer statics, gyroscope statics for kStatics, rotations). 1σ from the
+//     residual (accelerometer statics, gyroscope statics for kStatics, rotations). Rotation
+//     residuals are weighted by 1/σ_θ, σ_θ² = tr(M_g Σ_g M_gᵀ)/3 · Σ_k c_k² (the trapezoid
+//     weights c_k of each sample's white noise). Dense normal equations (21 + 2n unknowns for
+//     n statics, accumulated per residual block; not yet #10's sparse solver). 1σ from the
 //     inverse Fisher information at the estimate (u_j marginalised), propagated to b, K, T.
 //     There is no null space left: the accelerometer-defined frame (T_a upper triangular) is the
 //     gauge, fixed by the parameterisation.
@@ -196,8 +201,9 @@ struct ImuResult {
   double chi2_per_dof = std::numeric_limits<double>::quiet_NaN();      // joint fit, whitened
   int degrees_of_freedom = -1;
   int accel_iterations = 0, gyro_iterations = 0, joint_iterations = 0;
-  std::vector<double> cost;  // ½χ² after each accepted joint iteration (or gyro, if no joint)
-  // Covariance of the 21 (kStatics) or 21 (kEstimate) reported parameters in the order
+  std::vector<double> cost;  // ½χ² (whitened) at the start and after each accepted iteration
+                             // of the last stage run (joint, or the gyroscope fit)
+  // Covariance (from the inverse Fisher information) of the 21 reported parameters, in order
   // b_a(3), K_a(3), T_a01, T_a02, T_a12, b_g(3), K_g(3), T_g01, T_g02, T_g10, T_g12, T_g20, T_g21.
   Eigen::MatrixXd covariance;
   std::vector<std::string> warnings;
