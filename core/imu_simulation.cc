@@ -1,0 +1,159 @@
+#include "core/imu_simulation.h"
+
+#include <Eigen/Geometry>
+#include <Eigen/LU>
+#include <cmath>
+
+#include "core/array_simulation.h"
+
+namespace calibd::core {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+Eigen::Matrix3d RandomRotation(GaussianRng* rng) {
+  Eigen::Quaterniond q(rng->Normal(), rng->Normal(), rng->Normal(), rng->Normal());
+  q.normalize();
+  return q.toRotationMatrix();
+}
+
+// One segment of motion: from orientation r0, turn by axis*angle (body frame) over duration.
+struct Segment {
+  double t0 = 0, duration = 0;
+  Eigen::Matrix3d r0;
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitX();
+  double angle = 0;  // 0: static
+};
+
+}  // namespace
+
+bool ImuSimulationOptions::IsValid(std::string* error) const {
+  auto fail = [error](const std::string& what) {
+    if (error != nullptr) *error = what;
+    return false;
+  };
+  auto pos = [](double v) { return std::isfinite(v) && v > 0; };
+  auto nonneg = [](double v) { return std::isfinite(v) && v >= 0; };
+  if (statics < 1) return fail("statics must be >= 1");
+  if (!pos(static_duration)) return fail("static_duration must be > 0 s");
+  if (!pos(rotation_duration)) return fail("rotation_duration must be > 0 s");
+  if (!nonneg(initial_motion)) return fail("initial_motion must be >= 0 s");
+  if (!pos(rate)) return fail("rate must be > 0 Hz");
+  if (!pos(gravity)) return fail("gravity must be > 0");
+  if (!nonneg(accel_noise) || !nonneg(gyro_noise)) return fail("noise must be >= 0");
+  if (!pos(accel_unit) || !pos(gyro_unit)) return fail("units must be > 0");
+  if (!std::isfinite(accel_offset) || !std::isfinite(gyro_offset)) {
+    return fail("offsets must be finite");
+  }
+  if (!nonneg(scale_error) || !nonneg(misalignment) || !nonneg(accel_bias) || !nonneg(gyro_bias) ||
+      !nonneg(gyro_bias_drift) || !nonneg(accel_bias_drift)) {
+    return fail("sensor error sigmas must be >= 0");
+  }
+  const double samples =
+      rate * (initial_motion + statics * static_duration + (statics - 1) * rotation_duration);
+  if (samples > 5e8) return fail("the log would have more than 5e8 samples");
+  return true;
+}
+
+Status SimulateImu(const ImuSimulationOptions& o, ImuSimulation* out) {
+  std::string error;
+  if (!o.IsValid(&error)) return Status::InvalidInput("imu simulation: " + error);
+  GaussianRng rng(o.seed);
+  GaussianRng noise(o.noise_seed != 0 ? o.noise_seed : o.seed * 0x9E3779B97F4A7C15ULL + 1);
+  ImuSimulation& s = *out;
+  s = ImuSimulation();
+
+  // Sensor errors.
+  auto make_triad = [&](double unit, bool upper, double bias_si, double drift_si, double offset,
+                        ImuTriadTruth* tr) {
+    for (int i = 0; i < 3; ++i) tr->scale(i) = unit * (1 + o.scale_error * rng.Normal());
+    tr->misalignment.setIdentity();
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        if (i == j || (upper && i > j)) continue;
+        tr->misalignment(i, j) = o.misalignment * rng.Normal();
+      }
+    }
+    tr->matrix = tr->misalignment * tr->scale.asDiagonal();
+    for (int i = 0; i < 3; ++i) tr->bias(i) = offset + bias_si * rng.Normal() / unit;
+    tr->bias_drift = rng.UnitVector() * drift_si / unit;
+  };
+  make_triad(o.accel_unit, true, o.accel_bias, o.accel_bias_drift, o.accel_offset, &s.accel_truth);
+  make_triad(o.gyro_unit, false, o.gyro_bias, o.gyro_bias_drift, o.gyro_offset, &s.gyro_truth);
+
+  // Motion plan.
+  std::vector<Segment> segments;
+  double t = 0;
+  Eigen::Matrix3d r = RandomRotation(&rng);
+  auto add_rotation = [&](const Eigen::Matrix3d& to, double duration) {
+    const Eigen::AngleAxisd aa(r.transpose() * to);
+    Segment seg;
+    seg.t0 = t;
+    seg.duration = duration;
+    seg.r0 = r;
+    seg.axis = aa.axis();
+    seg.angle = aa.angle();
+    segments.push_back(seg);
+    t += duration;
+    r = to;
+  };
+  auto add_static = [&](double duration) {
+    Segment seg;
+    seg.t0 = t;
+    seg.duration = duration;
+    seg.r0 = r;
+    segments.push_back(seg);
+    t += duration;
+  };
+  if (o.initial_motion > 0) add_rotation(RandomRotation(&rng), o.initial_motion);
+  for (int j = 0; j < o.statics; ++j) {
+    if (j > 0) add_rotation(RandomRotation(&rng), o.rotation_duration);
+    s.orientations.push_back(r);
+    add_static(o.static_duration);
+  }
+  const double total = t;
+  const int64_t n = static_cast<int64_t>(std::floor(total * o.rate));
+  s.t.resize(n);
+  s.accel.resize(n, 3);
+  s.gyro.resize(n, 3);
+  const Eigen::Matrix3d ma_inv = s.accel_truth.matrix.inverse();
+  const Eigen::Matrix3d mg_inv = s.gyro_truth.matrix.inverse();
+  const Eigen::Vector3d up(0, 0, o.gravity);
+  const double an = o.accel_noise / o.accel_unit, gn = o.gyro_noise / o.gyro_unit;
+  size_t seg_i = 0;
+  std::vector<int64_t> first(segments.size(), -1), last(segments.size(), -1);
+  for (int64_t k = 0; k < n; ++k) {
+    const double tk = static_cast<double>(k) / o.rate;
+    while (seg_i + 1 < segments.size() && tk >= segments[seg_i + 1].t0) ++seg_i;
+    const Segment& seg = segments[seg_i];
+    Eigen::Matrix3d rk = seg.r0;
+    Eigen::Vector3d omega = Eigen::Vector3d::Zero();
+    if (seg.angle != 0) {
+      const double x = (tk - seg.t0) / seg.duration;
+      const double sx = x - std::sin(2 * kPi * x) / (2 * kPi);
+      rk = seg.r0 * Eigen::AngleAxisd(seg.angle * sx, seg.axis).toRotationMatrix();
+      omega = seg.axis * seg.angle * (1 - std::cos(2 * kPi * x)) / seg.duration;
+    } else {
+      if (first[seg_i] < 0) first[seg_i] = k;
+      last[seg_i] = k;
+    }
+    const Eigen::Vector3d f = rk.transpose() * up;
+    Eigen::Vector3d ya = ma_inv * f + s.accel_truth.bias + s.accel_truth.bias_drift * tk;
+    Eigen::Vector3d yg = mg_inv * omega + s.gyro_truth.bias + s.gyro_truth.bias_drift * tk;
+    for (int i = 0; i < 3; ++i) ya(i) += an * noise.Normal();
+    for (int i = 0; i < 3; ++i) yg(i) += gn * noise.Normal();
+    if (o.quantize) {
+      ya = ya.array().round();
+      yg = yg.array().round();
+    }
+    s.t(k) = tk;
+    s.accel.row(k) = ya.transpose();
+    s.gyro.row(k) = yg.transpose();
+  }
+  for (size_t i = 0; i < segments.size(); ++i) {
+    if (segments[i].angle == 0 && first[i] >= 0) s.statics.emplace_back(first[i], last[i]);
+  }
+  return Status::Ok();
+}
+
+}  // namespace calibd::core

@@ -1,0 +1,127 @@
+// Static detection for raw inertial logs (SPEC §7): which stretches of a continuous log were
+// recorded at rest, found from the log's own noise floor; no initial static period is needed.
+//
+// Spread of triad k at sample i: the RMS deviation from the mean vector over the centred window
+// of w samples (w = static_window / median sample period, odd, >= 3):
+//   s_k(i) = sqrt(Σ_axes var(y_axis over window i)),   in the triad's reading units.
+// Noise floor of triad k: the `noise_floor_quantile` quantile of s_k over non-overlapping windows
+// (windows touching a gap or a saturated sample excluded), at least a tiny absolute floor (so a
+// noise-free log still works). Threshold of triad k: `threshold_multiplier` × floor, or the
+// absolute override for its kind. Sample i is static when the window centred on it contains no
+// gap and no saturated sample and every triad's spread is <= its threshold. A static interval is
+// a maximal run of static samples [first, last] spanning t[last] - t[first] >= min_static; so the
+// samples of an interval lie at least w/2 samples away from any motion the windows saw, and
+// motion never merges into a static (a bump splits it or trims it). Slow bias drift does not
+// change a 1 s window's spread, so drift does not hide statics.
+//
+// Works in reading units: thresholds and statistics are reported in the triads' own units (the
+// criterion is relative to the noise floor, so units do not matter); `unit` converts them to SI
+// for the SI fields. Pure numerics, thread-compatible.
+#ifndef CALIBD_CORE_STATIC_DETECTION_H_
+#define CALIBD_CORE_STATIC_DETECTION_H_
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/status.h"
+
+namespace calibd::core {
+
+enum class TriadKind { kAccelerometer, kGyroscope };
+const char* TriadKindName(TriadKind kind);  // "accelerometer" | "gyroscope"
+
+// One sensor triad of the log. Non-owning: `readings` must outlive the call.
+struct TriadSeries {
+  std::string name;                            // e.g. "a0", "g0" (for messages and reports)
+  TriadKind kind = TriadKind::kAccelerometer;  // selects the absolute threshold override
+  const Eigen::MatrixX3d* readings = nullptr;  // N×3, reading units
+  double unit = 1;  // SI (m/s², rad/s) per reading unit, > 0; only scales the *_si fields
+  // Saturation limits in reading units: a sample with any axis <= saturation_low or
+  // >= saturation_high is saturated (dropped: never part of a static). Default: none.
+  double saturation_low = -std::numeric_limits<double>::infinity();
+  double saturation_high = std::numeric_limits<double>::infinity();
+};
+
+struct StaticDetectionOptions {
+  double static_window = 1.0;         // s, > 0: window over which the spread is measured
+  double min_static = 1.0;            // s, >= 0: shortest static interval kept (first..last)
+  double threshold_multiplier = 3.0;  // > 0: threshold = multiplier × noise floor
+  double noise_floor_quantile = 0.1;  // in (0, 1): at least this fraction of the log's windows
+                                      // must be static for the floor to be the noise floor
+  double gap_factor = 1.5;            // > 1: a step t[i] - t[i-1] > gap_factor × median period is
+                                      // a gap (reported; windows across it are never static)
+  // Absolute thresholds on the spread (reading units of the triads of that kind), overriding
+  // multiplier × floor for every triad of that kind (SPEC `static_threshold`). nullopt: from the
+  // noise floor.
+  std::optional<double> accel_threshold;
+  std::optional<double> gyro_threshold;
+
+  bool IsValid(std::string* error) const;
+};
+
+struct StaticInterval {
+  double start = 0, end = 0;          // t[first], t[last], s
+  int64_t first = -1, last = -1;      // sample indices, inclusive
+  int64_t samples = 0;                // last - first + 1
+  std::vector<Eigen::Vector3d> mean;  // per triad (order of the input), reading units
+  std::vector<Eigen::Vector3d> std;   // per triad, per axis sample std (n - 1), reading units
+};
+
+struct TimeGap {
+  int64_t index = -1;  // first sample after the gap
+  double start = 0;    // t[index - 1]
+  double end = 0;      // t[index]
+};
+
+struct StaticDetection {
+  std::vector<StaticInterval> intervals;  // in time order
+  double sample_period = 0;               // median t step, s
+  int64_t window_samples = 0;             // w
+  double threshold_multiplier = 0;        // the multiplier used
+  // Per triad (order of the input), reading units; *_si: times the triad's unit.
+  std::vector<std::string> triad_names;
+  std::vector<double> noise_floor;         // robust floor of the spread
+  std::vector<double> threshold;           // spread threshold used
+  std::vector<bool> threshold_overridden;  // the absolute override was used
+  std::vector<double> threshold_si;
+  std::vector<double> noise_floor_si;
+  std::vector<TimeGap> gaps;
+  int64_t saturated_samples = 0;             // samples with any triad saturated
+  std::vector<int64_t> saturated_per_triad;  // per triad
+  int64_t static_samples = 0;                // Σ interval samples
+};
+
+// Precomputes the spreads of every window once, so several thresholds can be tried cheaply
+// (imu_tk's idea: try several multipliers and let the caller keep the best fit).
+class StaticDetector {
+ public:
+  // kInvalidInput: options not valid, fewer than 3 samples, t not finite or not strictly
+  // increasing (message names the index), triads of a different length than t, non-finite
+  // readings (names triad, sample and axis), no triad. The triads' readings are only read here.
+  Status Init(const Eigen::VectorXd& t, const std::vector<TriadSeries>& triads,
+              const StaticDetectionOptions& options);
+
+  // Intervals for one multiplier (the options' one when nullopt). Requires a successful Init.
+  StaticDetection Detect(std::optional<double> multiplier = std::nullopt) const;
+
+ private:
+  const Eigen::VectorXd* t_ = nullptr;
+  std::vector<TriadSeries> triads_;
+  StaticDetectionOptions options_;
+  StaticDetection base_;        // floors, gaps, saturation, period, window
+  Eigen::VectorXd ratio_mult_;  // per centre: max over floor-based triads of spread / floor
+  Eigen::VectorXd ratio_abs_;   // per centre: max over overridden triads of spread / threshold
+  std::vector<char> blocked_;   // per centre: window touches a gap or a saturated sample
+};
+
+// One-shot convenience: Init + Detect().
+Status DetectStatics(const Eigen::VectorXd& t, const std::vector<TriadSeries>& triads,
+                     const StaticDetectionOptions& options, StaticDetection* out);
+
+}  // namespace calibd::core
+
+#endif  // CALIBD_CORE_STATIC_DETECTION_H_
