@@ -10,6 +10,7 @@
 
 #include "server/array_method.h"
 #include "server/config.h"
+#include "server/imu_method.h"
 #include "server/noise_method.h"
 #include "server/pca_method.h"
 #include "server/serve.h"
@@ -293,6 +294,54 @@ int RunCli(int argc, char** argv) {
       ->check(CLI::Range(int64_t{1}, int64_t{1000000000}))
       ->capture_default_str();
 
+  core::ImuSimulationOptions imu_sim;
+  CLI::App* sim_imu = simulate_cmd->add_subcommand(
+      "imu",
+      "one IMU placed by hand in n static orientations joined by rotations (imu_tk set-up), with "
+      "biases, scale errors and misalignments");
+  sim_imu->add_option("--out", out_dir, "output directory")->required();
+  sim_imu->add_option("--seed", imu_sim.seed, "random seed")->capture_default_str();
+  sim_imu->add_option("--statics", imu_sim.statics, "static orientations")
+      ->check(CLI::Range(1, 10000))
+      ->capture_default_str();
+  sim_imu->add_option("--static-seconds", imu_sim.static_duration, "seconds per static")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  sim_imu->add_option("--rotation-seconds", imu_sim.rotation_duration, "seconds per rotation")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  sim_imu->add_option("--rate", imu_sim.rate, "samples per second")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  sim_imu->add_option("--accel-noise", imu_sim.accel_noise, "σ per sample, m/s²")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_imu->add_option("--gyro-noise", imu_sim.gyro_noise, "σ per sample, rad/s")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_imu->add_option("--scale-error", imu_sim.scale_error, "σ of the relative scale errors")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_imu->add_option("--misalignment", imu_sim.misalignment, "σ of the misalignments, rad")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_imu->add_option("--accel-bias", imu_sim.accel_bias, "σ of the accelerometer biases, m/s²")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_imu->add_option("--gyro-bias", imu_sim.gyro_bias, "σ of the gyroscope biases, rad/s")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_imu
+      ->add_option("--gyro-bias-drift", imu_sim.gyro_bias_drift,
+                   "linear gyroscope bias drift, rad/s per s")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sim_imu
+      ->add_option("--initial-motion", imu_sim.initial_motion,
+                   "seconds of rotation before the first static")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+
   NoiseSimulationFileOptions noise_sim;
   CLI::App* sim_noise = simulate_cmd->add_subcommand(
       "noise", "one IMU at rest: a stationary log with known white noise and random walk");
@@ -336,6 +385,13 @@ int RunCli(int argc, char** argv) {
     std::string csv;
     json config, truth;
     Status s = SimulatePcaFiles(pca_sim, &csv, &config, &truth);
+    if (!s.ok()) return Report(s);
+    return WriteSimulation(out_dir, csv, config, truth);
+  }
+  if (*sim_imu) {
+    std::string csv;
+    json config, truth;
+    Status s = SimulateImuFiles(imu_sim, &csv, &config, &truth);
     if (!s.ok()) return Report(s);
     return WriteSimulation(out_dir, csv, config, truth);
   }

@@ -133,6 +133,41 @@ Status ResultToCsv(const json& result, std::string* out) {
         csv << "," << (std.is_array() && k < std.size() ? Num(std[k]) : "");
       csv << "\n";
     }
+  } else if (method == "imu") {
+    const json& imus = Get(params, "imus");
+    if (!imus.is_array()) return Status::Internal("stored imu result has no parameters.imus");
+    const json& uimus = Get(unc, "imus");
+    // One row per triad: value = matrix (reading - bias).
+    csv << "imu,sensor,bias_x,bias_y,bias_z,scale_x,scale_y,scale_z";
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) csv << ",matrix_" << r << c;
+    csv << ",bias_std_x,bias_std_y,bias_std_z,scale_std_x,scale_std_y,scale_std_z";
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) csv << ",misalignment_std_" << r << c;
+    csv << "\n";
+    for (size_t i = 0; i < imus.size(); ++i) {
+      const json& u = uimus.is_array() && i < uimus.size() ? uimus[i] : json();
+      const json& name = Get(imus[i], "name");
+      for (const char* sensor : {"accelerometer", "gyroscope"}) {
+        const json& p = Get(imus[i], sensor);
+        const json& ps = Get(u, sensor);
+        csv << CsvField(name.is_string() ? name.get<std::string>() : "") << "," << sensor;
+        auto vec = [&](const json& v) {
+          for (size_t k = 0; k < 3; ++k)
+            csv << "," << (v.is_array() && k < v.size() ? Num(v[k]) : "");
+        };
+        auto mat = [&](const json& m) {
+          for (size_t r = 0; r < 3; ++r) vec(m.is_array() && r < m.size() ? m[r] : json());
+        };
+        vec(Get(p, "bias"));
+        vec(Get(p, "scale"));
+        mat(Get(p, "matrix"));
+        vec(Get(ps, "bias_std"));
+        vec(Get(ps, "scale_std"));
+        mat(Get(ps, "misalignment_std"));
+        csv << "\n";
+      }
+    }
   } else if (method == "noise") {
     const json& channels = Get(params, "channels");
     if (!channels.is_array()) return Status::Internal("stored noise result has no channels");

@@ -1,5 +1,6 @@
 // The registry of calibration methods (server/method.h): one line per method.
 #include "server/array_method.h"
+#include "server/imu_method.h"
 #include "server/method.h"
 #include "server/noise_method.h"
 #include "server/pca_method.h"
@@ -10,6 +11,7 @@ const std::vector<const Method*>& AllMethods() {
   static const std::vector<const Method*> methods = {
       &PcaMethod(),
       &ArrayMethod(),
+      &ImuMethod(),
       &NoiseMethod(),
   };
   return methods;

@@ -1002,10 +1002,11 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     res.set_content(text, "application/yaml");
     return;
   }
-  if (method == "noise") {
-    return (void)SendStatus(
-        res,
-        Status::InvalidInput("the noise method exports json, csv and yaml").WithField("format"));
+  if (method == "noise" || method == "imu") {
+    return (void)SendStatus(res,
+                            Status::InvalidInput("the " + method + " method exports json and csv" +
+                                                 (method == "noise" ? " and yaml" : ""))
+                                .WithField("format"));
   }
   s = ResultToHeader(result, context, &text);
   if (!s.ok()) return (void)SendStatus(res, s);

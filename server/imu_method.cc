@@ -1,0 +1,326 @@
+#include "server/imu_method.h"
+
+#include <cmath>
+#include <cstdio>
+#include <set>
+
+#include "server/inertial_log.h"
+
+namespace calibd::server {
+
+using nlohmann::json;
+
+namespace {
+
+json Num(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
+json Vec(const Eigen::Vector3d& v) { return json::array({Num(v[0]), Num(v[1]), Num(v[2])}); }
+json Mat(const Eigen::Matrix3d& m) {
+  json rows = json::array();
+  for (int r = 0; r < 3; ++r) rows.push_back(Vec(m.row(r).transpose()));
+  return rows;
+}
+
+Status KeyError(const std::string& key, const std::string& message) {
+  return Status::InvalidInput("config key '" + key + "': " + message).WithField(key);
+}
+
+Status ReadNumber(const json& config, const char* key, bool positive, std::optional<double>* out) {
+  auto it = config.find(key);
+  if (it == config.end() || it->is_null()) return Status::Ok();
+  if (!it->is_number() || !std::isfinite(it->get<double>()) ||
+      (positive && !(it->get<double>() > 0))) {
+    return KeyError(key, positive ? "must be a number > 0" : "must be a finite number");
+  }
+  *out = it->get<double>();
+  return Status::Ok();
+}
+
+Status ParseImuConfig(const json& config, core::ImuOptions* options) {
+  if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
+  static const std::set<std::string> kKnown = {
+      "method",           "device",      "accel_unit", "gyro_unit",          "gravity",
+      "latitude",         "height",      "gyro_bias",  "static_window",      "min_static",
+      "static_threshold", "accel_noise", "gyro_noise", "nominal_accel_bias", "nominal_gyro_bias"};
+  for (const auto& [key, value] : config.items()) {
+    if (kKnown.count(key) == 0) {
+      return KeyError(key,
+                      "is not an imu config key (known: accel_unit, gyro_unit, gravity, latitude, "
+                      "height, gyro_bias, static_window, min_static, static_threshold, "
+                      "accel_noise, gyro_noise, nominal_accel_bias, nominal_gyro_bias, method, "
+                      "device)");
+    }
+  }
+  *options = core::ImuOptions();
+  InertialUnits units;
+  Status s = ParseInertialUnits(config, &units);
+  if (!s.ok()) return s;
+  options->accel_unit = units.accel;
+  options->gyro_unit = units.gyro;
+  std::optional<double> gravity, latitude, height, window, min_static, an, gn, ab, gb;
+  for (auto [key, positive, out] :
+       std::vector<std::tuple<const char*, bool, std::optional<double>*>>{
+           {"gravity", true, &gravity},
+           {"latitude", false, &latitude},
+           {"height", false, &height},
+           {"static_window", true, &window},
+           {"min_static", false, &min_static},
+           {"accel_noise", true, &an},
+           {"gyro_noise", true, &gn},
+           {"nominal_accel_bias", false, &ab},
+           {"nominal_gyro_bias", false, &gb}}) {
+    s = ReadNumber(config, key, positive, out);
+    if (!s.ok()) return s;
+  }
+  if (gravity && (latitude || height)) {
+    return KeyError("gravity", "give either gravity or latitude and height, not both");
+  }
+  if (height && !latitude) return KeyError("latitude", "is needed with height");
+  if (latitude) {
+    if (std::abs(*latitude) > 90) return KeyError("latitude", "must be in -90..90 degrees");
+    options->gravity = core::Wgs84NormalGravity(*latitude, height.value_or(0));
+  } else if (gravity) {
+    options->gravity = *gravity;
+  }
+  if (window) options->detection.static_window = *window;
+  if (min_static) {
+    if (*min_static < 0) return KeyError("min_static", "must be >= 0 seconds");
+    options->detection.min_static = *min_static;
+  }
+  options->accel_noise = an;
+  options->gyro_noise = gn;
+  if (ab) options->nominal_accel_bias = *ab;
+  if (gb) options->nominal_gyro_bias = *gb;
+  if (auto it = config.find("gyro_bias"); it != config.end()) {
+    if (*it == "statics") {
+      options->gyro_bias = core::GyroBiasModel::kStatics;
+    } else if (*it == "estimate") {
+      options->gyro_bias = core::GyroBiasModel::kEstimate;
+    } else {
+      return KeyError("gyro_bias", "must be \"statics\" or \"estimate\"");
+    }
+  }
+  if (auto it = config.find("static_threshold"); it != config.end() && !it->is_null()) {
+    if (!it->is_object()) {
+      return KeyError("static_threshold",
+                      "must be {\"accelerometer\": x, \"gyroscope\": y} (window spread in "
+                      "reading units; either may be left out)");
+    }
+    for (const auto& [key, value] : it->items()) {
+      if ((key != "accelerometer" && key != "gyroscope") || !value.is_number() ||
+          !(value.get<double>() > 0) || !std::isfinite(value.get<double>())) {
+        return KeyError("static_threshold",
+                        "must be {\"accelerometer\": x, \"gyroscope\": y} with numbers > 0");
+      }
+      (key == "accelerometer" ? options->detection.accel_threshold
+                              : options->detection.gyro_threshold) = value.get<double>();
+    }
+  }
+  std::string error;
+  if (!options->IsValid(&error)) return Status::InvalidInput(error);
+  return Status::Ok();
+}
+
+json TriadJson(const core::TriadCalibration& c) {
+  return {{"bias", Vec(c.bias)},
+          {"scale", Vec(c.scale)},
+          {"misalignment", Mat(c.misalignment)},
+          {"matrix", Mat(c.matrix)}};
+}
+
+json TriadStdJson(const core::TriadCalibration& c) {
+  return {{"bias_std", Vec(c.bias_std)},
+          {"scale_std", Vec(c.scale_std)},
+          {"misalignment_std", Mat(c.misalignment_std)}};
+}
+
+json DiagnosticsJson(const core::ImuResult& r) {
+  json statics = json::array(), rotations = json::array(), trials = json::array();
+  for (const auto& s : r.statics) {
+    statics.push_back({{"start", Num(s.start)},
+                       {"end", Num(s.end)},
+                       {"samples", s.samples},
+                       {"accel_mean", Vec(s.accel_mean)},
+                       {"accel_std", Vec(s.accel_std)},
+                       {"gyro_mean", Vec(s.gyro_mean)},
+                       {"gyro_std", Vec(s.gyro_std)},
+                       {"gravity_direction", Vec(s.gravity_direction)},
+                       {"norm_residual_before", Num(s.norm_residual_before)},
+                       {"norm_residual_after", Num(s.norm_residual_after)}});
+  }
+  for (const auto& q : r.rotations) {
+    rotations.push_back({{"from", q.from},
+                         {"to", q.to},
+                         {"start", Num(q.start)},
+                         {"end", Num(q.end)},
+                         {"angle", Num(q.angle)},
+                         {"direction_error_before", Num(q.direction_error_before)},
+                         {"direction_error_after", Num(q.direction_error_after)},
+                         {"used", q.used},
+                         {"excluded", q.excluded}});
+  }
+  for (const auto& t : r.threshold_trials) {
+    trials.push_back({{"multiplier", Num(t.multiplier)},
+                      {"statics", t.statics},
+                      {"accel_chi2_per_dof", Num(t.accel_chi2_per_dof)},
+                      {"chosen", t.chosen}});
+  }
+  const core::ImuCoverage& c = r.coverage;
+  return {{"name", r.name},
+          {"usable", r.usable},
+          {"termination", core::ImuTerminationName(r.termination)},
+          {"reason", r.reason},
+          {"chi2_per_dof", Num(r.chi2_per_dof)},
+          {"degrees_of_freedom", r.degrees_of_freedom},
+          {"iterations",
+           {{"accelerometer", r.accel_iterations},
+            {"gyroscope", r.gyro_iterations},
+            {"joint", r.joint_iterations}}},
+          {"noise", {{"accelerometer", Vec(r.accel_noise)}, {"gyroscope", Vec(r.gyro_noise)}}},
+          {"residuals",
+           {{"accel_norm_rms_before", Num(r.accel_norm_rms_before)},
+            {"accel_norm_rms_after", Num(r.accel_norm_rms_after)},
+            {"gyro_direction_rms_before", Num(r.gyro_direction_rms_before)},
+            {"gyro_direction_rms_after", Num(r.gyro_direction_rms_after)}}},
+          {"statics", statics},
+          {"rotations", rotations},
+          {"coverage",
+           {{"gravity_eigenvalues", Vec(c.gravity_eigenvalues)},
+            {"min_eigenvalue", Num(c.min_eigenvalue)},
+            {"least_covered_direction", Vec(c.least_covered_direction)},
+            {"missing_up", c.missing_up},
+            {"rotation_per_axis", Vec(c.rotation_per_axis)},
+            {"weak_axes", c.weak_axes},
+            {"sufficient", c.sufficient},
+            {"verdict", c.verdict}}},
+          {"threshold_trials", trials},
+          {"threshold_choice", r.threshold_choice},
+          {"cost", r.cost}};
+}
+
+class Imu : public Method {
+ public:
+  const char* name() const override { return "imu"; }
+  const char* summary() const override {
+    return "accelerometer and gyroscope gains, misalignments and biases of each IMU from a "
+           "hand-held log of static orientations joined by rotations (imu_tk model, ML)";
+  }
+  bool Reads(Layout layout) const override { return layout == Layout::kArray; }
+  Status ValidateConfig(const json& config) const override {
+    core::ImuOptions options;
+    return ParseImuConfig(config, &options);
+  }
+  Status Run(RecordingParser* parser, const json& config, const RunContext&,
+             json* result) const override {
+    core::ImuOptions options;
+    Status s = ParseImuConfig(config, &options);
+    if (!s.ok()) return s;
+    ArrayRecording log;
+    s = parser->TakeArray(&log);
+    if (!s.ok()) return s;
+    s = CheckLogTimes(log, "imu");
+    if (!s.ok()) return s;
+    const size_t imus = log.accel_names.size();
+    if (log.gyro_names.size() != imus) {
+      return Status::InvalidInput(
+          "the imu method pairs accelerometer triad K with gyroscope "
+          "triad K, but the log has " +
+          std::to_string(imus) + " accelerometer and " + std::to_string(log.gyro_names.size()) +
+          " gyroscope triads");
+    }
+    std::vector<Eigen::MatrixX3d> accel(imus), gyro(imus);
+    std::vector<core::ImuReadings> readings(imus);
+    for (size_t k = 0; k < imus; ++k) {
+      accel[k] = log.accel.middleCols(3 * static_cast<Eigen::Index>(k), 3);
+      gyro[k] = log.gyro.middleCols(3 * static_cast<Eigen::Index>(k), 3);
+      readings[k].name = std::to_string(k);
+      readings[k].accel = &accel[k];
+      readings[k].gyro = &gyro[k];
+    }
+    log.accel.resize(0, 0);
+    log.gyro.resize(0, 0);
+    std::vector<core::ImuResult> results;
+    s = core::CalibrateImus(log.t, readings, options, &results);
+    if (!s.ok()) return s;
+    json params = json::array(), stds = json::array(), diagnostics = json::array(),
+         warnings = json::array();
+    for (const core::ImuResult& r : results) {
+      params.push_back({{"name", r.name},
+                        {"accelerometer", TriadJson(r.accelerometer)},
+                        {"gyroscope", TriadJson(r.gyroscope)}});
+      stds.push_back({{"name", r.name},
+                      {"accelerometer", TriadStdJson(r.accelerometer)},
+                      {"gyroscope", TriadStdJson(r.gyroscope)}});
+      diagnostics.push_back(DiagnosticsJson(r));
+      for (const std::string& w : r.warnings) warnings.push_back("IMU " + r.name + ": " + w);
+    }
+    json statics = json::array();
+    const core::StaticDetection& d = results.front().detection;
+    for (const auto& iv : d.intervals) {
+      statics.push_back({{"start", Num(iv.start)}, {"end", Num(iv.end)}, {"samples", iv.samples}});
+    }
+    *result = {
+        {"method", "imu"},
+        {"model",
+         "a = T_a K_a (y_a - b_a), omega = T_g K_g (y_g - b_g): y raw readings, b biases "
+         "(reading units), K diagonal scales (SI per reading unit), T_a upper triangular with "
+         "unit diagonal (the body frame is the accelerometer's: x along its x axis, y in its x-y "
+         "plane), T_g the gyroscope's misalignment to that frame (unit diagonal); matrix = T K"},
+        {"parameters",
+         {{"gravity", Num(options.gravity)},
+          {"gyro_bias", core::GyroBiasModelName(options.gyro_bias)},
+          {"imus", params}}},
+        {"uncertainty", {{"imus", stds}}},
+        {"diagnostics",
+         {{"statics", statics},
+          {"static_window", Num(options.detection.static_window)},
+          {"min_static", Num(options.detection.min_static)},
+          {"threshold_choice", results.front().threshold_choice},
+          {"imus", diagnostics}}},
+        {"warnings", warnings}};
+    return Status::Ok();
+  }
+};
+
+}  // namespace
+
+Status SimulateImuFiles(const core::ImuSimulationOptions& options, std::string* csv, json* config,
+                        json* truth) {
+  core::ImuSimulation sim;
+  Status s = core::SimulateImu(options, &sim);
+  if (!s.ok()) return s;
+  csv->clear();
+  csv->reserve(static_cast<size_t>(sim.t.size()) * 100);
+  *csv += "t,a0_x,a0_y,a0_z,g0_x,g0_y,g0_z\n";
+  char line[256];
+  for (Eigen::Index i = 0; i < sim.t.size(); ++i) {
+    const int n = std::snprintf(line, sizeof line, "%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g\n",
+                                sim.t[i], sim.accel(i, 0), sim.accel(i, 1), sim.accel(i, 2),
+                                sim.gyro(i, 0), sim.gyro(i, 1), sim.gyro(i, 2));
+    csv->append(line, static_cast<size_t>(n));
+  }
+  *config = {{"method", "imu"},
+             {"accel_unit", options.accel_unit},
+             {"gyro_unit", options.gyro_unit},
+             {"gravity", options.gravity}};
+  if (options.accel_offset != 0) (*config)["nominal_accel_bias"] = options.accel_offset;
+  if (options.gyro_offset != 0) (*config)["nominal_gyro_bias"] = options.gyro_offset;
+  auto triad = [](const core::ImuTriadTruth& t) {
+    return json{{"bias", Vec(t.bias)},
+                {"scale", Vec(t.scale)},
+                {"misalignment", Mat(t.misalignment)},
+                {"matrix", Mat(t.matrix)}};
+  };
+  *truth = {{"method", "imu"},
+            {"seed", options.seed},
+            {"statics", options.statics},
+            {"accelerometer", triad(sim.accel_truth)},
+            {"gyroscope", triad(sim.gyro_truth)}};
+  return Status::Ok();
+}
+
+const Method& ImuMethod() {
+  static const Imu method;
+  return method;
+}
+
+}  // namespace calibd::server

@@ -1,0 +1,49 @@
+// JSON glue of the `imu` method (SPEC §7): an inertial log (array layout with `t`; triad K of the
+// accelerometers and of the gyroscopes belong to IMU K) to core::CalibrateImus, and its results to
+// the SPEC §4 / §7 result JSON:
+//   {"method":"imu","model":...,
+//    "parameters":{"gravity","gyro_bias","imus":[{"name",
+//        "accelerometer":{"bias":[3],"scale":[3],"misalignment":[[3]x3],"matrix":[[3]x3]},
+//        "gyroscope":{same}}]},
+//    "uncertainty":{"imus":[{"name","accelerometer":{"bias_std","scale_std","misalignment_std"},
+//                            "gyroscope":{same}}]},
+//    "diagnostics":{"statics":[{"start","end","samples"}],"threshold":{...},
+//        "imus":[{"name","termination","chi2_per_dof","degrees_of_freedom","noise",
+//                 "residuals":{"accel_norm_rms_before","accel_norm_rms_after",
+//                              "gyro_direction_rms_before","gyro_direction_rms_after"},
+//                 "statics":[...],"rotations":[...],"coverage":{...},
+//                 "threshold_trials":[...],"threshold_choice"}]},
+//    "warnings":[...]}
+// Biases in reading units, scales in SI per reading unit, misalignment angles in radians. No
+// NaN/Inf (null instead). Deterministic.
+// Config keys: method, device, accel_unit, gyro_unit (server/inertial_log.h), gravity (m/s²) or
+// latitude (deg) and height (m) for WGS-84 normal gravity (default 9.80665), gyro_bias
+// ("statics" default | "estimate"), static_window (s, default 1), min_static (s, default 1),
+// static_threshold ({"accelerometer": x, "gyroscope": y}, window spread in reading units,
+// overriding the threshold found from the noise floor), accel_noise / gyro_noise (σ per sample,
+// SI; default: from the statics), nominal_accel_bias / nominal_gyro_bias (reading units, e.g.
+// 32768 for offset-binary counts: the "before calibration" reference of the diagnostics).
+#ifndef CALIBD_SERVER_IMU_METHOD_H_
+#define CALIBD_SERVER_IMU_METHOD_H_
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "core/imu.h"
+#include "core/imu_simulation.h"
+#include "server/method.h"
+
+namespace calibd::server {
+
+// The `imu` method for the registry: reads inertial logs (the array layout with `t`).
+const Method& ImuMethod();
+
+// For `calibd simulate imu`: one IMU placed by hand in `statics` orientations; CSV
+// `t,a0_x,..,g0_z` (%.10g), the config ({"method":"imu", units, gravity}) and the truth
+// ({"accelerometer"/"gyroscope": {"bias","scale","misalignment","matrix"}}).
+Status SimulateImuFiles(const core::ImuSimulationOptions& options, std::string* csv,
+                        nlohmann::json* config, nlohmann::json* truth);
+
+}  // namespace calibd::server
+
+#endif  // CALIBD_SERVER_IMU_METHOD_H_
