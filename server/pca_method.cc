@@ -143,6 +143,21 @@ json PcaResultToJson(const core::PcaResult& r) {
   diag["residual_rms"] = Vec(r.residual_rms);
   diag["magnitude_error"] = Vec(r.magnitude_error);
   diag["degrees_of_freedom"] = r.degrees_of_freedom;
+  {
+    // How well the positions span the sphere (frame-free numbers; directions in the result's
+    // frame), so a poor calibration names its real cause.
+    const core::PcaCoverage& c = r.coverage;
+    json caps = json::object();
+    for (size_t i = 0; i < c.cap_names.size() && i < c.cap_positions.size(); ++i) {
+      caps[c.cap_names[i]] = c.cap_positions[i];
+    }
+    diag["coverage"] = {{"verdict", core::PcaCoverageVerdictName(c.verdict)},
+                        {"scatter_eigenvalues", Vec(c.scatter_eigenvalues)},
+                        {"scatter_min", Num(c.scatter_min)},
+                        {"design_min", Num(c.design_min)},
+                        {"positions_per_direction", caps},
+                        {"advice", c.advice}};
+  }
   diag["noise_std"] = Num(r.noise_std);
   diag["noise_std_given"] = r.noise_std_given;
   diag["noise_std_estimated"] = Num(r.noise_std_estimated);

@@ -131,6 +131,11 @@ TEST(PcaResultJson, HasExactlyTheSpecKeysAndNoNonFiniteNumbers) {
   EXPECT_EQ(d["min_positions"], 6);
   EXPECT_EQ(d["residual_rms"].size(), 12u);
   EXPECT_EQ(d["magnitude_error"].size(), 30u);
+  // 30 random orientations span the sphere: coverage good, nothing to add.
+  EXPECT_EQ(d["coverage"]["verdict"], "good") << d["coverage"].dump();
+  EXPECT_EQ(d["coverage"]["advice"], "");
+  EXPECT_EQ(d["coverage"]["scatter_eigenvalues"].size(), 3u);
+  EXPECT_EQ(d["coverage"]["positions_per_direction"].size(), 18u);
   ExpectNoNonFinite(result);
   // Close to the truth (nominal frame ≈ the body frame of a_model).
   for (int i = 0; i < 12; ++i) {
