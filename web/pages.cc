@@ -1226,6 +1226,261 @@ std::string ArrayReport(const JobView& view) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// noise and imu reports.
+
+std::vector<double> Doubles(const json* j) {
+  std::vector<double> out;
+  if (j == nullptr || !j->is_array()) return out;
+  for (const json& v : *j) out.push_back(v.is_number() ? v.get<double>() : kNaN);
+  return out;
+}
+
+// "1.23e-4 ± 2.1e-6" or "not visible" for a null term.
+std::string TermCell(const json* value, const json* std) {
+  const double v = Num(value), s = Num(std);
+  if (!std::isfinite(v)) return "<td class=\"num muted\">not visible</td>";
+  return NumCell(FormatSig(v, 4) + (std::isfinite(s) ? " \xC2\xB1 " + FormatSig(s, 2) : ""));
+}
+
+// Log-log Allan deviation of the channels of one sensor type, with their confidence bands and
+// the fitted model.
+std::string AllanPlot(const json* diag, char kind, const std::string& unit) {
+  const json* allan = Get(diag, "allan");
+  if (allan == nullptr || !allan->is_array()) return "";
+  std::vector<Series> series;
+  int color = 0;
+  for (const json& c : *allan) {
+    const std::string name = Str(Get(c, "name"));
+    if (name.empty() || name[0] != kind) continue;
+    Series data;
+    data.label = name;
+    data.x = Doubles(Get(c, "tau"));
+    data.y = Doubles(Get(c, "adev"));
+    data.marker = Marker::kCircle;
+    data.color = color;
+    for (const char* bound : {"adev_lower", "adev_upper"}) {
+      Series b;
+      b.x = data.x;
+      b.y = Doubles(Get(c, bound));
+      b.color = color;
+      b.dashed = true;
+      b.line_width = 0.8;
+      if (b.y.size() == b.x.size()) series.push_back(b);
+    }
+    Series fit;
+    fit.x = data.x;
+    fit.y = Doubles(Get(c, "fitted_adev"));
+    fit.color = color;
+    fit.line_width = 2.4;
+    series.push_back(std::move(data));
+    if (fit.y.size() == fit.x.size()) series.push_back(std::move(fit));
+    ++color;
+  }
+  if (series.empty()) return "";
+  PlotOptions o;
+  o.name = std::string("allan-") + (kind == 'a' ? "accel" : "gyro");
+  o.title = std::string(kind == 'a' ? "Accelerometers" : "Gyroscopes") + ": Allan deviation";
+  o.x.title = "cluster time \xCF\x84 (s)";
+  o.x.type = ScaleType::kLog10;
+  o.y.title = "Allan deviation \xCF\x83(\xCF\x84) (" + unit + ")";
+  o.y.type = ScaleType::kLog10;
+  o.ref_lines.push_back({true, 1.0, "\xCF\x84 = 1 s: N", true});
+  o.ref_lines.push_back({true, 3.0, "\xCF\x84 = 3 s: K", true});
+  return Figure(RenderXYPlot(o, series),
+                "Circles: overlapping Allan deviation; dashed: its confidence interval; thick: "
+                "the fitted model N\xC2\xB2/\xCF\x84 + (0.664 B)\xC2\xB2 + K\xC2\xB2\xCF\x84/3. "
+                "Slope \xE2\x88\x92\xC2\xBD: white noise (read at 1 s), flat: bias instability, "
+                "+\xC2\xBD: random walk (read at 3 s).");
+}
+
+std::string NoiseReport(const JobView& view) {
+  const json& result = view.job.result;
+  const json* params = Get(result, "parameters");
+  const json* unc = Get(result, "uncertainty");
+  const json* diag = Get(result, "diagnostics");
+  std::string out;
+  out += Guard("Parameters", [&] {
+    std::string s = "<dl class=\"kv\">";
+    s += "<dt>sample rate</dt><dd>" + E(ScalarText(Get(diag, "rate"), 6)) + " Hz</dd>";
+    s += "<dt>samples</dt><dd>" + E(ScalarText(Get(diag, "samples"))) + " (" +
+         FormatDuration(Num(Get(diag, "duration"))) + ")</dd>";
+    const json* st = Get(diag, "stationary");
+    s += "<dt>stationary</dt><dd>" +
+         std::string(st != nullptr && st->is_boolean() && st->get<bool>()
+                         ? "yes"
+                         : "no: the sensor moved, the Allan curve is meaningless") +
+         "</dd></dl>";
+    const json* channels = Get(params, "channels");
+    const json* uch = Get(unc, "channels");
+    if (channels == nullptr || !channels->is_array() || channels->empty()) {
+      return Section("parameters", "Parameters", s + NotAvailable("Channels"));
+    }
+    s += "<div class=\"table-wrap\"><table class=\"table-noise-parameters\"><thead><tr>"
+         "<th>channel</th><th>unit</th><th>white noise N (unit/\xE2\x88\x9AHz)</th>"
+         "<th>bias instability B (unit)</th><th>at \xCF\x84 (s)</th>"
+         "<th>random walk K (unit/s/\xE2\x88\x9AHz)</th></tr></thead><tbody>";
+    for (size_t i = 0; i < channels->size(); ++i) {
+      const json& c = (*channels)[i];
+      const json* u = uch != nullptr && uch->is_array() && i < uch->size() ? &(*uch)[i] : nullptr;
+      s += "<tr><td>" + E(Str(Get(c, "name"))) + "</td><td>" + E(Str(Get(c, "unit"))) + "</td>" +
+           TermCell(Get(c, "white_noise"), Get(u, "white_noise_std")) +
+           TermCell(Get(c, "bias_instability"), Get(u, "bias_instability_std")) +
+           NumCell(Num(Get(c, "bias_instability_tau")), 3) +
+           TermCell(Get(c, "random_walk"), Get(u, "random_walk_std")) + "</tr>";
+    }
+    s += "</tbody></table></div><p class=\"muted small\">\xC2\xB1 is one standard deviation. "
+         "N and K are Kalibr's noise_density and random_walk "
+         "(<a href=\"/api/v1/devices/" +
+         A(UrlEncode(view.job.device)) +
+         "/calibration?method=noise&amp;format=yaml\">imu.yaml</a>). A term the log is too short "
+         "to show is \"not visible\"; the warnings say how long a log would show it.</p>";
+    return Section("parameters", "Parameters", s);
+  });
+  out += Guard("Plots", [&] {
+    std::string figs = AllanPlot(diag, 'a', "m/s\xC2\xB2") + AllanPlot(diag, 'g', "rad/s");
+    if (figs.empty()) return NotAvailable("The Allan deviation plots");
+    return Section("plots", "Plots", "<div class=\"plots\">" + figs + "</div>");
+  });
+  return out;
+}
+
+std::string Vec3Cell(const json* v, int sig = 6) {
+  std::string text;
+  for (size_t k = 0; k < 3; ++k) {
+    const json* x = v != nullptr && v->is_array() && k < v->size() ? &(*v)[k] : nullptr;
+    text += (k ? ", " : "") + FormatSig(Num(x), sig);
+  }
+  return NumCell(text);
+}
+
+std::string ImuReport(const JobView& view) {
+  const json& result = view.job.result;
+  const json* params = Get(result, "parameters");
+  const json* unc = Get(result, "uncertainty");
+  const json* diag = Get(result, "diagnostics");
+  const json* imus = Get(params, "imus");
+  std::string out;
+  out += Guard("Parameters", [&] {
+    std::string s = "<dl class=\"kv\"><dt>gravity</dt><dd>" +
+                    E(ScalarText(Get(params, "gravity"), 7)) +
+                    " m/s\xC2\xB2</dd><dt>gyroscope bias</dt><dd>" +
+                    E(ScalarText(Get(params, "gyro_bias"))) + "</dd><dt>static intervals</dt><dd>";
+    const json* statics = Get(diag, "statics");
+    s += std::to_string(statics != nullptr && statics->is_array() ? statics->size() : 0) + " (" +
+         E(Str(Get(diag, "threshold_choice"))) + ")</dd></dl>";
+    if (imus == nullptr || !imus->is_array() || imus->empty()) {
+      return Section("parameters", "Parameters", s + NotAvailable("IMUs"));
+    }
+    s += "<div class=\"table-wrap\"><table class=\"table-imu-parameters\"><thead><tr>"
+         "<th>IMU</th><th>sensor</th><th>bias b (reading units)</th><th>\xCF\x83(b)</th>"
+         "<th>scale K (SI per reading unit)</th><th>\xCF\x83(K)</th>"
+         "<th>misalignment T (rows)</th></tr></thead><tbody>";
+    const json* uimus = Get(unc, "imus");
+    for (size_t i = 0; i < imus->size(); ++i) {
+      const json& imu = (*imus)[i];
+      const json* u =
+          uimus != nullptr && uimus->is_array() && i < uimus->size() ? &(*uimus)[i] : nullptr;
+      for (const char* sensor : {"accelerometer", "gyroscope"}) {
+        const json* p = Get(imu, sensor);
+        const json* ps = Get(u, sensor);
+        const json* t = Get(p, "misalignment");
+        std::string rows;
+        for (size_t r = 0; r < 3; ++r) {
+          const json* row = t != nullptr && t->is_array() && r < t->size() ? &(*t)[r] : nullptr;
+          std::string cells;
+          for (size_t k = 0; k < 3; ++k) {
+            const json* x =
+                row != nullptr && row->is_array() && k < row->size() ? &(*row)[k] : nullptr;
+            cells += (k ? " " : "") + FormatFixed(Num(x), 5);
+          }
+          rows += (r ? "<br>" : "") + cells;
+        }
+        s += "<tr><td>" + E(Str(Get(imu, "name"))) + "</td><td>" + sensor + "</td>" +
+             Vec3Cell(Get(p, "bias")) + Vec3Cell(Get(ps, "bias_std"), 2) +
+             Vec3Cell(Get(p, "scale")) + Vec3Cell(Get(ps, "scale_std"), 2) +
+             "<td class=\"num small\">" + rows + "</td></tr>";
+      }
+    }
+    s +=
+        "</tbody></table></div><p class=\"muted small\">a = T_a K_a (y_a \xE2\x88\x92 b_a), "
+        "\xCF\x89 = T_g K_g (y_g \xE2\x88\x92 b_g). T_a is upper triangular: the body frame is the "
+        "accelerometer's (x along its x axis, y in its x-y plane). \xCF\x83 is one standard "
+        "deviation from the Fisher information at the estimate.</p>";
+    return Section("parameters", "Parameters", s);
+  });
+  out += Guard("Fit", [&] {
+    const json* d = Get(diag, "imus");
+    if (d == nullptr || !d->is_array()) return std::string();
+    std::string s, figs;
+    for (const json& imu : *d) {
+      const json* res = Get(imu, "residuals");
+      const json* cov = Get(imu, "coverage");
+      s += "<h3>IMU " + E(Str(Get(imu, "name"))) + "</h3><dl class=\"kv\">";
+      s += "<dt>|a| \xE2\x88\x92 g over the statics (RMS)</dt><dd>" +
+           FormatSI(Num(Get(res, "accel_norm_rms_before")), "m/s\xC2\xB2") + " before, " +
+           FormatSI(Num(Get(res, "accel_norm_rms_after")), "m/s\xC2\xB2") + " after</dd>";
+      s += "<dt>gravity direction after each rotation (RMS)</dt><dd>" +
+           FormatSI(Num(Get(res, "gyro_direction_rms_before")), "rad") + " before, " +
+           FormatSI(Num(Get(res, "gyro_direction_rms_after")), "rad") + " after</dd>";
+      s += "<dt>\xCF\x87\xC2\xB2 / degrees of freedom</dt><dd>" +
+           E(ScalarText(Get(imu, "chi2_per_dof"), 3)) + "</dd>";
+      s += "<dt>orientation coverage</dt><dd>" + E(Str(Get(cov, "verdict"))) +
+           " (smallest eigenvalue " + E(ScalarText(Get(cov, "min_eigenvalue"), 3)) +
+           ", 1 = evenly spread)</dd></dl>";
+      const json* statics = Get(imu, "statics");
+      if (statics != nullptr && statics->is_array() && !statics->empty()) {
+        Series before, after;
+        before.label = "nominal conversion";
+        after.label = "calibrated";
+        before.marker = Marker::kOpenCircle;
+        after.marker = Marker::kCircle;
+        before.line = after.line = false;
+        for (size_t j = 0; j < statics->size(); ++j) {
+          before.x.push_back(static_cast<double>(j + 1));
+          after.x.push_back(static_cast<double>(j + 1));
+          before.y.push_back(Num(Get((*statics)[j], "norm_residual_before")));
+          after.y.push_back(Num(Get((*statics)[j], "norm_residual_after")));
+        }
+        PlotOptions o;
+        o.name = "imu-gravity-norm";
+        o.title = "|a| \xE2\x88\x92 g per static interval";
+        o.x.title = "static interval";
+        o.y.title = "|a| \xE2\x88\x92 g (m/s\xC2\xB2)";
+        o.y.include_zero = true;
+        figs += Figure(RenderXYPlot(o, {before, after}),
+                       "Each static's specific force should have the magnitude of gravity.");
+      }
+      const json* rotations = Get(imu, "rotations");
+      if (rotations != nullptr && rotations->is_array() && !rotations->empty()) {
+        Series before, after;
+        before.label = "nominal conversion";
+        after.label = "calibrated";
+        before.marker = Marker::kOpenCircle;
+        after.marker = Marker::kCircle;
+        before.line = after.line = false;
+        for (size_t j = 0; j < rotations->size(); ++j) {
+          before.x.push_back(static_cast<double>(j + 1));
+          after.x.push_back(static_cast<double>(j + 1));
+          before.y.push_back(Num(Get((*rotations)[j], "direction_error_before")));
+          after.y.push_back(Num(Get((*rotations)[j], "direction_error_after")));
+        }
+        PlotOptions o;
+        o.name = "imu-rotation-error";
+        o.title = "Gravity direction error after each rotation";
+        o.x.title = "rotation (between statics j and j+1)";
+        o.y.title = "angle (rad)";
+        o.y.include_zero = true;
+        figs += Figure(RenderXYPlot(o, {before, after}),
+                       "The integrated gyroscope must carry gravity's direction from one static "
+                       "to the next.");
+      }
+    }
+    return Section("fit", "Fit", s + "<div class=\"plots\">" + figs + "</div>");
+  });
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
 // Job page pieces.
 
 std::string TimingsHtml(const JobSummary& job) {
@@ -1237,6 +1492,18 @@ std::string TimingsHtml(const JobSummary& job) {
   out += "</dd><dt>finished</dt><dd>" + TimeHtml(job.finished_at, true);
   if (std::isfinite(s) && std::isfinite(f)) out += " (ran " + FormatDuration(f - s) + ")";
   out += "</dd><dt>attempts</dt><dd>" + std::to_string(job.attempts) + "</dd>";
+  return out;
+}
+
+// The export formats of a method's calibration (GET .../calibration?format=).
+std::string ExportLinks(const std::string& base, const std::string& method) {
+  std::string out = "<a href=\"" + A(base + "json") + "\">JSON</a> \xC2\xB7 <a href=\"" +
+                    A(base + "csv") + "\">CSV</a>";
+  if (method == "pca" || method == "array") {
+    out += " \xC2\xB7 <a href=\"" + A(base + "h") + "\">C header</a>";
+  } else if (method == "noise") {
+    out += " \xC2\xB7 <a href=\"" + A(base + "yaml") + "\">Kalibr imu.yaml</a>";
+  }
   return out;
 }
 
@@ -1253,9 +1520,7 @@ std::string DownloadsHtml(const JobView& view) {
     const std::string base = "/api/v1/devices/" + UrlEncode(job.device) +
                              "/calibration?method=" + UrlEncode(job.method) + "&format=";
     out += "<li>Latest " + E(job.method) + " calibration of " + E(job.device) +
-           " (may be newer than this report): <a href=\"" + A(base + "json") +
-           "\">JSON</a> \xC2\xB7 <a href=\"" + A(base + "csv") + "\">CSV</a> \xC2\xB7 <a href=\"" +
-           A(base + "h") + "\">C header</a></li>";
+           " (may be newer than this report): " + ExportLinks(base, job.method) + "</li>";
   }
   return out + "</ul>";
 }
@@ -1364,6 +1629,10 @@ std::string JobBody(const JobView& view) {
       out += PcaReport(view);
     } else if (method == "array") {
       out += ArrayReport(view);
+    } else if (method == "noise") {
+      out += NoiseReport(view);
+    } else if (method == "imu") {
+      out += ImuReport(view);
     } else {
       out += NotAvailable("A report for method \"" + method + "\"");
     }
@@ -1715,9 +1984,7 @@ std::string DeviceBody(const DeviceView& v) {
     for (const auto& m : methods) {
       const std::string base = "/api/v1/devices/" + UrlEncode(v.serial) +
                                "/calibration?method=" + UrlEncode(m) + "&format=";
-      out += "<li>Latest " + E(m) + " calibration: <a href=\"" + A(base + "json") +
-             "\">JSON</a> \xC2\xB7 <a href=\"" + A(base + "csv") +
-             "\">CSV</a> \xC2\xB7 <a href=\"" + A(base + "h") + "\">C header</a></li>";
+      out += "<li>Latest " + E(m) + " calibration: " + ExportLinks(base, m) + "</li>";
     }
     out += "</ul>";
   }

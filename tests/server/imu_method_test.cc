@@ -86,6 +86,15 @@ TEST(ImuMethod, CalibratesASimulatedHandHeldLogThroughTheServerWithinItsUncertai
   EXPECT_NE(exported->body.find("\n0,accelerometer,"), std::string::npos);
   EXPECT_NE(exported->body.find("\n0,gyroscope,"), std::string::npos);
   EXPECT_EQ(client.Get("/api/v1/devices/IMU-1/calibration?format=h")->status, 400);
+  // The report: parameters with 1σ per IMU, the fit before and after per static and rotation.
+  auto page = client.Get(("/jobs/" + std::to_string(job["id"].get<int64_t>())).c_str());
+  ASSERT_TRUE(page);
+  ASSERT_EQ(page->status, 200);
+  for (const char* part : {"class=\"table-imu-parameters\"", "class=\"plot plot-imu-gravity-norm\"",
+                           "class=\"plot plot-imu-rotation-error\"", "orientation coverage"}) {
+    EXPECT_NE(page->body.find(part), std::string::npos) << part;
+  }
+  EXPECT_EQ(page->body.find("format=h\""), std::string::npos);
 }
 
 TEST(ImuMethod, CountsAreConvertedWithTheConfiguredUnits) {
