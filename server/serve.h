@@ -18,14 +18,14 @@ struct ServeOptions {
   // Threads that process requests. A connection gets one only once its request line and headers
   // have arrived (server/http_server.h), so slow or idle clients do not hold threads.
   int http_threads = 128;
-  int read_timeout_seconds = 10;    // per read of a request body (slow clients are cut off)
-  int write_timeout_seconds = 30;   // per write on a connection
-  int head_timeout_seconds = 10;    // request line + headers must arrive within this (408)
+  int read_timeout_seconds = 10;         // per read of a request body (slow clients are cut off)
+  int write_timeout_seconds = 30;        // per write on a connection
+  int head_timeout_seconds = 10;         // request line + headers must arrive within this (408)
   int max_connections_per_client = 256;  // open connections per remote address (503 beyond)
   int max_requests_per_client = 64;      // requests in progress per remote address (more wait)
-  int64_t lease_ms = 30000;         // job lease; renewed every third of it while a job runs
-  int shutdown_grace_seconds = 20;  // on SIGTERM, running jobs may finish within this time
-  bool access_log = true;           // one line per request on stderr
+  int64_t lease_ms = 30000;              // job lease; renewed every third of it while a job runs
+  int shutdown_grace_seconds = 20;       // on SIGTERM, running jobs may finish within this time
+  bool access_log = true;                // one line per request on stderr
   // Returns "" when the options are consistent, else what is wrong (names the flag).
   std::string Validate() const;
 };
