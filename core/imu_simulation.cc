@@ -12,7 +12,9 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 
 Eigen::Matrix3d RandomRotation(GaussianRng* rng) {
-  Eigen::Quaterniond q(rng->Normal(), rng->Normal(), rng->Normal(), rng->Normal());
+  // Braces: the draws are made left to right with every compiler (parenthesised arguments are
+  // evaluated in an unspecified order, and GCC and Clang differ).
+  Eigen::Quaterniond q{rng->Normal(), rng->Normal(), rng->Normal(), rng->Normal()};
   q.normalize();
   return q.toRotationMatrix();
 }

@@ -1,6 +1,7 @@
 #include "server/http_util.h"
 
 #include <regex>
+#include <vector>
 
 namespace calibd::server {
 
@@ -97,7 +98,9 @@ std::string ToLower(std::string s) {
 }
 
 std::string RouteLabel(const std::string& path) {
-  static const std::pair<std::regex, const char*> kRoutes[] = {
+  // Never destroyed: request threads may still run while exit() destroys statics.
+  using Routes = std::vector<std::pair<std::regex, const char*>>;
+  static const Routes& kRoutes = *new Routes{
       {std::regex(R"(/api/v1/recordings)"), "/api/v1/recordings"},
       {std::regex(R"(/api/v1/recordings/[^/]+)"), "/api/v1/recordings/{id}"},
       {std::regex(R"(/api/v1/recordings/[^/]+/data)"), "/api/v1/recordings/{id}/data"},

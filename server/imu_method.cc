@@ -37,7 +37,7 @@ Status ReadNumber(const json& config, const char* key, bool positive, std::optio
 
 Status ParseImuConfig(const json& config, core::ImuOptions* options) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
-  static const std::set<std::string> kKnown = {
+  static const std::set<std::string>& kKnown = *new std::set<std::string>{
       "method",           "device",      "accel_unit", "gyro_unit",          "gravity",
       "latitude",         "height",      "gyro_bias",  "static_window",      "min_static",
       "static_threshold", "accel_noise", "gyro_noise", "nominal_accel_bias", "nominal_gyro_bias"};

@@ -8,7 +8,9 @@
 namespace calibd::server {
 
 const std::vector<const Method*>& AllMethods() {
-  static const std::vector<const Method*> methods = {
+  // Never destroyed (like every static the request and worker threads read): a thread still
+  // running while exit() runs static destructors must not find it freed.
+  static const std::vector<const Method*>& methods = *new std::vector<const Method*>{
       &PcaMethod(),
       &ArrayMethod(),
       &ImuMethod(),

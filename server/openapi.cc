@@ -238,7 +238,7 @@ json Build() {
 }  // namespace
 
 const json& OpenApiDocument() {
-  static const json doc = Build();
+  static const json& doc = *new json(Build());  // never destroyed (threads read it)
   return doc;
 }
 

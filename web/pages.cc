@@ -413,7 +413,7 @@ std::vector<std::string> FailureAdvice(const std::string& method, const std::str
 // Diagnostics table (in the spirit of Ceres' FullReport).
 
 const char* DiagnosticMeaning(const std::string& key) {
-  static const std::map<std::string, const char*> kMeaning = {
+  static const std::map<std::string, const char*>& kMeaning = *new std::map<std::string, const char*>{
       {"singular_values", "all singular values of the m\xC3\x97n reading matrix"},
       {"rank_gap",
        "\xCF\x83_d / \xCF\x83_{d+1}: a large gap means the readings span exactly d directions"},

@@ -30,7 +30,13 @@ struct Case {
 PcaProblem MakeProblem(const Case& k) {
   PcaRandom rng(k.seed);
   MatrixXd a = MatrixXd::Zero(k.d, k.m);
-  for (int i = 0; i < k.m; ++i) a.col(i) = (1 + 0.05 * rng.Normal()) * rng.UnitVector(k.d);
+  for (int i = 0; i < k.m; ++i) {
+    // Two statements: the order of the draws must not depend on the compiler (the operands of
+    // one expression are evaluated in an unspecified order; GCC and Clang differ). This is the
+    // order the stored figures below were computed with.
+    const VectorXd axis = rng.UnitVector(k.d);
+    a.col(i) = (1 + 0.05 * rng.Normal()) * axis;
+  }
   const VectorXd b = k.bias ? VectorXd(0.1 * rng.NormalMatrix(k.m, 1)) : VectorXd::Zero(k.m);
   const MatrixXd v = rng.SphereColumns(k.d, k.n, k.c);
   PcaProblem p;
@@ -219,7 +225,10 @@ TEST(PcaCost, ThousandSensorsGiveSigmaMatchingMonteCarlo) {
   const double c = 9.81, sigma = 0.01 * c;
   PcaRandom rng(4242);
   MatrixXd a(3, m);
-  for (int i = 0; i < m; ++i) a.col(i) = (1 + 0.05 * rng.Normal()) * rng.UnitVector(3);
+  for (int i = 0; i < m; ++i) {
+    const VectorXd axis = rng.UnitVector(3);  // before the gain: a fixed order of draws
+    a.col(i) = (1 + 0.05 * rng.Normal()) * axis;
+  }
   const VectorXd b = 0.1 * rng.NormalMatrix(m, 1);
   const MatrixXd v = rng.SphereColumns(3, n, c);
   MatrixXd clean = a.transpose() * v;
