@@ -279,7 +279,11 @@ class ReducedFisher {
   std::vector<MatrixXd> DiagonalBlocks() const {
     std::vector<MatrixXd> blocks(m_);
     const int np = p_ * m_;
-    if (low_rank_) {
+    if (low_rank_ && q_.cols() == 0) {
+      // r = 0 (d = 1: no tangent directions, no rotation gauge): no low-rank correction. (A
+      // block of an empty (pm)×0 matrix would offset a null pointer.)
+      for (int i = 0; i < m_; ++i) blocks[i] = vi_;
+    } else if (low_rank_) {
       const MatrixXd bq = b_ * q_;  // (pm)×r
       const VectorXd inv = lambda_.cwiseInverse();
       for (int i = 0; i < m_; ++i) {
@@ -295,8 +299,10 @@ class ReducedFisher {
       }
     }
     for (int i = 0; i < m_; ++i) {
-      const auto ni = nb_.middleRows(i * p_, p_);
-      blocks[i] -= ni * ni.transpose() / kappa_;
+      if (nb_.cols() > 0) {  // d = 1 has no rotation gauge (and nb_ no columns)
+        const auto ni = nb_.middleRows(i * p_, p_);
+        blocks[i] -= ni * ni.transpose() / kappa_;
+      }
       blocks[i] = 0.5 * (blocks[i] + blocks[i].transpose()).eval();
     }
     return blocks;

@@ -22,8 +22,8 @@ json Nums(const std::vector<double>& v) {
 
 Status ParseNoiseConfig(const json& config, core::NoiseOptions* options, InertialUnits* units) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
-  static const std::set<std::string>& kKnown = *new std::set<std::string>{"method", "device", "accel_unit", "gyro_unit",
-                                               "taus_per_decade"};
+  static const std::set<std::string>& kKnown =
+      *new std::set<std::string>{"method", "device", "accel_unit", "gyro_unit", "taus_per_decade"};
   for (const auto& [key, value] : config.items()) {
     if (kKnown.count(key) == 0) {
       return Status::InvalidInput("config key '" + key +

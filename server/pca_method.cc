@@ -36,8 +36,8 @@ void AppendNumber(std::string* out, double x) {
 Status ParsePcaConfig(const json& config, core::PcaOptions* options) {
   *options = core::PcaOptions();
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
-  static const std::set<std::string>& kKnown = *new std::set<std::string>{"method",  "device", "dimension", "magnitude",
-                                               "nominal", "refine", "bias",      "noise_std"};
+  static const std::set<std::string>& kKnown = *new std::set<std::string>{
+      "method", "device", "dimension", "magnitude", "nominal", "refine", "bias", "noise_std"};
   for (const auto& [key, value] : config.items()) {
     if (kKnown.count(key) == 0) {
       return KeyError(key,
