@@ -19,6 +19,8 @@ built=$(date +%s)
 # 256 MB of freed memory ASan holds back.
 export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:strict_string_checks=1:detect_stack_use_after_return=1:quarantine_size_mb=16:thread_local_quarantine_size_kb=256
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+# Readable stack traces in reports (Debian installs the symbolizer under a versioned name).
+[ -x /usr/lib/llvm-14/bin/llvm-symbolizer ] && export ASAN_SYMBOLIZER_PATH=/usr/lib/llvm-14/bin/llvm-symbolizer
 slow='^(ArrayCalibration\.(EfficientAtTheCramerRaoBoundForN1000|BothSolversReachTheSameEstimate'
 slow+='|RmseFallsAsInverseSquareRootOfN|BcdRecoversPositionsExactlyWithoutNoise'
 slow+='|PaperHeadlineMicrometreErrorsWithFig4Dynamics)'

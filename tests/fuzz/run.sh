@@ -51,6 +51,7 @@ work=$(mktemp -d "${TMPDIR:-/tmp}/calibd-fuzz-run-XXXXXX")
 trap 'rm -rf "$work"' EXIT
 export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1:allocator_may_return_null=1}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
+[ -x /usr/lib/llvm-14/bin/llvm-symbolizer ] && export ASAN_SYMBOLIZER_PATH=/usr/lib/llvm-14/bin/llvm-symbolizer
 
 # Fuzzes one target; its exit status goes to $work/<target>.status, its log to <target>.log.
 fuzz_one() {
