@@ -74,17 +74,20 @@ class HostileHttp : public ::testing::Test {
               << " s\n";
   }
 
+  // Liveness, not latency: the server still answers after `after`. The bound is loose (the
+  // sanitizer stage runs tests two at a time beside heavy ones); bench/slow_clients.sh measures
+  // the latency.
   void ExpectHealthy(const std::string& after) {
     const auto start = std::chrono::steady_clock::now();
     auto client = server_.Client();
-    client.set_connection_timeout(1, 0);
-    client.set_read_timeout(1, 0);
+    client.set_connection_timeout(5, 0);
+    client.set_read_timeout(5, 0);
     auto res = client.Get("/healthz");
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     ASSERT_TRUE(res) << "no /healthz answer after " << after;
     EXPECT_EQ(res->status, 200) << after;
-    EXPECT_LT(seconds, 1.0) << after;
+    EXPECT_LT(seconds, 2.0 * sanitizer::kTimeBoundScale) << after;
   }
 
   TestServer server_{Options()};
