@@ -1354,6 +1354,27 @@ std::string Vec3Cell(const json* v, int sig = 6) {
   return NumCell(text);
 }
 
+// One figure per item of `items` (1-based index on x): `before` and `after` (keys of each item)
+// as open and filled circles; "" when there are no items.
+std::string BeforeAfterPlot(const json* items, const char* before_key, const char* after_key,
+                            PlotOptions options, const std::string& caption) {
+  if (items == nullptr || !items->is_array() || items->empty()) return "";
+  Series before, after;
+  before.label = "nominal conversion";
+  after.label = "calibrated";
+  before.marker = Marker::kOpenCircle;
+  after.marker = Marker::kCircle;
+  before.line = after.line = false;
+  for (size_t j = 0; j < items->size(); ++j) {
+    before.x.push_back(static_cast<double>(j + 1));
+    after.x.push_back(static_cast<double>(j + 1));
+    before.y.push_back(Num(Get((*items)[j], before_key)));
+    after.y.push_back(Num(Get((*items)[j], after_key)));
+  }
+  options.y.include_zero = true;
+  return Figure(RenderXYPlot(options, {before, after}), caption);
+}
+
 std::string ImuReport(const JobView& view) {
   const json& result = view.job.result;
   const json* params = Get(result, "parameters");
@@ -1428,53 +1449,21 @@ std::string ImuReport(const JobView& view) {
       s += "<dt>orientation coverage</dt><dd>" + E(Str(Get(cov, "verdict"))) +
            " (smallest eigenvalue " + E(ScalarText(Get(cov, "min_eigenvalue"), 3)) +
            ", 1 = evenly spread)</dd></dl>";
-      const json* statics = Get(imu, "statics");
-      if (statics != nullptr && statics->is_array() && !statics->empty()) {
-        Series before, after;
-        before.label = "nominal conversion";
-        after.label = "calibrated";
-        before.marker = Marker::kOpenCircle;
-        after.marker = Marker::kCircle;
-        before.line = after.line = false;
-        for (size_t j = 0; j < statics->size(); ++j) {
-          before.x.push_back(static_cast<double>(j + 1));
-          after.x.push_back(static_cast<double>(j + 1));
-          before.y.push_back(Num(Get((*statics)[j], "norm_residual_before")));
-          after.y.push_back(Num(Get((*statics)[j], "norm_residual_after")));
-        }
-        PlotOptions o;
-        o.name = "imu-gravity-norm";
-        o.title = "|a| \xE2\x88\x92 g per static interval";
-        o.x.title = "static interval";
-        o.y.title = "|a| \xE2\x88\x92 g (m/s\xC2\xB2)";
-        o.y.include_zero = true;
-        figs += Figure(RenderXYPlot(o, {before, after}),
-                       "Each static's specific force should have the magnitude of gravity.");
-      }
-      const json* rotations = Get(imu, "rotations");
-      if (rotations != nullptr && rotations->is_array() && !rotations->empty()) {
-        Series before, after;
-        before.label = "nominal conversion";
-        after.label = "calibrated";
-        before.marker = Marker::kOpenCircle;
-        after.marker = Marker::kCircle;
-        before.line = after.line = false;
-        for (size_t j = 0; j < rotations->size(); ++j) {
-          before.x.push_back(static_cast<double>(j + 1));
-          after.x.push_back(static_cast<double>(j + 1));
-          before.y.push_back(Num(Get((*rotations)[j], "direction_error_before")));
-          after.y.push_back(Num(Get((*rotations)[j], "direction_error_after")));
-        }
-        PlotOptions o;
-        o.name = "imu-rotation-error";
-        o.title = "Gravity direction error after each rotation";
-        o.x.title = "rotation (between statics j and j+1)";
-        o.y.title = "angle (rad)";
-        o.y.include_zero = true;
-        figs += Figure(RenderXYPlot(o, {before, after}),
-                       "The integrated gyroscope must carry gravity's direction from one static "
-                       "to the next.");
-      }
+      PlotOptions o;
+      o.name = "imu-gravity-norm";
+      o.title = "|a| \xE2\x88\x92 g per static interval";
+      o.x.title = "static interval";
+      o.y.title = "|a| \xE2\x88\x92 g (m/s\xC2\xB2)";
+      figs += BeforeAfterPlot(Get(imu, "statics"), "norm_residual_before", "norm_residual_after", o,
+                              "Each static's specific force should have the magnitude of gravity.");
+      o.name = "imu-rotation-error";
+      o.title = "Gravity direction error after each rotation";
+      o.x.title = "rotation (between statics j and j+1)";
+      o.y.title = "angle (rad)";
+      figs += BeforeAfterPlot(Get(imu, "rotations"), "direction_error_before",
+                              "direction_error_after", o,
+                              "The integrated gyroscope must carry gravity's direction from one "
+                              "static to the next.");
     }
     return Section("fit", "Fit", s + "<div class=\"plots\">" + figs + "</div>");
   });
