@@ -383,13 +383,14 @@ Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
 }
 
 Status RunArray(const ArrayRecording& recording, const json& config, json* result,
-                const std::atomic<bool>* cancel) {
+                const std::atomic<bool>* cancel, core::TaskExecutor executor) {
   core::ArrayProblem problem;
   core::ArrayOptions options;
   bool degrees = false;
   ArrayAccelerometerCalibration calibration;
   Status s = ParseArrayConfig(config, &problem, &options, &degrees, &calibration);
   if (!s.ok()) return s;
+  if (executor) options.executor = std::move(executor);
   const int K = static_cast<int>(problem.nominal_positions.cols());
   const int K_rec = static_cast<int>(recording.accel_names.size());
   if (K_rec != K)
@@ -633,7 +634,7 @@ class Array : public Method {
     ArrayRecording recording;
     Status s = parser->TakeArray(&recording);
     if (!s.ok()) return s;
-    return RunArray(recording, config, result, ctx.cancel);
+    return RunArray(recording, config, result, ctx.cancel, ctx.executor);
   }
 };
 

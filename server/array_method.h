@@ -97,8 +97,11 @@ Status ParseArrayConfig(const nlohmann::json& config, core::ArrayProblem* geomet
 // The recording's triad count must equal the geometry's (kInvalidInput naming both).
 // Errors as core::CalibrateArray otherwise.
 // `cancel` (optional): the solver stops at its next iteration once it is true.
+// `executor` (optional): runs the solver's parallel work (e.g. the server's shared pool);
+// without one the solver starts its own threads.
 Status RunArray(const ArrayRecording& recording, const nlohmann::json& config,
-                nlohmann::json* result, const std::atomic<bool>* cancel = nullptr);
+                nlohmann::json* result, const std::atomic<bool>* cancel = nullptr,
+                core::TaskExecutor executor = {});
 
 // For `calibd simulate array`.
 struct ArraySimulationFileOptions {

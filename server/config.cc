@@ -135,7 +135,7 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
 }
 
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, const json& config,
-                       json* result, const std::atomic<bool>* cancel) {
+                       json* result, const std::atomic<bool>* cancel, core::TaskExecutor executor) {
   CommonConfig common;
   Status s = ValidateConfig(config, &common);
   if (!s.ok()) return s;
@@ -150,6 +150,7 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
   }
   RunContext context;
   context.cancel = cancel;
+  context.executor = std::move(executor);
   return method->Run(parser, config, context, result);
 }
 

@@ -9,6 +9,7 @@
 #include <string>
 #include <string_view>
 
+#include "core/block_lm.h"
 #include "core/status.h"
 #include "server/recording.h"
 
@@ -49,9 +50,10 @@ Status Calibrate(std::string_view recording, const std::string& file_name,
                  const std::atomic<bool>* cancel = nullptr);
 
 // The same, from a parser that has already been fed and finished (collecting).
+// `executor` (optional): see RunContext::executor.
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name,
                        const nlohmann::json& config, nlohmann::json* result,
-                       const std::atomic<bool>* cancel = nullptr);
+                       const std::atomic<bool>* cancel = nullptr, core::TaskExecutor executor = {});
 
 }  // namespace calibd::server
 

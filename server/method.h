@@ -15,6 +15,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/block_lm.h"
 #include "core/status.h"
 #include "server/recording.h"
 
@@ -24,6 +25,9 @@ namespace calibd::server {
 struct RunContext {
   // When it becomes true the method stops early; its result is then discarded. May be null.
   const std::atomic<bool>* cancel = nullptr;
+  // Runs a method's parallel numerics (the server's one shared core::TaskPool, so concurrent
+  // jobs never start cores × cores threads). Empty: the method starts its own threads.
+  core::TaskExecutor executor;
 };
 
 class Method {

@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "core/task_pool.h"
 #include "server/config.h"
 #include "server/exports.h"
 #include "server/http_server.h"
@@ -230,6 +231,9 @@ struct Service::Impl {
   std::unique_ptr<storage::Store> store;
   std::unique_ptr<ProcessInstance> instance;  // after store: removed before the store closes
   Metrics metrics;
+  // The jobs' parallel numerics: cores - 1 threads shared by every worker (each worker computes
+  // too), so W concurrent jobs use at most W + cores - 1 threads. Outlives the workers.
+  std::unique_ptr<core::TaskPool> numerics;
   std::unique_ptr<WorkerPool> workers;
   std::unique_ptr<HttpServer> http;  // destroyed first: its request threads use the rest
   std::once_flag shutdown_once;
@@ -313,6 +317,9 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
   pool.lease_ms = options.lease_ms;
   pool.id_prefix = impl->instance->id();
   pool.housekeeping = [d = impl.get()] { d->ReapDeadProcesses(); };
+  impl->numerics = std::make_unique<core::TaskPool>(
+      std::max(0, static_cast<int>(std::thread::hardware_concurrency()) - 1));
+  pool.executor = impl->numerics->Executor();
   impl->workers = std::make_unique<WorkerPool>(impl->store.get(), &impl->metrics, pool);
   HttpLimits limits;
   limits.threads = options.http_threads;

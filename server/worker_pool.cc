@@ -4,6 +4,7 @@
 #include <nlohmann/json.hpp>
 
 #include "server/config.h"
+#include "server/recording.h"
 
 namespace calibd::server {
 
@@ -147,15 +148,25 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
     metrics_->ObserveJob(job.method, transient ? "retried" : "failed", seconds());
   };
 
-  std::string bytes;
-  Status s = store_->ReadRecordingBytes(job.recording_id, &bytes);
-  if (!s.ok()) return fail(s, s.IsTransient());
   nlohmann::json config, result;
-  s = ParseJsonText(job.config_json, "config of job " + std::to_string(job.id), &config);
+  Status s = ParseJsonText(job.config_json, "config of job " + std::to_string(job.id), &config);
   if (s.ok()) {
     try {
-      s = Calibrate(bytes, "recording " + std::to_string(job.recording_id), config, &result,
-                    &cancel);
+      // The stored bytes stream through the collecting parser in the store's 1 MiB pieces, so
+      // a job holds the recording's numbers (8 bytes a value), never its text as well. The read
+      // keeps one snapshot of the recording for the whole parse.
+      const std::string file_name = "recording " + std::to_string(job.recording_id);
+      RecordingParser parser(file_name, /*collect=*/true);
+      Status parsed;
+      s = store_->ReadRecordingData(job.recording_id, [&](std::string_view chunk) {
+        parsed = parser.Feed(chunk);
+        return parsed.ok() && !cancel.load();
+      });
+      if (!s.ok()) return fail(s, s.IsTransient());
+      if (parsed.ok() && !cancel.load()) parsed = parser.Finish();
+      s = parsed.ok()
+              ? CalibrateParsed(&parser, file_name, config, &result, &cancel, options_.executor)
+              : parsed;
     } catch (const std::bad_alloc&) {
       s = Status::IoError("out of memory while calibrating");
     } catch (const std::exception&) {

@@ -23,6 +23,7 @@
 #include <thread>
 #include <vector>
 
+#include "core/block_lm.h"
 #include "server/metrics.h"
 #include "storage/store.h"
 
@@ -36,6 +37,9 @@ struct WorkerPoolOptions {
   // Optional: run by the lease renewer thread every lease_ms / 3 (e.g. taking back the jobs of
   // dead processes). Must not block for long.
   std::function<void()> housekeeping;
+  // Optional: runs the jobs' parallel numerics (RunContext::executor); the caller keeps what it
+  // refers to alive until Stop has returned.
+  core::TaskExecutor executor;
 };
 
 class WorkerPool {
