@@ -1002,17 +1002,11 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     res.set_content(text, "application/yaml");
     return;
   }
-  if (method == "noise" || method == "imu") {
-    return (void)SendStatus(res,
-                            Status::InvalidInput("the " + method + " method exports json and csv" +
-                                                 (method == "noise" ? " and yaml" : ""))
-                                .WithField("format"));
-  }
   s = ResultToHeader(result, context, &text);
   if (!s.ok()) return (void)SendStatus(res, s);
   res.set_header("Content-Disposition",
                  "attachment; filename=\"calibration-" + std::to_string(job.id) + ".h\"");
-  res.set_content(text, "text/x-c++hdr");
+  res.set_content(text, "text/x-c");  // C99 and C++
 }
 
 void Service::Impl::HandleRecording(const httplib::Request& req, httplib::Response& res) {

@@ -1489,9 +1489,8 @@ std::string TimingsHtml(const JobSummary& job) {
 std::string ExportLinks(const std::string& base, const std::string& method) {
   std::string out = "<a href=\"" + A(base + "json") + "\">JSON</a> \xC2\xB7 <a href=\"" +
                     A(base + "csv") + "\">CSV</a>";
-  if (method == "pca" || method == "array") {
-    out += " \xC2\xB7 <a href=\"" + A(base + "h") + "\">C header</a>";
-  } else if (method == "noise") {
+  out += " \xC2\xB7 <a href=\"" + A(base + "h") + "\">C header</a>";
+  if (method == "noise") {
     out += " \xC2\xB7 <a href=\"" + A(base + "yaml") + "\">Kalibr imu.yaml</a>";
   }
   return out;

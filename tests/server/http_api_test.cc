@@ -148,7 +148,8 @@ TEST_F(HttpApi, UploadCsvRunsPcaJobAndServesTheLatestCalibration) {
   auto header = client.Get("/api/v1/devices/SN-001/calibration?method=pca&format=h");
   ASSERT_TRUE(header);
   EXPECT_EQ(header->status, 200);
-  EXPECT_NE(header->body.find("constexpr double kSensitivity[12][3]"), std::string::npos);
+  EXPECT_NE(header->body.find("static const double CALIBD_SN_001_PCA_SENSITIVITY[12][3]"),
+            std::string::npos);
   EXPECT_NE(header->body.find("job " + std::to_string(job_id)), std::string::npos);
   EXPECT_NE(header->body.find("SN-001"), std::string::npos);
 
