@@ -18,6 +18,7 @@
 #include <thread>
 
 #include "server/config.h"
+#include "server/device_lookup.h"
 #include "server/exports.h"
 #include "server/http_server.h"
 #include "server/http_util.h"
@@ -942,7 +943,9 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
                                        .WithField("method"));
     }
     if (methods.empty()) {
-      SendError(res, 404, "not_found", "no succeeded calibration for device '" + serial + "'");
+      const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
+      SendError(res, 404, "not_found",
+                hint.empty() ? "no succeeded calibration for device '" + serial + "'" : hint);
       return;
     }
     method = methods[0];
@@ -953,8 +956,10 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
   storage::JobInfo job;
   Status s = store->LatestResult(serial, method, &job);
   if (s.code() == StatusCode::kNotFound) {
+    const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
     SendError(res, 404, "not_found",
-              "no succeeded " + method + " calibration for device '" + serial + "'");
+              hint.empty() ? "no succeeded " + method + " calibration for device '" + serial + "'"
+                           : hint);
     return;
   }
   if (!s.ok()) return (void)SendStatus(res, s);

@@ -2109,4 +2109,45 @@ std::string RenderErrorPage(int status, const std::string& message) {
   }
 }
 
+std::string RenderDevicesPage(const DevicesView& view) {
+  return SafePage("Devices", "page-devices", [&] {
+    std::string out = "<h1>Devices</h1>";
+    if (view.devices.empty()) {
+      return out +
+             "<p>No device has a calibration yet. Upload a recording with "
+             "<code>?device=SERIAL</code> (see the README's walkthrough).</p>";
+    }
+    out += "<p class=\"muted small\">" + std::to_string(view.devices.size()) +
+           (view.devices.size() == 1 ? " device" : " devices") +
+           ". Each method's column shows its latest calibration: the time links to its report, "
+           "JSON to the parameters that production tooling fetches.</p>";
+    out +=
+        "<div class=\"table-wrap\"><table class=\"table-devices\"><thead><tr>"
+        "<th>device (serial)</th><th>first seen (UTC)</th>";
+    for (const auto& m : view.methods) out += "<th>latest " + E(m) + " (UTC)</th>";
+    out += "</tr></thead><tbody>";
+    for (const auto& d : view.devices) {
+      out += "<tr><td>" + DeviceLink(d.serial) + "</td><td class=\"time\">" +
+             TimeHtml(d.first_seen) + "</td>";
+      for (const auto& m : view.methods) {
+        const DevicesView::Latest* latest = nullptr;
+        for (const auto& l : d.latest) {
+          if (l.method == m) latest = &l;
+        }
+        if (latest == nullptr) {
+          out += "<td class=\"muted\">" + std::string(kDash) + "</td>";
+          continue;
+        }
+        out += "<td><a class=\"time\" href=\"/jobs/" + std::to_string(latest->job_id) + "\">" +
+               TimeHtml(latest->calibrated_at) + "</a> (report #" + std::to_string(latest->job_id) +
+               ") \xC2\xB7 <a href=\"" +
+               A("/api/v1/devices/" + UrlEncode(d.serial) + "/calibration?method=" + UrlEncode(m)) +
+               "\">JSON</a></td>";
+      }
+      out += "</tr>";
+    }
+    return out + "</tbody></table></div>";
+  });
+}
+
 }  // namespace calibd::web
