@@ -21,8 +21,9 @@
 //            (pca axes-xz only for d >= 3; array positions-* and position-sigma only when the
 //            result has positions; the others are always present on a job with a result of
 //            that method, saying "no data" when their keys are missing)
-//   other:   form.filters, nav.pager a.older, .callout-error .failure-reason (failed job, or
-//            pca diagnostics.usable == false), ul.advice (what to record instead),
+//   other:   form.filters, nav.pager a.older, .callout-error .failure-reason (failed job: the
+//            method's message, the one source of what was wrong and what to do instead; or pca
+//            diagnostics.usable == false), p.model (the result's `model` equation),
 //            ul.warnings, ul.downloads, pre.config, span.badge.badge-STATUS,
 //            table.table-drift-detail (inside <details>, per sensor / triad)
 //
