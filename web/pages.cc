@@ -1312,10 +1312,10 @@ std::string ImuReport(const JobView& view) {
       return Section("parameters", "Parameters", s + NotAvailable("IMUs"));
     }
     s += "<div class=\"table-wrap\"><table class=\"table-imu-parameters\"><thead><tr>"
-         "<th>IMU</th><th>sensor</th><th>bias b, x y z (reading units)</th>"
-         "<th>\xCF\x83(b) (reading units)</th><th>scale K, x y z (SI per reading unit)</th>"
-         "<th>\xCF\x83(K) (SI per reading unit)</th><th>misalignment T, 3 rows (1)</th></tr>"
-         "</thead><tbody>";
+         "<th>IMU</th><th>sensor</th><th>bias b, x y z<br>(reading units)</th>"
+         "<th>\xCF\x83(b)<br>(reading units)</th><th>scale K, x y z<br>(SI per reading unit)</th>"
+         "<th>\xCF\x83(K)<br>(SI per reading unit)</th><th>misalignment T<br>(3 rows, unitless)"
+         "</th></tr></thead><tbody>";
     const json* uimus = Get(unc, "imus");
     for (size_t i = 0; i < imus->size(); ++i) {
       const json& imu = (*imus)[i];
