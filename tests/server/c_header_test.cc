@@ -319,5 +319,45 @@ TEST(CHeader, TwoCalibrationsOfOneDeviceAndMethodCollideLoudly) {
   EXPECT_NE(output.find("redefinition"), std::string::npos) << output;
 }
 
+// A serial or sensor name from a user cannot end a comment, open one, form a trigraph or break a
+// string literal: the header still compiles warning-free and holds the names unchanged.
+TEST(CHeader, HostileSerialAndSensorNamesCannotBreakTheHeader) {
+  const std::string serial = "x*/ int evil; /*?\?/\"\\";
+  const std::string sensor = "s?\?=1*/\"";
+  json result = {{"method", "pca"},
+                 {"parameters",
+                  {{"dimension", 1},
+                   {"magnitude_known", false},
+                   {"frame", "canonical */ int frame; /*"},
+                   {"sensors",
+                    {{{"name", sensor},
+                      {"sensitivity", {2.0}},
+                      {"axis", {1.0}},
+                      {"scale", 2.0},
+                      {"bias", 0.0}}}}}},
+                 {"uncertainty", {{"sensors", {{{"name", sensor}, {"scale_std", nullptr}}}}}}};
+  std::string h;
+  ASSERT_TRUE(ResultToHeader(result, {7, serial, "pca", "2026-01-01T00:00:00Z"}, &h).ok());
+  TempDir dir;
+  std::ofstream(dir.path() / "h.h") << h;
+  std::ofstream(dir.path() / "main.c")
+      << "#include \"h.h\"\n#include <string.h>\nint main(void) {\n"
+         "  static const char expected_serial[] = \"x*/ int evil; /*\\?\\?/\\\"\\\\\";\n"
+         "  static const char expected_sensor[] = \"s\\?\\?=1*/\\\"\";\n"
+         "  return strcmp(CALIBD_X___INT_EVIL__________PCA_DEVICE, expected_serial) != 0 ||\n"
+         "         strcmp(CALIBD_X___INT_EVIL__________PCA_NAMES[0], expected_sensor) != 0;\n"
+         "}\n";
+  const std::string d = dir.path().string();
+  std::string output;
+  for (const std::string compiler : {"gcc -std=c99 -Wall -Wextra -Werror -pedantic -x c",
+                                     "g++ -std=c++17 -Wall -Wextra -Werror -x c++"}) {
+    ASSERT_EQ(RunCommand(compiler + " -o " + d + "/main " + d + "/main.c", &output), 0)
+        << compiler << "\n"
+        << output << "\n"
+        << h;
+    EXPECT_EQ(RunCommand(d + "/main", &output), 0) << compiler;
+  }
+}
+
 }  // namespace
 }  // namespace calibd::server
