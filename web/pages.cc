@@ -539,27 +539,37 @@ std::string PcaParametersTable(const std::vector<PcaSensor>& sensors, size_t d, 
   bool any_nominal = false;
   for (const auto& s : sensors) any_nominal = any_nominal || !s.nominal.empty();
   static const char* kAxisNames[] = {"x", "y", "z"};
-  std::string head = "<tr><th>sensor</th><th class=\"num\">scale</th><th class=\"num\">" +
-                     std::string(kSigma) + "(scale)</th><th class=\"num\">" + kSigma +
-                     "/scale</th>";
+  // Every head names its unit (on further lines), the axis is one column and σ(scale) shares one
+  // with its relative value, so the table fits 1280 px even with biases and nominal axes.
+  std::string axis_names;
   for (size_t k = 0; k < d; ++k) {
-    head += "<th class=\"num\">axis " +
-            (k < 3 ? std::string(kAxisNames[k]) : std::to_string(k + 1)) + "</th>";
+    axis_names += (k ? ", " : "") + (k < 3 ? std::string(kAxisNames[k]) : std::to_string(k + 1));
   }
-  head += "<th class=\"num\">" + std::string(kSigma) + "(axis) (mrad)</th>";
-  if (any_nominal) head += "<th class=\"num\">angle to nominal (mrad)</th>";
-  if (has_bias)
-    head += "<th class=\"num\">bias</th><th class=\"num\">" + std::string(kSigma) + "(bias)</th>";
-  head += "<th class=\"num\">residual RMS</th></tr>";
+  std::string head =
+      "<tr><th>sensor</th><th class=\"num\">scale<br>(reading per<br>field "
+      "unit)</th><th class=\"num\">" +
+      std::string(kSigma) + "(scale)<br>(same unit,<br>relative)</th>" + "<th class=\"num\">axis " +
+      axis_names + "<br>(unitless)</th>";
+  head += "<th class=\"num\">" + std::string(kSigma) + "(axis)<br>(mrad)</th>";
+  if (any_nominal) head += "<th class=\"num\">angle to<br>nominal<br>(mrad)</th>";
+  if (has_bias) {
+    head += "<th class=\"num\">bias<br>(reading<br>units)</th><th class=\"num\">" +
+            std::string(kSigma) + "(bias)<br>(reading<br>units)</th>";
+  }
+  head += "<th class=\"num\">residual<br>RMS (reading<br>units)</th></tr>";
   std::string rows;
   for (const auto& s : sensors) {
-    rows += "<tr><td class=\"name\">" + E(s.name) + "</td>" + NumCell(s.scale, 6) +
-            NumCell(s.scale_std, 3) +
-            NumCell(Percent(
-                std::isfinite(s.scale) && s.scale != 0 ? s.scale_std / std::fabs(s.scale) : kNaN));
+    rows +=
+        "<tr><td class=\"name\">" + E(s.name) + "</td>" + NumCell(s.scale, 6) +
+        NumCell(FormatSig(s.scale_std, 3) + " (" +
+                Percent(std::isfinite(s.scale) && s.scale != 0 ? s.scale_std / std::fabs(s.scale)
+                                                               : kNaN) +
+                ")");
+    std::string axis;
     for (size_t k = 0; k < d; ++k) {
-      rows += NumCell(FormatFixed(k < s.axis.size() ? s.axis[k] : kNaN, 5));
+      axis += (k ? "&nbsp; " : "") + FormatFixed(k < s.axis.size() ? s.axis[k] : kNaN, 5);
     }
+    rows += NumCell(axis);
     rows += NumCell(s.axis_std * 1e3, 3);
     if (any_nominal) {
       rows += NumCell(s.nominal.empty() ? kNaN : AngleBetween(s.axis, s.nominal) * 1e3, 3);

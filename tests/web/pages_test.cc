@@ -201,7 +201,7 @@ TEST(JobPage, PcaReportHasParametersPlotsAndDownloads) {
   const std::string page = RenderJobPage(v);
   ExpectDocument(page, "page-job");
   EXPECT_TRUE(Has(page, "class=\"table-pca-parameters\""));
-  EXPECT_TRUE(Has(page, "angle to nominal (mrad)"));
+  EXPECT_TRUE(Has(page, "angle to<br>nominal<br>(mrad)"));
   EXPECT_TRUE(Has(page, "class=\"table-diagnostics\""));
   for (const char* plot :
        {"singular-values", "magnitude-error", "residual-rms", "axes-xy", "axes-xz"}) {
