@@ -203,7 +203,7 @@ json Build() {
           {"content",
            {{"application/json", {{"schema", {{"type", "object"}}}}},
             {"text/csv", {{"schema", {{"type", "string"}}}}},
-            {"text/x-c++hdr", {{"schema", {{"type", "string"}}}}}}}}},
+            {"text/x-c", {{"schema", {{"type", "string"}}}}}}}}},
         {"304", {{"description", "not modified (If-None-Match matched the ETag)"}}},
         {"400", ErrorResponse("bad method or format")},
         {"404", ErrorResponse("no succeeded calibration")}}}};
