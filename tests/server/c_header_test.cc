@@ -359,5 +359,52 @@ TEST(CHeader, HostileSerialAndSensorNamesCannotBreakTheHeader) {
   }
 }
 
+// An array result of the full model (per-IMU intrinsics beside the positions, SPEC §7) gets the
+// imu apply function too, without clashing with the positions' names.
+TEST(CHeader, ArrayResultWithIntrinsicsAppliesThemToAReading) {
+  const json triad = {{"bias", {0.1, -0.2, 0.3}},
+                      {"matrix", {{2.0, 0.0, 0.0}, {0.0, 3.0, 0.0}, {0.0, 0.5, 4.0}}}};
+  json result = {
+      {"method", "array"},
+      {"parameters",
+       {{"reference", 0},
+        {"positions",
+         {{{"name", "a0"}, {"position", {0.0, 0.0, 0.0}}, {"offset", {0.0, 0.0, 0.0}}},
+          {{"name", "a1"}, {"position", {0.01, 0.0, 0.0}}, {"offset", {0.001, 0.0, 0.0}}}}},
+        {"imus",
+         {{{"name", "0"}, {"accelerometer", triad}, {"gyroscope", triad}},
+          {{"name", "1"}, {"accelerometer", triad}, {"gyroscope", triad}}}}}},
+      {"uncertainty", json::object()}};
+  std::string h;
+  ASSERT_TRUE(ResultToHeader(result, {3, "B-1", "array", "2026-01-01T00:00:00Z"}, &h).ok());
+  EXPECT_NE(h.find("POSITION_STD is not written"), std::string::npos) << h;
+  TempDir dir;
+  std::ofstream(dir.path() / "h.h") << h;
+  std::ofstream(dir.path() / "main.c")
+      << "#include \"h.h\"\n#include <stdio.h>\nint main(void) {\n"
+         "  const double y[3] = {1.1, 0.8, 1.3};\n  double a[3], w[3];\n"
+         "  if (calibd_b_1_array_apply(1, y, y, a, w) != 0) return 1;\n"
+         "  printf(\"%.17g %.17g %.17g %d %d\\n\", a[0], a[1], a[2], CALIBD_B_1_ARRAY_IMU_IMUS,\n"
+         "         CALIBD_B_1_ARRAY_TRIADS);\n  return 0;\n}\n";
+  const std::string d = dir.path().string();
+  std::string output;
+  ASSERT_EQ(
+      RunCommand("gcc -std=c99 -Wall -Wextra -Werror -pedantic -o " + d + "/main " + d + "/main.c",
+                 &output),
+      0)
+      << output << "\n"
+      << h;
+  ASSERT_EQ(RunCommand(d + "/main", &output), 0);
+  // matrix (y - bias): (2·1, 3·1, 0.5·1 + 4·1).
+  double a0, a1, a2;
+  int imus, triads;
+  ASSERT_EQ(std::sscanf(output.c_str(), "%lf %lf %lf %d %d", &a0, &a1, &a2, &imus, &triads), 5);
+  EXPECT_DOUBLE_EQ(a0, 2.0);
+  EXPECT_DOUBLE_EQ(a1, 3.0);
+  EXPECT_DOUBLE_EQ(a2, 4.5);
+  EXPECT_EQ(imus, 2);
+  EXPECT_EQ(triads, 2);
+}
+
 }  // namespace
 }  // namespace calibd::server
