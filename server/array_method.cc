@@ -438,6 +438,12 @@ Status RunArray(const ArrayRecording& recording, const json& config, json* resul
   for (const auto& w : calibration.warnings) warnings.push_back(w);
 
   *result = {{"method", "array"},
+             {"model",
+              "y_a,k = s + (Omega(omega)^2 + Omega(omega_dot)) r_k for accelerometer triad k at "
+              "position r_k (metres, nominal geometry frame, the reference triad held at its "
+              "nominal position), y_g = omega for every gyroscope triad: s the specific force at "
+              "the origin, omega the angular rate, Omega(x) the cross-product matrix; the "
+              "parameters are the positions r_k"},
              {"parameters", {{"reference", r.reference}, {"positions", positions}}},
              {"uncertainty", {{"positions", stds}, {"std_rms", Num(std_rms)}}},
              {"diagnostics",

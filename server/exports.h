@@ -1,6 +1,5 @@
 // Representations of a stored calibration for production tooling (GET .../calibration?format=):
-// the result JSON as stored, CSV (one row per sensor / triad), and a C++ header with the
-// parameters as constexpr arrays.
+// the result JSON as stored, CSV (one row per sensor / triad), and a C99/C++ header.
 #ifndef CALIBD_SERVER_EXPORTS_H_
 #define CALIBD_SERVER_EXPORTS_H_
 
@@ -29,9 +28,16 @@ Status ResultToCsv(const nlohmann::json& result, std::string* out);
 Status ResultToKalibrYaml(const nlohmann::json& result, const ExportContext& context,
                           std::string* out);
 
-// A self-contained C++17 header: `namespace calibd_calibration { constexpr ... }`, with the job
-// id, date and device in a comment. Strings from users are sanitised for comments and escaped in
-// string literals.
+// A self-contained header, valid C99 and C++ (no namespace, no constexpr): `static const` arrays,
+// macros and one `static inline` function per method that applies the calibration to one raw
+// reading (pca: the field by the least-squares inverse; imu, and array results with per-IMU
+// intrinsics: both triads); array positions and noise figures as data. Every identifier starts
+// with CALIBD_<SERIAL>_<METHOD>_ (functions in lower case; serial and method with every byte other
+// than a letter or digit as '_'), and the include guard names the job, so headers of several
+// devices and methods go into one program; two jobs of one device and method collide loudly.
+// The comment states the model equation, device, job and time. An undefined σ is omitted (with a
+// comment), never written as 0; an undefined parameter gives kNotDeterminable. Strings from users
+// are sanitised for comments and escaped in string literals.
 Status ResultToHeader(const nlohmann::json& result, const ExportContext& context, std::string* out);
 
 }  // namespace calibd::server

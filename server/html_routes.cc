@@ -3,6 +3,7 @@
 #include <nlohmann/json.hpp>
 
 #include "server/config.h"
+#include "server/device_lookup.h"
 #include "server/http_util.h"
 #include "server/method.h"
 #include "storage/store.h"
@@ -118,6 +119,21 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
     SendPage(res, 200, web::RenderJobPage(view));
   });
 
+  http->Get("/devices", [store](const httplib::Request&, httplib::Response& res) {
+    std::vector<storage::DeviceInfo> devices;
+    Status s = store->ListDevices(&devices);
+    if (!s.ok()) return SendErrorPage(res, s);
+    web::DevicesView view;
+    view.methods.clear();
+    for (const Method* m : AllMethods()) view.methods.push_back(m->name());
+    for (const auto& d : devices) {
+      web::DevicesView::Device row{d.serial, d.first_seen, {}};
+      for (const auto& c : d.latest) row.latest.push_back({c.method, c.job_id, c.calibrated_at});
+      view.devices.push_back(std::move(row));
+    }
+    SendPage(res, 200, web::RenderDevicesPage(view));
+  });
+
   http->Get(R"(/devices/([^/]+))", [store](const httplib::Request& req, httplib::Response& res) {
     web::DeviceView view;
     view.serial = req.matches[1];
@@ -129,8 +145,11 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
     Status s = store->ListJobs(filter, &jobs);
     if (!s.ok()) return SendErrorPage(res, s);
     if (jobs.empty()) {
+      const std::string hint = WrongCaseDeviceMessage(store, view.serial);
       return SendPage(
-          res, 404, web::RenderErrorPage(404, "no calibrations for device '" + view.serial + "'"));
+          res, 404,
+          web::RenderErrorPage(
+              404, hint.empty() ? "no calibrations for device '" + view.serial + "'" : hint));
     }
     for (const auto& job : jobs) view.jobs.push_back(Summarize(job));
     SendPage(res, 200, web::RenderDevicePage(view));

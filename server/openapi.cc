@@ -68,6 +68,9 @@ json Build() {
       {"required", {"method", "parameters", "uncertainty", "diagnostics", "warnings"}},
       {"properties",
        {{"method", {{"type", "string"}, {"enum", method_names}}},
+        {"model",
+         {{"type", "string"},
+          {"description", "the equation that maps a raw reading to the calibrated quantity"}}},
         {"parameters", {{"type", "object"}}},
         {"uncertainty", {{"type", "object"}}},
         {"diagnostics", {{"type", "object"}}},
@@ -200,7 +203,7 @@ json Build() {
           {"content",
            {{"application/json", {{"schema", {{"type", "object"}}}}},
             {"text/csv", {{"schema", {{"type", "string"}}}}},
-            {"text/x-c++hdr", {{"schema", {{"type", "string"}}}}}}}}},
+            {"text/x-c", {{"schema", {{"type", "string"}}}}}}}}},
         {"304", {{"description", "not modified (If-None-Match matched the ETag)"}}},
         {"400", ErrorResponse("bad method or format")},
         {"404", ErrorResponse("no succeeded calibration")}}}};

@@ -169,6 +169,11 @@ json PcaResultToJson(const core::PcaResult& r) {
 
   json out;
   out["method"] = "pca";
+  out["model"] =
+      "r_i = a_i^T v + b_i: r_i the raw reading of sensor i, v the field (d components, |v| = "
+      "magnitude), a_i = scale_i axis_i its sensitivity vector, b_i its bias (reading units; 0 "
+      "unless estimated or removed); the calibrated field from one reading r of all m sensors is "
+      "the least-squares inverse v = (A^T A)^-1 A^T (r - b), A the m x d matrix of rows a_i^T";
   out["parameters"] = std::move(params);
   out["uncertainty"] = std::move(uncertainty);
   out["diagnostics"] = std::move(diag);

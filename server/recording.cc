@@ -57,6 +57,40 @@ std::string Excerpt(std::string_view s) {
   return s.size() <= kMax ? out : out + "...";
 }
 
+// Spreadsheet exports (semicolon- or tab-separated, decimal commas) are refused with what to
+// change; never guessed, since "1,5" in a comma-separated file is two numbers. The header line is
+// checked once; rows only on their error path, so the row reader pays nothing.
+constexpr const char* kCsvExportAdvice =
+    "calibd reads comma-separated files; export as CSV with ',' as the separator and '.' as the "
+    "decimal mark";
+
+// The separator a line or field uses instead of ',' (';' or a tab), or 0; with its 1-based byte
+// position in *at.
+char ForeignSeparator(std::string_view s, size_t* at) {
+  const size_t semicolon = s.find(';');
+  const size_t tab = s.find('\t');
+  if (semicolon == std::string_view::npos && tab == std::string_view::npos) return 0;
+  const bool is_tab = tab < semicolon;
+  *at = (is_tab ? tab : semicolon) + 1;
+  return is_tab ? '\t' : ';';
+}
+
+std::string SeparatorName(char c) { return c == '\t' ? "a tab" : "';'"; }
+
+// True when `text` is a number once its one ',' is read as '.' ("1,5", "-0,25e-3").
+bool IsDecimalCommaNumber(std::string_view text) {
+  const size_t comma = text.find(',');
+  if (comma == std::string_view::npos || text.find(',', comma + 1) != std::string_view::npos) {
+    return false;
+  }
+  std::string dotted(text);
+  dotted[comma] = '.';
+  double v;
+  auto [ptr, ec] = std::from_chars(dotted.data(), dotted.data() + dotted.size(), v);
+  return ec == std::errc() && ptr == dotted.data() + dotted.size() && comma > 0 &&
+         comma + 1 < text.size();
+}
+
 // The first C0 control character or DEL in `s` (NUL, tab, CR, ...), or -1. Names and labels are
 // exported into CSV files, C headers and HTML, so they must be printable.
 int FirstControlCharacter(std::string_view s) {
@@ -266,6 +300,7 @@ struct RecordingParser::Impl {
   RecordingSummary summary;
   std::vector<std::string_view> fields;  // reused per line
   std::vector<std::string> unquoted;     // storage for fields that had quotes (see Split)
+  std::string_view line_text;            // the line on the general path (for error hints)
 
   // pca
   int first_sensor_col = 1;  // 1 (averaged) or 2 (raw)
@@ -386,6 +421,21 @@ struct RecordingParser::Impl {
                   name);
     }
     if (ec != std::errc() || ptr != end) {
+      size_t at = 0;
+      if (const char sep = ForeignSeparator(text, &at); sep != 0) {
+        return Fail("line " + std::to_string(line_no) + " uses " + SeparatorName(sep) +
+                        " as the separator ('" + Excerpt(text) + "' in column '" + name +
+                        "'): " + kCsvExportAdvice,
+                    column, name);
+      }
+      if (IsDecimalCommaNumber(text)) {
+        std::string dotted(text);
+        dotted[dotted.find(',')] = '.';
+        return Fail("line " + std::to_string(line_no) + " uses ',' as the decimal mark ('" +
+                        Excerpt(text) + "' in column '" + name + "'; write " + Excerpt(dotted) +
+                        "): " + kCsvExportAdvice,
+                    column, name);
+      }
       return Fail("'" + Excerpt(text) + "' in column '" + name + "' is not a number", column, name);
     }
     if (!std::isfinite(*value)) {
@@ -394,6 +444,39 @@ struct RecordingParser::Impl {
                   column, name);
     }
     return Status::Ok();
+  }
+
+  // A row with the wrong number of fields; names a foreign separator or a decimal comma, the
+  // usual causes in spreadsheet exports.
+  Status RowShapeError(size_t got, size_t expected) {
+    const std::string counts =
+        "row has " + std::to_string(got) + " fields, the header has " + std::to_string(expected);
+    const int64_t column = static_cast<int64_t>(std::min(got, expected)) + 1;
+    size_t at = 0;
+    if (const char sep = ForeignSeparator(line_text, &at); sep != 0) {
+      return Fail("line " + std::to_string(line_no) + " uses " + SeparatorName(sep) +
+                      " as the separator (first at character " + std::to_string(at) + "; " +
+                      counts + "): " + kCsvExportAdvice,
+                  column);
+    }
+    if (got > expected) {
+      return Fail(
+          counts + ": if ',' is the decimal mark here (e.g. '1,5' for 1.5), " + kCsvExportAdvice,
+          column);
+    }
+    return Fail(counts, column);
+  }
+
+  // A header line without a comma that uses ';' or tabs: a spreadsheet's export.
+  bool ForeignHeader(std::string_view line) {
+    size_t at = 0;
+    const char sep = line.find(',') == std::string_view::npos ? ForeignSeparator(line, &at) : 0;
+    if (sep == 0) return false;
+    Fail("line " + std::to_string(line_no) + " uses " + SeparatorName(sep) +
+             " as the separator (first at character " + std::to_string(at) +
+             "): " + kCsvExportAdvice,
+         1);
+    return true;
   }
 
   Status Header() {
@@ -511,11 +594,7 @@ struct RecordingParser::Impl {
   Status PcaRow() {
     const auto& f = fields;
     const size_t expected = first_sensor_col + sensor_count;
-    if (f.size() != expected) {
-      return Fail("row has " + std::to_string(f.size()) + " fields, the header has " +
-                      std::to_string(expected),
-                  static_cast<int64_t>(std::min(f.size(), expected)) + 1);
-    }
+    if (f.size() != expected) return RowShapeError(f.size(), expected);
     if (f[0].empty()) return Fail("empty position label", 1, "position");
     if (!IsValidUtf8(f[0])) return Fail("position label is not valid UTF-8", 1, "position");
     if (const int c = FirstControlCharacter(f[0]); c >= 0) {
@@ -576,11 +655,7 @@ struct RecordingParser::Impl {
 
   Status ArrayRow() {
     const auto& f = fields;
-    if (f.size() != column_target.size()) {
-      return Fail("row has " + std::to_string(f.size()) + " fields, the header has " +
-                      std::to_string(column_target.size()),
-                  static_cast<int64_t>(std::min(f.size(), column_target.size())) + 1);
-    }
+    if (f.size() != column_target.size()) return RowShapeError(f.size(), column_target.size());
     double t = 0;
     for (size_t i = 0; i < f.size(); ++i) {
       const int target = column_target[i];
@@ -680,6 +755,8 @@ struct RecordingParser::Impl {
         return fast == Fast::kRead;
       }
     }
+    line_text = line;
+    if (!have_header && ForeignHeader(line)) return false;
     if (!Split(line).ok()) return false;
     if (!have_header) {
       have_header = true;

@@ -19,6 +19,7 @@
 
 #include "core/task_pool.h"
 #include "server/config.h"
+#include "server/device_lookup.h"
 #include "server/exports.h"
 #include "server/http_server.h"
 #include "server/http_util.h"
@@ -949,7 +950,9 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
                                        .WithField("method"));
     }
     if (methods.empty()) {
-      SendError(res, 404, "not_found", "no succeeded calibration for device '" + serial + "'");
+      const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
+      SendError(res, 404, "not_found",
+                hint.empty() ? "no succeeded calibration for device '" + serial + "'" : hint);
       return;
     }
     method = methods[0];
@@ -960,8 +963,10 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
   storage::JobInfo job;
   Status s = store->LatestResult(serial, method, &job);
   if (s.code() == StatusCode::kNotFound) {
+    const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
     SendError(res, 404, "not_found",
-              "no succeeded " + method + " calibration for device '" + serial + "'");
+              hint.empty() ? "no succeeded " + method + " calibration for device '" + serial + "'"
+                           : hint);
     return;
   }
   if (!s.ok()) return (void)SendStatus(res, s);
@@ -1009,17 +1014,11 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     res.set_content(text, "application/yaml");
     return;
   }
-  if (method == "noise" || method == "imu") {
-    return (void)SendStatus(res,
-                            Status::InvalidInput("the " + method + " method exports json and csv" +
-                                                 (method == "noise" ? " and yaml" : ""))
-                                .WithField("format"));
-  }
   s = ResultToHeader(result, context, &text);
   if (!s.ok()) return (void)SendStatus(res, s);
   res.set_header("Content-Disposition",
                  "attachment; filename=\"calibration-" + std::to_string(job.id) + ".h\"");
-  res.set_content(text, "text/x-c++hdr");
+  res.set_content(text, "text/x-c");  // C99 and C++
 }
 
 void Service::Impl::HandleRecording(const httplib::Request& req, httplib::Response& res) {

@@ -412,7 +412,9 @@ std::string RenderPage(std::string_view title, std::string_view page_class,
   out += Stylesheet();
   out += "</style>\n</head>\n<body class=\"" + EscapeAttr(page_class) + "\">\n";
   out += "<header class=\"top\"><a class=\"brand\" href=\"/\">calibd</a>";
-  out += "<nav><a href=\"/\">Calibration history</a></nav></header>\n<main>\n";
+  out +=
+      "<nav><a href=\"/\">Calibration history</a> <a "
+      "href=\"/devices\">Devices</a></nav></header>\n<main>\n";
   out += body_html;
   out +=
       "\n<footer class=\"foot\">calibd \xC2\xB7 calibration server for inertial sensors</footer>";

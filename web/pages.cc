@@ -322,94 +322,6 @@ std::string Percent(double rel) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The advice given with a failure: what to record instead.
-
-std::string Lower(std::string s) {
-  for (char& c : s) {
-    if (c >= 'A' && c <= 'Z') c = static_cast<char>(c - 'A' + 'a');
-  }
-  return s;
-}
-
-bool Contains(const std::string& haystack, const char* needle) {
-  return haystack.find(needle) != std::string::npos;
-}
-
-std::vector<std::string> FailureAdvice(const std::string& method, const std::string& error) {
-  const std::string e = Lower(error);
-  std::vector<std::string> out;
-  if (method == "pca") {
-    if (Contains(e, "position") && (Contains(e, "few") || Contains(e, "at least") ||
-                                    Contains(e, "need") || Contains(e, "minimum"))) {
-      out.push_back(
-          "Record more static positions: at least d(d+1)/2 (6 for d = 3), better 20 or more, "
-          "spread over all orientations.");
-    }
-    if (Contains(e, "gap") || Contains(e, "rank") || Contains(e, "singular")) {
-      out.push_back(
-          "The readings do not span d independent directions: turn the device so that the field "
-          "points along many different directions (not only rotations about one axis), and check "
-          "that every sensor is connected and not saturated.");
-    }
-    if (Contains(e, "definite") || Contains(e, "eigen") || Contains(e, "magnitude")) {
-      out.push_back(
-          "The field magnitude is not constant over the positions: hold the device still at each "
-          "position, keep the field constant (no nearby magnets or vibration), and check the "
-          "configured magnitude.");
-    }
-    if (Contains(e, "bias")) {
-      out.push_back(
-          "Readings seem to carry biases: record the raw static/moving layout or configure "
-          "\"bias\": \"estimate\" (needed for accelerometers and magnetometers).");
-    }
-    if (Contains(e, "sensor")) {
-      out.push_back("At least d sensors are needed; check the recording's header columns.");
-    }
-  } else if (method == "array") {
-    if (Contains(e, "excitation") || Contains(e, "rotation") || Contains(e, "observab") ||
-        Contains(e, "singular") || Contains(e, "determin")) {
-      out.push_back(
-          "The motion did not excite all position directions: record a free motion with strong "
-          "rotations and angular accelerations about all three axes (the paper uses about "
-          "2000 \xC2\xB0/s and 2000 \xC2\xB0/s\xC2\xB2).");
-    }
-    if (Contains(e, "saturat")) {
-      out.push_back(
-          "Too many samples were dropped at the gyroscope saturation: rotate a little slower, "
-          "or raise gyro_saturation if the sensors allow it.");
-    }
-    if (Contains(e, "sample") || Contains(e, "short")) {
-      out.push_back("Record more samples (thousands, covering several motions).");
-    }
-    if (Contains(e, "geometry") || Contains(e, "nominal") || Contains(e, "triad")) {
-      out.push_back(
-          "Check the config's geometry: one nominal position per accelerometer triad (metres), "
-          "and a valid reference index.");
-    }
-    if (Contains(e, "converge")) {
-      out.push_back(
-          "The solver did not converge: try the joint solver, more iterations, or a recording "
-          "with stronger excitation.");
-    }
-  }
-  if (Contains(e, "line") && Contains(e, "column")) {
-    out.push_back("Fix the recording at the line and column named above and upload it again.");
-  }
-  if (out.empty()) {
-    if (method == "pca") {
-      out.push_back(
-          "Record at least 20 static positions spread over all orientations, with the field's "
-          "magnitude constant, and every sensor's column present.");
-    } else if (method == "array") {
-      out.push_back(
-          "Record a free motion with strong rotation about all three axes, with every "
-          "accelerometer and gyroscope column present.");
-    }
-  }
-  return out;
-}
-
-// ---------------------------------------------------------------------------------------------
 // Diagnostics table (in the spirit of Ceres' FullReport).
 
 const char* DiagnosticMeaning(const std::string& key) {
@@ -437,7 +349,13 @@ const char* DiagnosticMeaning(const std::string& key) {
           {"noise_std_estimated", "reading noise \xCF\x83 estimated from the residuals"},
           {"degrees_of_freedom", "residual degrees of freedom"},
           {"refined", "maximum-likelihood refinement ran after the closed form"},
-          {"reflection", "the Procrustes fit onto the nominal axes needed a reflection"},
+          {"reflection",
+           "true: the estimated axes match the nominal ones as a mirror image (the Procrustes "
+           "fit has determinant \xE2\x88\x92"
+           "1). The readings cannot tell left- from "
+           "right-handed axes (the paper's Remark 1), so either value is normal and the "
+           "parameters are valid; only a nominal whose handedness differs from the wiring "
+           "would hide behind it"},
           {"noise_configured.accelerometer", "\xCF\x83_a from the config"},
           {"noise_configured.gyroscope", "\xCF\x83_g from the config"},
           {"excitation.verdict", "whether the motion determines every position direction"},
@@ -621,27 +539,37 @@ std::string PcaParametersTable(const std::vector<PcaSensor>& sensors, size_t d, 
   bool any_nominal = false;
   for (const auto& s : sensors) any_nominal = any_nominal || !s.nominal.empty();
   static const char* kAxisNames[] = {"x", "y", "z"};
-  std::string head = "<tr><th>sensor</th><th class=\"num\">scale</th><th class=\"num\">" +
-                     std::string(kSigma) + "(scale)</th><th class=\"num\">" + kSigma +
-                     "/scale</th>";
+  // Every head names its unit (on further lines), the axis is one column and σ(scale) shares one
+  // with its relative value, so the table fits 1280 px even with biases and nominal axes.
+  std::string axis_names;
   for (size_t k = 0; k < d; ++k) {
-    head += "<th class=\"num\">axis " +
-            (k < 3 ? std::string(kAxisNames[k]) : std::to_string(k + 1)) + "</th>";
+    axis_names += (k ? ", " : "") + (k < 3 ? std::string(kAxisNames[k]) : std::to_string(k + 1));
   }
-  head += "<th class=\"num\">" + std::string(kSigma) + "(axis) (mrad)</th>";
-  if (any_nominal) head += "<th class=\"num\">angle to nominal (mrad)</th>";
-  if (has_bias)
-    head += "<th class=\"num\">bias</th><th class=\"num\">" + std::string(kSigma) + "(bias)</th>";
-  head += "<th class=\"num\">residual RMS</th></tr>";
+  std::string head =
+      "<tr><th>sensor</th><th class=\"num\">scale<br>(reading per<br>field "
+      "unit)</th><th class=\"num\">" +
+      std::string(kSigma) + "(scale)<br>(same unit,<br>relative)</th>" + "<th class=\"num\">axis " +
+      axis_names + "<br>(unitless)</th>";
+  head += "<th class=\"num\">" + std::string(kSigma) + "(axis)<br>(mrad)</th>";
+  if (any_nominal) head += "<th class=\"num\">angle to<br>nominal<br>(mrad)</th>";
+  if (has_bias) {
+    head += "<th class=\"num\">bias<br>(reading<br>units)</th><th class=\"num\">" +
+            std::string(kSigma) + "(bias)<br>(reading<br>units)</th>";
+  }
+  head += "<th class=\"num\">residual<br>RMS (reading<br>units)</th></tr>";
   std::string rows;
   for (const auto& s : sensors) {
-    rows += "<tr><td class=\"name\">" + E(s.name) + "</td>" + NumCell(s.scale, 6) +
-            NumCell(s.scale_std, 3) +
-            NumCell(Percent(
-                std::isfinite(s.scale) && s.scale != 0 ? s.scale_std / std::fabs(s.scale) : kNaN));
+    rows +=
+        "<tr><td class=\"name\">" + E(s.name) + "</td>" + NumCell(s.scale, 6) +
+        NumCell(FormatSig(s.scale_std, 3) + " (" +
+                Percent(std::isfinite(s.scale) && s.scale != 0 ? s.scale_std / std::fabs(s.scale)
+                                                               : kNaN) +
+                ")");
+    std::string axis;
     for (size_t k = 0; k < d; ++k) {
-      rows += NumCell(FormatFixed(k < s.axis.size() ? s.axis[k] : kNaN, 5));
+      axis += (k ? "&nbsp; " : "") + FormatFixed(k < s.axis.size() ? s.axis[k] : kNaN, 5);
     }
+    rows += NumCell(axis);
     rows += NumCell(s.axis_std * 1e3, 3);
     if (any_nominal) {
       rows += NumCell(s.nominal.empty() ? kNaN : AngleBetween(s.axis, s.nominal) * 1e3, 3);
@@ -1349,7 +1277,7 @@ std::string Vec3Cell(const json* v, int sig = 6) {
   std::string text;
   for (size_t k = 0; k < 3; ++k) {
     const json* x = v != nullptr && v->is_array() && k < v->size() ? &(*v)[k] : nullptr;
-    text += (k ? ", " : "") + FormatSig(Num(x), sig);
+    text += (k ? "<br>" : "") + FormatSig(Num(x), sig);  // x, y, z stacked: fits 1280 px
   }
   return NumCell(text);
 }
@@ -1394,9 +1322,10 @@ std::string ImuReport(const JobView& view) {
       return Section("parameters", "Parameters", s + NotAvailable("IMUs"));
     }
     s += "<div class=\"table-wrap\"><table class=\"table-imu-parameters\"><thead><tr>"
-         "<th>IMU</th><th>sensor</th><th>bias b (reading units)</th><th>\xCF\x83(b)</th>"
-         "<th>scale K (SI per reading unit)</th><th>\xCF\x83(K)</th>"
-         "<th>misalignment T (rows)</th></tr></thead><tbody>";
+         "<th>IMU</th><th>sensor</th><th>bias b, x y z<br>(reading units)</th>"
+         "<th>\xCF\x83(b)<br>(reading units)</th><th>scale K, x y z<br>(SI per reading unit)</th>"
+         "<th>\xCF\x83(K)<br>(SI per reading unit)</th><th>misalignment T<br>(3 rows, unitless)"
+         "</th></tr></thead><tbody>";
     const json* uimus = Get(unc, "imus");
     for (size_t i = 0; i < imus->size(); ++i) {
       const json& imu = (*imus)[i];
@@ -1423,11 +1352,10 @@ std::string ImuReport(const JobView& view) {
              "<td class=\"num small\">" + rows + "</td></tr>";
       }
     }
-    s +=
-        "</tbody></table></div><p class=\"muted small\">a = T_a K_a (y_a \xE2\x88\x92 b_a), "
-        "\xCF\x89 = T_g K_g (y_g \xE2\x88\x92 b_g). T_a is upper triangular: the body frame is the "
-        "accelerometer's (x along its x axis, y in its x-y plane). \xCF\x83 is one standard "
-        "deviation from the Fisher information at the estimate.</p>";
+    s += "</tbody></table></div><p class=\"muted small\">The parameters of the model above. T_a "
+         "is upper triangular: the body frame is the accelerometer's (x along its x axis, y in its "
+         "x-y plane). \xCF\x83 is one standard deviation from the Fisher information at the "
+         "estimate.</p>";
     return Section("parameters", "Parameters", s);
   });
   out += Guard("Fit", [&] {
@@ -1489,9 +1417,8 @@ std::string TimingsHtml(const JobSummary& job) {
 std::string ExportLinks(const std::string& base, const std::string& method) {
   std::string out = "<a href=\"" + A(base + "json") + "\">JSON</a> \xC2\xB7 <a href=\"" +
                     A(base + "csv") + "\">CSV</a>";
-  if (method == "pca" || method == "array") {
-    out += " \xC2\xB7 <a href=\"" + A(base + "h") + "\">C header</a>";
-  } else if (method == "noise") {
+  out += " \xC2\xB7 <a href=\"" + A(base + "h") + "\">C header</a>";
+  if (method == "noise") {
     out += " \xC2\xB7 <a href=\"" + A(base + "yaml") + "\">Kalibr imu.yaml</a>";
   }
   return out;
@@ -1522,11 +1449,13 @@ std::string StatusCallout(const JobView& view) {
         "<div class=\"callout callout-error\"><p><strong>The calibration failed."
         "</strong></p><p class=\"failure-reason\">" +
         (job.error.empty() ? std::string("No reason was recorded.") : E(job.error)) + "</p>";
-    const auto advice = FailureAdvice(job.method, job.error);
-    if (!advice.empty()) {
-      out += "<p><strong>What to record instead:</strong></p><ul class=\"advice\">";
-      for (const auto& a : advice) out += "<li>" + E(a) + "</li>";
-      out += "</ul>";
+    // The method's message is the one source of what was wrong and what to record or set
+    // instead (it knows the configuration it ran with); the page adds nothing that could repeat
+    // or contradict it.
+    if (!job.error.empty()) {
+      out +=
+          "<p class=\"muted small\">This is the method's own account: what it needed, what it "
+          "found, and what to record or change instead.</p>";
     }
     return out + "</div>";
   }
@@ -1615,6 +1544,11 @@ std::string JobBody(const JobView& view) {
   if (has_result) {
     std::string method = Str(Get(job.result, "method"));
     if (method.empty()) method = job.method;
+    // The equation that applies the parameters to a raw reading (result key `model`).
+    const std::string model = Str(Get(job.result, "model"));
+    out += Section("model", "Model",
+                   model.empty() ? NotAvailable("The model statement")
+                                 : "<p class=\"model\">" + E(model) + "</p>");
     if (method == "pca") {
       out += PcaReport(view);
     } else if (method == "array") {
@@ -2108,6 +2042,47 @@ std::string RenderErrorPage(int status, const std::string& message) {
   } catch (...) {
     return "<!doctype html><title>Error</title><p>Error</p>";
   }
+}
+
+std::string RenderDevicesPage(const DevicesView& view) {
+  return SafePage("Devices", "page-devices", [&] {
+    std::string out = "<h1>Devices</h1>";
+    if (view.devices.empty()) {
+      return out +
+             "<p>No device has a calibration yet. Upload a recording with "
+             "<code>?device=SERIAL</code> (see the README's walkthrough).</p>";
+    }
+    out += "<p class=\"muted small\">" + std::to_string(view.devices.size()) +
+           (view.devices.size() == 1 ? " device" : " devices") +
+           ". Each method's column shows its latest calibration: the time links to its report, "
+           "JSON to the parameters that production tooling fetches.</p>";
+    out +=
+        "<div class=\"table-wrap\"><table class=\"table-devices\"><thead><tr>"
+        "<th>device (serial)</th><th>first seen (UTC)</th>";
+    for (const auto& m : view.methods) out += "<th>latest " + E(m) + " (UTC)</th>";
+    out += "</tr></thead><tbody>";
+    for (const auto& d : view.devices) {
+      out += "<tr><td>" + DeviceLink(d.serial) + "</td><td class=\"time\">" +
+             TimeHtml(d.first_seen) + "</td>";
+      for (const auto& m : view.methods) {
+        const DevicesView::Latest* latest = nullptr;
+        for (const auto& l : d.latest) {
+          if (l.method == m) latest = &l;
+        }
+        if (latest == nullptr) {
+          out += "<td class=\"muted\">" + std::string(kDash) + "</td>";
+          continue;
+        }
+        out += "<td><a class=\"time\" href=\"/jobs/" + std::to_string(latest->job_id) + "\">" +
+               TimeHtml(latest->calibrated_at) + "</a> (report #" + std::to_string(latest->job_id) +
+               ") \xC2\xB7 <a href=\"" +
+               A("/api/v1/devices/" + UrlEncode(d.serial) + "/calibration?method=" + UrlEncode(m)) +
+               "\">JSON</a></td>";
+      }
+      out += "</tr>";
+    }
+    return out + "</tbody></table></div>";
+  });
 }
 
 }  // namespace calibd::web

@@ -7,10 +7,10 @@
 // JavaScript, no external resources, and carry one small embedded stylesheet.
 //
 // DOM hooks for tests and browser checks (stable):
-//   <body class="page-history | page-job | page-device | page-error">
+//   <body class="page-history | page-job | page-device | page-devices | page-error">
 //   tables:  table.table-history, table.table-pca-parameters, table.table-array-parameters,
 //            table.table-diagnostics, table.table-calibrations, table.table-drift-pca,
-//            table.table-drift-array, table.table-timings
+//            table.table-drift-array, table.table-timings, table.table-devices
 //   plots:   svg.plot (every plot) plus svg.plot-NAME, NAME one of
 //            pca:   singular-values, magnitude-error, residual-rms, axes-xy, axes-xz
 //            array: cost, positions-xy, positions-xz, position-sigma, residual-rms,
@@ -21,8 +21,9 @@
 //            (pca axes-xz only for d >= 3; array positions-* and position-sigma only when the
 //            result has positions; the others are always present on a job with a result of
 //            that method, saying "no data" when their keys are missing)
-//   other:   form.filters, nav.pager a.older, .callout-error .failure-reason (failed job, or
-//            pca diagnostics.usable == false), ul.advice (what to record instead),
+//   other:   form.filters, nav.pager a.older, .callout-error .failure-reason (failed job: the
+//            method's message, the one source of what was wrong and what to do instead; or pca
+//            diagnostics.usable == false), p.model (the result's `model` equation),
 //            ul.warnings, ul.downloads, pre.config, span.badge.badge-STATUS,
 //            table.table-drift-detail (inside <details>, per sensor / triad)
 //
@@ -94,13 +95,34 @@ struct DeviceView {
                                  // of succeeded jobs are needed for the drift tables and plots
 };
 
+// `/devices` — every device with its latest calibration per method.
+struct DevicesView {
+  struct Latest {
+    std::string method;
+    int64_t job_id = 0;
+    std::string calibrated_at;  // timestamp as stored (see JobSummary)
+  };
+  struct Device {
+    std::string serial;
+    std::string first_seen;      // timestamp as stored; may be empty
+    std::vector<Latest> latest;  // one per method with a calibration, any order
+  };
+  std::vector<Device> devices;  // rendered in the given order
+  std::vector<std::string> methods = {"pca", "array", "imu", "noise"};  // one column each
+};
+
+// The devices page: table.table-devices, one row per device (serial linking to its page, first
+// seen, per method the latest calibration's time linking to its report, and its JSON). Times are
+// UTC, said in the column heads.
+std::string RenderDevicesPage(const DevicesView& view);
+
 // The history page: filter form (GET, works without JS), table.table-history (device link,
 // method, status badge, created time, key figures, warnings flag), "older" pagination link.
 std::string RenderHistoryPage(const HistoryView& view);
 
 // The report of one job: header (device, method, recording download, config, timings, status or
-// failure reason with advice on what to record instead), parameters with uncertainties,
-// downloads, plots, diagnostics and warnings.
+// the method's failure message, which says what to record instead), the model equation,
+// parameters with uncertainties, downloads, plots, diagnostics and warnings.
 std::string RenderJobPage(const JobView& view);
 
 // One device: its calibrations over time and the drift of every parameter between successive

@@ -148,12 +148,38 @@ TEST_F(HttpApi, UploadCsvRunsPcaJobAndServesTheLatestCalibration) {
   auto header = client.Get("/api/v1/devices/SN-001/calibration?method=pca&format=h");
   ASSERT_TRUE(header);
   EXPECT_EQ(header->status, 200);
-  EXPECT_NE(header->body.find("constexpr double kSensitivity[12][3]"), std::string::npos);
+  EXPECT_NE(header->body.find("static const double CALIBD_SN_001_PCA_SENSITIVITY[12][3]"),
+            std::string::npos);
   EXPECT_NE(header->body.find("job " + std::to_string(job_id)), std::string::npos);
   EXPECT_NE(header->body.find("SN-001"), std::string::npos);
 
   EXPECT_EQ(client.Get("/api/v1/devices/SN-001/calibration?method=array")->status, 404);
   EXPECT_EQ(client.Get("/api/v1/devices/NOPE/calibration?method=pca")->status, 404);
+  // A serial in the wrong case is another device; the 404 names the stored one (API and page).
+  for (const char* path : {"/api/v1/devices/sn-001/calibration?method=pca",
+                           "/api/v1/devices/sn-001/calibration", "/devices/sn-001"}) {
+    auto wrong_case = client.Get(path);
+    ASSERT_TRUE(wrong_case);
+    EXPECT_EQ(wrong_case->status, 404) << path;
+    const bool html = path[1] == 'd';
+    EXPECT_NE(wrong_case->body.find(html ? "no device &#39;sn-001&#39;; did you mean "
+                                           "&#39;SN-001&#39;?"
+                                         : "no device 'sn-001'; did you mean 'SN-001'?"),
+              std::string::npos)
+        << path << ": " << wrong_case->body;
+  }
+  // The devices page lists the device with its latest calibration, linked, times in UTC.
+  auto devices_page = client.Get("/devices");
+  ASSERT_TRUE(devices_page);
+  EXPECT_EQ(devices_page->status, 200);
+  for (const std::string& part :
+       {std::string("class=\"table-devices\""), std::string("<th>first seen (UTC)</th>"),
+        std::string("<th>latest pca (UTC)</th>"), std::string("<a href=\"/devices/SN-001\">"),
+        "href=\"/jobs/" + std::to_string(job_id) + "\">",
+        std::string("/api/v1/devices/SN-001/calibration?method=pca")}) {
+    EXPECT_NE(devices_page->body.find(part), std::string::npos) << part;
+  }
+  EXPECT_EQ(devices_page->body.find("<script"), std::string::npos);
   EXPECT_EQ(client.Get("/api/v1/devices/SN-001/calibration?format=xml")->status, 400);
 
   // The recording's metadata and original bytes.

@@ -106,7 +106,7 @@ TEST(PcaResultJson, HasExactlyTheSpecKeysAndNoNonFiniteNumbers) {
   ASSERT_TRUE(ParsePcaConfig(config, &o).ok());
   json result;
   ASSERT_TRUE(RunPca(rec, o, &result).ok());
-  EXPECT_EQ(Keys(result), (std::set<std::string>{"method", "parameters", "uncertainty",
+  EXPECT_EQ(Keys(result), (std::set<std::string>{"method", "model", "parameters", "uncertainty",
                                                  "diagnostics", "warnings"}));
   EXPECT_EQ(result["method"], "pca");
   const json& p = result["parameters"];

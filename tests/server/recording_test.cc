@@ -189,6 +189,58 @@ INSTANTIATE_TEST_SUITE_P(
       return name;
     });
 
+// Spreadsheet exports: semicolon- or tab-separated files and decimal commas are refused with
+// what was detected, where, and what to change; on the header and on the first data line, in
+// both layouts, with either the one-pass or the general row reader.
+TEST(RecordingParser, SpreadsheetSeparatorsAndDecimalCommasSayWhatToChange) {
+  const std::string advice =
+      "calibd reads comma-separated files; export as CSV with ',' as the separator and '.' as "
+      "the decimal mark";
+  struct Case {
+    std::string text;
+    int64_t line, column;
+    std::string message;
+  } cases[] = {
+      {"position;s1;s2;s3\np1;1,5;0;0\n", 1, 1,
+       "line 1 uses ';' as the separator (first at character 9): " + advice},
+      {"# exported\nt\ta0_x\ta0_y\ta0_z\n0\t1.5\t0\t0\n", 2, 1,
+       "line 2 uses a tab as the separator (first at character 2): " + advice},
+      {"position,s1,s2,s3\np1;1;0;0\n", 2, 2,
+       "line 2 uses ';' as the separator (first at character 3; row has 1 fields, the header "
+       "has 4): " +
+           advice},
+      {"position,s1,s2\np1,1,5,0,25\n", 2, 4,
+       "row has 5 fields, the header has 3: if ',' is the decimal mark here (e.g. '1,5' for "
+       "1.5), " +
+           advice},
+      {"position,s1,s2\np1,\"1,5\",0\n", 2, 2,
+       "line 2 uses ',' as the decimal mark ('1,5' in column 's1'; write 1.5): " + advice},
+      {"a0_x,a0_y,a0_z\n1,\"-0,25e-3\",2\n", 2, 2,
+       "line 2 uses ',' as the decimal mark ('-0,25e-3' in column 'a0_y'; write -0.25e-3): " +
+           advice},
+      {"position,s1,s2\np1;1,5;2,3\n", 2, 2,
+       "line 2 uses ';' as the separator ('5;2' in column 's1'): " + advice},
+  };
+  for (const Case& c : cases) {
+    for (bool one_pass : {true, false}) {
+      SCOPED_TRACE(c.text);
+      RecordingLimits limits;
+      limits.one_pass_rows = one_pass;
+      RecordingParser parser("sheet.csv", true, limits);
+      Status s = ParseAll(c.text, &parser);
+      ASSERT_FALSE(s.ok());
+      EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+      EXPECT_EQ(s.message(), c.message);
+      EXPECT_EQ(s.line(), c.line);
+      EXPECT_EQ(s.column(), c.column);
+    }
+  }
+  // A ';' or a tab inside a quoted name of a comma-separated header is a name, not a separator
+  // (the header has commas); the names are refused or kept by the usual rules.
+  RecordingParser parser("ok.csv", true);
+  EXPECT_TRUE(ParseAll("position,\"s;1\",s2\np1,1.5,2\n", &parser).ok());
+}
+
 TEST(RecordingParser, RejectsOverlongLineWithoutBufferingIt) {
   RecordingLimits limits;
   limits.max_line_bytes = 1000;

@@ -77,6 +77,7 @@ render array "/jobs/$j3"
 render failed "/jobs/$j4"
 render device "/devices/$hostile"
 render missing /jobs/999999
+render devices /devices
 
 expect history 'class="page-history' 'table-history' 'form class="filters\|class="filters'
 expect pca 'class="page-job' 'table-pca-parameters' 'plot-singular-values' 'plot-magnitude-error' \
@@ -85,7 +86,11 @@ expect array 'table-array-parameters' 'plot-cost' 'plot-positions-xy' 'plot-posi
 expect failed 'callout-error' 'badge-failed'
 expect device 'class="page-device' 'table-calibrations' 'table-drift-pca'
 expect missing 'class="page-error'
-for page in history pca array failed device; do
+expect devices 'class="page-devices' 'table-devices' 'first seen (UTC)'
+expect pca 'class="model"'
+expect array 'class="model"'
+reject failed 'class="advice"'
+for page in history pca array failed device devices; do
   reject "$page" '<script' '<img'
 done
 echo "browser pages: screenshots in $shots"

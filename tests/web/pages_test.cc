@@ -201,7 +201,7 @@ TEST(JobPage, PcaReportHasParametersPlotsAndDownloads) {
   const std::string page = RenderJobPage(v);
   ExpectDocument(page, "page-job");
   EXPECT_TRUE(Has(page, "class=\"table-pca-parameters\""));
-  EXPECT_TRUE(Has(page, "angle to nominal (mrad)"));
+  EXPECT_TRUE(Has(page, "angle to<br>nominal<br>(mrad)"));
   EXPECT_TRUE(Has(page, "class=\"table-diagnostics\""));
   for (const char* plot :
        {"singular-values", "magnitude-error", "residual-rms", "axes-xy", "axes-xz"}) {
@@ -271,20 +271,45 @@ TEST(JobPage, HundredThousandSampleExcitationKeepsPageUnderOneMegabyte) {
   EXPECT_LT(page.size(), 400u * 1024u);
 }
 
-TEST(JobPage, FailedJobExplainsReasonAndWhatToRecord) {
+// The method's message is the one source of requirements and advice: the page shows it once and
+// adds no generic advice that could contradict it (a minimum of 6 positions when the method,
+// estimating biases, needs 9) or suggest a setting the config already has.
+TEST(JobPage, FailedJobShowsTheMethodsMessageOnceAndNothingThatContradictsIt) {
   JobView v;
+  const std::string message =
+      "7 positions recorded, but dimension 3 with unknown biases needs at least 9 (d(d+3)/2); "
+      "record at least 9 positions with orientations spread over the sphere";
   v.job = Job(31, "IMU-0042", "pca", "failed", "2026-11-20T09:20:00Z", json());
-  v.job.error =
-      "only 4 positions: need at least 6 (d(d+1)/2 for d = 3) to determine the sensitivities";
+  v.job.error = message;
   v.config = PcaConfig();
+  v.config["bias"] = "estimate";
   const std::string page = RenderJobPage(v);
   ExpectDocument(page, "page-job");
   EXPECT_TRUE(Has(page, "callout-error"));
-  EXPECT_TRUE(Has(page, "only 4 positions"));
-  EXPECT_TRUE(Has(page, "What to record instead"));
-  EXPECT_TRUE(Has(page, "Record more static positions"));
   EXPECT_TRUE(Has(page, "badge-failed"));
+  const std::string escaped = "7 positions recorded, but dimension 3 with unknown biases needs";
+  const size_t at = page.find(escaped);
+  ASSERT_NE(at, std::string::npos);
+  EXPECT_EQ(page.find(escaped, at + 1), std::string::npos) << "the message is shown once";
+  EXPECT_FALSE(Has(page, "6 for d = 3"));
+  EXPECT_FALSE(Has(page, "d(d+1)/2"));
+  // "bias": "estimate" appears in the config block only, never as advice.
+  EXPECT_FALSE(Has(page, "configure"));
+  EXPECT_FALSE(Has(page, "class=\"advice\""));
   EXPECT_FALSE(Has(page, "class=\"plot "));
+}
+
+// "reflection" is explained where the diagnostics show it: a mirror image, normal either way.
+TEST(JobPage, PcaReflectionIsExplainedWhereShown) {
+  JobView v;
+  json r = PcaResult();
+  r["diagnostics"]["reflection"] = true;
+  v.job = Job(33, "IMU-0042", "pca", "succeeded", "2026-11-20T09:20:00Z", r);
+  v.config = PcaConfig();
+  const std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "mirror image"));
+  EXPECT_TRUE(Has(page, "either value is normal"));
 }
 
 TEST(JobPage, UnusablePcaResultSaysWhy) {
