@@ -155,7 +155,7 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
   if (s.ok()) {
     try {
       s = Calibrate(bytes, "recording " + std::to_string(job.recording_id), config, &result,
-                    &cancel);
+                    &cancel, options_.acceptance);
     } catch (const std::bad_alloc&) {
       s = Status::IoError("out of memory while calibrating");
     } catch (const std::exception&) {

@@ -19,6 +19,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
 #include <vector>
@@ -36,6 +37,9 @@ struct WorkerPoolOptions {
   // Optional: run by the lease renewer thread every lease_ms / 3 (e.g. taking back the jobs of
   // dead processes). Must not block for long.
   std::function<void()> housekeeping;
+  // Server-wide acceptance limits per method (`serve --acceptance`; null: built-in defaults),
+  // passed to Calibrate for every job's verdict.
+  nlohmann::json acceptance;
 };
 
 class WorkerPool {
