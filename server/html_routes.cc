@@ -29,6 +29,20 @@ web::JobSummary Summarize(const storage::JobInfo& job) {
     json result;
     if (ParseJsonText(job.result_json, "result", &result).ok()) s.result = std::move(result);
   }
+  s.state = job.state;
+  return s;
+}
+
+// Summarize plus the revoke/accept decisions, read only where there are some to show (a result
+// revoked or accepted by a person), so that a page of ordinary jobs costs no extra queries.
+web::JobSummary SummarizeWithEvents(storage::Store* store, const storage::JobInfo& job,
+                                    bool always) {
+  web::JobSummary s = Summarize(job);
+  if (!always && job.decision.empty()) return s;
+  std::vector<storage::JobEvent> events;
+  if (store->ListJobEvents(job.id, &events).ok()) {
+    for (const auto& e : events) s.events.push_back({e.action, e.reason, e.actor, e.created_at});
+  }
   return s;
 }
 
@@ -83,7 +97,7 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
     std::vector<storage::JobInfo> jobs;
     Status s = store->ListJobs(filter, &jobs);
     if (!s.ok()) return SendErrorPage(res, s);
-    for (const auto& job : jobs) view.jobs.push_back(Summarize(job));
+    for (const auto& job : jobs) view.jobs.push_back(SummarizeWithEvents(store, job, false));
     if (static_cast<int>(jobs.size()) == filter.limit) {
       view.next_before = std::to_string(jobs.back().id);
     }
@@ -105,7 +119,7 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
     Status s = store->GetJob(id, &job);
     if (!s.ok()) return SendErrorPage(res, s);
     web::JobView view;
-    view.job = Summarize(job);
+    view.job = SummarizeWithEvents(store, job, true);
     view.recording_id = job.recording_id;
     storage::RecordingInfo rec;
     if (store->GetRecording(job.recording_id, &rec).ok()) {
@@ -132,7 +146,7 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
       return SendPage(
           res, 404, web::RenderErrorPage(404, "no calibrations for device '" + view.serial + "'"));
     }
-    for (const auto& job : jobs) view.jobs.push_back(Summarize(job));
+    for (const auto& job : jobs) view.jobs.push_back(SummarizeWithEvents(store, job, false));
     SendPage(res, 200, web::RenderDevicePage(view));
   });
 }
