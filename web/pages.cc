@@ -1901,10 +1901,14 @@ std::string PcaDrift(const std::vector<const JobSummary*>& jobs) {
     }
     return worst;
   };
+  auto named = [](const std::string& who) {
+    return who.empty() ? std::string()
+                       : "<br><span class=\"name small muted\">" + E(who) + "</span>";
+  };
   std::string rows;
   for (size_t k = FirstDriftPair(jobs.size()); k < jobs.size(); ++k) {
-    double worst_scale = kNaN, worst_angle = kNaN, worst_bias = kNaN;
-    std::string ws, wa, wb, detail, pair;
+    double worst_scale = kNaN, worst_bias = kNaN;
+    std::string ws, wb, detail, pair;
     const bool same_frame = frame_of(k - 1) == frame_of(k);
     const double pair_change = axis_pair_change(k, &pair);
     for (const auto& n : names) {
@@ -1923,24 +1927,19 @@ std::string PcaDrift(const std::vector<const JobSummary*>& jobs) {
         worst_bias = db;
         wb = n;
       }
-      if (std::isfinite(ang) && !(worst_angle >= ang)) {
-        worst_angle = ang;
-        wa = n;
-      }
       detail += "<tr><td class=\"name\">" + E(n) + "</td>" + NumCell(ds, 3) +
                 NumCell(FormatSig(rel * 1e6, 3)) + NumCell(db, 3) + NumCell(ang * 1e3, 3) + "</tr>";
     }
-    const std::string frames = same_frame
-                                   ? std::string()
-                                   : "<span class=\"frames-differ muted small\">frames differ (" +
-                                         E(frame_of(k - 1)) + " \xE2\x86\x92 " + E(frame_of(k)) +
-                                         "): axis directions not compared</span>";
+    const std::string frames =
+        same_frame
+            ? std::string()
+            : "<br><span class=\"frames-differ muted small\">frames differ (" + E(frame_of(k - 1)) +
+                  " \xE2\x86\x92 " + E(frame_of(k)) + "): axis directions not compared</span>";
     rows += "<tr><td>" + PairLabel(*jobs[k - 1], *jobs[k]) + frames + "</td>" +
-            PairTimeCell(*jobs[k - 1], *jobs[k]) + NumCell(FormatSig(worst_scale * 1e6, 3)) +
-            "<td class=\"name\">" + E(ws) + "</td>" + NumCell(pair_change * 1e3, 3) +
-            "<td class=\"name\">" + E(pair) + "</td>" + NumCell(worst_bias, 3) +
-            "<td class=\"name\">" + E(wb) + "</td>" + NumCell(worst_angle * 1e3, 3) +
-            "<td class=\"name\">" + E(wa) + "</td><td><details><summary>" +
+            PairTimeCell(*jobs[k - 1], *jobs[k]) +
+            NumCell(FormatSig(worst_scale * 1e6, 3) + named(ws)) +
+            NumCell(FormatSig(pair_change * 1e3, 3) + named(pair)) +
+            NumCell(FormatSig(worst_bias, 3) + named(wb)) + "<td><details><summary>" +
             std::to_string(names.size()) +
             " sensors</summary><table class=\"table-drift-detail\"><thead><tr><th>sensor</th>"
             "<th class=\"num\">\xCE\x94scale (reading units per field unit)</th>"
@@ -1952,12 +1951,12 @@ std::string PcaDrift(const std::vector<const JobSummary*>& jobs) {
   }
   std::string out =
       "<div class=\"table-wrap\"><table class=\"table-drift-pca\"><thead><tr><th>calibrations</th>"
-      "<th>when</th><th class=\"num\">largest \xCE\x94scale (ppm)</th><th>sensor</th>"
-      "<th class=\"num\">largest change of an angle between axes (mrad)</th><th>sensors</th>"
+      "<th>when</th><th class=\"num\">largest \xCE\x94scale (ppm)</th>"
+      "<th class=\"num\" title=\"largest change of an angle between two sensors' axes\">"
+      "largest change of an angle between axes (mrad)</th>"
       "<th class=\"num\">largest \xCE\x94"
-      "bias (reading units)</th><th>sensor</th>"
-      "<th class=\"num\">largest axis change, same frame (mrad)</th><th>sensor</th>"
-      "<th>per sensor</th></tr>"
+      "bias (reading units)</th>"
+      "<th>per sensor (axis change: same frame only)</th></tr>"
       "</thead><tbody>" +
       rows + "</tbody></table></div>" + OmittedPairsNote(jobs.size()) +
       "<p class=\"muted small\">Scale factors, biases and the angles between axes do not depend "
