@@ -220,6 +220,16 @@ Status ResolveCalibrationReference(storage::Store* store, json* config) {
                                 " job; it must be a succeeded pca job")
         .WithField("accelerometer_calibration");
   }
+  if (!job.served()) {
+    // The gate applies to calibrations that feed other calibrations too.
+    return Status::InvalidInput(
+               "accelerometer_calibration: job " + std::to_string(id) + " is " + job.state +
+               (job.state == "rejected" ? " by the acceptance gate" : std::string()) +
+               " (see /jobs/" + std::to_string(id) +
+               "); use an accepted pca calibration, or accept this one with a "
+               "reason first")
+        .WithField("accelerometer_calibration");
+  }
   json result;
   s = ParseJsonText(job.result_json, "result of job " + std::to_string(id), &result);
   if (!s.ok()) return Status::Internal("stored result is not JSON");

@@ -263,6 +263,22 @@ TEST_F(HttpGate, AReuploadNeverMovesTheRecordingToItsOldDevice) {
   EXPECT_EQ(Served("DRONE-8"), other["id"]);
 }
 
+TEST_F(HttpGate, ARejectedPcaJobCannotCalibrateAnArray) {
+  const json box = Calibrate(BoxFacesCsv(14), "DRONE-11");
+  ASSERT_EQ(box["state"], "rejected");
+  const json config = {{"method", "array"},
+                       {"geometry", {{"positions", {{0, 0, 0}}}}},
+                       {"accel_noise", 0.04},
+                       {"gyro_noise", 0.001},
+                       {"accelerometer_calibration", {{"job", box["id"]}}}};
+  auto res = server_.Client().Post(
+      "/api/v1/jobs", json{{"recording_id", box["recording_id"]}, {"config", config}}.dump(),
+      "application/json");
+  ASSERT_EQ(res->status, 400) << res->body;
+  EXPECT_EQ(Body(res)["error"]["field"], "accelerometer_calibration");
+  EXPECT_NE(res->body.find("rejected by the acceptance gate"), std::string::npos) << res->body;
+}
+
 TEST(HttpGateAuth, DecisionsNeedTheTokenAndRecordIt) {
   testing::TempDir dir;
   const auto token_file = dir.path() / "token";
