@@ -151,7 +151,12 @@ void JudgeResult(const Method& method, const json& config, const json& acceptanc
                  json* result) {
   const AcceptanceLimits limits = EffectiveAcceptance(method.name(), acceptance_defaults, config);
   Verdict verdict;
-  method.Judge(*result, WithoutAcceptance(config), limits, &verdict);
+  try {
+    method.Judge(*result, WithoutAcceptance(config), limits, &verdict);
+  } catch (const nlohmann::json::exception&) {
+    // A result of an unexpected shape: fail closed, never serve what could not be judged.
+    verdict.Reject("the result could not be judged (unexpected shape); please report it");
+  }
   (*result)["verdict"] = verdict.ToJson(limits);
 }
 

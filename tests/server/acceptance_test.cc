@@ -296,6 +296,15 @@ TEST(Gate, ArrayModelFullTriadsAreJudgedLikeImu) {
   EXPECT_TRUE(HasReason(w, "look like rad/s but are taken as deg/s")) << w.dump();
 }
 
+TEST(Gate, AResultThatCannotBeJudgedIsRejected) {
+  // A damaged result (a string where a count belongs) fails closed instead of throwing.
+  const json v =
+      JudgeWith("pca", {{"method", "pca"}, {"diagnostics", {{"degrees_of_freedom", "x"}}}},
+                {{"method", "pca"}});
+  EXPECT_EQ(v["status"], "rejected");
+  EXPECT_TRUE(HasReason(v, "could not be judged")) << v.dump();
+}
+
 // ---- noise ----
 
 TEST(Gate, NoiseNeedsAStationaryLogAndAPreciseWhiteNoise) {
