@@ -179,6 +179,9 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
     return;
   }
   metrics_->ObserveJob(job.method, "succeeded", seconds());
+  if (result.contains("verdict") && result["verdict"].is_object()) {
+    metrics_->ObserveVerdict(job.method, result["verdict"].value("status", std::string("?")));
+  }
 }
 
 }  // namespace calibd::server

@@ -133,6 +133,13 @@ TEST_F(HttpGate, PoorlySpreadPcaRecordingIsRejectedAndNeverServed) {
   ASSERT_EQ(rejected["jobs"].size(), 1u);
   EXPECT_EQ(rejected["jobs"][0]["id"], box["id"]);
   EXPECT_EQ(server_.Client().Get("/api/v1/jobs?verdict=maybe")->status, 400);
+  // Monitoring sees the rejections.
+  const std::string metrics = server_.Client().Get("/metrics")->body;
+  EXPECT_NE(metrics.find("calibd_verdicts_total{method=\"pca\",verdict=\"rejected\"} 1"),
+            std::string::npos)
+      << metrics;
+  EXPECT_NE(metrics.find("calibd_verdicts_total{method=\"pca\",verdict=\"accepted\"} 1"),
+            std::string::npos);
 }
 
 TEST_F(HttpGate, UnitMixUpsAreRejectedWithTheProbableCause) {
