@@ -91,6 +91,10 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
     if (status == "queued" || status == "running" || status == "succeeded" || status == "failed") {
       view.filter.status = filter.status = status;
     }
+    const std::string verdict = req.get_param_value("verdict");
+    if (verdict == "accepted" || verdict == "rejected" || verdict == "revoked") {
+      view.filter.verdict = filter.state = verdict;
+    }
     if (req.has_param("before") && !ParsePositive(req.get_param_value("before"), &filter.before)) {
       return SendPage(res, 400, web::RenderErrorPage(400, "'before' must be a job id"));
     }

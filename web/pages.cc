@@ -1716,6 +1716,7 @@ std::string FilterQuery(const HistoryFilter& f) {
   if (!f.device.empty()) q += "&device=" + UrlEncode(f.device);
   if (!f.method.empty()) q += "&method=" + UrlEncode(f.method);
   if (!f.status.empty()) q += "&status=" + UrlEncode(f.status);
+  if (!f.verdict.empty()) q += "&verdict=" + UrlEncode(f.verdict);
   return q;
 }
 
@@ -1751,6 +1752,9 @@ std::string HistoryBody(const HistoryView& v) {
       v.filter.status != "running" && v.filter.status != "queued") {
     out += Option(v.filter.status, v.filter.status, v.filter.status);
   }
+  out += "</select></label><label>verdict<select name=\"verdict\">" +
+         Option("", "any", v.filter.verdict);
+  for (const char* s : {"accepted", "rejected", "revoked"}) out += Option(s, s, v.filter.verdict);
   out += "</select></label><button type=\"submit\">Filter</button>";
   out += "<a href=\"/\">clear</a></form>";
   if (v.total >= 0) {

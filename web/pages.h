@@ -79,6 +79,7 @@ struct HistoryFilter {
   std::string device;
   std::string method;
   std::string status;
+  std::string verdict;  // "accepted" | "rejected" | "revoked" (the acceptance gate's state)
 };
 
 // `/` — the calibration history.

@@ -565,6 +565,12 @@ TEST(HistoryPage, MarksRejectedResults) {
   EXPECT_TRUE(Has(page, "<span class=\"verdict-reason\">too noisy</span>"));
   EXPECT_FALSE(Has(page, "<span class=\"badge badge-revoked\""));
   EXPECT_FALSE(Has(page, "<span class=\"badge badge-accepted\""));  // accepted: no mark
+  // The filter form offers the gate's states and keeps the chosen one in the pager link.
+  h.filter.verdict = "rejected";
+  h.next_before = "8";
+  const std::string filtered = RenderHistoryPage(h);
+  EXPECT_TRUE(Has(filtered, "<select name=\"verdict\">"));
+  EXPECT_TRUE(Has(filtered, "verdict=rejected"));
 }
 
 TEST(DevicePage, ManyCalibrationsKeepThePageSmall) {
@@ -628,7 +634,7 @@ TEST(Escaping, HostileDeviceAndSensorNamesNeverAppearUnescapedInAnyPage) {
 
     HistoryView h;
     h.jobs = {pj.job, aj.job, fj.job, sj.job};
-    h.filter = {evil, evil, evil};
+    h.filter = {evil, evil, evil, evil};
     h.devices = {evil};
     h.next_before = evil;
     const std::string hp = RenderHistoryPage(h);
