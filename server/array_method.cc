@@ -6,6 +6,7 @@
 #include <map>
 
 #include "core/array_simulation.h"
+#include "server/inertial_log.h"
 
 namespace calibd::server {
 namespace {
@@ -619,6 +620,120 @@ Status SimulateArrayStaticFiles(const ArraySimulationFileOptions& options, int p
   return Status::Ok();
 }
 
+void JudgeArray(const json& result, const json& config, const AcceptanceLimits& limits,
+                Verdict* verdict) {
+  const json params = result.value("parameters", json::object());
+  const json uncertainty = result.value("uncertainty", json::object());
+  const json diag = result.value("diagnostics", json::object());
+  const int reference = params.value("reference", -1);
+  // Positions: parameters.positions (SPEC §4), or per IMU (model full: parameters.imus[].position
+  // with uncertainty.imus[].position_std), against the nominal geometry.
+  struct Position {
+    std::string name;
+    Eigen::Vector3d offset = Eigen::Vector3d::Constant(NAN);
+    Eigen::Vector3d std = Eigen::Vector3d::Constant(NAN);
+  };
+  auto vec3 = [](const json& j) {
+    Eigen::Vector3d v = Eigen::Vector3d::Constant(NAN);
+    if (j.is_array() && j.size() == 3) {
+      for (int k = 0; k < 3; ++k) v[k] = Number(j[k]).value_or(NAN);
+    }
+    return v;
+  };
+  std::vector<Position> positions;
+  if (params.contains("positions") && params["positions"].is_array()) {
+    const json stds = uncertainty.value("positions", json::array());
+    for (size_t i = 0; i < params["positions"].size(); ++i) {
+      const json& p = params["positions"][i];
+      Position q;
+      q.name = p.value("name", "a" + std::to_string(i));
+      q.offset = vec3(p.value("offset", json()));
+      if (i < stds.size()) q.std = vec3(stds[i].value("std", json()));
+      positions.push_back(q);
+    }
+  } else if (params.contains("imus") && params["imus"].is_array()) {
+    const json nominal = config.value("geometry", json::object()).value("positions", json());
+    const json stds = uncertainty.value("imus", json::array());
+    for (size_t i = 0; i < params["imus"].size(); ++i) {
+      const json& p = params["imus"][i];
+      if (!p.contains("position")) continue;
+      Position q;
+      q.name = "IMU " + p.value("name", std::to_string(i));
+      if (nominal.is_array() && i < nominal.size()) {
+        q.offset = vec3(p["position"]) - vec3(nominal[i]);
+      }
+      if (i < stds.size()) q.std = vec3(stds[i].value("position_std", json()));
+      positions.push_back(q);
+    }
+  }
+  const auto offset_max = limits.Get("max_offset");
+  const auto std_max = limits.Get("max_position_std");
+  Offenders far, uncertain, undefined;
+  for (size_t i = 0; i < positions.size(); ++i) {
+    const Position& q = positions[i];
+    if (static_cast<int>(i) == reference) continue;  // held at its nominal position
+    const double offset = q.offset.norm();
+    if (offset_max && std::isfinite(offset) && offset > *offset_max) {
+      far.Add(q.name + " " + Fmt(offset * 1e3) + " mm");
+    }
+    if (!q.std.allFinite()) {
+      undefined.Add(q.name);
+    } else if (std_max && q.std.maxCoeff() > *std_max) {
+      uncertain.Add(q.name + " " + Fmt(q.std.maxCoeff() * 1e6) + " um");
+    }
+  }
+  if (offset_max) {
+    far.RejectInto(verdict, "triad more than " + Fmt(*offset_max * 1e3) +
+                                " mm from its nominal position: is the geometry right (metres, "
+                                "triad order), and gyro_unit?");
+  }
+  undefined.RejectInto(verdict,
+                       "the position uncertainty could not be computed, so the precision "
+                       "cannot be judged");
+  if (std_max) {
+    uncertain.RejectInto(verdict, "position too uncertain (1 sigma above " + Fmt(*std_max * 1e6) +
+                                      " um): rotate faster and about every axis, for longer");
+  }
+  if (diag.contains("converged") && !diag.value("converged", true)) {
+    verdict->Reject(
+        "the solver did not converge: the positions are not the best fit; raise "
+        "max_iterations or record a more exciting motion");
+  }
+  // Residuals against the configured noise.
+  const auto chi2_max = limits.Get("max_chi2");
+  const json rms = diag.value("residual_rms", json::object());
+  const json noise = diag.value("noise_configured", json::object());
+  if (chi2_max) {
+    for (const char* sensor : {"accelerometer", "gyroscope"}) {
+      const auto r = Number(rms.value(sensor, json()));
+      const auto n = Number(noise.value(sensor, json()));
+      if (!r || !n || *n <= 0) continue;
+      const double chi2 = (*r / *n) * (*r / *n);
+      if (chi2 > *chi2_max) {
+        verdict->Reject(std::string("the ") + sensor + " residuals are " + Fmt(*r / *n) +
+                        " times the configured noise (" +
+                        (std::string(sensor) == "accelerometer" ? "accel_noise " : "gyro_noise ") +
+                        Fmt(*n) + ", ratio squared " + Fmt(chi2) + " above " + Fmt(*chi2_max) +
+                        "): the noise figure is wrong, the sensors saturated, or the model does "
+                        "not fit (a sensor's gain or bias: calibrate the accelerometers first)");
+      }
+    }
+  }
+  // Model full: every triad's gains, misalignments and biases, as for imu.
+  if (params.contains("imus")) {
+    TriadNominal nominal;
+    InertialUnits units;
+    if (ParseInertialUnits(config, &units).ok()) {
+      nominal.accel_unit = units.accel;
+      nominal.gyro_unit = units.gyro;
+      nominal.accel_text = units.accel_text;
+      nominal.gyro_text = units.gyro_text;
+    }
+    JudgeImuTriads(params["imus"], uncertainty.value("imus", json()), nominal, limits, "IMU",
+                   verdict);
+  }
+}
+
 namespace {
 
 class Array : public Method {
@@ -634,6 +749,10 @@ class Array : public Method {
     core::ArrayOptions options;
     bool degrees = false;
     return ParseArrayConfig(config, &geometry, &options, &degrees);
+  }
+  void Judge(const nlohmann::json& result, const nlohmann::json& config,
+             const AcceptanceLimits& limits, Verdict* verdict) const override {
+    JudgeArray(result, config, limits, verdict);
   }
   Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
              nlohmann::json* result) const override {

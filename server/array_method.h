@@ -103,6 +103,15 @@ Status RunArray(const ArrayRecording& recording, const nlohmann::json& config,
                 nlohmann::json* result, const std::atomic<bool>* cancel = nullptr,
                 core::TaskExecutor executor = {});
 
+// The acceptance gate of an array result (Method::Judge): every triad but the reference within
+// max_offset of its nominal position and its 1 sigma within max_position_std (positions from
+// parameters.positions, or parameters.imus[].position against config geometry for model full),
+// the solver converged, the residual RMS against the configured accel_noise / gyro_noise
+// (max_chi2 on the squared ratio), and with parameters.imus (model full) each triad's gains,
+// misalignments and biases as for imu (JudgeImuTriads; nominal units from accel_unit, gyro_unit).
+void JudgeArray(const nlohmann::json& result, const nlohmann::json& config,
+                const AcceptanceLimits& limits, Verdict* verdict);
+
 // For `calibd simulate array`.
 struct ArraySimulationFileOptions {
   int64_t samples = 1000;                // N

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "server/acceptance.h"
 #include "server/array_method.h"
 #include "server/config.h"
 #include "server/imu_method.h"
@@ -81,7 +82,13 @@ Status InlineCalibrationFile(const std::string& config_path, json* config) {
   return Status::Ok();
 }
 
-int Calibrate(const std::string& recording_path, const std::string& config_path, bool compact) {
+int Calibrate(const std::string& recording_path, const std::string& config_path, bool compact,
+              const std::string& acceptance_path) {
+  json acceptance;
+  if (!acceptance_path.empty()) {
+    Status s = LoadAcceptanceFile(acceptance_path, &acceptance);
+    if (!s.ok()) return Report(s);
+  }
   std::string config_text;
   Status s = ReadFile(config_path, &config_text);
   if (!s.ok()) return Report(s);
@@ -99,9 +106,16 @@ int Calibrate(const std::string& recording_path, const std::string& config_path,
   s = ParseRecordingFile(recording_path, &parser);
   if (!s.ok()) return Report(s);
   json result;
-  s = CalibrateParsed(&parser, recording_path, config, &result);
+  s = CalibrateParsed(&parser, recording_path, config, &result, nullptr, acceptance);
   if (!s.ok()) return Report(s);
   std::cout << (compact ? result.dump() : result.dump(2)) << "\n";
+  // The verdict for people too (the exit code stays 0: a result was computed; a rejected one is
+  // what a server would not serve).
+  const json& verdict = result["verdict"];
+  std::cerr << "calibd: verdict: " << verdict.value("status", std::string("?")) << "\n";
+  for (const json& reason : verdict.value("reasons", json::array())) {
+    std::cerr << "calibd:   - " << reason.get<std::string>() << "\n";
+  }
   return kExitOk;
 }
 
@@ -158,6 +172,10 @@ int RunCli(int argc, char** argv) {
       ->capture_default_str();
   serve_cmd->add_option("--token-file", serve.token_file,
                         "file holding the bearer token that writes require");
+  serve_cmd->add_option("--acceptance", serve.acceptance_file,
+                        "JSON file of server-wide acceptance limits per method, e.g. "
+                        "{\"pca\": {\"max_scale_std\": 0.005}} (a config's `acceptance` overrides "
+                        "them per key)");
   serve_cmd->add_flag("--insecure", serve.insecure,
                       "allow a non-loopback --listen without a token");
   serve_cmd->add_option("--max-upload-bytes", serve.max_upload_bytes, "largest accepted upload")
@@ -192,16 +210,19 @@ int RunCli(int argc, char** argv) {
   serve_cmd->add_flag("!--no-access-log", serve.access_log, "do not log requests to stderr");
 
   // calibrate
-  std::string recording_path, config_path;
+  std::string recording_path, config_path, acceptance_path;
   bool compact = false;
   CLI::App* calibrate_cmd =
       app.add_subcommand("calibrate", "run one calibration offline and print the result JSON");
   calibrate_cmd->add_option("recording", recording_path, "recording CSV (SPEC §2)")->required();
   calibrate_cmd->add_option("--config", config_path, "config JSON (SPEC §3)")->required();
   calibrate_cmd->add_flag("--compact", compact, "print the JSON on one line");
+  calibrate_cmd->add_option("--acceptance", acceptance_path,
+                            "JSON file of acceptance limits per method, as for serve");
   calibrate_cmd->footer(
-      "Exit codes: 0 success, 2 bad input (file, line, column on stderr), 3 the data cannot "
-      "determine the parameters (the message says what to record instead).");
+      "Exit codes: 0 a result was computed (its \"verdict\" says whether the acceptance gate "
+      "accepts it; also printed on stderr), 2 bad input (file, line, column on stderr), 3 the "
+      "data cannot determine the parameters (the message says what to record instead).");
 
   // simulate
   CLI::App* simulate_cmd =
@@ -380,7 +401,7 @@ int RunCli(int argc, char** argv) {
   }
 
   if (*serve_cmd) return RunServe(serve);
-  if (*calibrate_cmd) return Calibrate(recording_path, config_path, compact);
+  if (*calibrate_cmd) return Calibrate(recording_path, config_path, compact, acceptance_path);
   if (*sim_pca) {
     std::string csv;
     json config, truth;

@@ -131,11 +131,38 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
     }
     common->device = serial;
   }
+  if (auto acceptance = config.find("acceptance"); acceptance != config.end()) {
+    Status s =
+        ValidateAcceptance(*acceptance, common->method, "config key 'acceptance'", "acceptance");
+    if (!s.ok()) return s;
+    return m->ValidateConfig(WithoutAcceptance(config));
+  }
   return m->ValidateConfig(config);
 }
 
+json WithoutAcceptance(const json& config) {
+  if (!config.is_object() || !config.contains("acceptance")) return config;
+  json out = config;
+  out.erase("acceptance");
+  return out;
+}
+
+void JudgeResult(const Method& method, const json& config, const json& acceptance_defaults,
+                 json* result) {
+  const AcceptanceLimits limits = EffectiveAcceptance(method.name(), acceptance_defaults, config);
+  Verdict verdict;
+  try {
+    method.Judge(*result, WithoutAcceptance(config), limits, &verdict);
+  } catch (const nlohmann::json::exception&) {
+    // A result of an unexpected shape: fail closed, never serve what could not be judged.
+    verdict.Reject("the result could not be judged (unexpected shape); please report it");
+  }
+  (*result)["verdict"] = verdict.ToJson(limits);
+}
+
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, const json& config,
-                       json* result, const std::atomic<bool>* cancel, core::TaskExecutor executor) {
+                       json* result, const std::atomic<bool>* cancel,
+                       const json& acceptance_defaults, core::TaskExecutor executor) {
   CommonConfig common;
   Status s = ValidateConfig(config, &common);
   if (!s.ok()) return s;
@@ -151,15 +178,18 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
   RunContext context;
   context.cancel = cancel;
   context.executor = std::move(executor);
-  return method->Run(parser, config, context, result);
+  s = method->Run(parser, WithoutAcceptance(config), context, result);
+  if (!s.ok()) return s;
+  JudgeResult(*method, config, acceptance_defaults, result);
+  return Status::Ok();
 }
 
 Status Calibrate(std::string_view recording, const std::string& file_name, const json& config,
-                 json* result, const std::atomic<bool>* cancel) {
+                 json* result, const std::atomic<bool>* cancel, const json& acceptance_defaults) {
   RecordingParser parser(file_name, /*collect=*/true);
   Status s = ParseRecording(recording, &parser);
   if (!s.ok()) return s;
-  return CalibrateParsed(&parser, file_name, config, result, cancel);
+  return CalibrateParsed(&parser, file_name, config, result, cancel, acceptance_defaults);
 }
 
 }  // namespace calibd::server

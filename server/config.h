@@ -36,24 +36,40 @@ struct CommonConfig {
 };
 
 // Checks the whole config: an object, `method` known, `device` a non-empty string of at most
-// 128 printable characters when present, and the method's own keys (unknown keys are errors).
-// Errors name the key (Status::field()).
+// 128 printable characters when present, `acceptance` (limits of the method's acceptance gate,
+// server/acceptance.h) when present, and the method's own keys (unknown keys are errors).
+// Errors name the key (Status::field(), "acceptance.<limit>" for a limit).
 Status ValidateConfig(const nlohmann::json& config, CommonConfig* common);
 
+// The config without its `acceptance` key (what a Method's ValidateConfig, Run and Judge see).
+nlohmann::json WithoutAcceptance(const nlohmann::json& config);
+
+class Method;
+// Judges a result `method` computed with `config` and writes (*result)["verdict"] (SPEC §4):
+// limits = built-in defaults < acceptance_defaults[method] (server-wide, `serve --acceptance`;
+// null for none) < config["acceptance"]. The config must have been validated.
+void JudgeResult(const Method& method, const nlohmann::json& config,
+                 const nlohmann::json& acceptance_defaults, nlohmann::json* result);
+
 // Parses the recording bytes (collecting), checks the layout matches the config's method, runs the
-// calibration and writes the result JSON (SPEC §4). kInvalidInput for bad bytes or config,
+// calibration and writes the result JSON (SPEC §4) with its verdict (JudgeResult; a rejected
+// result is still OK: it is computed, only not served). kInvalidInput for bad bytes or config,
 // kNotDeterminable when the data cannot determine the parameters.
 // `cancel` (optional): when it becomes true the computation stops early (the result is then
-// meaningless and must be discarded).
+// meaningless and must be discarded). `acceptance_defaults`: the server-wide limits per method
+// (`serve --acceptance`), null for the built-in defaults.
 Status Calibrate(std::string_view recording, const std::string& file_name,
                  const nlohmann::json& config, nlohmann::json* result,
-                 const std::atomic<bool>* cancel = nullptr);
+                 const std::atomic<bool>* cancel = nullptr,
+                 const nlohmann::json& acceptance_defaults = nlohmann::json());
 
 // The same, from a parser that has already been fed and finished (collecting).
 // `executor` (optional): see RunContext::executor.
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name,
                        const nlohmann::json& config, nlohmann::json* result,
-                       const std::atomic<bool>* cancel = nullptr, core::TaskExecutor executor = {});
+                       const std::atomic<bool>* cancel = nullptr,
+                       const nlohmann::json& acceptance_defaults = nlohmann::json(),
+                       core::TaskExecutor executor = {});
 
 }  // namespace calibd::server
 

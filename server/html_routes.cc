@@ -30,6 +30,20 @@ web::JobSummary Summarize(const storage::JobInfo& job) {
     json result;
     if (ParseJsonText(job.result_json, "result", &result).ok()) s.result = std::move(result);
   }
+  s.state = job.state;
+  return s;
+}
+
+// Summarize plus the revoke/accept decisions, read only where there are some to show (a result
+// revoked or accepted by a person), so that a page of ordinary jobs costs no extra queries.
+web::JobSummary SummarizeWithEvents(storage::Store* store, const storage::JobInfo& job,
+                                    bool always) {
+  web::JobSummary s = Summarize(job);
+  if (!always && job.decision.empty()) return s;
+  std::vector<storage::JobEvent> events;
+  if (store->ListJobEvents(job.id, &events).ok()) {
+    for (const auto& e : events) s.events.push_back({e.action, e.reason, e.actor, e.created_at});
+  }
   return s;
 }
 
@@ -78,13 +92,17 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
     if (status == "queued" || status == "running" || status == "succeeded" || status == "failed") {
       view.filter.status = filter.status = status;
     }
+    const std::string verdict = req.get_param_value("verdict");
+    if (verdict == "accepted" || verdict == "rejected" || verdict == "revoked") {
+      view.filter.verdict = filter.state = verdict;
+    }
     if (req.has_param("before") && !ParsePositive(req.get_param_value("before"), &filter.before)) {
       return SendPage(res, 400, web::RenderErrorPage(400, "'before' must be a job id"));
     }
     std::vector<storage::JobInfo> jobs;
     Status s = store->ListJobs(filter, &jobs);
     if (!s.ok()) return SendErrorPage(res, s);
-    for (const auto& job : jobs) view.jobs.push_back(Summarize(job));
+    for (const auto& job : jobs) view.jobs.push_back(SummarizeWithEvents(store, job, false));
     if (static_cast<int>(jobs.size()) == filter.limit) {
       view.next_before = std::to_string(jobs.back().id);
     }
@@ -106,7 +124,7 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
     Status s = store->GetJob(id, &job);
     if (!s.ok()) return SendErrorPage(res, s);
     web::JobView view;
-    view.job = Summarize(job);
+    view.job = SummarizeWithEvents(store, job, true);
     view.recording_id = job.recording_id;
     storage::RecordingInfo rec;
     if (store->GetRecording(job.recording_id, &rec).ok()) {
@@ -151,7 +169,7 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
           web::RenderErrorPage(
               404, hint.empty() ? "no calibrations for device '" + view.serial + "'" : hint));
     }
-    for (const auto& job : jobs) view.jobs.push_back(Summarize(job));
+    for (const auto& job : jobs) view.jobs.push_back(SummarizeWithEvents(store, job, false));
     SendPage(res, 200, web::RenderDevicePage(view));
   });
 }

@@ -209,6 +209,39 @@ class Imu : public Method {
     core::ImuOptions options;
     return ParseImuConfig(config, &options);
   }
+  void Judge(const json& result, const json& config, const AcceptanceLimits& limits,
+             Verdict* verdict) const override {
+    TriadNominal nominal;
+    InertialUnits units;
+    if (ParseInertialUnits(config, &units).ok()) {
+      nominal.accel_unit = units.accel;
+      nominal.gyro_unit = units.gyro;
+      nominal.accel_text = units.accel_text;
+      nominal.gyro_text = units.gyro_text;
+    }
+    nominal.accel_bias = Number(config.value("nominal_accel_bias", json())).value_or(0);
+    nominal.gyro_bias = Number(config.value("nominal_gyro_bias", json())).value_or(0);
+    const json params = result.value("parameters", json::object());
+    const json stds = result.value("uncertainty", json::object()).value("imus", json());
+    JudgeImuTriads(params.value("imus", json()), stds, nominal, limits, "IMU", verdict);
+    const json diags = result.value("diagnostics", json::object()).value("imus", json());
+    if (!diags.is_array()) return;
+    const auto chi2_max = limits.Get("max_chi2");
+    for (const json& d : diags) {
+      const std::string name = "IMU " + d.value("name", std::string("?"));
+      const json coverage = d.value("coverage", json::object());
+      if (!coverage.value("sufficient", true)) {
+        verdict->Reject(name + ": the orientations do not determine every parameter: " +
+                        coverage.value("verdict", std::string("add orientations")));
+      }
+      const auto chi2 = Number(d.value("chi2_per_dof", json()));
+      if (chi2_max && chi2 && *chi2 > *chi2_max) {
+        verdict->Reject(name + ": the residuals are " + Fmt(std::sqrt(*chi2)) +
+                        " times the noise (chi2/dof " + Fmt(*chi2) + " above " + Fmt(*chi2_max) +
+                        "): the device moved during a static, or the statics are too short");
+      }
+    }
+  }
   Status Run(RecordingParser* parser, const json& config, const RunContext&,
              json* result) const override {
     core::ImuOptions options;

@@ -17,6 +17,7 @@
 
 #include "core/block_lm.h"
 #include "core/status.h"
+#include "server/acceptance.h"
 #include "server/recording.h"
 
 namespace calibd::server {
@@ -47,6 +48,13 @@ class Method {
   // kNotDeterminable (the data cannot determine the parameters; the message says what to record).
   virtual Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
                      nlohmann::json* result) const = 0;
+  // The acceptance gate (SPEC §4 `verdict`): judges a result this method's Run wrote (with the
+  // config it ran with, `acceptance` removed) against the limits in force (server/acceptance.h),
+  // calling verdict->Reject once per failed rule with words a line operator understands (what is
+  // wrong and what to do). Never fails: what cannot be judged (an undefined uncertainty) is a
+  // rejection. Deterministic.
+  virtual void Judge(const nlohmann::json& result, const nlohmann::json& config,
+                     const AcceptanceLimits& limits, Verdict* verdict) const = 0;
 };
 
 // Every method, in the order users see them. Never empty; the pointers live for the process.

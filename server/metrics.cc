@@ -65,6 +65,12 @@ void Metrics::ObserveJob(const std::string& method, const std::string& outcome, 
   AddToHistogram(job_bounds_, seconds, h.buckets.data(), &h.count, &h.sum);
 }
 
+void Metrics::ObserveVerdict(const std::string& method, const std::string& verdict) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++verdicts_["method=\"" + EscapeLabelValue(method) + "\",verdict=\"" + EscapeLabelValue(verdict) +
+              "\""];
+}
+
 void Metrics::ObserveUpload(int64_t bytes, int status) {
   std::lock_guard<std::mutex> lock(mu_);
   upload_bytes_ += static_cast<uint64_t>(std::max<int64_t>(bytes, 0));
@@ -98,6 +104,10 @@ std::string Metrics::Render(const std::map<std::string, std::map<std::string, do
   histograms("calibd_http_request_duration_seconds", "HTTP request latency.", latency_bounds_,
              request_latency_);
   counters("calibd_jobs_finished_total", "Calibration job runs by method and outcome.", jobs_);
+  counters("calibd_verdicts_total",
+           "Results judged by the acceptance gate, by method and verdict (rejected results are "
+           "never served).",
+           verdicts_);
   histograms("calibd_job_duration_seconds", "Calibration job run time by method.", job_bounds_,
              job_duration_);
   counters("calibd_uploads_total", "Recording uploads by HTTP status.", uploads_);

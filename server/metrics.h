@@ -22,6 +22,8 @@ class Metrics {
                       double seconds);
   // A calibration job finished: outcome "succeeded" | "failed" | "retried" | "released".
   void ObserveJob(const std::string& method, const std::string& outcome, double seconds);
+  // The acceptance gate judged a stored result: verdict "accepted" | "rejected".
+  void ObserveVerdict(const std::string& method, const std::string& verdict);
   // Bytes of an upload body received (whether or not it was accepted), and its outcome.
   void ObserveUpload(int64_t bytes, int status);
 
@@ -42,6 +44,7 @@ class Metrics {
   std::map<std::string, Histogram> request_latency_;  // labels -> histogram
   std::map<std::string, Histogram> job_duration_;
   std::map<std::string, uint64_t> jobs_;
+  std::map<std::string, uint64_t> verdicts_;
   std::map<std::string, uint64_t> uploads_;
   uint64_t upload_bytes_ = 0;
 };

@@ -61,6 +61,48 @@ class Noise : public Method {
     InertialUnits units;
     return ParseNoiseConfig(config, &options, &units);
   }
+  void Judge(const json& result, const json&, const AcceptanceLimits& limits,
+             Verdict* verdict) const override {
+    const json diag = result.value("diagnostics", json::object());
+    if (!diag.value("stationary", true)) {
+      verdict->Reject(
+          "the log is not stationary (the device moved or was touched): noise figures of a moving "
+          "device are not the sensor's; record again with the device at rest");
+    }
+    const json params = result.value("parameters", json::object()).value("channels", json());
+    const json stds = result.value("uncertainty", json::object()).value("channels", json());
+    if (!params.is_array()) return;
+    const auto rel_max = limits.Get("max_white_noise_std");
+    Offenders missing, uncertain, too_high;
+    for (size_t i = 0; i < params.size(); ++i) {
+      const json& c = params[i];
+      const std::string name = c.value("name", std::to_string(i));
+      const std::string unit = c.value("unit", std::string());
+      const auto n = Number(c.value("white_noise", json()));
+      if (!n) {
+        missing.Add(name);
+        continue;
+      }
+      const json sd = stds.is_array() && i < stds.size() ? stds[i] : json::object();
+      const auto n_std = Number(sd.value("white_noise_std", json()));
+      if (rel_max && (!n_std || *n_std / *n > *rel_max)) {
+        uncertain.Add(name + " " + (n_std ? Fmt(*n_std / *n * 100) + " %" : "undefined"));
+      }
+      const auto max =
+          limits.Get(unit == "m/s^2" ? "max_accel_white_noise" : "max_gyro_white_noise");
+      if (max && *n > *max) too_high.Add(name + " " + Fmt(*n) + " " + unit + "/sqrt(Hz)");
+    }
+    missing.RejectInto(verdict,
+                       "no white-noise density could be read (log too short or too few "
+                       "samples)");
+    if (rel_max) {
+      uncertain.RejectInto(verdict, "white-noise density too uncertain (1 sigma above " +
+                                        Fmt(*rel_max * 100) + " %): record a longer log");
+    }
+    too_high.RejectInto(verdict,
+                        "white-noise density far above any MEMS sensor: check accel_unit "
+                        "and gyro_unit, and that the device was at rest");
+  }
   Status Run(RecordingParser* parser, const json& config, const RunContext&,
              json* result) const override {
     core::NoiseOptions options;

@@ -91,6 +91,27 @@ json Build() {
         {"error", {{"type", "object"}, {"nullable", true}}},
         {"result", {{"allOf", json::array({Ref("Result")})}, {"nullable", true}}},
         {"config", {{"type", "object"}}},
+        {"verdict",
+         {{"type", "string"},
+          {"enum", {"accepted", "rejected"}},
+          {"nullable", true},
+          {"description", "the acceptance gate's verdict (succeeded jobs)"}}},
+        {"revoked", {{"type", "boolean"}}},
+        {"state",
+         {{"type", "string"},
+          {"enum", {"accepted", "rejected", "revoked"}},
+          {"nullable", true},
+          {"description", "after people's decisions; only accepted results are served"}}},
+        {"events",
+         {{"type", "array"},
+          {"description", "GET /jobs/{id} only: revoke/accept decisions, oldest first"},
+          {"items",
+           {{"type", "object"},
+            {"properties",
+             {{"action", {{"type", "string"}, {"enum", {"revoke", "accept"}}}},
+              {"reason", {{"type", "string"}}},
+              {"actor", {{"type", "string"}, {"description", "token | anonymous"}}},
+              {"at", {{"type", "string"}, {"format", "date-time"}}}}}}}}},
         {"url", {{"type", "string"}}},
         {"report_url", {{"type", "string"}}}}}};
   schemas["Recording"] = {
@@ -169,6 +190,9 @@ json Build() {
       {"parameters", json::array({QueryParam("device", "string", "filter"),
                                   QueryParam("method", "string", "filter"),
                                   QueryParam("status", "string", "filter"),
+                                  QueryParam("verdict", "string",
+                                             "filter: accepted | rejected | revoked (the "
+                                             "acceptance gate's state; succeeded jobs only)"),
                                   QueryParam("limit", "integer", "1..500, default 50"),
                                   QueryParam("before", "integer", "cursor: jobs with smaller ids"),
                                   QueryParam("include_results", "boolean", "embed results")})},
@@ -180,19 +204,58 @@ json Build() {
                                 {"next", {{"type", "string"}, {"nullable", true}}}}}})},
         {"400", ErrorResponse("bad filter")}}}};
   paths["/jobs/{id}"]["get"] = {
-      {"summary", "One job with its result"},
+      {"summary",
+       "One job with its result, its verdict (the acceptance gate's), revoked, state "
+       "(accepted | rejected | revoked) and events (revoke/accept decisions: action, reason, "
+       "actor, at)"},
       {"parameters", json::array({PathParam("id", "integer", "job id")})},
       {"responses",
        {{"200", JsonResponse("the job", Ref("Job"))}, {"404", ErrorResponse("no such job")}}}};
+  const json decision_body = {
+      {"required", true},
+      {"content",
+       {{"application/json",
+         {{"schema",
+           {{"type", "object"},
+            {"required", {"reason"}},
+            {"properties",
+             {{"reason", {{"type", "string"}, {"minLength", 1}, {"maxLength", 500}}}}}}}}}}}};
+  for (const char* action : {"revoke", "accept"}) {
+    const bool revoke = std::string(action) == "revoke";
+    paths[std::string("/jobs/{id}/") + action]["post"] = {
+        {"summary", revoke ? "Withdraw a served result: the device's calibration falls back to "
+                             "its previous accepted one"
+                           : "Accept a result the acceptance gate rejected (or re-accept a "
+                             "revoked one)"},
+        {"security", json::array({{{"bearer", json::array()}}})},
+        {"parameters", json::array({PathParam("id", "integer", "job id")})},
+        {"requestBody", decision_body},
+        {"responses",
+         {{"200", JsonResponse("the job with the recorded event",
+                               {{"type", "object"}, {"properties", {{"job", Ref("Job")}}}})},
+          {"400", ErrorResponse("reason missing, empty or too long")},
+          {"401", ErrorResponse("missing or wrong token")},
+          {"404", ErrorResponse("no such job")},
+          {"409", ErrorResponse(revoke ? "the job has no served result (not succeeded, "
+                                         "rejected, or already revoked)"
+                                       : "the job has no result, or it is already accepted")},
+          {"415", ErrorResponse("not application/json")}}}};
+  }
   paths["/devices"]["get"] = {
       {"summary", "Devices with their latest calibration time per method"},
       {"responses", {{"200", JsonResponse("devices", {{"type", "object"}})}}}};
   paths["/devices/{serial}/calibration"]["get"] = {
-      {"summary", "The latest succeeded calibration of a device, for production tooling"},
+      {"summary",
+       "The latest accepted (not rejected by the acceptance gate, not revoked) calibration of a "
+       "device, for production tooling; X-Calibd-Job and X-Calibd-State name the job and its "
+       "state"},
       {"parameters",
        json::array({PathParam("serial", "string", "device serial number"),
                     QueryParam("method", "string", "pca | array (needed when the device has both)"),
-                    QueryParam("format", "string", "json (default) | csv | h"),
+                    QueryParam("format", "string", "json (default) | csv | h | yaml"),
+                    QueryParam("job", "integer",
+                               "that job's result whatever its state (404 when it is not this "
+                               "device's or has no result)"),
                     {{"name", "If-None-Match"},
                      {"in", "header"},
                      {"required", false},
@@ -206,7 +269,7 @@ json Build() {
             {"text/x-c", {{"schema", {{"type", "string"}}}}}}}}},
         {"304", {{"description", "not modified (If-None-Match matched the ETag)"}}},
         {"400", ErrorResponse("bad method or format")},
-        {"404", ErrorResponse("no succeeded calibration")}}}};
+        {"404", ErrorResponse("no accepted calibration, or job not this device's")}}}};
   paths["/recordings/{id}"]["get"] = {
       {"summary", "Recording metadata"},
       {"parameters", json::array({PathParam("id", "integer", "recording id")})},

@@ -256,6 +256,144 @@ Status SimulatePcaFiles(const core::PcaSimulationOptions& options, std::string* 
   return Status::Ok();
 }
 
+void JudgePca(const json& result, const json& config, const AcceptanceLimits& limits,
+              Verdict* verdict) {
+  const json params = result.value("parameters", json::object());
+  const json diag = result.value("diagnostics", json::object());
+  const json sensors = params.value("sensors", json::array());
+  const json stds = result.value("uncertainty", json::object()).value("sensors", json::array());
+  const bool magnitude_known = params.value("magnitude_known", false);
+  const double magnitude = Number(params.value("magnitude", json())).value_or(NAN);
+
+  // Orientation coverage first: it is the real cause of most of the other failures.
+  const json coverage = diag.value("coverage", json::object());
+  const auto scatter = Number(coverage.value("scatter_min", json()));
+  const auto design = Number(coverage.value("design_min", json()));
+  const auto min_scatter = limits.Get("min_scatter");
+  const auto min_design = limits.Get("min_design");
+  if ((min_scatter && (!scatter || *scatter < *min_scatter)) ||
+      (min_design && (!design || *design < *min_design))) {
+    std::string advice = coverage.value("advice", std::string());
+    verdict->Reject(
+        "the orientations are poorly spread (spread " +
+        (scatter ? Fmt(*scatter) : std::string("unknown")) + ", minimum " +
+        (min_scatter ? Fmt(*min_scatter) : std::string("none")) + "; design " +
+        (design ? Fmt(*design) : std::string("unknown")) + ", minimum " +
+        (min_design ? Fmt(*min_design) : std::string("none")) + ")" +
+        (advice.empty() ? std::string(": add positions between the axes") : ": " + advice));
+  }
+
+  // Nominal scale per sensor: |nominal_i| when given, else 1 when the magnitude is known (readings
+  // in the field's unit); nothing to compare with when the magnitude is unknown (relative scales).
+  std::vector<double> nominal_scale(sensors.size(), magnitude_known ? 1.0 : NAN);
+  const bool has_nominal = config.contains("nominal") && config["nominal"].is_array();
+  if (has_nominal) {
+    const json& rows = config["nominal"];
+    for (size_t i = 0; i < sensors.size() && i < rows.size(); ++i) {
+      double sq = 0;
+      for (const json& x : rows[i]) sq += Number(x).value_or(0) * Number(x).value_or(0);
+      nominal_scale[i] = std::sqrt(sq);
+    }
+  }
+  const auto range = limits.Get("scale_range");
+  const auto implausible = limits.Get("implausible_factor");
+  const auto scale_std_max = limits.Get("max_scale_std");
+  const auto axis_std_max = limits.Get("max_axis_std");
+  const auto bias_std_max = limits.Get("max_bias_std");
+  Offenders out_of_range, absurd, scale_std, axis_std, bias_std, undefined;
+  double absurd_ratio = NAN;
+  for (size_t i = 0; i < sensors.size(); ++i) {
+    const json& sensor = sensors[i];
+    const std::string name = sensor.value("name", "s" + std::to_string(i));
+    const double scale = Number(sensor.value("scale", json())).value_or(NAN);
+    const double ratio = scale / nominal_scale[i];
+    if (std::isfinite(ratio)) {
+      if (implausible && (ratio > *implausible || ratio < 1 / *implausible)) {
+        absurd.Add(name + " (" + Fmt(scale) + ", " + Fmt(ratio) + " x the nominal)");
+        absurd_ratio = ratio;
+      } else if (range && std::abs(ratio - 1) > *range) {
+        out_of_range.Add(name + " (" + Fmt(scale) + " against " + Fmt(nominal_scale[i]) + ")");
+      }
+    }
+    const json sd = i < stds.size() ? stds[i] : json::object();
+    const double rel = Number(sd.value("scale_std", json())).value_or(NAN) / std::abs(scale);
+    const double axis = Number(sd.value("axis_std_rad", json())).value_or(NAN);
+    if (!std::isfinite(rel) || !std::isfinite(axis)) {
+      undefined.Add(name);
+    } else {
+      if (scale_std_max && rel > *scale_std_max) scale_std.Add(name + " " + Fmt(rel * 100) + " %");
+      if (axis_std_max && axis > *axis_std_max)
+        axis_std.Add(name + " " + Fmt(axis * 1e3) + " mrad");
+    }
+    // Biases: estimated (or removed from a raw log) ones have a std; relative to the magnitude.
+    const auto b_std = Number(sd.value("bias_std", json()));
+    if (params.value("bias", std::string()) == "estimate" && !b_std) {
+      undefined.Add(name + " bias");
+    } else if (b_std && bias_std_max && std::isfinite(magnitude) && magnitude > 0 &&
+               std::isfinite(scale) && scale > 0) {
+      // bias_std is in reading units; / scale gives field units, / magnitude relative.
+      const double rel_bias = *b_std / scale / magnitude;
+      if (rel_bias > *bias_std_max) bias_std.Add(name + " " + Fmt(*b_std) + " reading units");
+    }
+  }
+  if (!absurd.empty()) {
+    // A unit mix-up between the readings and `magnitude` is the usual cause.
+    std::string cause;
+    constexpr double kG = 9.80665;
+    auto near = [](double x, double target) { return std::abs(x / target - 1) < 0.15; };
+    if (!has_nominal && near(absurd_ratio, 1 / kG) && near(magnitude, kG)) {
+      cause = "readings look like g but magnitude is " + Fmt(magnitude) +
+              ": units? (give magnitude 1 for readings in g, or convert them to m/s^2)";
+    } else if (!has_nominal && near(absurd_ratio, kG) && near(magnitude, 1)) {
+      cause = "readings look like m/s^2 but magnitude is " + Fmt(magnitude) +
+              ": units? (give magnitude 9.80665 for readings in m/s^2)";
+    } else {
+      cause = std::string("are the readings and magnitude (") + Fmt(magnitude) +
+              ") in the same unit" +
+              (has_nominal ? ", and is nominal right?"
+                           : "? (readings in another unit need nominal sensitivities)");
+    }
+    absurd.RejectInto(verdict, "scale factors physically implausible, " + cause);
+  }
+  if (range) {
+    out_of_range.RejectInto(
+        verdict, "scale factor more than " + Fmt(*range * 100) + " % from the nominal" +
+                     std::string(has_nominal ? "" : " (1: readings in the field's unit)"));
+  }
+  undefined.RejectInto(verdict,
+                       "the uncertainty could not be computed, so the precision cannot be judged "
+                       "(give noise_std, or record more positions)");
+  if (scale_std_max) {
+    scale_std.RejectInto(verdict, "scale factor too uncertain (1 sigma above " +
+                                      Fmt(*scale_std_max * 100) +
+                                      " %): record more, better spread positions");
+  }
+  if (axis_std_max) {
+    axis_std.RejectInto(verdict, "axis direction too uncertain (1 sigma above " +
+                                     Fmt(*axis_std_max * 1e3) +
+                                     " mrad): record more, better spread positions");
+  }
+  if (bias_std_max) {
+    bias_std.RejectInto(verdict, "bias too uncertain (1 sigma above " + Fmt(*bias_std_max * 100) +
+                                     " % of the field): record more positions");
+  }
+  // Residual against the noise: only meaningful when sigma was given (an estimated sigma is the
+  // residual itself).
+  const auto chi2_max = limits.Get("max_chi2");
+  const auto cost = Number(diag.value("cost", json()));
+  const int dof = diag.value("degrees_of_freedom", 0);
+  const auto sigma = Number(diag.value("noise_std", json()));
+  if (chi2_max && diag.value("noise_std_given", false) && cost && sigma && *sigma > 0 && dof > 0) {
+    const double chi2 = 2 * *cost / dof / (*sigma * *sigma);
+    if (chi2 > *chi2_max) {
+      verdict->Reject("the residuals are " + Fmt(std::sqrt(chi2)) + " times the given noise_std " +
+                      Fmt(*sigma) + " (chi2/dof " + Fmt(chi2) + " above " + Fmt(*chi2_max) +
+                      "): the device moved during a position, the field was not constant, or "
+                      "noise_std is wrong");
+    }
+  }
+}
+
 namespace {
 
 class Pca : public Method {
@@ -271,6 +409,10 @@ class Pca : public Method {
   Status ValidateConfig(const nlohmann::json& config) const override {
     core::PcaOptions options;
     return ParsePcaConfig(config, &options);
+  }
+  void Judge(const nlohmann::json& result, const nlohmann::json& config,
+             const AcceptanceLimits& limits, Verdict* verdict) const override {
+    JudgePca(result, config, limits, verdict);
   }
   Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext&,
              nlohmann::json* result) const override {

@@ -37,6 +37,15 @@ Status RunPca(const PcaRecording& recording, const core::PcaOptions& options,
 // The result JSON of an already computed core result (used by RunPca).
 nlohmann::json PcaResultToJson(const core::PcaResult& result);
 
+// The acceptance gate of a pca result (Method::Judge): orientation coverage (min_scatter,
+// min_design; the reason carries diagnostics.coverage.advice, naming the missing orientations),
+// scale factors against the nominal (|nominal_i| when `nominal` is given, else 1 when the
+// magnitude is known: readings in the field's unit; not judged for an unknown magnitude) with
+// scale_range and implausible_factor (a unit mix-up between readings and magnitude is named),
+// 1 sigma of scale, axis and bias, and the residual against a given noise_std (max_chi2).
+void JudgePca(const nlohmann::json& result, const nlohmann::json& config,
+              const AcceptanceLimits& limits, Verdict* verdict);
+
 // For `calibd simulate pca`: the averaged-layout CSV (`position,g0_x,...,g3_z`, %.17g), the
 // config ({"method":"pca","magnitude":c,"nominal": a_model as m×d}, plus "bias":"estimate" when
 // the simulation has biases) and the truth ({"sensors":[{"name","sensitivity","bias"}],"v": n×d,

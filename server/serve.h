@@ -13,6 +13,9 @@ struct ServeOptions {
   int workers = 0;                         // calibration threads; 0 = one per core
   std::string token_file;                  // non-empty: writes need "Authorization: Bearer TOKEN"
   bool insecure = false;                   // allow a non-loopback address without a token
+  // Non-empty: a JSON file of server-wide acceptance limits per method (server/acceptance.h),
+  // {"pca": {"max_scale_std": 0.005}, ...}; a config's own `acceptance` overrides them per key.
+  std::string acceptance_file;
   int64_t max_upload_bytes = int64_t{512} << 20;   // larger uploads: 413
   int64_t max_json_body_bytes = int64_t{1} << 20;  // POST /jobs bodies and config parts
   // Threads that process requests. A connection gets one only once its request line and headers

@@ -18,6 +18,7 @@
 #include <thread>
 
 #include "core/task_pool.h"
+#include "server/acceptance.h"
 #include "server/config.h"
 #include "server/device_lookup.h"
 #include "server/exports.h"
@@ -150,7 +151,16 @@ json JobJson(const storage::JobInfo& job, bool with_result) {
     json result;
     if (ParseJsonText(job.result_json, "result", &result).ok()) j["result"] = std::move(result);
   }
+  // The acceptance gate: the gate's verdict, a person's decision, and what follows (only the
+  // "accepted" state is ever served as the device's calibration).
+  j["verdict"] = NullIfEmpty(job.verdict);
+  j["revoked"] = job.decision == "revoked";
+  j["state"] = NullIfEmpty(job.state);
   return j;
+}
+
+json EventJson(const storage::JobEvent& e) {
+  return {{"action", e.action}, {"reason", e.reason}, {"actor", e.actor}, {"at", e.created_at}};
 }
 
 json RecordingJson(const storage::RecordingInfo& r) {
@@ -212,6 +222,16 @@ Status ResolveCalibrationReference(storage::Store* store, json* config) {
                                 " job; it must be a succeeded pca job")
         .WithField("accelerometer_calibration");
   }
+  if (!job.served()) {
+    // The gate applies to calibrations that feed other calibrations too.
+    return Status::InvalidInput(
+               "accelerometer_calibration: job " + std::to_string(id) + " is " + job.state +
+               (job.state == "rejected" ? " by the acceptance gate" : std::string()) +
+               " (see /jobs/" + std::to_string(id) +
+               "); use an accepted pca calibration, or accept this one with a "
+               "reason first")
+        .WithField("accelerometer_calibration");
+  }
   json result;
   s = ParseJsonText(job.result_json, "result of job " + std::to_string(id), &result);
   if (!s.ok()) return Status::Internal("stored result is not JSON");
@@ -226,8 +246,9 @@ struct Service::Impl {
   std::string host;
   int requested_port = 0;
   int bound_port = 0;
-  int listen_fd = -1;  // the listening socket, noted by the socket-options hook (Bind)
-  std::string token;   // empty: no authentication
+  int listen_fd = -1;         // the listening socket, noted by the socket-options hook (Bind)
+  std::string token;          // empty: no authentication
+  nlohmann::json acceptance;  // server-wide acceptance limits (--acceptance), null for none
   fs::path staging_dir;
   std::unique_ptr<storage::Store> store;
   std::unique_ptr<ProcessInstance> instance;  // after store: removed before the store closes
@@ -249,6 +270,7 @@ struct Service::Impl {
                     const httplib::ContentReader& reader);
   void HandleCreateJob(const httplib::Request& req, httplib::Response& res);
   void HandleGetJob(const httplib::Request& req, httplib::Response& res);
+  void HandleDecision(const httplib::Request& req, httplib::Response& res, bool revoke);
   void HandleListJobs(const httplib::Request& req, httplib::Response& res);
   void HandleDevices(const httplib::Request& req, httplib::Response& res);
   void HandleLatest(const httplib::Request& req, httplib::Response& res);
@@ -298,6 +320,10 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
     return Status::InvalidInput("refusing to listen on non-loopback address '" + impl->host +
                                 "' without --token-file (use --insecure to override)");
   }
+  if (!options.acceptance_file.empty()) {
+    Status s = LoadAcceptanceFile(options.acceptance_file, &impl->acceptance);
+    if (!s.ok()) return s;
+  }
   storage::StoreOptions store_options;
   Status s = storage::Store::Open(options.db_path, store_options, &impl->store);
   if (!s.ok()) return s;
@@ -321,6 +347,7 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
   impl->numerics = std::make_unique<core::TaskPool>(
       std::max(0, static_cast<int>(std::thread::hardware_concurrency()) - 1));
   pool.executor = impl->numerics->Executor();
+  pool.acceptance = impl->acceptance;
   impl->workers = std::make_unique<WorkerPool>(impl->store.get(), &impl->metrics, pool);
   HttpLimits limits;
   limits.threads = options.http_threads;
@@ -530,6 +557,14 @@ void Service::Impl::SetupRoutes() {
   });
   http.Get(R"(/api/v1/jobs/([^/]+))",
            [this](const httplib::Request& req, httplib::Response& res) { HandleGetJob(req, res); });
+  http.Post(R"(/api/v1/jobs/([^/]+)/revoke)",
+            [this](const httplib::Request& req, httplib::Response& res) {
+              HandleDecision(req, res, /*revoke=*/true);
+            });
+  http.Post(R"(/api/v1/jobs/([^/]+)/accept)",
+            [this](const httplib::Request& req, httplib::Response& res) {
+              HandleDecision(req, res, /*revoke=*/false);
+            });
   http.Get("/api/v1/jobs", [this](const httplib::Request& req, httplib::Response& res) {
     HandleListJobs(req, res);
   });
@@ -849,7 +884,79 @@ void Service::Impl::HandleGetJob(const httplib::Request& req, httplib::Response&
   storage::JobInfo job;
   Status s = store->GetJob(id, &job);
   if (!s.ok()) return (void)SendStatus(res, s);
-  res.set_content(JsonBody(JobJson(job, true)), "application/json");
+  json body = JobJson(job, true);
+  std::vector<storage::JobEvent> events;
+  s = store->ListJobEvents(id, &events);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  body["events"] = json::array();
+  for (const auto& e : events) body["events"].push_back(EventJson(e));
+  res.set_content(JsonBody(body), "application/json");
+}
+
+// POST /api/v1/jobs/{id}/revoke and /accept {"reason": "..."}: a person's decision on a result
+// (Store::RevokeJob / AcceptJob). The token check ran in the request filter (a write).
+void Service::Impl::HandleDecision(const httplib::Request& req, httplib::Response& res,
+                                   bool revoke) {
+  constexpr size_t kMaxReason = 500;
+  int64_t id = 0;
+  if (!ParseId(req.matches[1], &id)) {
+    SendError(res, 404, "not_found", "no such job");
+    return;
+  }
+  const std::string media = ToLower(req.get_header_value("Content-Type"));
+  if (media.rfind("application/json", 0) != 0) {
+    SendError(res, 415, "unsupported_media_type", "send {\"reason\": \"...\"} as application/json");
+    return;
+  }
+  json body;
+  Status s = ParseJsonText(req.body, "request body", &body);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  if (!body.is_object()) {
+    SendError(res, 400, "invalid_input", "the body must be a JSON object {\"reason\": \"...\"}");
+    return;
+  }
+  for (auto& [key, value] : body.items()) {
+    if (key != "reason") {
+      return (void)SendStatus(
+          res, Status::InvalidInput("unknown key '" + key.substr(0, 64) + "' (expected reason)")
+                   .WithField(key.substr(0, 64)));
+    }
+  }
+  auto reason = body.find("reason");
+  std::string text;
+  if (reason != body.end() && reason->is_string()) text = reason->get<std::string>();
+  while (!text.empty() && isspace(static_cast<unsigned char>(text.back()))) text.pop_back();
+  while (!text.empty() && isspace(static_cast<unsigned char>(text.front()))) text.erase(0, 1);
+  if (text.empty()) {
+    return (void)SendStatus(res, Status::InvalidInput(std::string("'reason' is required: say why "
+                                                                  "the result is ") +
+                                                      (revoke ? "revoked" : "accepted"))
+                                     .WithField("reason"));
+  }
+  if (text.size() > kMaxReason) {
+    return (void)SendStatus(res,
+                            Status::InvalidInput("'reason' has " + std::to_string(text.size()) +
+                                                 " bytes; at most " + std::to_string(kMaxReason))
+                                .WithField("reason"));
+  }
+  for (unsigned char ch : text) {
+    if (ch < 0x20 && ch != '\t') {
+      return (void)SendStatus(
+          res,
+          Status::InvalidInput("'reason' may not contain control characters").WithField("reason"));
+    }
+  }
+  const std::string actor = token.empty() ? "anonymous" : "token";
+  storage::JobEvent event;
+  s = revoke ? store->RevokeJob(id, text, actor, &event)
+             : store->AcceptJob(id, text, actor, &event);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  storage::JobInfo job;
+  s = store->GetJob(id, &job);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  json out = JobJson(job, false);
+  out["event"] = EventJson(event);
+  res.set_content(JsonBody(json{{"job", out}}), "application/json");
 }
 
 void Service::Impl::HandleListJobs(const httplib::Request& req, httplib::Response& res) {
@@ -858,11 +965,19 @@ void Service::Impl::HandleListJobs(const httplib::Request& req, httplib::Respons
     if (key == "device") {
       filter.device = value;
     } else if (key == "method") {
-      if (value != "pca" && value != "array") {
+      if (FindMethod(value) == nullptr) {
         return (void)SendStatus(
-            res, Status::InvalidInput("method must be pca or array").WithField("method"));
+            res,
+            Status::InvalidInput("method must be " + MethodNamesForMessage()).WithField("method"));
       }
       filter.method = value;
+    } else if (key == "verdict") {
+      if (value != "accepted" && value != "rejected" && value != "revoked") {
+        return (void)SendStatus(
+            res, Status::InvalidInput("verdict must be accepted, rejected or revoked")
+                     .WithField("verdict"));
+      }
+      filter.state = value;
     } else if (key == "status") {
       if (value != "queued" && value != "running" && value != "succeeded" && value != "failed") {
         return (void)SendStatus(
@@ -934,7 +1049,41 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     return (void)SendStatus(
         res, Status::InvalidInput("format must be json, csv, h or yaml").WithField("format"));
   }
-  if (method.empty()) {
+  storage::JobInfo job;
+  Status s;
+  if (req.has_param("job")) {
+    // One job's result, whatever its verdict (the response says it in X-Calibd-State), but only
+    // for this device: a job id never reaches another device's calibration.
+    int64_t id = 0;
+    if (!ParseId(req.get_param_value("job"), &id)) {
+      return (void)SendStatus(
+          res, Status::InvalidInput("job must be a job id (a positive integer)").WithField("job"));
+    }
+    s = store->GetJob(id, &job);
+    if (s.code() != StatusCode::kNotFound && !s.ok()) return (void)SendStatus(res, s);
+    if (s.code() == StatusCode::kNotFound || job.device != serial) {
+      SendError(res, 404, "not_found",
+                "device '" + serial + "' has no job " + std::to_string(id) +
+                    (s.ok() ? " (that job is " +
+                                  (job.device.empty() ? std::string("of no device")
+                                                      : "another device's") +
+                                  ")"
+                            : std::string()));
+      return;
+    }
+    if (job.status != "succeeded") {
+      SendError(res, 404, "not_found",
+                "job " + std::to_string(id) + " is " + job.status + ": it has no result");
+      return;
+    }
+    if (!method.empty() && method != job.method) {
+      SendError(
+          res, 404, "not_found",
+          "job " + std::to_string(id) + " is a " + job.method + " calibration, not " + method);
+      return;
+    }
+    method = job.method;
+  } else if (method.empty()) {
     std::vector<storage::DeviceInfo> devices;
     Status s = store->ListDevices(&devices);
     if (!s.ok()) return (void)SendStatus(res, s);
@@ -952,7 +1101,10 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     if (methods.empty()) {
       const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
       SendError(res, 404, "not_found",
-                hint.empty() ? "no succeeded calibration for device '" + serial + "'" : hint);
+                hint.empty() ? "no accepted calibration for device '" + serial +
+                                   "' (rejected and revoked results are never served; see /devices/" +
+                                   UrlEncode(serial) + ")"
+                             : hint);
       return;
     }
     method = methods[0];
@@ -960,20 +1112,24 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     return (void)SendStatus(
         res, Status::InvalidInput("method must be " + MethodNamesForMessage()).WithField("method"));
   }
-  storage::JobInfo job;
-  Status s = store->LatestResult(serial, method, &job);
-  if (s.code() == StatusCode::kNotFound) {
-    const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
-    SendError(res, 404, "not_found",
-              hint.empty() ? "no succeeded " + method + " calibration for device '" + serial + "'"
-                           : hint);
-    return;
+  if (!req.has_param("job")) {
+    s = store->LatestResult(serial, method, &job);
+    if (s.code() == StatusCode::kNotFound) {
+      const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
+      SendError(res, 404, "not_found",
+                hint.empty() ? "no accepted " + method + " calibration for device '" + serial +
+                                   "' (rejected and revoked results are never served; see /devices/" +
+                                   UrlEncode(serial) + ")"
+                             : hint);
+      return;
+    }
+    if (!s.ok()) return (void)SendStatus(res, s);
   }
-  if (!s.ok()) return (void)SendStatus(res, s);
   const std::string etag = "\"" + job.result_sha256.substr(0, 32) + "-" + format + "\"";
   res.set_header("ETag", etag);
   res.set_header("Cache-Control", "no-cache");
   res.set_header("X-Calibd-Job", std::to_string(job.id));
+  res.set_header("X-Calibd-State", job.state);
   if (IfNoneMatchHits(req.get_header_value("If-None-Match"), etag)) {
     res.status = 304;
     return;
@@ -981,11 +1137,9 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
   if (format == "json") {
     // The hot path of production tooling: the stored result is valid JSON text already (the
     // worker wrote it with json::dump), so it is embedded as is, without parsing it again.
-    json head = {{"device", serial},
-                 {"method", method},
-                 {"job_id", job.id},
-                 {"calibrated_at", job.finished_at},
-                 {"result", nullptr}};
+    json head = {{"device", serial},   {"method", method},
+                 {"job_id", job.id},   {"calibrated_at", job.finished_at},
+                 {"state", job.state}, {"result", nullptr}};
     std::string body = head.dump(-1, ' ', false, json::error_handler_t::replace);
     const std::string placeholder = "\"result\":null";
     const size_t at = body.rfind(placeholder);

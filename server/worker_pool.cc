@@ -165,7 +165,8 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       if (!s.ok()) return fail(s, s.IsTransient());
       if (parsed.ok() && !cancel.load()) parsed = parser.Finish();
       s = parsed.ok()
-              ? CalibrateParsed(&parser, file_name, config, &result, &cancel, options_.executor)
+              ? CalibrateParsed(&parser, file_name, config, &result, &cancel,
+                                options_.acceptance, options_.executor)
               : parsed;
     } catch (const std::bad_alloc&) {
       s = Status::IoError("out of memory while calibrating");
@@ -190,6 +191,9 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
     return;
   }
   metrics_->ObserveJob(job.method, "succeeded", seconds());
+  if (result.contains("verdict") && result["verdict"].is_object()) {
+    metrics_->ObserveVerdict(job.method, result["verdict"].value("status", std::string("?")));
+  }
 }
 
 }  // namespace calibd::server

@@ -19,6 +19,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
 #include <vector>
@@ -40,6 +41,9 @@ struct WorkerPoolOptions {
   // Optional: runs the jobs' parallel numerics (RunContext::executor); the caller keeps what it
   // refers to alive until Stop has returned.
   core::TaskExecutor executor;
+  // Server-wide acceptance limits per method (`serve --acceptance`; null: built-in defaults),
+  // passed to Calibrate for every job's verdict.
+  nlohmann::json acceptance;
 };
 
 class WorkerPool {

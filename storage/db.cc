@@ -2,6 +2,9 @@
 
 #include <sqlite3.h>
 
+#include <algorithm>
+#include <chrono>
+#include <thread>
 #include <utility>
 
 namespace calibd::storage {
@@ -204,7 +207,17 @@ Status Db::Open(const std::string& path, const Options& options, std::unique_ptr
     s = db->PrepareUncached("PRAGMA journal_mode=WAL", &st);
     if (!s.ok()) return s;
     bool row = false;
-    s = st.Step(&row);
+    // SQLite may answer SQLITE_BUSY here without calling the busy handler while another
+    // connection switches a fresh file to WAL or migrates it (seen about once in 50 runs of
+    // Schema.ConcurrentOpenersMigrateOnce on a loaded machine): retry within the busy timeout.
+    const auto give_up = std::chrono::steady_clock::now() +
+                         std::chrono::milliseconds(std::max(options.busy_timeout_ms, 0));
+    for (;;) {
+      s = st.Step(&row);
+      if (s.code() != StatusCode::kBusy || std::chrono::steady_clock::now() >= give_up) break;
+      st.Reset();
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
     if (!s.ok()) return s;
     std::string mode = row ? st.ColumnText(0) : "";
     if (mode != "wal") {

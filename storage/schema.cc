@@ -93,6 +93,40 @@ INSERT INTO device_calibrations (device, method, job_id, calibrated_at)
     ORDER BY COALESCE(k.finished_at, k.created_at) DESC, k.id DESC LIMIT 1);
 )sql";
 
+// Version 3: the acceptance gate (issue #11). results.verdict is the gate's verdict of the result
+// ("accepted" | "rejected", from the result JSON's verdict.status; results stored before the gate
+// have none and count as accepted); results.decision a person's later decision ("revoked" |
+// "accepted", NULL: the gate's verdict stands), with every decision kept in job_events. A device's
+// latest calibration (device_calibrations) is its latest served result: succeeded, and accepted
+// by the gate or by a person, not revoked.
+constexpr const char* kV3 = R"sql(
+ALTER TABLE results ADD COLUMN verdict TEXT NOT NULL DEFAULT 'accepted'
+  CHECK (verdict IN ('accepted', 'rejected'));
+ALTER TABLE results ADD COLUMN decision TEXT CHECK (decision IN ('revoked', 'accepted'));
+UPDATE results SET verdict = 'rejected'
+  WHERE CASE WHEN json_valid(result_json)
+             THEN json_extract(result_json, '$.verdict.status') END = 'rejected';
+
+CREATE TABLE job_events (
+  id         INTEGER PRIMARY KEY,
+  job_id     INTEGER NOT NULL REFERENCES jobs(id),
+  action     TEXT    NOT NULL CHECK (action IN ('revoke', 'accept')),
+  reason     TEXT    NOT NULL,
+  actor      TEXT    NOT NULL,
+  created_at INTEGER NOT NULL
+);
+CREATE INDEX job_events_by_job ON job_events(job_id, id);
+
+DELETE FROM device_calibrations;
+INSERT INTO device_calibrations (device, method, job_id, calibrated_at)
+  SELECT j.device, j.method, j.id, COALESCE(j.finished_at, j.created_at) FROM jobs j
+  WHERE j.status = 'succeeded' AND j.device <> '' AND j.id = (
+    SELECT k.id FROM jobs k JOIN results r ON r.job_id = k.id
+    WHERE k.device = j.device AND k.method = j.method AND k.status = 'succeeded'
+      AND COALESCE(r.decision, r.verdict) = 'accepted'
+    ORDER BY COALESCE(k.finished_at, k.created_at) DESC, k.id DESC LIMIT 1);
+)sql";
+
 // The hashes of results carried over from v1 are computed here (SQLite has no sha256()).
 Status HashCarriedOverResults(Db* db) {
   Stmt select;
@@ -127,6 +161,7 @@ const std::vector<Step>& Steps() {
   static const std::vector<Step> steps = {
       {kV1, nullptr},
       {kV2, &HashCarriedOverResults},
+      {kV3, nullptr},
   };
   return steps;
 }

@@ -6,6 +6,9 @@
 //   1  recordings (+ their bytes in recording_data), jobs with leases, result JSON inside jobs
 //   2  retry back-off (jobs.not_before), results in their own table with a sha256 (ETag),
 //      devices and the latest calibration per device and method, lease index
+//   3  the acceptance gate: results.verdict (the gate's, from the result JSON), results.decision
+//      (a person's revoke/accept), job_events (who/when/why); device_calibrations holds the
+//      latest served (accepted, not revoked) result
 //
 // Thread-safety: functions take a Db the caller owns (one thread at a time).
 #ifndef CALIBD_STORAGE_SCHEMA_H_
@@ -18,7 +21,7 @@
 
 namespace calibd::storage {
 
-inline constexpr int kSchemaVersion = 2;
+inline constexpr int kSchemaVersion = 3;
 
 // Reads PRAGMA user_version.
 Status SchemaVersion(Db* db, int64_t* version);

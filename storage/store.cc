@@ -64,7 +64,7 @@ struct Blob {
 constexpr const char* kJobSelect =
     "SELECT j.id, j.recording_id, j.method, j.device, j.config_json, j.status, j.attempts, "
     "j.lease_owner, j.lease_expires_at, j.created_at, j.started_at, j.finished_at, "
-    "j.error_code, j.error_message, j.not_before, r.sha256, ";
+    "j.error_code, j.error_message, j.not_before, r.sha256, r.verdict, r.decision, ";
 constexpr const char* kJobFrom = " FROM jobs j LEFT JOIN results r ON r.job_id = j.id ";
 
 std::string JobSelect(bool with_result) {
@@ -94,7 +94,10 @@ void ReadJobRow(const Stmt& st, JobInfo* job) {
   job->not_before_ms = st.ColumnInt(14);
   if (job->status == "succeeded") {
     job->result_sha256 = st.ColumnText(15);
-    job->result_json = st.ColumnText(16);
+    job->verdict = st.ColumnText(16);
+    job->decision = st.ColumnText(17);
+    job->state = job->decision.empty() ? job->verdict : job->decision;
+    job->result_json = st.ColumnText(18);
   }
 }
 
@@ -525,8 +528,11 @@ Status Store::PutRecordingLocked(Db* db, const NewRecording& r, const std::strin
   if (!s.ok()) return s;
   if (r.job) {
     JobInfo job;
+    // The job is for the device this upload names, or none: never the device of identical bytes
+    // uploaded before (a re-upload must not move a recording's calibrations to its old device).
     const std::string& device = !r.job->device.empty() ? r.job->device : r.device;
-    s = EnqueueJobLocked(db, id, r.job->method, device, r.job->config_json, now, &job);
+    s = EnqueueJobLocked(db, id, r.job->method, device, r.job->config_json, now, &job,
+                         /*inherit_device=*/false);
     if (!s.ok()) return s;
     info.job = std::move(job);
   }
@@ -583,6 +589,32 @@ Status Store::ReadRecordingBytes(int64_t id, std::string* out) {
 
 // ---- jobs -------------------------------------------------------------------------------------
 
+namespace {
+
+// Makes device_calibrations hold the device's latest served result for the method (succeeded,
+// accepted by the gate or a person, not revoked), or nothing.
+Status RefreshLatest(Db* db, const std::string& device, const std::string& method) {
+  Stmt st;
+  Status s = db->Prepare("DELETE FROM device_calibrations WHERE device = ?1 AND method = ?2", &st);
+  if (!s.ok()) return s;
+  st.BindText(1, device).BindText(2, method);
+  s = st.Run();
+  if (!s.ok()) return s;
+  s = db->Prepare(
+      "INSERT INTO device_calibrations (device, method, job_id, calibrated_at) "
+      "SELECT j.device, j.method, j.id, COALESCE(j.finished_at, j.created_at) "
+      "FROM jobs j JOIN results r ON r.job_id = j.id "
+      "WHERE j.device = ?1 AND j.method = ?2 AND j.status = 'succeeded' "
+      "AND COALESCE(r.decision, r.verdict) = 'accepted' "
+      "ORDER BY COALESCE(j.finished_at, j.created_at) DESC, j.id DESC LIMIT 1",
+      &st);
+  if (!s.ok()) return s;
+  st.BindText(1, device).BindText(2, method);
+  return st.Run();
+}
+
+}  // namespace
+
 Status Store::LoadJob(Db* db, int64_t id, bool with_result, JobInfo* out) {
   Stmt st;
   Status s = db->Prepare(JobSelect(with_result) + "WHERE j.id = ?1", &st);
@@ -598,12 +630,12 @@ Status Store::LoadJob(Db* db, int64_t id, bool with_result, JobInfo* out) {
 
 Status Store::EnqueueJobLocked(Db* db, int64_t recording_id, const std::string& method,
                                const std::string& device, const std::string& config_json,
-                               int64_t now, JobInfo* out) {
+                               int64_t now, JobInfo* out, bool inherit_device) {
   if (method.empty()) return Status::InvalidInput("storage: a job needs a method");
   RecordingInfo rec;
   Status s = LoadRecording(db, recording_id, &rec);
   if (!s.ok()) return s;
-  const std::string& job_device = device.empty() ? rec.device : device;
+  const std::string& job_device = device.empty() && inherit_device ? rec.device : device;
   Stmt st;
   s = db->Prepare(
       "INSERT INTO jobs (recording_id, method, device, config_json, status, attempts, "
@@ -816,8 +848,11 @@ Status Store::CompleteJob(int64_t job_id, const std::string& worker_id,
     if (!s.ok()) return s;
     const int64_t now = Now();
     Stmt st;
+    // The gate's verdict, read from the result (anything but "rejected" counts as accepted).
     s = db->Prepare(
-        "INSERT INTO results (job_id, result_json, sha256, created_at) VALUES (?1, ?2, ?3, ?4)",
+        "INSERT INTO results (job_id, result_json, sha256, created_at, verdict) VALUES (?1, ?2, "
+        "?3, ?4, CASE WHEN (CASE WHEN json_valid(?2) THEN json_extract(?2, '$.verdict.status') "
+        "END) = 'rejected' THEN 'rejected' ELSE 'accepted' END)",
         &st);
     if (!s.ok()) return s;
     st.BindInt(1, job_id).BindText(2, result_json).BindText(3, sha).BindInt(4, now);
@@ -834,17 +869,7 @@ Status Store::CompleteJob(int64_t job_id, const std::string& worker_id,
     if (!job.device.empty()) {
       s = RememberDevice(db, job.device, now);
       if (!s.ok()) return s;
-      s = db->Prepare(
-          "INSERT INTO device_calibrations (device, method, job_id, calibrated_at) "
-          "VALUES (?1, ?2, ?3, ?4) ON CONFLICT (device, method) DO UPDATE SET "
-          "job_id = excluded.job_id, calibrated_at = excluded.calibrated_at "
-          "WHERE excluded.calibrated_at > device_calibrations.calibrated_at OR "
-          "(excluded.calibrated_at = device_calibrations.calibrated_at AND "
-          "excluded.job_id > device_calibrations.job_id)",
-          &st);
-      if (!s.ok()) return s;
-      st.BindText(1, job.device).BindText(2, job.method).BindInt(3, job_id).BindInt(4, now);
-      s = st.Run();
+      s = RefreshLatest(db, job.device, job.method);
       if (!s.ok()) return s;
     }
     return Status::Ok();
@@ -924,11 +949,19 @@ Status FilterSql(const JobFilter& f, bool with_cursor, std::string* where) {
                                 "' (queued, running, succeeded or failed)")
         .WithField("status");
   }
+  if (!f.state.empty() && f.state != "accepted" && f.state != "rejected" && f.state != "revoked") {
+    return Status::InvalidInput("unknown verdict '" + f.state + "' (accepted, rejected or revoked)")
+        .WithField("verdict");
+  }
   *where = "WHERE 1 ";
   int n = 0;
   if (!f.device.empty()) *where += "AND j.device = ?" + std::to_string(++n) + " ";
   if (!f.method.empty()) *where += "AND j.method = ?" + std::to_string(++n) + " ";
   if (!f.status.empty()) *where += "AND j.status = ?" + std::to_string(++n) + " ";
+  if (!f.state.empty()) {
+    *where += "AND j.status = 'succeeded' AND COALESCE(r.decision, r.verdict) = ?" +
+              std::to_string(++n) + " ";
+  }
   if (with_cursor && f.before > 0) *where += "AND j.id < ?" + std::to_string(++n) + " ";
   return Status::Ok();
 }
@@ -938,6 +971,7 @@ int BindFilter(Stmt* st, const JobFilter& f, bool with_cursor) {
   if (!f.device.empty()) st->BindText(++n, f.device);
   if (!f.method.empty()) st->BindText(++n, f.method);
   if (!f.status.empty()) st->BindText(++n, f.status);
+  if (!f.state.empty()) st->BindText(++n, f.state);
   if (with_cursor && f.before > 0) st->BindInt(++n, f.before);
   return n;
 }
@@ -955,7 +989,7 @@ Status Store::ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) {
   if (!s.ok()) return s;
   Stmt st;
   const int limit_param = 1 + (!filter.device.empty()) + (!filter.method.empty()) +
-                          (!filter.status.empty()) + (filter.before > 0);
+                          (!filter.status.empty()) + (!filter.state.empty()) + (filter.before > 0);
   s = conn.db()->Prepare(JobSelect(filter.include_results) + where + "ORDER BY j.id DESC LIMIT ?" +
                              std::to_string(limit_param),
                          &st);
@@ -981,7 +1015,8 @@ Status Store::CountJobs(const JobFilter& filter, int64_t* count) {
   s = conn.Open();
   if (!s.ok()) return s;
   Stmt st;
-  s = conn.db()->Prepare("SELECT COUNT(*) FROM jobs j " + where, &st);
+  s = conn.db()->Prepare(
+      "SELECT COUNT(*) FROM jobs j LEFT JOIN results r ON r.job_id = j.id " + where, &st);
   if (!s.ok()) return s;
   BindFilter(&st, filter, false);
   bool row = false;
@@ -1067,6 +1102,115 @@ Status Store::QueueDepth(QueueCounts* out) {
     if (status == "succeeded") out->succeeded = n;
     if (status == "failed") out->failed = n;
   }
+  return Status::Ok();
+}
+
+// ---- the acceptance gate's decisions ------------------------------------------------------------
+
+Status Store::DecideLocked(Db* db, int64_t job_id, const std::string& action,
+                           const std::string& reason, const std::string& actor, JobEvent* out) {
+  JobInfo job;
+  Status s = LoadJob(db, job_id, false, &job);
+  if (!s.ok()) return s;
+  const std::string id = "job " + std::to_string(job_id);
+  const bool revoke = action == "revoke";
+  if (job.status != "succeeded") {
+    return Status::Conflict(id + " is " + job.status + ": it has no result to " + action);
+  }
+  if (revoke && job.state == "revoked") return Status::Conflict(id + " is already revoked");
+  if (revoke && job.state == "rejected") {
+    return Status::Conflict(id +
+                            " was rejected by the acceptance gate and is not served: "
+                            "there is nothing to revoke");
+  }
+  if (!revoke && job.state == "accepted") {
+    return Status::Conflict(
+        id + " is already accepted" +
+        (job.decision.empty() ? std::string(" by the acceptance gate") : std::string()));
+  }
+  const int64_t now = Now();
+  Stmt st;
+  s = db->Prepare("UPDATE results SET decision = ?2 WHERE job_id = ?1", &st);
+  if (!s.ok()) return s;
+  st.BindInt(1, job_id).BindText(2, revoke ? "revoked" : "accepted");
+  s = st.Run();
+  if (!s.ok()) return s;
+  s = db->Prepare(
+      "INSERT INTO job_events (job_id, action, reason, actor, created_at) "
+      "VALUES (?1, ?2, ?3, ?4, ?5)",
+      &st);
+  if (!s.ok()) return s;
+  st.BindInt(1, job_id).BindText(2, action).BindText(3, reason).BindText(4, actor).BindInt(5, now);
+  s = st.Run();
+  if (!s.ok()) return s;
+  JobEvent event;
+  event.id = db->LastInsertRowid();
+  event.job_id = job_id;
+  event.action = action;
+  event.reason = reason;
+  event.actor = actor;
+  event.created_at_ms = now;
+  event.created_at = FormatTimestamp(now);
+  if (!job.device.empty()) {
+    s = RefreshLatest(db, job.device, job.method);
+    if (!s.ok()) return s;
+  }
+  if (out != nullptr) *out = std::move(event);
+  return Status::Ok();
+}
+
+Status Store::RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,
+                        JobEvent* out) {
+  if (reason.empty())
+    return Status::InvalidInput("a revocation needs a reason").WithField("reason");
+  JobEvent event;
+  Status s =
+      Write([&](Db* db) { return DecideLocked(db, job_id, "revoke", reason, actor, &event); });
+  if (s.ok() && out != nullptr) *out = std::move(event);
+  return s;
+}
+
+Status Store::AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
+                        JobEvent* out) {
+  if (reason.empty())
+    return Status::InvalidInput("an acceptance needs a reason").WithField("reason");
+  JobEvent event;
+  Status s =
+      Write([&](Db* db) { return DecideLocked(db, job_id, "accept", reason, actor, &event); });
+  if (s.ok() && out != nullptr) *out = std::move(event);
+  return s;
+}
+
+Status Store::ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) {
+  Conn conn(this);
+  Status s = conn.Open();
+  if (!s.ok()) return s;
+  JobInfo job;
+  s = LoadJob(conn.db(), job_id, false, &job);
+  if (!s.ok()) return s;
+  Stmt st;
+  s = conn.db()->Prepare(
+      "SELECT id, job_id, action, reason, actor, created_at FROM job_events WHERE job_id = ?1 "
+      "ORDER BY id",
+      &st);
+  if (!s.ok()) return s;
+  st.BindInt(1, job_id);
+  std::vector<JobEvent> events;
+  for (bool row = true;;) {
+    s = st.Step(&row);
+    if (!s.ok()) return s;
+    if (!row) break;
+    JobEvent e;
+    e.id = st.ColumnInt(0);
+    e.job_id = st.ColumnInt(1);
+    e.action = st.ColumnText(2);
+    e.reason = st.ColumnText(3);
+    e.actor = st.ColumnText(4);
+    e.created_at_ms = st.ColumnInt(5);
+    e.created_at = FormatTimestamp(e.created_at_ms);
+    events.push_back(std::move(e));
+  }
+  *out = std::move(events);
   return Status::Ok();
 }
 

@@ -84,7 +84,7 @@ struct StoreOptions {
 // A job to enqueue (alone or with its recording).
 struct NewJob {
   std::string method;       // "pca" | "array" (validated by the server; must be non-empty)
-  std::string device;       // serial; "" = the recording's device
+  std::string device;       // serial; "" = the upload's device (NewRecording::device), or none
   std::string config_json;  // the config as JSON text, stored verbatim; "" = "{}"
 };
 
@@ -124,6 +124,25 @@ struct JobInfo {
   std::string error_message;
   std::string result_json;    // "" unless succeeded (and, for ListJobs, include_results)
   std::string result_sha256;  // hex SHA-256 of result_json, for an ETag
+  // The acceptance gate (succeeded jobs only, else ""): the gate's verdict of the result
+  // ("accepted" | "rejected"), a person's later decision ("" none, "revoked", "accepted"), and
+  // the state that follows: "accepted" (served as the device's calibration when latest),
+  // "rejected" or "revoked".
+  std::string verdict;
+  std::string decision;
+  std::string state;
+  bool served() const { return state == "accepted"; }
+};
+
+// One revoke/accept decision on a job's result (Store::RevokeJob, AcceptJob).
+struct JobEvent {
+  int64_t id = 0;
+  int64_t job_id = 0;
+  std::string action;  // "revoke" | "accept"
+  std::string reason;  // the person's words
+  std::string actor;   // who: "token" (an authenticated request) or "anonymous"
+  std::string created_at;
+  int64_t created_at_ms = 0;
 };
 
 struct RecordingInfo {
@@ -148,6 +167,8 @@ struct JobFilter {
   std::string status;            // "" = any; else one of the four states
   int limit = 50;                // 1..500 (clamped); default 50
   int64_t before = 0;            // cursor: only jobs with id < before; 0 = from the newest
+  std::string state;             // "" = any; "accepted" | "rejected" | "revoked" (JobInfo::state;
+                                 // implies succeeded)
   bool include_results = false;  // fill result_json / result_sha256 of succeeded jobs
 };
 
@@ -189,9 +210,11 @@ class Store {
   // Stores a recording unless identical bytes are already stored; then *existed = true and *out
   // describes the stored one (its id, original device and upload time). r.job, if set, is
   // enqueued against the (new or existing) recording in the same transaction; its device
-  // defaults to r.device, then to the recording's device. One transaction: after an error nothing
-  // was stored. kInvalidInput for bad arguments (columns/sensors not JSON arrays, job without
-  // method, unreadable path gives kIoError). `out`/`existed` may be null.
+  // defaults to r.device, else it has none: never the stored recording's device (a re-upload of
+  // the same bytes must not silently calibrate the device they were first uploaded for). One
+  // transaction: after an error nothing was stored. kInvalidInput for bad arguments
+  // (columns/sensors not JSON arrays, job without method, unreadable path gives kIoError).
+  // `out`/`existed` may be null.
   Status PutRecording(const NewRecording& r, RecordingInfo* out, bool* existed);
   // Metadata (summary_json filled, job empty). kNotFound.
   Status GetRecording(int64_t id, RecordingInfo* out);
@@ -223,11 +246,12 @@ class Store {
   Status RenewLease(int64_t job_id, const std::string& worker_id, int64_t lease_ms);
 
   // Stores the result and marks the job succeeded (finished_at = now, lease cleared), stores the
-  // result's SHA-256 and makes it the device's latest calibration for the method if it finished
-  // last. Idempotent: if the job already succeeded with the identical result, OK and nothing
-  // changes (whoever calls). kConflict: the caller does not hold the job (and it has not succeeded
-  // with this result), or it already succeeded with a different result, or it failed.
-  // kInvalidInput: empty result. kNotFound.
+  // result's SHA-256 and its verdict (the result JSON's verdict.status; anything but "rejected",
+  // including no verdict, is "accepted") and, when accepted, makes it the device's latest
+  // calibration for the method if it finished last. Idempotent: if the job already succeeded with
+  // the identical result, OK and nothing changes (whoever calls). kConflict: the caller does not
+  // hold the job (and it has not succeeded with this result), or it already succeeded with a
+  // different result, or it failed. kInvalidInput: empty result. kNotFound.
   Status CompleteJob(int64_t job_id, const std::string& worker_id, const std::string& result_json);
 
   // Records a failure of the holder's run. transient = true (I/O error, busy database): back to
@@ -262,11 +286,28 @@ class Store {
   Status CountJobs(const JobFilter& filter, int64_t* count);
   // Every device seen (uploads and jobs), by serial, with its latest calibration per method.
   Status ListDevices(std::vector<DeviceInfo>* out);
-  // The device's latest succeeded job for `method` (by finished time), with result_json and
-  // result_sha256. kNotFound if there is none.
+  // The device's latest served job for `method` (succeeded, accepted by the gate or a person, not
+  // revoked; by finished time), with result_json and result_sha256. kNotFound if there is none.
   Status LatestResult(const std::string& device, const std::string& method, JobInfo* out);
   // Jobs per state.
   Status QueueDepth(QueueCounts* out);
+
+  // ---- The acceptance gate's decisions ----
+
+  // Withdraws a served result (state "accepted" -> "revoked"): the device's latest calibration
+  // falls back to its previous served one. Recorded as a JobEvent with `reason` and `actor`.
+  // kConflict (message says why) unless the job succeeded and its result is served (a queued,
+  // running or failed job has no result; a rejected one is not served; a revoked one already is);
+  // kInvalidInput for an empty reason; kNotFound.
+  Status RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,
+                   JobEvent* out = nullptr);
+  // Accepts a result the gate rejected, or re-accepts a revoked one (state -> "accepted"): it is
+  // then served when it is the device's latest served one. kConflict unless the job succeeded
+  // and its state is "rejected" or "revoked"; otherwise as RevokeJob.
+  Status AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
+                   JobEvent* out = nullptr);
+  // The job's decisions, oldest first. kNotFound for no such job.
+  Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out);
 
   // ---- Maintenance ----
 
@@ -291,9 +332,11 @@ class Store {
                             RecordingInfo* out, bool* existed);
   Status EnqueueJobLocked(Db* db, int64_t recording_id, const std::string& method,
                           const std::string& device, const std::string& config_json, int64_t now,
-                          JobInfo* out);
+                          JobInfo* out, bool inherit_device = true);
   Status RecoverLocked(Db* db, int64_t now, int64_t* recovered);
   Status LoadJob(Db* db, int64_t id, bool with_result, JobInfo* out);
+  Status DecideLocked(Db* db, int64_t job_id, const std::string& action, const std::string& reason,
+                      const std::string& actor, JobEvent* out);
   Status RequireHolder(Db* db, int64_t job_id, const std::string& worker_id, const char* action,
                        JobInfo* job);
 

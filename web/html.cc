@@ -356,6 +356,10 @@ font-weight:600;border:1px solid;line-height:1.5;white-space:nowrap}
 .badge-running{color:var(--accent);background:#e8f0fa;border-color:#a8c6ea}
 .badge-queued{color:var(--muted);background:#f0f2f4;border-color:#c8d0d8}
 .badge-unknown{color:var(--muted);background:#fff;border-color:#c8d0d8}
+.badge-rejected{color:#fff;background:var(--bad);border-color:var(--bad)}
+.badge-revoked{color:#fff;background:#6b4f00;border-color:#6b4f00}
+.badge-accepted{color:var(--ok);background:#fff;border-color:#9fd0b3}
+.verdict-reason{font-size:.8rem;color:var(--bad);display:block;max-width:28rem}
 .flag-warn{color:var(--warn);font-weight:600;white-space:nowrap}
 .callout{border-left:4px solid var(--line);background:var(--panel);padding:.6rem .9rem;margin:.8rem 0}
 .callout p{margin:.2rem 0}

@@ -1486,13 +1486,83 @@ std::string StatusCallout(const JobView& view) {
   return "";
 }
 
+// A badge for a result the gate rejected or a person revoked, with the reason in words ("" for
+// an accepted result: the usual case needs no mark).
+std::string VerdictBadge(const JobSummary& job) {
+  const std::string state = GateState(job);
+  if (state != "rejected" && state != "revoked") return "";
+  std::string reason;
+  if (state == "revoked") {
+    for (const auto& e : job.events) {
+      if (e.action == "revoke") reason = e.reason;
+    }
+  } else if (const json* reasons = Array(Get(Get(job.result, "verdict"), "reasons"))) {
+    if (!reasons->empty() && (*reasons)[0].is_string()) reason = (*reasons)[0].get<std::string>();
+    if (reasons->size() > 1) reason += " (+" + std::to_string(reasons->size() - 1) + " more)";
+  }
+  std::string shown = reason;
+  if (shown.size() > 140) shown = shown.substr(0, 140) + "\xE2\x80\xA6";
+  return " <span class=\"badge badge-" + state + "\" title=\"" + E(reason) + "\">" + state +
+         "</span>" +
+         (shown.empty() ? "" : "<span class=\"verdict-reason\">" + E(shown) + "</span>");
+}
+
+// The report's verdict block: what the gate decided and why, and every decision since.
+std::string VerdictSection(const JobSummary& job) {
+  const std::string state = GateState(job);
+  if (state.empty()) return "";
+  const json* verdict = Get(job.result, "verdict");
+  std::string out;
+  const json* reasons = Array(Get(verdict, "reasons"));
+  const std::string gate = Str(Get(verdict, "status"));
+  if (state == "accepted") {
+    out += "<div class=\"callout callout-ok verdict\"><p><strong>Accepted</strong>" +
+           std::string(gate == "rejected" ? " by a person, overriding the acceptance gate"
+                                          : " by the acceptance gate") +
+           ": this result is served as the device's calibration when it is the latest "
+           "accepted one.</p>";
+  } else if (state == "rejected") {
+    out +=
+        "<div class=\"callout callout-error verdict\"><p><strong>Rejected by the acceptance "
+        "gate</strong>: this result is never served to production tooling. Record again "
+        "as advised, or accept it with a reason (POST /api/v1/jobs/" +
+        std::to_string(job.id) + "/accept).</p>";
+  } else {
+    out +=
+        "<div class=\"callout callout-warn verdict\"><p><strong>Revoked</strong>: withdrawn "
+        "by a person; the device's calibration fell back to its previous accepted one.</p>";
+  }
+  if (reasons != nullptr && !reasons->empty()) {
+    out += "<p>The gate's reasons:</p><ul class=\"verdict-reasons\">";
+    for (const auto& r : *reasons)
+      out += "<li>" + E(r.is_string() ? r.get<std::string>() : r.dump()) + "</li>";
+    out += "</ul>";
+  }
+  out += "</div>";
+  if (!job.events.empty()) {
+    out +=
+        "<div class=\"table-wrap\"><table class=\"table-events\"><thead><tr><th>when</th>"
+        "<th>decision</th><th>by</th><th>reason</th></tr></thead><tbody>";
+    for (const auto& e : job.events) {
+      out += "<tr><td class=\"time\">" + TimeHtml(e.at) + "</td><td>" + E(e.action) + "</td><td>" +
+             E(e.actor) + "</td><td>" + E(e.reason) + "</td></tr>";
+    }
+    out += "</tbody></table></div>";
+  }
+  return out;
+}
+
 std::string JobBody(const JobView& view) {
   const JobSummary& job = view.job;
   std::string out;
   out += "<h1>Calibration #" + std::to_string(job.id) + " \xC2\xB7 " +
          E(job.method.empty() ? std::string("?") : job.method) +
          (job.device.empty() ? "" : " \xC2\xB7 " + E(job.device)) + " " + StatusBadge(job.status) +
+         (GateState(job) == "rejected" || GateState(job) == "revoked"
+              ? " <span class=\"badge badge-" + GateState(job) + "\">" + GateState(job) + "</span>"
+              : std::string()) +
          "</h1>";
+  out += VerdictSection(job);
   out += StatusCallout(view);
   // Header facts.
   std::string kv = "<dl class=\"kv job-header\"><dt>device</dt><dd>" + DeviceLink(job.device) +
@@ -1580,6 +1650,7 @@ std::string FilterQuery(const HistoryFilter& f) {
   if (!f.device.empty()) q += "&device=" + UrlEncode(f.device);
   if (!f.method.empty()) q += "&method=" + UrlEncode(f.method);
   if (!f.status.empty()) q += "&status=" + UrlEncode(f.status);
+  if (!f.verdict.empty()) q += "&verdict=" + UrlEncode(f.verdict);
   return q;
 }
 
@@ -1615,6 +1686,9 @@ std::string HistoryBody(const HistoryView& v) {
       v.filter.status != "running" && v.filter.status != "queued") {
     out += Option(v.filter.status, v.filter.status, v.filter.status);
   }
+  out += "</select></label><label>verdict<select name=\"verdict\">" +
+         Option("", "any", v.filter.verdict);
+  for (const char* s : {"accepted", "rejected", "revoked"}) out += Option(s, s, v.filter.verdict);
   out += "</select></label><button type=\"submit\">Filter</button>";
   out += "<a href=\"/\">clear</a></form>";
   if (v.total >= 0) {
@@ -1637,7 +1711,7 @@ std::string HistoryBody(const HistoryView& v) {
         figures = E(Guard("figures", [&] { return KeyFigures(j.method, j.result); }));
       }
       out += "<tr><td>" + JobLink(j.id) + "</td><td class=\"name\">" + DeviceLink(j.device) +
-             "</td><td>" + E(j.method) + "</td><td>" + StatusBadge(j.status) +
+             "</td><td>" + E(j.method) + "</td><td>" + StatusBadge(j.status) + VerdictBadge(j) +
              "</td><td class=\"time\">" + TimeHtml(j.created_at) + "</td><td>" + figures + "</td>" +
              WarningsCell(j) + "</tr>";
     }
@@ -1738,44 +1812,94 @@ std::string PcaDrift(const std::vector<const JobSummary*>& jobs) {
     }
     return nullptr;
   };
+  auto frame_of = [&](size_t k) {
+    std::string f = Str(Get(Get(jobs[k]->result, "parameters"), "frame"));
+    const json* reflection = Get(Get(jobs[k]->result, "diagnostics"), "reflection");
+    if (reflection != nullptr && reflection->is_boolean() && reflection->get<bool>()) {
+      f += " (reflected)";
+    }
+    return f.empty() ? std::string("unknown") : f;
+  };
+  // Frame-free: the largest change of an angle between two sensors' axes (what a change of frame
+  // cannot move), named by the pair.
+  auto axis_pair_change = [&](size_t k, std::string* pair) {
+    double worst = kNaN;
+    for (size_t i = 0; i < names.size(); ++i) {
+      for (size_t j = i + 1; j < names.size(); ++j) {
+        const PcaSensor *a0 = find(k - 1, names[i]), *b0 = find(k - 1, names[j]);
+        const PcaSensor *a1 = find(k, names[i]), *b1 = find(k, names[j]);
+        if (!a0 || !b0 || !a1 || !b1) continue;
+        const double d =
+            std::fabs(AngleBetween(a1->axis, b1->axis) - AngleBetween(a0->axis, b0->axis));
+        if (std::isfinite(d) && !(worst >= d)) {
+          worst = d;
+          *pair = names[i] + "/" + names[j];
+        }
+      }
+    }
+    return worst;
+  };
+  auto named = [](const std::string& who) {
+    return who.empty() ? std::string()
+                       : "<br><span class=\"name small muted\">" + E(who) + "</span>";
+  };
   std::string rows;
   for (size_t k = FirstDriftPair(jobs.size()); k < jobs.size(); ++k) {
-    double worst_scale = kNaN, worst_angle = kNaN;
-    std::string ws, wa, detail;
+    double worst_scale = kNaN, worst_bias = kNaN;
+    std::string ws, wb, detail, pair;
+    const bool same_frame = frame_of(k - 1) == frame_of(k);
+    const double pair_change = axis_pair_change(k, &pair);
     for (const auto& n : names) {
       const PcaSensor *a = find(k - 1, n), *b = find(k, n);
       if (a == nullptr || b == nullptr) continue;
       const double ds = b->scale - a->scale;
       const double rel = a->scale != 0 ? ds / std::fabs(a->scale) : kNaN;
-      const double ang = AngleBetween(a->axis, b->axis);
+      // Axis directions only compare within one frame; across frames the change is the frame's.
+      const double ang = same_frame ? AngleBetween(a->axis, b->axis) : kNaN;
+      const double db = b->bias - a->bias;
       if (std::isfinite(rel) && !(std::fabs(worst_scale) >= std::fabs(rel))) {
         worst_scale = rel;
         ws = n;
       }
-      if (std::isfinite(ang) && !(worst_angle >= ang)) {
-        worst_angle = ang;
-        wa = n;
+      if (std::isfinite(db) && !(std::fabs(worst_bias) >= std::fabs(db))) {
+        worst_bias = db;
+        wb = n;
       }
       detail += "<tr><td class=\"name\">" + E(n) + "</td>" + NumCell(ds, 3) +
-                NumCell(FormatSig(rel * 1e6, 3)) + NumCell(ang * 1e3, 3) + "</tr>";
+                NumCell(FormatSig(rel * 1e6, 3)) + NumCell(db, 3) + NumCell(ang * 1e3, 3) + "</tr>";
     }
-    rows += "<tr><td>" + PairLabel(*jobs[k - 1], *jobs[k]) + "</td>" +
-            PairTimeCell(*jobs[k - 1], *jobs[k]) + NumCell(FormatSig(worst_scale * 1e6, 3)) +
-            "<td class=\"name\">" + E(ws) + "</td>" + NumCell(worst_angle * 1e3, 3) +
-            "<td class=\"name\">" + E(wa) + "</td><td><details><summary>" +
+    const std::string frames =
+        same_frame
+            ? std::string()
+            : "<br><span class=\"frames-differ muted small\">frames differ (" + E(frame_of(k - 1)) +
+                  " \xE2\x86\x92 " + E(frame_of(k)) + "): axis directions not compared</span>";
+    rows += "<tr><td>" + PairLabel(*jobs[k - 1], *jobs[k]) + frames + "</td>" +
+            PairTimeCell(*jobs[k - 1], *jobs[k]) +
+            NumCell(FormatSig(worst_scale * 1e6, 3) + named(ws)) +
+            NumCell(FormatSig(pair_change * 1e3, 3) + named(pair)) +
+            NumCell(FormatSig(worst_bias, 3) + named(wb)) + "<td><details><summary>" +
             std::to_string(names.size()) +
             " sensors</summary><table class=\"table-drift-detail\"><thead><tr><th>sensor</th>"
-            "<th class=\"num\">\xCE\x94scale</th><th class=\"num\">\xCE\x94scale (ppm)</th>"
+            "<th class=\"num\">\xCE\x94scale (reading units per field unit)</th>"
+            "<th class=\"num\">\xCE\x94scale (ppm)</th>"
             "<th class=\"num\">\xCE\x94"
+            "bias (reading units)</th><th class=\"num\">\xCE\x94"
             "axis (mrad)</th></tr></thead><tbody>" +
             detail + "</tbody></table></details></td></tr>";
   }
   std::string out =
       "<div class=\"table-wrap\"><table class=\"table-drift-pca\"><thead><tr><th>calibrations</th>"
-      "<th>when</th><th class=\"num\">largest \xCE\x94scale (ppm)</th><th>sensor</th>"
-      "<th class=\"num\">largest axis change (mrad)</th><th>sensor</th><th>per sensor</th></tr>"
+      "<th>when</th><th class=\"num\">largest \xCE\x94scale (ppm)</th>"
+      "<th class=\"num\" title=\"largest change of an angle between two sensors' axes\">"
+      "largest change of an angle between axes (mrad)</th>"
+      "<th class=\"num\">largest \xCE\x94"
+      "bias (reading units)</th>"
+      "<th>per sensor (axis change: same frame only)</th></tr>"
       "</thead><tbody>" +
-      rows + "</tbody></table></div>" + OmittedPairsNote(jobs.size());
+      rows + "</tbody></table></div>" + OmittedPairsNote(jobs.size()) +
+      "<p class=\"muted small\">Scale factors, biases and the angles between axes do not depend "
+      "on the frame; an axis direction does, so it is compared only between results in the same "
+      "frame.</p>";
   // Plots over time, relative to the first calibration.
   const TimeAxis ax = MakeTimeAxis(jobs);
   std::vector<Series> scale_series, axis_series;
@@ -1931,8 +2055,9 @@ std::string DeviceBody(const DeviceView& v) {
         figures = E(Guard("figures", [&] { return KeyFigures(j.method, j.result); }));
       }
       table += "<tr>" + NumCell(std::to_string(i + 1)) + "<td>" + JobLink(j.id) + "</td><td>" +
-               E(j.method) + "</td><td>" + StatusBadge(j.status) + "</td><td class=\"time\">" +
-               TimeHtml(j.created_at) + "</td><td>" + figures + "</td>" + WarningsCell(j) + "</tr>";
+               E(j.method) + "</td><td>" + StatusBadge(j.status) + VerdictBadge(j) +
+               "</td><td class=\"time\">" + TimeHtml(j.created_at) + "</td><td>" + figures +
+               "</td>" + WarningsCell(j) + "</tr>";
     }
     table += "</tbody></table></div>";
   }
@@ -1942,16 +2067,18 @@ std::string DeviceBody(const DeviceView& v) {
     const std::string m = method;
     std::vector<const JobSummary*> ok;
     for (const auto& j : jobs) {
-      if (j.status == "succeeded" && j.method == m && j.result.is_object()) ok.push_back(&j);
+      // Only what production tooling could have fetched: accepted, not revoked.
+      if (GateState(j) == "accepted" && j.method == m && j.result.is_object()) ok.push_back(&j);
     }
     if (ok.size() < 2) continue;
-    drift += "<h3>" + m + " (" + std::to_string(ok.size()) + " succeeded calibrations)</h3>";
+    drift += "<h3>" + m + " (" + std::to_string(ok.size()) +
+             " accepted calibrations; rejected and revoked ones are not compared)</h3>";
     drift += Guard("Drift", [&] { return m == "pca" ? PcaDrift(ok) : ArrayDrift(ok); });
   }
   if (drift.empty()) {
     drift =
-        "<p class=\"muted\">Drift needs at least two succeeded calibrations of the same "
-        "method.</p>";
+        "<p class=\"muted\">Drift needs at least two accepted (not revoked) calibrations of the "
+        "same method.</p>";
   }
   out += Section("drift", "Drift between successive calibrations", drift);
   return out;
@@ -1989,6 +2116,12 @@ std::string KeyFigures(const std::string& method, const json& result) {
            " \xE2\x89\xA4 " + FormatMicrometres(f.worst_sigma, 2);
   }
   return kDash;
+}
+
+std::string GateState(const JobSummary& job) {
+  if (job.status != "succeeded") return "";
+  if (!job.state.empty()) return job.state;
+  return Str(Get(Get(job.result, "verdict"), "status")) == "rejected" ? "rejected" : "accepted";
 }
 
 std::string RenderHistoryPage(const HistoryView& view) {

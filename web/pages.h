@@ -45,6 +45,14 @@
 
 namespace calibd::web {
 
+// A person's decision on a result (the acceptance gate's revoke/accept history).
+struct JobEventSummary {
+  std::string action;  // "revoke" | "accept"
+  std::string reason;
+  std::string actor;  // "token" | "anonymous"
+  std::string at;     // ISO 8601 UTC
+};
+
 // One calibration job as stored (the fields of GET /api/v1/jobs/{id}).
 struct JobSummary {
   int64_t id = 0;
@@ -57,13 +65,22 @@ struct JobSummary {
   int attempts = 0;         // times a worker claimed it
   std::string error;        // failure message in plain words (failed jobs), else empty
   nlohmann::json result;    // SPEC §4 result JSON; null when none (queued/running/failed)
+  // The acceptance gate (succeeded jobs): "accepted" | "rejected" | "revoked"; empty: taken from
+  // result.verdict.status (no verdict: accepted). Only accepted results are served and compared.
+  std::string state;
+  std::vector<JobEventSummary> events;  // decisions, oldest first (the report shows them)
 };
+
+// The gate's state of a job as the pages show it: "" (not succeeded), "accepted", "rejected" or
+// "revoked".
+std::string GateState(const JobSummary& job);
 
 // Filters of the history page, echoed into its form. Empty: no filter.
 struct HistoryFilter {
   std::string device;
   std::string method;
   std::string status;
+  std::string verdict;  // "accepted" | "rejected" | "revoked" (the acceptance gate's state)
 };
 
 // `/` — the calibration history.

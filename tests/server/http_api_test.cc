@@ -609,6 +609,8 @@ TEST_F(HttpApi, OpenApiDocumentsEveryRouteTheServerHas) {
                                         "post /jobs",
                                         "get /jobs",
                                         "get /jobs/{id}",
+                                        "post /jobs/{id}/revoke",
+                                        "post /jobs/{id}/accept",
                                         "get /devices",
                                         "get /devices/{serial}/calibration",
                                         "get /recordings/{id}",

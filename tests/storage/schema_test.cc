@@ -152,6 +152,87 @@ TEST(Schema, Version1DataIsCarriedOverAndUsable) {
   EXPECT_EQ(check, "ok");
 }
 
+TEST(Schema, Version2ResultsGetTheirVerdictAndTheLatestBecomesTheLatestAccepted) {
+  TempDir dir;
+  const std::string path = dir.File("v2.db");
+  const std::string rejected =
+      R"({"method":"pca","verdict":{"status":"rejected","reasons":["x"]}})";
+  {
+    auto db = OpenDb(path);
+    ASSERT_TRUE(MigrateSchema(db.get(), 2).ok());
+    ASSERT_TRUE(db->Exec("INSERT INTO recordings (id, sha256, bytes, device, layout, rows, "
+                         "created_at) VALUES (1, 'h', 3, 'SN1', 'pca_averaged', 1, 1000);"
+                         "INSERT INTO recording_data VALUES (1, X'616263');"
+                         "INSERT INTO devices VALUES ('SN1', 1000);")
+                    .ok());
+    // What calibd with schema v2 wrote: results without a verdict (job 1), one with a rejected
+    // verdict (job 2, the newest) and one whose JSON is damaged (job 3); v2 made job 2 the latest.
+    ASSERT_TRUE(db->Exec("INSERT INTO jobs (id, recording_id, method, device, config_json, status, "
+                         "attempts, created_at, finished_at) VALUES "
+                         "(1, 1, 'pca', 'SN1', '{}', 'succeeded', 1, 1100, 2000),"
+                         "(2, 1, 'pca', 'SN1', '{}', 'succeeded', 1, 1200, 3000),"
+                         "(3, 1, 'pca', 'SN1', '{}', 'succeeded', 1, 1300, 2500);"
+                         "INSERT INTO results VALUES (1, '{\"method\":\"pca\"}', 'a', 2000),"
+                         "(3, '{not json', 'c', 2500);"
+                         "INSERT INTO device_calibrations VALUES ('SN1', 'pca', 2, 3000);")
+                    .ok());
+    Stmt st;
+    ASSERT_TRUE(db->PrepareUncached("INSERT INTO results VALUES (2, ?1, 'b', 3000)", &st).ok());
+    st.BindText(1, rejected);
+    ASSERT_TRUE(st.Run().ok());
+  }
+  std::unique_ptr<Store> store;
+  StoreOptions o;
+  o.now_ms = [] { return int64_t{10000}; };
+  Status s = Store::Open(path, o, &store);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  JobInfo job;
+  ASSERT_TRUE(store->GetJob(1, &job).ok());
+  EXPECT_EQ(job.verdict, "accepted");  // no verdict: results before the gate count as accepted
+  EXPECT_EQ(job.state, "accepted");
+  ASSERT_TRUE(store->GetJob(2, &job).ok());
+  EXPECT_EQ(job.verdict, "rejected");
+  EXPECT_EQ(job.result_json, rejected);
+  ASSERT_TRUE(store->GetJob(3, &job).ok());
+  EXPECT_EQ(job.verdict, "accepted");  // unreadable JSON: no verdict in it
+  // The latest served is job 3 (finished 2500), not the rejected job 2 (3000).
+  JobInfo latest;
+  ASSERT_TRUE(store->LatestResult("SN1", "pca", &latest).ok());
+  EXPECT_EQ(latest.id, 3);
+  // Revoking it falls back to job 1; accepting job 2 serves it; the events are kept in order.
+  ASSERT_TRUE(store->RevokeJob(3, "wrong fixture", "anonymous").ok());
+  ASSERT_TRUE(store->LatestResult("SN1", "pca", &latest).ok());
+  EXPECT_EQ(latest.id, 1);
+  EXPECT_EQ(store->RevokeJob(3, "again", "anonymous").code(), StatusCode::kConflict);
+  EXPECT_EQ(store->RevokeJob(2, "not served", "anonymous").code(), StatusCode::kConflict);
+  EXPECT_EQ(store->AcceptJob(1, "fine", "anonymous").code(), StatusCode::kConflict);
+  EXPECT_EQ(store->AcceptJob(2, "", "anonymous").code(), StatusCode::kInvalidInput);
+  ASSERT_TRUE(store->AcceptJob(2, "checked by hand", "token").ok());
+  ASSERT_TRUE(store->LatestResult("SN1", "pca", &latest).ok());
+  EXPECT_EQ(latest.id, 2);
+  std::vector<JobEvent> events;
+  ASSERT_TRUE(store->ListJobEvents(3, &events).ok());
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].action, "revoke");
+  EXPECT_EQ(events[0].reason, "wrong fixture");
+  EXPECT_EQ(events[0].created_at_ms, 10000);
+  EXPECT_EQ(store->ListJobEvents(99, &events).code(), StatusCode::kNotFound);
+  // Filters by state.
+  JobFilter filter;
+  filter.state = "revoked";
+  std::vector<JobInfo> jobs;
+  ASSERT_TRUE(store->ListJobs(filter, &jobs).ok());
+  ASSERT_EQ(jobs.size(), 1u);
+  EXPECT_EQ(jobs[0].id, 3);
+  int64_t count = 0;
+  filter.state = "accepted";
+  ASSERT_TRUE(store->CountJobs(filter, &count).ok());
+  EXPECT_EQ(count, 2);
+  std::string check;
+  ASSERT_TRUE(store->IntegrityCheck(&check).ok());
+  EXPECT_EQ(check, "ok");
+}
+
 TEST(Schema, NewerSchemaThanThisBuildIsRefused) {
   TempDir dir;
   {

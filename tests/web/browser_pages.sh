@@ -39,6 +39,22 @@ wait_job "$j1"
 "$bin" simulate pca --out "$tmp/pca2" --seed 4 --positions 60 2>/dev/null
 j2=$(upload "$tmp/pca2" "$hostile")
 wait_job "$j2"
+# The acceptance gate on the device page: a result the gate rejects (limits this config sets far
+# tighter than any data meet) and one a person revokes; a fourth, accepted one keeps a drift pair.
+"$bin" simulate pca --out "$tmp/pca3" --seed 5 --positions 60 2>/dev/null
+python3 - "$tmp/pca3/config.json" <<'PY'
+import json, sys
+c = json.load(open(sys.argv[1]))
+c["acceptance"] = {"max_scale_std": 1e-6}
+json.dump(c, open(sys.argv[1], "w"))
+PY
+j5=$(upload "$tmp/pca3" "$hostile")
+wait_job "$j5"
+"$bin" simulate pca --out "$tmp/pca4" --seed 6 --positions 60 2>/dev/null
+j6=$(upload "$tmp/pca4" "$hostile")
+wait_job "$j6"
+curl -sf -H 'Content-Type: application/json' -d '{"reason": "board <b>dropped</b> on the rig"}' \
+  "$base/api/v1/jobs/$j2/revoke" >/dev/null
 j3=$(upload "$tmp/array" 'ARRAY-1')
 wait_job "$j3"
 # A failed job: too few positions.
@@ -76,6 +92,8 @@ render pca "/jobs/$j2"
 render array "/jobs/$j3"
 render failed "/jobs/$j4"
 render device "/devices/$hostile"
+render revoked "/jobs/$j2"
+render rejected "/jobs/$j5"
 render missing /jobs/999999
 render devices /devices
 
@@ -85,12 +103,16 @@ expect pca 'class="page-job' 'table-pca-parameters' 'plot-singular-values' 'plot
 expect array 'table-array-parameters' 'plot-cost' 'plot-positions-xy' 'plot-positions-xz'
 expect failed 'callout-error' 'badge-failed'
 expect device 'class="page-device' 'table-calibrations' 'table-drift-pca'
+expect device '<span class="badge badge-rejected"' '<span class="badge badge-revoked"' \
+  'scale factor too uncertain' 'board &lt;b&gt;dropped&lt;/b&gt; on the rig' '2 accepted calibrations'
+expect revoked 'Revoked' 'table-events' 'board &lt;b&gt;dropped'
+expect rejected 'Rejected by the acceptance gate' 'scale factor too uncertain'
 expect missing 'class="page-error'
 expect devices 'class="page-devices' 'table-devices' 'first seen (UTC)'
 expect pca 'class="model"'
 expect array 'class="model"'
 reject failed 'class="advice"'
-for page in history pca array failed device devices; do
+for page in history pca array failed device devices revoked rejected; do
   reject "$page" '<script' '<img'
 done
 echo "browser pages: screenshots in $shots"

@@ -505,8 +505,97 @@ TEST(DevicePage, SingleCalibrationHasNoDrift) {
   d.jobs = {Job(1, "X", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult())};
   const std::string page = RenderDevicePage(d);
   ExpectDocument(page, "page-device");
-  EXPECT_TRUE(Has(page, "Drift needs at least two succeeded calibrations"));
+  EXPECT_TRUE(Has(page, "Drift needs at least two accepted (not revoked) calibrations"));
   ExpectDocument(RenderDevicePage(DeviceView{}), "page-device");
+}
+
+TEST(DevicePage, MarksRejectedAndRevokedResultsAndComparesOnlyAcceptedOnes) {
+  DeviceView d;
+  d.serial = "DRONE-1";
+  JobSummary rejected =
+      Job(2, "DRONE-1", "pca", "succeeded", "2026-02-01T08:00:00Z", PcaResult("g", 0.3));
+  rejected.result["verdict"] = {
+      {"status", "rejected"},
+      {"reasons", {"the orientations are poorly spread: add positions with the -y axis up"}}};
+  JobSummary revoked =
+      Job(3, "DRONE-1", "pca", "succeeded", "2026-03-01T08:00:00Z", PcaResult("g", 0.2));
+  revoked.state = "revoked";
+  revoked.events = {{"revoke", "board <dropped> on the rig", "token", "2026-03-02T08:00:00Z"}};
+  d.jobs = {Job(1, "DRONE-1", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult()), rejected,
+            revoked,
+            Job(4, "DRONE-1", "pca", "succeeded", "2026-04-01T08:00:00Z", PcaResult("g", 5e-4))};
+  const std::string page = RenderDevicePage(d);
+  ExpectDocument(page, "page-device");
+  EXPECT_TRUE(Has(page, "<span class=\"badge badge-rejected\""));
+  EXPECT_TRUE(Has(page, "add positions with the -y axis up"));
+  EXPECT_TRUE(Has(page, "<span class=\"badge badge-revoked\""));
+  EXPECT_TRUE(Has(page, "board &lt;dropped&gt; on the rig"));  // escaped
+  // Drift compares 1 -> 4 only: neither the rejected #2 nor the revoked #3 is a calibration
+  // anyone could have flashed.
+  EXPECT_TRUE(Has(page, ">#1</a> \xE2\x86\x92 <a href=\"/jobs/4\">#4</a>"));
+  EXPECT_FALSE(Has(page, "/jobs/2\">#2</a> \xE2\x86\x92"));
+  EXPECT_FALSE(Has(page, "\xE2\x86\x92 <a href=\"/jobs/3\">"));
+  EXPECT_TRUE(Has(page, "2 accepted calibrations"));
+  // Biases and the frame-free angle between axes are compared.
+  EXPECT_TRUE(Has(page, "bias (reading units)"));
+  EXPECT_TRUE(Has(page, "largest change of an angle between axes (mrad)"));
+}
+
+TEST(DevicePage, ResultsInDifferentFramesAreNotComparedByAxisDirection) {
+  DeviceView d;
+  d.serial = "DRONE-2";
+  JobSummary nominal = Job(1, "DRONE-2", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult());
+  nominal.result["parameters"]["frame"] = "nominal";
+  JobSummary canonical = Job(2, "DRONE-2", "pca", "succeeded", "2026-02-01T08:00:00Z", PcaResult());
+  canonical.result["parameters"]["frame"] = "canonical";
+  d.jobs = {nominal, canonical};
+  const std::string page = RenderDevicePage(d);
+  EXPECT_TRUE(Has(page, "frames differ (nominal \xE2\x86\x92 canonical)"));
+  d.jobs[1].result["parameters"]["frame"] = "nominal";
+  EXPECT_FALSE(Has(RenderDevicePage(d), "frames differ"));
+}
+
+TEST(JobPage, ShowsTheVerdictWithReasonsAndTheDecisions) {
+  JobView v;
+  v.job = Job(7, "DRONE-3", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult());
+  v.job.result["verdict"] = {{"status", "rejected"},
+                             {"reasons",
+                              {"scale factors physically implausible, readings look "
+                               "like g but magnitude is 9.81: units?"}}};
+  std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "Rejected by the acceptance gate"));
+  EXPECT_TRUE(Has(page, "readings look like g but magnitude is 9.81"));
+  EXPECT_LT(page.find("Rejected by the acceptance gate"), page.find("Parameters"));  // prominent
+  v.job.state = "accepted";
+  v.job.events = {{"accept", "checked on the rig", "token", "2026-01-02T08:00:00Z"}};
+  page = RenderJobPage(v);
+  EXPECT_TRUE(Has(page, "overriding the acceptance gate"));
+  EXPECT_TRUE(Has(page, "class=\"table-events\""));
+  EXPECT_TRUE(Has(page, "checked on the rig"));
+  v.job.result.erase("verdict");  // results from before the gate count as accepted
+  v.job.state.clear();
+  v.job.events.clear();
+  EXPECT_TRUE(Has(RenderJobPage(v), "Accepted</strong> by the acceptance gate"));
+}
+
+TEST(HistoryPage, MarksRejectedResults) {
+  HistoryView h;
+  JobSummary rejected = Job(9, "D", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult());
+  rejected.state = "rejected";
+  rejected.result["verdict"] = {{"status", "rejected"}, {"reasons", {"too noisy"}}};
+  h.jobs = {rejected, Job(8, "D", "pca", "succeeded", "2026-01-01T07:00:00Z", PcaResult())};
+  const std::string page = RenderHistoryPage(h);
+  EXPECT_TRUE(Has(page, "<span class=\"badge badge-rejected\" title=\"too noisy\""));
+  EXPECT_TRUE(Has(page, "<span class=\"verdict-reason\">too noisy</span>"));
+  EXPECT_FALSE(Has(page, "<span class=\"badge badge-revoked\""));
+  EXPECT_FALSE(Has(page, "<span class=\"badge badge-accepted\""));  // accepted: no mark
+  // The filter form offers the gate's states and keeps the chosen one in the pager link.
+  h.filter.verdict = "rejected";
+  h.next_before = "8";
+  const std::string filtered = RenderHistoryPage(h);
+  EXPECT_TRUE(Has(filtered, "<select name=\"verdict\">"));
+  EXPECT_TRUE(Has(filtered, "verdict=rejected"));
 }
 
 TEST(DevicePage, ManyCalibrationsKeepThePageSmall) {
@@ -570,7 +659,7 @@ TEST(Escaping, HostileDeviceAndSensorNamesNeverAppearUnescapedInAnyPage) {
 
     HistoryView h;
     h.jobs = {pj.job, aj.job, fj.job, sj.job};
-    h.filter = {evil, evil, evil};
+    h.filter = {evil, evil, evil, evil};
     h.devices = {evil};
     h.next_before = evil;
     const std::string hp = RenderHistoryPage(h);

@@ -1,0 +1,404 @@
+#include "server/acceptance.h"
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include "server/config.h"
+
+namespace calibd::server {
+
+using nlohmann::json;
+
+namespace {
+
+// ---- THE table of acceptance limits and their defaults (README "Acceptance gate") ----
+//
+// Defaults are meant to pass a sound calibration of a MEMS sensor made as the README describes and
+// to stop the mistakes seen on production lines: poorly spread orientations, unit mix-ups, too
+// few or too noisy data. A line tightens them to its own tolerances (`serve --acceptance`).
+
+// Shared by pca, imu and array (the latter only for `model: full` results, parameters.imus).
+constexpr AcceptanceKey kMaxScaleStd = {
+    "max_scale_std", "largest 1 sigma of a scale factor, relative to it (0.01 = 1 %)", 0.01};
+constexpr AcceptanceKey kMaxAxisStd = {
+    "max_axis_std",
+    "largest 1 sigma of an axis direction (pca) or misalignment entry (imu, array full), rad",
+    0.01};  // 0.57 degrees
+constexpr AcceptanceKey kScaleRange = {
+    "scale_range",
+    "allowed relative deviation of a scale factor from its nominal, |scale/nominal - 1|", 0.1};
+constexpr AcceptanceKey kImplausible = {
+    "implausible_factor",
+    "a scale factor this many times above or below its nominal is physically implausible (a "
+    "unit mix-up) and rejected even when scale_range is null",
+    3.0};
+constexpr AcceptanceKey kMaxChi2 = {
+    "max_chi2",
+    "largest residual against the noise: mean squared residual / sigma^2 (1 when the model "
+    "explains the data down to the noise)",
+    4.0};
+
+// imu and array full: biases in SI, (bias - nominal bias) x nominal unit.
+constexpr AcceptanceKey kAccelBiasStd = {"max_accel_bias_std",
+                                         "largest 1 sigma of an accelerometer bias, m/s^2", 0.05};
+constexpr AcceptanceKey kGyroBiasStd = {"max_gyro_bias_std",
+                                        "largest 1 sigma of a gyroscope bias, rad/s", 0.005};
+constexpr AcceptanceKey kAccelBias = {
+    "max_accel_bias", "largest accelerometer bias (beyond the nominal bias), m/s^2", 2.0};
+constexpr AcceptanceKey kGyroBias = {
+    "max_gyro_bias", "largest gyroscope bias (beyond the nominal bias), rad/s", 0.2};  // 11 deg/s
+
+const std::vector<AcceptanceKey>& PcaKeys() {
+  static const std::vector<AcceptanceKey>& keys = *new std::vector<AcceptanceKey>{
+      kMaxScaleStd,
+      kMaxAxisStd,
+      {"max_bias_std", "largest 1 sigma of a bias, relative to the field magnitude", 0.01},
+      kScaleRange,
+      kImplausible,
+      kMaxChi2,  // only judged when noise_std is given (otherwise sigma is the residual itself)
+      {"min_scatter",
+       "smallest spread of the orientations: d x the smallest eigenvalue of the field directions' "
+       "scatter (1 uniform, 0 all in a plane); diagnostics.coverage.scatter_min",
+       0.3},  // core::PcaCoverage::kMinScatter
+      {"min_design",
+       "smallest eigenvalue of the quadric fit's design relative to a uniform sphere (what the "
+       "angles between axes are estimated from); diagnostics.coverage.design_min",
+       0.05},  // core::PcaCoverage::kMinDesign
+  };
+  return keys;
+}
+
+const std::vector<AcceptanceKey>& ImuKeys() {
+  static const std::vector<AcceptanceKey>& keys = *new std::vector<AcceptanceKey>{
+      kMaxScaleStd, kMaxAxisStd, kScaleRange, kImplausible, kAccelBiasStd,
+      kGyroBiasStd, kAccelBias,  kGyroBias,   kMaxChi2};
+  return keys;
+}
+
+const std::vector<AcceptanceKey>& ArrayKeys() {
+  static const std::vector<AcceptanceKey>& keys = *new std::vector<AcceptanceKey>{
+      {"max_position_std", "largest 1 sigma of a position coordinate, m", 1e-4},  // 0.1 mm
+      {"max_offset",
+       "largest distance of a triad from its nominal position in `geometry`, m (a wrong geometry "
+       "or gyro_unit shows here)",
+       0.005},   // 5 mm
+      kMaxChi2,  // residual RMS against accel_noise and gyro_noise, each
+      // model full (parameters.imus) only:
+      kMaxScaleStd,
+      kMaxAxisStd,
+      kScaleRange,
+      kImplausible,
+      kAccelBiasStd,
+      kGyroBiasStd,
+      kAccelBias,
+      kGyroBias};
+  return keys;
+}
+
+const std::vector<AcceptanceKey>& NoiseKeys() {
+  static const std::vector<AcceptanceKey>& keys = *new std::vector<AcceptanceKey>{
+      {"max_white_noise_std",
+       "largest 1 sigma of a white-noise density, relative to it (log too short)", 0.2},
+      {"max_accel_white_noise",
+       "largest accelerometer white-noise density, m/s^2/sqrt(Hz) (far above any MEMS part: "
+       "units or a moving device)",
+       0.1},
+      {"max_gyro_white_noise",
+       "largest gyroscope white-noise density, rad/s/sqrt(Hz) (far above any MEMS part: units or "
+       "a moving device)",
+       0.01},
+  };
+  return keys;
+}
+
+std::string KeyList(const std::vector<AcceptanceKey>& keys) {
+  std::string out;
+  for (const AcceptanceKey& k : keys) out += (out.empty() ? "" : ", ") + std::string(k.name);
+  return out;
+}
+
+}  // namespace
+
+const std::vector<AcceptanceKey>& AcceptanceKeys(const std::string& method) {
+  static const std::vector<AcceptanceKey> kNone;
+  if (method == "pca") return PcaKeys();
+  if (method == "imu") return ImuKeys();
+  if (method == "array") return ArrayKeys();
+  if (method == "noise") return NoiseKeys();
+  return kNone;
+}
+
+std::optional<double> AcceptanceLimits::Get(const std::string& key) const {
+  auto it = values.find(key);
+  return it == values.end() ? std::nullopt : it->second;
+}
+
+json AcceptanceLimits::ToJson() const {
+  json out = json::object();
+  for (const auto& [key, value] : values) out[key] = value ? json(*value) : json(nullptr);
+  return out;
+}
+
+Status ValidateAcceptance(const json& value, const std::string& method, const std::string& where,
+                          const std::string& field_prefix) {
+  const std::vector<AcceptanceKey>& keys = AcceptanceKeys(method);
+  if (!value.is_object()) {
+    return Status::InvalidInput(where + " must be an object of limits for " + method + " (" +
+                                KeyList(keys) + ")")
+        .WithField(field_prefix);
+  }
+  for (const auto& [key, limit] : value.items()) {
+    const AcceptanceKey* known = nullptr;
+    for (const AcceptanceKey& k : keys) {
+      if (key == k.name) known = &k;
+    }
+    const std::string field = field_prefix + "." + key;
+    if (known == nullptr) {
+      return Status::InvalidInput(where + ": '" + key + "' is not an acceptance limit of " +
+                                  method + " (known: " + KeyList(keys) + ")")
+          .WithField(field);
+    }
+    if (!limit.is_null() &&
+        (!limit.is_number() || !std::isfinite(limit.get<double>()) || limit.get<double>() < 0)) {
+      return Status::InvalidInput(where + ": '" + key + "' must be a number >= 0 (" +
+                                  known->meaning + "), or null for no limit")
+          .WithField(field);
+    }
+  }
+  return Status::Ok();
+}
+
+Status ValidateServerAcceptance(const json& value, const std::string& file) {
+  if (!value.is_object()) {
+    return Status::InvalidInput(file +
+                                ": acceptance defaults must be a JSON object with one object of "
+                                "limits per method, e.g. {\"pca\": {\"max_scale_std\": 0.005}}");
+  }
+  for (const auto& [method, limits] : value.items()) {
+    if (AcceptanceKeys(method).empty()) {
+      return Status::InvalidInput(file + ": '" + method +
+                                  "' is not a method (pca, array, imu or noise)")
+          .WithField(method);
+    }
+    Status s = ValidateAcceptance(limits, method, file + ": " + method, method);
+    if (!s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+Status LoadAcceptanceFile(const std::string& path, json* out) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status::InvalidInput("cannot read --acceptance " + path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  json value;
+  Status s = ParseJsonText(text.str(), path, &value);
+  if (!s.ok()) return s;
+  s = ValidateServerAcceptance(value, path);
+  if (!s.ok()) return s;
+  *out = std::move(value);
+  return Status::Ok();
+}
+
+AcceptanceLimits EffectiveAcceptance(const std::string& method, const json& server_defaults,
+                                     const json& config) {
+  AcceptanceLimits limits;
+  for (const AcceptanceKey& k : AcceptanceKeys(method)) limits.values[k.name] = k.default_value;
+  auto apply = [&](const json& overrides) {
+    if (!overrides.is_object()) return;
+    for (const auto& [key, value] : overrides.items()) {
+      if (limits.values.count(key) == 0) continue;
+      limits.values[key] =
+          value.is_number() ? std::optional<double>(value.get<double>()) : std::optional<double>();
+    }
+  };
+  if (server_defaults.is_object()) {
+    if (auto it = server_defaults.find(method); it != server_defaults.end()) apply(*it);
+  }
+  if (config.is_object()) {
+    if (auto it = config.find("acceptance"); it != config.end()) apply(*it);
+  }
+  return limits;
+}
+
+json Verdict::ToJson(const AcceptanceLimits& limits) const {
+  return {{"status", accepted() ? "accepted" : "rejected"},
+          {"reasons", reasons_},
+          {"limits", limits.ToJson()}};
+}
+
+std::string Fmt(double x) {
+  if (!std::isfinite(x)) return "undefined";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3g", x);
+  return buf;
+}
+
+std::optional<double> Number(const json& j) {
+  if (!j.is_number()) return std::nullopt;
+  const double x = j.get<double>();
+  if (!std::isfinite(x)) return std::nullopt;
+  return x;
+}
+
+void Offenders::RejectInto(Verdict* verdict, const std::string& rule) const {
+  if (items_.empty()) return;
+  std::string text = rule + ": ";
+  const size_t shown = std::min<size_t>(items_.size(), 6);
+  for (size_t i = 0; i < shown; ++i) text += (i ? ", " : "") + items_[i];
+  if (items_.size() > shown) text += " and " + std::to_string(items_.size() - shown) + " more";
+  verdict->Reject(text);
+}
+
+std::string UnitMixupHint(double ratio, const std::string& quantity) {
+  constexpr double kG = 9.80665, kDeg = 180.0 / M_PI;
+  auto near = [](double x, double target) { return std::abs(x / target - 1) < 0.15; };
+  if (quantity == "accelerometer") {
+    if (near(ratio, kG)) return "the readings look like g but are taken as m/s^2: units?";
+    if (near(ratio, 1 / kG)) return "the readings look like m/s^2 but are taken as g: units?";
+  } else {
+    if (near(ratio, kDeg)) return "the readings look like rad/s but are taken as deg/s: units?";
+    if (near(ratio, 1 / kDeg)) return "the readings look like deg/s but are taken as rad/s: units?";
+  }
+  return "";
+}
+
+namespace {
+
+// A 3-vector or 3x3 matrix (rows) at j as numbers; non-numbers become NaN.
+std::vector<double> Flat(const json& j) {
+  std::vector<double> out;
+  if (!j.is_array()) return out;
+  for (const json& x : j) {
+    if (x.is_array()) {
+      for (const json& y : x) out.push_back(Number(y).value_or(NAN));
+    } else {
+      out.push_back(Number(x).value_or(NAN));
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+void JudgeImuTriads(const json& imus, const json& imus_std, const TriadNominal& nominal,
+                    const AcceptanceLimits& limits, const std::string& label, Verdict* verdict) {
+  if (!imus.is_array()) return;
+  const auto scale_std_max = limits.Get("max_scale_std");
+  const auto axis_std_max = limits.Get("max_axis_std");
+  const auto range = limits.Get("scale_range");
+  const auto implausible = limits.Get("implausible_factor");
+  Offenders undefined, scale_std, axis_std, out_of_range, bias_std, bias;
+  static const char* const kAxes[] = {"x", "y", "z"};
+  for (size_t i = 0; i < imus.size(); ++i) {
+    const json& imu = imus[i];
+    const std::string name = label + " " + imu.value("name", std::to_string(i));
+    const json* stds = nullptr;
+    if (imus_std.is_array() && i < imus_std.size()) stds = &imus_std[i];
+    for (const char* quantity : {"accelerometer", "gyroscope"}) {
+      if (!imu.contains(quantity)) continue;
+      const bool accel = std::string(quantity) == "accelerometer";
+      const std::string who = name + " " + quantity;
+      const json& t = imu[quantity];
+      const double unit = accel ? nominal.accel_unit : nominal.gyro_unit;
+      const std::vector<double> scale = Flat(t.value("scale", json()));
+      const std::vector<double> b = Flat(t.value("bias", json()));
+      // Scale factors against the nominal unit conversion.
+      for (size_t k = 0; k < scale.size() && k < 3; ++k) {
+        const double ratio = scale[k] / unit;
+        const std::string axis = who + " " + kAxes[k];
+        if (!std::isfinite(ratio)) {
+          undefined.Add(axis + " scale");
+          continue;
+        }
+        if (implausible && (ratio > *implausible || ratio < 1 / *implausible)) {
+          std::string hint = UnitMixupHint(ratio, quantity);
+          if (hint.empty())
+            hint = "units, or a wrong " + std::string(accel ? "accel_unit" : "gyro_unit") + "?";
+          verdict->Reject(
+              axis + ": scale " + Fmt(scale[k]) + " is " + Fmt(ratio) + " times the nominal " +
+              Fmt(unit) + " (" +
+              (accel ? "accel_unit " + nominal.accel_text : "gyro_unit " + nominal.gyro_text) +
+              "), physically implausible: " + hint);
+        } else if (range && std::abs(ratio - 1) > *range) {
+          out_of_range.Add(axis + " " + Fmt((ratio - 1) * 100) + " %");
+        }
+      }
+      if (stds == nullptr || !stds->contains(quantity)) {
+        undefined.Add(who + " uncertainty");
+        continue;
+      }
+      const json& s = (*stds)[quantity];
+      const std::vector<double> sstd = Flat(s.value("scale_std", json()));
+      for (size_t k = 0; k < sstd.size() && k < scale.size(); ++k) {
+        const double rel = sstd[k] / std::abs(scale[k]);
+        if (!std::isfinite(rel)) {
+          undefined.Add(who + " " + kAxes[k] + " scale");
+        } else if (scale_std_max && rel > *scale_std_max) {
+          scale_std.Add(who + " " + kAxes[k] + " " + Fmt(rel * 100) + " %");
+        }
+      }
+      const std::vector<double> mstd = Flat(s.value("misalignment_std", json()));
+      double worst = 0;
+      bool misalignment_undefined = false;
+      for (size_t k = 0; k < mstd.size(); ++k) {
+        if (k % 4 == 0) continue;  // the unit diagonal is fixed, its std 0
+        if (!std::isfinite(mstd[k])) {
+          // T_a's lower triangle is fixed (the frame's gauge): written as 0, not null.
+          misalignment_undefined = true;
+        } else {
+          worst = std::max(worst, mstd[k]);
+        }
+      }
+      if (misalignment_undefined) undefined.Add(who + " misalignment");
+      if (axis_std_max && worst > *axis_std_max) {
+        axis_std.Add(who + " " + Fmt(worst * 1e3) + " mrad");
+      }
+      const std::vector<double> bstd = Flat(s.value("bias_std", json()));
+      const auto bias_std_max = limits.Get(accel ? "max_accel_bias_std" : "max_gyro_bias_std");
+      const auto bias_max = limits.Get(accel ? "max_accel_bias" : "max_gyro_bias");
+      const double nominal_bias = accel ? nominal.accel_bias : nominal.gyro_bias;
+      const char* si = accel ? "m/s^2" : "rad/s";
+      for (size_t k = 0; k < bstd.size() && k < 3; ++k) {
+        const double sigma = bstd[k] * unit;
+        if (!std::isfinite(sigma)) {
+          undefined.Add(who + " " + kAxes[k] + " bias");
+        } else if (bias_std_max && sigma > *bias_std_max) {
+          bias_std.Add(who + " " + kAxes[k] + " " + Fmt(sigma) + " " + si);
+        }
+      }
+      for (size_t k = 0; k < b.size() && k < 3; ++k) {
+        const double value = (b[k] - nominal_bias) * unit;
+        if (std::isfinite(value) && bias_max && std::abs(value) > *bias_max) {
+          bias.Add(who + " " + kAxes[k] + " " + Fmt(value) + " " + si);
+        }
+      }
+    }
+  }
+  undefined.RejectInto(verdict,
+                       "the uncertainty could not be computed, so the precision cannot be judged");
+  if (range) {
+    out_of_range.RejectInto(verdict, "scale factor more than " + Fmt(*range * 100) +
+                                         " % from the nominal unit conversion");
+  }
+  if (scale_std_max) {
+    scale_std.RejectInto(verdict, "scale factor too uncertain (1 sigma above " +
+                                      Fmt(*scale_std_max * 100) +
+                                      " %): record more or longer statics");
+  }
+  if (axis_std_max) {
+    axis_std.RejectInto(verdict,
+                        "misalignment too uncertain (1 sigma above " + Fmt(*axis_std_max * 1e3) +
+                            " mrad): record more orientations and rotations about every axis");
+  }
+  bias_std.RejectInto(verdict,
+                      "bias too uncertain (1 sigma above the limit): record longer statics");
+  bias.RejectInto(verdict,
+                  "bias beyond the limit (max_accel_bias / max_gyro_bias): a damaged "
+                  "sensor, or a wrong nominal bias?");
+}
+
+}  // namespace calibd::server

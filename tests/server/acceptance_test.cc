@@ -1,0 +1,330 @@
+// The acceptance gate (server/acceptance.h, each method's Judge): limits and their validation, and
+// the verdicts of real calibrations of simulated recordings (pca) and of results whose numbers sit
+// just inside and just outside each limit (imu, array, noise), so that a wrong rule fails.
+#include "server/acceptance.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Core>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "core/pca_simulation.h"
+#include "server/config.h"
+#include "server/method.h"
+
+namespace calibd::server {
+namespace {
+
+using nlohmann::json;
+
+bool HasReason(const json& verdict, const std::string& text) {
+  for (const json& r : verdict["reasons"]) {
+    if (r.get<std::string>().find(text) != std::string::npos) return true;
+  }
+  return false;
+}
+
+// A static accelerometer triad recording (pca averaged layout): readings m_ij = a_iᵀ v_j + b_i +
+// noise at the given field directions (scaled to `field`), a = scale × (I + small tilt).
+std::string TriadCsv(const std::vector<Eigen::Vector3d>& directions, double field, double scale,
+                     double bias, double noise, uint64_t seed) {
+  core::PcaRandom random(seed + 1000003);  // a stream of its own, not the directions'
+  Eigen::Matrix3d a = scale * Eigen::Matrix3d::Identity();
+  a(0, 1) = 0.004 * scale;  // small misalignments
+  a(2, 0) = -0.003 * scale;
+  std::string csv = "position,a0_x,a0_y,a0_z\n";
+  for (size_t j = 0; j < directions.size(); ++j) {
+    const Eigen::Vector3d v = directions[j].normalized() * field;
+    csv += "p" + std::to_string(j + 1);
+    for (int i = 0; i < 3; ++i) {
+      char buf[40];
+      std::snprintf(buf, sizeof buf, ",%.12g",
+                    a.col(i).dot(v) + bias * (i + 1) + noise * random.Normal());
+      csv += buf;
+    }
+    csv += "\n";
+  }
+  return csv;
+}
+
+std::vector<Eigen::Vector3d> RandomDirections(int n, uint64_t seed) {
+  core::PcaRandom random(seed);
+  std::vector<Eigen::Vector3d> out;
+  for (int j = 0; j < n; ++j) out.emplace_back(random.UnitVector(3));
+  return out;
+}
+
+// The recording: the six faces of a box plus four positions close to faces.
+std::vector<Eigen::Vector3d> BoxFaces() {
+  return {{1, 0, 0},  {-1, 0, 0},      {0, 1, 0},    {0, -1, 0},   {0, 0, 1},
+          {0, 0, -1}, {1, 0.08, 0.05}, {0.06, 1, 0}, {0, 0.07, 1}, {-1, 0, 0.06}};
+}
+
+json Calib(const std::string& csv, const json& config, const json& server = json()) {
+  json result;
+  Status s = Calibrate(csv, "test.csv", config, &result, nullptr, server);
+  EXPECT_TRUE(s.ok()) << s.ToString();
+  return result;
+}
+
+json TriadConfig(double magnitude) {
+  return {{"method", "pca"},
+          {"magnitude", magnitude},
+          {"bias", "estimate"},
+          {"nominal", {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}}};
+}
+
+TEST(Gate, AcceptsGoodPcaCalibrationsOfRandomOrientations) {
+  // 30 random orientations, 0.002 m/s² noise (an averaged MEMS reading): every trial accepted.
+  for (uint64_t seed = 1; seed <= 20; ++seed) {
+    const json r = Calib(TriadCsv(RandomDirections(30, seed), 9.80665, 1.02, 0.1, 0.002, seed),
+                         TriadConfig(9.80665));
+    EXPECT_EQ(r["verdict"]["status"], "accepted") << "seed " << seed << ": " << r["verdict"].dump();
+  }
+}
+
+TEST(Gate, RejectsPositionsOnlyOnBoxFacesNamingTheMissingOrientations) {
+  const json r = Calib(TriadCsv(BoxFaces(), 9.80665, 1.0, 0.1, 0.002, 3), TriadConfig(9.80665));
+  EXPECT_EQ(r["diagnostics"]["coverage"]["verdict"], "poor");
+  EXPECT_EQ(r["verdict"]["status"], "rejected");
+  ASSERT_TRUE(HasReason(r["verdict"], "orientations are poorly spread")) << r["verdict"].dump();
+  // The reason carries the coverage advice: which positions to add.
+  EXPECT_TRUE(HasReason(r["verdict"], "add positions")) << r["verdict"].dump();
+}
+
+TEST(Gate, RejectsReadingsInGWithMagnitudeInMetresPerSecondSquared) {
+  // Readings in g (field 1) but magnitude 9.80665: every scale comes out 0.102.
+  json config = TriadConfig(9.80665);
+  config.erase("nominal");
+  const json r = Calib(TriadCsv(RandomDirections(30, 5), 1.0, 1.0, 0.01, 0.0002, 5), config);
+  EXPECT_EQ(r["verdict"]["status"], "rejected");
+  EXPECT_TRUE(HasReason(r["verdict"], "readings look like g but magnitude is 9.81"))
+      << r["verdict"].dump();
+}
+
+TEST(Gate, RejectsReadingsInMetresPerSecondSquaredWithMagnitudeOne) {
+  json config = TriadConfig(1.0);
+  config.erase("nominal");
+  const json r = Calib(TriadCsv(RandomDirections(30, 6), 9.80665, 1.0, 0.1, 0.002, 6), config);
+  EXPECT_EQ(r["verdict"]["status"], "rejected");
+  EXPECT_TRUE(HasReason(r["verdict"], "readings look like m/s^2 but magnitude is 1"))
+      << r["verdict"].dump();
+}
+
+TEST(Gate, ScaleRangeIsJudgedAgainstTheNominalNorm) {
+  // Nominal sensitivities of norm 2: a true scale of 2.16 is 8 % off (accepted with the default
+  // 10 %), 2.24 is 12 % off (rejected); a limit of 5 % rejects the first too.
+  json config = TriadConfig(9.80665);
+  config["nominal"] = {{2, 0, 0}, {0, 2, 0}, {0, 0, 2}};
+  const auto dirs = RandomDirections(40, 7);
+  json r = Calib(TriadCsv(dirs, 9.80665, 2.16, 0.1, 0.002, 7), config);
+  EXPECT_EQ(r["verdict"]["status"], "accepted") << r["verdict"].dump();
+  r = Calib(TriadCsv(dirs, 9.80665, 2.24, 0.1, 0.002, 7), config);
+  EXPECT_EQ(r["verdict"]["status"], "rejected");
+  EXPECT_TRUE(HasReason(r["verdict"], "more than 10 % from the nominal")) << r["verdict"].dump();
+  config["acceptance"] = {{"scale_range", 0.05}};
+  r = Calib(TriadCsv(dirs, 9.80665, 2.16, 0.1, 0.002, 7), config);
+  EXPECT_EQ(r["verdict"]["status"], "rejected");
+  EXPECT_EQ(r["verdict"]["limits"]["scale_range"], 0.05);
+}
+
+TEST(Gate, ScaleUncertaintyLimitSeparatesNoiseLevels) {
+  // σ(scale) grows with the noise: 30 positions with noise 0.02 m/s² give about 0.1 %, with 0.5
+  // m/s² about 2.5 %: the 1 % default accepts the first and rejects the second.
+  const auto dirs = RandomDirections(30, 8);
+  json r = Calib(TriadCsv(dirs, 9.80665, 1.0, 0.1, 0.02, 8), TriadConfig(9.80665));
+  EXPECT_EQ(r["verdict"]["status"], "accepted") << r["verdict"].dump();
+  r = Calib(TriadCsv(dirs, 9.80665, 1.0, 0.1, 0.5, 8), TriadConfig(9.80665));
+  EXPECT_EQ(r["verdict"]["status"], "rejected");
+  EXPECT_TRUE(HasReason(r["verdict"], "scale factor too uncertain")) << r["verdict"].dump();
+}
+
+TEST(Gate, ResidualAgainstAGivenNoiseIsBounded) {
+  // Readings with noise 0.01 judged against a claimed noise_std: the true σ passes, a σ 3 times
+  // too small (χ² ≈ 9 > 4) is rejected.
+  const auto dirs = RandomDirections(40, 9);
+  json config = TriadConfig(9.80665);
+  config["noise_std"] = 0.01;
+  json r = Calib(TriadCsv(dirs, 9.80665, 1.0, 0.1, 0.01, 9), config);
+  EXPECT_EQ(r["verdict"]["status"], "accepted") << r["verdict"].dump();
+  config["noise_std"] = 0.01 / 3;
+  r = Calib(TriadCsv(dirs, 9.80665, 1.0, 0.1, 0.01, 9), config);
+  EXPECT_TRUE(HasReason(r["verdict"], "times the given noise_std")) << r["diagnostics"].dump();
+}
+
+TEST(Gate, ServerDefaultsApplyAndTheConfigOverridesThemPerKey) {
+  const json server = {{"pca", {{"max_scale_std", 0.002}, {"scale_range", 0.5}}}};
+  json config = {{"method", "pca"}, {"acceptance", {{"scale_range", 0.2}, {"max_chi2", nullptr}}}};
+  const AcceptanceLimits limits = EffectiveAcceptance("pca", server, config);
+  EXPECT_EQ(*limits.Get("max_scale_std"), 0.002);    // server
+  EXPECT_EQ(*limits.Get("scale_range"), 0.2);        // config wins
+  EXPECT_FALSE(limits.Get("max_chi2").has_value());  // null: no limit
+  EXPECT_EQ(*limits.Get("max_axis_std"), 0.01);      // built-in default
+  // The server defaults of another method do not leak.
+  EXPECT_EQ(*EffectiveAcceptance("imu", server, json::object()).Get("max_scale_std"), 0.01);
+}
+
+TEST(Gate, InvalidAcceptanceKeysAreErrorsNamingThem) {
+  CommonConfig common;
+  json config = {{"method", "pca"}, {"acceptance", {{"max_sclae_std", 0.1}}}};
+  Status s = ValidateConfig(config, &common);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+  EXPECT_EQ(s.field(), "acceptance.max_sclae_std");
+  EXPECT_NE(s.message().find("max_scale_std"), std::string::npos) << s.message();  // known keys
+  config["acceptance"] = {{"max_scale_std", -1}};
+  s = ValidateConfig(config, &common);
+  EXPECT_EQ(s.field(), "acceptance.max_scale_std");
+  config["acceptance"] = {{"max_offset", 0.001}};  // an array key is not a pca key
+  EXPECT_EQ(ValidateConfig(config, &common).field(), "acceptance.max_offset");
+  config["acceptance"] = "strict";
+  EXPECT_EQ(ValidateConfig(config, &common).field(), "acceptance");
+  config["acceptance"] = {{"max_scale_std", 0.001}, {"scale_range", nullptr}};
+  EXPECT_TRUE(ValidateConfig(config, &common).ok());
+  EXPECT_EQ(ValidateServerAcceptance(json{{"pcb", json::object()}}, "f.json").field(), "pcb");
+  EXPECT_EQ(ValidateServerAcceptance(json{{"imu", {{"max_offset", 1}}}}, "f.json").field(),
+            "imu.max_offset");
+}
+
+// ---- imu: results built by hand around the limits ----
+
+json ImuResult(double accel_scale, double scale_std, double misalignment_std, double bias_std,
+               double chi2) {
+  auto triad = [](double scale) {
+    return json{{"bias", {0.01, -0.02, 0.03}},
+                {"scale", {scale, scale, scale}},
+                {"misalignment", {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}}};
+  };
+  auto triad_std = [&](double scale) {
+    return json{{"bias_std", {bias_std, bias_std, bias_std}},
+                {"scale_std", {scale_std * scale, scale_std * scale, scale_std * scale}},
+                {"misalignment_std",
+                 {{0, misalignment_std, misalignment_std}, {0, 0, misalignment_std}, {0, 0, 0}}}};
+  };
+  return {{"method", "imu"},
+          {"parameters",
+           {{"imus",
+             {{{"name", "0"}, {"accelerometer", triad(accel_scale)}, {"gyroscope", triad(1.0)}}}}}},
+          {"uncertainty",
+           {{"imus",
+             {{{"name", "0"},
+               {"accelerometer", triad_std(accel_scale)},
+               {"gyroscope", triad_std(1.0)}}}}}},
+          {"diagnostics",
+           {{"imus",
+             {{{"name", "0"}, {"chi2_per_dof", chi2}, {"coverage", {{"sufficient", true}}}}}}}}};
+}
+
+json JudgeWith(const char* method, const json& result, const json& config) {
+  json r = result;
+  JudgeResult(*FindMethod(method), config, json(), &r);
+  return r["verdict"];
+}
+
+TEST(Gate, ImuLimitsHoldJustInsideAndFailJustOutside) {
+  const json config = {{"method", "imu"}};
+  EXPECT_EQ(JudgeWith("imu", ImuResult(1.0, 0.009, 0.009, 0.001, 3.9), config)["status"],
+            "accepted");
+  json v = JudgeWith("imu", ImuResult(1.0, 0.011, 0.009, 0.001, 3.9), config);
+  EXPECT_TRUE(HasReason(v, "scale factor too uncertain")) << v.dump();
+  EXPECT_EQ(v["reasons"].size(), 1u) << v.dump();  // one reason per rule, listing every triad
+  v = JudgeWith("imu", ImuResult(1.0, 0.009, 0.011, 0.001, 3.9), config);
+  EXPECT_TRUE(HasReason(v, "misalignment too uncertain")) << v.dump();
+  v = JudgeWith("imu", ImuResult(1.0, 0.009, 0.009, 0.006, 3.9),
+                config);  // gyro 0.006 > 0.005 rad/s
+  EXPECT_TRUE(HasReason(v, "bias too uncertain")) << v.dump();
+  EXPECT_EQ(v["reasons"].size(), 1u) << v.dump();  // the accelerometer's 0.006 m/s² is fine
+  v = JudgeWith("imu", ImuResult(1.0, 0.009, 0.009, 0.001, 4.1), config);
+  EXPECT_TRUE(HasReason(v, "chi2/dof 4.1 above 4")) << v.dump();
+  v = JudgeWith("imu", ImuResult(1.09, 0.009, 0.009, 0.001, 1), config);
+  EXPECT_EQ(v["status"], "accepted") << v.dump();
+  v = JudgeWith("imu", ImuResult(1.11, 0.009, 0.009, 0.001, 1), config);
+  EXPECT_TRUE(HasReason(v, "more than 10 % from the nominal unit conversion")) << v.dump();
+}
+
+TEST(Gate, ImuUnitMixUpsNameTheProbableCause) {
+  // Readings in g taken as m/s²: K ≈ 9.81 against the nominal 1.
+  json v = JudgeWith("imu", ImuResult(9.80665, 0.001, 0.001, 0.001, 1), {{"method", "imu"}});
+  EXPECT_TRUE(HasReason(v, "look like g but are taken as m/s^2")) << v.dump();
+  // Readings in m/s² taken as g: K ≈ 1 against the nominal 9.80665.
+  v = JudgeWith("imu", ImuResult(1.0, 0.001, 0.001, 0.001, 1),
+                {{"method", "imu"}, {"accel_unit", "g"}});
+  EXPECT_TRUE(HasReason(v, "look like m/s^2 but are taken as g")) << v.dump();
+  EXPECT_TRUE(HasReason(v, "accel_unit g")) << v.dump();
+}
+
+// ---- array ----
+
+json ArrayResult(double offset, double std, double accel_rms) {
+  json positions = json::array(), stds = json::array();
+  for (int k = 0; k < 3; ++k) {
+    const double o = k == 0 ? 0.0 : offset;  // the reference stays at its nominal position
+    positions.push_back(
+        {{"name", "a" + std::to_string(k)}, {"position", {o, 0, 0}}, {"offset", {o, 0, 0}}});
+    stds.push_back({{"name", "a" + std::to_string(k)}, {"std", {k == 0 ? 0.0 : std, std / 2, 0}}});
+  }
+  return {{"method", "array"},
+          {"parameters", {{"reference", 0}, {"positions", positions}}},
+          {"uncertainty", {{"positions", stds}}},
+          {"diagnostics",
+           {{"converged", true},
+            {"residual_rms", {{"accelerometer", accel_rms}, {"gyroscope", 0.001}}},
+            {"noise_configured", {{"accelerometer", 0.04}, {"gyroscope", 0.001}}}}}};
+}
+
+TEST(Gate, ArrayLimitsHoldJustInsideAndFailJustOutside) {
+  const json config = {{"method", "array"}};
+  EXPECT_EQ(JudgeWith("array", ArrayResult(0.0049, 9e-5, 0.079), config)["status"], "accepted");
+  json v = JudgeWith("array", ArrayResult(0.0051, 9e-5, 0.079), config);
+  EXPECT_TRUE(HasReason(v, "more than 5 mm from its nominal position")) << v.dump();
+  v = JudgeWith("array", ArrayResult(0.0049, 1.1e-4, 0.079), config);
+  EXPECT_TRUE(HasReason(v, "position too uncertain")) << v.dump();
+  v = JudgeWith("array", ArrayResult(0.0049, 9e-5, 0.081), config);  // (0.081/0.04)² = 4.1
+  EXPECT_TRUE(HasReason(v, "accelerometer residuals are 2.02 times")) << v.dump();
+}
+
+TEST(Gate, ArrayModelFullTriadsAreJudgedLikeImu) {
+  json r = ArrayResult(0.001, 1e-5, 0.04);
+  const json imu = ImuResult(1.0, 0.001, 0.001, 0.001, 1);
+  r["parameters"]["imus"] = imu["parameters"]["imus"];
+  r["uncertainty"]["imus"] = imu["uncertainty"]["imus"];
+  EXPECT_EQ(JudgeWith("array", r, {{"method", "array"}})["status"], "accepted");
+  // Gyroscope readings in rad/s with gyro_unit deg/s: K ≈ 1 rad/s per reading, 57 × the nominal.
+  const json w = JudgeWith("array", r, {{"method", "array"}, {"gyro_unit", "deg/s"}});
+  EXPECT_TRUE(HasReason(w, "look like rad/s but are taken as deg/s")) << w.dump();
+}
+
+TEST(Gate, AResultThatCannotBeJudgedIsRejected) {
+  // A damaged result (a string where a count belongs) fails closed instead of throwing.
+  const json v =
+      JudgeWith("pca", {{"method", "pca"}, {"diagnostics", {{"degrees_of_freedom", "x"}}}},
+                {{"method", "pca"}});
+  EXPECT_EQ(v["status"], "rejected");
+  EXPECT_TRUE(HasReason(v, "could not be judged")) << v.dump();
+}
+
+// ---- noise ----
+
+TEST(Gate, NoiseNeedsAStationaryLogAndAPreciseWhiteNoise) {
+  auto result = [](bool stationary, double rel_std, double density) {
+    return json{{"method", "noise"},
+                {"parameters",
+                 {{"channels", {{{"name", "a0_x"}, {"unit", "m/s^2"}, {"white_noise", density}}}}}},
+                {"uncertainty",
+                 {{"channels", {{{"name", "a0_x"}, {"white_noise_std", rel_std * density}}}}}},
+                {"diagnostics", {{"stationary", stationary}}}};
+  };
+  const json config = {{"method", "noise"}};
+  EXPECT_EQ(JudgeWith("noise", result(true, 0.19, 0.002), config)["status"], "accepted");
+  EXPECT_TRUE(HasReason(JudgeWith("noise", result(true, 0.21, 0.002), config), "too uncertain"));
+  EXPECT_TRUE(HasReason(JudgeWith("noise", result(false, 0.1, 0.002), config), "not stationary"));
+  EXPECT_TRUE(HasReason(JudgeWith("noise", result(true, 0.1, 0.2), config), "far above"));
+  json missing = result(true, 0.1, 0.002);
+  missing["parameters"]["channels"][0]["white_noise"] = nullptr;
+  EXPECT_TRUE(HasReason(JudgeWith("noise", missing, config), "no white-noise density"));
+}
+
+}  // namespace
+}  // namespace calibd::server
