@@ -1101,10 +1101,11 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     if (methods.empty()) {
       const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
       SendError(res, 404, "not_found",
-                hint.empty() ? "no accepted calibration for device '" + serial +
-                                   "' (rejected and revoked results are never served; see /devices/" +
-                                   UrlEncode(serial) + ")"
-                             : hint);
+                hint.empty()
+                    ? "no accepted calibration for device '" + serial +
+                          "' (rejected and revoked results are never served; see /devices/" +
+                          UrlEncode(serial) + ")"
+                    : hint);
       return;
     }
     method = methods[0];
@@ -1117,10 +1118,11 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     if (s.code() == StatusCode::kNotFound) {
       const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
       SendError(res, 404, "not_found",
-                hint.empty() ? "no accepted " + method + " calibration for device '" + serial +
-                                   "' (rejected and revoked results are never served; see /devices/" +
-                                   UrlEncode(serial) + ")"
-                             : hint);
+                hint.empty()
+                    ? "no accepted " + method + " calibration for device '" + serial +
+                          "' (rejected and revoked results are never served; see /devices/" +
+                          UrlEncode(serial) + ")"
+                    : hint);
       return;
     }
     if (!s.ok()) return (void)SendStatus(res, s);

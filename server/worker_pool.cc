@@ -164,10 +164,9 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       });
       if (!s.ok()) return fail(s, s.IsTransient());
       if (parsed.ok() && !cancel.load()) parsed = parser.Finish();
-      s = parsed.ok()
-              ? CalibrateParsed(&parser, file_name, config, &result, &cancel,
-                                options_.acceptance, options_.executor)
-              : parsed;
+      s = parsed.ok() ? CalibrateParsed(&parser, file_name, config, &result, &cancel,
+                                        options_.acceptance, options_.executor)
+                      : parsed;
     } catch (const std::bad_alloc&) {
       s = Status::IoError("out of memory while calibrating");
     } catch (const std::exception&) {
