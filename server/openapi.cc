@@ -140,8 +140,10 @@ json Build() {
         {"400", ErrorResponse("malformed recording or config (line, column, field)")},
         {"401", ErrorResponse("missing or wrong token")},
         {"411", ErrorResponse("no Content-Length and not chunked")},
-        {"413", ErrorResponse("body larger than --max-upload-bytes")},
-        {"415", ErrorResponse("not text/csv or multipart/form-data, or compressed")},
+        {"413", ErrorResponse("body (or the gzip'd recording decompressed) larger than "
+                              "--max-upload-bytes, or expanding more than --max-gzip-ratio")},
+        {"415", ErrorResponse("not text/csv or multipart/form-data, or an encoding other than "
+                              "gzip")},
         {"503", ErrorResponse("database busy")}}}};
   paths["/jobs"]["post"] = {
       {"summary", "Queue a calibration of a stored recording with another config"},
