@@ -219,6 +219,10 @@ class Imu : public Method {
     if (!s.ok()) return s;
     s = CheckLogTimes(log, "imu");
     if (!s.ok()) return s;
+    // Mean sample rate (Hz) over the log.
+    const double rate = log.t.size() > 1 ? static_cast<double>(log.t.size() - 1) /
+                                               (log.t[log.t.size() - 1] - log.t[0])
+                                         : 0.0;
     const size_t imus = log.accel_names.size();
     if (log.gyro_names.size() != imus) {
       return Status::InvalidInput(
@@ -268,10 +272,14 @@ class Imu : public Method {
         {"parameters",
          {{"gravity", Num(options.gravity)},
           {"gyro_bias", core::GyroBiasModelName(options.gyro_bias)},
+          // The nominal SI per reading unit the log was read with (exports to SI readings).
+          {"accel_unit", Num(options.accel_unit)},
+          {"gyro_unit", Num(options.gyro_unit)},
           {"imus", params}}},
         {"uncertainty", {{"imus", stds}}},
         {"diagnostics",
          {{"statics", statics},
+          {"rate", Num(rate)},
           {"static_window", Num(options.detection.static_window)},
           {"min_static", Num(options.detection.min_static)},
           {"threshold_choice", results.front().threshold_choice},

@@ -1071,15 +1071,16 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
   if (format == "yaml") {
     s = ResultToKalibrYaml(result, context, &text);
     if (!s.ok()) return (void)SendStatus(res, s);
-    res.set_header("Content-Disposition", "attachment; filename=\"imu.yaml\"");
+    res.set_header("Content-Disposition", method == "imu"
+                                              ? "attachment; filename=\"kalibr_imu_chain.yaml\""
+                                              : "attachment; filename=\"imu.yaml\"");
     res.set_content(text, "application/yaml");
     return;
   }
   if (method == "noise" || method == "imu") {
-    return (void)SendStatus(res,
-                            Status::InvalidInput("the " + method + " method exports json and csv" +
-                                                 (method == "noise" ? " and yaml" : ""))
-                                .WithField("format"));
+    return (void)SendStatus(
+        res, Status::InvalidInput("the " + method + " method exports json, csv and yaml")
+                 .WithField("format"));
   }
   s = ResultToHeader(result, context, &text);
   if (!s.ok()) return (void)SendStatus(res, s);
