@@ -326,6 +326,10 @@ Status SimulateImuFiles(const core::ImuSimulationOptions& options, std::string* 
   return Status::Ok();
 }
 
+Status ParseImuOptions(const json& config, core::ImuOptions* options) {
+  return ParseImuConfig(config, options);
+}
+
 const Method& ImuMethod() {
   static const Imu method;
   return method;

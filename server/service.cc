@@ -26,6 +26,7 @@
 #include "server/method.h"
 #include "server/metrics.h"
 #include "server/recording.h"
+#include "server/recording_routes.h"
 #include "server/worker_pool.h"
 #include "storage/store.h"
 
@@ -561,6 +562,7 @@ void Service::Impl::SetupRoutes() {
   http.Get("/api/v1/openapi.json", [](const httplib::Request&, httplib::Response& res) {
     res.set_content(JsonBody(OpenApiDocument()), "application/json");
   });
+  RegisterRecordingRoutes(&http, store.get());  // /segments and the recording page
   RegisterHtmlRoutes(&http, store.get());
 
   // Known paths with another method: 405 with Allow; everything else: 404.

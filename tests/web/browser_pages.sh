@@ -47,6 +47,12 @@ j4=$(curl -sf -H 'Content-Type: text/csv' --data-binary @"$tmp/bad.csv" \
   "$base/api/v1/recordings?method=pca&device=%22%3E%3Cimg%20src%3Dx%20onerror%3Dalert(1)%3E" |
   job_id)
 wait_job "$j4"
+# An inertial log: its recording page has the timeline with the statics.
+"$bin" simulate imu --out "$tmp/imu" --seed 3 --statics 12 2>/dev/null
+j5=$(upload "$tmp/imu" 'IMU-1')
+wait_job "$j5"
+r5=$(curl -sf "$base/api/v1/jobs/$j5" |
+  python3 -c 'import json, sys; print(json.load(sys.stdin)["recording_id"])')
 
 render() {  # render NAME PATH -> DOM dump in $tmp/NAME.html, screenshot in $shots/NAME.png
   local flags=(--headless --no-sandbox --disable-gpu --disable-background-networking
@@ -77,6 +83,7 @@ render array "/jobs/$j3"
 render failed "/jobs/$j4"
 render device "/devices/$hostile"
 render missing /jobs/999999
+render recording "/recordings/$r5"
 
 expect history 'class="page-history' 'table-history' 'form class="filters\|class="filters'
 expect pca 'class="page-job' 'table-pca-parameters' 'plot-singular-values' 'plot-magnitude-error' \
@@ -85,7 +92,9 @@ expect array 'table-array-parameters' 'plot-cost' 'plot-positions-xy' 'plot-posi
 expect failed 'callout-error' 'badge-failed'
 expect device 'class="page-device' 'table-calibrations' 'table-drift-pca'
 expect missing 'class="page-error'
-for page in history pca array failed device; do
+expect recording 'class="page-recording' 'plot-timeline-accel' 'plot-timeline-gyro' \
+  'table-intervals' 'table-thresholds' "href=\"/jobs/$j5\""
+for page in history pca array failed device recording; do
   reject "$page" '<script' '<img'
 done
 echo "browser pages: screenshots in $shots"
