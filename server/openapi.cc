@@ -220,6 +220,21 @@ json Build() {
          {{"description", "the CSV as uploaded"},
           {"content", {{"text/csv", {{"schema", {{"type", "string"}}}}}}}}},
         {"404", ErrorResponse("no such recording")}}}};
+  paths["/recordings/{id}/segments"]["get"] = {
+      {"summary", "The static intervals of a stored inertial log (SPEC section 7)"},
+      {"parameters",
+       json::array({PathParam("id", "integer", "recording id"),
+                    QueryParam("static_window", "number", "s, default 1"),
+                    QueryParam("min_static", "number", "s, default 1"),
+                    QueryParam("static_threshold", "string",
+                               "{\"accelerometer\": x, \"gyroscope\": y}, reading units"),
+                    QueryParam("accel_unit", "string", "m/s^2 per reading unit"),
+                    QueryParam("gyro_unit", "string", "rad/s per reading unit")})},
+      {"responses",
+       {{"200", JsonResponse("intervals, thresholds, gaps", {{"type", "object"}})},
+        {"400", ErrorResponse("bad option (field)")},
+        {"404", ErrorResponse("no such recording")},
+        {"422", ErrorResponse("not an inertial log")}}}};
   paths["/healthz"]["get"] = {
       {"summary", "Liveness (also at /healthz)"},
       {"responses",

@@ -592,6 +592,7 @@ TEST_F(HttpApi, OpenApiDocumentsEveryRouteTheServerHas) {
                                         "get /devices/{serial}/calibration",
                                         "get /recordings/{id}",
                                         "get /recordings/{id}/data",
+                                        "get /recordings/{id}/segments",
                                         "get /healthz",
                                         "get /metrics",
                                         "get /openapi.json"};
