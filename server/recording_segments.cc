@@ -86,7 +86,7 @@ Status ComputeSegments(storage::Store* store, int64_t recording_id, const Segmen
   ArrayRecording log;
   s = parser.TakeArray(&log);
   if (!s.ok()) return s;
-  s = CheckLogTimes(log, "static detection");
+  s = CheckLogTimes(log, "static detection", &parser.summary());
   if (!s.ok()) return s;
   std::vector<Eigen::MatrixX3d> triads;
   std::vector<core::TriadSeries> series;

@@ -22,9 +22,11 @@
 #include "server/gzip_stream.h"
 #include "server/http_server.h"
 #include "server/http_util.h"
+#include "server/inertial_log.h"
 #include "server/instance.h"
 #include "server/method.h"
 #include "server/metrics.h"
+#include "server/noise_reference.h"
 #include "server/recording.h"
 #include "server/recording_routes.h"
 #include "server/worker_pool.h"
@@ -192,6 +194,9 @@ bool ParseId(const std::string& text, int64_t* id) {
 // calibration it used.
 Status ResolveCalibrationReference(storage::Store* store, json* config) {
   if (!config->is_object()) return Status::Ok();
+  // accel_noise / gyro_noise: {"job": ID} of a noise job, resolved the same way.
+  Status noise = ResolveNoiseReferences(store, config);
+  if (!noise.ok()) return noise;
   auto it = config->find("accelerometer_calibration");
   if (it == config->end() || !it->is_object() || !it->contains("job") || it->contains("result")) {
     return Status::Ok();
@@ -798,6 +803,10 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     if (!s.ok()) return finish(SendStatus(res, s));
     s = ValidateConfig(config, &common);
     if (!s.ok()) return finish(SendStatus(res, s));
+    if (common.method == "imu" || common.method == "noise") {  // raw-log methods: t increases
+      s = CheckTimesIncrease(summary, common.method);
+      if (!s.ok()) return finish(SendStatus(res, s));
+    }
     if (!FindMethod(common.method)->Reads(summary.layout)) {
       return finish(SendStatus(res, Status::InvalidInput(std::string("method '") + common.method +
                                                          "' cannot read the recording's " +
