@@ -1,6 +1,7 @@
 #include "server/recording_segments.h"
 
 #include <cmath>
+#include <mutex>
 
 #include "server/config.h"
 #include "server/imu_method.h"
@@ -20,12 +21,11 @@ json Vec(const Eigen::Vector3d& v) { return json::array({Num(v[0]), Num(v[1]), N
 // |row| of a triad's three columns, times `unit`, decimated to about `points` (min/max per
 // bucket, so bumps survive).
 RecordingSegments::Trace MakeTrace(const std::string& name, const Eigen::VectorXd& t,
-                                   const Eigen::MatrixXd& columns, Eigen::Index first, double unit,
-                                   size_t points) {
+                                   const Eigen::MatrixX3d& triad, double unit, size_t points) {
   std::vector<double> x(static_cast<size_t>(t.size())), y(x.size());
   for (Eigen::Index i = 0; i < t.size(); ++i) {
     x[static_cast<size_t>(i)] = t[i];
-    y[static_cast<size_t>(i)] = unit * columns.block(i, first, 1, 3).norm();
+    y[static_cast<size_t>(i)] = unit * triad.row(i).norm();
   }
   RecordingSegments::Trace trace;
   trace.name = name;
@@ -63,6 +63,10 @@ Status ParseSegmentsQuery(const std::multimap<std::string, std::string>& params,
 
 Status ComputeSegments(storage::Store* store, int64_t recording_id, const SegmentsOptions& options,
                        RecordingSegments* out) {
+  // One at a time per process: a 2-hour 400 Hz log costs ~2 s and a few hundred MB while it is
+  // read (bench/README.md), and page views must not multiply that.
+  static std::mutex& one_at_a_time = *new std::mutex;
+  std::lock_guard<std::mutex> lock(one_at_a_time);
   storage::RecordingInfo info;
   Status s = store->GetRecording(recording_id, &info);
   if (!s.ok()) return s;
@@ -97,6 +101,8 @@ Status ComputeSegments(storage::Store* store, int64_t recording_id, const Segmen
   for (size_t k = 0; k < log.gyro_names.size(); ++k) {
     triads.emplace_back(log.gyro.middleCols(3 * static_cast<Eigen::Index>(k), 3));
   }
+  log.accel.resize(0, 0);  // the triads hold the readings now
+  log.gyro.resize(0, 0);
   for (size_t i = 0; i < triads.size(); ++i) {
     const bool accel = i < log.accel_names.size();
     core::TriadSeries ts;
@@ -120,15 +126,12 @@ Status ComputeSegments(storage::Store* store, int64_t recording_id, const Segmen
   s = core::DetectStatics(log.t, series, options.detection, &out->detection);
   if (!s.ok()) return s;
   if (options.timeline_points > 0) {
-    for (size_t k = 0; k < log.accel_names.size(); ++k) {
-      out->accel_traces.push_back(MakeTrace(log.accel_names[k], log.t, log.accel,
-                                            3 * static_cast<Eigen::Index>(k), options.accel_unit,
-                                            options.timeline_points));
-    }
-    for (size_t k = 0; k < log.gyro_names.size(); ++k) {
-      out->gyro_traces.push_back(MakeTrace(log.gyro_names[k], log.t, log.gyro,
-                                           3 * static_cast<Eigen::Index>(k), options.gyro_unit,
-                                           options.timeline_points));
+    for (size_t i = 0; i < triads.size(); ++i) {
+      const bool accel = i < log.accel_names.size();
+      (accel ? out->accel_traces : out->gyro_traces)
+          .push_back(MakeTrace(series[i].name, log.t, triads[i],
+                               accel ? options.accel_unit : options.gyro_unit,
+                               options.timeline_points));
     }
   }
   return Status::Ok();
