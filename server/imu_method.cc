@@ -342,6 +342,7 @@ class Imu : public Method {
           {"rate", Num(rate)},
           {"gaps", gaps},
           {"noise_jobs", NoiseJobsJson(config)},
+          {"noise_model", NoiseModelJson(config)},
           {"saturated_samples", d.saturated_samples},
           {"static_window", Num(options.detection.static_window)},
           {"min_static", Num(options.detection.min_static)},

@@ -36,7 +36,8 @@ Status Resolve(storage::Store* store, const std::string& key, json* value) {
   }
   const char prefix = key == "accel_noise" ? 'a' : 'g';
   const json rate = result["diagnostics"].value("rate", json());
-  double worst = -1;
+  double worst = -1, worst_walk = -1;
+  bool walk_seen = true;  // every channel of the type shows its random walk
   json channels = json::array();
   for (const json& c : result["parameters"].value("channels", json::array())) {
     const std::string name = c.value("name", "");
@@ -46,8 +47,14 @@ Status Resolve(storage::Store* store, const std::string& key, json* value) {
       return KeyError(
           key, "noise job " + std::to_string(id) + " does not show the white noise of " + name);
     }
-    channels.push_back({{"name", name}, {"white_noise", n}});
+    const json& k = c.value("random_walk", json());
+    channels.push_back({{"name", name}, {"white_noise", n}, {"random_walk", k}});
     worst = std::max(worst, n.get<double>());
+    if (k.is_number()) {
+      worst_walk = std::max(worst_walk, k.get<double>());
+    } else {
+      walk_seen = false;
+    }
   }
   if (worst <= 0 || !rate.is_number() || !(rate.get<double>() > 0)) {
     return KeyError(key, std::string("noise job ") + std::to_string(id) + " has no " +
@@ -56,6 +63,7 @@ Status Resolve(storage::Store* store, const std::string& key, json* value) {
   *value = {{"job", id},
             {"sigma", worst * std::sqrt(rate.get<double>())},
             {"white_noise", worst},
+            {"random_walk", walk_seen && worst_walk > 0 ? json(worst_walk) : json()},
             {"rate", rate},
             {"channels", channels}};
   return Status::Ok();
@@ -105,6 +113,20 @@ Status ReadNoiseLevel(const json& config, const char* key, std::optional<NoiseLe
   }
   *out = level;
   return Status::Ok();
+}
+
+json NoiseModelJson(const json& config) {
+  json out = {{"accelerometer", nullptr}, {"gyroscope", nullptr}};
+  for (auto [key, sensor] : {std::pair<const char*, const char*>{"accel_noise", "accelerometer"},
+                             {"gyro_noise", "gyroscope"}}) {
+    auto it = config.find(key);
+    if (it != config.end() && it->is_object() && it->contains("sigma")) {
+      out[sensor] = {{"job", it->value("job", json())},
+                     {"white_noise", it->value("white_noise", json())},
+                     {"random_walk", it->value("random_walk", json())}};
+    }
+  }
+  return out;
 }
 
 json NoiseJobsJson(const json& config) {

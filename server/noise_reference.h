@@ -2,7 +2,8 @@
 // array configs over HTTP.
 //
 // At enqueue (upload or POST /jobs), ResolveNoiseReferences replaces each such reference by
-// {"job": ID, "sigma": σ, "white_noise": N, "rate": f, "channels": [...]} taken from that job's
+// {"job": ID, "sigma": σ, "white_noise": N, "random_walk": K or null, "rate": f, "channels": [...]}
+// taken from that job's
 // stored result, so the queued job is self-contained (a later noise job cannot change it) and
 // says which job it used. σ is the per-sample standard deviation the methods take:
 // σ = N · √f, with N the largest white-noise density (unit/√Hz, SI) over that sensor type's
@@ -44,6 +45,9 @@ Status ReadNoiseLevel(const nlohmann::json& config, const char* key,
 // {"accelerometer": ID or null, "gyroscope": ID or null}: the noise jobs a config's resolved
 // references came from, for the result's diagnostics.noise_jobs.
 nlohmann::json NoiseJobsJson(const nlohmann::json& config);
+// {"accelerometer": {"job", "white_noise", "random_walk"} or null, "gyroscope": ...}: Kalibr's
+// figures (SI; the largest axis) of the resolved references, for exports of the result.
+nlohmann::json NoiseModelJson(const nlohmann::json& config);
 
 }  // namespace calibd::server
 

@@ -102,9 +102,10 @@ Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context,
     << "# (w_m - b_g), Da = Ta^-1 and Dw = Tw^-1 lower triangular, readings a_m, w_m in SI.\n"
     << "# calibd's a = T_a K_a (y_a - b_a), w = T_g K_g (y_g - b_g) are the same up to the\n"
     << "# rotation R_BODYtoI below (frame I: Da lower triangular; calibd's body frame: T_a\n"
-    << "# upper triangular). Noise densities: the static intervals' per-sample spread /\n"
-    << "# sqrt(update_rate). Random walks are not visible in a hand-held log: run a calibd noise\n"
-    << "# job on a long stationary log for accelerometer_random_walk and gyroscope_random_walk.\n";
+    << "# upper triangular). Noise figures: from the noise job the calibration named in\n"
+    << "# accel_noise/gyro_noise ({\"job\": ID}); else the noise densities from the static\n"
+    << "# intervals' per-sample spread / sqrt(update_rate), and no random walks (a hand-held log\n"
+    << "# cannot show them: run a calibd noise job on a long stationary log).\n";
   for (size_t k = 0; k < imus.size(); ++k) {
     const json& imu = imus[k];
     Eigen::Matrix3d ma, mg;
@@ -143,14 +144,35 @@ Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context,
       << "    - [0.0, 1.0, 0.0, 0.0]\n"
       << "    - [0.0, 0.0, 1.0, 0.0]\n"
       << "    - [0.0, 0.0, 0.0, 1.0]\n";
-    if (accel_sigma > 0 && gyro_sigma > 0 && rate > 0) {
-      y << "  accelerometer_noise_density: " << Num(accel_sigma / std::sqrt(rate))
-        << "  # m/s^2/sqrt(Hz), largest axis\n"
-        << "  gyroscope_noise_density: " << Num(gyro_sigma / std::sqrt(rate))
-        << "  # rad/s/sqrt(Hz), largest axis\n";
+    // Kalibr's noise figures: from the noise job the calibration used (accel_noise/gyro_noise
+    // {"job": ID}), else the densities from the statics' spread; random walks only from a job.
+    const json& noise_model = diagnostics.value("noise_model", json::object());
+    for (int type = 0; type < 2; ++type) {
+      const char* sensor = type == 0 ? "accelerometer" : "gyroscope";
+      const char* units[2][2] = {{"m/s^2/sqrt(Hz)", "m/s^3/sqrt(Hz)"},
+                                 {"rad/s/sqrt(Hz)", "rad/s^2/sqrt(Hz)"}};
+      const json& from_job = noise_model.is_object() ? noise_model.value(sensor, json()) : json();
+      const std::string job =
+          from_job.is_object() && from_job.value("job", json()).is_number_integer()
+              ? std::to_string(from_job["job"].get<int64_t>())
+              : "";
+      const double sigma = type == 0 ? accel_sigma : gyro_sigma;
+      if (!job.empty() && from_job.value("white_noise", json()).is_number()) {
+        y << "  " << sensor << "_noise_density: " << Num(from_job["white_noise"].get<double>())
+          << "  # " << units[type][0] << ", largest axis, calibd noise job " << job << "\n";
+      } else if (sigma > 0 && rate > 0) {
+        y << "  " << sensor << "_noise_density: " << Num(sigma / std::sqrt(rate)) << "  # "
+          << units[type][0] << ", largest axis, from the static intervals\n";
+      }
+      if (!job.empty() && from_job.value("random_walk", json()).is_number()) {
+        y << "  " << sensor << "_random_walk: " << Num(from_job["random_walk"].get<double>())
+          << "  # " << units[type][1] << ", largest axis, calibd noise job " << job << "\n";
+      } else {
+        y << "  # " << sensor << "_random_walk: not known; run a calibd noise job and give it as "
+          << (type == 0 ? "accel_noise" : "gyro_noise") << ": {\"job\": ID}\n";
+      }
     }
-    y << "  # accelerometer_random_walk, gyroscope_random_walk: from a calibd noise job\n"
-      << "  rostopic: /imu" << k << "\n"
+    y << "  rostopic: /imu" << k << "\n"
       << "  time_offset: 0.0\n"
       << "  update_rate: " << Num(rate) << "\n"
       << "  model: \"calibrated\"\n";

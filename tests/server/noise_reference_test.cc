@@ -50,9 +50,13 @@ class NoiseReference : public ::testing::Test {
   void SetUp() override {
     ASSERT_EQ(server_.error(), "");
     NoiseSimulationFileOptions sim;
-    sim.rate = 100;
-    sim.seconds = 600;
+    sim.rate = 50;
+    sim.seconds = 3600;
     sim.seed = 9;
+    // Random walks that dominate from ~10-20 s on, so an hour shows them in every channel (as in
+    // noise_method_test).
+    sim.accel_random_walk = 4e-4;
+    sim.gyro_random_walk = 2e-5;
     std::string csv;
     json config, truth;
     ASSERT_TRUE(SimulateNoiseFiles(sim, &csv, &config, &truth).ok());
@@ -94,6 +98,22 @@ TEST_F(NoiseReference, AnImuJobUsesTheNoiseJobsFiguresRecordsAndLinksIt) {
   for (int i = 0; i < 3; ++i) {  // the σ the fit used
     EXPECT_NEAR(diag["imus"][0]["noise"]["accelerometer"][i].get<double>(), sa, 1e-12 * sa);
     EXPECT_NEAR(diag["imus"][0]["noise"]["gyroscope"][i].get<double>(), sg, 1e-12 * sg);
+  }
+  // The OpenVINS export of this calibration carries the noise job's Kalibr figures.
+  auto yaml = server_.Client().Get("/api/v1/devices/IMU-N/calibration?method=imu&format=yaml");
+  ASSERT_TRUE(yaml);
+  ASSERT_EQ(yaml->status, 200) << yaml->body;
+  for (const char* sensor : {"accelerometer", "gyroscope"}) {
+    double walk = 0;
+    for (const json& c : noise_result_["parameters"]["channels"]) {
+      if (c["name"].get<std::string>()[0] != sensor[0]) continue;
+      ASSERT_TRUE(c["random_walk"].is_number()) << "an hour should show it: " << c.dump();
+      walk = std::max(walk, c["random_walk"].get<double>());
+    }
+    const std::string key = std::string("  ") + sensor + "_random_walk: ";
+    const size_t at = yaml->body.find(key);
+    ASSERT_NE(at, std::string::npos) << yaml->body;
+    EXPECT_DOUBLE_EQ(std::stod(yaml->body.substr(at + key.size())), walk);
   }
   auto page = server_.Client().Get(("/jobs/" + job["id"].dump()).c_str());
   ASSERT_TRUE(page);

@@ -117,6 +117,16 @@ TEST(OpenVinsYaml, IntrinsicsPredictCalibdsModelUpToOneRotationInTheCalibratedFo
     EXPECT_NEAR(YamlNumber(yaml, "gyroscope_noise_density"), sg.maxCoeff() / std::sqrt(rate),
                 1e-15);
     EXPECT_DOUBLE_EQ(YamlNumber(yaml, "update_rate"), rate);
+    EXPECT_TRUE(std::isnan(YamlNumber(yaml, "accelerometer_random_walk"))) << yaml;
+    // With noise jobs, their figures are written instead (Kalibr's keys, all four).
+    result["diagnostics"]["noise_model"] = {
+        {"accelerometer", {{"job", 3}, {"white_noise", 2e-3}, {"random_walk", 4e-4}}},
+        {"gyroscope", {{"job", 3}, {"white_noise", 1e-4}, {"random_walk", 2e-5}}}};
+    ASSERT_TRUE(ImuResultToOpenVinsYaml(result, {7, "SN-1", "imu", "2026-01-01"}, &yaml).ok());
+    EXPECT_DOUBLE_EQ(YamlNumber(yaml, "accelerometer_noise_density"), 2e-3);
+    EXPECT_DOUBLE_EQ(YamlNumber(yaml, "accelerometer_random_walk"), 4e-4);
+    EXPECT_DOUBLE_EQ(YamlNumber(yaml, "gyroscope_noise_density"), 1e-4);
+    EXPECT_DOUBLE_EQ(YamlNumber(yaml, "gyroscope_random_walk"), 2e-5);
   }
 }
 
