@@ -7,6 +7,7 @@
 
 #include "core/array_simulation.h"
 #include "server/inertial_log.h"
+#include "server/noise_reference.h"
 
 namespace calibd::server {
 namespace {
@@ -331,16 +332,16 @@ Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
   Status s = ParseGeometry(*g, geometry_part);
   if (!s.ok()) return s;
 
-  auto a = config.find("accel_noise");
-  if (a == config.end()) return KeyError("accel_noise", "missing: sigma_a in m/s^2");
-  s = ReadPositive(*a, "accel_noise", &options->accel_noise);
+  // A number, or {"job": ID} of a noise job resolved at enqueue (server/noise_reference.h; SI).
+  std::optional<NoiseLevel> accel_noise, gyro_noise;
+  s = ReadNoiseLevel(config, "accel_noise", &accel_noise);
   if (!s.ok()) return s;
-
-  auto gn = config.find("gyro_noise");
-  if (gn == config.end()) return KeyError("gyro_noise", "missing: sigma_g in gyro_unit");
-  s = ReadPositive(*gn, "gyro_noise", &options->gyro_noise);
+  if (!accel_noise) return KeyError("accel_noise", "missing: sigma_a in m/s^2");
+  options->accel_noise = accel_noise->value;
+  s = ReadNoiseLevel(config, "gyro_noise", &gyro_noise);
   if (!s.ok()) return s;
-  options->gyro_noise *= gyro_scale;
+  if (!gyro_noise) return KeyError("gyro_noise", "missing: sigma_g in gyro_unit");
+  options->gyro_noise = gyro_noise->si ? gyro_noise->value : gyro_noise->value * gyro_scale;
 
   if (auto it = config.find("gyro_saturation"); it != config.end() && !it->is_null()) {
     double v = 0;
@@ -463,6 +464,7 @@ Status RunArray(const ArrayRecording& recording, const json& config, json* resul
                {"noise_estimate",
                 {{"accelerometer", Num(r.noise_estimate_accel)},
                  {"gyroscope", Num(r.noise_estimate_gyro * gyro_out)}}},
+               {"noise_jobs", NoiseJobsJson(config)},
                {"noise_configured",
                 {{"accelerometer", Num(options.accel_noise)},
                  {"gyroscope", Num(options.gyro_noise * gyro_out)}}},

@@ -178,8 +178,15 @@ int RunCli(int argc, char** argv) {
                         "them per key)");
   serve_cmd->add_flag("--insecure", serve.insecure,
                       "allow a non-loopback --listen without a token");
-  serve_cmd->add_option("--max-upload-bytes", serve.max_upload_bytes, "largest accepted upload")
+  serve_cmd
+      ->add_option("--max-upload-bytes", serve.max_upload_bytes,
+                   "largest accepted upload (a gzip'd recording: compressed and decompressed)")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 40))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--max-gzip-ratio", serve.max_gzip_ratio,
+                   "a gzip'd recording expanding more than this is refused (413)")
+      ->check(CLI::Range(1.0, 1e6))
       ->capture_default_str();
   serve_cmd
       ->add_option("--http-threads", serve.http_threads,

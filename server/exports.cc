@@ -4,6 +4,8 @@
 #include <cstdio>
 #include <sstream>
 
+#include "server/openvins_yaml.h"
+
 namespace calibd::server {
 
 using nlohmann::json;
@@ -189,8 +191,11 @@ Status ResultToCsv(const json& result, std::string* out) {
 Status ResultToKalibrYaml(const json& result, const ExportContext& context, std::string* out) {
   const std::string method =
       Get(result, "method").is_string() ? result["method"].get<std::string>() : "";
+  if (method == "imu") return ImuResultToOpenVinsYaml(result, context, out);
   if (method != "noise") {
-    return Status::InvalidInput("format=yaml (Kalibr imu.yaml) is available for noise results")
+    return Status::InvalidInput(
+               "format=yaml is available for noise results (Kalibr imu.yaml) and imu results "
+               "(OpenVINS kalibr_imu_chain.yaml)")
         .WithField("format");
   }
   const json& channels = Get(Get(result, "parameters"), "channels");

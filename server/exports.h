@@ -23,8 +23,9 @@ struct ExportContext {
 // kInternal if the result lacks the SPEC keys (a stored result always has them).
 Status ResultToCsv(const nlohmann::json& result, std::string* out);
 // Kalibr's imu.yaml (accelerometer_/gyroscope_noise_density and _random_walk, the largest over
-// the axes, update_rate) of a noise result. kInvalidInput for other methods; kNotDeterminable
-// when a figure is null (the log could not show it).
+// the axes, update_rate) of a noise result; for an imu result, OpenVINS's kalibr_imu_chain.yaml
+// (server/openvins_yaml.h). kInvalidInput for other methods; kNotDeterminable when a figure is
+// null (the log could not show it).
 Status ResultToKalibrYaml(const nlohmann::json& result, const ExportContext& context,
                           std::string* out);
 

@@ -684,13 +684,35 @@ HttpServer::~HttpServer() { Shutdown(0); }
 
 void HttpServer::SetAccessLogger(AccessLogger logger) { logger_ = std::move(logger); }
 
+// Debian builds cpp-httplib 0.11.4 with zlib and brotli, so it would decompress a request body
+// with `Content-Encoding: gzip`, `deflate` or `br` itself, with no limit on the decompressed
+// size. Before anything else sees a request, its Content-Encoding is moved to
+// kBodyEncodingHeader (a client's own copy of that header is dropped first), so bodies reach the
+// handlers as sent and the handlers decode them under their own limits. `req` is httplib's own
+// non-const Request object (Server::process_request), handed to the hooks as const.
+static void MoveContentEncoding(const httplib::Request& const_req) {
+  auto& req = const_cast<httplib::Request&>(const_req);
+  if (req.has_header("Content-Encoding")) {
+    req.headers.erase(kBodyEncodingHeader);
+    std::string encodings;
+    for (auto [it, end] = req.headers.equal_range("Content-Encoding"); it != end; ++it) {
+      encodings += (encodings.empty() ? "" : ", ") + it->second;
+    }
+    req.headers.erase("Content-Encoding");
+    req.headers.emplace(kBodyEncodingHeader, encodings);
+  }
+}
+
 void HttpServer::SetRequestFilter(HandlerWithResponse filter) {
   filter_ = std::move(filter);
-  set_pre_routing_handler(
-      [this](const httplib::Request& req, httplib::Response& res) { return filter_(req, res); });
+  set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
+    MoveContentEncoding(req);
+    return filter_(req, res);
+  });
   // httplib answers `Expect: 100-continue` before routing; a request we refuse gets its error
   // instead of "100 Continue", so the client does not send the body at all.
   set_expect_100_continue_handler([this](const httplib::Request& req, httplib::Response& res) {
+    MoveContentEncoding(req);
     if (filter_(req, res) == HandlerResponse::Handled) {
       res.set_header("Connection", "close");
       return res.status;

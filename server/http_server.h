@@ -17,6 +17,9 @@
 //  - Per-client limits: open connections per remote address (503 beyond), and requests in
 //    progress per remote address (more wait, holding no thread, until one of theirs finishes).
 //  - Unbounded header lines: the head is limited to HttpLimits::max_head_bytes (431 beyond).
+//  - Decompression bombs: httplib (built by Debian with zlib and brotli) decodes compressed
+//    request bodies itself, with no limit on the decoded size; here it never does
+//    (SetRequestFilter).
 //
 // Everything else (parsing, routing, handlers, bodies, multipart) is httplib's, through its
 // protected Server::process_request, called with a Stream of ours.
@@ -35,6 +38,9 @@
 #include "server/http_util.h"
 
 namespace calibd::server {
+
+// Where the request's Content-Encoding is found once SetRequestFilter's filter runs (below).
+inline constexpr const char* kBodyEncodingHeader = "X-Calibd-Content-Encoding";
 
 struct HttpLimits {
   int threads = 128;                  // threads that process requests (heads are read by one more)
@@ -76,6 +82,8 @@ class HttpServer : public httplib::Server {
   // Runs once the head has arrived, before any of the body is read — also for requests with
   // `Expect: 100-continue`, whose clients then never send a body that would be refused.
   // Return Handled with the error answer in `res` to refuse the request.
+  // From here on, a request's `Content-Encoding` header is found as kBodyEncodingHeader, and
+  // httplib never decodes the body (handlers do, under their own limits: server/gzip_stream.h).
   void SetRequestFilter(HandlerWithResponse filter);
 
   // Stops accepting, closes idle and half-received connections, lets requests in progress finish

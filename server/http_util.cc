@@ -104,6 +104,8 @@ std::string RouteLabel(const std::string& path) {
       {std::regex(R"(/api/v1/recordings)"), "/api/v1/recordings"},
       {std::regex(R"(/api/v1/recordings/[^/]+)"), "/api/v1/recordings/{id}"},
       {std::regex(R"(/api/v1/recordings/[^/]+/data)"), "/api/v1/recordings/{id}/data"},
+      {std::regex(R"(/api/v1/recordings/[^/]+/segments)"), "/api/v1/recordings/{id}/segments"},
+      {std::regex(R"(/recordings/[^/]+)"), "/recordings/{id}"},
       {std::regex(R"(/api/v1/jobs)"), "/api/v1/jobs"},
       {std::regex(R"(/api/v1/jobs/[^/]+)"), "/api/v1/jobs/{id}"},
       {std::regex(R"(/api/v1/jobs/[^/]+/revoke)"), "/api/v1/jobs/{id}/revoke"},

@@ -3,8 +3,10 @@
 #include <cmath>
 #include <cstdio>
 #include <set>
+#include <tuple>
 
 #include "server/inertial_log.h"
+#include "server/noise_reference.h"
 
 namespace calibd::server {
 
@@ -38,16 +40,17 @@ Status ReadNumber(const json& config, const char* key, bool positive, std::optio
 Status ParseImuConfig(const json& config, core::ImuOptions* options) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
   static const std::set<std::string>& kKnown = *new std::set<std::string>{
-      "method",           "device",      "accel_unit", "gyro_unit",          "gravity",
-      "latitude",         "height",      "gyro_bias",  "static_window",      "min_static",
-      "static_threshold", "accel_noise", "gyro_noise", "nominal_accel_bias", "nominal_gyro_bias"};
+      "method",           "device",         "accel_unit", "gyro_unit",          "gravity",
+      "latitude",         "height",         "gyro_bias",  "static_window",      "min_static",
+      "static_threshold", "accel_noise",    "gyro_noise", "nominal_accel_bias", "nominal_gyro_bias",
+      "accel_saturation", "gyro_saturation"};
   for (const auto& [key, value] : config.items()) {
     if (kKnown.count(key) == 0) {
       return KeyError(key,
                       "is not an imu config key (known: accel_unit, gyro_unit, gravity, latitude, "
                       "height, gyro_bias, static_window, min_static, static_threshold, "
-                      "accel_noise, gyro_noise, nominal_accel_bias, nominal_gyro_bias, method, "
-                      "device)");
+                      "accel_noise, gyro_noise, nominal_accel_bias, nominal_gyro_bias, "
+                      "accel_saturation, gyro_saturation, method, device)");
     }
   }
   *options = core::ImuOptions();
@@ -64,8 +67,6 @@ Status ParseImuConfig(const json& config, core::ImuOptions* options) {
            {"height", false, &height},
            {"static_window", true, &window},
            {"min_static", false, &min_static},
-           {"accel_noise", true, &an},
-           {"gyro_noise", true, &gn},
            {"nominal_accel_bias", false, &ab},
            {"nominal_gyro_bias", false, &gb}}) {
     s = ReadNumber(config, key, positive, out);
@@ -85,6 +86,15 @@ Status ParseImuConfig(const json& config, core::ImuOptions* options) {
   if (min_static) {
     if (*min_static < 0) return KeyError("min_static", "must be >= 0 seconds");
     options->detection.min_static = *min_static;
+  }
+  // σ per sample, SI: a number, or {"job": ID} of a noise job resolved at enqueue
+  // (server/noise_reference.h).
+  for (auto [key, out] :
+       {std::pair<const char*, std::optional<double>*>{"accel_noise", &an}, {"gyro_noise", &gn}}) {
+    std::optional<NoiseLevel> level;
+    s = ReadNoiseLevel(config, key, &level);
+    if (!s.ok()) return s;
+    if (level) *out = level->value;
   }
   options->accel_noise = an;
   options->gyro_noise = gn;
@@ -115,9 +125,46 @@ Status ParseImuConfig(const json& config, core::ImuOptions* options) {
                               : options->detection.gyro_threshold) = value.get<double>();
     }
   }
+  // Saturation: a number s (readings at or beyond ±s) or [low, high] (e.g. [0, 65535] for
+  // offset-binary counts), reading units. Saturated samples are dropped from the statics and
+  // counted in the diagnostics.
+  for (auto [key, low, high] :
+       {std::tuple<const char*, double*, double*>{
+            "accel_saturation", &options->accel_saturation_low, &options->accel_saturation_high},
+        std::tuple<const char*, double*, double*>{"gyro_saturation", &options->gyro_saturation_low,
+                                                  &options->gyro_saturation_high}}) {
+    auto it = config.find(key);
+    if (it == config.end() || it->is_null()) continue;
+    const char* help =
+        "must be a number s > 0 (readings at or beyond +-s are saturated) or [low, high] in "
+        "reading units";
+    if (it->is_number() && std::isfinite(it->get<double>()) && it->get<double>() > 0) {
+      *low = -it->get<double>();
+      *high = it->get<double>();
+    } else if (it->is_array() && it->size() == 2 && (*it)[0].is_number() && (*it)[1].is_number() &&
+               std::isfinite((*it)[0].get<double>()) && std::isfinite((*it)[1].get<double>()) &&
+               (*it)[0].get<double>() < (*it)[1].get<double>()) {
+      *low = (*it)[0].get<double>();
+      *high = (*it)[1].get<double>();
+    } else {
+      return KeyError(key, help);
+    }
+  }
   std::string error;
   if (!options->IsValid(&error)) return Status::InvalidInput(error);
   return Status::Ok();
+}
+
+// "12.5-13.1 s, 40-41.2 s" for at most `max` gaps.
+std::string GapList(const std::vector<core::TimeGap>& gaps, size_t max = 10) {
+  std::string out;
+  char buf[64];
+  for (size_t i = 0; i < gaps.size() && i < max; ++i) {
+    std::snprintf(buf, sizeof buf, "%s%.6g-%.6g s", i ? ", " : "", gaps[i].start, gaps[i].end);
+    out += buf;
+  }
+  if (gaps.size() > max) out += ", ...";
+  return out;
 }
 
 json TriadJson(const core::TriadCalibration& c) {
@@ -250,8 +297,12 @@ class Imu : public Method {
     ArrayRecording log;
     s = parser->TakeArray(&log);
     if (!s.ok()) return s;
-    s = CheckLogTimes(log, "imu");
+    s = CheckLogTimes(log, "imu", &parser->summary());
     if (!s.ok()) return s;
+    // Mean sample rate (Hz) over the log.
+    const double rate = log.t.size() > 1 ? static_cast<double>(log.t.size() - 1) /
+                                               (log.t[log.t.size() - 1] - log.t[0])
+                                         : 0.0;
     const size_t imus = log.accel_names.size();
     if (log.gyro_names.size() != imus) {
       return Status::InvalidInput(
@@ -288,6 +339,19 @@ class Imu : public Method {
     }
     json statics = json::array();
     const core::StaticDetection& d = results.front().detection;
+    json gaps = json::array();
+    for (const auto& g : d.gaps) {
+      gaps.push_back({{"index", g.index}, {"start", Num(g.start)}, {"end", Num(g.end)}});
+    }
+    if (!d.gaps.empty()) {
+      warnings.push_back(std::to_string(d.gaps.size()) + " gap(s) in t (" + GapList(d.gaps) +
+                         "): no static interval spans one, and rotations across one are not "
+                         "used");
+    }
+    if (d.saturated_samples > 0) {
+      warnings.push_back(std::to_string(d.saturated_samples) +
+                         " saturated sample(s) dropped from the static intervals");
+    }
     for (const auto& iv : d.intervals) {
       statics.push_back({{"start", Num(iv.start)}, {"end", Num(iv.end)}, {"samples", iv.samples}});
     }
@@ -301,10 +365,18 @@ class Imu : public Method {
         {"parameters",
          {{"gravity", Num(options.gravity)},
           {"gyro_bias", core::GyroBiasModelName(options.gyro_bias)},
+          // The nominal SI per reading unit the log was read with (exports to SI readings).
+          {"accel_unit", Num(options.accel_unit)},
+          {"gyro_unit", Num(options.gyro_unit)},
           {"imus", params}}},
         {"uncertainty", {{"imus", stds}}},
         {"diagnostics",
          {{"statics", statics},
+          {"rate", Num(rate)},
+          {"gaps", gaps},
+          {"noise_jobs", NoiseJobsJson(config)},
+          {"noise_model", NoiseModelJson(config)},
+          {"saturated_samples", d.saturated_samples},
           {"static_window", Num(options.detection.static_window)},
           {"min_static", Num(options.detection.min_static)},
           {"threshold_choice", results.front().threshold_choice},
@@ -349,6 +421,10 @@ Status SimulateImuFiles(const core::ImuSimulationOptions& options, std::string* 
             {"accelerometer", triad(sim.accel_truth)},
             {"gyroscope", triad(sim.gyro_truth)}};
   return Status::Ok();
+}
+
+Status ParseImuOptions(const json& config, core::ImuOptions* options) {
+  return ParseImuConfig(config, options);
 }
 
 const Method& ImuMethod() {

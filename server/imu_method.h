@@ -38,6 +38,10 @@ namespace calibd::server {
 // The `imu` method for the registry: reads inertial logs (the array layout with `t`).
 const Method& ImuMethod();
 
+// The imu config keys (SPEC §7) as core options; errors name the key. Also used for the static
+// detection keys of GET /recordings/{id}/segments (server/recording_segments.h).
+Status ParseImuOptions(const nlohmann::json& config, core::ImuOptions* options);
+
 // For `calibd simulate imu`: one IMU placed by hand in `statics` orientations; CSV
 // `t,a0_x,..,g0_z` (%.10g), the config ({"method":"imu", units, gravity}) and the truth
 // ({"accelerometer"/"gyroscope": {"bias","scale","misalignment","matrix"}}).

@@ -52,11 +52,29 @@ Status ParseInertialUnits(const json& config, InertialUnits* units) {
                   &units->gyro_text);
 }
 
-Status CheckLogTimes(const ArrayRecording& recording, const std::string& method) {
+Status CheckTimesIncrease(const RecordingSummary& summary, const std::string& method) {
+  if (summary.t_disorder_line == 0) return Status::Ok();
+  char buf[200];
+  std::snprintf(
+      buf, sizeof buf,
+      "t must increase strictly for the %s method: t = %.9g s %s t = %.9g s of the row before",
+      method.c_str(), summary.t_disorder,
+      summary.t_disorder == summary.t_disorder_previous ? "repeats" : "comes after",
+      summary.t_disorder_previous);
+  return Status::InvalidInput(buf)
+      .WithLocation(summary.t_disorder_line, summary.t_disorder_column)
+      .WithField("t");
+}
+
+Status CheckLogTimes(const ArrayRecording& recording, const std::string& method,
+                     const RecordingSummary* summary) {
   if (recording.t.size() == 0) {
     return Status::InvalidInput("the " + method +
                                 " method needs the time column 't' (seconds) in the log")
         .WithField("t");
+  }
+  if (summary != nullptr && summary->t_disorder_line > 0) {
+    return CheckTimesIncrease(*summary, method);
   }
   for (Eigen::Index i = 1; i < recording.t.size(); ++i) {
     if (!(recording.t[i] > recording.t[i - 1])) {

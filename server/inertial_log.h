@@ -23,9 +23,14 @@ struct InertialUnits {
 // Reads accel_unit and gyro_unit (absent: SI). kInvalidInput naming the key.
 Status ParseInertialUnits(const nlohmann::json& config, InertialUnits* units);
 
-// The recording's times must be present and strictly increasing (names the first bad row's
-// sample index and time). `method` names the method in the message.
-Status CheckLogTimes(const ArrayRecording& recording, const std::string& method);
+// The recording's times must be present and strictly increasing. With the parser's summary,
+// the first non-increasing (or repeated) t is named by its line and column in the file; without
+// it, by its sample index. `method` names the method in the message.
+Status CheckLogTimes(const ArrayRecording& recording, const std::string& method,
+                     const RecordingSummary* summary = nullptr);
+// From the parser's summary alone (at upload, before the log is stored): kInvalidInput with the
+// line and column of the first t that does not increase, else Ok.
+Status CheckTimesIncrease(const RecordingSummary& summary, const std::string& method);
 
 }  // namespace calibd::server
 

@@ -112,7 +112,7 @@ class Noise : public Method {
     ArrayRecording log;
     s = parser->TakeArray(&log);
     if (!s.ok()) return s;
-    s = CheckLogTimes(log, "noise");
+    s = CheckLogTimes(log, "noise", &parser->summary());
     if (!s.ok()) return s;
     // The samples as floats in SI, one column per channel (the analysis reads them in place);
     // the parser's doubles are released channel by channel group.

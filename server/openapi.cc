@@ -164,8 +164,10 @@ json Build() {
         {"400", ErrorResponse("malformed recording or config (line, column, field)")},
         {"401", ErrorResponse("missing or wrong token")},
         {"411", ErrorResponse("no Content-Length and not chunked")},
-        {"413", ErrorResponse("body larger than --max-upload-bytes")},
-        {"415", ErrorResponse("not text/csv or multipart/form-data, or compressed")},
+        {"413", ErrorResponse("body (or the gzip'd recording decompressed) larger than "
+                              "--max-upload-bytes, or expanding more than --max-gzip-ratio")},
+        {"415", ErrorResponse("not text/csv or multipart/form-data, or an encoding other than "
+                              "gzip")},
         {"503", ErrorResponse("database busy")}}}};
   paths["/jobs"]["post"] = {
       {"summary", "Queue a calibration of a stored recording with another config"},
@@ -284,6 +286,21 @@ json Build() {
          {{"description", "the CSV as uploaded"},
           {"content", {{"text/csv", {{"schema", {{"type", "string"}}}}}}}}},
         {"404", ErrorResponse("no such recording")}}}};
+  paths["/recordings/{id}/segments"]["get"] = {
+      {"summary", "The static intervals of a stored inertial log (SPEC section 7)"},
+      {"parameters",
+       json::array({PathParam("id", "integer", "recording id"),
+                    QueryParam("static_window", "number", "s, default 1"),
+                    QueryParam("min_static", "number", "s, default 1"),
+                    QueryParam("static_threshold", "string",
+                               "{\"accelerometer\": x, \"gyroscope\": y}, reading units"),
+                    QueryParam("accel_unit", "string", "m/s^2 per reading unit"),
+                    QueryParam("gyro_unit", "string", "rad/s per reading unit")})},
+      {"responses",
+       {{"200", JsonResponse("intervals, thresholds, gaps", {{"type", "object"}})},
+        {"400", ErrorResponse("bad option (field)")},
+        {"404", ErrorResponse("no such recording")},
+        {"422", ErrorResponse("not an inertial log")}}}};
   paths["/healthz"]["get"] = {
       {"summary", "Liveness (also at /healthz)"},
       {"responses",

@@ -321,6 +321,9 @@ struct RecordingParser::Impl {
   std::vector<int> column_target;
   int accel_triads = 0, gyro_triads = 0;
   bool has_t = false;
+  int64_t t_column = 0;  // 1-based, when has_t
+  double previous_t = 0;
+  bool have_previous_t = false;
   std::vector<double> array_values;  // N * (3K+3G), row-major (collect only)
   std::vector<double> t_values;
 
@@ -576,6 +579,7 @@ struct RecordingParser::Impl {
     accel_triads = static_cast<int>(accel_cols.size());
     gyro_triads = static_cast<int>(gyro_cols.size());
     has_t = t_col != 0;
+    t_column = t_col;
     column_target.assign(f.size(), -1);
     for (int k = 0; k < accel_triads; ++k) {
       for (int axis = 0; axis < 3; ++axis) column_target[accel_cols[k][axis] - 1] = 3 * k + axis;
@@ -668,6 +672,16 @@ struct RecordingParser::Impl {
   }
 
   void CommitArrayRow(double t) {
+    if (has_t) {
+      if (have_previous_t && !(t > previous_t) && summary.t_disorder_line == 0) {
+        summary.t_disorder_line = line_no;
+        summary.t_disorder_column = t_column;
+        summary.t_disorder = t;
+        summary.t_disorder_previous = previous_t;
+      }
+      previous_t = t;
+      have_previous_t = true;
+    }
     if (collect) {
       array_values.insert(array_values.end(), row_values.begin(), row_values.end());
       if (has_t) t_values.push_back(t);

@@ -60,6 +60,11 @@ struct RecordingSummary {
   // pca: sensor names; array: triad names (a0.., then g0..).
   std::vector<std::string> sensors;
   int64_t positions = 0;  // pca only: distinct position labels
+  // array layout with `t`: the first row whose t is not greater than the previous row's (line
+  // and column in the file; 0 when t increases strictly throughout). Not an error of the layout
+  // (the array method accepts any t); the raw-log methods refuse it (CheckLogTimes).
+  int64_t t_disorder_line = 0, t_disorder_column = 0;
+  double t_disorder = 0, t_disorder_previous = 0;
 };
 
 struct RecordingLimits {

@@ -16,7 +16,12 @@ struct ServeOptions {
   // Non-empty: a JSON file of server-wide acceptance limits per method (server/acceptance.h),
   // {"pca": {"max_scale_std": 0.005}, ...}; a config's own `acceptance` overrides them per key.
   std::string acceptance_file;
-  int64_t max_upload_bytes = int64_t{512} << 20;   // larger uploads: 413
+  // Larger uploads: 413. For a gzip-compressed recording, the limit applies to the compressed
+  // body and to the decompressed CSV (what is stored).
+  int64_t max_upload_bytes = int64_t{512} << 20;
+  // A gzip-compressed recording that expands more than this many times is refused (413) as a
+  // decompression bomb (checked past its first MiB). CSV logs compress 3-20 times.
+  double max_gzip_ratio = 200;
   int64_t max_json_body_bytes = int64_t{1} << 20;  // POST /jobs bodies and config parts
   // Threads that process requests. A connection gets one only once its request line and headers
   // have arrived (server/http_server.h), so slow or idle clients do not hold threads.

@@ -22,12 +22,16 @@
 #include "server/config.h"
 #include "server/device_lookup.h"
 #include "server/exports.h"
+#include "server/gzip_stream.h"
 #include "server/http_server.h"
 #include "server/http_util.h"
+#include "server/inertial_log.h"
 #include "server/instance.h"
 #include "server/method.h"
 #include "server/metrics.h"
+#include "server/noise_reference.h"
 #include "server/recording.h"
+#include "server/recording_routes.h"
 #include "server/worker_pool.h"
 #include "storage/store.h"
 
@@ -180,6 +184,11 @@ json RecordingJson(const storage::RecordingInfo& r) {
   return j;
 }
 
+bool IsGzipEncoding(const std::string& encoding) {
+  const std::string e = ToLower(encoding);
+  return e == "gzip" || e == "x-gzip";
+}
+
 bool ParseId(const std::string& text, int64_t* id) {
   if (text.empty() || text.size() > 18) return false;
   int64_t v = 0;
@@ -197,6 +206,9 @@ bool ParseId(const std::string& text, int64_t* id) {
 // calibration it used.
 Status ResolveCalibrationReference(storage::Store* store, json* config) {
   if (!config->is_object()) return Status::Ok();
+  // accel_noise / gyro_noise: {"job": ID} of a noise job, resolved the same way.
+  Status noise = ResolveNoiseReferences(store, config);
+  if (!noise.ok()) return noise;
   auto it = config->find("accelerometer_calibration");
   if (it == config->end() || !it->is_object() || !it->contains("job") || it->contains("result")) {
     return Status::Ok();
@@ -291,6 +303,7 @@ std::string ServeOptions::Validate() const {
   }
   if (workers < 0) return "--workers must be >= 0";
   if (max_upload_bytes < 1) return "--max-upload-bytes must be >= 1";
+  if (!(max_gzip_ratio >= 1)) return "--max-gzip-ratio must be >= 1";
   if (http_threads < 4) return "--http-threads must be >= 4";
   if (head_timeout_seconds < 1) return "--head-timeout-seconds must be >= 1";
   if (max_connections_per_client < 1) return "--max-connections-per-client must be >= 1";
@@ -454,13 +467,17 @@ void Service::Impl::SetupRoutes() {
     t_request_start = std::chrono::steady_clock::now();
     const bool write = req.method != "GET" && req.method != "HEAD" && req.method != "OPTIONS";
     const bool is_upload = req.path == "/api/v1/recordings" && req.method == "POST";
-    if (req.has_header("Content-Encoding")) {
-      const std::string enc = req.get_header_value("Content-Encoding");
-      if (enc != "identity") {
+    // Only uploads may be compressed, and only with gzip (decoded by HandleUpload under the
+    // upload and ratio limits); httplib never decodes bodies (server/http_server.h).
+    if (req.has_header(kBodyEncodingHeader)) {
+      const std::string enc = req.get_header_value(kBodyEncodingHeader);
+      if (ToLower(enc) != "identity" && !(is_upload && IsGzipEncoding(enc))) {
         res.set_header("Connection", "close");
         SendError(res, 415, "unsupported_media_type",
                   "compressed request bodies (Content-Encoding: " + enc.substr(0, 32) +
-                      ") are not accepted; send the body uncompressed");
+                      ") are not accepted; " +
+                      (is_upload ? "send the recording uncompressed or with Content-Encoding: gzip"
+                                 : "send the body uncompressed"));
         return httplib::Server::HandlerResponse::Handled;
       }
     }
@@ -593,6 +610,7 @@ void Service::Impl::SetupRoutes() {
   http.Get("/api/v1/openapi.json", [](const httplib::Request&, httplib::Response& res) {
     res.set_content(JsonBody(OpenApiDocument()), "application/json");
   });
+  RegisterRecordingRoutes(&http, store.get());  // /segments and the recording page
   RegisterHtmlRoutes(&http, store.get());
 
   // Known paths with another method: 405 with Allow; everything else: 404.
@@ -627,8 +645,17 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
   const std::string content_type = req.get_header_value("Content-Type");
   const std::string media = ToLower(content_type.substr(0, content_type.find(';')));
   const bool multipart = req.is_multipart_form_data();
+  const bool body_gzip = IsGzipEncoding(req.get_header_value(kBodyEncodingHeader));
+  if (multipart && body_gzip) {
+    res.set_header("Connection", "close");
+    SendError(res, 415, "unsupported_media_type",
+              "a gzip-compressed multipart body is not accepted; compress the 'recording' part "
+              "instead (a .csv.gz file)");
+    return finish(415);
+  }
   if (!multipart && media != "text/csv" && media != "text/plain" && media != "application/csv" &&
-      media != "application/octet-stream") {
+      media != "application/octet-stream" && media != "application/gzip" &&
+      media != "application/x-gzip") {
     res.set_header("Connection", "close");
     SendError(res, 415, "unsupported_media_type",
               "send the recording as text/csv, or as multipart/form-data with parts 'recording' "
@@ -646,11 +673,23 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
   Status body_status;   // first other error (size, I/O, multipart shape)
   std::string file_name;
 
-  auto take_recording_bytes = [&](const char* data, size_t len) {
-    received += static_cast<int64_t>(len);
-    if (received > options.max_upload_bytes) {
+  // The recording may be gzip-compressed (Content-Encoding: gzip, or a body or part that starts
+  // with the gzip magic bytes, e.g. a .csv.gz file). It is decompressed as it arrives, and the
+  // decompressed CSV is what is parsed, hashed and stored: the same log sent compressed or not
+  // is one recording, and GET /recordings/{id}/data returns the CSV.
+  GzipLimits gzip_limits;
+  gzip_limits.max_output_bytes = options.max_upload_bytes;
+  gzip_limits.max_ratio = options.max_gzip_ratio;
+  std::unique_ptr<GzipInflater> inflater;  // set when the recording is compressed
+  std::string head;                        // the first bytes, until the magic can be seen
+  bool decided = false;                    // compressed or not is known
+  int64_t csv_bytes = 0;
+
+  auto take_csv_bytes = [&](const char* data, size_t len) {
+    csv_bytes += static_cast<int64_t>(len);
+    if (csv_bytes > options.max_upload_bytes) {
       body_status =
-          Status(StatusCode::kTooLarge, "the upload is larger than the limit of " +
+          Status(StatusCode::kTooLarge, "the recording is larger than the limit of " +
                                             std::to_string(options.max_upload_bytes) + " bytes");
       return false;
     }
@@ -661,6 +700,45 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     }
     parse_status = parser.Feed(std::string_view(data, len));
     return parse_status.ok();
+  };
+  auto feed_recording = [&](const char* data, size_t len) {
+    if (!inflater) return take_csv_bytes(data, len);
+    Status st = inflater->Feed(data, len, take_csv_bytes);
+    if (!st.ok() && !GzipInflater::IsSinkStopped(st)) body_status = st;
+    return st.ok();
+  };
+  auto take_recording_bytes = [&](const char* data, size_t len) {
+    received += static_cast<int64_t>(len);
+    if (received > options.max_upload_bytes) {
+      body_status =
+          Status(StatusCode::kTooLarge, "the upload is larger than the limit of " +
+                                            std::to_string(options.max_upload_bytes) + " bytes");
+      return false;
+    }
+    if (!decided) {
+      const size_t take = std::min(len, 2 - head.size());
+      head.append(data, take);
+      data += take;
+      len -= take;
+      if (head.size() < 2 && !body_gzip) return true;
+      decided = true;
+      if (body_gzip || LooksLikeGzip(head.data(), head.size())) {
+        inflater = std::make_unique<GzipInflater>(gzip_limits, "the recording");
+      }
+      if (!feed_recording(head.data(), head.size())) return false;
+    }
+    return len == 0 || feed_recording(data, len);
+  };
+  // After the last byte: a recording of one byte, and the end of a gzip stream.
+  auto end_recording = [&] {
+    if (!decided && !head.empty()) {
+      decided = true;
+      if (!feed_recording(head.data(), head.size())) return;
+    }
+    if (inflater) {
+      Status st = inflater->Finish();
+      if (!st.ok()) body_status = st;
+    }
   };
 
   bool read_ok;
@@ -733,6 +811,7 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
   } else {
     read_ok = reader([&](const char* data, size_t len) { return take_recording_bytes(data, len); });
   }
+  if (read_ok && body_status.ok() && parse_status.ok()) end_recording();
 
   if (!body_status.ok()) {
     res.set_header("Connection", "close");
@@ -767,6 +846,10 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     if (!s.ok()) return finish(SendStatus(res, s));
     s = ValidateConfig(config, &common);
     if (!s.ok()) return finish(SendStatus(res, s));
+    if (common.method == "imu" || common.method == "noise") {  // raw-log methods: t increases
+      s = CheckTimesIncrease(summary, common.method);
+      if (!s.ok()) return finish(SendStatus(res, s));
+    }
     if (!FindMethod(common.method)->Reads(summary.layout)) {
       return finish(SendStatus(res, Status::InvalidInput(std::string("method '") + common.method +
                                                          "' cannot read the recording's " +
@@ -804,6 +887,7 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
                  {"rows", info.rows},
                  {"layout", info.layout},
                  {"existed", existed},
+                 {"compressed_bytes", inflater ? json(inflater->compressed_bytes()) : json()},
                  {"url", "/api/v1/recordings/" + std::to_string(info.id)}}}};
   if (info.job) {
     body["job"] = {{"id", info.job->id},
@@ -1166,7 +1250,9 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
   if (format == "yaml") {
     s = ResultToKalibrYaml(result, context, &text);
     if (!s.ok()) return (void)SendStatus(res, s);
-    res.set_header("Content-Disposition", "attachment; filename=\"imu.yaml\"");
+    res.set_header("Content-Disposition", method == "imu"
+                                              ? "attachment; filename=\"kalibr_imu_chain.yaml\""
+                                              : "attachment; filename=\"imu.yaml\"");
     res.set_content(text, "application/yaml");
     return;
   }

@@ -1578,6 +1578,8 @@ std::string JobBody(const JobView& view) {
       kv += ", <span class=\"mono small\">sha256 " + E(view.recording_sha256.substr(0, 16)) +
             "\xE2\x80\xA6</span>";
     }
+    kv += " \xC2\xB7 <a href=\"/recordings/" + std::to_string(view.recording_id) +
+          "\">recording page</a>";
   } else {
     kv += kDash;
   }
@@ -1599,6 +1601,19 @@ std::string JobBody(const JobView& view) {
       kv += " (" + std::to_string(sensors->get<int64_t>()) + " sensors)";
     }
     kv += "</dd>";
+  }
+  // Noise levels taken from noise jobs ({"job": ID} in the config) link to them (SPEC §7).
+  const json* noise_jobs = Get(Get(job.result, "diagnostics"), "noise_jobs");
+  if (noise_jobs != nullptr && noise_jobs->is_object()) {
+    std::string links;
+    for (const char* sensor : {"accelerometer", "gyroscope"}) {
+      const json* id = Get(noise_jobs, sensor);
+      if (id == nullptr || !id->is_number_integer()) continue;
+      const std::string n = std::to_string(id->get<int64_t>());
+      links += std::string(links.empty() ? "" : "; ") + sensor + " from <a href=\"/jobs/" + n +
+               "\">noise job #" + n + "</a>";
+    }
+    if (!links.empty()) kv += "<dt>noise levels</dt><dd class=\"noise-jobs\">" + links + "</dd>";
   }
   kv += TimingsHtml(job) + "</dl>";
   out += kv;

@@ -655,6 +655,27 @@ std::string RenderXYPlot(const PlotOptions& o, const std::vector<Series>& series
   const Scale sy(ty, dy.first, dy.second, f.py0(), f.py1());
 
   std::string body;
+  // Shaded bands, behind everything else; labels at the top of the plot area.
+  if (!o.bands.empty()) {
+    body += "<g class=\"bands\">";
+    for (const auto& b : o.bands) {
+      double a = sx(b.x0), c = sx(b.x1);
+      if (!std::isfinite(a) || !std::isfinite(c)) continue;
+      if (a > c) std::swap(a, c);
+      a = std::max(a, f.px0());
+      c = std::min(c, f.px1());
+      if (c < a) continue;
+      body += "<rect x=\"" + N(a) + "\" y=\"" + N(f.py1()) + "\" width=\"" +
+              N(std::max(c - a, 0.6)) + "\" height=\"" + N(f.py0() - f.py1()) +
+              "\" fill=\"#cfe3f3\" fill-opacity=\"0.75\"/>";
+      if (!b.label.empty()) {
+        body += "<text x=\"" + N((a + c) / 2) + "\" y=\"" + N(f.py1() + 10) +
+                "\" text-anchor=\"middle\" font-size=\"9\" fill=\"" + kMuted + "\">" +
+                EscapeText(b.label) + "</text>";
+      }
+    }
+    body += "</g>";
+  }
   // Reference lines.
   for (const auto& r : o.ref_lines) {
     const double p = r.vertical ? sx(r.at) : sy(r.at);

@@ -107,6 +107,13 @@ struct RefLine {
   bool dashed = true;
 };
 
+// A shaded vertical band over [x0, x1] in data units (e.g. a static interval on a timeline),
+// drawn behind the data, with a short label at its top (escaped; empty: none).
+struct Band {
+  double x0 = 0, x1 = 0;
+  std::string label;
+};
+
 // One segment from (x0,y0) to (x1,y1) in data units (used for "nominal → estimated" links).
 struct Segment {
   double x0 = 0, y0 = 0, x1 = 0, y1 = 0;
@@ -122,6 +129,7 @@ struct PlotOptions {
   bool equal_aspect = false;      // same data units per pixel on both axes
   size_t max_points = 2000;       // per series, after which DecimateMinMax is used
   std::vector<RefLine> ref_lines;
+  std::vector<Band> bands;  // RenderXYPlot only
   std::vector<Segment> segments;
   std::vector<std::string> notes;  // extra lines printed under the plot area
   bool legend = true;

@@ -9,6 +9,7 @@
 #include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -50,8 +51,9 @@ class HostileHttp : public ::testing::Test {
   void SetUp() override { ASSERT_EQ(server_.error(), ""); }
 
   // Sends `request` (and maybe more), expects a 4xx answer or a closed connection.
+  // `expected_status`: the one status expected (0: any 4xx or a closed connection).
   void ExpectRefused(const std::string& name, const std::string& request,
-                     const std::string& more = {}) {
+                     const std::string& more = {}, int expected_status = 0) {
     const auto start = std::chrono::steady_clock::now();
     RawConnection c(server_.port());
     ASSERT_TRUE(c.ok()) << name;
@@ -61,6 +63,7 @@ class HostileHttp : public ::testing::Test {
     const int status = StatusOf(response);
     EXPECT_TRUE(status == 0 || (status >= 400 && status < 500))
         << name << ": " << response.substr(0, 300);
+    if (expected_status != 0) EXPECT_EQ(status, expected_status) << name << ": " << response;
     if (status >= 400) {
       const size_t body = response.find("\r\n\r\n");
       ASSERT_NE(body, std::string::npos) << name;
@@ -92,6 +95,32 @@ class HostileHttp : public ::testing::Test {
 
   TestServer server_{Options()};
 };
+
+// `bytes` zeros, gzip-compressed (zlib, level 9: about a thousandth of the size).
+std::string GzipZeros(int64_t bytes) {
+  z_stream zs{};
+  deflateInit2(&zs, 9, Z_DEFLATED, 16 + MAX_WBITS, 9, Z_DEFAULT_STRATEGY);
+  const std::string zeros(1 << 20, '\0');
+  std::string out;
+  std::string buf(1 << 16, '\0');
+  for (int64_t left = bytes; left >= 0;) {
+    const size_t n = static_cast<size_t>(std::min<int64_t>(left, zeros.size()));
+    left -= static_cast<int64_t>(n);
+    zs.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(zeros.data()));
+    zs.avail_in = static_cast<uInt>(n);
+    const int flush = left == 0 ? Z_FINISH : Z_NO_FLUSH;
+    int ret;
+    do {
+      zs.next_out = reinterpret_cast<Bytef*>(buf.data());
+      zs.avail_out = static_cast<uInt>(buf.size());
+      ret = deflate(&zs, flush);
+      out.append(buf.data(), buf.size() - zs.avail_out);
+    } while (zs.avail_out == 0 || (flush == Z_FINISH && ret != Z_STREAM_END));
+    if (left == 0) break;
+  }
+  deflateEnd(&zs);
+  return out;
+}
 
 std::string Post(const std::string& path, const std::string& headers, const std::string& body) {
   return "POST " + path + " HTTP/1.1\r\nHost: x\r\n" + headers +
@@ -192,15 +221,27 @@ TEST_F(HostileHttp, EveryCaseIsRefusedAndMemoryStaysBounded) {
                   std::string("GET ") + path + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
   }
   {
-    // A gzip bomb: 10 MB of zeros compress to ~10 kB; refused before inflating.
-    std::string bomb(10240, '\0');
-    ExpectRefused("gzip bomb", Post("/api/v1/recordings",
-                                    "Content-Type: text/csv\r\nContent-Encoding: gzip\r\n", bomb));
-    ExpectRefused("brotli bomb", Post("/api/v1/recordings",
-                                      "Content-Type: text/csv\r\nContent-Encoding: br\r\n", bomb));
+    // A gzip bomb: 256 MiB of zeros in ~256 kB. Uploads may be gzip'd, so it is inflated, and cut
+    // off by the expansion-ratio guard after about a MiB: 413.
+    std::string bomb = GzipZeros(int64_t{256} << 20);
+    ExpectRefused(
+        "gzip bomb",
+        Post("/api/v1/recordings", "Content-Type: text/csv\r\nContent-Encoding: gzip\r\n", bomb),
+        {}, 413);
+    ExpectRefused("gzip bomb as a .csv.gz part (magic bytes, no header)",
+                  Post("/api/v1/recordings", "Content-Type: application/gzip\r\n", bomb), {}, 413);
+    ExpectRefused(
+        "brotli body",
+        Post("/api/v1/recordings", "Content-Type: text/csv\r\nContent-Encoding: br\r\n", bomb), {},
+        415);
     ExpectRefused(
         "gzip on a JSON route",
-        Post("/api/v1/jobs", "Content-Type: application/json\r\nContent-Encoding: gzip\r\n", bomb));
+        Post("/api/v1/jobs", "Content-Type: application/json\r\nContent-Encoding: gzip\r\n", bomb),
+        {}, 415);
+    ExpectRefused("truncated gzip stream",
+                  Post("/api/v1/recordings", "Content-Type: text/csv\r\nContent-Encoding: gzip\r\n",
+                       bomb.substr(0, 200)),
+                  {}, 400);
   }
 
   const int64_t growth_kib = RssKiB() - rss_before;

@@ -444,9 +444,14 @@ TEST_F(HttpApi, OversizedAndWronglyTypedBodiesAreRefused) {
   auto type = client.Post("/api/v1/recordings", "x", "image/png");
   ASSERT_TRUE(type);
   EXPECT_EQ(type->status, 415);
+  auto br = client.Post("/api/v1/recordings", {{"Content-Encoding", "br"}}, "xx", "text/csv");
+  ASSERT_TRUE(br);
+  EXPECT_EQ(br->status, 415);
+  // gzip is accepted (tests/server/gzip_upload_test.cc); "xx" is not gzip: 400 at byte 0.
   auto gz = client.Post("/api/v1/recordings", {{"Content-Encoding", "gzip"}}, "xx", "text/csv");
   ASSERT_TRUE(gz);
-  EXPECT_EQ(gz->status, 415);
+  EXPECT_EQ(gz->status, 400);
+  EXPECT_NE(gz->body.find("at byte 0"), std::string::npos) << gz->body;
 }
 
 TEST(HttpApiLimits, ChunkedUploadOverTheLimitIs413) {
@@ -615,6 +620,7 @@ TEST_F(HttpApi, OpenApiDocumentsEveryRouteTheServerHas) {
                                         "get /devices/{serial}/calibration",
                                         "get /recordings/{id}",
                                         "get /recordings/{id}/data",
+                                        "get /recordings/{id}/segments",
                                         "get /healthz",
                                         "get /metrics",
                                         "get /openapi.json"};

@@ -114,6 +114,17 @@ TEST_F(Smuggling, CompressedBodyRefused415NeverRunsTheBody) {
   const std::string body = SmuggledUpload();
   ExpectRefusedAndClosed("415", 415,
                          Head("POST /api/v1/recordings?device=A HTTP/1.1",
+                              "Content-Type: text/csv\r\nContent-Encoding: br\r\n"
+                              "Content-Length: " +
+                                  std::to_string(body.size()) + "\r\n"),
+                         body);
+}
+
+// Uploads may be gzip'd: a body that says gzip and is not is refused part-way (400) and closed.
+TEST_F(Smuggling, NotReallyGzipBodyRefused400NeverRunsTheBody) {
+  const std::string body = SmuggledUpload();
+  ExpectRefusedAndClosed("400", 400,
+                         Head("POST /api/v1/recordings?device=A HTTP/1.1",
                               "Content-Type: text/csv\r\nContent-Encoding: gzip\r\n"
                               "Content-Length: " +
                                   std::to_string(body.size()) + "\r\n"),

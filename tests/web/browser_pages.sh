@@ -63,6 +63,12 @@ j4=$(curl -sf -H 'Content-Type: text/csv' --data-binary @"$tmp/bad.csv" \
   "$base/api/v1/recordings?method=pca&device=%22%3E%3Cimg%20src%3Dx%20onerror%3Dalert(1)%3E" |
   job_id)
 wait_job "$j4"
+# An inertial log: its recording page has the timeline with the statics.
+"$bin" simulate imu --out "$tmp/imu" --seed 3 --statics 12 2>/dev/null
+j7=$(upload "$tmp/imu" 'IMU-1')
+wait_job "$j7"
+r7=$(curl -sf "$base/api/v1/jobs/$j7" |
+  python3 -c 'import json, sys; print(json.load(sys.stdin)["recording_id"])')
 
 render() {  # render NAME PATH -> DOM dump in $tmp/NAME.html, screenshot in $shots/NAME.png
   local flags=(--headless --no-sandbox --disable-gpu --disable-background-networking
@@ -96,6 +102,7 @@ render revoked "/jobs/$j2"
 render rejected "/jobs/$j5"
 render missing /jobs/999999
 render devices /devices
+render recording "/recordings/$r7"
 
 expect history 'class="page-history' 'table-history' 'form class="filters\|class="filters'
 expect pca 'class="page-job' 'table-pca-parameters' 'plot-singular-values' 'plot-magnitude-error' \
@@ -112,7 +119,9 @@ expect devices 'class="page-devices' 'table-devices' 'first seen (UTC)'
 expect pca 'class="model"'
 expect array 'class="model"'
 reject failed 'class="advice"'
-for page in history pca array failed device devices revoked rejected; do
+expect recording 'class="page-recording' 'plot-timeline-accel' 'plot-timeline-gyro' \
+  'table-intervals' 'table-thresholds' "href=\"/jobs/$j7\""
+for page in history pca array failed device devices revoked rejected recording; do
   reject "$page" '<script' '<img'
 done
 echo "browser pages: screenshots in $shots"

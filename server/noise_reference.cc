@@ -1,0 +1,145 @@
+#include "server/noise_reference.h"
+
+#include <cmath>
+#include <string>
+
+#include "server/config.h"
+
+namespace calibd::server {
+
+using nlohmann::json;
+
+namespace {
+
+Status KeyError(const std::string& key, const std::string& message) {
+  return Status::InvalidInput("config key '" + key + "': " + message).WithField(key);
+}
+
+Status Resolve(storage::Store* store, const std::string& key, json* value) {
+  const json& ref = (*value)["job"];
+  if (!ref.is_number_integer() || ref.get<int64_t>() <= 0 || value->size() != 1) {
+    return KeyError(key, "must be a number or {\"job\": ID} of a succeeded noise job");
+  }
+  const int64_t id = ref.get<int64_t>();
+  storage::JobInfo job;
+  Status s = store->GetJob(id, &job);
+  if (s.code() == StatusCode::kNotFound)
+    return KeyError(key, "there is no job " + std::to_string(id));
+  if (!s.ok()) return s;
+  if (job.method != "noise" || job.status != "succeeded") {
+    return KeyError(key, "job " + std::to_string(id) + " is a " + job.status + " " + job.method +
+                             " job; it must be a succeeded noise job");
+  }
+  json result;
+  if (!ParseJsonText(job.result_json, "result", &result).ok()) {
+    return Status::Internal("stored result is not JSON");
+  }
+  const char prefix = key == "accel_noise" ? 'a' : 'g';
+  const json rate = result["diagnostics"].value("rate", json());
+  double worst = -1, worst_walk = -1;
+  bool walk_seen = true;  // every channel of the type shows its random walk
+  json channels = json::array();
+  for (const json& c : result["parameters"].value("channels", json::array())) {
+    const std::string name = c.value("name", "");
+    if (name.empty() || name[0] != prefix) continue;
+    const json& n = c.value("white_noise", json());
+    if (!n.is_number()) {
+      return KeyError(
+          key, "noise job " + std::to_string(id) + " does not show the white noise of " + name);
+    }
+    const json& k = c.value("random_walk", json());
+    channels.push_back({{"name", name}, {"white_noise", n}, {"random_walk", k}});
+    worst = std::max(worst, n.get<double>());
+    if (k.is_number()) {
+      worst_walk = std::max(worst_walk, k.get<double>());
+    } else {
+      walk_seen = false;
+    }
+  }
+  if (worst <= 0 || !rate.is_number() || !(rate.get<double>() > 0)) {
+    return KeyError(key, std::string("noise job ") + std::to_string(id) + " has no " +
+                             (prefix == 'a' ? "accelerometer" : "gyroscope") + " channels");
+  }
+  *value = {{"job", id},
+            {"sigma", worst * std::sqrt(rate.get<double>())},
+            {"white_noise", worst},
+            {"random_walk", walk_seen && worst_walk > 0 ? json(worst_walk) : json()},
+            {"rate", rate},
+            {"channels", channels}};
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status ResolveNoiseReferences(storage::Store* store, json* config) {
+  if (!config->is_object()) return Status::Ok();
+  const std::string method = config->value("method", "");
+  if (method != "imu" && method != "array") return Status::Ok();
+  for (const char* key : {"accel_noise", "gyro_noise"}) {
+    auto it = config->find(key);
+    if (it == config->end() || !it->is_object() || it->contains("sigma")) continue;
+    Status s = Resolve(store, key, &*it);
+    if (!s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+Status ReadNoiseLevel(const json& config, const char* key, std::optional<NoiseLevel>* out) {
+  out->reset();
+  auto it = config.find(key);
+  if (it == config.end() || it->is_null()) return Status::Ok();
+  NoiseLevel level;
+  if (it->is_number()) {
+    level.value = it->get<double>();
+  } else if (it->is_object() && it->contains("job")) {
+    auto sigma = it->find("sigma");
+    const json& job = (*it)["job"];
+    if (sigma == it->end()) {
+      return KeyError(key,
+                      "{\"job\": ID} is resolved by the server when the job is queued (over "
+                      "HTTP); offline, give the noise level as a number");
+    }
+    if (!job.is_number_integer() || !sigma->is_number()) {
+      return KeyError(key, "a resolved noise reference needs an integer \"job\" and a \"sigma\"");
+    }
+    level.value = sigma->get<double>();
+    level.si = true;
+    level.job = job.get<int64_t>();
+  } else {
+    return KeyError(key, "must be a number > 0 or {\"job\": ID} of a succeeded noise job");
+  }
+  if (!std::isfinite(level.value) || !(level.value > 0)) {
+    return KeyError(key, "must be a finite number > 0");
+  }
+  *out = level;
+  return Status::Ok();
+}
+
+json NoiseModelJson(const json& config) {
+  json out = {{"accelerometer", nullptr}, {"gyroscope", nullptr}};
+  for (auto [key, sensor] : {std::pair<const char*, const char*>{"accel_noise", "accelerometer"},
+                             {"gyro_noise", "gyroscope"}}) {
+    auto it = config.find(key);
+    if (it != config.end() && it->is_object() && it->contains("sigma")) {
+      out[sensor] = {{"job", it->value("job", json())},
+                     {"white_noise", it->value("white_noise", json())},
+                     {"random_walk", it->value("random_walk", json())}};
+    }
+  }
+  return out;
+}
+
+json NoiseJobsJson(const json& config) {
+  json out = {{"accelerometer", nullptr}, {"gyroscope", nullptr}};
+  for (auto [key, sensor] : {std::pair<const char*, const char*>{"accel_noise", "accelerometer"},
+                             {"gyro_noise", "gyroscope"}}) {
+    auto it = config.find(key);
+    if (it != config.end() && it->is_object() && it->contains("job") &&
+        (*it)["job"].is_number_integer()) {
+      out[sensor] = (*it)["job"];
+    }
+  }
+  return out;
+}
+
+}  // namespace calibd::server

@@ -1,0 +1,196 @@
+#include "server/openvins_yaml.h"
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+namespace calibd::server {
+
+using nlohmann::json;
+
+namespace {
+
+std::string Num(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  std::string s = buf;
+  if (s.find_first_of(".eEn") == std::string::npos) s += ".0";  // cv::FileStorage: a real
+  return s;
+}
+
+std::string CommentSafe(const std::string& s) {
+  std::string out;
+  for (unsigned char c : s) out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
+  return out;
+}
+
+bool ReadMatrix(const json& j, Eigen::Matrix3d* m) {
+  if (!j.is_array() || j.size() != 3) return false;
+  for (int r = 0; r < 3; ++r) {
+    if (!j[r].is_array() || j[r].size() != 3) return false;
+    for (int c = 0; c < 3; ++c) {
+      if (!j[r][c].is_number()) return false;
+      (*m)(r, c) = j[r][c].get<double>();
+    }
+  }
+  return true;
+}
+
+bool ReadVector(const json& j, Eigen::Vector3d* v) {
+  if (!j.is_array() || j.size() != 3) return false;
+  for (int i = 0; i < 3; ++i) {
+    if (!j[i].is_number()) return false;
+    (*v)(i) = j[i].get<double>();
+  }
+  return true;
+}
+
+// M = Q L with Q a rotation and L lower triangular with a positive diagonal (QL decomposition,
+// from the QR decomposition of M J, J the exchange matrix: M J = Q1 U, Q = Q1 J, L = J U J).
+// False when M is singular or mirrors (det <= 0: no rotation Q exists).
+bool QlDecomposition(const Eigen::Matrix3d& m, Eigen::Matrix3d* q, Eigen::Matrix3d* l) {
+  if (!(m.determinant() > 0) || !m.allFinite()) return false;
+  Eigen::Matrix3d j = Eigen::Matrix3d::Zero();
+  j(0, 2) = j(1, 1) = j(2, 0) = 1;
+  Eigen::HouseholderQR<Eigen::Matrix3d> qr(m * j);
+  Eigen::Matrix3d q1 = qr.householderQ();
+  Eigen::Matrix3d u = qr.matrixQR().triangularView<Eigen::Upper>();
+  for (int i = 0; i < 3; ++i) {
+    if (u(i, i) < 0) {
+      u.row(i) *= -1;
+      q1.col(i) *= -1;
+    }
+  }
+  *q = q1 * j;
+  *l = j * u * j;
+  return q->determinant() > 0;
+}
+
+void WriteMatrix(std::ostringstream& y, const char* key, const Eigen::Matrix3d& m) {
+  y << "  " << key << ":\n";
+  for (int r = 0; r < 3; ++r) {
+    y << "    - [" << Num(m(r, 0)) << ", " << Num(m(r, 1)) << ", " << Num(m(r, 2)) << "]\n";
+  }
+}
+
+}  // namespace
+
+Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context, std::string* out) {
+  const json& params = result.value("parameters", json::object());
+  const json& imus = params.value("imus", json::array());
+  const json& diagnostics = result.value("diagnostics", json::object());
+  if (!imus.is_array() || imus.empty()) return Status::Internal("stored imu result has no imus");
+  if (!params.contains("accel_unit") || !params["accel_unit"].is_number() ||
+      !params.contains("gyro_unit") || !params["gyro_unit"].is_number() ||
+      !diagnostics.contains("rate") || !diagnostics["rate"].is_number()) {
+    return Status::NotDeterminable(
+        "this imu result predates the reading units and rate being stored with it; run the job "
+        "again (POST /api/v1/jobs with its recording) to export it for OpenVINS");
+  }
+  const double accel_unit = params["accel_unit"].get<double>();
+  const double gyro_unit = params["gyro_unit"].get<double>();
+  const double rate = diagnostics["rate"].get<double>();
+  const json& per_imu_diagnostics = diagnostics.value("imus", json::array());
+
+  std::ostringstream y;
+  y << "%YAML:1.0\n"
+    << "# OpenVINS kalibr_imu_chain.yaml: IMU intrinsics from calibd imu job " << context.job_id
+    << " of device '" << CommentSafe(context.device) << "', finished "
+    << CommentSafe(context.finished_at) << ".\n"
+    << "# OpenVINS model (calibrated = kalibr): a_I = Da (a_m - b_a), w_I = R_IMUtoGYRO^T Dw\n"
+    << "# (w_m - b_g), Da = Ta^-1 and Dw = Tw^-1 lower triangular, readings a_m, w_m in SI.\n"
+    << "# calibd's a = T_a K_a (y_a - b_a), w = T_g K_g (y_g - b_g) are the same up to the\n"
+    << "# rotation R_BODYtoI below (frame I: Da lower triangular; calibd's body frame: T_a\n"
+    << "# upper triangular). Noise figures: from the noise job the calibration named in\n"
+    << "# accel_noise/gyro_noise ({\"job\": ID}); else the noise densities from the static\n"
+    << "# intervals' per-sample spread / sqrt(update_rate), and no random walks (a hand-held log\n"
+    << "# cannot show them: run a calibd noise job on a long stationary log).\n";
+  for (size_t k = 0; k < imus.size(); ++k) {
+    const json& imu = imus[k];
+    Eigen::Matrix3d ma, mg;
+    Eigen::Vector3d ba, bg;
+    if (!ReadMatrix(imu["accelerometer"].value("matrix", json()), &ma) ||
+        !ReadMatrix(imu["gyroscope"].value("matrix", json()), &mg) ||
+        !ReadVector(imu["accelerometer"].value("bias", json()), &ba) ||
+        !ReadVector(imu["gyroscope"].value("bias", json()), &bg)) {
+      return Status::Internal("stored imu result lacks a matrix or bias");
+    }
+    const std::string name = imu.value("name", std::to_string(k));
+    ma /= accel_unit;  // per SI reading
+    mg /= gyro_unit;
+    Eigen::Matrix3d r, la, q, lg;
+    if (!QlDecomposition(ma, &r, &la)) {
+      return Status::NotDeterminable("IMU " + name +
+                                     ": the accelerometer matrix is singular or mirrors the axes; "
+                                     "it has no OpenVINS form");
+    }
+    if (!QlDecomposition(r.transpose() * mg, &q, &lg)) {
+      return Status::NotDeterminable("IMU " + name +
+                                     ": the gyroscope matrix is singular or mirrors the axes; it "
+                                     "has no OpenVINS form");
+    }
+    double accel_sigma = 0, gyro_sigma = 0;
+    if (k < per_imu_diagnostics.size()) {
+      const json& noise = per_imu_diagnostics[k].value("noise", json::object());
+      Eigen::Vector3d sa, sg;
+      if (ReadVector(noise.value("accelerometer", json()), &sa)) accel_sigma = sa.maxCoeff();
+      if (ReadVector(noise.value("gyroscope", json()), &sg)) gyro_sigma = sg.maxCoeff();
+    }
+    const Eigen::Vector3d ba_si = ba * accel_unit, bg_si = bg * gyro_unit;
+    y << "imu" << k << ":  # calibd IMU " << CommentSafe(name) << "\n"
+      << "  T_i_b:\n"
+      << "    - [1.0, 0.0, 0.0, 0.0]\n"
+      << "    - [0.0, 1.0, 0.0, 0.0]\n"
+      << "    - [0.0, 0.0, 1.0, 0.0]\n"
+      << "    - [0.0, 0.0, 0.0, 1.0]\n";
+    // Kalibr's noise figures: from the noise job the calibration used (accel_noise/gyro_noise
+    // {"job": ID}), else the densities from the statics' spread; random walks only from a job.
+    const json& noise_model = diagnostics.value("noise_model", json::object());
+    for (int type = 0; type < 2; ++type) {
+      const char* sensor = type == 0 ? "accelerometer" : "gyroscope";
+      const char* units[2][2] = {{"m/s^2/sqrt(Hz)", "m/s^3/sqrt(Hz)"},
+                                 {"rad/s/sqrt(Hz)", "rad/s^2/sqrt(Hz)"}};
+      const json& from_job = noise_model.is_object() ? noise_model.value(sensor, json()) : json();
+      const std::string job =
+          from_job.is_object() && from_job.value("job", json()).is_number_integer()
+              ? std::to_string(from_job["job"].get<int64_t>())
+              : "";
+      const double sigma = type == 0 ? accel_sigma : gyro_sigma;
+      if (!job.empty() && from_job.value("white_noise", json()).is_number()) {
+        y << "  " << sensor << "_noise_density: " << Num(from_job["white_noise"].get<double>())
+          << "  # " << units[type][0] << ", largest axis, calibd noise job " << job << "\n";
+      } else if (sigma > 0 && rate > 0) {
+        y << "  " << sensor << "_noise_density: " << Num(sigma / std::sqrt(rate)) << "  # "
+          << units[type][0] << ", largest axis, from the static intervals\n";
+      }
+      if (!job.empty() && from_job.value("random_walk", json()).is_number()) {
+        y << "  " << sensor << "_random_walk: " << Num(from_job["random_walk"].get<double>())
+          << "  # " << units[type][1] << ", largest axis, calibd noise job " << job << "\n";
+      } else {
+        y << "  # " << sensor << "_random_walk: not known; run a calibd noise job and give it as "
+          << (type == 0 ? "accel_noise" : "gyro_noise") << ": {\"job\": ID}\n";
+      }
+    }
+    y << "  rostopic: /imu" << k << "\n"
+      << "  time_offset: 0.0\n"
+      << "  update_rate: " << Num(rate) << "\n"
+      << "  model: \"calibrated\"\n";
+    WriteMatrix(y, "Tw", lg.inverse());
+    WriteMatrix(y, "R_IMUtoGYRO", q.transpose());
+    WriteMatrix(y, "Ta", la.inverse());
+    WriteMatrix(y, "R_IMUtoACC", Eigen::Matrix3d::Identity());
+    WriteMatrix(y, "Tg", Eigen::Matrix3d::Zero());
+    y << "  # R_BODYtoI (calibd body frame to I, rows):";
+    for (int i = 0; i < 3; ++i) {
+      y << " [" << Num(r(0, i)) << ", " << Num(r(1, i)) << ", " << Num(r(2, i)) << "]";
+    }
+    y << "\n  # biases in SI for initialising the filter: b_a = [" << Num(ba_si(0)) << ", "
+      << Num(ba_si(1)) << ", " << Num(ba_si(2)) << "] m/s^2, b_g = [" << Num(bg_si(0)) << ", "
+      << Num(bg_si(1)) << ", " << Num(bg_si(2)) << "] rad/s\n";
+  }
+  *out = y.str();
+  return Status::Ok();
+}
+
+}  // namespace calibd::server

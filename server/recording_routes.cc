@@ -1,0 +1,148 @@
+#include "server/recording_routes.h"
+
+#include <nlohmann/json.hpp>
+
+#include "server/config.h"
+#include "server/recording_segments.h"
+#include "web/html.h"
+#include "web/recording_page.h"
+
+namespace calibd::server {
+
+using nlohmann::json;
+
+namespace {
+
+bool ParseRecordingId(const std::string& text, int64_t* id) {
+  if (text.empty() || text.size() > 18 ||
+      text.find_first_not_of("0123456789") != std::string::npos) {
+    return false;
+  }
+  *id = std::stoll(text);
+  return *id > 0;
+}
+
+void SendHtml(httplib::Response& res, int status, std::string html) {
+  res.status = status;
+  res.set_header("Cache-Control", "no-cache");
+  res.set_header(
+      "Content-Security-Policy",
+      "default-src 'none'; style-src 'unsafe-inline'; img-src data:; form-action 'self'");
+  res.set_header("X-Content-Type-Options", "nosniff");
+  res.set_content(std::move(html), "text/html; charset=utf-8");
+}
+
+// A recording that is not an inertial log cannot be segmented: 422 (valid input, nothing to find).
+Status AsNotSegmentable(Status s) {
+  if (s.code() == StatusCode::kInvalidInput) {
+    return Status(StatusCode::kNotDeterminable, s.message());
+  }
+  return s;
+}
+
+// The query string as given (for the page's links), keys of the segments options only.
+std::string EchoQuery(const httplib::Request& req) {
+  std::string q;
+  for (const auto& [key, value] : req.params) {
+    q += (q.empty() ? "" : "&") + UrlEncode(key) + "=" + UrlEncode(value);
+  }
+  return q;
+}
+
+constexpr size_t kTimelinePoints = 3000;  // per triad: min/max of 1500 buckets
+constexpr int kJobPages = 10;             // the page lists jobs among the newest 10 × 500
+
+}  // namespace
+
+void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store) {
+  http->Get(R"(/api/v1/recordings/([^/]+)/segments)",
+            [store](const httplib::Request& req, httplib::Response& res) {
+              int64_t id = 0;
+              if (!ParseRecordingId(req.matches[1], &id)) {
+                SendError(res, 404, "not_found", "no such recording");
+                return;
+              }
+              SegmentsOptions options;
+              Status s = ParseSegmentsQuery(req.params, &options);
+              if (!s.ok()) return (void)SendStatus(res, s);
+              RecordingSegments segments;
+              s = ComputeSegments(store, id, options, &segments);
+              if (!s.ok()) return (void)SendStatus(res, AsNotSegmentable(s));
+              res.set_content(JsonBody(SegmentsJson(segments, options)), "application/json");
+            });
+
+  http->Get(R"(/recordings/([^/]+))", [store](const httplib::Request& req, httplib::Response& res) {
+    int64_t id = 0;
+    if (!ParseRecordingId(req.matches[1], &id)) {
+      return SendHtml(res, 404, web::RenderErrorPage(404, "no such recording"));
+    }
+    storage::RecordingInfo info;
+    Status s = store->GetRecording(id, &info);
+    if (s.code() == StatusCode::kNotFound) {
+      return SendHtml(res, 404, web::RenderErrorPage(404, "no such recording"));
+    }
+    if (!s.ok()) {
+      return SendHtml(res, 503,
+                      web::RenderErrorPage(503, "the database is unavailable; try again shortly"));
+    }
+    web::RecordingPageView view;
+    view.id = info.id;
+    view.sha256 = info.sha256;
+    view.layout = info.layout;
+    view.device = info.device;
+    view.file_name = info.file_name;
+    view.created_at = info.created_at;
+    view.bytes = info.bytes;
+    view.rows = info.rows;
+    json columns;
+    if (ParseJsonText(info.columns_json, "columns", &columns).ok() && columns.is_array()) {
+      for (const json& c : columns) {
+        if (c.is_string()) view.columns.push_back(c.get<std::string>());
+      }
+    }
+    SegmentsOptions options;
+    options.timeline_points = kTimelinePoints;
+    s = ParseSegmentsQuery(req.params, &options);
+    view.query = s.ok() ? EchoQuery(req) : "";
+    if (s.ok()) {
+      RecordingSegments segments;
+      s = ComputeSegments(store, id, options, &segments);
+      if (s.ok()) {
+        view.segments = SegmentsJson(segments, options);
+        for (auto& tr : segments.accel_traces) {
+          view.accel.push_back({tr.name, std::move(tr.t), std::move(tr.norm)});
+        }
+        for (auto& tr : segments.gyro_traces) {
+          view.gyro.push_back({tr.name, std::move(tr.t), std::move(tr.norm)});
+        }
+      }
+    }
+    if (!s.ok()) {
+      view.segments_note = s.code() == StatusCode::kInvalidInput
+                               ? "No timeline: " + s.message()
+                               : "No timeline: the recording could not be read.";
+    }
+    // Its jobs: the job list has no recording filter, so the newest jobs are scanned.
+    storage::JobFilter filter;
+    filter.limit = 500;
+    for (int page = 0; page < kJobPages; ++page) {
+      std::vector<storage::JobInfo> jobs;
+      if (!store->ListJobs(filter, &jobs).ok() || jobs.empty()) break;
+      for (const auto& job : jobs) {
+        if (job.recording_id != id) continue;
+        web::JobSummary j;
+        j.id = job.id;
+        j.status = job.status;
+        j.device = job.device;
+        j.method = job.method;
+        j.created_at = job.created_at;
+        view.jobs.push_back(std::move(j));
+      }
+      if (static_cast<int>(jobs.size()) < filter.limit) break;
+      filter.before = jobs.back().id;
+    }
+    SendHtml(res, 200, web::RenderRecordingPage(view));
+  });
+}
+
+}  // namespace calibd::server

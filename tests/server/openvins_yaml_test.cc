@@ -1,0 +1,186 @@
+// format=yaml for imu results: OpenVINS's kalibr_imu_chain.yaml. The intrinsics it writes
+// predict, for any raw reading, the same specific force and rate as calibd's model up to one
+// common rotation of the frame (the convention mapping of server/openvins_yaml.h), in OpenVINS's
+// `calibrated` (kalibr) form: Da, Dw lower triangular, R_IMUtoACC = I, Tg = 0; and the route serves
+// it for a real imu job.
+#include "server/openvins_yaml.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <sstream>
+
+#include "server/imu_method.h"
+#include "tests/server/http_test_util.h"
+
+namespace calibd::server {
+namespace {
+
+using nlohmann::json;
+using testing::TestServer;
+
+json Mat(const Eigen::Matrix3d& m) {
+  json j = json::array();
+  for (int r = 0; r < 3; ++r) j.push_back({m(r, 0), m(r, 1), m(r, 2)});
+  return j;
+}
+
+// The 3x3 matrix under `  key:` of block `imuN:` in the YAML text.
+Eigen::Matrix3d YamlMatrix(const std::string& yaml, const std::string& block,
+                           const std::string& key) {
+  Eigen::Matrix3d m = Eigen::Matrix3d::Constant(NAN);
+  size_t at = yaml.find("\n" + block + ":");
+  if (at == std::string::npos) return m;
+  at = yaml.find("\n  " + key + ":\n", at);
+  if (at == std::string::npos) return m;
+  std::istringstream in(yaml.substr(at + key.size() + 5));
+  for (int r = 0; r < 3; ++r) {
+    std::string line;
+    std::getline(in, line);
+    char dash, open, c1, c2;
+    std::istringstream row(line);
+    row >> dash >> open >> m(r, 0) >> c1 >> m(r, 1) >> c2 >> m(r, 2);
+  }
+  return m;
+}
+
+double YamlNumber(const std::string& yaml, const std::string& key) {
+  const size_t at = yaml.find("  " + key + ": ");
+  if (at == std::string::npos) return NAN;
+  return std::stod(yaml.substr(at + key.size() + 4));
+}
+
+TEST(OpenVinsYaml, IntrinsicsPredictCalibdsModelUpToOneRotationInTheCalibratedForm) {
+  std::mt19937_64 rng(42);
+  std::normal_distribution<double> n01;
+  for (int trial = 0; trial < 20; ++trial) {
+    const double ua = 0.0024, ug = 2e-4;  // SI per count
+    Eigen::Matrix3d ta = Eigen::Matrix3d::Identity(), tg = Eigen::Matrix3d::Identity();
+    ta(0, 1) = 0.01 * n01(rng);
+    ta(0, 2) = 0.01 * n01(rng);
+    ta(1, 2) = 0.01 * n01(rng);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c)
+        if (r != c) tg(r, c) = 0.02 * n01(rng);
+    Eigen::Vector3d ka, kg, ba, bg, sa, sg;
+    for (int i = 0; i < 3; ++i) {
+      ka(i) = ua * (1 + 0.02 * n01(rng));
+      kg(i) = ug * (1 + 0.02 * n01(rng));
+      ba(i) = 32768 + 30 * n01(rng);
+      bg(i) = 32768 + 30 * n01(rng);
+      sa(i) = 0.01 * (1 + i);
+      sg(i) = 0.001 * (1 + i);
+    }
+    const Eigen::Matrix3d ma = ta * ka.asDiagonal(), mg = tg * kg.asDiagonal();
+    const double rate = 200;
+    json imu = {{"name", "0"},
+                {"accelerometer", {{"matrix", Mat(ma)}, {"bias", {ba(0), ba(1), ba(2)}}}},
+                {"gyroscope", {{"matrix", Mat(mg)}, {"bias", {bg(0), bg(1), bg(2)}}}}};
+    json result = {{"method", "imu"},
+                   {"parameters", {{"accel_unit", ua}, {"gyro_unit", ug}, {"imus", {imu}}}},
+                   {"diagnostics",
+                    {{"rate", rate},
+                     {"imus",
+                      {{{"noise",
+                         {{"accelerometer", {sa(0), sa(1), sa(2)}},
+                          {"gyroscope", {sg(0), sg(1), sg(2)}}}}}}}}}};
+    std::string yaml;
+    ASSERT_TRUE(ImuResultToOpenVinsYaml(result, {7, "SN-1", "imu", "2026-01-01"}, &yaml).ok());
+    ASSERT_EQ(yaml.rfind("%YAML:1.0\n", 0), 0u);
+    EXPECT_NE(yaml.find("\nimu0:"), std::string::npos);
+    EXPECT_NE(yaml.find("  model: \"calibrated\"\n"), std::string::npos);
+    const Eigen::Matrix3d tw_ov = YamlMatrix(yaml, "imu0", "Tw");
+    const Eigen::Matrix3d ta_ov = YamlMatrix(yaml, "imu0", "Ta");
+    const Eigen::Matrix3d r_gyro = YamlMatrix(yaml, "imu0", "R_IMUtoGYRO");
+    ASSERT_TRUE(tw_ov.allFinite() && ta_ov.allFinite() && r_gyro.allFinite()) << yaml;
+    EXPECT_TRUE(YamlMatrix(yaml, "imu0", "R_IMUtoACC").isIdentity(0)) << yaml;
+    EXPECT_TRUE(YamlMatrix(yaml, "imu0", "Tg").isZero(0)) << yaml;
+    const Eigen::Matrix3d da = ta_ov.inverse(), dw = tw_ov.inverse();
+    // The calibrated (kalibr) model reads only the lower triangle of Da and Dw.
+    EXPECT_LT(da.triangularView<Eigen::StrictlyUpper>().toDenseMatrix().norm(), 1e-12);
+    EXPECT_LT(dw.triangularView<Eigen::StrictlyUpper>().toDenseMatrix().norm(), 1e-12);
+    // OpenVINS on SI readings u·y: a_I = Da (u_a y_a - u_a b_a), w_I = R_GYROtoI Dw (...).
+    // calibd: a = M_a (y_a - b_a). Per count, OpenVINS's maps are Da u_a and R_GYROtoI Dw u_g;
+    // both must equal R0 M with one rotation R0.
+    const Eigen::Matrix3d r0a = (da * ua) * ma.inverse();
+    const Eigen::Matrix3d r0g = (r_gyro.transpose() * dw * ug) * mg.inverse();
+    EXPECT_LT((r0a * r0a.transpose() - Eigen::Matrix3d::Identity()).norm(), 1e-9) << r0a;
+    EXPECT_NEAR(r0a.determinant(), 1, 1e-9);
+    EXPECT_LT((r0a - r0g).norm(), 1e-9) << r0a << "\n" << r0g;
+    // The rotation is the small one of the misalignments, not a flip.
+    EXPECT_LT(std::acos(std::min(1.0, (r0a.trace() - 1) / 2)), 0.1);
+    EXPECT_NEAR(YamlNumber(yaml, "accelerometer_noise_density"), sa.maxCoeff() / std::sqrt(rate),
+                1e-15);
+    EXPECT_NEAR(YamlNumber(yaml, "gyroscope_noise_density"), sg.maxCoeff() / std::sqrt(rate),
+                1e-15);
+    EXPECT_DOUBLE_EQ(YamlNumber(yaml, "update_rate"), rate);
+    EXPECT_TRUE(std::isnan(YamlNumber(yaml, "accelerometer_random_walk"))) << yaml;
+    // With noise jobs, their figures are written instead (Kalibr's keys, all four).
+    result["diagnostics"]["noise_model"] = {
+        {"accelerometer", {{"job", 3}, {"white_noise", 2e-3}, {"random_walk", 4e-4}}},
+        {"gyroscope", {{"job", 3}, {"white_noise", 1e-4}, {"random_walk", 2e-5}}}};
+    ASSERT_TRUE(ImuResultToOpenVinsYaml(result, {7, "SN-1", "imu", "2026-01-01"}, &yaml).ok());
+    EXPECT_DOUBLE_EQ(YamlNumber(yaml, "accelerometer_noise_density"), 2e-3);
+    EXPECT_DOUBLE_EQ(YamlNumber(yaml, "accelerometer_random_walk"), 4e-4);
+    EXPECT_DOUBLE_EQ(YamlNumber(yaml, "gyroscope_noise_density"), 1e-4);
+    EXPECT_DOUBLE_EQ(YamlNumber(yaml, "gyroscope_random_walk"), 2e-5);
+  }
+}
+
+TEST(OpenVinsYaml, AMirroringMatrixOrAnOldResultIsRefusedSayingWhy) {
+  json imu = {
+      {"name", "0"},
+      {"accelerometer", {{"matrix", Mat(-Eigen::Matrix3d::Identity())}, {"bias", {0, 0, 0}}}},
+      {"gyroscope", {{"matrix", Mat(Eigen::Matrix3d::Identity())}, {"bias", {0, 0, 0}}}}};
+  json result = {{"method", "imu"},
+                 {"parameters", {{"accel_unit", 1}, {"gyro_unit", 1}, {"imus", {imu}}}},
+                 {"diagnostics", {{"rate", 100}}}};
+  std::string yaml;
+  Status s = ImuResultToOpenVinsYaml(result, {}, &yaml);
+  EXPECT_EQ(s.code(), StatusCode::kNotDeterminable);
+  EXPECT_NE(s.message().find("mirrors"), std::string::npos) << s.message();
+  result["parameters"].erase("accel_unit");
+  s = ImuResultToOpenVinsYaml(result, {}, &yaml);
+  EXPECT_EQ(s.code(), StatusCode::kNotDeterminable);
+  EXPECT_NE(s.message().find("run the job again"), std::string::npos) << s.message();
+}
+
+TEST(OpenVinsYaml, TheCalibrationRouteServesItForAnImuJobInCounts) {
+  core::ImuSimulationOptions sim;
+  sim.statics = 20;
+  sim.seed = 5;
+  sim.accel_unit = 0.0024;
+  sim.gyro_unit = 2e-4;
+  sim.accel_offset = 32768;
+  sim.gyro_offset = 32768;
+  std::string csv;
+  json config, truth;
+  ASSERT_TRUE(SimulateImuFiles(sim, &csv, &config, &truth).ok());
+  config["device"] = "OV-1";
+  TestServer server;
+  ASSERT_EQ(server.error(), "");
+  auto res = server.Client().Post(
+      "/api/v1/recordings",
+      httplib::MultipartFormDataItems{{"recording", csv, "imu.csv", "text/csv"},
+                                      {"config", config.dump(), "", "application/json"}});
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 201) << res->body;
+  json job = server.WaitForJob(json::parse(res->body)["job"]["id"]);
+  ASSERT_EQ(job["status"], "succeeded") << job.dump();
+  EXPECT_DOUBLE_EQ(job["result"]["parameters"]["accel_unit"].get<double>(), 0.0024);
+  EXPECT_NEAR(job["result"]["diagnostics"]["rate"].get<double>(), sim.rate, 1e-6);
+  auto yaml = server.Client().Get("/api/v1/devices/OV-1/calibration?method=imu&format=yaml");
+  ASSERT_TRUE(yaml);
+  ASSERT_EQ(yaml->status, 200) << yaml->body;
+  EXPECT_NE(yaml->get_header_value("Content-Disposition").find("kalibr_imu_chain.yaml"),
+            std::string::npos);
+  // Per SI reading, the gains are ≈ 1 (the counts' unit is divided out).
+  const Eigen::Matrix3d ta = YamlMatrix(yaml->body, "imu0", "Ta");
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(ta(i, i), 1, 0.05) << yaml->body;
+}
+
+}  // namespace
+}  // namespace calibd::server

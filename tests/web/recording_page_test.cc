@@ -1,0 +1,117 @@
+// The recording page (web/recording_page.h): metadata and links, the two timelines with one
+// shaded, numbered band per static interval, the tables of thresholds, gaps and intervals,
+// user strings escaped, a long log decimated to a bounded page, and the note when there is no
+// timeline.
+#include "web/recording_page.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <string>
+
+namespace calibd::web {
+namespace {
+
+using json = nlohmann::json;
+
+size_t Count(const std::string& text, const std::string& what) {
+  size_t n = 0;
+  for (size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+  return n;
+}
+
+// A 2-minute 100 Hz log (or `seconds`) with statics [10k, 10k + 6] s.
+RecordingPageView View(double seconds = 120) {
+  RecordingPageView v;
+  v.id = 7;
+  v.sha256 = "ab12";
+  v.layout = "array";
+  v.device = "<script>alert(1)</script>";
+  v.file_name = "\"><img src=x onerror=alert(1)>.csv";
+  v.bytes = 123456;
+  v.rows = static_cast<int64_t>(seconds * 100);
+  v.columns = {"t", "a0_x", "a0_y", "a0_z", "g0_x", "g0_y", "g0_z"};
+  json intervals = json::array();
+  for (int k = 0; 10.0 * k + 6 < seconds; ++k) {
+    intervals.push_back({{"number", k + 1},
+                         {"start", 10.0 * k},
+                         {"end", 10.0 * k + 6},
+                         {"samples", 601},
+                         {"mean", {{"a0", {0, 0, 9.81}}, {"g0", {0, 0, 0}}}},
+                         {"std", {{"a0", {0.01, 0.01, 0.01}}, {"g0", {1e-3, 1e-3, 1e-3}}}}});
+  }
+  v.segments = {{"recording_id", 7},
+                {"static_window", 1},
+                {"min_static", 1},
+                {"threshold_multiplier", 3},
+                {"triads",
+                 {{{"name", "a0"},
+                   {"kind", "accelerometer"},
+                   {"noise_floor", 0.01},
+                   {"threshold", 0.03},
+                   {"threshold_si", 0.03},
+                   {"overridden", false},
+                   {"saturated_samples", 4}}}},
+                {"gaps", {{{"index", 500}, {"start", 4.99}, {"end", 5.5}}}},
+                {"intervals", intervals}};
+  RecordingPageView::Trace a{"a0", {}, {}}, g{"g0", {}, {}};
+  for (int i = 0; i < static_cast<int>(seconds * 100); ++i) {
+    const double t = i / 100.0;
+    const bool still = std::fmod(t, 10.0) < 6;
+    a.t.push_back(t);
+    a.norm.push_back(9.81 + (still ? 0.01 : 2.0) * std::sin(3.1 * i));
+    g.t.push_back(t);
+    g.norm.push_back(still ? 0.001 : 1.5 + std::sin(0.01 * i));
+  }
+  v.accel.push_back(a);
+  v.gyro.push_back(g);
+  web::JobSummary j;
+  j.id = 42;
+  j.method = "imu";
+  j.status = "succeeded";
+  j.device = "SN 1";
+  v.jobs.push_back(j);
+  return v;
+}
+
+TEST(RecordingPage, TimelinesShadeAndNumberEveryStaticAndLinkItsJobs) {
+  const RecordingPageView v = View();
+  const std::string html = RenderRecordingPage(v);
+  EXPECT_NE(html.find("class=\"page-recording\""), std::string::npos);
+  EXPECT_NE(html.find("plot-timeline-accel"), std::string::npos);
+  EXPECT_NE(html.find("plot-timeline-gyro"), std::string::npos);
+  // 12 statics, shaded in both timelines, labelled 1..12.
+  EXPECT_EQ(Count(html, "fill=\"#cfe3f3\""), 2 * v.segments["intervals"].size());
+  EXPECT_EQ(v.segments["intervals"].size(), 12u);
+  EXPECT_NE(html.find(">12</text>"), std::string::npos);
+  EXPECT_NE(html.find("href=\"/jobs/42\""), std::string::npos);
+  EXPECT_NE(html.find("href=\"/devices/SN%201\""), std::string::npos);
+  EXPECT_NE(html.find("href=\"/api/v1/recordings/7/data\""), std::string::npos);
+  EXPECT_NE(html.find("href=\"/api/v1/recordings/7/segments\""), std::string::npos);
+  EXPECT_NE(html.find("table-intervals"), std::string::npos);
+  EXPECT_NE(html.find("1 gap(s)"), std::string::npos);
+  // User strings never reach the page raw.
+  EXPECT_EQ(html.find("<script>alert"), std::string::npos);
+  EXPECT_EQ(html.find("<img src=x"), std::string::npos);
+}
+
+TEST(RecordingPage, AnHourLongLogIsDecimatedToABoundedPage) {
+  const std::string html = RenderRecordingPage(View(3600));
+  EXPECT_LT(html.size(), 1u << 20) << html.size();
+  EXPECT_NE(html.find("decimated"), std::string::npos);
+}
+
+TEST(RecordingPage, WithoutSegmentsTheNoteSaysWhy) {
+  RecordingPageView v = View();
+  v.segments = nullptr;
+  v.accel.clear();
+  v.gyro.clear();
+  v.segments_note = "No timeline: recording 7 has the pca_averaged layout";
+  const std::string html = RenderRecordingPage(v);
+  EXPECT_NE(html.find("No timeline: recording 7 has the pca_averaged layout"), std::string::npos);
+  EXPECT_EQ(html.find("plot-timeline-accel"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace calibd::web

@@ -1,0 +1,195 @@
+#include "web/recording_page.h"
+
+#include <cmath>
+
+#include "web/html.h"
+#include "web/svg_plot.h"
+
+namespace calibd::web {
+
+using nlohmann::json;
+
+namespace {
+
+std::string E(std::string_view s) { return EscapeText(s); }
+
+double NumberOr(const json& j, const char* key, double fallback) {
+  if (!j.is_object()) return fallback;
+  auto it = j.find(key);
+  return it != j.end() && it->is_number() ? it->get<double>() : fallback;
+}
+
+std::string Dd(const std::string& term, const std::string& value_html) {
+  return "<dt>" + E(term) + "</dt><dd>" + value_html + "</dd>";
+}
+
+// The timeline of one sensor kind: the norm of every triad against time, statics shaded.
+std::string Timeline(const std::vector<RecordingPageView::Trace>& traces, const json& intervals,
+                     const std::string& name, const std::string& title,
+                     const std::string& y_title) {
+  PlotOptions o;
+  o.name = name;
+  o.title = title;
+  o.x.title = "time t (s)";
+  o.y.title = y_title;
+  o.width = 900;
+  o.height = 300;
+  o.max_points = 4000;
+  if (intervals.is_array()) {
+    for (const json& iv : intervals) {
+      o.bands.push_back({NumberOr(iv, "start", NAN), NumberOr(iv, "end", NAN),
+                         std::to_string(static_cast<long long>(NumberOr(iv, "number", 0)))});
+    }
+  }
+  std::vector<Series> series;
+  for (const auto& tr : traces) {
+    Series s;
+    s.label = "|" + tr.name + "|";
+    s.x = tr.t;
+    s.y = tr.norm;
+    s.line_width = 1.0;
+    series.push_back(std::move(s));
+  }
+  return RenderXYPlot(o, series);
+}
+
+std::string JobsSection(const RecordingPageView& v) {
+  std::string s = "<section id=\"jobs\"><h2>Jobs on this recording</h2>";
+  if (v.jobs.empty()) {
+    return s +
+           "<p class=\"muted\">No job has used this recording yet (POST /api/v1/jobs with its "
+           "recording_id runs one).</p></section>";
+  }
+  s += "<div class=\"table-wrap\"><table class=\"table-recording-jobs\"><thead><tr><th>job</th>"
+       "<th>method</th><th>device</th><th>status</th><th>created</th></tr></thead><tbody>";
+  for (const JobSummary& j : v.jobs) {
+    const std::string id = std::to_string(j.id);
+    s += "<tr><td><a href=\"/jobs/" + id + "\">#" + id + "</a></td><td>" + E(j.method) +
+         "</td><td>" +
+         (j.device.empty() ? std::string("<span class=\"muted\">none</span>")
+                           : "<a href=\"/devices/" + EscapeAttr(UrlEncode(j.device)) + "\">" +
+                                 E(j.device) + "</a>") +
+         "</td><td>" + StatusBadge(j.status) + "</td><td>" + E(j.created_at) + "</td></tr>";
+  }
+  return s + "</tbody></table></div></section>";
+}
+
+std::string SegmentsSection(const RecordingPageView& v) {
+  std::string s = "<section id=\"segments\"><h2>Static intervals</h2>";
+  const json& seg = v.segments;
+  if (!seg.is_object()) {
+    return s + "<p class=\"muted not-available\">" + E(v.segments_note) + "</p></section>";
+  }
+  const json& intervals = seg.contains("intervals") ? seg["intervals"] : json::array();
+  const std::string id = std::to_string(v.id);
+  s += "<p>" + std::to_string(intervals.size()) +
+       " static interval(s) found from the log's own noise floor (window " +
+       E(FormatSig(NumberOr(seg, "static_window", NAN), 3)) + " s, at least " +
+       E(FormatSig(NumberOr(seg, "min_static", NAN), 3)) + " s, threshold " +
+       E(FormatSig(NumberOr(seg, "threshold_multiplier", NAN), 3)) +
+       " \xC3\x97 the noise floor unless overridden" +
+       (v.query.empty() ? std::string() : "; options: " + E(v.query)) +
+       "). The same as JSON: <a href=\"/api/v1/recordings/" + id + "/segments" +
+       (v.query.empty() ? std::string() : "?" + EscapeAttr(v.query)) +
+       "\">segments</a>. Try other options with <code>?static_window=&amp;min_static=&amp;"
+       "static_threshold={\"accelerometer\":x,\"gyroscope\":y}</code>.</p>";
+  s += "<div class=\"timelines\">";  // one under the other, full width: a shared time axis
+  s += "<figure>" +
+       Timeline(v.accel, intervals, "timeline-accel", "Accelerometer norm", "|a| (m/s\xC2\xB2)") +
+       "<figcaption>Shaded and numbered: the static intervals.</figcaption></figure>";
+  s += "<figure>" +
+       Timeline(v.gyro, intervals, "timeline-gyro", "Gyroscope norm", "|\xCF\x89| (rad/s)") +
+       "<figcaption>Between two statics the board was turned; the rotations the imu method "
+       "integrates.</figcaption></figure>";
+  s += "</div>";
+  // Thresholds per triad.
+  if (seg.contains("triads") && seg["triads"].is_array()) {
+    s += "<div class=\"table-wrap\"><table class=\"table-thresholds\"><thead><tr><th>triad</th>"
+         "<th>kind</th><th>noise floor (reading units)</th><th>threshold (reading units)</th>"
+         "<th>threshold (SI)</th><th>saturated samples</th></tr></thead><tbody>";
+    for (const json& t : seg["triads"]) {
+      s += "<tr><td>" + E(t.value("name", "")) + "</td><td>" + E(t.value("kind", "")) +
+           "</td><td>" + E(FormatSig(NumberOr(t, "noise_floor", NAN))) + "</td><td>" +
+           E(FormatSig(NumberOr(t, "threshold", NAN))) +
+           (t.value("overridden", false) ? " (given)" : "") + "</td><td>" +
+           E(FormatSig(NumberOr(t, "threshold_si", NAN))) + "</td><td>" +
+           std::to_string(static_cast<long long>(NumberOr(t, "saturated_samples", 0))) +
+           "</td></tr>";
+    }
+    s += "</tbody></table></div>";
+  }
+  if (seg.contains("gaps") && seg["gaps"].is_array() && !seg["gaps"].empty()) {
+    s += "<p class=\"warning\">" + std::to_string(seg["gaps"].size()) +
+         " gap(s) in the sample times (no static window spans one):";
+    size_t shown = 0;
+    for (const json& g : seg["gaps"]) {
+      if (++shown > 20) {
+        s += " \xE2\x80\xA6";
+        break;
+      }
+      s += " " + E(FormatSig(NumberOr(g, "start", NAN), 6)) + "\xE2\x80\x93" +
+           E(FormatSig(NumberOr(g, "end", NAN), 6)) + " s;";
+    }
+    s += "</p>";
+  }
+  if (!intervals.empty()) {
+    s += "<div class=\"table-wrap\"><table class=\"table-intervals\"><thead><tr><th>#</th>"
+         "<th>start (s)</th><th>end (s)</th><th>duration</th><th>samples</th>"
+         "<th>mean per triad (reading units)</th></tr></thead><tbody>";
+    for (const json& iv : intervals) {
+      std::string means;
+      if (iv.contains("mean") && iv["mean"].is_object()) {
+        for (const auto& [name, m] : iv["mean"].items()) {
+          means += E(name) + " (";
+          for (size_t i = 0; i < 3 && m.is_array() && i < m.size(); ++i) {
+            means += (i ? ", " : "") + E(FormatSig(m[i].is_number() ? m[i].get<double>() : NAN));
+          }
+          means += ") ";
+        }
+      }
+      const double a = NumberOr(iv, "start", NAN), b = NumberOr(iv, "end", NAN);
+      s += "<tr><td>" + std::to_string(static_cast<long long>(NumberOr(iv, "number", 0))) +
+           "</td><td>" + E(FormatSig(a, 6)) + "</td><td>" + E(FormatSig(b, 6)) + "</td><td>" +
+           E(FormatDuration(b - a)) + "</td><td>" +
+           std::to_string(static_cast<long long>(NumberOr(iv, "samples", 0))) + "</td><td>" +
+           means + "</td></tr>";
+    }
+    s += "</tbody></table></div>";
+  }
+  return s + "</section>";
+}
+
+}  // namespace
+
+std::string RenderRecordingPage(const RecordingPageView& v) {
+  const std::string id = std::to_string(v.id);
+  std::string body = "<h1>Recording " + id + "</h1>";
+  std::string columns;
+  for (size_t i = 0; i < v.columns.size(); ++i) {
+    if (i == 40) {
+      columns += ", \xE2\x80\xA6 (" + std::to_string(v.columns.size()) + " in all)";
+      break;
+    }
+    columns += (i ? ", " : "") + E(v.columns[i]);
+  }
+  body += "<section id=\"metadata\"><h2>Metadata</h2><dl class=\"kv\">" +
+          Dd("layout", E(v.layout)) + Dd("rows", std::to_string(v.rows)) +
+          Dd("bytes", std::to_string(v.bytes) + " (" +
+                          E(FormatSI(static_cast<double>(v.bytes), "B")) + ")") +
+          Dd("SHA-256", "<code>" + E(v.sha256) + "</code>") +
+          Dd("device", v.device.empty() ? std::string("<span class=\"muted\">none</span>")
+                                        : "<a href=\"/devices/" + EscapeAttr(UrlEncode(v.device)) +
+                                              "\">" + E(v.device) + "</a>") +
+          Dd("file name", v.file_name.empty() ? std::string("<span class=\"muted\">none</span>")
+                                              : E(v.file_name)) +
+          Dd("uploaded", E(v.created_at)) + Dd("columns", columns) +
+          Dd("data", "<a href=\"/api/v1/recordings/" + id +
+                         "/data\">the CSV</a> \xC2\xB7 <a href=\"/api/v1/recordings/" + id +
+                         "\">metadata as JSON</a>") +
+          "</dl></section>";
+  body += SegmentsSection(v);
+  body += JobsSection(v);
+  return RenderPage("Recording " + id, "page-recording", body);
+}
+
+}  // namespace calibd::web

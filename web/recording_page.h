@@ -1,0 +1,40 @@
+// The recording page `/recordings/{id}` (SPEC §7): the recording's metadata, links to its data
+// and to the jobs that used it, and, for an inertial log, a timeline of the accelerometer norm
+// and the gyroscope norm against time with the static intervals the detector found shaded and
+// numbered (1, 2, ... as in the segments answer and the imu diagnostics), plus the table of
+// intervals and the thresholds used. Pure rendering; every user string is escaped.
+#ifndef CALIBD_WEB_RECORDING_PAGE_H_
+#define CALIBD_WEB_RECORDING_PAGE_H_
+
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "web/pages.h"
+
+namespace calibd::web {
+
+struct RecordingPageView {
+  int64_t id = 0;
+  std::string sha256, layout, device, file_name, created_at;
+  int64_t bytes = 0, rows = 0;
+  std::vector<std::string> columns;
+  std::vector<JobSummary> jobs;  // the jobs of this recording, newest first
+  // Inertial logs: the segments answer (server/recording_segments.h SegmentsJson), or null with
+  // `segments_note` saying why there is none (not an inertial log, a bad time column...).
+  nlohmann::json segments;
+  std::string segments_note;
+  std::string query;  // the detection options of the request, shown and linked ("" = defaults)
+  struct Trace {
+    std::string name;             // "a0", "g0", ...
+    std::vector<double> t, norm;  // s, SI norm (decimated)
+  };
+  std::vector<Trace> accel, gyro;
+};
+
+std::string RenderRecordingPage(const RecordingPageView& view);
+
+}  // namespace calibd::web
+
+#endif  // CALIBD_WEB_RECORDING_PAGE_H_
