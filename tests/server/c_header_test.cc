@@ -153,8 +153,11 @@ TEST(CHeader, HeadersOfTwoDevicesAndEveryMethodCompileTogetherInCAndCxxAndCorrec
     results[std::to_string(i) + " pca"] = job["result"];
 
     core::ImuSimulationOptions imu;
-    imu.statics = 14;
-    imu.seed = 21 + i;
+    // Random orientations: with these seeds every face of the board is up in some static, so the
+    // acceptance gate accepts the result and it is what the device serves (the subject here is
+    // the header; the gate's coverage rule has its own tests).
+    imu.statics = 24;
+    imu.seed = 23 + i;
     ASSERT_TRUE(SimulateImuFiles(imu, &csv, &config, &truth).ok());
     job = Calibrate(server, csv, config, i == 0 ? dev1 : dev2);
     ASSERT_EQ(job["status"], "succeeded") << job.dump();
