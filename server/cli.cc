@@ -189,6 +189,12 @@ int RunCli(int argc, char** argv) {
       ->check(CLI::Range(1.0, 1e6))
       ->capture_default_str();
   serve_cmd
+      ->add_option("--job-memory-bytes", serve.job_memory_bytes,
+                   "memory one job may use; larger jobs are refused with 422 (0: half the "
+                   "machine's memory shared among the workers, 256 MiB to 8 GiB each)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 50))
+      ->capture_default_str();
+  serve_cmd
       ->add_option("--http-threads", serve.http_threads,
                    "threads that process requests (slow and idle connections hold none)")
       ->check(CLI::Range(4, 1024))

@@ -55,6 +55,14 @@ class Method {
   // rejection. Deterministic.
   virtual void Judge(const nlohmann::json& result, const nlohmann::json& config,
                      const AcceptanceLimits& limits, Verdict* verdict) const = 0;
+  // The job's peak memory per value of the recording (rows x columns), in bytes: the parser's
+  // doubles (8) plus what the method's run holds at its peak, measured on large recordings
+  // (bench/README.md, "Memory budget per job"). Used by the per-job budget (server/job_budget.h)
+  // to refuse, before any work, a job that would not fit. `config` has been validated.
+  virtual double PeakBytesPerValue(const nlohmann::json& config) const {
+    (void)config;
+    return 24;
+  }
 };
 
 // Every method, in the order users see them. Never empty; the pointers live for the process.

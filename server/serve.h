@@ -22,6 +22,10 @@ struct ServeOptions {
   // A gzip-compressed recording that expands more than this many times is refused (413) as a
   // decompression bomb (checked past its first MiB). CSV logs compress 3-20 times.
   double max_gzip_ratio = 200;
+  // Memory one job may use (server/job_budget.h): a job whose recording would need more is
+  // refused with 422 at upload or POST /jobs (and failed by a worker if queued before).
+  // 0 = half the machine's memory shared among the workers, 256 MiB to 8 GiB each.
+  int64_t job_memory_bytes = 0;
   int64_t max_json_body_bytes = int64_t{1} << 20;  // POST /jobs bodies and config parts
   // Threads that process requests. A connection gets one only once its request line and headers
   // have arrived (server/http_server.h), so slow or idle clients do not hold threads.

@@ -27,6 +27,7 @@
 #include "server/http_util.h"
 #include "server/inertial_log.h"
 #include "server/instance.h"
+#include "server/job_budget.h"
 #include "server/method.h"
 #include "server/metrics.h"
 #include "server/noise_reference.h"
@@ -258,9 +259,10 @@ struct Service::Impl {
   std::string host;
   int requested_port = 0;
   int bound_port = 0;
-  int listen_fd = -1;         // the listening socket, noted by the socket-options hook (Bind)
-  std::string token;          // empty: no authentication
-  nlohmann::json acceptance;  // server-wide acceptance limits (--acceptance), null for none
+  int listen_fd = -1;            // the listening socket, noted by the socket-options hook (Bind)
+  std::string token;             // empty: no authentication
+  nlohmann::json acceptance;     // server-wide acceptance limits (--acceptance), null for none
+  int64_t job_memory_bytes = 0;  // the per-job memory budget in force (server/job_budget.h)
   fs::path staging_dir;
   std::unique_ptr<storage::Store> store;
   std::unique_ptr<ProcessInstance> instance;  // after store: removed before the store closes
@@ -304,6 +306,7 @@ std::string ServeOptions::Validate() const {
   if (workers < 0) return "--workers must be >= 0";
   if (max_upload_bytes < 1) return "--max-upload-bytes must be >= 1";
   if (!(max_gzip_ratio >= 1)) return "--max-gzip-ratio must be >= 1";
+  if (job_memory_bytes < 0) return "--job-memory-bytes must be >= 0 (0: automatic)";
   if (http_threads < 4) return "--http-threads must be >= 4";
   if (head_timeout_seconds < 1) return "--head-timeout-seconds must be >= 1";
   if (max_connections_per_client < 1) return "--max-connections-per-client must be >= 1";
@@ -361,6 +364,9 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
       std::max(0, static_cast<int>(std::thread::hardware_concurrency()) - 1));
   pool.executor = impl->numerics->Executor();
   pool.acceptance = impl->acceptance;
+  impl->job_memory_bytes =
+      options.job_memory_bytes > 0 ? options.job_memory_bytes : DefaultJobMemoryBytes(pool.workers);
+  pool.job_memory_bytes = impl->job_memory_bytes;
   impl->workers = std::make_unique<WorkerPool>(impl->store.get(), &impl->metrics, pool);
   HttpLimits limits;
   limits.threads = options.http_threads;
@@ -856,6 +862,10 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
                                                          LayoutName(summary.layout) + " layout")
                                         .WithField("method")));
     }
+    const RecordingShape shape{summary.rows, static_cast<int64_t>(summary.columns.size())};
+    s = CheckJobBudget(*FindMethod(common.method), shape, WithoutAcceptance(config),
+                       job_memory_bytes);
+    if (!s.ok()) return finish(SendStatus(res, s));
     rec.job = storage::NewJob{common.method, common.device,
                               config.dump(-1, ' ', false, json::error_handler_t::replace)};
   } else if (config.contains("device")) {
@@ -949,6 +959,12 @@ void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Respon
                              std::to_string(recording_id) + "'s " + recording.layout + " layout")
             .WithField("method"));
   }
+  const json columns = json::parse(recording.columns_json, nullptr, /*allow_exceptions=*/false);
+  const RecordingShape shape{recording.rows,
+                             columns.is_array() ? static_cast<int64_t>(columns.size()) : 0};
+  s = CheckJobBudget(*FindMethod(common.method), shape, WithoutAcceptance(config),
+                     job_memory_bytes);
+  if (!s.ok()) return (void)SendStatus(res, s);
   storage::JobInfo job;
   s = store->EnqueueJob(recording_id, common.method, common.device,
                         config.dump(-1, ' ', false, json::error_handler_t::replace), &job);

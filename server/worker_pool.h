@@ -44,6 +44,9 @@ struct WorkerPoolOptions {
   // Server-wide acceptance limits per method (`serve --acceptance`; null: built-in defaults),
   // passed to Calibrate for every job's verdict.
   nlohmann::json acceptance;
+  // Per-job memory budget (server/job_budget.h), checked before a claimed job reads its
+  // recording; <= 0: none.
+  int64_t job_memory_bytes = 0;
 };
 
 class WorkerPool {
