@@ -16,7 +16,9 @@
 #define CALIBD_TESTS_LIB_MONTE_CARLO_H_
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 namespace calibd::monte_carlo {
 
@@ -28,6 +30,20 @@ inline double StdRatioStandardError(double samples) { return std::sqrt(0.5 / sam
 
 // Standard error of the mean of `samples` independent values of standard deviation `sigma`.
 inline double MeanStandardError(double sigma, double samples) { return sigma / std::sqrt(samples); }
+
+// Standard error of the median of the independent values `x`, without assuming their
+// distribution: the number of values below the true median is Binomial(T, 1/2), standard deviation
+// √T / 2, so the order statistics √T / 2 ranks either side of the middle bound about ±1 standard
+// error; half their distance estimates it.
+inline double MedianStandardError(std::vector<double> x) {
+  if (x.size() < 4) return 0;
+  std::sort(x.begin(), x.end());
+  const double t = static_cast<double>(x.size());
+  const double half = std::sqrt(t) / 2;
+  const size_t lo = static_cast<size_t>(std::max(0.0, std::floor(t / 2 - half)));
+  const size_t hi = std::min(x.size() - 1, static_cast<size_t>(std::ceil(t / 2 + half)));
+  return (x[hi] - x[lo]) / 2;
+}
 
 // Number of independent errors a sum of squares of errors with covariance `c` is worth:
 // (tr C)² / tr(C²), d when C is a multiple of the identity, 1 when the errors are one error.
