@@ -1,0 +1,358 @@
+// The worker pool against a real Store on a temporary SQLite file, running the real methods on
+// small simulated recordings: jobs complete, Stop's grace period, Stop(0) releasing a running
+// job, a lease taken back cancelling the computation, and the shared numerics executor.
+//
+// A running job is held at a known point without timing: the array solver's parallel numerics go
+// through WorkerPoolOptions::executor, and the test's executor (GatedExecutor) runs every task
+// correctly but makes the first call wait until the test opens the gate.
+#include "server/worker_pool.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+
+#include "core/pca_simulation.h"
+#include "core/task_pool.h"
+#include "server/array_method.h"
+#include "server/metrics.h"
+#include "server/pca_method.h"
+#include "storage/store.h"
+#include "tests/lib/sanitizer.h"
+#include "tests/storage/storage_test_util.h"
+
+namespace calibd::server {
+namespace {
+
+using nlohmann::json;
+using storage::testing::FakeClock;
+using storage::testing::TempDir;
+
+// Runs every task on the calling thread (the solvers' results do not depend on the thread
+// count), counts the calls, and holds the first call until Open() while the gate is closed.
+class GatedExecutor {
+ public:
+  explicit GatedExecutor(bool closed) : open_(!closed) {}
+
+  core::TaskExecutor Fn() {
+    return [this](int64_t tasks, const std::function<void(int64_t)>& run) {
+      {
+        std::unique_lock<std::mutex> lock(mu_);
+        ++calls_;
+        changed_.notify_all();
+        changed_.wait(lock, [this] { return open_; });
+      }
+      for (int64_t i = 0; i < tasks; ++i) run(i);
+    };
+  }
+  // Waits (at most a minute) until a computation is inside the executor.
+  bool WaitEntered() {
+    std::unique_lock<std::mutex> lock(mu_);
+    return changed_.wait_for(lock, std::chrono::minutes(1), [this] { return calls_ > 0; });
+  }
+  void Open() {
+    std::lock_guard<std::mutex> lock(mu_);
+    open_ = true;
+    changed_.notify_all();
+  }
+  int calls() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return calls_;
+  }
+
+ private:
+  mutable std::mutex mu_;
+  std::condition_variable changed_;
+  bool open_;
+  int calls_ = 0;
+};
+
+class WorkerPoolTest : public ::testing::Test {
+ protected:
+  void OpenStore(std::function<int64_t()> now_ms = {}) {
+    storage::StoreOptions o;
+    o.now_ms = std::move(now_ms);
+    ASSERT_TRUE(storage::Store::Open(dir_.File("calibd.db"), o, &store_).ok());
+  }
+  void SetUp() override { OpenStore(); }
+
+  // A small array recording (N = 1000, 32 triads) and its job.
+  int64_t EnqueueArray(uint64_t seed) {
+    ArraySimulationFileOptions so;
+    so.seed = seed;
+    std::string csv;
+    json config, truth;
+    EXPECT_TRUE(SimulateArrayFiles(so, &csv, &config, &truth).ok());
+    return Enqueue(csv, "array", "array", config);
+  }
+  // A small pca recording (12 sensors, 100 positions).
+  int64_t EnqueuePca(uint64_t seed) {
+    core::PcaSimulationOptions so;
+    so.seed = seed;
+    std::string csv;
+    json config, truth;
+    EXPECT_TRUE(SimulatePcaFiles(so, &csv, &config, &truth).ok());
+    return Enqueue(csv, "pca_averaged", "pca", config);
+  }
+  int64_t Enqueue(const std::string& csv, const std::string& layout, const std::string& method,
+                  const json& config) {
+    storage::NewRecording r;
+    r.data = csv;
+    r.layout = layout;
+    r.file_name = method + ".csv";
+    r.device = "SN-1";
+    r.job = storage::NewJob{method, "", config.dump()};
+    storage::RecordingInfo info;
+    const Status s = store_->PutRecording(r, &info, nullptr);
+    EXPECT_TRUE(s.ok()) << s.ToString();
+    EXPECT_TRUE(info.job.has_value());
+    return info.job ? info.job->id : 0;
+  }
+
+  storage::JobInfo Job(int64_t id) {
+    storage::JobInfo job;
+    EXPECT_TRUE(store_->GetJob(id, &job).ok());
+    return job;
+  }
+  // Polls until the job has `status` (at most two minutes: a liveness bound, not a speed claim).
+  storage::JobInfo WaitFor(int64_t id, const std::string& status) {
+    storage::JobInfo job;
+    for (int i = 0; i < 12000; ++i) {
+      job = Job(id);
+      if (job.status == status) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return job;
+  }
+  int Outcomes(const std::string& method, const std::string& outcome) {
+    const std::string text = metrics_.Render({}, {});
+    const std::string key =
+        "calibd_jobs_finished_total{method=\"" + method + "\",outcome=\"" + outcome + "\"} ";
+    const size_t at = text.find(key);
+    return at == std::string::npos ? 0 : std::stoi(text.substr(at + key.size()));
+  }
+  WorkerPoolOptions Options(core::TaskExecutor executor = {}) {
+    WorkerPoolOptions o;
+    o.workers = 1;
+    o.lease_ms = 300;  // renewed every 100 ms: a lost lease is noticed at once
+    o.poll_ms = 20;
+    o.id_prefix = "test:1";
+    o.executor = std::move(executor);
+    return o;
+  }
+
+  TempDir dir_;
+  FakeClock clock_;  // used by the tests that open the store with it
+  std::unique_ptr<storage::Store> store_;
+  Metrics metrics_;
+};
+
+TEST_F(WorkerPoolTest, JobsOfEveryQueuedMethodComplete) {
+  const int64_t pca = EnqueuePca(3);
+  const int64_t array = EnqueueArray(4);
+  WorkerPoolOptions o = Options();
+  o.workers = 2;
+  WorkerPool pool(store_.get(), &metrics_, o);
+  pool.Start();
+  pool.Notify();
+  const storage::JobInfo p = WaitFor(pca, "succeeded");
+  const storage::JobInfo a = WaitFor(array, "succeeded");
+  EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
+  ASSERT_EQ(p.status, "succeeded") << p.error_code << ": " << p.error_message;
+  ASSERT_EQ(a.status, "succeeded") << a.error_code << ": " << a.error_message;
+  EXPECT_EQ(p.attempts, 1);
+  EXPECT_EQ(a.attempts, 1);
+  EXPECT_EQ(json::parse(p.result_json)["parameters"]["sensors"].size(), 12u);
+  EXPECT_EQ(json::parse(a.result_json)["parameters"]["positions"].size(), 32u);
+  EXPECT_EQ(Outcomes("pca", "succeeded"), 1);
+  EXPECT_EQ(Outcomes("array", "succeeded"), 1);
+  EXPECT_EQ(pool.running_jobs(), 0);
+}
+
+TEST_F(WorkerPoolTest, StopWithAGracePeriodLetsTheRunningJobFinish) {
+  const int64_t id = EnqueueArray(5);
+  GatedExecutor gate(/*closed=*/true);
+  WorkerPool pool(store_.get(), &metrics_, Options(gate.Fn()));
+  pool.Start();
+  pool.Notify();
+  ASSERT_TRUE(gate.WaitEntered());
+  EXPECT_EQ(pool.running_jobs(), 1);
+  EXPECT_EQ(Job(id).status, "running");
+  bool all_done = false;
+  std::thread stopper([&] { all_done = pool.Stop(std::chrono::minutes(2)); });
+  // Stop is now waiting (or about to) while the job is held; let the job go on.
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  gate.Open();
+  stopper.join();
+  EXPECT_TRUE(all_done);
+  const storage::JobInfo job = Job(id);
+  EXPECT_EQ(job.status, "succeeded") << job.error_code << ": " << job.error_message;
+  EXPECT_EQ(job.attempts, 1);
+  EXPECT_EQ(Outcomes("array", "succeeded"), 1);
+}
+
+TEST_F(WorkerPoolTest, StopWithoutGraceReleasesTheRunningJobWithoutCountingTheAttempt) {
+  // A whole run of the job first, counting its executor calls: a cancelled run must make fewer.
+  const int64_t whole = EnqueueArray(6);
+  int full_calls = 0;
+  {
+    GatedExecutor counter(/*closed=*/false);
+    WorkerPool pool(store_.get(), &metrics_, Options(counter.Fn()));
+    pool.Start();
+    pool.Notify();
+    ASSERT_EQ(WaitFor(whole, "succeeded").status, "succeeded");
+    EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
+    full_calls = counter.calls();
+  }
+  ASSERT_GT(full_calls, 2);
+
+  // The same recording and config again, held in its first executor call.
+  const storage::JobInfo first = Job(whole);
+  storage::JobInfo queued;
+  ASSERT_TRUE(store_->EnqueueJob(first.recording_id, "array", "", first.config_json, &queued).ok());
+  const int64_t id = queued.id;
+  GatedExecutor gate(/*closed=*/true);
+  WorkerPool pool(store_.get(), &metrics_, Options(gate.Fn()));
+  pool.Start();
+  pool.Notify();
+  ASSERT_TRUE(gate.WaitEntered());
+  EXPECT_EQ(Job(id).attempts, 1);
+  bool all_done = true;
+  std::thread stopper([&] { all_done = pool.Stop(std::chrono::milliseconds(0)); });
+  // Stop(0) gives the job back at once; only then does the held computation go on (and must
+  // stop at its next check instead of computing to the end).
+  const storage::JobInfo released = WaitFor(id, "queued");
+  gate.Open();
+  stopper.join();
+  EXPECT_FALSE(all_done);
+  EXPECT_EQ(released.status, "queued");
+  const storage::JobInfo job = Job(id);
+  EXPECT_EQ(job.status, "queued");
+  EXPECT_EQ(job.attempts, 0) << "a released attempt is not counted";
+  EXPECT_EQ(job.lease_owner, "");
+  EXPECT_EQ(job.result_json, "");
+  EXPECT_EQ(Outcomes("array", "cancelled"), 1);
+  EXPECT_EQ(Outcomes("array", "succeeded"), 1);  // the whole run only
+  EXPECT_LT(gate.calls(), full_calls) << "the cancelled computation ran to the end";
+
+  // It runs again, to the same result, after the restart.
+  WorkerPool again(store_.get(), &metrics_, Options());
+  again.Start();
+  again.Notify();
+  const storage::JobInfo done = WaitFor(id, "succeeded");
+  EXPECT_TRUE(again.Stop(std::chrono::seconds(60)));
+  EXPECT_EQ(done.status, "succeeded") << done.error_code << ": " << done.error_message;
+  EXPECT_EQ(done.attempts, 1);
+}
+
+// The lease is taken back (as another process does when it believes this one dead, or after the
+// lease expired) and another worker claims the job: the running computation is cancelled, stores
+// nothing, and the new holder keeps the job.
+void ExpectTakenBackJobIsCancelled(storage::Store* store, Metrics* metrics, int64_t id,
+                                   const std::function<void()>& take_back) {
+  GatedExecutor gate(/*closed=*/true);
+  WorkerPoolOptions o;
+  o.workers = 1;
+  o.lease_ms = 300;
+  o.poll_ms = 20;
+  o.id_prefix = "test:1";
+  o.executor = gate.Fn();
+  WorkerPool pool(store, metrics, o);
+  pool.Start();
+  pool.Notify();
+  ASSERT_TRUE(gate.WaitEntered());
+  take_back();
+  storage::JobInfo other;
+  bool claimed = false;
+  ASSERT_TRUE(store->ClaimJob("other:2-0", 600000, &other, &claimed).ok());
+  ASSERT_TRUE(claimed);
+  ASSERT_EQ(other.id, id);
+  // The renewer (every 100 ms) finds the lease gone and cancels the run; keep the computation
+  // held long enough for that (a liveness allowance, scaled for the sanitizers).
+  std::this_thread::sleep_for(
+      std::chrono::milliseconds(static_cast<int>(1500 * sanitizer::kTimeBoundScale)));
+  gate.Open();
+  // The pool's worker is free again (it ends the cancelled run) and nothing was stored.
+  for (int i = 0; i < 12000 && pool.running_jobs() > 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_EQ(pool.running_jobs(), 0);
+  EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
+  storage::JobInfo job;
+  ASSERT_TRUE(store->GetJob(id, &job).ok());
+  EXPECT_EQ(job.status, "running");
+  EXPECT_EQ(job.lease_owner, "other:2-0");
+  EXPECT_EQ(job.result_json, "");
+  const std::string text = metrics->Render({}, {});
+  // Cancelled, not computed to the end and refused at CompleteJob ("released").
+  EXPECT_NE(text.find("calibd_jobs_finished_total{method=\"array\",outcome=\"cancelled\"} 1"),
+            std::string::npos)
+      << text;
+  EXPECT_EQ(text.find("outcome=\"released\""), std::string::npos) << text;
+}
+
+TEST_F(WorkerPoolTest, LeaseTakenBackFromADeadOwnerCancelsTheRunningComputation) {
+  const int64_t id = EnqueueArray(7);
+  ExpectTakenBackJobIsCancelled(store_.get(), &metrics_, id, [&] {
+    int64_t taken_back = 0;
+    ASSERT_TRUE(store_->ExpireLeasesOf("test:1-", &taken_back).ok());
+    EXPECT_EQ(taken_back, 1);
+  });
+}
+
+TEST_F(WorkerPoolTest, ExpiredLeaseRecoveredElsewhereCancelsTheRunningComputation) {
+  store_.reset();
+  OpenStore(clock_.Fn());
+  const int64_t id = EnqueueArray(8);
+  ExpectTakenBackJobIsCancelled(store_.get(), &metrics_, id, [&] {
+    // The lease (300 ms, renewed from the fake clock) lapses when the clock jumps a minute; the
+    // renewer may renew it from the new time in between, so jump until one recovery takes it.
+    int64_t recovered = 0;
+    for (int i = 0; i < 100 && recovered == 0; ++i) {
+      clock_.Advance(60000);
+      ASSERT_TRUE(store_->RecoverExpiredLeases(&recovered).ok());
+    }
+    EXPECT_EQ(recovered, 1);
+  });
+}
+
+TEST_F(WorkerPoolTest, SharedExecutorIsUsedAndGivesTheIdenticalResult) {
+  const int64_t own = EnqueueArray(9);
+  {
+    WorkerPool pool(store_.get(), &metrics_, Options());
+    pool.Start();
+    pool.Notify();
+    ASSERT_EQ(WaitFor(own, "succeeded").status, "succeeded");
+    EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
+  }
+  // The same recording and config again (a second job on the stored recording).
+  storage::JobInfo first = Job(own);
+  storage::JobInfo second;
+  ASSERT_TRUE(store_->EnqueueJob(first.recording_id, "array", "", first.config_json, &second).ok());
+  core::TaskPool numerics(2);
+  std::atomic<int> calls{0};
+  const core::TaskExecutor pooled = numerics.Executor();
+  WorkerPool pool(store_.get(), &metrics_,
+                  Options([&](int64_t tasks, const std::function<void(int64_t)>& run) {
+                    ++calls;
+                    pooled(tasks, run);
+                  }));
+  pool.Start();
+  pool.Notify();
+  const storage::JobInfo shared = WaitFor(second.id, "succeeded");
+  EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
+  ASSERT_EQ(shared.status, "succeeded") << shared.error_code << ": " << shared.error_message;
+  EXPECT_GT(calls.load(), 0) << "the job did not use the shared executor";
+  json a = json::parse(first.result_json), b = json::parse(shared.result_json);
+  EXPECT_EQ(a["parameters"], b["parameters"]);
+  EXPECT_EQ(a["uncertainty"], b["uncertainty"]);
+  EXPECT_EQ(a["diagnostics"]["iterations"], b["diagnostics"]["iterations"]);
+}
+
+}  // namespace
+}  // namespace calibd::server
