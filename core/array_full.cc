@@ -776,11 +776,18 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   lo.threads = threads;
   lo.executor = options.executor;
   BlockLm<FullProblem> lm(fp, lo);
-  const BlockLmSummary summary = lm.Solve(&x, &theta);
+  BlockLm<FullProblem>::Callback callback;
+  if (options.callback)
+    callback = [&options](int it, const Eigen::VectorXd&) { return options.callback(it); };
+  const BlockLmSummary summary = lm.Solve(&x, &theta, callback);
   res.termination = summary.termination;
   res.iterations = summary.iterations;
   res.converged = summary.converged();
   res.cost = summary.cost;
+  if (summary.termination == BlockLmTermination::kUserStopped) {
+    res.reason = "stopped by the caller";
+    return Status::Internal("the full array calibration was stopped by the caller");
+  }
   if (summary.termination == BlockLmTermination::kNumericalFailure)
     return not_determinable(
         "the joint solver found no step with a finite cost (numerical "

@@ -64,6 +64,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -99,6 +100,9 @@ struct ArrayFullOptions {
   // Length of the batches of consecutive dynamic samples whose scores are summed in the
   // sandwich covariance, seconds. > 0.
   double robust_batch = 1.0;
+  // Called after every accepted LM step with the iteration number; false stops the solver
+  // (termination kUserStopped: the result is not used). Optional (cancellation).
+  std::function<bool(int iteration)> callback;
   // Minimum number of statics (the accelerometer closed form needs 9 spanning orientations).
   int min_statics = 9;
 
