@@ -86,7 +86,8 @@ struct FullData {
   Eigen::VectorXd static_n;            // J sample counts
   Eigen::MatrixXd ya, yg;              // 3K x Nd
   std::vector<int64_t> dyn_index;      // Nd: sample index in the log
-  double wa = 0, wg = 0;               // 1 / sigma
+  double wa = 0, wg = 0;               // 1 / sigma (statics)
+  double wa_d = 0, wg_d = 0;           // 1 / sigma (dynamic samples)
   double gravity = 9.80665;
 };
 
@@ -200,7 +201,7 @@ class FullProblem {
       return;
     }
     const int64_t m = n - d_.J;
-    const double wa = d_.wa, wg = d_.wg;
+    const double wa = d_.wa_d, wg = d_.wg_d;
     const Vec3 w = x.head<3>(), wd = x.segment<3>(3), s = x.segment<3>(6);
     const Mat3 A = MatrixA(w, wd);
     for (int k = 0; k < K; ++k) {
@@ -581,14 +582,14 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   const double sigma_a = options.accel_noise > 0 ? options.accel_noise : res.static_noise_accel;
   const double sigma_g = options.gyro_noise > 0 ? options.gyro_noise : res.static_noise_gyro;
   res.noise_estimated = !(options.accel_noise > 0 && options.gyro_noise > 0);
-  res.accel_noise = sigma_a;
-  res.gyro_noise = sigma_g;
+  res.accel_noise = res.dynamic_accel_noise = sigma_a;
+  res.gyro_noise = res.dynamic_gyro_noise = sigma_g;
   if (!(sigma_a > 0) || !(sigma_g > 0))
     return not_determinable(
         "the noise levels are zero in the statics (noise-free readings?): configure accel_noise "
         "and gyro_noise");
-  d.wa = 1 / sigma_a;
-  d.wg = 1 / sigma_g;
+  d.wa = d.wa_d = 1 / sigma_a;
+  d.wg = d.wg_d = 1 / sigma_g;
 
   // ----- Dynamic samples: everything outside the statics, without saturated gyroscopes.
   for (int64_t n = 0; n < N; ++n) {
@@ -780,15 +781,45 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   if (options.callback)
     callback = [&options](int it, const Eigen::VectorXd&) { return options.callback(it); };
   const BlockLmSummary summary = lm.Solve(&x, &theta, callback);
-  res.termination = summary.termination;
-  res.iterations = summary.iterations;
-  res.converged = summary.converged();
+  BlockLmSummary final_summary = summary;
+  std::vector<double> resolved_costs;  // of the re-solves (kResidual): their own weights
+  if (options.dynamic_weighting == ArrayFullDynamicWeighting::kResidual &&
+      summary.termination != BlockLmTermination::kNumericalFailure &&
+      summary.termination != BlockLmTermination::kUserStopped) {
+    // Weight the dynamic samples by their own residual level (per sensor kind, corrected for
+    // the 9 motion unknowns per sample) and solve again from the estimate; twice, the levels
+    // then move by far less than their own uncertainty.
+    for (int round = 0; round < 2; ++round) {
+      const std::vector<TriadParams> c = Unpack(theta, K);
+      Eigen::MatrixX2d dy = Eigen::MatrixX2d::Zero(K, 2);
+      for (int64_t m = 0; m < d.Nd; ++m) fp.AddSquaredResiduals(d.J + m, x.col(d.J + m), c, &dy);
+      const double correction = 6.0 * K / (6.0 * K - 9);
+      const double sa = std::sqrt(dy.col(0).sum() / (3.0 * K * d.Nd) * correction);
+      const double sg = std::sqrt(dy.col(1).sum() / (3.0 * K * d.Nd) * correction);
+      d.wa_d = 1 / std::max(sa, sigma_a);
+      d.wg_d = 1 / std::max(sg, sigma_g);
+      final_summary = lm.Solve(&x, &theta, callback);
+      res.iterations += final_summary.iterations;
+      resolved_costs.insert(resolved_costs.end(), final_summary.cost.begin(),
+                            final_summary.cost.end());
+      if (final_summary.termination == BlockLmTermination::kUserStopped) {
+        res.reason = "stopped by the caller";
+        return Status::Internal("the full array calibration was stopped by the caller");
+      }
+    }
+    res.dynamic_accel_noise = 1 / d.wa_d;
+    res.dynamic_gyro_noise = 1 / d.wg_d;
+  }
+  res.termination = final_summary.termination;
+  res.iterations += summary.iterations;
+  res.converged = final_summary.converged();
   res.cost = summary.cost;
+  res.cost.insert(res.cost.end(), resolved_costs.begin(), resolved_costs.end());
   if (summary.termination == BlockLmTermination::kUserStopped) {
     res.reason = "stopped by the caller";
     return Status::Internal("the full array calibration was stopped by the caller");
   }
-  if (summary.termination == BlockLmTermination::kNumericalFailure)
+  if (final_summary.termination == BlockLmTermination::kNumericalFailure)
     return not_determinable(
         "the joint solver found no step with a finite cost (numerical "
         "failure): the recording or the noise settings are degenerate");
@@ -805,7 +836,7 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   // ----- Residuals and chi^2.
   const int P = static_cast<int>(E.cols());
   res.dof = 6LL * K * (d.J + d.Nd) - 9 * d.Nd - 2 * d.J - P;
-  res.chi2_per_dof = res.dof > 0 ? summary.final_cost() / static_cast<double>(res.dof) : 0;
+  res.chi2_per_dof = res.dof > 0 ? final_summary.final_cost() / static_cast<double>(res.dof) : 0;
   {
     Eigen::MatrixX2d st = Eigen::MatrixX2d::Zero(K, 2), dy = Eigen::MatrixX2d::Zero(K, 2);
     for (int64_t n = 0; n < d.J + d.Nd; ++n)
@@ -875,7 +906,9 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   }
 
   // ----- Residual-aware (sandwich) covariance when the residuals exceed the noise.
-  if (res.chi2_per_dof > options.robust_ratio) {
+  const bool reweighted = options.dynamic_weighting == ArrayFullDynamicWeighting::kResidual &&
+                          (d.wa_d < d.wa || d.wg_d < d.wg);
+  if (res.chi2_per_dof > options.robust_ratio || reweighted) {
     res.robust = true;
     // Batches: every static alone, the dynamic samples in runs of robust_batch seconds.
     std::vector<std::vector<int64_t>> batches;
@@ -937,18 +970,27 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
           res.triads[k], res.theta_covariance_robust.block<kP, kP>(kP * k, kP * k));
       res.report_std_robust[k].name = res.names[k];
     }
-    res.warnings.push_back(
-        "the residuals exceed the noise (chi^2/dof = " + Fmt("%.3g", res.chi2_per_dof) +
-        "; dynamic residual rms " + Fmt("%.3g", res.dynamic_rms_accel) + " m/s^2 and " +
-        Fmt("%.3g", res.dynamic_rms_gyro) + " rad/s against noise " + Fmt("%.3g", sigma_a) +
-        " and " + Fmt("%.3g", sigma_g) +
-        "): the model does not explain the data to the noise level (e.g. sampling-time errors "
-        "between the IMUs), so the Cramér-Rao σ is too optimistic; use the residual-aware σ "
-        "(uncertainty.imus[].robust)");
+    if (reweighted)
+      res.warnings.push_back(
+          "the dynamic residuals exceed the statics' noise (dynamic samples weighted by their own "
+          "residual level, " +
+          Fmt("%.3g", 1 / d.wa_d) + " m/s^2 and " + Fmt("%.3g", 1 / d.wg_d) +
+          " rad/s): the model does not explain the motion to the noise level (e.g. sampling-time "
+          "errors between the IMUs) and the residuals are correlated in time, so use the "
+          "residual-aware σ (uncertainty.imus[].robust)");
+    else
+      res.warnings.push_back(
+          "the residuals exceed the noise (chi^2/dof = " + Fmt("%.3g", res.chi2_per_dof) +
+          "; dynamic residual rms " + Fmt("%.3g", res.dynamic_rms_accel) + " m/s^2 and " +
+          Fmt("%.3g", res.dynamic_rms_gyro) + " rad/s against noise " + Fmt("%.3g", sigma_a) +
+          " and " + Fmt("%.3g", sigma_g) +
+          "): the model does not explain the data to the noise level (e.g. sampling-time errors "
+          "between the IMUs), so the Cramér-Rao σ is too optimistic; use the residual-aware σ "
+          "(uncertainty.imus[].robust)");
   }
   if (!res.converged)
     res.warnings.push_back(std::string("the solver did not converge (") +
-                           BlockLmTerminationName(summary.termination) +
+                           BlockLmTerminationName(final_summary.termination) +
                            "): the estimate is usable but not at the optimum");
   res.usable = true;
   res.reason = res.converged

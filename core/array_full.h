@@ -75,6 +75,14 @@
 
 namespace calibd::core {
 
+// How the dynamic samples are weighted.
+enum class ArrayFullDynamicWeighting {
+  kNoise,     // by the noise (configured or the statics'): the ML estimate of the stated model
+  kResidual,  // by their own residual level after a first fit (per sensor kind), then solved
+              // again: when the model does not explain the motion to the noise level (real
+              // hardware: sampling-time errors), the statics keep their weight in the fit
+};
+
 struct ArrayFullOptions {
   // Noise per axis of the readings: accelerometer sigma_a (m/s^2), gyroscope sigma_g (rad/s).
   // 0 (default): estimated from the statics' pooled within-interval sample std. >= 0.
@@ -103,6 +111,9 @@ struct ArrayFullOptions {
   // Called after every accepted LM step with the iteration number; false stops the solver
   // (termination kUserStopped: the result is not used). Optional (cancellation).
   std::function<bool(int iteration)> callback;
+  // Weighting of the dynamic samples. kResidual also reports the residual-aware σ whenever the
+  // dynamic residuals exceed the noise.
+  ArrayFullDynamicWeighting dynamic_weighting = ArrayFullDynamicWeighting::kNoise;
   // Minimum number of statics (the accelerometer closed form needs 9 spanning orientations).
   int min_statics = 9;
 
@@ -200,6 +211,8 @@ struct ArrayFullResult {
   double chi2_per_dof = 0;                 // final cost / dof
   double accel_noise = 0, gyro_noise = 0;  // sigma used
   bool noise_estimated = false;            // from the statics (not configured)
+  // Sigma used for the dynamic samples (= accel_noise, gyro_noise unless kResidual raised it).
+  double dynamic_accel_noise = 0, dynamic_gyro_noise = 0;
   std::vector<ArrayFullResidualStats> residuals;
   double dynamic_rms_accel = 0, dynamic_rms_gyro = 0;    // over all triads
   double static_noise_accel = 0, static_noise_gyro = 0;  // pooled within-static std

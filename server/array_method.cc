@@ -413,9 +413,9 @@ Status ParseArrayFullConfig(const json& config, core::ArrayFullProblem* geometry
   *options = core::ArrayFullOptions();
   *gyro_in_degrees = false;
   static const char* const kKeys[] = {
-      "method",     "device",        "model",           "geometry",    "accel_noise",
-      "gyro_noise", "gyro_unit",     "gyro_saturation", "gravity",     "max_iterations",
-      "tolerance",  "static_window", "min_static",      "robust_batch"};
+      "method",     "device",        "model",           "geometry",     "accel_noise",
+      "gyro_noise", "gyro_unit",     "gyro_saturation", "gravity",      "max_iterations",
+      "tolerance",  "static_window", "min_static",      "robust_batch", "dynamic_weighting"};
   for (auto it = config.begin(); it != config.end(); ++it) {
     if (it.key() == "solver" || it.key() == "accelerometer_calibration")
       return KeyError(it.key(),
@@ -427,7 +427,7 @@ Status ParseArrayFullConfig(const json& config, core::ArrayFullProblem* geometry
                       "unknown key for method array with model full (known: geometry, "
                       "accel_noise, gyro_noise, gyro_unit, gyro_saturation, gravity, "
                       "max_iterations, tolerance, static_window, min_static, robust_batch, "
-                      "model, method, device)");
+                      "dynamic_weighting, model, method, device)");
   }
   if (auto u = config.find("gyro_unit"); u != config.end()) {
     std::string unit;
@@ -464,6 +464,15 @@ Status ParseArrayFullConfig(const json& config, core::ArrayFullProblem* geometry
   if (s = optional_positive("gravity", 1, &options->gravity); !s.ok()) return s;
   if (s = optional_positive("static_window", 1, &options->statics.static_window); !s.ok()) return s;
   if (s = optional_positive("robust_batch", 1, &options->robust_batch); !s.ok()) return s;
+  if (auto it = config.find("dynamic_weighting"); it != config.end()) {
+    std::string w;
+    if (s = ReadString(*it, "dynamic_weighting", &w); !s.ok()) return s;
+    if (w == "residual")
+      options->dynamic_weighting = core::ArrayFullDynamicWeighting::kResidual;
+    else if (w != "noise")
+      return KeyError("dynamic_weighting",
+                      "must be \"noise\" (default) or \"residual\", not \"" + w + "\"");
+  }
   if (auto it = config.find("min_static"); it != config.end()) {
     if (s = ReadNumber(*it, "min_static", &options->statics.min_static); !s.ok()) return s;
     if (!(options->statics.min_static >= 0)) return KeyError("min_static", "must be >= 0 (s)");
@@ -606,7 +615,12 @@ Status RunArrayFull(const ArrayRecording& recording, const json& config, json* r
         {"noise",
          {{"accelerometer", Num(r.accel_noise)},
           {"gyroscope", Num(r.gyro_noise / gyro_unit)},
-          {"source", r.noise_estimated ? "statics" : "configured"}}},
+          {"source", r.noise_estimated ? "statics" : "configured"},
+          {"dynamic_weighting",
+           options.dynamic_weighting == core::ArrayFullDynamicWeighting::kResidual ? "residual"
+                                                                                   : "noise"},
+          {"dynamic_accelerometer", Num(r.dynamic_accel_noise)},
+          {"dynamic_gyroscope", Num(r.dynamic_gyro_noise / gyro_unit)}}},
         {"static_noise",
          {{"accelerometer", Num(r.static_noise_accel)},
           {"gyroscope", Num(r.static_noise_gyro / gyro_unit)}}},

@@ -105,10 +105,12 @@ Status RunArray(const ArrayRecording& recording, const nlohmann::json& config,
 // from the statics), gyro_noise (gyro_unit, optional: from the statics), gyro_unit,
 // gyro_saturation, gravity (m/s², default 9.80665), max_iterations (>= 1), tolerance,
 // static_window and min_static (s, static detection), robust_batch (s, the residual-aware σ's
-// batches), model, method, device. solver and accelerometer_calibration are rejected (the full
-// model estimates the accelerometers with its own joint solver). Errors as ParseArrayConfig.
-// RunArray dispatches on "model": with "full" it runs core::CalibrateArrayFull on the recording
-// (which needs a `t` column and one gyroscope triad per accelerometer triad) and writes
+// batches), dynamic_weighting ("noise" default | "residual": the dynamic samples weighted by
+// their own residual level, core::ArrayFullDynamicWeighting), model, method, device. solver and
+// accelerometer_calibration are rejected (the full model estimates the accelerometers with its own
+// joint solver). Errors as ParseArrayConfig. RunArray dispatches on "model": with "full" it runs
+// core::CalibrateArrayFull on the recording (which needs a `t` column and one gyroscope triad per
+// accelerometer triad) and writes
 //   parameters: {"model":"full","reference","imus":[{"name","accelerometer":{"bias","scale",
 //                "misalignment","matrix"},"gyroscope":{same},"position"}],"positions":[as the
 //                positions model]},

@@ -170,6 +170,30 @@ TEST(ArrayFull, ResidualAwareSigmaMatchesTheSpreadWhenTheNoiseIsUnderstated) {
   EXPECT_NEAR(z.mean, 1.0, 3 * z.se);
 }
 
+// When the model fits (simulation), weighting the dynamic samples by their own residual level
+// changes nothing material: the level found is the noise, and the estimate moves by far less
+// than its σ.
+TEST(ArrayFull, ResidualWeightingFindsTheNoiseWhenTheModelFits) {
+  ArrayFullSimulationOptions so = Board8(13);
+  ArrayFullSimulation sim;
+  ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+  ArrayFullOptions fo = FitOptions(so);
+  ArrayFullResult a, b;
+  ASSERT_TRUE(CalibrateArrayFull(sim.problem, fo, &a).ok());
+  fo.dynamic_weighting = ArrayFullDynamicWeighting::kResidual;
+  ASSERT_TRUE(CalibrateArrayFull(sim.problem, fo, &b).ok());
+  // The residual level is an estimate from ~800 x 48 residuals: within a few % of the truth.
+  EXPECT_NEAR(b.dynamic_accel_noise / so.accel_noise, 1, 0.03);
+  EXPECT_NEAR(b.dynamic_gyro_noise / so.gyro_noise, 1, 0.03);
+  EXPECT_NEAR(b.chi2_per_dof, 1, 0.05);
+  double worst = 0;
+  for (int i = 0; i < a.theta.size(); ++i)
+    if (a.theta_covariance(i, i) > 0)
+      worst =
+          std::max(worst, std::abs(a.theta(i) - b.theta(i)) / std::sqrt(a.theta_covariance(i, i)));
+  EXPECT_LT(worst, 0.2);
+}
+
 TEST(ArrayFull, EstimateHoldsTheGauges) {
   ArrayFullSimulationOptions so = Board8(7);
   so.reference = 5;

@@ -121,6 +121,12 @@ TEST(ArrayFullMethod, ConfigErrorsNameTheKey) {
   EXPECT_EQ(s.field(), "model");
   EXPECT_NE(s.message().find("\"positions\" (default) or \"full\""), std::string::npos);
   c = config;
+  c["dynamic_weighting"] = "residual";
+  ASSERT_TRUE(ParseArrayFullConfig(c, &p, &o, &deg).ok());
+  EXPECT_EQ(o.dynamic_weighting, core::ArrayFullDynamicWeighting::kResidual);
+  c["dynamic_weighting"] = "loud";
+  EXPECT_EQ(ParseArrayFullConfig(c, &p, &o, &deg).field(), "dynamic_weighting");
+  c = config;
   c["accel_noise"] = -1;
   EXPECT_EQ(ParseArrayFullConfig(c, &p, &o, &deg).field(), "accel_noise");
   // Over HTTP a bad key is refused at upload (400, naming it).
