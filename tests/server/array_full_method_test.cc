@@ -93,6 +93,16 @@ TEST(ArrayFullMethod, CalibratesASimulatedBoardThroughTheServerWithinItsUncertai
     ExpectWithin(p["position"], t["position"], u["position_std"], 5,
                  std::to_string(k) + ".position");
   }
+  // The job's HTML report renders a full-model result.
+  auto page = server.Client().Get(("/jobs/" + std::to_string(job["id"].get<int64_t>())).c_str());
+  ASSERT_TRUE(page);
+  EXPECT_EQ(page->status, 200);
+  for (const char* format : {"json", "csv", "h"}) {
+    auto exported = server.Client().Get(
+        (std::string("/api/v1/devices/ARRAY-1/calibration?method=array&format=") + format).c_str());
+    ASSERT_TRUE(exported);
+    EXPECT_EQ(exported->status, 200) << format << ": " << exported->body;
+  }
   // deg/s readings: the gyroscope matrix maps deg/s to rad/s.
   EXPECT_NEAR(imus[1]["gyroscope"]["scale"][0].get<double>(), M_PI / 180, 0.05 * M_PI / 180);
 }
