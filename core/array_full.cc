@@ -852,6 +852,35 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
     res.dynamic_rms_gyro = std::sqrt(dy.col(1).sum() / (3.0 * K * d.Nd));
   }
 
+  // ----- Sampling-time offsets (a diagnostic of the model's main misfit on real hardware): if
+  // IMU k samples at t + delta_k, its gyroscope residual is ~ delta_k T_g,k omega_dot. Least
+  // squares per IMU, made relative to their mean (a common offset is absorbed by omega).
+  {
+    res.time_offsets = Eigen::VectorXd::Zero(K);
+    Eigen::VectorXd num = Eigen::VectorXd::Zero(K), den = Eigen::VectorXd::Zero(K);
+    double ss = 0, along = 0, vv = 0;
+    for (int64_t m = 0; m < d.Nd; ++m) {
+      const Vec3 w = x.col(d.J + m).head<3>(), wd = x.col(d.J + m).segment<3>(3);
+      for (int k = 0; k < K; ++k) {
+        const Vec3 e = d.yg.col(m).segment<3>(3 * k) - ctx[k].Tg * w - ctx[k].bg;
+        const Vec3 v = ctx[k].Tg * wd;
+        num(k) += e.dot(v);
+        den(k) += v.squaredNorm();
+        ss += e.squaredNorm();
+        if (v.squaredNorm() > 0) along += e.dot(v) * e.dot(v) / v.squaredNorm();
+        vv += v.squaredNorm();
+      }
+    }
+    for (int k = 0; k < K; ++k) res.time_offsets(k) = den(k) > 0 ? num(k) / den(k) : 0;
+    // Fraction of the gyroscope residual explained by the per-IMU offsets (before centring).
+    double explained = 0;
+    for (int k = 0; k < K; ++k) explained += den(k) > 0 ? num(k) * num(k) / den(k) : 0;
+    res.time_offset_explained = ss > 0 ? explained / ss : 0;
+    res.time_offsets.array() -= res.time_offsets.mean();
+    res.jitter_explained = ss > 0 ? along / ss : 0;
+    res.jitter_rms = vv > 0 ? std::sqrt(along / vv) : 0;
+  }
+
   // ----- Information, null directions, Cramér-Rao bound.
   BlockLmInformation info;
   lm.ComputeSharedInformation(x, theta, &info, nullptr);

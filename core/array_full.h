@@ -217,6 +217,17 @@ struct ArrayFullResult {
   double dynamic_rms_accel = 0, dynamic_rms_gyro = 0;    // over all triads
   double static_noise_accel = 0, static_noise_gyro = 0;  // pooled within-static std
 
+  // Diagnostic of sampling-time errors between the IMUs (not part of the model): per IMU, the
+  // offset delta_k (s, relative to the mean of all) whose delta_k T_g,k omega_dot best explains
+  // its gyroscope residual in the dynamic phase, and the fraction of the gyroscope residual sum
+  // of squares such offsets explain (~0 when the model fits).
+  Eigen::VectorXd time_offsets;
+  double time_offset_explained = 0;
+  // The same with an offset free per sample and IMU (timing jitter): the fraction of the
+  // gyroscope residual along T_g,k omega_dot, and the rms offset it implies (s), weighted by
+  // |T_g,k omega_dot|^2.
+  double jitter_explained = 0;
+  double jitter_rms = 0;
   // Rotation excitation: eigenvalues (ascending) of sum omega omega^T over dynamic samples,
   // (rad/s)^2, the noise floor N sigma_g^2 / K, the least excited body axis and a verdict "good"
   // (>= 100 floor), "weak" (>= 3 floor: warning), "insufficient" (not determinable).

@@ -586,6 +586,9 @@ Status RunArrayFull(const ArrayRecording& recording, const json& config, json* r
   for (double c : r.cost) cost.push_back(Num(c));
   json warnings = json::array();
   for (const auto& w : r.warnings) warnings.push_back(w);
+  json offsets = json::array();
+  for (int k = 0; k < K; ++k)
+    offsets.push_back({{"name", r.names[k]}, {"offset", Num(1e3 * r.time_offsets(k))}});
   json nulls = json::array();
   for (const auto& n : r.null_directions) nulls.push_back(n);
   *result = {
@@ -636,6 +639,15 @@ Status RunArrayFull(const ArrayRecording& recording, const json& config, json* r
           {"verdict", r.rotation_verdict},
           {"units", "(rad/s)^2"}}},
         {"null_directions", std::move(nulls)},
+        {"time_offsets",
+         {{"offsets_ms", offsets},
+          {"explained_fraction", Num(r.time_offset_explained)},
+          {"per_sample_rms_ms", Num(1e3 * r.jitter_rms)},
+          {"per_sample_explained_fraction", Num(r.jitter_explained)},
+          {"note",
+           "diagnostic, not part of the model: per IMU the constant sampling-time offset "
+           "(relative to their mean) that best explains its gyroscope residual by omega_dot, "
+           "and the same free per sample (jitter)"}}},
         {"robust",
          {{"used", r.robust},
           {"batches", r.robust_batches},
