@@ -429,6 +429,21 @@ class BlockLm {
       Normal b;
       b.C.resize(B, q);
       Eigen::Matrix<double, B, Q> Z(B, q);
+      // Runtime q (large): the Z of up to kStack blocks are stacked and their Z^T Z added by one
+      // symmetric rank-k update of the lower triangle (half the flops of Z^T Z, and a k large
+      // enough for the blocked kernel); symmetrised after the chunk reduction.
+      constexpr int kStack = 16;
+      Eigen::MatrixXd Zs;
+      int stacked = 0;
+      if constexpr (Q == Eigen::Dynamic) Zs.resize(B * kStack, q);
+      auto flush = [&]() {
+        if constexpr (Q == Eigen::Dynamic) {
+          if (stacked > 0)
+            acc.T.template selfadjointView<Eigen::Lower>().rankUpdate(
+                Zs.topRows(B * stacked).transpose());
+          stacked = 0;
+        }
+      };
       for (int64_t n = begin; n < end; ++n) {
         if (evaluate) {
           problem_.Linearize(n, x.col(n), context, &b, &acc.sums);
@@ -446,7 +461,8 @@ class BlockLm {
         Z = Linv.lazyProduct(b.C);
         const BlockVector u = Linv.lazyProduct(g);
         if constexpr (Q == Eigen::Dynamic) {
-          acc.T.noalias() += Z.transpose() * Z;
+          Zs.middleRows(B * stacked, B) = Z;
+          if (++stacked == kStack) flush();
           acc.t.noalias() += Z.transpose() * u;
         } else {
           acc.T.noalias() += Z.transpose().lazyProduct(Z);
@@ -454,6 +470,7 @@ class BlockLm {
         }
         if (information) problem_.Factored(n, Linv, &acc.sums);
       }
+      flush();
     });
     lin->T.setZero(q, q);
     lin->t.setZero(q);
@@ -471,6 +488,7 @@ class BlockLm {
         problem_.Merge(acc.sums, &lin->sums);
       }
     }
+    if constexpr (Q == Eigen::Dynamic) lin->T = lin->T.template selfadjointView<Eigen::Lower>();
     if (evaluate) {
       problem_.AssembleShared(lin->sums, context, &lin->shared);
       const double gp = lin->shared.g.size() ? lin->shared.g.cwiseAbs().maxCoeff() : 0.0;

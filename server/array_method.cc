@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <map>
 
+#include "core/array_full.h"
+#include "core/array_full_simulation.h"
 #include "core/array_simulation.h"
 #include "server/inertial_log.h"
 #include "server/noise_reference.h"
@@ -305,14 +307,23 @@ Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
                                       "solver",
                                       "max_iterations",
                                       "tolerance",
-                                      "accelerometer_calibration"};
+                                      "accelerometer_calibration",
+                                      "model"};
+  if (auto m = config.find("model"); m != config.end()) {
+    std::string model;
+    Status s = ReadString(*m, "model", &model);
+    if (!s.ok()) return s;
+    if (model != "positions")
+      return KeyError("model",
+                      "must be \"positions\" (default) or \"full\", not \"" + model + "\"");
+  }
   for (auto it = config.begin(); it != config.end(); ++it) {
     if (std::find_if(std::begin(kKeys), std::end(kKeys),
                      [&](const char* k) { return it.key() == k; }) == std::end(kKeys))
       return KeyError(it.key(),
                       "unknown key for method array (known: geometry, accel_noise, gyro_noise, "
                       "gyro_unit, gyro_saturation, solver, max_iterations, tolerance, "
-                      "accelerometer_calibration, method, device)");
+                      "accelerometer_calibration, model, method, device)");
   }
   // Units first: they apply to gyro_noise and gyro_saturation.
   if (auto u = config.find("gyro_unit"); u != config.end()) {
@@ -384,8 +395,279 @@ Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
   return Status::Ok();
 }
 
-Status RunArray(const ArrayRecording& recording, const json& config, json* result,
+// ----- model: full (SPEC §7, issue #14).
+
+namespace {
+
+bool IsFullModel(const json& config) {
+  if (!config.is_object()) return false;
+  auto m = config.find("model");
+  return m != config.end() && m->is_string() && m->get<std::string>() == "full";
+}
+
+}  // namespace
+
+Status ParseArrayFullConfig(const json& config, core::ArrayFullProblem* geometry_part,
+                            core::ArrayFullOptions* options, bool* gyro_in_degrees) {
+  if (!config.is_object())
+    return Status::InvalidInput("the config must be a JSON object, not " +
+                                std::string(config.type_name()));
+  *options = core::ArrayFullOptions();
+  *gyro_in_degrees = false;
+  static const char* const kKeys[] = {
+      "method",     "device",        "model",           "geometry",     "accel_noise",
+      "gyro_noise", "gyro_unit",     "gyro_saturation", "gravity",      "max_iterations",
+      "tolerance",  "static_window", "min_static",      "robust_batch", "dynamic_weighting"};
+  for (auto it = config.begin(); it != config.end(); ++it) {
+    if (it.key() == "solver" || it.key() == "accelerometer_calibration")
+      return KeyError(it.key(),
+                      "not used with model \"full\" (it estimates the accelerometers itself "
+                      "with its own joint solver); remove it or use model \"positions\"");
+    if (std::find_if(std::begin(kKeys), std::end(kKeys),
+                     [&](const char* k) { return it.key() == k; }) == std::end(kKeys))
+      return KeyError(it.key(),
+                      "unknown key for method array with model full (known: geometry, "
+                      "accel_noise, gyro_noise, gyro_unit, gyro_saturation, gravity, "
+                      "max_iterations, tolerance, static_window, min_static, robust_batch, "
+                      "dynamic_weighting, model, method, device)");
+  }
+  if (auto u = config.find("gyro_unit"); u != config.end()) {
+    std::string unit;
+    Status s = ReadString(*u, "gyro_unit", &unit);
+    if (!s.ok()) return s;
+    if (unit == "deg/s")
+      *gyro_in_degrees = true;
+    else if (unit != "rad/s")
+      return KeyError("gyro_unit", "must be \"rad/s\" or \"deg/s\", not \"" + unit + "\"");
+  }
+  const double gyro_scale = *gyro_in_degrees ? core::kDegree : 1.0;
+  auto g = config.find("geometry");
+  if (g == config.end())
+    return KeyError("geometry", "missing: {\"positions\": [[x,y,z], ...], \"reference\": 0}");
+  core::ArrayProblem geometry;
+  Status s = ParseGeometry(*g, &geometry);
+  if (!s.ok()) return s;
+  geometry_part->nominal_positions = geometry.nominal_positions;
+  geometry_part->reference = geometry.reference;
+  auto optional_positive = [&](const char* key, double scale, double* out) -> Status {
+    auto it = config.find(key);
+    if (it == config.end() || it->is_null()) return Status::Ok();
+    double v = 0;
+    Status st = ReadPositive(*it, key, &v);
+    if (!st.ok()) return st;
+    *out = v * scale;
+    return Status::Ok();
+  };
+  if (s = optional_positive("accel_noise", 1, &options->accel_noise); !s.ok()) return s;
+  if (s = optional_positive("gyro_noise", gyro_scale, &options->gyro_noise); !s.ok()) return s;
+  double saturation = 0;
+  if (s = optional_positive("gyro_saturation", gyro_scale, &saturation); !s.ok()) return s;
+  if (saturation > 0) options->gyro_saturation = saturation;
+  if (s = optional_positive("gravity", 1, &options->gravity); !s.ok()) return s;
+  if (s = optional_positive("static_window", 1, &options->statics.static_window); !s.ok()) return s;
+  if (s = optional_positive("robust_batch", 1, &options->robust_batch); !s.ok()) return s;
+  if (auto it = config.find("dynamic_weighting"); it != config.end()) {
+    std::string w;
+    if (s = ReadString(*it, "dynamic_weighting", &w); !s.ok()) return s;
+    if (w == "residual")
+      options->dynamic_weighting = core::ArrayFullDynamicWeighting::kResidual;
+    else if (w != "noise")
+      return KeyError("dynamic_weighting",
+                      "must be \"noise\" (default) or \"residual\", not \"" + w + "\"");
+  }
+  if (auto it = config.find("min_static"); it != config.end()) {
+    if (s = ReadNumber(*it, "min_static", &options->statics.min_static); !s.ok()) return s;
+    if (!(options->statics.min_static >= 0)) return KeyError("min_static", "must be >= 0 (s)");
+  }
+  if (auto it = config.find("max_iterations"); it != config.end()) {
+    int64_t v = 0;
+    if (s = ReadInteger(*it, "max_iterations", 1, 1000000, &v); !s.ok()) return s;
+    options->max_iterations = static_cast<int>(v);
+  }
+  if (auto it = config.find("tolerance"); it != config.end()) {
+    if (s = ReadNumber(*it, "tolerance", &options->tolerance); !s.ok()) return s;
+    if (!(options->tolerance >= 0 && options->tolerance < 1))
+      return KeyError("tolerance", "must be >= 0 and < 1 (0: never stop early)");
+  }
+  std::string error;
+  if (!options->IsValid(&error)) return Status::InvalidInput(error);
+  return Status::Ok();
+}
+
+namespace {
+
+json Mat(const Eigen::Matrix3d& m) {
+  json rows = json::array();
+  for (int i = 0; i < 3; ++i) rows.push_back(Vec(m.row(i).transpose()));
+  return rows;
+}
+
+// A sensor in reading units: the core saw readings times `unit` (SI per reading unit); the
+// reported matrix maps a bias-free reading to SI, so it is multiplied by unit and the bias
+// divided by it.
+json SensorJson(const core::ArrayFullSensorReport& r, double unit) {
+  return {{"bias", Vec(r.bias / unit)},
+          {"scale", Vec(r.scale * unit)},
+          {"misalignment", Mat(r.misalignment)},
+          {"matrix", Mat(r.matrix * unit)}};
+}
+
+json SensorStdJson(const core::ArrayFullSensorStd& r, double unit) {
+  return {{"bias_std", Vec(r.bias_std / unit)},
+          {"scale_std", Vec(r.scale_std * unit)},
+          {"misalignment_std", Mat(r.misalignment_std)}};
+}
+
+Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
+                    const std::atomic<bool>* cancel, core::TaskExecutor executor) {
+  core::ArrayFullProblem problem;
+  core::ArrayFullOptions options;
+  bool degrees = false;
+  Status s = ParseArrayFullConfig(config, &problem, &options, &degrees);
+  if (!s.ok()) return s;
+  if (executor) options.executor = std::move(executor);
+  const int K = static_cast<int>(problem.nominal_positions.cols());
+  const int K_rec = static_cast<int>(recording.accel_names.size());
+  const int G_rec = static_cast<int>(recording.gyro_names.size());
+  if (K_rec != K || G_rec != K)
+    return Status::InvalidInput(
+               "model full needs one accelerometer and one gyroscope triad per "
+               "position: the recording has " +
+               std::to_string(K_rec) + " accelerometer and " + std::to_string(G_rec) +
+               " gyroscope triads, geometry.positions " + std::to_string(K))
+        .WithField("geometry.positions");
+  if (recording.t.size() == 0)
+    return Status::InvalidInput(
+               "model full needs a `t` column (seconds): the statics are found "
+               "from the log's timing")
+        .WithField("t");
+  problem.t = std::move(recording.t);  // moved, not copied: one copy of the samples per job
+  problem.accel = std::move(recording.accel);
+  problem.gyro = std::move(recording.gyro);
+  if (degrees) problem.gyro *= core::kDegree;
+  for (const auto& name : recording.accel_names)
+    problem.names.push_back(name.size() > 1 && name[0] == 'a' ? name.substr(1) : name);
+  if (cancel != nullptr) options.callback = [cancel](int) { return !cancel->load(); };
+  core::ArrayFullResult r;
+  s = core::CalibrateArrayFull(problem, options, &r);
+  if (!s.ok()) return s;
+
+  const double gyro_unit = degrees ? core::kDegree : 1.0;  // rad/s per reading unit
+  json imus = json::array(), stds = json::array(), positions = json::array(),
+       position_stds = json::array(), residuals = json::array(), changed = json::array();
+  for (int k = 0; k < K; ++k) {
+    const core::ArrayFullTriadReport& p = r.report[k];
+    imus.push_back({{"name", p.name},
+                    {"accelerometer", SensorJson(p.accelerometer, 1)},
+                    {"gyroscope", SensorJson(p.gyroscope, gyro_unit)},
+                    {"position", Vec(p.position)}});
+    json u = {{"name", p.name},
+              {"accelerometer", SensorStdJson(r.report_std[k].accelerometer, 1)},
+              {"gyroscope", SensorStdJson(r.report_std[k].gyroscope, gyro_unit)},
+              {"position_std", Vec(r.report_std[k].position_std)}};
+    if (r.robust)
+      u["robust"] = {{"accelerometer", SensorStdJson(r.report_std_robust[k].accelerometer, 1)},
+                     {"gyroscope", SensorStdJson(r.report_std_robust[k].gyroscope, gyro_unit)},
+                     {"position_std", Vec(r.report_std_robust[k].position_std)}};
+    stds.push_back(std::move(u));
+    positions.push_back({{"name", p.name},
+                         {"position", Vec(p.position)},
+                         {"offset", Vec(p.position - problem.nominal_positions.col(k))}});
+    position_stds.push_back({{"name", p.name}, {"std", Vec(r.report_std[k].position_std)}});
+    const core::ArrayFullResidualStats& rs = r.residuals[k];
+    residuals.push_back({{"name", p.name},
+                         {"static",
+                          {{"accelerometer", Num(rs.static_accel)},
+                           {"gyroscope", Num(rs.static_gyro / gyro_unit)}}},
+                         {"dynamic",
+                          {{"accelerometer", Num(rs.dynamic_accel)},
+                           {"gyroscope", Num(rs.dynamic_gyro / gyro_unit)}}}});
+    changed.push_back(
+        {{"name", p.name}, {"position_change", Vec(p.position - r.initial[k].position)}});
+  }
+  json cost = json::array();
+  for (double c : r.cost) cost.push_back(Num(c));
+  json warnings = json::array();
+  for (const auto& w : r.warnings) warnings.push_back(w);
+  json offsets = json::array();
+  for (int k = 0; k < K; ++k)
+    offsets.push_back({{"name", r.names[k]}, {"offset", Num(1e3 * r.time_offsets(k))}});
+  json nulls = json::array();
+  for (const auto& n : r.null_directions) nulls.push_back(n);
+  *result = {
+      {"method", "array"},
+      {"parameters",
+       {{"model", "full"},
+        {"reference", r.reference},
+        {"imus", std::move(imus)},
+        {"positions", std::move(positions)}}},
+      {"uncertainty", {{"imus", std::move(stds)}, {"positions", std::move(position_stds)}}},
+      {"diagnostics",
+       {{"model", "full"},
+        {"gauge",
+         {{"scale", r.gauge}, {"reference", r.reference}, {"description", r.gauge_description}}},
+        {"solver", "joint"},
+        {"iterations", r.iterations},
+        {"converged", r.converged},
+        {"termination", core::BlockLmTerminationName(r.termination)},
+        {"cost", cost},
+        {"statics", r.statics},
+        {"static_samples", r.static_samples},
+        {"dynamic_samples", r.dynamic_samples},
+        {"samples_dropped", r.samples_dropped},
+        {"dof", r.dof},
+        {"chi2_per_dof", Num(r.chi2_per_dof)},
+        {"gyro_unit", degrees ? "deg/s" : "rad/s"},
+        {"noise",
+         {{"accelerometer", Num(r.accel_noise)},
+          {"gyroscope", Num(r.gyro_noise / gyro_unit)},
+          {"source", r.noise_estimated ? "statics" : "configured"},
+          {"dynamic_weighting",
+           options.dynamic_weighting == core::ArrayFullDynamicWeighting::kResidual ? "residual"
+                                                                                   : "noise"},
+          {"dynamic_accelerometer", Num(r.dynamic_accel_noise)},
+          {"dynamic_gyroscope", Num(r.dynamic_gyro_noise / gyro_unit)}}},
+        {"static_noise",
+         {{"accelerometer", Num(r.static_noise_accel)},
+          {"gyroscope", Num(r.static_noise_gyro / gyro_unit)}}},
+        {"residual_rms",
+         {{"dynamic",
+           {{"accelerometer", Num(r.dynamic_rms_accel)},
+            {"gyroscope", Num(r.dynamic_rms_gyro / gyro_unit)}}},
+          {"imus", std::move(residuals)}}},
+        {"rotation_excitation",
+         {{"eigenvalues", Vec(r.rotation_eigenvalues)},
+          {"noise_floor", Num(r.rotation_noise_floor)},
+          {"weakest_axis", Vec(r.weakest_rotation_axis)},
+          {"verdict", r.rotation_verdict},
+          {"units", "(rad/s)^2"}}},
+        {"null_directions", std::move(nulls)},
+        {"time_offsets",
+         {{"offsets_ms", offsets},
+          {"explained_fraction", Num(r.time_offset_explained)},
+          {"per_sample_rms_ms", Num(1e3 * r.jitter_rms)},
+          {"per_sample_explained_fraction", Num(r.jitter_explained)},
+          {"note",
+           "diagnostic, not part of the model: per IMU the constant sampling-time offset "
+           "(relative to their mean) that best explains its gyroscope residual by omega_dot, "
+           "and the same free per sample (jitter)"}}},
+        {"robust",
+         {{"used", r.robust},
+          {"batches", r.robust_batches},
+          {"batch_seconds", options.robust_batch},
+          {"ratio", options.robust_ratio}}},
+        {"positions_only_start", r.initial_positions_from_array},
+        {"changed_from_positions_only", std::move(changed)}}},
+      {"warnings", std::move(warnings)}};
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status RunArray(ArrayRecording recording, const json& config, json* result,
                 const std::atomic<bool>* cancel, core::TaskExecutor executor) {
+  if (IsFullModel(config))
+    return RunArrayFull(std::move(recording), config, result, cancel, std::move(executor));
   core::ArrayProblem problem;
   core::ArrayOptions options;
   bool degrees = false;
@@ -400,10 +682,11 @@ Status RunArray(const ArrayRecording& recording, const json& config, json* resul
                                 " accelerometer triads but geometry.positions has " +
                                 std::to_string(K) + " positions")
         .WithField("geometry.positions");
-  problem.accel = recording.accel;
-  problem.gyro = recording.gyro;
+  // Moved, not copied: a job holds one copy of the samples (the parser's).
+  problem.accel = std::move(recording.accel);
+  problem.gyro = std::move(recording.gyro);
   if (degrees) problem.gyro *= core::kDegree;
-  problem.accel_names = recording.accel_names;
+  problem.accel_names = std::move(recording.accel_names);
   if (calibration.present) {
     s = core::CorrectAccelerometerReadings(calibration.triads, problem.accel_names, &problem.accel);
     if (!s.ok()) return s.WithField(kCalibrationKey);
@@ -734,42 +1017,117 @@ void JudgeArray(const json& result, const json& config, const AcceptanceLimits& 
     JudgeImuTriads(params["imus"], uncertainty.value("imus", json()), nominal, limits, "IMU",
                    verdict);
   }
-}
 
-namespace {
-
-class Array : public Method {
- public:
-  const char* name() const override { return "array"; }
-  const char* summary() const override {
-    return "positions of the accelerometer triads of an inertial sensor array from a free, "
-           "hand-twisted recording (Carlsson, Skog, Jalden: maximum likelihood)";
-  }
-  bool Reads(Layout layout) const override { return layout == Layout::kArray; }
-  Status ValidateConfig(const nlohmann::json& config) const override {
-    core::ArrayProblem geometry;
-    core::ArrayOptions options;
-    bool degrees = false;
-    return ParseArrayConfig(config, &geometry, &options, &degrees);
-  }
-  void Judge(const nlohmann::json& result, const nlohmann::json& config,
-             const AcceptanceLimits& limits, Verdict* verdict) const override {
-    JudgeArray(result, config, limits, verdict);
-  }
-  Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
-             nlohmann::json* result) const override {
-    ArrayRecording recording;
-    Status s = parser->TakeArray(&recording);
+  Status SimulateArrayFullFiles(const ArraySimulationFileOptions& options, std::string* csv,
+                                json* config, json* truth) {
+    if (options.gyro_unit != "rad/s" && options.gyro_unit != "deg/s")
+      return Status::InvalidInput("gyro_unit must be \"rad/s\" or \"deg/s\", not \"" +
+                                  options.gyro_unit + "\"");
+    core::ArrayFullSimulationOptions so;
+    if (options.board == "mimu4444")
+      so.nominal_positions = core::Mimu4444NominalPositions();
+    else if (options.board == "paper32")
+      so.nominal_positions = core::PaperArrayNominalPositions();
+    else
+      return Status::InvalidInput("board must be \"mimu4444\" or \"paper32\", not \"" +
+                                  options.board + "\"");
+    so.seed = options.seed;
+    so.dynamic_samples = options.samples;
+    so.static_duration = 1.5;
+    so.accel_noise = options.accel_noise;
+    so.gyro_noise = options.gyro_noise_dps * core::kDegree;
+    core::ArrayFullSimulation sim;
+    Status s = core::SimulateArrayFull(so, &sim);
     if (!s.ok()) return s;
-    return RunArray(recording, config, result, ctx.cancel, ctx.executor);
+    const bool degrees = options.gyro_unit == "deg/s";
+    const double unit = degrees ? core::kDegree : 1.0;  // rad/s per reading unit
+    const int K = static_cast<int>(so.nominal_positions.cols());
+    std::string out = "t";
+    for (const char* kind : {"a", "g"})
+      for (int k = 0; k < K; ++k)
+        for (const char* axis : {"_x", "_y", "_z"}) out += "," + (kind + std::to_string(k)) + axis;
+    out += '\n';
+    const int64_t N = sim.problem.t.size();
+    for (int64_t n = 0; n < N; ++n) {
+      out += FormatG17(sim.problem.t(n));
+      for (int c = 0; c < 3 * K; ++c) out += "," + FormatG17(sim.problem.accel(n, c));
+      for (int c = 0; c < 3 * K; ++c) out += "," + FormatG17(sim.problem.gyro(n, c) / unit);
+      out += '\n';
+    }
+    *csv = std::move(out);
+    json nominal = json::array(), imus = json::array();
+    for (int k = 0; k < K; ++k) {
+      nominal.push_back(Vec(so.nominal_positions.col(k)));
+      const core::ArrayFullTriadReport p = core::ReportArrayFullTriad(sim.truth[k]);
+      imus.push_back({{"name", std::to_string(k)},
+                      {"accelerometer", SensorJson(p.accelerometer, 1)},
+                      {"gyroscope", SensorJson(p.gyroscope, unit)},
+                      {"position", Vec(p.position)}});
+    }
+    *config = {{"method", "array"},
+               {"model", "full"},
+               {"geometry", {{"positions", nominal}, {"reference", so.reference}}},
+               {"accel_noise", so.accel_noise},
+               {"gyro_noise", options.gyro_noise_dps * (degrees ? 1 : core::kDegree)},
+               {"gyro_unit", options.gyro_unit},
+               {"static_window", 0.25},
+               {"min_static", 0.5}};
+    *truth = {{"method", "array"},
+              {"model", "full"},
+              {"reference", so.reference},
+              {"imus", std::move(imus)},
+              {"seed", options.seed},
+              {"options",
+               {{"board", options.board},
+                {"dynamic_samples", options.samples},
+                {"statics", so.statics},
+                {"static_duration", so.static_duration},
+                {"rate", so.rate},
+                {"accel_noise", options.accel_noise},
+                {"gyro_noise_dps", options.gyro_noise_dps},
+                {"gyro_unit", options.gyro_unit}}}};
+    return Status::Ok();
   }
-};
 
-}  // namespace
+  namespace {
 
-const Method& ArrayMethod() {
-  static const Array method;
-  return method;
-}
+  class Array : public Method {
+   public:
+    const char* name() const override { return "array"; }
+    const char* summary() const override {
+      return "positions of the accelerometer triads of an inertial sensor array from a free, "
+             "hand-twisted recording (Carlsson, Skog, Jalden: maximum likelihood)";
+    }
+    bool Reads(Layout layout) const override { return layout == Layout::kArray; }
+    Status ValidateConfig(const nlohmann::json& config) const override {
+      bool degrees = false;
+      if (IsFullModel(config)) {
+        core::ArrayFullProblem geometry;
+        core::ArrayFullOptions options;
+        return ParseArrayFullConfig(config, &geometry, &options, &degrees);
+      }
+      core::ArrayProblem geometry;
+      core::ArrayOptions options;
+      return ParseArrayConfig(config, &geometry, &options, &degrees);
+    }
+    void Judge(const nlohmann::json& result, const nlohmann::json& config,
+               const AcceptanceLimits& limits, Verdict* verdict) const override {
+      JudgeArray(result, config, limits, verdict);
+    }
+    Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
+               nlohmann::json* result) const override {
+      ArrayRecording recording;
+      Status s = parser->TakeArray(&recording);
+      if (!s.ok()) return s;
+      return RunArray(std::move(recording), config, result, ctx.cancel, ctx.executor);
+    }
+  };
+
+  }  // namespace
+
+  const Method& ArrayMethod() {
+    static const Array method;
+    return method;
+  }
 
 }  // namespace calibd::server

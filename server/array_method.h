@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/array.h"
+#include "core/array_full.h"
 #include "core/status.h"
 #include "server/method.h"
 #include "server/recording.h"
@@ -99,9 +100,10 @@ Status ParseArrayConfig(const nlohmann::json& config, core::ArrayProblem* geomet
 // `cancel` (optional): the solver stops at its next iteration once it is true.
 // `executor` (optional): runs the solver's parallel work (e.g. the server's shared pool);
 // without one the solver starts its own threads.
-Status RunArray(const ArrayRecording& recording, const nlohmann::json& config,
-                nlohmann::json* result, const std::atomic<bool>* cancel = nullptr,
-                core::TaskExecutor executor = {});
+// The recording is taken by value: pass it with std::move where it is not needed afterwards
+// (the samples are then never copied).
+Status RunArray(ArrayRecording recording, const nlohmann::json& config, nlohmann::json* result,
+                const std::atomic<bool>* cancel = nullptr, core::TaskExecutor executor = {});
 
 // The acceptance gate of an array result (Method::Judge): every triad but the reference within
 // max_offset of its nominal position and its 1 sigma within max_position_std (positions from
@@ -111,6 +113,32 @@ Status RunArray(const ArrayRecording& recording, const nlohmann::json& config,
 // misalignments and biases as for imu (JudgeImuTriads; nominal units from accel_unit, gyro_unit).
 void JudgeArray(const nlohmann::json& result, const nlohmann::json& config,
                 const AcceptanceLimits& limits, Verdict* verdict);
+
+// model "full" (SPEC §7): the keys geometry (as above), accel_noise (m/s², optional: default
+// from the statics), gyro_noise (gyro_unit, optional: from the statics), gyro_unit,
+// gyro_saturation, gravity (m/s², default 9.80665), max_iterations (>= 1), tolerance,
+// static_window and min_static (s, static detection), robust_batch (s, the residual-aware σ's
+// batches), dynamic_weighting ("noise" default | "residual": the dynamic samples weighted by
+// their own residual level, core::ArrayFullDynamicWeighting), model, method, device. solver and
+// accelerometer_calibration are rejected (the full model estimates the accelerometers with its own
+// joint solver). Errors as ParseArrayConfig. RunArray dispatches on "model": with "full" it runs
+// core::CalibrateArrayFull on the recording (which needs a `t` column and one gyroscope triad per
+// accelerometer triad) and writes
+//   parameters: {"model":"full","reference","imus":[{"name","accelerometer":{"bias","scale",
+//                "misalignment","matrix"},"gyroscope":{same},"position"}],"positions":[as the
+//                positions model]},
+//   uncertainty: {"imus":[{"name","accelerometer":{"bias_std","scale_std","misalignment_std"},
+//                 "gyroscope":{same},"position_std","robust":{same keys, when the residuals
+//                 exceed the noise}}],"positions":[{"name","std"}]},
+//   diagnostics: {"model","gauge":{"scale","reference","description"},"iterations",
+//                 "converged","termination","cost","statics","static_samples",
+//                 "dynamic_samples","samples_dropped","dof","chi2_per_dof","noise",
+//                 "static_noise","residual_rms":{"dynamic","imus":[{"name","static",
+//                 "dynamic"}]},"rotation_excitation","null_directions","robust",
+//                 "positions_only_start","changed_from_positions_only"}.
+// Gyroscope figures in the configured gyro_unit (bias in it, scale in rad/s per unit).
+Status ParseArrayFullConfig(const nlohmann::json& config, core::ArrayFullProblem* geometry_part,
+                            core::ArrayFullOptions* options, bool* gyro_in_degrees);
 
 // For `calibd simulate array`.
 struct ArraySimulationFileOptions {
@@ -130,6 +158,11 @@ struct ArraySimulationFileOptions {
   // Static recording (SimulateArrayStaticFiles): readings averaged over this many samples per
   // position, so the noise is accel_noise / sqrt(static_samples). >= 1.
   int64_t static_samples = 1000;
+  // `--model full` (SimulateArrayFullFiles): the board ("mimu4444": 8 IMUs, "paper32": the 32 of
+  // the seed) with per-triad accelerometer and gyroscope errors (core/array_full_simulation.h
+  // defaults: gains 1 %, misalignment 10 mrad, biases 0.1 m/s² and 1 °/s), 20 statics of
+  // 1.5 s, then `samples` dynamic samples, at 100 Hz.
+  std::string board = "mimu4444";
 };
 
 // The CSV text (header t,a0_x..a31_z,g0_x..g31_z, %.17g, t = n / 100 s), the config
@@ -150,6 +183,13 @@ Status SimulateArrayFiles(const ArraySimulationFileOptions& options, std::string
 // kInvalidInput for positions < 1, static_samples < 1 or invalid options.
 Status SimulateArrayStaticFiles(const ArraySimulationFileOptions& options, int positions,
                                 std::string* csv, nlohmann::json* config);
+
+// `calibd simulate array --model full`: CSV (t,a0_x..,g0_x.., %.17g), config ({"method":
+// "array","model":"full","geometry","accel_noise","gyro_noise","gyro_unit","static_window":0.25,
+// "min_static":0.5}) and truth ({"method","model":"full","reference","imus":[as the result's
+// parameters.imus],"seed","options"}). kInvalidInput for an unknown board or unit.
+Status SimulateArrayFullFiles(const ArraySimulationFileOptions& options, std::string* csv,
+                              nlohmann::json* config, nlohmann::json* truth);
 
 }  // namespace calibd::server
 

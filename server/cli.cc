@@ -316,6 +316,17 @@ int RunCli(int argc, char** argv) {
                    "σ of each accelerometer axis tilt, rad")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  std::string array_model = "positions";
+  sim_array
+      ->add_option("--model", array_model,
+                   "positions: the seed's set-up (ideal triads); full: per-triad accelerometer "
+                   "and gyroscope errors, 20 statics then the dynamic phase (-N samples), for "
+                   "model full")
+      ->check(CLI::IsMember({"positions", "full"}))
+      ->capture_default_str();
+  sim_array->add_option("--board", array_sim.board, "with --model full: mimu4444 or paper32")
+      ->check(CLI::IsMember({"mimu4444", "paper32"}))
+      ->capture_default_str();
   int static_positions = 0;
   sim_array
       ->add_option("--static-positions", static_positions,
@@ -433,6 +444,13 @@ int RunCli(int argc, char** argv) {
     std::string csv;
     json config, truth;
     Status s = SimulateNoiseFiles(noise_sim, &csv, &config, &truth);
+    if (!s.ok()) return Report(s);
+    return WriteSimulation(out_dir, csv, config, truth);
+  }
+  if (*sim_array && array_model == "full") {
+    std::string csv;
+    json config, truth;
+    Status s = SimulateArrayFullFiles(array_sim, &csv, &config, &truth);
     if (!s.ok()) return Report(s);
     return WriteSimulation(out_dir, csv, config, truth);
   }

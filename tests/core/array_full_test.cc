@@ -1,0 +1,249 @@
+// Tests of the full array model (core/array_full.h) on simulated boards with per-triad
+// accelerometer and gyroscope errors (core/array_full_simulation.h). Statistical tests use fixed
+// seeds and margins of 3 standard errors of the number of runs.
+#include "core/array_full.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/array_full_simulation.h"
+#include "tests/lib/sanitizer.h"
+
+namespace calibd::core {
+namespace {
+
+ArrayFullSimulationOptions Board8(uint64_t seed) {
+  ArrayFullSimulationOptions o;
+  o.nominal_positions = Mimu4444NominalPositions();
+  o.seed = seed;
+  return o;
+}
+
+ArrayFullOptions FitOptions(const ArrayFullSimulationOptions& so) {
+  ArrayFullOptions o;
+  o.accel_noise = so.accel_noise > 0 ? so.accel_noise : 0.04;
+  o.gyro_noise = so.gyro_noise > 0 ? so.gyro_noise : 0.2 * kDegree;
+  o.statics.static_window = 0.2;
+  o.statics.min_static = 0.3;
+  o.threads = 1;
+  return o;
+}
+
+TEST(ArrayFull, RecoversEveryParameterExactlyWithoutNoise) {
+  ArrayFullSimulationOptions so = Board8(3);
+  so.accel_noise = 0;
+  so.gyro_noise = 0;
+  ArrayFullSimulation sim;
+  ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+  ArrayFullResult r;
+  const Status s = CalibrateArrayFull(sim.problem, FitOptions(so), &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  std::printf("%s\n", r.BriefReport().c_str());
+  EXPECT_EQ(r.statics, so.statics);
+  const Eigen::VectorXd err = r.theta - sim.truth_theta;
+  EXPECT_LT(err.cwiseAbs().maxCoeff(), 1e-9) << err.transpose();
+  EXPECT_EQ(r.gauge, "sum_trace_gyroscope");
+}
+
+TEST(ArrayFull, RecoversThe32TriadArrayExactlyWithoutNoise) {
+  ArrayFullSimulationOptions so;
+  so.nominal_positions = PaperArrayNominalPositions();
+  so.seed = 5;
+  so.rate = 50;
+  so.dynamic_samples = 100;
+  so.accel_noise = 0;
+  so.gyro_noise = 0;
+  ArrayFullSimulation sim;
+  ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+  ArrayFullResult r;
+  const Status s = CalibrateArrayFull(sim.problem, FitOptions(so), &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  std::printf("%s\n", r.BriefReport().c_str());
+  EXPECT_LT((r.theta - sim.truth_theta).cwiseAbs().maxCoeff(), 1e-9);
+}
+
+// Whitened error e^T CRB^+ e of all 27K - 7 free parameters, and the mean of (error / sigma)^2
+// over the reported quantities' parameters (theta's coordinates), for one run.
+struct Whitened {
+  double chi2 = 0;
+  double z2 = 0;  // mean over the free coordinates of (error / sigma)^2
+  int free = 0;
+};
+
+Whitened WhitenedError(const ArrayFullResult& r, const Eigen::VectorXd& truth,
+                       const Eigen::MatrixXd& covariance) {
+  const Eigen::MatrixXd& E = r.gauge_basis;
+  const Eigen::VectorXd err = r.theta - truth;
+  const Eigen::VectorXd delta = E.transpose() * err;
+  const Eigen::MatrixXd covE = E.transpose() * covariance * E;
+  Whitened w;
+  w.free = static_cast<int>(E.cols());
+  w.chi2 = delta.dot(covE.ldlt().solve(delta));
+  int n = 0;
+  for (int i = 0; i < err.size(); ++i) {
+    const double v = covariance(i, i);
+    if (v <= 1e-30) continue;  // a gauge-fixed coordinate
+    w.z2 += err(i) * err(i) / v;
+    ++n;
+  }
+  w.z2 /= n;
+  return w;
+}
+
+struct MeanSe {
+  double mean = 0, se = 0;
+};
+MeanSe Summarise(const std::vector<double>& v) {
+  MeanSe m;
+  for (double x : v) m.mean += x;
+  m.mean /= v.size();
+  double ss = 0;
+  for (double x : v) ss += (x - m.mean) * (x - m.mean);
+  m.se = std::sqrt(ss / (v.size() - 1) / v.size());
+  return m;
+}
+
+// Efficiency: over Monte-Carlo runs the whitened error chi^2 has the mean of its degrees of
+// freedom (the 209 free parameters of an 8-IMU board), and the reported sigma of every
+// parameter matches its spread (mean (error / sigma)^2 = 1), within 3 standard errors.
+TEST(ArrayFull, IsEfficientAndItsSigmaMatchesTheSpreadOnAnEightImuBoard) {
+  // Fewer runs under ASan (10-50x slower): the margins are 3 SE of whatever was run.
+  constexpr int kRuns = sanitizer::kAddressSanitizer ? 5 : 16;
+  std::vector<double> chi2, z2, cost;
+  int free = 0;
+  for (int run = 0; run < kRuns; ++run) {
+    ArrayFullSimulationOptions so = Board8(100 + run);
+    ArrayFullSimulation sim;
+    ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+    ArrayFullResult r;
+    const Status s = CalibrateArrayFull(sim.problem, FitOptions(so), &r);
+    ASSERT_TRUE(s.ok()) << s.message();
+    EXPECT_TRUE(r.converged) << r.BriefReport();
+    EXPECT_FALSE(r.robust);
+    // No sampling-time errors simulated: the offsets explain (almost) nothing.
+    EXPECT_LT(r.time_offset_explained, 0.05);
+    const Whitened w = WhitenedError(r, sim.truth_theta, r.theta_covariance);
+    free = w.free;
+    chi2.push_back(w.chi2 / w.free);
+    z2.push_back(w.z2);
+    cost.push_back(r.chi2_per_dof);
+    if (run == 0) std::printf("%s\n", r.BriefReport().c_str());
+  }
+  EXPECT_EQ(free, 27 * 8 - 7);
+  const MeanSe c = Summarise(chi2), z = Summarise(z2), f = Summarise(cost);
+  std::printf("chi2/free %.4f +- %.4f, mean (err/sigma)^2 %.4f +- %.4f, cost/dof %.4f +- %.4f\n",
+              c.mean, c.se, z.mean, z.se, f.mean, f.se);
+  // The SE of chi2/free from theory: sqrt(2 / (free * runs)); use the larger of the two.
+  const double c_se = std::max(c.se, std::sqrt(2.0 / (free * kRuns)));
+  EXPECT_NEAR(c.mean, 1.0, 3 * c_se);
+  EXPECT_NEAR(z.mean, 1.0, 3 * z.se);
+  EXPECT_NEAR(f.mean, 1.0, 3 * std::max(f.se, 1e-3));
+}
+
+// With the configured noise three times too small, the residuals exceed it: a warning, and the
+// residual-aware sigma matches the spread while the Cramér-Rao sigma (of the understated
+// noise) is about three times too small.
+TEST(ArrayFull, ResidualAwareSigmaMatchesTheSpreadWhenTheNoiseIsUnderstated) {
+  constexpr int kRuns = sanitizer::kAddressSanitizer ? 4 : 12;
+  std::vector<double> z2_crb, z2_robust;
+  for (int run = 0; run < kRuns; ++run) {
+    ArrayFullSimulationOptions so = Board8(200 + run);
+    ArrayFullSimulation sim;
+    ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+    ArrayFullOptions fo = FitOptions(so);
+    fo.accel_noise /= 3;
+    fo.gyro_noise /= 3;
+    fo.robust_batch = 0.05;
+    ArrayFullResult r;
+    const Status s = CalibrateArrayFull(sim.problem, fo, &r);
+    ASSERT_TRUE(s.ok()) << s.message();
+    ASSERT_TRUE(r.robust);
+    EXPECT_NEAR(r.chi2_per_dof, 9, 0.5);
+    bool warned = false;
+    for (const auto& w : r.warnings)
+      warned |= w.find("residuals exceed the noise") != std::string::npos;
+    EXPECT_TRUE(warned);
+    z2_crb.push_back(WhitenedError(r, sim.truth_theta, r.theta_covariance).z2);
+    z2_robust.push_back(WhitenedError(r, sim.truth_theta, r.theta_covariance_robust).z2);
+  }
+  const MeanSe c = Summarise(z2_crb), z = Summarise(z2_robust);
+  std::printf("mean (err/sigma)^2: CRB %.3f +- %.3f, robust %.4f +- %.4f\n", c.mean, c.se, z.mean,
+              z.se);
+  EXPECT_NEAR(c.mean, 9.0, 3 * c.se);
+  EXPECT_NEAR(z.mean, 1.0, 3 * z.se);
+}
+
+// When the model fits (simulation), weighting the dynamic samples by their own residual level
+// changes nothing material: the level found is the noise, and the estimate moves by far less
+// than its σ.
+TEST(ArrayFull, ResidualWeightingFindsTheNoiseWhenTheModelFits) {
+  ArrayFullSimulationOptions so = Board8(13);
+  ArrayFullSimulation sim;
+  ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+  ArrayFullOptions fo = FitOptions(so);
+  ArrayFullResult a, b;
+  ASSERT_TRUE(CalibrateArrayFull(sim.problem, fo, &a).ok());
+  fo.dynamic_weighting = ArrayFullDynamicWeighting::kResidual;
+  ASSERT_TRUE(CalibrateArrayFull(sim.problem, fo, &b).ok());
+  // The residual level is an estimate from ~800 x 48 residuals: within a few % of the truth.
+  EXPECT_NEAR(b.dynamic_accel_noise / so.accel_noise, 1, 0.03);
+  EXPECT_NEAR(b.dynamic_gyro_noise / so.gyro_noise, 1, 0.03);
+  EXPECT_NEAR(b.chi2_per_dof, 1, 0.05);
+  double worst = 0;
+  for (int i = 0; i < a.theta.size(); ++i)
+    if (a.theta_covariance(i, i) > 0)
+      worst =
+          std::max(worst, std::abs(a.theta(i) - b.theta(i)) / std::sqrt(a.theta_covariance(i, i)));
+  EXPECT_LT(worst, 0.2);
+}
+
+TEST(ArrayFull, EstimateHoldsTheGauges) {
+  ArrayFullSimulationOptions so = Board8(7);
+  so.reference = 5;
+  ArrayFullSimulation sim;
+  ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+  ArrayFullResult r;
+  ASSERT_TRUE(CalibrateArrayFull(sim.problem, FitOptions(so), &r).ok());
+  const ArrayFullTriad& ref = r.triads[5];
+  EXPECT_EQ(ref.accel_T(1, 0), 0);
+  EXPECT_EQ(ref.accel_T(2, 0), 0);
+  EXPECT_EQ(ref.accel_T(2, 1), 0);
+  EXPECT_EQ((ref.position - so.nominal_positions.col(5)).norm(), 0);
+  double trace = 0;
+  for (const auto& t : r.triads) trace += t.gyro_T.trace();
+  EXPECT_NEAR(trace, 24, 1e-12);
+  EXPECT_EQ(r.report_std[5].position_std.norm(), 0);
+  EXPECT_GT(r.report_std[4].position_std.minCoeff(), 0);
+  // The other triads' positions moved from the nominal by the simulated perturbation.
+  EXPECT_GT((r.triads[0].position - so.nominal_positions.col(0)).norm(), 1e-5);
+}
+
+TEST(ArrayFull, RotationAboutTwoAxesOnlyIsNotDeterminableAndNamesTheThird) {
+  ArrayFullSimulationOptions so = Board8(9);
+  so.omega_axes = Eigen::Vector3d(1, 1, 0);
+  ArrayFullSimulation sim;
+  ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+  ArrayFullResult r;
+  const Status s = CalibrateArrayFull(sim.problem, FitOptions(so), &r);
+  EXPECT_EQ(s.code(), StatusCode::kNotDeterminable);
+  EXPECT_NE(s.message().find("rotation about the body axis (0.00, 0.00, 1.00)"), std::string::npos)
+      << s.message();
+  EXPECT_EQ(r.rotation_verdict, "insufficient");
+  EXPECT_FALSE(r.usable);
+}
+
+TEST(ArrayFull, TooFewStaticsIsNotDeterminable) {
+  ArrayFullSimulationOptions so = Board8(11);
+  so.statics = 6;
+  ArrayFullSimulation sim;
+  ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+  ArrayFullResult r;
+  const Status s = CalibrateArrayFull(sim.problem, FitOptions(so), &r);
+  EXPECT_EQ(s.code(), StatusCode::kNotDeterminable);
+  EXPECT_NE(s.message().find("at least 9 static orientations"), std::string::npos) << s.message();
+  EXPECT_EQ(r.statics, 6);
+}
+
+}  // namespace
+}  // namespace calibd::core
