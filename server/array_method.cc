@@ -1017,117 +1017,118 @@ void JudgeArray(const json& result, const json& config, const AcceptanceLimits& 
     JudgeImuTriads(params["imus"], uncertainty.value("imus", json()), nominal, limits, "IMU",
                    verdict);
   }
+}
 
-  Status SimulateArrayFullFiles(const ArraySimulationFileOptions& options, std::string* csv,
-                                json* config, json* truth) {
-    if (options.gyro_unit != "rad/s" && options.gyro_unit != "deg/s")
-      return Status::InvalidInput("gyro_unit must be \"rad/s\" or \"deg/s\", not \"" +
-                                  options.gyro_unit + "\"");
-    core::ArrayFullSimulationOptions so;
-    if (options.board == "mimu4444")
-      so.nominal_positions = core::Mimu4444NominalPositions();
-    else if (options.board == "paper32")
-      so.nominal_positions = core::PaperArrayNominalPositions();
-    else
-      return Status::InvalidInput("board must be \"mimu4444\" or \"paper32\", not \"" +
-                                  options.board + "\"");
-    so.seed = options.seed;
-    so.dynamic_samples = options.samples;
-    so.static_duration = 1.5;
-    so.accel_noise = options.accel_noise;
-    so.gyro_noise = options.gyro_noise_dps * core::kDegree;
-    core::ArrayFullSimulation sim;
-    Status s = core::SimulateArrayFull(so, &sim);
-    if (!s.ok()) return s;
-    const bool degrees = options.gyro_unit == "deg/s";
-    const double unit = degrees ? core::kDegree : 1.0;  // rad/s per reading unit
-    const int K = static_cast<int>(so.nominal_positions.cols());
-    std::string out = "t";
-    for (const char* kind : {"a", "g"})
-      for (int k = 0; k < K; ++k)
-        for (const char* axis : {"_x", "_y", "_z"}) out += "," + (kind + std::to_string(k)) + axis;
+Status SimulateArrayFullFiles(const ArraySimulationFileOptions& options, std::string* csv,
+                              json* config, json* truth) {
+  if (options.gyro_unit != "rad/s" && options.gyro_unit != "deg/s")
+    return Status::InvalidInput("gyro_unit must be \"rad/s\" or \"deg/s\", not \"" +
+                                options.gyro_unit + "\"");
+  core::ArrayFullSimulationOptions so;
+  if (options.board == "mimu4444")
+    so.nominal_positions = core::Mimu4444NominalPositions();
+  else if (options.board == "paper32")
+    so.nominal_positions = core::PaperArrayNominalPositions();
+  else
+    return Status::InvalidInput("board must be \"mimu4444\" or \"paper32\", not \"" +
+                                options.board + "\"");
+  so.seed = options.seed;
+  so.dynamic_samples = options.samples;
+  so.static_duration = 1.5;
+  so.accel_noise = options.accel_noise;
+  so.gyro_noise = options.gyro_noise_dps * core::kDegree;
+  core::ArrayFullSimulation sim;
+  Status s = core::SimulateArrayFull(so, &sim);
+  if (!s.ok()) return s;
+  const bool degrees = options.gyro_unit == "deg/s";
+  const double unit = degrees ? core::kDegree : 1.0;  // rad/s per reading unit
+  const int K = static_cast<int>(so.nominal_positions.cols());
+  std::string out = "t";
+  for (const char* kind : {"a", "g"})
+    for (int k = 0; k < K; ++k)
+      for (const char* axis : {"_x", "_y", "_z"}) out += "," + (kind + std::to_string(k)) + axis;
+  out += '\n';
+  const int64_t N = sim.problem.t.size();
+  for (int64_t n = 0; n < N; ++n) {
+    out += FormatG17(sim.problem.t(n));
+    for (int c = 0; c < 3 * K; ++c) out += "," + FormatG17(sim.problem.accel(n, c));
+    for (int c = 0; c < 3 * K; ++c) out += "," + FormatG17(sim.problem.gyro(n, c) / unit);
     out += '\n';
-    const int64_t N = sim.problem.t.size();
-    for (int64_t n = 0; n < N; ++n) {
-      out += FormatG17(sim.problem.t(n));
-      for (int c = 0; c < 3 * K; ++c) out += "," + FormatG17(sim.problem.accel(n, c));
-      for (int c = 0; c < 3 * K; ++c) out += "," + FormatG17(sim.problem.gyro(n, c) / unit);
-      out += '\n';
-    }
-    *csv = std::move(out);
-    json nominal = json::array(), imus = json::array();
-    for (int k = 0; k < K; ++k) {
-      nominal.push_back(Vec(so.nominal_positions.col(k)));
-      const core::ArrayFullTriadReport p = core::ReportArrayFullTriad(sim.truth[k]);
-      imus.push_back({{"name", std::to_string(k)},
-                      {"accelerometer", SensorJson(p.accelerometer, 1)},
-                      {"gyroscope", SensorJson(p.gyroscope, unit)},
-                      {"position", Vec(p.position)}});
-    }
-    *config = {{"method", "array"},
-               {"model", "full"},
-               {"geometry", {{"positions", nominal}, {"reference", so.reference}}},
-               {"accel_noise", so.accel_noise},
-               {"gyro_noise", options.gyro_noise_dps * (degrees ? 1 : core::kDegree)},
-               {"gyro_unit", options.gyro_unit},
-               {"static_window", 0.25},
-               {"min_static", 0.5}};
-    *truth = {{"method", "array"},
-              {"model", "full"},
-              {"reference", so.reference},
-              {"imus", std::move(imus)},
-              {"seed", options.seed},
-              {"options",
-               {{"board", options.board},
-                {"dynamic_samples", options.samples},
-                {"statics", so.statics},
-                {"static_duration", so.static_duration},
-                {"rate", so.rate},
-                {"accel_noise", options.accel_noise},
-                {"gyro_noise_dps", options.gyro_noise_dps},
-                {"gyro_unit", options.gyro_unit}}}};
-    return Status::Ok();
   }
-
-  namespace {
-
-  class Array : public Method {
-   public:
-    const char* name() const override { return "array"; }
-    const char* summary() const override {
-      return "positions of the accelerometer triads of an inertial sensor array from a free, "
-             "hand-twisted recording (Carlsson, Skog, Jalden: maximum likelihood)";
-    }
-    bool Reads(Layout layout) const override { return layout == Layout::kArray; }
-    Status ValidateConfig(const nlohmann::json& config) const override {
-      bool degrees = false;
-      if (IsFullModel(config)) {
-        core::ArrayFullProblem geometry;
-        core::ArrayFullOptions options;
-        return ParseArrayFullConfig(config, &geometry, &options, &degrees);
-      }
-      core::ArrayProblem geometry;
-      core::ArrayOptions options;
-      return ParseArrayConfig(config, &geometry, &options, &degrees);
-    }
-    void Judge(const nlohmann::json& result, const nlohmann::json& config,
-               const AcceptanceLimits& limits, Verdict* verdict) const override {
-      JudgeArray(result, config, limits, verdict);
-    }
-    Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
-               nlohmann::json* result) const override {
-      ArrayRecording recording;
-      Status s = parser->TakeArray(&recording);
-      if (!s.ok()) return s;
-      return RunArray(std::move(recording), config, result, ctx.cancel, ctx.executor);
-    }
-  };
-
-  }  // namespace
-
-  const Method& ArrayMethod() {
-    static const Array method;
-    return method;
+  *csv = std::move(out);
+  json nominal = json::array(), imus = json::array();
+  for (int k = 0; k < K; ++k) {
+    nominal.push_back(Vec(so.nominal_positions.col(k)));
+    const core::ArrayFullTriadReport p = core::ReportArrayFullTriad(sim.truth[k]);
+    imus.push_back({{"name", std::to_string(k)},
+                    {"accelerometer", SensorJson(p.accelerometer, 1)},
+                    {"gyroscope", SensorJson(p.gyroscope, unit)},
+                    {"position", Vec(p.position)}});
   }
+  *config = {{"method", "array"},
+             {"model", "full"},
+             {"geometry", {{"positions", nominal}, {"reference", so.reference}}},
+             {"accel_noise", so.accel_noise},
+             {"gyro_noise", options.gyro_noise_dps * (degrees ? 1 : core::kDegree)},
+             {"gyro_unit", options.gyro_unit},
+             {"static_window", 0.25},
+             {"min_static", 0.5}};
+  *truth = {{"method", "array"},
+            {"model", "full"},
+            {"reference", so.reference},
+            {"imus", std::move(imus)},
+            {"seed", options.seed},
+            {"options",
+             {{"board", options.board},
+              {"dynamic_samples", options.samples},
+              {"statics", so.statics},
+              {"static_duration", so.static_duration},
+              {"rate", so.rate},
+              {"accel_noise", options.accel_noise},
+              {"gyro_noise_dps", options.gyro_noise_dps},
+              {"gyro_unit", options.gyro_unit}}}};
+  return Status::Ok();
+}
+
+namespace {
+
+class Array : public Method {
+ public:
+  const char* name() const override { return "array"; }
+  const char* summary() const override {
+    return "positions of the accelerometer triads of an inertial sensor array from a free, "
+           "hand-twisted recording (Carlsson, Skog, Jalden: maximum likelihood)";
+  }
+  bool Reads(Layout layout) const override { return layout == Layout::kArray; }
+  Status ValidateConfig(const nlohmann::json& config) const override {
+    bool degrees = false;
+    if (IsFullModel(config)) {
+      core::ArrayFullProblem geometry;
+      core::ArrayFullOptions options;
+      return ParseArrayFullConfig(config, &geometry, &options, &degrees);
+    }
+    core::ArrayProblem geometry;
+    core::ArrayOptions options;
+    return ParseArrayConfig(config, &geometry, &options, &degrees);
+  }
+  void Judge(const nlohmann::json& result, const nlohmann::json& config,
+             const AcceptanceLimits& limits, Verdict* verdict) const override {
+    JudgeArray(result, config, limits, verdict);
+  }
+  Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
+             nlohmann::json* result) const override {
+    ArrayRecording recording;
+    Status s = parser->TakeArray(&recording);
+    if (!s.ok()) return s;
+    return RunArray(std::move(recording), config, result, ctx.cancel, ctx.executor);
+  }
+};
+
+}  // namespace
+
+const Method& ArrayMethod() {
+  static const Array method;
+  return method;
+}
 
 }  // namespace calibd::server
