@@ -5,6 +5,7 @@
 // fast_float algorithm, correctly rounded). Column numbers in errors are 1-based field numbers.
 #include "server/recording.h"
 
+#include <algorithm>
 #include <array>
 #include <charconv>
 #include <cmath>
@@ -326,6 +327,15 @@ struct RecordingParser::Impl {
   bool have_previous_t = false;
   std::vector<double> array_values;  // N * (3K+3G), row-major (collect only)
   std::vector<double> t_values;
+  int64_t expected_rows = 0;  // ExpectRows: the announced number of data rows (0: unknown)
+  // Direct collection (ExpectRows, array layout): rows go straight into the column-major
+  // matrices TakeArray hands out, so the numbers are held once, never also as a row-major
+  // buffer. If more rows come than announced, the rows so far move to array_values and the
+  // parser goes on as without the hint.
+  bool direct = false;
+  int64_t direct_rows = 0;  // rows written into the matrices
+  Eigen::MatrixXd direct_accel, direct_gyro;
+  Eigen::VectorXd direct_t;
 
   Status Fail(std::string message, int64_t column = 0, std::string field = {}) {
     Status s = Status::InvalidInput(std::move(message));
@@ -592,6 +602,15 @@ struct RecordingParser::Impl {
     for (int k = 0; k < accel_triads; ++k) summary.sensors.push_back("a" + std::to_string(k));
     for (int j = 0; j < gyro_triads; ++j) summary.sensors.push_back("g" + std::to_string(j));
     row_values.resize(3 * (accel_triads + gyro_triads));
+    const int64_t width = static_cast<int64_t>(row_values.size());
+    // At most 2^30 values (8 GiB) up front, whatever the hint says (the job budget of
+    // server/job_budget.h bounds real jobs far below that).
+    if (collect && expected_rows > 0 && expected_rows <= (int64_t{1} << 30) / width) {
+      direct = true;
+      direct_accel.resize(expected_rows, 3 * accel_triads);
+      direct_gyro.resize(expected_rows, 3 * gyro_triads);
+      if (has_t) direct_t.resize(expected_rows);
+    }
     return Status::Ok();
   }
 
@@ -682,10 +701,33 @@ struct RecordingParser::Impl {
       previous_t = t;
       have_previous_t = true;
     }
-    if (collect) {
-      array_values.insert(array_values.end(), row_values.begin(), row_values.end());
-      if (has_t) t_values.push_back(t);
+    if (!collect) return;
+    if (direct && direct_rows == expected_rows) LeaveDirectCollection();
+    if (direct) {
+      const int ka = 3 * accel_triads, kg = 3 * gyro_triads;
+      for (int j = 0; j < ka; ++j) direct_accel(direct_rows, j) = row_values[j];
+      for (int j = 0; j < kg; ++j) direct_gyro(direct_rows, j) = row_values[ka + j];
+      if (has_t) direct_t(direct_rows) = t;
+      ++direct_rows;
+      return;
     }
+    array_values.insert(array_values.end(), row_values.begin(), row_values.end());
+    if (has_t) t_values.push_back(t);
+  }
+
+  // More rows than announced: the rows so far move to the row-major buffers.
+  void LeaveDirectCollection() {
+    const int ka = 3 * accel_triads, kg = 3 * gyro_triads;
+    array_values.reserve(static_cast<size_t>(2 * direct_rows * (ka + kg)));
+    for (int64_t n = 0; n < direct_rows; ++n) {
+      for (int j = 0; j < ka; ++j) array_values.push_back(direct_accel(n, j));
+      for (int j = 0; j < kg; ++j) array_values.push_back(direct_gyro(n, j));
+      if (has_t) t_values.push_back(direct_t(n));
+    }
+    direct = false;
+    direct_accel.resize(0, 0);
+    direct_gyro.resize(0, 0);
+    direct_t.resize(0);
   }
 
   // The one-pass reader for the common row: plain numbers (no spaces, quotes or '+') after
@@ -906,6 +948,13 @@ Status RecordingParser::TakePca(PcaRecording* out) {
   return Status::Ok();
 }
 
+void RecordingParser::ExpectRows(int64_t rows) {
+  // A hint only (used up to a cap, so a wrong hint cannot ask for absurd memory): a recording
+  // with more rows still parses, as without the hint; one with fewer holds the difference until
+  // TakeArray.
+  impl_->expected_rows = std::max<int64_t>(rows, 0);
+}
+
 Status RecordingParser::TakeArray(ArrayRecording* out) {
   Impl& d = *impl_;
   if (!d.finished || !d.error.ok() || !d.collect) {
@@ -918,13 +967,30 @@ Status RecordingParser::TakeArray(ArrayRecording* out) {
         .WithFile(d.file_name);
   }
   const int64_t rows = d.summary.rows;
+  out->accel_names.assign(d.summary.sensors.begin(), d.summary.sensors.begin() + d.accel_triads);
+  out->gyro_names.assign(d.summary.sensors.begin() + d.accel_triads, d.summary.sensors.end());
+  if (d.direct) {
+    // Handed over without a copy when the hint was exact (fewer rows: the rows there are).
+    if (d.direct_rows == d.direct_accel.rows()) {
+      out->accel = std::move(d.direct_accel);
+      out->gyro = std::move(d.direct_gyro);
+      out->t = d.has_t ? std::move(d.direct_t) : Eigen::VectorXd();
+    } else {
+      out->accel = d.direct_accel.topRows(d.direct_rows);
+      out->gyro = d.direct_gyro.topRows(d.direct_rows);
+      out->t = d.has_t ? Eigen::VectorXd(d.direct_t.head(d.direct_rows)) : Eigen::VectorXd();
+    }
+    d.direct = false;
+    d.direct_accel.resize(0, 0);
+    d.direct_gyro.resize(0, 0);
+    d.direct_t.resize(0);
+    return Status::Ok();
+  }
   const int width = 3 * (d.accel_triads + d.gyro_triads);
   Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> all(
       d.array_values.data(), rows, width);
   out->accel = all.leftCols(3 * d.accel_triads);
   out->gyro = all.rightCols(3 * d.gyro_triads);
-  out->accel_names.assign(d.summary.sensors.begin(), d.summary.sensors.begin() + d.accel_triads);
-  out->gyro_names.assign(d.summary.sensors.begin() + d.accel_triads, d.summary.sensors.end());
   if (d.has_t) {
     out->t = Eigen::Map<const Eigen::VectorXd>(d.t_values.data(), rows);
   } else {

@@ -88,6 +88,11 @@ class RecordingParser {
 
   // Feed the next chunk. After the first error every call returns it again.
   Status Feed(std::string_view chunk);
+  // Optional, before the first Feed of a collecting parser: the number of data rows the input
+  // has (e.g. a stored recording's row count). An array recording's numbers then go straight
+  // into the matrices TakeArray hands out: held once, instead of a growing row-major buffer
+  // (up to 2x slack) plus the matrices copied from it. A wrong hint changes nothing but memory.
+  void ExpectRows(int64_t rows);
   // End of input: checks the last line and the whole-file rules (e.g. every raw position has
   // static and moving rows). Must be called once after the last Feed.
   Status Finish();

@@ -158,12 +158,12 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       // a job holds the recording's numbers (8 bytes a value), never its text as well. The read
       // keeps one snapshot of the recording for the whole parse.
       const std::string file_name = "recording " + std::to_string(job.recording_id);
+      storage::RecordingInfo recording;
+      s = store_->GetRecording(job.recording_id, &recording);
+      if (!s.ok()) return fail(s, s.IsTransient());
       // The budget again: the job may have been queued by a server with a larger one.
       if (const Method* method = FindMethod(job.method);
           method != nullptr && options_.job_memory_bytes > 0) {
-        storage::RecordingInfo recording;
-        s = store_->GetRecording(job.recording_id, &recording);
-        if (!s.ok()) return fail(s, s.IsTransient());
         const nlohmann::json columns =
             nlohmann::json::parse(recording.columns_json, nullptr, /*allow_exceptions=*/false);
         const RecordingShape shape{recording.rows,
@@ -172,6 +172,7 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
         if (!s.ok()) return fail(s, /*transient=*/false);
       }
       RecordingParser parser(file_name, /*collect=*/true);
+      parser.ExpectRows(recording.rows);
       Status parsed;
       s = store_->ReadRecordingData(job.recording_id, [&](std::string_view chunk) {
         parsed = parser.Feed(chunk);

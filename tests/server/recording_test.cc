@@ -112,6 +112,29 @@ TEST(RecordingParser, ReadsArrayColumnsInAnyOrder) {
   EXPECT_DOUBLE_EQ(rec.t(1), 0.6);
 }
 
+TEST(RecordingParser, ARowCountHintNeverChangesWhatIsRead) {
+  std::string text = "t,a0_x,a0_y,a0_z,g0_x,g0_y,g0_z\n";
+  for (int n = 0; n < 50; ++n) {
+    text += std::to_string(0.01 * n) + "," + std::to_string(n) + ",2,3,4,5," + std::to_string(-n) +
+            "\n";
+  }
+  RecordingParser plain("arr.csv", true);
+  ASSERT_TRUE(ParseAll(text, &plain).ok());
+  ArrayRecording want;
+  ASSERT_TRUE(plain.TakeArray(&want).ok());
+  // Exact, too small, too large, negative: the hint only sizes the buffers.
+  for (int64_t hint : {int64_t{50}, int64_t{7}, int64_t{100000}, int64_t{-3}}) {
+    RecordingParser hinted("arr.csv", true);
+    hinted.ExpectRows(hint);
+    ASSERT_TRUE(ParseAll(text, &hinted).ok());
+    ArrayRecording got;
+    ASSERT_TRUE(hinted.TakeArray(&got).ok());
+    EXPECT_EQ(got.accel, want.accel) << hint;
+    EXPECT_EQ(got.gyro, want.gyro) << hint;
+    EXPECT_EQ(got.t, want.t) << hint;
+  }
+}
+
 TEST(RecordingParser, ArrayWithoutTimeColumnHasEmptyT) {
   RecordingParser parser("arr.csv", true);
   ASSERT_TRUE(ParseAll("a0_x,a0_y,a0_z\n1,2,3\n", &parser).ok());
