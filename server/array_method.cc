@@ -1100,6 +1100,12 @@ class Array : public Method {
            "hand-twisted recording (Carlsson, Skog, Jalden: maximum likelihood)";
   }
   bool Reads(Layout layout) const override { return layout == Layout::kArray; }
+  // Measured server peaks (bench/README.md, "Memory budget per job"): positions model, N = 100 000
+  // samples of 32 IMUs, 14 bytes per value; full model, 8 IMUs and 23 000 rows, 58 bytes per
+  // value (the per-sample Jacobians of every triad's T and b).
+  double PeakBytesPerValue(const nlohmann::json& config) const override {
+    return IsFullModel(config) ? 64 : 24;
+  }
   Status ValidateConfig(const nlohmann::json& config) const override {
     bool degrees = false;
     if (IsFullModel(config)) {
