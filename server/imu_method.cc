@@ -287,6 +287,24 @@ class Imu : public Method {
                         " times the noise (chi2/dof " + Fmt(*chi2) + " above " + Fmt(*chi2_max) +
                         "): the device moved during a static, or the statics are too short");
       }
+      const json residuals = d.value("residuals", json::object());
+      const auto accel = Number(residuals.value("accel_norm_rms_after", json()));
+      const auto accel_max = limits.Get("max_accel_residual");
+      if (accel_max && accel && *accel > *accel_max) {
+        verdict->Reject(name + ": after calibration |a| still differs from gravity by " +
+                        Fmt(*accel) + " m/s^2 RMS over the statics (above " + Fmt(*accel_max) +
+                        "): the board moved during a static, or gravity is wrong for this place");
+      }
+      const auto gyro = Number(residuals.value("gyro_direction_rms_after", json()));
+      const auto gyro_max = limits.Get("max_gyro_residual");
+      if (gyro_max && gyro && *gyro > *gyro_max) {
+        verdict->Reject(name +
+                        ": after calibration the integrated rotations still miss the "
+                        "measured gravity direction by " +
+                        Fmt(*gyro) + " rad RMS (above " + Fmt(*gyro_max) +
+                        "): rotate more slowly (the gyroscope saturated?) or "
+                        "hold each static longer");
+      }
     }
   }
   Status Run(RecordingParser* parser, const json& config, const RunContext&,

@@ -191,7 +191,7 @@ TEST(Gate, InvalidAcceptanceKeysAreErrorsNamingThem) {
 // ---- imu: results built by hand around the limits ----
 
 json ImuResult(double accel_scale, double scale_std, double misalignment_std, double bias_std,
-               double chi2) {
+               double chi2, double accel_residual = 0.001, double gyro_residual = 0.005) {
   auto triad = [](double scale) {
     return json{{"bias", {0.01, -0.02, 0.03}},
                 {"scale", {scale, scale, scale}},
@@ -214,7 +214,12 @@ json ImuResult(double accel_scale, double scale_std, double misalignment_std, do
                {"gyroscope", triad_std(1.0)}}}}}},
           {"diagnostics",
            {{"imus",
-             {{{"name", "0"}, {"chi2_per_dof", chi2}, {"coverage", {{"sufficient", true}}}}}}}}};
+             {{{"name", "0"},
+               {"chi2_per_dof", chi2},
+               {"residuals",
+                {{"accel_norm_rms_after", accel_residual},
+                 {"gyro_direction_rms_after", gyro_residual}}},
+               {"coverage", {{"sufficient", true}}}}}}}}};
 }
 
 json JudgeWith(const char* method, const json& result, const json& config) {
@@ -236,8 +241,22 @@ TEST(Gate, ImuLimitsHoldJustInsideAndFailJustOutside) {
                 config);  // gyro 0.006 > 0.005 rad/s
   EXPECT_TRUE(HasReason(v, "bias too uncertain")) << v.dump();
   EXPECT_EQ(v["reasons"].size(), 1u) << v.dump();  // the accelerometer's 0.006 m/s² is fine
-  v = JudgeWith("imu", ImuResult(1.0, 0.009, 0.009, 0.001, 4.1), config);
+  // chi2 against the noise has no default for imu (real statics' means are far more precise
+  // than their model: imu_tk's Xsens log has chi2/dof 30); the physical residuals judge the fit.
+  EXPECT_EQ(JudgeWith("imu", ImuResult(1.0, 0.009, 0.009, 0.001, 30.5), config)["status"],
+            "accepted");
+  v = JudgeWith("imu", ImuResult(1.0, 0.009, 0.009, 0.001, 4.1),
+                {{"method", "imu"}, {"acceptance", {{"max_chi2", 4}}}});
   EXPECT_TRUE(HasReason(v, "chi2/dof 4.1 above 4")) << v.dump();
+  EXPECT_EQ(
+      JudgeWith("imu", ImuResult(1.0, 0.009, 0.009, 0.001, 1, 0.019, 0.019), config)["status"],
+      "accepted");
+  v = JudgeWith("imu", ImuResult(1.0, 0.009, 0.009, 0.001, 1, 0.021, 0.019), config);
+  EXPECT_TRUE(HasReason(v, "|a| still differs from gravity by 0.021 m/s^2")) << v.dump();
+  EXPECT_EQ(v["reasons"].size(), 1u) << v.dump();
+  v = JudgeWith("imu", ImuResult(1.0, 0.009, 0.009, 0.001, 1, 0.019, 0.021), config);
+  EXPECT_TRUE(HasReason(v, "miss the measured gravity direction by 0.021 rad")) << v.dump();
+  EXPECT_EQ(v["reasons"].size(), 1u) << v.dump();
   v = JudgeWith("imu", ImuResult(1.09, 0.009, 0.009, 0.001, 1), config);
   EXPECT_EQ(v["status"], "accepted") << v.dump();
   v = JudgeWith("imu", ImuResult(1.11, 0.009, 0.009, 0.001, 1), config);
