@@ -289,6 +289,24 @@ Status ParseAccelerometerCalibration(const json& value, int triads,
   return Status::Ok();
 }
 
+namespace {
+
+// `gyro_unit` of an array config: "rad/s" (default) or "deg/s" (*gyro_in_degrees).
+Status ParseGyroUnit(const json& config, bool* gyro_in_degrees) {
+  auto u = config.find("gyro_unit");
+  if (u == config.end()) return Status::Ok();
+  std::string unit;
+  Status s = ReadString(*u, "gyro_unit", &unit);
+  if (!s.ok()) return s;
+  if (unit == "deg/s")
+    *gyro_in_degrees = true;
+  else if (unit != "rad/s")
+    return KeyError("gyro_unit", "must be \"rad/s\" or \"deg/s\", not \"" + unit + "\"");
+  return Status::Ok();
+}
+
+}  // namespace
+
 Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
                         core::ArrayOptions* options, bool* gyro_in_degrees,
                         ArrayAccelerometerCalibration* calibration) {
@@ -326,15 +344,7 @@ Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
                       "accelerometer_calibration, model, method, device)");
   }
   // Units first: they apply to gyro_noise and gyro_saturation.
-  if (auto u = config.find("gyro_unit"); u != config.end()) {
-    std::string unit;
-    Status s = ReadString(*u, "gyro_unit", &unit);
-    if (!s.ok()) return s;
-    if (unit == "deg/s")
-      *gyro_in_degrees = true;
-    else if (unit != "rad/s")
-      return KeyError("gyro_unit", "must be \"rad/s\" or \"deg/s\", not \"" + unit + "\"");
-  }
+  if (Status u = ParseGyroUnit(config, gyro_in_degrees); !u.ok()) return u;
   const double gyro_scale = *gyro_in_degrees ? core::kDegree : 1.0;
 
   auto g = config.find("geometry");
@@ -431,15 +441,7 @@ Status ParseArrayFullConfig(const json& config, core::ArrayFullProblem* geometry
                       "max_iterations, tolerance, static_window, min_static, robust_batch, "
                       "dynamic_weighting, model, method, device)");
   }
-  if (auto u = config.find("gyro_unit"); u != config.end()) {
-    std::string unit;
-    Status s = ReadString(*u, "gyro_unit", &unit);
-    if (!s.ok()) return s;
-    if (unit == "deg/s")
-      *gyro_in_degrees = true;
-    else if (unit != "rad/s")
-      return KeyError("gyro_unit", "must be \"rad/s\" or \"deg/s\", not \"" + unit + "\"");
-  }
+  if (Status u = ParseGyroUnit(config, gyro_in_degrees); !u.ok()) return u;
   const double gyro_scale = *gyro_in_degrees ? core::kDegree : 1.0;
   auto g = config.find("geometry");
   if (g == config.end())
