@@ -776,11 +776,15 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
     if (!(std::abs(ra_i - 1) <= o.max_scale_deviation)) {
       m << "accelerometer scale "
         << "xyz"[i] << " is " << ra_i
-        << " times the nominal accel_unit: wrong accel_unit or gravity?";
+        << " times the nominal accel_unit: wrong accel_unit or gravity? (a gain known only "
+           "roughly: raise max_scale_deviation, now "
+        << o.max_scale_deviation << ")";
     } else if (!(std::abs(rg_i - 1) <= o.max_scale_deviation)) {
       m << "gyroscope scale "
         << "xyz"[i] << " is " << rg_i
-        << " times the nominal gyro_unit: wrong gyro_unit (deg/s vs rad/s?)";
+        << " times the nominal gyro_unit: wrong gyro_unit (deg/s vs rad/s?) (a gain known "
+           "only roughly: raise max_scale_deviation, now "
+        << o.max_scale_deviation << ")";
     }
     if (!m.str().empty()) {
       return Fail(Status::NotDeterminable(m.str()), ImuTermination::kImplausible, res);

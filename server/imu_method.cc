@@ -39,18 +39,31 @@ Status ReadNumber(const json& config, const char* key, bool positive, std::optio
 
 Status ParseImuConfig(const json& config, core::ImuOptions* options) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
-  static const std::set<std::string>& kKnown = *new std::set<std::string>{
-      "method",           "device",         "accel_unit", "gyro_unit",          "gravity",
-      "latitude",         "height",         "gyro_bias",  "static_window",      "min_static",
-      "static_threshold", "accel_noise",    "gyro_noise", "nominal_accel_bias", "nominal_gyro_bias",
-      "accel_saturation", "gyro_saturation"};
+  static const std::set<std::string>& kKnown = *new std::set<std::string>{"method",
+                                                                          "device",
+                                                                          "accel_unit",
+                                                                          "gyro_unit",
+                                                                          "gravity",
+                                                                          "latitude",
+                                                                          "height",
+                                                                          "gyro_bias",
+                                                                          "static_window",
+                                                                          "min_static",
+                                                                          "static_threshold",
+                                                                          "accel_noise",
+                                                                          "gyro_noise",
+                                                                          "nominal_accel_bias",
+                                                                          "nominal_gyro_bias",
+                                                                          "accel_saturation",
+                                                                          "gyro_saturation",
+                                                                          "max_scale_deviation"};
   for (const auto& [key, value] : config.items()) {
     if (kKnown.count(key) == 0) {
       return KeyError(key,
                       "is not an imu config key (known: accel_unit, gyro_unit, gravity, latitude, "
                       "height, gyro_bias, static_window, min_static, static_threshold, "
                       "accel_noise, gyro_noise, nominal_accel_bias, nominal_gyro_bias, "
-                      "accel_saturation, gyro_saturation, method, device)");
+                      "accel_saturation, gyro_saturation, max_scale_deviation, method, device)");
     }
   }
   *options = core::ImuOptions();
@@ -59,7 +72,7 @@ Status ParseImuConfig(const json& config, core::ImuOptions* options) {
   if (!s.ok()) return s;
   options->accel_unit = units.accel;
   options->gyro_unit = units.gyro;
-  std::optional<double> gravity, latitude, height, window, min_static, an, gn, ab, gb;
+  std::optional<double> gravity, latitude, height, window, min_static, an, gn, ab, gb, deviation;
   for (auto [key, positive, out] :
        std::vector<std::tuple<const char*, bool, std::optional<double>*>>{
            {"gravity", true, &gravity},
@@ -68,7 +81,8 @@ Status ParseImuConfig(const json& config, core::ImuOptions* options) {
            {"static_window", true, &window},
            {"min_static", false, &min_static},
            {"nominal_accel_bias", false, &ab},
-           {"nominal_gyro_bias", false, &gb}}) {
+           {"nominal_gyro_bias", false, &gb},
+           {"max_scale_deviation", true, &deviation}}) {
     s = ReadNumber(config, key, positive, out);
     if (!s.ok()) return s;
   }
@@ -82,6 +96,9 @@ Status ParseImuConfig(const json& config, core::ImuOptions* options) {
   } else if (gravity) {
     options->gravity = *gravity;
   }
+  // How far a scale factor may be from the nominal unit before the fit refuses it as a unit
+  // mix-up (core default 0.25): widen it for a sensor whose gain is only roughly known.
+  if (deviation) options->max_scale_deviation = *deviation;
   if (window) options->detection.static_window = *window;
   if (min_static) {
     if (*min_static < 0) return KeyError("min_static", "must be >= 0 seconds");

@@ -126,6 +126,37 @@ TEST(ImuMethod, CountsAreConvertedWithTheConfiguredUnits) {
   EXPECT_EQ(s.code(), StatusCode::kNotDeterminable) << s.ToString();
 }
 
+TEST(ImuMethod, AGainKnownOnlyRoughlyNeedsAWiderScaleDeviationAndIsThenJudged) {
+  // A gyroscope whose real gain is 1.31 times the nominal gyro_unit (imu_tk's Xsens log against
+  // its starting guess 1/6258 rad/s per count).
+  core::ImuSimulationOptions sim;
+  sim.statics = 24;
+  sim.seed = 23;
+  sim.gyro_unit = 2.09e-4;
+  sim.gyro_offset = 32768;
+  std::string csv;
+  json config, truth, result;
+  ASSERT_TRUE(SimulateImuFiles(sim, &csv, &config, &truth).ok());
+  config["gyro_unit"] = 1.0 / 6258;
+  Status s = Calibrate(csv, "imu.csv", config, &result);
+  EXPECT_EQ(s.code(), StatusCode::kNotDeterminable) << s.ToString();
+  EXPECT_NE(s.message().find("raise max_scale_deviation, now 0.25"), std::string::npos)
+      << s.message();
+  config["max_scale_deviation"] = 0.5;
+  s = Calibrate(csv, "imu.csv", config, &result);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  const json& g = result["parameters"]["imus"][0]["gyroscope"];
+  const json& gs = result["uncertainty"]["imus"][0]["gyroscope"];
+  ExpectWithin(g["scale"], truth["gyroscope"]["scale"], gs["scale_std"], 5, "gyroscope.scale");
+  // Computed, but not served: the gate names the scale 31 % off the declared nominal.
+  EXPECT_EQ(result["verdict"]["status"], "rejected") << result["verdict"].dump();
+  EXPECT_NE(result["verdict"].dump().find("more than 10 % from the nominal unit conversion"),
+            std::string::npos)
+      << result["verdict"].dump();
+  config["max_scale_deviation"] = 0;
+  EXPECT_EQ(Calibrate(csv, "imu.csv", config, &result).field(), "max_scale_deviation");
+}
+
 TEST(ImuMethod, TooFewStaticsIsNotDeterminableSayingWhatToRecord) {
   core::ImuSimulationOptions sim;
   sim.statics = 5;
