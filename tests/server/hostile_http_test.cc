@@ -254,7 +254,10 @@ TEST_F(HostileHttp, EveryCaseIsRefusedAndMemoryStaysBounded) {
 // of 5; beyond it the kernel dropped handshakes and those requests waited a 1 s retransmission
 // (Service::Bind raises the backlog).
 TEST_F(HostileHttp, ABurstOfConnectionsIsAnsweredWithoutHandshakeRetransmissions) {
-  constexpr int kConnections = 256;
+  // Below the per-client limit of 256 open connections (--max-connections-per-client) with room
+  // for the fixture's own: at 256 the burst plus a still-open readiness connection made one
+  // answer a 503 now and then. Still far above cpp-httplib's backlog of 5.
+  constexpr int kConnections = 200;
   const auto start = std::chrono::steady_clock::now();
   std::vector<int> fds;
   sockaddr_in addr{};
@@ -271,6 +274,7 @@ TEST_F(HostileHttp, ABurstOfConnectionsIsAnsweredWithoutHandshakeRetransmissions
   const std::string request = "GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n";
   double slowest = 0;
   int answered = 0;
+  std::string unexpected;  // the first answer that was not a 200, for the failure message
   for (int fd : fds) {
     pollfd pfd{fd, POLLOUT, 0};
     ASSERT_EQ(poll(&pfd, 1, 10000), 1) << "connect did not complete";
@@ -286,11 +290,15 @@ TEST_F(HostileHttp, ABurstOfConnectionsIsAnsweredWithoutHandshakeRetransmissions
     char buf[4096];
     for (ssize_t n; (n = recv(fd, buf, sizeof buf, 0)) > 0;) response.append(buf, n);
     close(fd);
-    if (response.rfind("HTTP/1.1 200", 0) == 0) ++answered;
+    if (response.rfind("HTTP/1.1 200", 0) == 0) {
+      ++answered;
+    } else if (unexpected.empty()) {
+      unexpected = response.empty() ? "(no answer)" : response.substr(0, 300);
+    }
     slowest = std::max(
         slowest, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   }
-  EXPECT_EQ(answered, kConnections);
+  EXPECT_EQ(answered, kConnections) << unexpected;
   // A dropped handshake costs >= 1 s (the kernel's initial retransmission timeout).
   EXPECT_LT(slowest, 0.9 * sanitizer::kTimeBoundScale)
       << "the last answer came after " << slowest << " s";
