@@ -240,7 +240,7 @@ TEST(ServeProcess, KillNineNeverLosesAnAcknowledgedUploadOrJob) {
   std::set<int64_t> jobs;
   std::mt19937_64 rng(20261122);
   uint64_t seed = 100;
-  const int kKills = sanitizer::kAddressSanitizer ? 10 : 20;  // bench/crash_soak.sh does 200
+  const int kKills = sanitizer::kSanitizer ? 10 : 20;  // bench/crash_soak.sh does 200
   for (int round = 0; round < kKills; ++round) {
     ServerProcess server(db, {"--workers", "2"});
     ASSERT_GT(server.port(), 0) << server.log();
