@@ -7,7 +7,8 @@
 //                    the residual-aware σ; wall time with 2 threads, CPU of all threads,
 //                    iterations, extra peak RSS of the process
 // Run each N in its own process so the peak RSS is its own:
-//   build/bench/array_full_bench --benchmark_filter=BM_ArrayFull/4000 --benchmark_counters_tabular=true
+//   build/bench/array_full_bench --benchmark_filter=BM_ArrayFull/4000
+//   --benchmark_counters_tabular=true
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
