@@ -236,8 +236,9 @@ TEST(ArrayFullMimu4444, RepeatsAcrossExperimentsWithinTheResidualAwareSigma) {
   const double pr = rms(pos_scatter) / rms(pos_robust);
   EXPECT_GT(pr, 0.5);
   EXPECT_LT(pr, 2.0);
-  if (o.dynamic_weighting == ArrayFullDynamicWeighting::kNoise)
+  if (o.dynamic_weighting == ArrayFullDynamicWeighting::kNoise) {
     EXPECT_GT(rms(pos_scatter) / rms(pos_crb), 5);
+  }
 }
 
 }  // namespace
