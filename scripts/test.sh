@@ -5,7 +5,7 @@
 #      (scripts/sanitize.sh), including a replay of the committed fuzz corpora;
 #   3. fuzzes each libFuzzer target with a fixed budget of inputs from a fixed seed (about a minute
 #      each), or for $CALIBD_FUZZ_SECONDS s each when that is set (tests/fuzz/run.sh).
-# About 20-25 minutes on 2 cores from a clean checkout (bench/README.md, "Sanitizers and fuzzing").
+# About 25 minutes on 2 cores from a clean checkout (bench/README.md, "Sanitizers and fuzzing").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 start=$(date +%s)
