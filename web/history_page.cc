@@ -1,0 +1,112 @@
+// `/`: the calibration history (web/pages.h).
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <exception>
+#include <functional>
+#include <limits>
+#include <map>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "web/html.h"
+#include "web/pages.h"
+#include "web/report_common.h"
+#include "web/reports.h"
+#include "web/svg_plot.h"
+
+namespace calibd::web::internal {
+
+std::string Option(const std::string& value, const std::string& label, const std::string& current) {
+  return "<option value=\"" + A(value) + "\"" + (value == current ? " selected" : "") + ">" +
+         E(label) + "</option>";
+}
+
+std::string FilterQuery(const HistoryFilter& f) {
+  std::string q;
+  if (!f.device.empty()) q += "&device=" + UrlEncode(f.device);
+  if (!f.method.empty()) q += "&method=" + UrlEncode(f.method);
+  if (!f.status.empty()) q += "&status=" + UrlEncode(f.status);
+  if (!f.verdict.empty()) q += "&verdict=" + UrlEncode(f.verdict);
+  return q;
+}
+
+std::string HistoryBody(const HistoryView& v) {
+  std::string out = "<h1>Calibration history</h1>";
+  out += "<form class=\"filters\" method=\"get\" action=\"/\">";
+  out += "<label>device<input type=\"text\" name=\"device\" value=\"" + A(v.filter.device) +
+         "\" list=\"devices\" size=\"18\"></label>";
+  if (!v.devices.empty()) {
+    out += "<datalist id=\"devices\">";
+    for (const auto& d : v.devices) out += "<option value=\"" + A(d) + "\">";
+    out += "</datalist>";
+  }
+  out += "<label>method<select name=\"method\">" + Option("", "any", v.filter.method);
+  for (const std::string& m : v.methods) out += Option(m, m, v.filter.method);
+  if (!v.filter.method.empty() &&
+      std::find(v.methods.begin(), v.methods.end(), v.filter.method) == v.methods.end()) {
+    out += Option(v.filter.method, v.filter.method, v.filter.method);
+  }
+  out +=
+      "</select></label><label>status<select name=\"status\">" + Option("", "any", v.filter.status);
+  for (const char* s : {"succeeded", "failed", "running", "queued"}) {
+    out += Option(s, s, v.filter.status);
+  }
+  if (!v.filter.status.empty() && v.filter.status != "succeeded" && v.filter.status != "failed" &&
+      v.filter.status != "running" && v.filter.status != "queued") {
+    out += Option(v.filter.status, v.filter.status, v.filter.status);
+  }
+  out += "</select></label><label>verdict<select name=\"verdict\">" +
+         Option("", "any", v.filter.verdict);
+  for (const char* s : {"accepted", "rejected", "revoked"}) out += Option(s, s, v.filter.verdict);
+  out += "</select></label><button type=\"submit\">Filter</button>";
+  out += "<a href=\"/\">clear</a></form>";
+  if (v.total >= 0) {
+    out += "<p class=\"muted small\">" + std::to_string(v.total) + " matching calibrations.</p>";
+  }
+  if (v.jobs.empty()) {
+    out += "<p class=\"empty\">No calibrations match.</p>";
+  } else {
+    out +=
+        "<div class=\"table-wrap\"><table class=\"table-history\"><thead><tr><th>job</th>"
+        "<th>device</th><th>method</th><th>status</th><th>created</th><th>key figures</th>"
+        "<th class=\"num\">warnings</th></tr></thead><tbody>";
+    for (const auto& j : v.jobs) {
+      std::string figures;
+      if (j.status == "failed") {
+        std::string e = j.error;
+        if (e.size() > 90) e = e.substr(0, 90) + "\xE2\x80\xA6";
+        figures = "<span class=\"muted\">" + E(e.empty() ? std::string("failed") : e) + "</span>";
+      } else {
+        figures = E(Guard("figures", [&] { return KeyFigures(j.method, j.result); }));
+      }
+      out += "<tr><td>" + JobLink(j.id) + "</td><td class=\"name\">" + DeviceLink(j.device) +
+             "</td><td>" + E(j.method) + "</td><td>" + StatusBadge(j.status) + VerdictBadge(j) +
+             "</td><td class=\"time\">" + TimeHtml(j.created_at) + "</td><td>" + figures + "</td>" +
+             WarningsCell(j) + "</tr>";
+    }
+    out += "</tbody></table></div>";
+  }
+  out += "<nav class=\"pager\">";
+  if (!v.next_before.empty()) {
+    out += "<a class=\"older\" rel=\"next\" href=\"" +
+           A("/?before=" + UrlEncode(v.next_before) + FilterQuery(v.filter)) +
+           "\">Older calibrations \xE2\x86\x92</a>";
+  }
+  out += "</nav>";
+  return out;
+}
+
+}  // namespace calibd::web::internal
+
+namespace calibd::web {
+
+using namespace internal;  // NOLINT: this file is part of internal's pages
+
+std::string RenderHistoryPage(const HistoryView& view) {
+  return SafePage("Calibration history", "page-history", [&] { return HistoryBody(view); });
+}
+
+}  // namespace calibd::web
