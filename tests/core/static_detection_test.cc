@@ -326,6 +326,10 @@ TEST(StaticDetection, RejectsBadInputNamingIt) {
   o.static_window = -1;
   s = DetectStatics(sim.t, Triads(sim), o, &d);
   EXPECT_NE(s.message().find("static_window"), std::string::npos) << s.message();
+  o.static_window = 1;
+  o.noise_floor_cluster_width = 1;
+  s = DetectStatics(sim.t, Triads(sim), o, &d);
+  EXPECT_NE(s.message().find("noise_floor_cluster_width"), std::string::npos) << s.message();
 }
 
 }  // namespace
