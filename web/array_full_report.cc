@@ -62,6 +62,20 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
+// The σ the tables show of one entry of uncertainty.imus: the residual-aware one (`robust`) when
+// the result has it (the residuals exceed the noise: the Cramér–Rao bound is then too small),
+// else the Cramér–Rao bound.
+const json* ShownSigma(const json* uimu) {
+  const json* robust = Get(uimu, "robust");
+  return robust != nullptr && robust->is_object() ? robust : uimu;
+}
+bool HasRobustSigma(const json& result) {
+  const json* stds = Get(Get(&result, "uncertainty"), "imus");
+  for (size_t k = 0; k < Size(stds); ++k)
+    if (ShownSigma(At(stds, k)) != At(stds, k)) return true;
+  return false;
+}
+
 // A value cell with its σ in small print beside it; `beyond` (non-empty: why) marks it.
 std::string ValueCell(double v, int decimals, double sd, const std::string& beyond,
                       bool group_start = false, bool sign = true) {
@@ -134,7 +148,7 @@ std::string SensorTable(const json& result, const Kind& kind, const Limits& lim)
   std::vector<double> g_sd, a_sd, b_sd;
   for (size_t k = 0; k < K; ++k) {
     const json* p = Get(At(imus, k), kind.key);
-    const json* s = Get(At(stds, k), kind.key);
+    const json* s = Get(ShownSigma(At(stds, k)), kind.key);
     for (size_t c = 0; c < 3; ++c) {
       g_sd.push_back(100 * V(Get(s, "scale_std"), c) / std::abs(V(Get(p, "scale"), c)));
       double ang, sd;
@@ -156,7 +170,7 @@ std::string SensorTable(const json& result, const Kind& kind, const Limits& lim)
   for (size_t k = 0; k < K; ++k) {
     const json* imu = At(imus, k);
     const json* p = Get(imu, kind.key);
-    const json* s = Get(At(stds, k), kind.key);
+    const json* s = Get(ShownSigma(At(stds, k)), kind.key);
     std::string name = Str(Get(imu, "name"));
     if (name.empty()) name = std::to_string(k);
     const bool is_ref = std::isfinite(ref) && static_cast<double>(k) == ref;
@@ -235,7 +249,7 @@ std::string MisalignmentTable(const json& result, double axis_std_limit) {
     if (name.empty()) name = std::to_string(k);
     for (const char* sensor : {"accelerometer", "gyroscope"}) {
       const json* m = Get(Get(At(imus, k), sensor), "misalignment");
-      const json* ms = Get(Get(At(stds, k), sensor), "misalignment_std");
+      const json* ms = Get(Get(ShownSigma(At(stds, k)), sensor), "misalignment_std");
       rows += "<tr><td class=\"name\">" + E(name) + "</td><td>" + sensor + "</td>";
       for (const auto& e : kEntries) {
         const double sd = M(ms, e[0], e[1]);
@@ -274,13 +288,11 @@ std::string TriadsSection(const json& result) {
        " (" + E(Str(Get(noise, "source"))) + ")</dd>";
   s += "<dt>\xCF\x87\xC2\xB2 / degrees of freedom</dt><dd>" +
        FormatSig(Num(Get(diag, "chi2_per_dof")), 3) + "</dd>";
-  const json* robust = Get(Get(diag, "robust"), "used");
-  const bool robust_used = robust != nullptr && robust->is_boolean() && robust->get<bool>();
-  s += "<dt>\xCF\x83 shown</dt><dd>" +
-       std::string(robust_used
-                       ? "Cram\xC3\xA9r\xE2\x80\x93Rao bound; the residuals exceed the noise, so "
-                         "the residual-aware \xCF\x83 (uncertainty.imus[].robust in the JSON) is "
-                         "the honest one"
+  s += "<dt>\xCF\x83 shown</dt><dd class=\"sigma-shown\">" +
+       std::string(HasRobustSigma(result)
+                       ? "residual-aware (the residuals exceed the noise, so the "
+                         "Cram\xC3\xA9r\xE2\x80\x93Rao bound, in uncertainty.imus[] of the JSON, "
+                         "is too small); the limits are marked against it"
                        : "Cram\xC3\xA9r\xE2\x80\x93Rao bound at the estimate") +
        "</dd></dl>";
   if (Size(Get(Get(&result, "parameters"), "imus")) == 0)
@@ -361,6 +373,7 @@ std::string ChangeSection(const json& result) {
   const json* ch = Get(diag, "changed_from_positions_only");
   if (Size(ch) == 0) return "";
   const json* pstd = Get(Get(&result, "uncertainty"), "positions");
+  const bool robust = HasRobustSigma(result);
   std::vector<std::string> names;
   BarSeries sx{"\xCE\x94x / \xCF\x83x", {}, {}, 0}, sy{"\xCE\x94y / \xCF\x83y", {}, {}, 1},
       sz{"\xCE\x94z / \xCF\x83z", {}, {}, 2};
@@ -375,10 +388,16 @@ std::string ChangeSection(const json& result) {
     const json* d = Get(c, "position_change");
     const json* po = Get(c, "positions_only");
     const json* in_sigma = Get(c, "position_change_sigma");
-    // Older results carry only the change: σ from uncertainty.positions.
+    // Older results carry only the change: σ from uncertainty.positions. With a residual-aware
+    // σ, the shift is measured against it (as the tables above).
     const json* sd = nullptr;
     for (size_t i = 0; i < Size(pstd); ++i)
       if (Str(Get(At(pstd, i), "name")) == Str(Get(c, "name"))) sd = Get(At(pstd, i), "std");
+    const json* uimu = At(Get(Get(&result, "uncertainty"), "imus"), k);
+    if (robust && ShownSigma(uimu) != uimu) {
+      sd = Get(ShownSigma(uimu), "position_std");
+      in_sigma = nullptr;
+    }
     double ratio[3];
     std::string row = "<tr><td class=\"name\">" + E(name) + "</td>";
     for (size_t a = 0; a < 3; ++a)
@@ -425,8 +444,8 @@ std::string ChangeSection(const json& result) {
                            "closed form, the gyroscope biases removed, ideal gyroscopes). "
                          : "The positions-only fit for the start failed: the full model started "
                            "from the nominal geometry, so the shift below is from it. ") +
-      "\xCF\x83 is the full model's 1\xCF\x83 of the position; shifts beyond 3\xCF\x83 are "
-      "marked." +
+      "\xCF\x83 is the full model's 1\xCF\x83 of the position" +
+      std::string(robust ? " (residual-aware)" : "") + "; shifts beyond 3\xCF\x83 are marked." +
       (worst > 0 ? " Largest: triad " + E(worst_name) + ", " + FormatSig(worst, 2) + "\xCF\x83."
                  : "") +
       "</p>";

@@ -11,6 +11,10 @@
 // results of any shape render: missing numbers show as "–", a section that cannot be built says
 // so. Every name from the result is escaped.
 //
+// σ shown: the residual-aware one (uncertainty.imus[].robust) when the result has it (real
+// hardware, residuals above the noise), else the Cramér–Rao bound; limits and the shift in σ are
+// judged against the σ shown.
+//
 // Layout (32 triads stay readable): one table per sensor kind, one row per triad, column groups
 // gain − 1 (%), axis misalignment (mrad), bias (reading units), each value with its σ in small
 // print beside it; the full misalignment entries in a collapsed <details> table; a bar chart per

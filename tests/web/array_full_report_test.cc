@@ -242,6 +242,33 @@ TEST(ArrayFullReport, ChangeFromThePositionsOnlyFitInMicrometresAndSigma) {
   EXPECT_TRUE(Has(Table(ArrayFullSections(old), "array-full-change"), ">5.00<"));
 }
 
+// Real hardware: the residuals exceed the noise and the result carries the residual-aware σ
+// (uncertainty.imus[].robust); the tables show it, the limits and the shift are judged by it.
+TEST(ArrayFullReport, ShowsTheResidualAwareSigmaWhenTheResultHasIt) {
+  json r = FullResult(8);
+  for (auto& u : r["uncertainty"]["imus"]) {
+    json robust = {{"accelerometer", u["accelerometer"]},
+                   {"gyroscope", u["gyroscope"]},
+                   {"position_std", Vec(5e-5, 5e-5, 5e-5)}};
+    robust["accelerometer"]["bias_std"] = Vec(0.07, 0.07, 0.07);  // beyond 0.05 m/s^2
+    u["robust"] = robust;
+  }
+  const std::string html = ArrayFullSections(r);
+  const std::string accel = Table(html, "array-full-accelerometer");
+  EXPECT_TRUE(Has(accel,
+                  ">+0.022<span class=\"sd\">\xC2\xB1"
+                  "0.070</span>"))
+      << accel;                                   // σ 0.07: 3 decimals
+  EXPECT_EQ(Count(accel, " beyond\""), 8u * 3u);  // every bias σ beyond the limit
+  EXPECT_TRUE(Has(html, "class=\"sigma-shown\">residual-aware"));
+  // The 10 µm shift is 0.2 residual-aware σ, no longer 5 σ: nothing marked.
+  const std::string change = Table(html, "array-full-change");
+  EXPECT_TRUE(Has(change, ">0.20<")) << change;
+  EXPECT_FALSE(Has(change, "beyond"));
+  // Without it: the Cramér–Rao bound.
+  EXPECT_TRUE(Has(ArrayFullSections(FullResult(8)), "class=\"sigma-shown\">Cram"));
+}
+
 TEST(ArrayFullReport, ResultsOfAnyShapeRenderAndOnlyFullResultsGetTheSections) {
   EXPECT_TRUE(IsArrayFullResult(FullResult(3)));
   EXPECT_FALSE(IsArrayFullResult(json{{"method", "array"}, {"parameters", {{"positions", {}}}}}));
