@@ -685,6 +685,7 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
     if (s.ok() && ar.usable) {
       for (int k = 0; k < K; ++k) start[k].position = ar.positions.col(k);
       res.initial_positions_from_array = true;
+      res.initial_position_std = ar.position_std;
     } else {
       res.warnings.push_back("the positions-only fit for the start failed (" + s.message() +
                              "); the full model starts from the nominal positions");

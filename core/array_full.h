@@ -198,6 +198,9 @@ struct ArrayFullResult {
   // The start (closed forms + positions-only fit), for "what the full model changed".
   std::vector<ArrayFullTriad> initial;
   bool initial_positions_from_array = false;  // positions-only fit succeeded
+  // 1 sigma (CRB) of initial[k].position from that fit, 3 x K (0 for the reference); empty when
+  // the fit failed (the start is then the nominal geometry).
+  Eigen::Matrix3Xd initial_position_std;
 
   BlockLmTermination termination = BlockLmTermination::kNotRun;
   int iterations = 0;

@@ -13,6 +13,24 @@ double Quantile(std::vector<double> x, double q) {
   return x[k];
 }
 
+// The noise floor of one triad from its window spreads (header: the smaller of the quantile and
+// the median of the quietest cluster).
+double NoiseFloor(std::vector<double> spreads, const StaticDetectionOptions& o) {
+  if (spreads.empty()) return 0;
+  const double by_quantile = Quantile(spreads, o.noise_floor_quantile);
+  std::sort(spreads.begin(), spreads.end());
+  const size_t n = spreads.size();
+  const size_t m = std::min(n, std::max(static_cast<size_t>(o.noise_floor_min_windows),
+                                        static_cast<size_t>(std::ceil(o.noise_floor_quiet_fraction *
+                                                                      static_cast<double>(n)))));
+  const double seed = spreads[m - 1];
+  const size_t in_cluster = static_cast<size_t>(
+      std::upper_bound(spreads.begin(), spreads.end(), o.noise_floor_cluster_width * seed) -
+      spreads.begin());
+  const double by_cluster = spreads[(in_cluster - 1) / 2];  // its median (lower for even counts)
+  return std::min(by_quantile, by_cluster);
+}
+
 // Spread of every centred window of w = 2h+1 samples, for centres h .. N-h-1 (others: +inf).
 // Running sums relative to an anchor re-taken (and the sums recomputed) every w centres, so the
 // rounding error of the sums stays at the level of the window's own deviation from the anchor:
@@ -72,6 +90,13 @@ bool StaticDetectionOptions::IsValid(std::string* error) const {
   if (!positive(threshold_multiplier)) return fail("threshold multiplier must be > 0");
   if (!(noise_floor_quantile > 0 && noise_floor_quantile < 1)) {
     return fail("noise_floor_quantile must be in (0, 1)");
+  }
+  if (noise_floor_min_windows < 1) return fail("noise_floor_min_windows must be >= 1");
+  if (!(noise_floor_quiet_fraction >= 0 && noise_floor_quiet_fraction < 1)) {
+    return fail("noise_floor_quiet_fraction must be in [0, 1)");
+  }
+  if (!(std::isfinite(noise_floor_cluster_width) && noise_floor_cluster_width > 1)) {
+    return fail("noise_floor_cluster_width must be a finite number > 1");
   }
   if (!(std::isfinite(gap_factor) && gap_factor > 1)) return fail("gap_factor must be > 1");
   if (accel_threshold && !positive(*accel_threshold)) {
@@ -183,7 +208,7 @@ Status StaticDetector::Init(const Eigen::VectorXd& t, const std::vector<TriadSer
     }
     const double scale = s.readings->cwiseAbs().maxCoeff();
     const double eps = 1e-12 * std::max(scale, 1e-300);
-    const double floor = std::max(Quantile(samples, options.noise_floor_quantile), eps);
+    const double floor = std::max(NoiseFloor(std::move(samples), options), eps);
     const std::optional<double>& override_thr =
         s.kind == TriadKind::kAccelerometer ? options.accel_threshold : options.gyro_threshold;
     b.triad_names.push_back(s.name);

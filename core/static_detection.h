@@ -4,15 +4,23 @@
 // Spread of triad k at sample i: the RMS deviation from the mean vector over the centred window
 // of w samples (w = static_window / median sample period, odd, >= 3):
 //   s_k(i) = sqrt(Σ_axes var(y_axis over window i)),   in the triad's reading units.
-// Noise floor of triad k: the `noise_floor_quantile` quantile of s_k over non-overlapping windows
-// (windows touching a gap or a saturated sample excluded), at least a tiny absolute floor (so a
-// noise-free log still works). Threshold of triad k: `threshold_multiplier` × floor, or the
-// absolute override for its kind. Sample i is static when the window centred on it contains no
-// gap and no saturated sample and every triad's spread is <= its threshold. A static interval is
-// a maximal run of static samples [first, last] spanning t[last] - t[first] >= min_static; so the
-// samples of an interval lie at least w/2 samples away from any motion the windows saw, and
-// motion never merges into a static (a bump splits it or trims it). Slow bias drift does not
-// change a 1 s window's spread, so drift does not hide statics.
+// Noise floor of triad k, from s_k over non-overlapping windows (windows touching a gap or a
+// saturated sample excluded): the smaller of
+//  (a) their `noise_floor_quantile` quantile (the floor when at least that fraction of the log is
+//      static), and
+//  (b) the median of the quietest cluster: the windows with s_k <= `noise_floor_cluster_width` ×
+//      s_quiet, where s_quiet is the m-th smallest spread, m = max(`noise_floor_min_windows`,
+//      ceil(`noise_floor_quiet_fraction` × windows)) (so a few stuck or lucky windows below the
+//      statics do not set it);
+// at least a tiny absolute floor (so a noise-free log still works). (b) finds the statics' noise
+// when they are only a few per cent of a log with a long dynamic phase, where (a) lies in the
+// motion; when statics are plentiful (a) is the smaller and the floor is as before. Threshold of
+// triad k: `threshold_multiplier` × floor, or the absolute override for its kind. Sample i is
+// static when the window centred on it contains no gap and no saturated sample and every triad's
+// spread is <= its threshold. A static interval is a maximal run of static samples [first, last]
+// spanning t[last] - t[first] >= min_static; so the samples of an interval lie at least w/2 samples
+// away from any motion the windows saw, and motion never merges into a static (a bump splits it or
+// trims it). Slow bias drift does not change a 1 s window's spread, so drift does not hide statics.
 //
 // Works in reading units: thresholds and statistics are reported in the triads' own units (the
 // criterion is relative to the noise floor, so units do not matter); `unit` converts them to SI
@@ -50,10 +58,15 @@ struct StaticDetectionOptions {
   double static_window = 1.0;         // s, > 0: window over which the spread is measured
   double min_static = 1.0;            // s, >= 0: shortest static interval kept (first..last)
   double threshold_multiplier = 3.0;  // > 0: threshold = multiplier × noise floor
-  double noise_floor_quantile = 0.1;  // in (0, 1): at least this fraction of the log's windows
-                                      // must be static for the floor to be the noise floor
-  double gap_factor = 1.5;            // > 1: a step t[i] - t[i-1] > gap_factor × median period is
-                                      // a gap (reported; windows across it are never static)
+  double noise_floor_quantile = 0.1;  // in (0, 1): the floor's quantile when at least this
+                                      // fraction of the log's windows is static
+  // The quietest cluster (see above), for logs with fewer statics: its seed is the m-th quietest
+  // window, m = max(min_windows, ceil(quiet_fraction × windows)); it spans width × the seed.
+  int noise_floor_min_windows = 3;            // >= 1
+  double noise_floor_quiet_fraction = 0.005;  // in [0, 1)
+  double noise_floor_cluster_width = 2.0;     // > 1
+  double gap_factor = 1.5;  // > 1: a step t[i] - t[i-1] > gap_factor × median period is
+                            // a gap (reported; windows across it are never static)
   // Absolute thresholds on the spread (reading units of the triads of that kind), overriding
   // multiplier × floor for every triad of that kind (SPEC `static_threshold`). nullopt: from the
   // noise floor.

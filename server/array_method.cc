@@ -584,8 +584,24 @@ Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
                          {"dynamic",
                           {{"accelerometer", Num(rs.dynamic_accel)},
                            {"gyroscope", Num(rs.dynamic_gyro / gyro_unit)}}}});
-    changed.push_back(
-        {{"name", p.name}, {"position_change", Vec(p.position - r.initial[k].position)}});
+    // What the full model changed against the positions-only fit it starts from (the same
+    // log's dynamic samples, accelerometers corrected by the statics' closed form, gyroscope
+    // biases removed): the shift, and the shift in units of the full model's 1 sigma per axis
+    // (null where sigma is 0: the reference, held by the gauge).
+    const Eigen::Vector3d shift = p.position - r.initial[k].position;
+    json in_sigma = json::array();
+    for (int c = 0; c < 3; ++c) {
+      const double sd = r.report_std[k].position_std(c);
+      in_sigma.push_back(sd > 0 ? Num(shift(c) / sd) : json(nullptr));
+    }
+    json entry = {{"name", p.name},
+                  {"positions_only", Vec(r.initial[k].position)},
+                  {"position_change", Vec(shift)},
+                  {"position_change_norm", Num(shift.norm())},
+                  {"position_change_sigma", std::move(in_sigma)}};
+    if (r.initial_position_std.cols() == K)
+      entry["positions_only_std"] = Vec(r.initial_position_std.col(k));
+    changed.push_back(std::move(entry));
   }
   json cost = json::array();
   for (double c : r.cost) cost.push_back(Num(c));
@@ -598,6 +614,13 @@ Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
   for (const auto& n : r.null_directions) nulls.push_back(n);
   *result = {
       {"method", "array"},
+      {"model",
+       "a_k = M_a,k (y_a,k - b_a,k), omega = M_g,k (y_g,k - b_g,k) for IMU k: y raw readings, b "
+       "biases (reading units), M = matrix (SI per reading unit; scale = its diagonal, "
+       "misalignment = M diag(scale)^-1), in the body frame of the reference accelerometer; a_k "
+       "= s + (Omega(omega)^2 + Omega(omega_dot)) r_k with r_k the accelerometer's position "
+       "(metres, nominal geometry frame, the reference held at its nominal position), s the "
+       "specific force at the origin, Omega(x) the cross-product matrix"},
       {"parameters",
        {{"model", "full"},
         {"reference", r.reference},

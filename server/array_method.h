@@ -135,7 +135,11 @@ void JudgeArray(const nlohmann::json& result, const nlohmann::json& config,
 //                 "dynamic_samples","samples_dropped","dof","chi2_per_dof","noise",
 //                 "static_noise","residual_rms":{"dynamic","imus":[{"name","static",
 //                 "dynamic"}]},"rotation_excitation","null_directions","robust",
-//                 "positions_only_start","changed_from_positions_only"}.
+//                 "positions_only_start","changed_from_positions_only":[{"name",
+//                 "positions_only" (the fit the full model starts from), "positions_only_std"
+//                 (its CRB; absent when that fit failed), "position_change",
+//                 "position_change_norm", "position_change_sigma" (change / the full model's
+//                 position_std per axis; null for the reference)}]}; "model": the equation.
 // Gyroscope figures in the configured gyro_unit (bias in it, scale in rad/s per unit).
 Status ParseArrayFullConfig(const nlohmann::json& config, core::ArrayFullProblem* geometry_part,
                             core::ArrayFullOptions* options, bool* gyro_in_degrees);

@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "web/array_full_report.h"
 #include "web/html.h"
 #include "web/report_common.h"
 #include "web/reports.h"
@@ -373,6 +374,7 @@ std::string ArrayReport(const JobView& view) {
     }
     return Section("parameters", "Parameters", s);
   });
+  if (IsArrayFullResult(result)) out += ArrayFullSections(result);  // web/array_full_report.h
   out += Guard("Plots", [&] {
     const json dj = diag ? *diag : json();
     std::string figs;
@@ -384,8 +386,9 @@ std::string ArrayReport(const JobView& view) {
       figs += Figure(PositionsPlot(triads, 0, 2), "");
       figs += Figure(PositionSigmaPlot(triads), "");
     }
-    figs += Figure(ArrayResidualPlot(dj, view.config),
-                   "Residual RMS close to the noise level means the model fits.");
+    if (!IsArrayFullResult(result))  // model full: per triad in ArrayFullSections
+      figs += Figure(ArrayResidualPlot(dj, view.config),
+                     "Residual RMS close to the noise level means the model fits.");
     figs += ResidualHistograms(dj);
     figs += ExcitationPlots(dj);
     return Section("plots", "Plots", "<div class=\"plots\">" + figs + "</div>");

@@ -361,6 +361,11 @@ font-weight:600;border:1px solid;line-height:1.5;white-space:nowrap}
 .badge-accepted{color:var(--ok);background:#fff;border-color:#9fd0b3}
 .verdict-reason{font-size:.8rem;color:var(--bad);display:block;max-width:28rem}
 .flag-warn{color:var(--warn);font-weight:600;white-space:nowrap}
+.sd{font-size:.7rem;color:var(--muted);margin-left:.2rem}
+table.table-array-full td,table.table-array-full th{padding:.28rem .3rem}
+th.group{text-align:center}
+.gs{border-left:2px solid var(--line)}
+td.beyond{background:#fcf0ed;color:var(--bad);font-weight:600}
 .callout{border-left:4px solid var(--line);background:var(--panel);padding:.6rem .9rem;margin:.8rem 0}
 .callout p{margin:.2rem 0}
 .callout-error{border-color:var(--bad);background:#fcf0ed}

@@ -93,10 +93,40 @@ TEST(ArrayFullMethod, CalibratesASimulatedBoardThroughTheServerWithinItsUncertai
     ExpectWithin(p["position"], t["position"], u["position_std"], 5,
                  std::to_string(k) + ".position");
   }
-  // The job's HTML report renders a full-model result.
+  // What the full model changed against the positions-only fit it starts from: that fit's
+  // positions plus the change are the full model's, the change in σ is change / position_std
+  // (null for the reference, held by the gauge).
+  const json& changed = d["changed_from_positions_only"];
+  ASSERT_EQ(changed.size(), 8u);
+  EXPECT_TRUE(d["positions_only_start"].get<bool>());
+  for (int k = 0; k < 8; ++k) {
+    const json& c = changed[k];
+    ASSERT_TRUE(c.contains("positions_only_std")) << c;
+    double norm2 = 0;
+    for (int a = 0; a < 3; ++a) {
+      const double change = c["position_change"][a].get<double>();
+      norm2 += change * change;
+      EXPECT_NEAR(c["positions_only"][a].get<double>() + change,
+                  imus[k]["position"][a].get<double>(), 1e-12);
+      if (k == 0) {
+        EXPECT_TRUE(c["position_change_sigma"][a].is_null());
+        EXPECT_EQ(change, 0);
+      } else {
+        EXPECT_NEAR(c["position_change_sigma"][a].get<double>(),
+                    change / stds[k]["position_std"][a].get<double>(), 1e-9);
+        EXPECT_GT(c["positions_only_std"][a].get<double>(), 0);
+      }
+    }
+    EXPECT_NEAR(c["position_change_norm"].get<double>(), std::sqrt(norm2), 1e-15);
+  }
+  // The job's HTML report renders a full-model result, with its own sections.
   auto page = server.Client().Get(("/jobs/" + std::to_string(job["id"].get<int64_t>())).c_str());
   ASSERT_TRUE(page);
   EXPECT_EQ(page->status, 200);
+  for (const char* part : {"table-array-full-accelerometer", "table-array-full-gyroscope",
+                           "plot-array-full-residuals-gyroscope", "table-array-full-change"})
+    EXPECT_NE(page->body.find(part), std::string::npos) << part;
+  EXPECT_FALSE(r["model"].get<std::string>().empty());
   for (const char* format : {"json", "csv", "h"}) {
     auto exported = server.Client().Get(
         (std::string("/api/v1/devices/ARRAY-1/calibration?method=array&format=") + format).c_str());

@@ -57,6 +57,11 @@ curl -sf -H 'Content-Type: application/json' -d '{"reason": "board <b>dropped</b
   "$base/api/v1/jobs/$j2/revoke" >/dev/null
 j3=$(upload "$tmp/array" 'ARRAY-1')
 wait_job "$j3"
+# An array job with model full (issue #18): the triad tables, residuals per triad, the change from
+# the positions-only fit.
+"$bin" simulate array --model full --out "$tmp/full" --seed 3 --samples 400 2>/dev/null
+j8=$(upload "$tmp/full" 'ARRAY-FULL-1')
+wait_job "$j8"
 # A failed job: too few positions.
 printf 'position,s1,s2,s3\np1,1,0,0\np2,0,1,0\n' >"$tmp/bad.csv"
 j4=$(curl -sf -H 'Content-Type: text/csv' --data-binary @"$tmp/bad.csv" \
@@ -74,7 +79,9 @@ render() {  # render NAME PATH -> DOM dump in $tmp/NAME.html, screenshot in $sho
   local flags=(--headless --no-sandbox --disable-gpu --disable-background-networking
     --disable-component-update --disable-sync --no-first-run --disable-quic
     --user-data-dir="$tmp/profile-$1" --window-size=1280,2400 --hide-scrollbars)
-  timeout 120 "$chromium" "${flags[@]}" --dump-dom "$base$2" >"$tmp/$1.html" 2>/dev/null
+  # The page's console (JavaScript errors would show as "Uncaught ...") goes to $tmp/NAME.log.
+  timeout 120 "$chromium" "${flags[@]}" --enable-logging=stderr --v=0 --dump-dom "$base$2" \
+    >"$tmp/$1.html" 2>"$tmp/$1.log"
   timeout 120 "$chromium" "${flags[@]}" --screenshot="$shots/$1.png" "$base$2" >/dev/null 2>&1
   [ -s "$shots/$1.png" ] || { echo "no screenshot of $2"; exit 1; }
 }
@@ -103,12 +110,23 @@ render rejected "/jobs/$j5"
 render missing /jobs/999999
 render devices /devices
 render recording "/recordings/$r7"
+render full "/jobs/$j8"
 
 expect history 'class="page-history' 'table-history' 'form class="filters\|class="filters'
 expect pca 'class="page-job' 'table-pca-parameters' 'plot-singular-values' 'plot-magnitude-error' \
   'plot-residual-rms' 'plot-axes-xy' 'plot-axes-xz' 'table-diagnostics'
 expect array 'table-array-parameters' 'plot-cost' 'plot-positions-xy' 'plot-positions-xz'
 expect failed 'callout-error' 'badge-failed'
+expect full 'badge-succeeded' 'table-array-full-accelerometer' 'table-array-full-gyroscope' \
+  'table-array-full-misalignment' 'table-array-full-change' \
+  'plot-array-full-residuals-accelerometer' 'plot-array-full-residuals-gyroscope' \
+  'plot-array-full-position-change' 'plot-positions-xy' 'table-array-parameters' \
+  'id="triads"' 'id="triad-residuals"' 'id="full-vs-positions"'
+# Eight triads: eight rows in each sensor table (the DOM dump puts each table on one line).
+rows=$(grep -o '<table class="table-array-full table-array-full-gyroscope">.*' "$tmp/full.html" |
+  sed 's|</table>.*||' | grep -o '<tr><td class="name">' | wc -l)
+if [ "$rows" -eq 8 ]; then passed=$((passed + 1)); else
+  failed=$((failed + 1)); echo "FAIL: full: $rows gyroscope rows, expected 8"; fi
 expect device 'class="page-device' 'table-calibrations' 'table-drift-pca'
 expect device '<span class="badge badge-rejected"' '<span class="badge badge-revoked"' \
   'scale factor too uncertain' 'board &lt;b&gt;dropped&lt;/b&gt; on the rig' '2 accepted calibrations'
@@ -121,8 +139,11 @@ expect array 'class="model"'
 reject failed 'class="advice"'
 expect recording 'class="page-recording' 'plot-timeline-accel' 'plot-timeline-gyro' \
   'table-intervals' 'table-thresholds' "href=\"/jobs/$j7\""
-for page in history pca array failed device devices revoked rejected recording; do
+for page in history pca array failed device devices revoked rejected recording full; do
   reject "$page" '<script' '<img'
+  if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
+    failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"
+  else passed=$((passed + 1)); fi
 done
 echo "browser pages: screenshots in $shots"
 echo "$passed passed, $failed failed"
