@@ -80,6 +80,10 @@ class PgConn {
   Status ExecScript(const char* sql);
 
   bool broken() const;
+  // Set by a statement that wants listeners woken once its transaction commits (PgStore sends
+  // the NOTIFY after COMMIT: a NOTIFY inside the transaction would hold PostgreSQL's global
+  // notify lock across the commit's WAL flush and serialise every enqueue).
+  bool notify_after_commit = false;
   bool InTransaction() const;  // inside BEGIN (idle or failed transaction)
   pg_conn* handle() const { return conn_; }
 

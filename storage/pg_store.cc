@@ -178,7 +178,11 @@ Status RefreshLatest(PgConn* c, const std::string& device, const std::string& me
       {PgText(device), PgText(method)});
 }
 
-Status NotifyJobs(PgConn* c) { return c->Exec("SELECT pg_notify($1, '')", {PgText(kJobsChannel)}); }
+// Listeners are woken after the transaction commits (PgStore::Txn).
+Status NotifyJobs(PgConn* c) {
+  c->notify_after_commit = true;
+  return Status::Ok();
+}
 
 // WHERE clause with $n placeholders; the values in the same order from FilterParams.
 std::string FilterSql(const JobFilter& f, bool with_cursor, int* n) {
@@ -316,6 +320,7 @@ Status PgStore::Txn(const std::function<Status(PgConn*)>& op) {
     Status s = lease.Open();
     if (!s.ok()) return s;
     PgConn* c = lease.get();
+    c->notify_after_commit = false;
     s = c->ExecScript("BEGIN");
     if (s.ok()) {
       try {
@@ -325,6 +330,10 @@ Status PgStore::Txn(const std::function<Status(PgConn*)>& op) {
       }
       if (s.ok()) {
         s = c->ExecScript("COMMIT");
+        // Best effort: a lost notification only delays workers until their next poll.
+        if (s.ok() && c->notify_after_commit) {
+          (void)c->Exec("SELECT pg_notify($1, '')", {PgText(kJobsChannel)});
+        }
       } else if (!c->broken()) {
         (void)c->ExecScript("ROLLBACK");
       }
@@ -581,7 +590,7 @@ Status PgStore::EnqueueJobLocked(PgConn* c, int64_t recording_id, const std::str
   const int64_t id = res.Int(0, 0);
   s = RememberDevice(c, job_device, now);
   if (!s.ok()) return s;
-  s = NotifyJobs(c);  // delivered to listeners when the transaction commits
+  s = NotifyJobs(c);  // sent to listeners once the transaction commits
   if (!s.ok()) return s;
   return LoadJob(c, id, false, out);
 }

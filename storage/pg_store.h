@@ -24,7 +24,8 @@
 // job row locked (SELECT ... FOR UPDATE) for every state transition, so two hosts racing on an
 // expired lease are serialised and only the holder's result is stored (results has job_id as
 // its primary key: a result is never written twice). Enqueues (and jobs given back) send NOTIFY
-// calibd_jobs on commit; SetJobListener LISTENs on a dedicated connection.
+// calibd_jobs right after their commit (not inside the transaction, where PostgreSQL's global
+// notify lock would serialise the commits); SetJobListener LISTENs on a dedicated connection.
 //
 // Connections: a pool (one connection per concurrently calling thread, idle ones kept up to
 // StoreOptions::max_idle_connections). A call whose connection fails (server stopped or
