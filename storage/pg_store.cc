@@ -242,12 +242,16 @@ class PgStore::Lease {
   ~Lease() {
     if (conn_) store_->Return(std::move(conn_));
   }
-  Status Open() { return store_->Acquire(&conn_); }
+  Status Open() { return store_->Acquire(&conn_, &pooled_); }
   PgConn* get() { return conn_.get(); }
+  // The connection was idle in the pool (it may have died there: server restarted) and is
+  // broken now: the call may run again on a fresh one, once, if nothing of it took effect.
+  bool StaleFromPool() const { return pooled_ && conn_ && conn_->broken(); }
 
  private:
   PgStore* store_;
   std::unique_ptr<PgConn> conn_;
+  bool pooled_ = false;
 };
 
 PgStore::PgStore(std::string target, StoreOptions options)
@@ -270,15 +274,17 @@ Status PgStore::NewConnection(std::unique_ptr<PgConn>* out) {
   return Status::Ok();
 }
 
-Status PgStore::Acquire(std::unique_ptr<PgConn>* out) {
+Status PgStore::Acquire(std::unique_ptr<PgConn>* out, bool* pooled) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (!idle_.empty()) {
       *out = std::move(idle_.back());
       idle_.pop_back();
+      *pooled = true;
       return Status::Ok();
     }
   }
+  *pooled = false;
   return NewConnection(out);
 }
 
@@ -322,6 +328,8 @@ Status PgStore::Txn(const std::function<Status(PgConn*)>& op) {
     PgConn* c = lease.get();
     c->notify_after_commit = false;
     s = c->ExecScript("BEGIN");
+    // A connection that died in the pool (server restarted): nothing was done, run it afresh.
+    if (!s.ok() && lease.StaleFromPool() && attempt < 3) continue;
     if (s.ok()) {
       try {
         s = op(c);
@@ -347,10 +355,14 @@ Status PgStore::Txn(const std::function<Status(PgConn*)>& op) {
 }
 
 Status PgStore::Read(const std::function<Status(PgConn*)>& op) {
-  Lease lease(this);
-  Status s = lease.Open();
-  if (!s.ok()) return s;
-  return op(lease.get());
+  for (int attempt = 1;; ++attempt) {
+    Lease lease(this);
+    Status s = lease.Open();
+    if (!s.ok()) return s;
+    s = op(lease.get());
+    // Reads change nothing: one that met a connection that died in the pool runs again.
+    if (s.ok() || !lease.StaleFromPool() || attempt > 1) return s;
+  }
 }
 
 Status PgStore::Ping() {
@@ -540,13 +552,18 @@ Status PgStore::GetRecording(int64_t id, RecordingInfo* out) {
 
 Status PgStore::ReadRecordingData(int64_t id,
                                   const std::function<bool(std::string_view chunk)>& sink) {
-  Lease lease(this);
-  Status s = lease.Open();
-  if (!s.ok()) return s;
-  PgConn* c = lease.get();
-  // One snapshot for the whole stream (the Lease rolls it back on an early return).
-  s = c->ExecScript("BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY");
-  if (!s.ok()) return s;
+  std::unique_ptr<Lease> lease;
+  Status s;
+  for (int attempt = 1;; ++attempt) {
+    lease = std::make_unique<Lease>(this);
+    s = lease->Open();
+    if (!s.ok()) return s;
+    // One snapshot for the whole stream (the Lease rolls it back on an early return).
+    s = lease->get()->ExecScript("BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY");
+    if (s.ok()) break;
+    if (!lease->StaleFromPool() || attempt > 1) return s;
+  }
+  PgConn* c = lease->get();
   PgResult res;
   s = c->Exec("SELECT bytes FROM recordings WHERE id = $1", {PgInt(id)}, &res);
   if (!s.ok()) return s;

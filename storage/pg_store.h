@@ -30,9 +30,12 @@
 // Connections: a pool (one connection per concurrently calling thread, idle ones kept up to
 // StoreOptions::max_idle_connections). A call whose connection fails (server stopped or
 // restarted, network) returns kBusy naming the cause, the broken connection and every idle one
-// are dropped, and the next call connects afresh: the store reconnects by itself. A write whose
-// COMMIT was cut off may or may not have committed (the caller was not told OK, so nothing
-// acknowledged is lost; retrying is safe: uploads are deduplicated, job transitions check state).
+// are dropped, and the next call connects afresh: the store reconnects by itself. A call that
+// finds its pooled connection died while idle (the server restarted in between) runs again at
+// once on a fresh one when nothing of it had taken effect (reads; a write whose BEGIN failed). A
+// write whose COMMIT was cut off may or may not have committed (the caller was not told OK, so
+// nothing acknowledged is lost; retrying is safe: uploads are deduplicated, job transitions check
+// state).
 //
 // Options: busy_timeout_ms becomes lock_timeout; read_only sets
 // default_transaction_read_only (writes fail with kIoError); max_page_count is not supported
@@ -109,7 +112,7 @@ class PgStore final : public Store {
   class Lease;  // a pooled connection, returned on destruction
   PgStore(std::string target, StoreOptions options);
   Status NewConnection(std::unique_ptr<PgConn>* out);
-  Status Acquire(std::unique_ptr<PgConn>* out);
+  Status Acquire(std::unique_ptr<PgConn>* out, bool* pooled);
   void Return(std::unique_ptr<PgConn> conn);
   // Runs `op` in one transaction (BEGIN ... COMMIT, ROLLBACK on error). A deadlock or
   // serialization failure runs it again (up to 3 times), so `op` must set its outputs afresh.

@@ -310,6 +310,23 @@ TEST_F(PgStoreTest, ListenerHearsJobsEnqueuedByAnotherHost) {
   worker_host->SetJobListener(nullptr);
 }
 
+// Stops and restarts the cluster.
+TEST_F(PgStoreTest, ServerRestartedWhileTheStoreWasIdleIsInvisibleToItsNextCalls) {
+  auto store = Open();
+  int64_t rec = Put(store.get(), "before the restart");
+  RecordingInfo info;
+  ASSERT_TRUE(store->GetRecording(rec, &info).ok());  // idle pooled connections now
+  ASSERT_TRUE(cluster_->Stop());
+  ASSERT_TRUE(cluster_->Start());
+  Status s = store->GetRecording(rec, &info);  // a read: runs again on a fresh connection
+  EXPECT_TRUE(s.ok()) << s.ToString();
+  ASSERT_TRUE(cluster_->Stop());
+  ASSERT_TRUE(cluster_->Start());
+  JobInfo job;
+  s = store->EnqueueJob(rec, "pca", "", "{}", &job);  // a write whose BEGIN found it dead
+  EXPECT_TRUE(s.ok()) << s.ToString();
+}
+
 // Last in this file: it stops and restarts the cluster.
 TEST_F(PgStoreTest, ServerGoingAwayIsBusyAndTheStoreReconnectsByItself) {
   auto store = Open();

@@ -841,6 +841,24 @@ TEST_P(StoreTest, RejectedResultIsNotServedUntilAcceptedAndRevokingFallsBack) {
   EXPECT_EQ(store_->LatestResult("SN1", "pca", &latest).code(), StatusCode::kNotFound);
 }
 
+TEST_P(StoreTest, ExpireLeasesOfTakesBackOnlyTheDeadProcesssJobsAtOnce) {
+  int64_t rec = Put("reap");
+  int64_t dead_job = Enqueue(rec);
+  int64_t live_job = Enqueue(rec);
+  EXPECT_EQ(Claim("host:1:5-0", 30000).id, dead_job);
+  EXPECT_EQ(Claim("host:1:50-0", 30000).id, live_job);  // shares a prefix, but not "host:1:5-"
+  EXPECT_EQ(store_->ExpireLeasesOf("", nullptr).code(), StatusCode::kInvalidInput);
+  int64_t taken_back = -1;
+  ASSERT_TRUE(store_->ExpireLeasesOf("host:1:5-", &taken_back).ok());
+  EXPECT_EQ(taken_back, 1);
+  EXPECT_EQ(Get(dead_job).status, "queued");  // at once, not after the 30 s lease
+  EXPECT_EQ(Get(dead_job).error_code, "lease_expired");
+  EXPECT_EQ(Get(live_job).status, "running");
+  EXPECT_EQ(Claim("host:2:7-0").id, dead_job);
+  ASSERT_TRUE(store_->ExpireLeasesOf("host:1:5-", &taken_back).ok());
+  EXPECT_EQ(taken_back, 0);
+}
+
 TEST_P(StoreTest, PingAnswersAndTheBackendIsNamed) {
   EXPECT_TRUE(store_->Ping().ok());
   EXPECT_EQ(std::string(store_->backend()), GetParam());
