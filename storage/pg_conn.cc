@@ -65,6 +65,18 @@ int64_t PgResult::Affected() const {
 namespace {
 void IgnoreNotice(void*, const char*) {}  // "relation already exists, skipping" and the like
 
+// libpq's messages span lines ("...\n\tThis probably means..."): one line, single spaces.
+std::string OneLine(const char* text) {
+  std::string out;
+  for (const char* p = text; *p != '\0'; ++p) {
+    const bool space = *p == '\n' || *p == '\t' || *p == '\r' || *p == ' ';
+    if (space && (out.empty() || out.back() == ' ')) continue;
+    out += space ? ' ' : *p;
+  }
+  while (!out.empty() && out.back() == ' ') out.pop_back();
+  return out;
+}
+
 bool Starts(const char* state, const char* prefix) {
   return std::strncmp(state, prefix, std::strlen(prefix)) == 0;
 }
@@ -80,8 +92,7 @@ Status PgConn::Connect(const std::string& target, const std::string& display,
   c->conn_ = PQconnectdbParams(keys, values, /*expand_dbname=*/1);
   if (c->conn_ == nullptr) return Status::Internal("storage: libpq could not allocate");
   if (PQstatus(c->conn_) != CONNECTION_OK) {
-    std::string why = PQerrorMessage(c->conn_);
-    while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
+    const std::string why = OneLine(PQerrorMessage(c->conn_));
     return Status::Busy("storage: cannot connect to PostgreSQL at " + display + ": " + why);
   }
   PQsetNoticeProcessor(c->conn_, &IgnoreNotice, nullptr);
@@ -101,9 +112,8 @@ bool PgConn::InTransaction() const {
 }
 
 Status PgConn::StatusFrom(pg_result* res, std::string_view what) {
-  std::string msg = res != nullptr ? PQresultErrorMessage(res) : "";
-  if (msg.empty()) msg = PQerrorMessage(conn_);
-  while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
+  std::string msg = OneLine(res != nullptr ? PQresultErrorMessage(res) : "");
+  if (msg.empty()) msg = OneLine(PQerrorMessage(conn_));
   const char* state = res != nullptr ? PQresultErrorField(res, PG_DIAG_SQLSTATE) : nullptr;
   std::string text = "storage: " + std::string(what) + ": " + msg;
   if (PQstatus(conn_) != CONNECTION_OK || state == nullptr) {

@@ -340,6 +340,7 @@ TEST_F(PgStoreTest, ServerGoingAwayIsBusyAndTheStoreReconnectsByItself) {
   s = store->GetRecording(rec, &info);
   EXPECT_EQ(s.code(), StatusCode::kBusy) << s.ToString();
   EXPECT_NE(s.message().find("PostgreSQL"), std::string::npos) << s.message();
+  EXPECT_EQ(s.message().find('\n'), std::string::npos) << s.message();  // one line
   ASSERT_TRUE(cluster_->Start());
   EXPECT_TRUE(store->Ping().ok());
   ASSERT_TRUE(store->EnqueueJob(rec, "pca", "", "{}", &job).ok());
