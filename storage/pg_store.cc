@@ -295,7 +295,6 @@ void PgStore::Return(std::unique_ptr<PgConn> conn) {
     // The server went away or restarted: the idle connections are most likely dead too. Drop
     // them, so the next calls connect afresh instead of failing one by one.
     idle_.clear();
-    ++generation_;
     return;
   }
   if (static_cast<int>(idle_.size()) < options_.max_idle_connections) {

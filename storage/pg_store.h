@@ -135,7 +135,6 @@ class PgStore final : public Store {
   std::string target_;  // with the password: never logged
   std::mutex mu_;
   std::vector<std::unique_ptr<PgConn>> idle_;  // guarded by mu_
-  uint64_t generation_ = 0;  // guarded by mu_; bumped when a connection is found broken
 
   std::mutex listen_mu_;  // serialises SetJobListener
   std::function<void()> on_job_;

@@ -1,6 +1,7 @@
 // The parts of Store common to both backends: the choice of backend, timestamps, helpers.
 #include "storage/store.h"
 
+#include <cctype>
 #include <chrono>
 #include <ctime>
 #include <nlohmann/json.hpp>
@@ -87,9 +88,17 @@ Store::Store(std::string path, StoreOptions options)
 bool Store::IsPostgresTarget(const std::string& target) {
   auto starts = [&](const char* prefix) { return target.rfind(prefix, 0) == 0; };
   if (starts("postgresql://") || starts("postgres://")) return true;
-  // A libpq keyword/value string: "host=... dbname=..." (an SQLite path has no '=' before a
-  // space in practice; a path containing "dbname=" is not supported).
-  return target.find("dbname=") != std::string::npos && target.find('/') == std::string::npos;
+  // A libpq keyword/value string starts with a keyword and '=' ("host=/run/postgresql
+  // dbname=calibd"). An SQLite file whose path starts so is written "./NAME=...".
+  size_t i = target.find_first_not_of(' ');
+  if (i == std::string::npos) return false;
+  const size_t word = i;
+  while (i < target.size() &&
+         (std::isalnum(static_cast<unsigned char>(target[i])) || target[i] == '_')) {
+    ++i;
+  }
+  while (i < target.size() && target[i] == ' ') ++i;
+  return i > word && i < target.size() && target[i] == '=';
 }
 
 Status Store::Open(const std::string& target, StoreOptions options, std::unique_ptr<Store>* out) {

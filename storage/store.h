@@ -198,8 +198,9 @@ class Store {
   // (not a database), kConflict (schema newer than this build), kBusy (locked; PostgreSQL server
   // unreachable).
   // `target` picks the backend: a PostgreSQL connection URI ("postgresql://..." or
-  // "postgres://...", libpq's syntax) or a libpq keyword string ("host=... dbname=...") opens a
-  // PgStore (pg_store.h), anything else is an SQLite file path (SqliteStore, sqlite_store.h).
+  // "postgres://...", libpq's syntax) or a libpq keyword string (starting "KEYWORD=", e.g.
+  // "host=/run/postgresql dbname=calibd") opens a PgStore (pg_store.h); anything else is an
+  // SQLite file path (SqliteStore, sqlite_store.h).
   static Status Open(const std::string& target, StoreOptions options, std::unique_ptr<Store>* out);
   // True when Open would pick PostgreSQL for `target`.
   static bool IsPostgresTarget(const std::string& target);

@@ -69,8 +69,13 @@ TEST_F(PgStoreTest, OpenPicksThePostgresBackendForUrisAndKeywordStrings) {
   EXPECT_TRUE(Store::IsPostgresTarget("postgresql://u@db/calibd"));
   EXPECT_TRUE(Store::IsPostgresTarget("postgres:///calibd?host=/run/postgresql"));
   EXPECT_TRUE(Store::IsPostgresTarget("host=db dbname=calibd"));
+  EXPECT_TRUE(Store::IsPostgresTarget("host=/run/postgresql dbname=calibd"));
+  EXPECT_TRUE(Store::IsPostgresTarget("service = calibd"));
   EXPECT_FALSE(Store::IsPostgresTarget("data/calibd.db"));
   EXPECT_FALSE(Store::IsPostgresTarget("/var/lib/calibd/calibd.db"));
+  EXPECT_FALSE(Store::IsPostgresTarget("./a=b.db"));
+  EXPECT_FALSE(Store::IsPostgresTarget("calibd.db"));
+  EXPECT_FALSE(Store::IsPostgresTarget("=x"));
   auto store = Open();
   ASSERT_NE(store, nullptr);
   EXPECT_STREQ(store->backend(), "postgresql");
