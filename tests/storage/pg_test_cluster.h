@@ -7,7 +7,8 @@
 // The cluster is stopped and its folder removed when the program exits normally (a gtest
 // Environment) and, should the program crash or be killed, by a watchdog child that notices its
 // parent is gone. The binaries come from $CALIBD_PG_BIN, else /usr/lib/postgresql/15/bin;
-// they are installed by scripts/setup.sh, so a missing binary is a failure, never a skip.
+// they are installed by scripts/setup.sh, so a missing binary is a failure, never a skip. When
+// run as root, $TMPDIR (default /tmp) must be reachable by the postgres user (/tmp is).
 #ifndef CALIBD_TESTS_STORAGE_PG_TEST_CLUSTER_H_
 #define CALIBD_TESTS_STORAGE_PG_TEST_CLUSTER_H_
 
