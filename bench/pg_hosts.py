@@ -282,6 +282,7 @@ def main():
     args.bin = os.path.realpath(args.bin)
     root = tempfile.mkdtemp(prefix="calibd-pg-bench-")
     os.chmod(root, 0o755)
+    os.environ["TMPDIR"] = root  # calibd on PostgreSQL stages uploads there: removed with it
     cluster = None
     ok = True
     try:

@@ -30,10 +30,12 @@ using nlohmann::json;
 using storage::testing::PgTestCluster;
 
 // `calibd serve` as a child process; its stderr is collected to learn the port (as in
-// process_test.cc).
+// process_test.cc). `tmpdir` becomes its TMPDIR, where a PostgreSQL calibd stages uploads (so
+// the staging folders go with the test's temporary folder).
 class ServerProcess {
  public:
-  ServerProcess(const std::string& db, std::vector<std::string> extra = {}) {
+  ServerProcess(const std::string& db, const std::string& tmpdir,
+                std::vector<std::string> extra = {}) {
     int fds[2];
     if (pipe(fds) != 0) return;
     pid_ = fork();
@@ -41,6 +43,7 @@ class ServerProcess {
       dup2(fds[1], 2);
       close(fds[0]);
       close(fds[1]);
+      setenv("TMPDIR", tmpdir.c_str(), 1);
       std::vector<std::string> args = {CALIBD_BINARY, "serve",       "--db",           db,
                                        "--listen",    "127.0.0.1:0", "--no-access-log"};
       args.insert(args.end(), extra.begin(), extra.end());
@@ -124,10 +127,11 @@ class PgServe : public ::testing::Test {
   }
   PgTestCluster* cluster_ = nullptr;
   std::string uri_;
+  testing::TempDir tmp_;  // the servers' TMPDIR
 };
 
 TEST_F(PgServe, DatabaseGoneGivesServiceUnavailableAndCalibdReconnectsByItself) {
-  ServerProcess server(uri_, {"--workers", "1"});
+  ServerProcess server(uri_, tmp_.path().string(), {"--workers", "1"});
   ASSERT_GT(server.port(), 0) << server.log();
   auto client = server.Client();
   std::string first_csv;
@@ -184,7 +188,8 @@ TEST_F(PgServe, ThreeHostsUnderKillNineLoseNothingAndRunEveryJobOnce) {
   std::vector<std::unique_ptr<ServerProcess>> hosts(kHosts);
   std::vector<std::mutex> host_mu(kHosts);
   for (int h = 0; h < kHosts; ++h) {
-    hosts[h] = std::make_unique<ServerProcess>(uri_, std::vector<std::string>{"--workers", "2"});
+    hosts[h] = std::make_unique<ServerProcess>(uri_, tmp_.path().string(),
+                                               std::vector<std::string>{"--workers", "2"});
     ASSERT_GT(hosts[h]->port(), 0) << hosts[h]->log();
   }
   std::mutex mu;
@@ -220,7 +225,8 @@ TEST_F(PgServe, ThreeHostsUnderKillNineLoseNothingAndRunEveryJobOnce) {
   for (int k = 0; k < kKills; ++k) {
     std::this_thread::sleep_for(std::chrono::milliseconds(700 + rng() % 800));
     const int h = k % kHosts;
-    auto fresh = std::make_unique<ServerProcess>(uri_, std::vector<std::string>{"--workers", "2"});
+    auto fresh = std::make_unique<ServerProcess>(uri_, tmp_.path().string(),
+                                                 std::vector<std::string>{"--workers", "2"});
     ASSERT_GT(fresh->port(), 0) << fresh->log();
     std::unique_ptr<ServerProcess> old;
     {
