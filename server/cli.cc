@@ -164,7 +164,10 @@ int RunCli(int argc, char** argv) {
   // serve
   ServeOptions serve;
   CLI::App* serve_cmd = app.add_subcommand("serve", "HTTP server plus job workers");
-  serve_cmd->add_option("--db", serve.db_path, "SQLite database file (created with its folder)")
+  serve_cmd
+      ->add_option("--db", serve.db_path,
+                   "SQLite database file (created with its folder), or a PostgreSQL "
+                   "connection URI postgresql://USER@HOST/DB shared by several calibd")
       ->capture_default_str();
   serve_cmd->add_option("--listen", serve.listen, "HOST:PORT to listen on")->capture_default_str();
   serve_cmd->add_option("--workers", serve.workers, "calibration worker threads (0: one per core)")

@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "server/service.h"
+#include "storage/pg_store.h"
 
 namespace calibd::server {
 
@@ -40,7 +41,8 @@ int RunServe(const ServeOptions& options) {
     return 1;
   }
   std::cerr << "calibd: listening on http://" << options.listen.substr(0, options.listen.rfind(':'))
-            << ":" << service->port() << " (database " << options.db_path << ")" << std::endl;
+            << ":" << service->port() << " (database "
+            << storage::RedactConnectionTarget(options.db_path) << ")" << std::endl;
 
   std::thread watcher([&] {
     int signal_number = 0;

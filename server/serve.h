@@ -8,7 +8,8 @@
 namespace calibd::server {
 
 struct ServeOptions {
-  std::string db_path = "data/calibd.db";  // created with its folder
+  std::string db_path = "data/calibd.db";  // SQLite file (created with its folder) or a
+                                           // postgresql:// URI (storage::Store::Open)
   std::string listen = "127.0.0.1:8080";   // HOST:PORT; port 0 picks a free port (printed)
   int workers = 0;                         // calibration threads; 0 = one per core
   std::string token_file;                  // non-empty: writes need "Authorization: Bearer TOKEN"

@@ -34,6 +34,7 @@
 #include "server/recording.h"
 #include "server/recording_routes.h"
 #include "server/worker_pool.h"
+#include "storage/sha256.h"
 #include "storage/store.h"
 
 namespace calibd::server {
@@ -349,8 +350,15 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
   if (recovered > 0) {
     std::cerr << "calibd: took back " << recovered << " job(s) whose lease had lapsed\n";
   }
-  s = ProcessInstance::Create(fs::absolute(options.db_path).parent_path() / "staging",
-                              &impl->instance);
+  // Staging (and the detection of this host's dead calibd processes) beside an SQLite file; for
+  // a PostgreSQL database in the temporary folder, one per database, shared by its processes.
+  const char* tmp = std::getenv("TMPDIR");
+  const fs::path staging_root =
+      storage::Store::IsPostgresTarget(options.db_path)
+          ? fs::path(tmp != nullptr && *tmp != '\0' ? tmp : "/tmp") /
+                ("calibd-staging-" + storage::Sha256Hex(options.db_path).substr(0, 12))
+          : fs::absolute(options.db_path).parent_path() / "staging";
+  s = ProcessInstance::Create(staging_root, &impl->instance);
   if (!s.ok()) return s;
   impl->staging_dir = impl->instance->staging_dir();
   impl->ReapDeadProcesses();
@@ -1320,11 +1328,15 @@ void Service::Impl::HandleHealth(const httplib::Request&, httplib::Response& res
   Status s = store->QueueDepth(&counts);
   if (!s.ok()) {
     res.status = 503;
-    res.set_content(JsonBody(json{{"status", "unavailable"}, {"database", s.message()}}),
-                    "application/json");
+    res.set_content(
+        JsonBody(json{
+            {"status", "unavailable"}, {"backend", store->backend()}, {"database", s.message()}}),
+        "application/json");
     return;
   }
   res.set_content(json{{"status", "ok"},
+                       {"backend", store->backend()},
+                       {"database", "reachable"},
                        {"queued", counts.queued},
                        {"running", counts.running},
                        {"workers_busy", workers->running_jobs()}}
@@ -1335,7 +1347,10 @@ void Service::Impl::HandleHealth(const httplib::Request&, httplib::Response& res
 void Service::Impl::HandleMetrics(const httplib::Request&, httplib::Response& res) {
   std::map<std::string, std::map<std::string, double>> gauges;
   storage::QueueCounts counts;
-  if (store->QueueDepth(&counts).ok()) {
+  const bool database_up = store->QueueDepth(&counts).ok();
+  gauges["calibd_database_up"] = {
+      {"backend=\"" + std::string(store->backend()) + "\"", database_up ? 1.0 : 0.0}};
+  if (database_up) {
     gauges["calibd_jobs"] = {{"state=\"queued\"", static_cast<double>(counts.queued)},
                              {"state=\"running\"", static_cast<double>(counts.running)},
                              {"state=\"succeeded\"", static_cast<double>(counts.succeeded)},
@@ -1355,12 +1370,14 @@ void Service::Impl::HandleMetrics(const httplib::Request&, httplib::Response& re
       {"reason=\"head_too_large\"", static_cast<double>(c.heads_too_large)},
       {"reason=\"lingering_close\"", static_cast<double>(c.lingering_closes)}};
   res.set_content(
-      metrics.Render(gauges, {{"calibd_jobs", "Jobs in the queue by state."},
-                              {"calibd_workers_busy", "Workers running a job."},
-                              {"calibd_http_connections", "Client connections by state."},
-                              {"calibd_http_refusals",
-                               "Connections refused or closed by the front end since the start, by "
-                               "reason."}}),
+      metrics.Render(
+          gauges, {{"calibd_jobs", "Jobs in the queue by state."},
+                   {"calibd_workers_busy", "Workers running a job."},
+                   {"calibd_database_up", "1 when the database answered this scrape, by backend."},
+                   {"calibd_http_connections", "Client connections by state."},
+                   {"calibd_http_refusals",
+                    "Connections refused or closed by the front end since the start, by "
+                    "reason."}}),
       "text/plain; version=0.0.4");
 }
 

@@ -31,6 +31,15 @@ void WorkerPool::Start() {
   started_ = true;
   for (int i = 0; i < options_.workers; ++i) threads_.emplace_back([this, i] { WorkerLoop(i); });
   renewer_ = std::thread([this] { RenewLoop(); });
+  // Jobs enqueued by other processes (PostgreSQL NOTIFY) wake every idle worker; the polling
+  // stays as the fallback (back-off, lapsed leases, a listener reconnecting).
+  listening_ = store_->SetJobListener([this] {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      ++notifications_;
+    }
+    wake_.notify_all();
+  });
 }
 
 void WorkerPool::Notify() {
@@ -47,6 +56,7 @@ int WorkerPool::running_jobs() const {
 }
 
 bool WorkerPool::Stop(std::chrono::milliseconds grace) {
+  if (listening_.exchange(false)) store_->SetJobListener(nullptr);  // before mu_: it takes mu_
   std::unique_lock<std::mutex> lock(mu_);
   if (!started_) return true;
   stopping_ = true;
@@ -104,7 +114,8 @@ void WorkerPool::WorkerLoop(int index) {
       continue;  // look for the next job at once
     }
     std::unique_lock<std::mutex> lock(mu_);
-    wake_.wait_for(lock, std::chrono::milliseconds(options_.poll_ms),
+    // With a listener, jobs from anywhere wake us: poll 4x less often.
+    wake_.wait_for(lock, std::chrono::milliseconds(options_.poll_ms * (listening_ ? 4 : 1)),
                    [&] { return stopping_ || notifications_ != seen_notifications; });
   }
 }

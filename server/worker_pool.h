@@ -1,4 +1,4 @@
-// WorkerPool: threads that claim calibration jobs from the SQLite queue, run them, and store the
+// WorkerPool: threads that claim calibration jobs from the store's queue, run them, and store the
 // result or the reason for failure, renewing their leases while they compute.
 //
 // At least once, idempotent: a job whose lease lapses (process killed, machine hung) is taken
@@ -33,7 +33,8 @@ namespace calibd::server {
 struct WorkerPoolOptions {
   int workers = 1;           // threads; >= 1
   int64_t lease_ms = 30000;  // lease length; renewed every lease_ms / 3 while a job runs
-  int64_t poll_ms = 500;     // idle workers look for jobs at least this often (Notify wakes)
+  int64_t poll_ms = 500;     // idle workers look for jobs at least this often (Notify wakes);
+                             // 4x less often when the store notifies (PostgreSQL LISTEN)
   std::string id_prefix;     // worker ids are "<id_prefix>-<n>"; should be unique per process
   // Optional: run by the lease renewer thread every lease_ms / 3 (e.g. taking back the jobs of
   // dead processes). Must not block for long.
@@ -89,7 +90,8 @@ class WorkerPool {
   bool stopping_ = false;
   bool started_ = false;
   uint64_t notifications_ = 0;
-  std::map<int64_t, Active> active_;  // job id -> its worker, guarded by mu_
+  std::atomic<bool> listening_{false};  // the store calls us when jobs arrive (SetJobListener)
+  std::map<int64_t, Active> active_;    // job id -> its worker, guarded by mu_
   int busy_workers_ = 0;
   std::vector<std::thread> threads_;
   std::thread renewer_;

@@ -1,29 +1,26 @@
-// Store: everything calibd keeps, in one SQLite file — recordings (original bytes, deduplicated
-// by SHA-256), the job queue with leases and retries, results, devices.
+// Store: everything calibd keeps — recordings (original bytes, deduplicated by SHA-256), the job
+// queue with leases and retries, results, devices, the acceptance decisions. An abstract
+// interface with two backends, chosen by Store::Open from its target:
+//   SqliteStore (sqlite_store.h): one SQLite file, embedded, the default; one host.
+//   PgStore (pg_store.h): a PostgreSQL database ("postgresql://..."), shared by any number of
+//     calibd processes on any hosts.
+// One test suite (tests/storage/store_test.cc) holds both to this contract.
 //
-// Durability: WAL with synchronous=FULL. When a write call returns OK its effect is on disk and
-// survives kill -9 and power loss (given a disk that honours fdatasync); when it returns an error
-// nothing of it was committed (every write call is atomic — its own savepoint in a committed
-// transaction — never a half-written recording, job or result, and another call's failure in the
-// same group commit does not affect it).
+// Durability and atomicity: when a write call returns OK its effect is committed and survives
+// kill -9 of the process (and power loss, given storage that honours fsync); when it returns an
+// error nothing of it was committed (every write call is atomic: never a half-written recording,
+// job or result).
 //
-// Thread-safety: a Store is thread-safe. Each read borrows a connection from an internal pool
-// (one per concurrently calling thread, opened on demand; idle ones are kept up to
-// Options::max_idle_connections), so readers never wait for writers (WAL) and a long upload does
-// not block reads. Writes from the threads of one process go through a group-commit queue
-// (LevelDB-style: the first waiting writer runs the queued calls in one BEGIN IMMEDIATE
-// transaction, one savepoint per call, and one fsync acknowledges them all), so durable writes
-// per second can exceed the disk's fsync rate when calls are concurrent. A call returns only
-// after its transaction committed (or failed). Between processes, SQLite's write lock
-// serialises transactions (waiting up to Options::busy_timeout_ms, then kBusy). Several
-// processes may open the same file at once. Do not use a Store across fork(): open a new one
-// in the child. Output arguments are written only when a call returns OK.
+// Thread-safety: a Store is thread-safe; calls from many threads run concurrently on pooled
+// connections. Several processes may open the same database at once (PostgreSQL: on several
+// hosts). Do not use a Store across fork(): open a new one in the child. Output arguments are
+// written only when a call returns OK.
 //
 // Errors (calibd::Status): kNotFound (no such id), kConflict (illegal state transition, e.g.
 // completing a job one does not lease), kInvalidInput (bad argument), kBusy and kIoError
-// (transient / environmental: locked past the timeout, disk full, I/O error, read-only file),
-// kCorruption (damaged file), kTooLarge (recording over SQLite's blob limit). Messages carry
-// SQLite's own text.
+// (transient / environmental: locked past the timeout, database server unreachable, disk full,
+// I/O error, read-only), kCorruption (damaged database), kTooLarge (recording over the backend's
+// limit). Messages carry the database's own text.
 //
 // Times: stored as milliseconds since the Unix epoch from Options::now_ms; reported as ISO-8601
 // UTC strings with milliseconds ("2026-11-22T04:03:46.123Z"), or "" when unset, plus the raw *_ms.
@@ -57,7 +54,8 @@ struct StoreOptions {
   // Clock, milliseconds since the Unix epoch. Default: the system clock. Must be thread-safe.
   // Tests inject a fake clock to expire leases and back-offs without sleeping.
   std::function<int64_t()> now_ms;
-  // Lock wait before kBusy (per statement / BEGIN IMMEDIATE). Default 5000 ms.
+  // Lock wait before kBusy (per statement / BEGIN IMMEDIATE; PostgreSQL: lock_timeout).
+  // Default 5000 ms.
   int busy_timeout_ms = 5000;
   // A job is tried at most this many times (claims). A transient failure or an expired lease
   // on the last attempt makes it failed. Default 5.
@@ -69,6 +67,7 @@ struct StoreOptions {
   // must exist and be at the current schema version. Default false.
   bool read_only = false;
   // > 0: PRAGMA max_page_count on every connection (a size quota; also simulates a full disk).
+  // SQLite only: PostgreSQL refuses it (kInvalidInput).
   // Default 0 = unlimited.
   int64_t max_page_count = 0;
   // Connections kept open when idle. Default 16.
@@ -78,6 +77,7 @@ struct StoreOptions {
   // Group commit: concurrent write calls in this process are run in one transaction (each in
   // its own savepoint, so one call's failure does not affect the others) and share one fsync.
   // At most this many calls per transaction; 1 disables batching. Default 64.
+  // SQLite only (PostgreSQL commits each call in its own transaction; the server batches).
   int max_write_batch = 64;
 };
 
@@ -192,18 +192,40 @@ struct QueueCounts {
 
 class Store {
  public:
-  // Opens (creating it and its folder if needed) the database at `path` and migrates its schema
-  // to the latest version (schema.h). Safe to call from several processes at once.
+  // Opens (creating an SQLite file and its folder if needed) the database and migrates its schema
+  // to the latest version (schema.h, pg_schema.cc). Safe to call from several processes at once.
   // Fails with kIoError (cannot open/create, read-only when a migration is needed), kCorruption
-  // (not a database), kConflict (schema newer than this build), kBusy.
-  static Status Open(const std::string& path, StoreOptions options, std::unique_ptr<Store>* out);
+  // (not a database), kConflict (schema newer than this build), kBusy (locked; PostgreSQL server
+  // unreachable).
+  // `target` picks the backend: a PostgreSQL connection URI ("postgresql://..." or
+  // "postgres://...", libpq's syntax) or a libpq keyword string (starting "KEYWORD=", e.g.
+  // "host=/run/postgresql dbname=calibd") opens a PgStore (pg_store.h); anything else is an
+  // SQLite file path (SqliteStore, sqlite_store.h).
+  static Status Open(const std::string& target, StoreOptions options, std::unique_ptr<Store>* out);
+  // True when Open would pick PostgreSQL for `target`.
+  static bool IsPostgresTarget(const std::string& target);
   // Closes the pooled connections. Every call must have returned (no call may be in flight).
-  ~Store();
+  virtual ~Store() = default;
   Store(const Store&) = delete;
   Store& operator=(const Store&) = delete;
 
+  // The file path (SQLite) or the connection target with any password replaced by "***".
   const std::string& path() const { return path_; }
   const StoreOptions& options() const { return options_; }
+  // "sqlite" | "postgresql".
+  virtual const char* backend() const = 0;
+  // Whether the database answers now (one trivial query on a pooled connection). kBusy /
+  // kIoError with the reason when it does not (server down, connection refused).
+  virtual Status Ping() = 0;
+  // Calls `on_job` (from a thread of the store) soon after a job becomes claimable through any
+  // process on the database (PostgreSQL: LISTEN/NOTIFY), so idle workers need not poll hard.
+  // Returns false when the backend has no such notification (SQLite: poll; in-process enqueues
+  // are signalled by the server itself). At most one listener; nullptr removes it. The store
+  // stops calling it before this returns with nullptr and before it is destroyed.
+  virtual bool SetJobListener(std::function<void()> on_job) {
+    (void)on_job;
+    return false;
+  }
 
   // ---- Recordings ----
 
@@ -215,13 +237,14 @@ class Store {
   // transaction: after an error nothing was stored. kInvalidInput for bad arguments
   // (columns/sensors not JSON arrays, job without method, unreadable path gives kIoError).
   // `out`/`existed` may be null.
-  Status PutRecording(const NewRecording& r, RecordingInfo* out, bool* existed);
+  virtual Status PutRecording(const NewRecording& r, RecordingInfo* out, bool* existed) = 0;
   // Metadata (summary_json filled, job empty). kNotFound.
-  Status GetRecording(int64_t id, RecordingInfo* out);
+  virtual Status GetRecording(int64_t id, RecordingInfo* out) = 0;
   // Streams the original bytes to `sink` in chunks of at most 1 MiB, in order, from one
   // consistent snapshot. `sink` returns false to stop early (then the call returns OK).
   // The sink may call other Store methods (it runs on a borrowed connection). kNotFound.
-  Status ReadRecordingData(int64_t id, const std::function<bool(std::string_view chunk)>& sink);
+  virtual Status ReadRecordingData(int64_t id,
+                                   const std::function<bool(std::string_view chunk)>& sink) = 0;
   // The whole bytes in memory (small recordings, tests, the worker).
   Status ReadRecordingBytes(int64_t id, std::string* out);
 
@@ -229,8 +252,9 @@ class Store {
 
   // Queues a job for a stored recording (kNotFound if it does not exist). Device "" = the
   // recording's device. The device is remembered in ListDevices.
-  Status EnqueueJob(int64_t recording_id, const std::string& method, const std::string& device,
-                    const std::string& config_json, JobInfo* out);
+  virtual Status EnqueueJob(int64_t recording_id, const std::string& method,
+                            const std::string& device, const std::string& config_json,
+                            JobInfo* out) = 0;
 
   // Atomically takes the oldest claimable job: queued with not_before <= now, after first taking
   // back jobs whose lease has lapsed (as RecoverExpiredLeases). The job becomes running with
@@ -238,12 +262,13 @@ class Store {
   // *claimed = false (and OK) when nothing is claimable. No two callers, in any threads or
   // processes, get the same job while its lease is valid. worker_id must be unique among all
   // live workers on the file (e.g. "host:pid:n"): the lease checks compare it.
-  Status ClaimJob(const std::string& worker_id, int64_t lease_ms, JobInfo* out, bool* claimed);
+  virtual Status ClaimJob(const std::string& worker_id, int64_t lease_ms, JobInfo* out,
+                          bool* claimed) = 0;
 
   // Extends the lease to now + lease_ms. The holder may renew a lapsed lease as long as nobody
   // has taken the job back. kConflict if `worker_id` does not hold the job (taken back, finished,
   // another owner); kNotFound if no such job.
-  Status RenewLease(int64_t job_id, const std::string& worker_id, int64_t lease_ms);
+  virtual Status RenewLease(int64_t job_id, const std::string& worker_id, int64_t lease_ms) = 0;
 
   // Stores the result and marks the job succeeded (finished_at = now, lease cleared), stores the
   // result's SHA-256 and its verdict (the result JSON's verdict.status; anything but "rejected",
@@ -252,45 +277,47 @@ class Store {
   // the identical result, OK and nothing changes (whoever calls). kConflict: the caller does not
   // hold the job (and it has not succeeded with this result), or it already succeeded with a
   // different result, or it failed. kInvalidInput: empty result. kNotFound.
-  Status CompleteJob(int64_t job_id, const std::string& worker_id, const std::string& result_json);
+  virtual Status CompleteJob(int64_t job_id, const std::string& worker_id,
+                             const std::string& result_json) = 0;
 
   // Records a failure of the holder's run. transient = true (I/O error, busy database): back to
   // queued, not claimable before now + back-off, unless attempts >= max_attempts, then failed.
   // transient = false (the input cannot be calibrated): failed at once. error_code/message are
   // kept on the job. kConflict if `worker_id` does not hold the job; kNotFound.
-  Status FailJob(int64_t job_id, const std::string& worker_id, const std::string& code,
-                 const std::string& message, bool transient);
+  virtual Status FailJob(int64_t job_id, const std::string& worker_id, const std::string& code,
+                         const std::string& message, bool transient) = 0;
 
   // Graceful shutdown: gives the job back (queued, claimable at once) without counting the
   // attempt. kConflict if not the holder; kNotFound.
-  Status ReleaseJob(int64_t job_id, const std::string& worker_id);
+  virtual Status ReleaseJob(int64_t job_id, const std::string& worker_id) = 0;
 
   // Takes back every running job whose lease expired before now: queued again (claimable at
   // once), or failed with error_code "lease_expired" when it already used max_attempts.
   // Call at server start. *recovered (may be null) = jobs taken back.
-  Status RecoverExpiredLeases(int64_t* recovered);
+  virtual Status RecoverExpiredLeases(int64_t* recovered) = 0;
 
   // The holder of some leases is known to be dead (same host, its process gone): every running
   // job whose lease_owner starts with `owner_prefix` is taken back at once, exactly as if its
   // lease had expired now (queued again, or failed past max_attempts). Leases of live holders
   // elsewhere still run out their time. *taken_back (may be null) = jobs taken back.
   // kInvalidInput for an empty prefix.
-  Status ExpireLeasesOf(const std::string& owner_prefix, int64_t* taken_back);
+  virtual Status ExpireLeasesOf(const std::string& owner_prefix, int64_t* taken_back) = 0;
 
   // One job with its result if succeeded. kNotFound.
-  Status GetJob(int64_t id, JobInfo* out);
+  virtual Status GetJob(int64_t id, JobInfo* out) = 0;
   // Newest first (by id, which only grows: the cursor `before` is stable under inserts).
   // For the next page pass before = the last returned id.
-  Status ListJobs(const JobFilter& filter, std::vector<JobInfo>* out);
+  virtual Status ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) = 0;
   // Number of jobs matching filter's device/method/status (limit/before ignored).
-  Status CountJobs(const JobFilter& filter, int64_t* count);
+  virtual Status CountJobs(const JobFilter& filter, int64_t* count) = 0;
   // Every device seen (uploads and jobs), by serial, with its latest calibration per method.
-  Status ListDevices(std::vector<DeviceInfo>* out);
+  virtual Status ListDevices(std::vector<DeviceInfo>* out) = 0;
   // The device's latest served job for `method` (succeeded, accepted by the gate or a person, not
   // revoked; by finished time), with result_json and result_sha256. kNotFound if there is none.
-  Status LatestResult(const std::string& device, const std::string& method, JobInfo* out);
+  virtual Status LatestResult(const std::string& device, const std::string& method,
+                              JobInfo* out) = 0;
   // Jobs per state.
-  Status QueueDepth(QueueCounts* out);
+  virtual Status QueueDepth(QueueCounts* out) = 0;
 
   // ---- The acceptance gate's decisions ----
 
@@ -299,54 +326,31 @@ class Store {
   // kConflict (message says why) unless the job succeeded and its result is served (a queued,
   // running or failed job has no result; a rejected one is not served; a revoked one already is);
   // kInvalidInput for an empty reason; kNotFound.
-  Status RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                   JobEvent* out = nullptr);
+  virtual Status RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,
+                           JobEvent* out = nullptr) = 0;
   // Accepts a result the gate rejected, or re-accepts a revoked one (state -> "accepted"): it is
   // then served when it is the device's latest served one. kConflict unless the job succeeded
   // and its state is "rejected" or "revoked"; otherwise as RevokeJob.
-  Status AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                   JobEvent* out = nullptr);
+  virtual Status AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
+                           JobEvent* out = nullptr) = 0;
   // The job's decisions, oldest first. kNotFound for no such job.
-  Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out);
+  virtual Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) = 0;
 
   // ---- Maintenance ----
 
-  // PRAGMA integrity_check: *result = "ok" when the file is sound (else SQLite's report).
-  Status IntegrityCheck(std::string* result);
-  // Runs a WAL checkpoint (TRUNCATE), e.g. at shutdown. kBusy if readers prevent it.
-  Status Checkpoint();
+  // *result = "ok" when the database is sound, else a report (SQLite: PRAGMA integrity_check;
+  // PostgreSQL: every recording's stored bytes add up to its size).
+  virtual Status IntegrityCheck(std::string* result) = 0;
+  // SQLite: runs a WAL checkpoint (TRUNCATE), e.g. at shutdown; kBusy if readers prevent it.
+  // PostgreSQL: nothing to do (OK).
+  virtual Status Checkpoint() = 0;
 
- private:
-  class Conn;     // a pooled connection, returned to the pool on destruction
-  struct Writer;  // a write call waiting in the group-commit queue
-  // Runs `op` inside a write transaction shared with other queued calls (group commit); `op`
-  // must not begin or commit transactions (savepoints are fine) and may be run again in a fresh
-  // transaction if another call's failure aborted the shared one.
-  Status Write(const std::function<Status(Db*)>& op);
+ protected:
   Store(std::string path, StoreOptions options);
-  Status Acquire(std::unique_ptr<Db>* db);
-  void Return(std::unique_ptr<Db> db);
   int64_t Now() const { return options_.now_ms(); }
-
-  Status PutRecordingLocked(Db* db, const NewRecording& r, const std::string& sha,
-                            RecordingInfo* out, bool* existed);
-  Status EnqueueJobLocked(Db* db, int64_t recording_id, const std::string& method,
-                          const std::string& device, const std::string& config_json, int64_t now,
-                          JobInfo* out, bool inherit_device = true);
-  Status RecoverLocked(Db* db, int64_t now, int64_t* recovered);
-  Status LoadJob(Db* db, int64_t id, bool with_result, JobInfo* out);
-  Status DecideLocked(Db* db, int64_t job_id, const std::string& action, const std::string& reason,
-                      const std::string& actor, JobEvent* out);
-  Status RequireHolder(Db* db, int64_t job_id, const std::string& worker_id, const char* action,
-                       JobInfo* job);
 
   std::string path_;
   StoreOptions options_;
-  Db::Options db_options_;
-  std::mutex mu_;
-  std::vector<std::unique_ptr<Db>> idle_;  // guarded by mu_
-  std::mutex write_mu_;
-  std::deque<Writer*> writers_;  // guarded by write_mu_; the front one is the leader
 };
 
 }  // namespace calibd::storage

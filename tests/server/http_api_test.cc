@@ -60,6 +60,8 @@ TEST_F(HttpApi, HealthzMetricsAndOpenApiAnswer) {
   ASSERT_TRUE(health);
   EXPECT_EQ(health->status, 200);
   EXPECT_EQ(Body(health)["status"], "ok");
+  EXPECT_EQ(Body(health)["backend"], "sqlite");
+  EXPECT_EQ(Body(health)["database"], "reachable");
   EXPECT_EQ(client.Get("/api/v1/healthz")->status, 200);
   // A request is counted by the access logger after its answer is sent, so the count of the
   // /healthz requests above may trail by a moment: poll briefly.
@@ -75,6 +77,7 @@ TEST_F(HttpApi, HealthzMetricsAndOpenApiAnswer) {
             std::string::npos)
       << metrics->body;
   EXPECT_NE(metrics->body.find("calibd_jobs{state=\"queued\"} 0"), std::string::npos);
+  EXPECT_NE(metrics->body.find("calibd_database_up{backend=\"sqlite\"} 1"), std::string::npos);
   EXPECT_NE(metrics->body.find("# TYPE calibd_http_request_duration_seconds histogram"),
             std::string::npos);
   auto openapi = client.Get("/api/v1/openapi.json");

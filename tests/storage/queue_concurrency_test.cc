@@ -1,5 +1,7 @@
 // The job queue under contention: threads of one process and separate processes claiming from
-// one SQLite file. Every job must be claimed and completed exactly once, none lost.
+// one database — an SQLite file, and a PostgreSQL database in a throw-away cluster
+// (pg_test_cluster.h), the same tests for both. Every job must be claimed and completed exactly
+// once, none lost.
 #include <gtest/gtest.h>
 #include <poll.h>
 #include <signal.h>
@@ -17,6 +19,7 @@
 #include <vector>
 
 #include "storage/store.h"
+#include "tests/storage/pg_test_cluster.h"
 #include "tests/storage/storage_test_util.h"
 
 namespace calibd::storage {
@@ -103,10 +106,25 @@ void ExpectEveryJobCompletedOnce(Store* store, const std::set<int64_t>& ids,
   EXPECT_EQ(check, "ok");
 }
 
-TEST(QueueConcurrency, FourThreadsCompleteEachOf1000JobsExactlyOnce) {
-  TempDir dir;
+// The backend under test: "sqlite" or "postgresql".
+class QueueConcurrency : public ::testing::TestWithParam<std::string> {
+ protected:
+  void SetUp() override {
+    if (GetParam() == "postgresql") {
+      auto* cluster = testing::PgTestCluster::Get();
+      ASSERT_NE(cluster, nullptr);
+      target_ = cluster->NewDatabase();
+    } else {
+      target_ = dir_.File("q.db");
+    }
+  }
+  TempDir dir_;
+  std::string target_;
+};
+
+TEST_P(QueueConcurrency, FourThreadsCompleteEachOf1000JobsExactlyOnce) {
   std::unique_ptr<Store> store;
-  ASSERT_TRUE(Store::Open(dir.File("q.db"), StoreOptions(), &store).ok());
+  ASSERT_TRUE(Store::Open(target_, StoreOptions(), &store).ok());
   const std::set<int64_t> ids = SeedJobs(store.get());
   ASSERT_EQ(ids.size(), static_cast<size_t>(kJobs));
 
@@ -127,9 +145,9 @@ TEST(QueueConcurrency, FourThreadsCompleteEachOf1000JobsExactlyOnce) {
   ExpectEveryJobCompletedOnce(store.get(), ids, claims);
 }
 
-TEST(QueueConcurrency, TwoProcessesWithTwoThreadsEachCompleteEachJobExactlyOnce) {
-  TempDir dir;
-  const std::string path = dir.File("q.db");
+TEST_P(QueueConcurrency, TwoProcessesWithTwoThreadsEachCompleteEachJobExactlyOnce) {
+  const TempDir& dir = dir_;
+  const std::string path = target_;
   std::set<int64_t> ids;
   {
     std::unique_ptr<Store> store;
@@ -207,7 +225,12 @@ TEST(QueueConcurrency, TwoProcessesWithTwoThreadsEachCompleteEachJobExactlyOnce)
   ExpectEveryJobCompletedOnce(store.get(), ids, claims);
 }
 
-TEST(QueueConcurrency, GroupCommitIsolatesAFailingCallFromItsBatch) {
+INSTANTIATE_TEST_SUITE_P(Backends, QueueConcurrency, ::testing::Values("sqlite", "postgresql"),
+                         [](const ::testing::TestParamInfo<std::string>& info) {
+                           return info.param;
+                         });
+
+TEST(QueueConcurrencySqlite, GroupCommitIsolatesAFailingCallFromItsBatch) {
   // Many threads completing jobs at once, half of them with the wrong worker id: the illegal
   // calls fail with kConflict, the legal ones in the same transactions still commit.
   TempDir dir;

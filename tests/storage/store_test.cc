@@ -1,4 +1,6 @@
-// Store: recordings and every job state transition, legal and illegal, on real SQLite files.
+// Store: recordings and every job state transition, legal and illegal — one suite run against
+// both backends: an SQLite file and a database in a throw-away PostgreSQL cluster
+// (pg_test_cluster.h). Each test gets a fresh file or database.
 #include "storage/store.h"
 
 #include <gtest/gtest.h>
@@ -9,6 +11,7 @@
 #include <thread>
 
 #include "storage/sha256.h"
+#include "tests/storage/pg_test_cluster.h"
 #include "tests/storage/storage_test_util.h"
 
 namespace calibd::storage {
@@ -18,15 +21,25 @@ using testing::FakeClock;
 using testing::RandomBytes;
 using testing::TempDir;
 
-class StoreTest : public ::testing::Test {
+// The backend under test: "sqlite" or "postgresql".
+class StoreTest : public ::testing::TestWithParam<std::string> {
  protected:
-  void SetUp() override { Reopen(); }
+  void SetUp() override {
+    if (GetParam() == "postgresql") {
+      auto* cluster = testing::PgTestCluster::Get();
+      ASSERT_NE(cluster, nullptr);
+      target_ = cluster->NewDatabase();
+    } else {
+      target_ = dir_.File("calibd.db");
+    }
+    Reopen();
+  }
 
   void Reopen(StoreOptions options = {}) {
     store_.reset();
     if (!options.now_ms) options.now_ms = clock_.Fn();
     options_ = options;
-    Status s = Store::Open(dir_.File("calibd.db"), options, &store_);
+    Status s = Store::Open(target_, options, &store_);
     ASSERT_TRUE(s.ok()) << s.ToString();
   }
 
@@ -69,6 +82,7 @@ class StoreTest : public ::testing::Test {
   }
 
   TempDir dir_;
+  std::string target_;  // the SQLite file or the PostgreSQL URI
   FakeClock clock_;
   StoreOptions options_;
   std::unique_ptr<Store> store_;
@@ -76,7 +90,7 @@ class StoreTest : public ::testing::Test {
 
 // ---- recordings ----
 
-TEST_F(StoreTest, PutRecordingStoresBytesAndSummary) {
+TEST_P(StoreTest, PutRecordingStoresBytesAndSummary) {
   const std::string bytes = "position,s1,s2\np1,1,2\np2,3,4\np3,5,6\n";
   NewRecording r;
   r.data = bytes;
@@ -115,13 +129,13 @@ TEST_F(StoreTest, PutRecordingStoresBytesAndSummary) {
   EXPECT_EQ(back, bytes);
 }
 
-TEST_F(StoreTest, FormatsTimestampsAsIsoUtcWithMilliseconds) {
+TEST_P(StoreTest, FormatsTimestampsAsIsoUtcWithMilliseconds) {
   EXPECT_EQ(FormatTimestamp(0), "1970-01-01T00:00:00.000Z");
   EXPECT_EQ(FormatTimestamp(1'790'000'000'123), "2026-09-21T14:13:20.123Z");
   EXPECT_EQ(FormatTimestamp(-1), "1969-12-31T23:59:59.999Z");
 }
 
-TEST_F(StoreTest, IdenticalBytesAreStoredOnceAndReturnTheExistingId) {
+TEST_P(StoreTest, IdenticalBytesAreStoredOnceAndReturnTheExistingId) {
   const std::string bytes = RandomBytes(10000, 1);
   NewRecording r;
   r.data = bytes;
@@ -146,7 +160,7 @@ TEST_F(StoreTest, IdenticalBytesAreStoredOnceAndReturnTheExistingId) {
   EXPECT_NE(third.id, first.id);
 }
 
-TEST_F(StoreTest, DuplicateUploadStillEnqueuesItsJobAgainstTheExistingRecording) {
+TEST_P(StoreTest, DuplicateUploadStillEnqueuesItsJobAgainstTheExistingRecording) {
   NewRecording r;
   r.data = "a,b\n1,2\n";
   r.device = "SN1";
@@ -171,7 +185,7 @@ TEST_F(StoreTest, DuplicateUploadStillEnqueuesItsJobAgainstTheExistingRecording)
   EXPECT_EQ(counts.queued, 2);
 }
 
-TEST_F(StoreTest, EmptyRecordingRoundTrips) {
+TEST_P(StoreTest, EmptyRecordingRoundTrips) {
   RecordingInfo info;
   NewRecording r;
   r.data = std::string_view();
@@ -182,7 +196,7 @@ TEST_F(StoreTest, EmptyRecordingRoundTrips) {
   EXPECT_EQ(back, "");
 }
 
-TEST_F(StoreTest, StreamsAStagedFileByteExactInBoundedChunks) {
+TEST_P(StoreTest, StreamsAStagedFileByteExactInBoundedChunks) {
   // 50 MB from a staged file: the store reads and writes it in 1 MiB chunks (blob API), and
   // reading it back delivers chunks of at most 1 MiB — memory does not depend on the size.
   const size_t size = 50u << 20;
@@ -241,7 +255,7 @@ TEST_F(StoreTest, StreamsAStagedFileByteExactInBoundedChunks) {
   EXPECT_EQ(again.id, info.id);
 }
 
-TEST_F(StoreTest, StagedFileWithAWrongAnnouncedHashIsRejectedAndNothingStored) {
+TEST_P(StoreTest, StagedFileWithAWrongAnnouncedHashIsRejectedAndNothingStored) {
   const std::string staged = dir_.File("upload.tmp");
   std::ofstream(staged, std::ios::binary) << "t,a0_x\n1,2\n";
   NewRecording r;
@@ -254,7 +268,7 @@ TEST_F(StoreTest, StagedFileWithAWrongAnnouncedHashIsRejectedAndNothingStored) {
   EXPECT_EQ(store_->GetRecording(1, &info).code(), StatusCode::kNotFound);
 }
 
-TEST_F(StoreTest, MissingStagedFileIsAnIoErrorNamingIt) {
+TEST_P(StoreTest, MissingStagedFileIsAnIoErrorNamingIt) {
   NewRecording r;
   r.path = dir_.File("nope.tmp");
   Status s = store_->PutRecording(r, nullptr, nullptr);
@@ -262,7 +276,7 @@ TEST_F(StoreTest, MissingStagedFileIsAnIoErrorNamingIt) {
   EXPECT_NE(s.message().find("nope.tmp"), std::string::npos);
 }
 
-TEST_F(StoreTest, ReadCanStopEarly) {
+TEST_P(StoreTest, ReadCanStopEarly) {
   const std::string bytes = RandomBytes(3u << 20, 5);
   int64_t id = Put(bytes);
   int calls = 0;
@@ -270,7 +284,7 @@ TEST_F(StoreTest, ReadCanStopEarly) {
   EXPECT_EQ(calls, 2);
 }
 
-TEST_F(StoreTest, UnknownRecordingIsNotFound) {
+TEST_P(StoreTest, UnknownRecordingIsNotFound) {
   RecordingInfo info;
   std::string bytes;
   EXPECT_EQ(store_->GetRecording(42, &info).code(), StatusCode::kNotFound);
@@ -279,7 +293,7 @@ TEST_F(StoreTest, UnknownRecordingIsNotFound) {
   EXPECT_EQ(store_->EnqueueJob(42, "pca", "", "{}", &job).code(), StatusCode::kNotFound);
 }
 
-TEST_F(StoreTest, BadRecordingArgumentsAreInvalidInputAndStoreNothing) {
+TEST_P(StoreTest, BadRecordingArgumentsAreInvalidInputAndStoreNothing) {
   NewRecording r;
   r.data = "x";
   r.columns_json = "not json";
@@ -296,7 +310,7 @@ TEST_F(StoreTest, BadRecordingArgumentsAreInvalidInputAndStoreNothing) {
 
 // ---- jobs: the happy path ----
 
-TEST_F(StoreTest, EnqueuedJobIsQueuedWithTheRecordingsDevice) {
+TEST_P(StoreTest, EnqueuedJobIsQueuedWithTheRecordingsDevice) {
   int64_t rec = Put("x", "SN1");
   JobInfo job;
   ASSERT_TRUE(store_->EnqueueJob(rec, "pca", "", "", &job).ok());
@@ -315,7 +329,7 @@ TEST_F(StoreTest, EnqueuedJobIsQueuedWithTheRecordingsDevice) {
   EXPECT_EQ(store_->EnqueueJob(rec, "", "", "{}", &job).code(), StatusCode::kInvalidInput);
 }
 
-TEST_F(StoreTest, ClaimRunsTheOldestJobUnderALease) {
+TEST_P(StoreTest, ClaimRunsTheOldestJobUnderALease) {
   int64_t rec = Put("x");
   int64_t first = Enqueue(rec), second = Enqueue(rec);
   JobInfo job = Claim("w1", 30000);
@@ -332,7 +346,7 @@ TEST_F(StoreTest, ClaimRunsTheOldestJobUnderALease) {
   EXPECT_FALSE(claimed);
 }
 
-TEST_F(StoreTest, CompleteStoresResultWithHashAndUpdatesTheDevice) {
+TEST_P(StoreTest, CompleteStoresResultWithHashAndUpdatesTheDevice) {
   int64_t rec = Put("x", "SN1");
   int64_t id = Enqueue(rec);
   Claim("w1");
@@ -365,7 +379,7 @@ TEST_F(StoreTest, CompleteStoresResultWithHashAndUpdatesTheDevice) {
   EXPECT_EQ(devices[0].latest[0].calibrated_at, job.finished_at);
 }
 
-TEST_F(StoreTest, LatestResultIsTheLastToFinishPerMethod) {
+TEST_P(StoreTest, LatestResultIsTheLastToFinishPerMethod) {
   int64_t rec = Put("x", "SN1");
   int64_t a = Enqueue(rec, "pca"), b = Enqueue(rec, "pca"), c = Enqueue(rec, "array");
   Claim("w");
@@ -388,7 +402,7 @@ TEST_F(StoreTest, LatestResultIsTheLastToFinishPerMethod) {
   EXPECT_EQ(devices[0].latest[1].method, "pca");
 }
 
-TEST_F(StoreTest, CompletingTwiceWithTheSameResultStoresOneResult) {
+TEST_P(StoreTest, CompletingTwiceWithTheSameResultStoresOneResult) {
   int64_t id = Enqueue(Put("x"));
   Claim("w1");
   ASSERT_TRUE(store_->CompleteJob(id, "w1", "{\"v\":1}").ok());
@@ -401,7 +415,7 @@ TEST_F(StoreTest, CompletingTwiceWithTheSameResultStoresOneResult) {
   EXPECT_EQ(Get(id).result_json, "{\"v\":1}");
 }
 
-TEST_F(StoreTest, ListJobsIsNewestFirstWithFiltersAndStableCursor) {
+TEST_P(StoreTest, ListJobsIsNewestFirstWithFiltersAndStableCursor) {
   int64_t r1 = Put("1", "SN1"), r2 = Put("2", "SN2");
   std::vector<int64_t> ids;
   for (int i = 0; i < 7; ++i) {
@@ -453,7 +467,7 @@ TEST_F(StoreTest, ListJobsIsNewestFirstWithFiltersAndStableCursor) {
   EXPECT_EQ(page.size(), 8u);
 }
 
-TEST_F(StoreTest, ListJobsIncludesResultsOnlyWhenAsked) {
+TEST_P(StoreTest, ListJobsIncludesResultsOnlyWhenAsked) {
   int64_t id = Enqueue(Put("x"));
   Claim("w");
   ASSERT_TRUE(store_->CompleteJob(id, "w", "{\"ok\":true}").ok());
@@ -468,7 +482,7 @@ TEST_F(StoreTest, ListJobsIncludesResultsOnlyWhenAsked) {
   EXPECT_EQ(page[0].result_json, "{\"ok\":true}");
 }
 
-TEST_F(StoreTest, QueueDepthCountsEveryState) {
+TEST_P(StoreTest, QueueDepthCountsEveryState) {
   int64_t rec = Put("x");
   for (int i = 0; i < 5; ++i) Enqueue(rec);
   JobInfo a = Claim("w"), b = Claim("w"), c = Claim("w");
@@ -485,7 +499,7 @@ TEST_F(StoreTest, QueueDepthCountsEveryState) {
 
 // ---- leases ----
 
-TEST_F(StoreTest, ExpiredLeaseIsTakenBackByTheNextClaim) {
+TEST_P(StoreTest, ExpiredLeaseIsTakenBackByTheNextClaim) {
   int64_t id = Enqueue(Put("x"));
   Claim("w1", 1000);
   JobInfo none;
@@ -499,7 +513,7 @@ TEST_F(StoreTest, ExpiredLeaseIsTakenBackByTheNextClaim) {
   EXPECT_EQ(job.attempts, 2);
 }
 
-TEST_F(StoreTest, RenewedLeaseIsNotTakenBack) {
+TEST_P(StoreTest, RenewedLeaseIsNotTakenBack) {
   int64_t id = Enqueue(Put("x"));
   Claim("w1", 1000);
   clock_.Advance(900);
@@ -513,7 +527,7 @@ TEST_F(StoreTest, RenewedLeaseIsNotTakenBack) {
   ASSERT_TRUE(store_->CompleteJob(id, "w1", "{}").ok());
 }
 
-TEST_F(StoreTest, HolderMayRenewALapsedLeaseNobodyTookBack) {
+TEST_P(StoreTest, HolderMayRenewALapsedLeaseNobodyTookBack) {
   int64_t id = Enqueue(Put("x"));
   Claim("w1", 1000);
   clock_.Advance(5000);
@@ -521,7 +535,7 @@ TEST_F(StoreTest, HolderMayRenewALapsedLeaseNobodyTookBack) {
   EXPECT_TRUE(store_->CompleteJob(id, "w1", "{}").ok());
 }
 
-TEST_F(StoreTest, RenewingALeaseTakenByAnotherWorkerIsAConflict) {
+TEST_P(StoreTest, RenewingALeaseTakenByAnotherWorkerIsAConflict) {
   int64_t id = Enqueue(Put("x"));
   Claim("w1", 1000);
   clock_.Advance(1001);
@@ -537,7 +551,7 @@ TEST_F(StoreTest, RenewingALeaseTakenByAnotherWorkerIsAConflict) {
   EXPECT_TRUE(store_->CompleteJob(id, "w2", "{}").ok());
 }
 
-TEST_F(StoreTest, RecoverExpiredLeasesRequeuesOnlyLapsedJobs) {
+TEST_P(StoreTest, RecoverExpiredLeasesRequeuesOnlyLapsedJobs) {
   int64_t rec = Put("x");
   int64_t a = Enqueue(rec), b = Enqueue(rec);
   Claim("w1", 1000);
@@ -559,7 +573,7 @@ TEST_F(StoreTest, RecoverExpiredLeasesRequeuesOnlyLapsedJobs) {
   EXPECT_EQ(Get(a).error_code, "");
 }
 
-TEST_F(StoreTest, LeaseExpiringOnTheLastAttemptFailsTheJob) {
+TEST_P(StoreTest, LeaseExpiringOnTheLastAttemptFailsTheJob) {
   StoreOptions o;
   o.max_attempts = 2;
   Reopen(o);
@@ -578,7 +592,7 @@ TEST_F(StoreTest, LeaseExpiringOnTheLastAttemptFailsTheJob) {
   EXPECT_EQ(job.finished_at_ms, clock_.Now());
 }
 
-TEST_F(StoreTest, ClaimRejectsBadArguments) {
+TEST_P(StoreTest, ClaimRejectsBadArguments) {
   JobInfo job;
   bool claimed;
   EXPECT_EQ(store_->ClaimJob("", 1000, &job, &claimed).code(), StatusCode::kInvalidInput);
@@ -587,7 +601,7 @@ TEST_F(StoreTest, ClaimRejectsBadArguments) {
 
 // ---- failures and retries ----
 
-TEST_F(StoreTest, TransientFailureRequeuesWithExponentialBackoff) {
+TEST_P(StoreTest, TransientFailureRequeuesWithExponentialBackoff) {
   int64_t id = Enqueue(Put("x"));
   Claim("w1");
   ASSERT_TRUE(store_->FailJob(id, "w1", "io_error", "disk hiccup", true).ok());
@@ -609,7 +623,7 @@ TEST_F(StoreTest, TransientFailureRequeuesWithExponentialBackoff) {
   EXPECT_EQ(Get(id).not_before_ms, clock_.Now() + 2000);  // doubled
 }
 
-TEST_F(StoreTest, BackoffIsCappedAtTheMaximum) {
+TEST_P(StoreTest, BackoffIsCappedAtTheMaximum) {
   StoreOptions o;
   o.max_attempts = 20;
   o.backoff_base_ms = 1000;
@@ -624,7 +638,7 @@ TEST_F(StoreTest, BackoffIsCappedAtTheMaximum) {
   EXPECT_EQ(Get(id).not_before_ms, clock_.Now() + 5000);
 }
 
-TEST_F(StoreTest, TransientFailuresStopAtMaxAttempts) {
+TEST_P(StoreTest, TransientFailuresStopAtMaxAttempts) {
   StoreOptions o;
   o.max_attempts = 3;
   Reopen(o);
@@ -647,7 +661,7 @@ TEST_F(StoreTest, TransientFailuresStopAtMaxAttempts) {
   EXPECT_FALSE(claimed);
 }
 
-TEST_F(StoreTest, PermanentFailureFailsAtOnceWithTheReason) {
+TEST_P(StoreTest, PermanentFailureFailsAtOnceWithTheReason) {
   int64_t id = Enqueue(Put("x"));
   Claim("w1");
   ASSERT_TRUE(
@@ -661,7 +675,7 @@ TEST_F(StoreTest, PermanentFailureFailsAtOnceWithTheReason) {
   EXPECT_EQ(job.result_json, "");
 }
 
-TEST_F(StoreTest, ReleaseRequeuesWithoutCountingTheAttempt) {
+TEST_P(StoreTest, ReleaseRequeuesWithoutCountingTheAttempt) {
   int64_t id = Enqueue(Put("x"));
   Claim("w1");
   ASSERT_TRUE(store_->ReleaseJob(id, "w1").ok());
@@ -674,7 +688,7 @@ TEST_F(StoreTest, ReleaseRequeuesWithoutCountingTheAttempt) {
 
 // ---- illegal transitions ----
 
-TEST_F(StoreTest, CompletingAJobOneDoesNotLeaseIsAConflict) {
+TEST_P(StoreTest, CompletingAJobOneDoesNotLeaseIsAConflict) {
   int64_t id = Enqueue(Put("x"));
   Status s = store_->CompleteJob(id, "w1", "{}");  // still queued
   EXPECT_EQ(s.code(), StatusCode::kConflict);
@@ -686,7 +700,7 @@ TEST_F(StoreTest, CompletingAJobOneDoesNotLeaseIsAConflict) {
   EXPECT_EQ(Get(id).status, "running");
 }
 
-TEST_F(StoreTest, FailingOrReleasingAFinishedJobIsAConflict) {
+TEST_P(StoreTest, FailingOrReleasingAFinishedJobIsAConflict) {
   int64_t rec = Put("x");
   int64_t ok = Enqueue(rec), bad = Enqueue(rec);
   Claim("w");
@@ -704,7 +718,7 @@ TEST_F(StoreTest, FailingOrReleasingAFinishedJobIsAConflict) {
   EXPECT_EQ(Get(bad).error_code, "bad");
 }
 
-TEST_F(StoreTest, OperationsOnUnknownJobsAreNotFound) {
+TEST_P(StoreTest, OperationsOnUnknownJobsAreNotFound) {
   JobInfo job;
   EXPECT_EQ(store_->GetJob(99, &job).code(), StatusCode::kNotFound);
   EXPECT_EQ(store_->RenewLease(99, "w", 1000).code(), StatusCode::kNotFound);
@@ -713,7 +727,7 @@ TEST_F(StoreTest, OperationsOnUnknownJobsAreNotFound) {
   EXPECT_EQ(store_->ReleaseJob(99, "w").code(), StatusCode::kNotFound);
 }
 
-TEST_F(StoreTest, EmptyResultIsInvalid) {
+TEST_P(StoreTest, EmptyResultIsInvalid) {
   int64_t id = Enqueue(Put("x"));
   Claim("w");
   EXPECT_EQ(store_->CompleteJob(id, "w", "").code(), StatusCode::kInvalidInput);
@@ -722,7 +736,7 @@ TEST_F(StoreTest, EmptyResultIsInvalid) {
 
 // ---- devices and persistence ----
 
-TEST_F(StoreTest, DevicesAreRememberedFromUploadsAndJobs) {
+TEST_P(StoreTest, DevicesAreRememberedFromUploadsAndJobs) {
   Put("a", "SN-B");
   int64_t rec = Put("b", "");
   Enqueue(rec, "pca", "SN-A");
@@ -735,7 +749,7 @@ TEST_F(StoreTest, DevicesAreRememberedFromUploadsAndJobs) {
   EXPECT_EQ(devices[0].first_seen_ms, clock_.Now());
 }
 
-TEST_F(StoreTest, EverythingSurvivesReopening) {
+TEST_P(StoreTest, EverythingSurvivesReopening) {
   const std::string bytes = RandomBytes(100000, 9);
   int64_t rec = Put(bytes, "SN1");
   int64_t id = Enqueue(rec);
@@ -752,7 +766,8 @@ TEST_F(StoreTest, EverythingSurvivesReopening) {
   EXPECT_TRUE(store_->Checkpoint().ok());
 }
 
-TEST_F(StoreTest, OpenCreatesTheParentFolder) {
+TEST(SqliteStoreTest, OpenCreatesTheParentFolder) {
+  TempDir dir_;
   std::unique_ptr<Store> store;
   StoreOptions o;
   Status s = Store::Open(dir_.File("data/sub/calibd.db"), o, &store);
@@ -760,7 +775,7 @@ TEST_F(StoreTest, OpenCreatesTheParentFolder) {
   EXPECT_TRUE(std::filesystem::exists(dir_.File("data/sub/calibd.db")));
 }
 
-TEST_F(StoreTest, StoreIsUsableFromManyThreadsAtOnce) {
+TEST_P(StoreTest, StoreIsUsableFromManyThreadsAtOnce) {
   int64_t rec = Put("x");
   std::vector<std::thread> threads;
   std::atomic<int> errors{0};
@@ -782,6 +797,77 @@ TEST_F(StoreTest, StoreIsUsableFromManyThreadsAtOnce) {
   ASSERT_TRUE(store_->CountJobs(JobFilter(), &n).ok());
   EXPECT_EQ(n, 160);
 }
+
+TEST_P(StoreTest, RejectedResultIsNotServedUntilAcceptedAndRevokingFallsBack) {
+  int64_t rec = Put("decisions");
+  int64_t first = Enqueue(rec, "pca", "SN1");
+  Claim("w");
+  ASSERT_TRUE(store_->CompleteJob(first, "w", R"({"verdict":{"status":"accepted"}})").ok());
+  clock_.Advance(1000);
+  int64_t second = Enqueue(rec, "pca", "SN1");
+  Claim("w");
+  ASSERT_TRUE(store_->CompleteJob(second, "w", R"({"verdict":{"status":"rejected"}})").ok());
+  EXPECT_EQ(Get(second).state, "rejected");
+  JobInfo latest;
+  ASSERT_TRUE(store_->LatestResult("SN1", "pca", &latest).ok());
+  EXPECT_EQ(latest.id, first);  // the rejected one is not served
+
+  EXPECT_EQ(store_->RevokeJob(second, "not served", "anonymous").code(), StatusCode::kConflict);
+  EXPECT_EQ(store_->AcceptJob(first, "fine", "anonymous").code(), StatusCode::kConflict);
+  EXPECT_EQ(store_->AcceptJob(second, "", "anonymous").code(), StatusCode::kInvalidInput);
+  JobEvent event;
+  ASSERT_TRUE(store_->AcceptJob(second, "checked by hand", "token", &event).ok());
+  EXPECT_EQ(event.job_id, second);
+  EXPECT_EQ(event.action, "accept");
+  ASSERT_TRUE(store_->LatestResult("SN1", "pca", &latest).ok());
+  EXPECT_EQ(latest.id, second);
+
+  ASSERT_TRUE(store_->RevokeJob(second, "wrong fixture", "token").ok());
+  EXPECT_EQ(store_->RevokeJob(second, "again", "token").code(), StatusCode::kConflict);
+  ASSERT_TRUE(store_->LatestResult("SN1", "pca", &latest).ok());
+  EXPECT_EQ(latest.id, first);  // falls back to the previous served one
+  std::vector<JobEvent> events;
+  ASSERT_TRUE(store_->ListJobEvents(second, &events).ok());
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[0].action, "accept");
+  EXPECT_EQ(events[1].action, "revoke");
+  EXPECT_EQ(events[1].reason, "wrong fixture");
+  JobFilter revoked;
+  revoked.state = "revoked";
+  int64_t n = 0;
+  ASSERT_TRUE(store_->CountJobs(revoked, &n).ok());
+  EXPECT_EQ(n, 1);
+  ASSERT_TRUE(store_->RevokeJob(first, "also wrong", "token").ok());
+  EXPECT_EQ(store_->LatestResult("SN1", "pca", &latest).code(), StatusCode::kNotFound);
+}
+
+TEST_P(StoreTest, ExpireLeasesOfTakesBackOnlyTheDeadProcesssJobsAtOnce) {
+  int64_t rec = Put("reap");
+  int64_t dead_job = Enqueue(rec);
+  int64_t live_job = Enqueue(rec);
+  EXPECT_EQ(Claim("host:1:5-0", 30000).id, dead_job);
+  EXPECT_EQ(Claim("host:1:50-0", 30000).id, live_job);  // shares a prefix, but not "host:1:5-"
+  EXPECT_EQ(store_->ExpireLeasesOf("", nullptr).code(), StatusCode::kInvalidInput);
+  int64_t taken_back = -1;
+  ASSERT_TRUE(store_->ExpireLeasesOf("host:1:5-", &taken_back).ok());
+  EXPECT_EQ(taken_back, 1);
+  EXPECT_EQ(Get(dead_job).status, "queued");  // at once, not after the 30 s lease
+  EXPECT_EQ(Get(dead_job).error_code, "lease_expired");
+  EXPECT_EQ(Get(live_job).status, "running");
+  EXPECT_EQ(Claim("host:2:7-0").id, dead_job);
+  ASSERT_TRUE(store_->ExpireLeasesOf("host:1:5-", &taken_back).ok());
+  EXPECT_EQ(taken_back, 0);
+}
+
+TEST_P(StoreTest, PingAnswersAndTheBackendIsNamed) {
+  EXPECT_TRUE(store_->Ping().ok());
+  EXPECT_EQ(std::string(store_->backend()), GetParam());
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, StoreTest, ::testing::Values("sqlite", "postgresql"),
+                         [](const ::testing::TestParamInfo<std::string>& info) {
+                           return info.param;
+                         });
 
 }  // namespace
 }  // namespace calibd::storage

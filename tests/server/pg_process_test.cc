@@ -1,0 +1,291 @@
+// Real `calibd serve` processes on one PostgreSQL database (serve --db postgresql://...): several
+// hosts sharing the queue under kill -9, and a database that goes away and comes back. The
+// database is a throw-away cluster this program starts (tests/storage/pg_test_cluster.h); the
+// servers are the built binary, started with fork/exec on free ports.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <set>
+#include <thread>
+
+#include "server/pca_method.h"
+#include "storage/pg_conn.h"
+#include "storage/store.h"
+#include "tests/lib/sanitizer.h"
+#include "tests/server/http_test_util.h"
+#include "tests/storage/pg_test_cluster.h"
+
+namespace calibd::server {
+namespace {
+
+using nlohmann::json;
+using storage::testing::PgTestCluster;
+
+// `calibd serve` as a child process; its stderr is collected to learn the port (as in
+// process_test.cc). `tmpdir` becomes its TMPDIR, where a PostgreSQL calibd stages uploads (so
+// the staging folders go with the test's temporary folder).
+class ServerProcess {
+ public:
+  ServerProcess(const std::string& db, const std::string& tmpdir,
+                std::vector<std::string> extra = {}) {
+    int fds[2];
+    if (pipe(fds) != 0) return;
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(fds[1], 2);
+      close(fds[0]);
+      close(fds[1]);
+      setenv("TMPDIR", tmpdir.c_str(), 1);
+      std::vector<std::string> args = {CALIBD_BINARY, "serve",       "--db",           db,
+                                       "--listen",    "127.0.0.1:0", "--no-access-log"};
+      args.insert(args.end(), extra.begin(), extra.end());
+      std::vector<char*> argv;
+      for (auto& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      execv(CALIBD_BINARY, argv.data());
+      _exit(127);
+    }
+    close(fds[1]);
+    reader_ = std::thread([this, fd = fds[0]] {
+      char buf[4096];
+      ssize_t n;
+      while ((n = read(fd, buf, sizeof buf)) > 0) {
+        std::lock_guard<std::mutex> lock(mu_);
+        log_.append(buf, static_cast<size_t>(n));
+      }
+      close(fd);
+    });
+    for (int i = 0; i < 3000 && port_ == 0; ++i) {
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        const size_t at = log_.find("listening on http://127.0.0.1:");
+        if (at != std::string::npos) port_ = std::atoi(log_.c_str() + at + 30);
+      }
+      if (port_ == 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+  }
+  ~ServerProcess() {
+    if (pid_ > 0 && !exited_) Signal(SIGKILL);
+    if (reader_.joinable()) reader_.join();
+  }
+
+  int port() const { return port_; }
+  int Signal(int sig) {
+    kill(pid_, sig);
+    int status = 0;
+    waitpid(pid_, &status, 0);
+    exited_ = true;
+    return status;
+  }
+  std::string log() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return log_;
+  }
+  httplib::Client Client() const {
+    httplib::Client c("127.0.0.1", port_);
+    c.set_read_timeout(30, 0);
+    c.set_connection_timeout(5, 0);
+    return c;
+  }
+
+ private:
+  pid_t pid_ = -1;
+  int port_ = 0;
+  bool exited_ = false;
+  std::mutex mu_;
+  std::string log_;
+  std::thread reader_;
+};
+
+httplib::MultipartFormDataItems PcaUpload(uint64_t seed, std::string* csv_out) {
+  core::PcaSimulationOptions sim;
+  sim.seed = seed;
+  sim.positions = 30;
+  std::string csv;
+  json config, truth;
+  EXPECT_TRUE(SimulatePcaFiles(sim, &csv, &config, &truth).ok());
+  config["device"] = "PG-" + std::to_string(seed % 3);
+  if (csv_out != nullptr) *csv_out = csv;
+  return {{"recording", csv, "r.csv", "text/csv"},
+          {"config", config.dump(), "", "application/json"}};
+}
+
+class PgServe : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    cluster_ = PgTestCluster::Get();
+    ASSERT_NE(cluster_, nullptr);
+    uri_ = cluster_->NewDatabase();
+  }
+  PgTestCluster* cluster_ = nullptr;
+  std::string uri_;
+  testing::TempDir tmp_;  // the servers' TMPDIR
+};
+
+TEST_F(PgServe, DatabaseGoneGivesServiceUnavailableAndCalibdReconnectsByItself) {
+  ServerProcess server(uri_, tmp_.path().string(), {"--workers", "1"});
+  ASSERT_GT(server.port(), 0) << server.log();
+  auto client = server.Client();
+  std::string first_csv;
+  auto res = client.Post("/api/v1/recordings", PcaUpload(1, &first_csv));
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 201) << res->body;
+  const int64_t first = json::parse(res->body)["recording"]["id"];
+  res = client.Get("/healthz");
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 200);
+  EXPECT_EQ(json::parse(res->body)["backend"], "postgresql");
+  EXPECT_EQ(json::parse(res->body)["database"], "reachable");
+
+  ASSERT_TRUE(cluster_->Stop());
+  res = client.Get(("/api/v1/recordings/" + std::to_string(first)).c_str());
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 503) << res->body;
+  EXPECT_EQ(res->get_header_value("Retry-After"), "1");
+  json error = json::parse(res->body);
+  EXPECT_EQ(error["error"]["code"], "busy") << res->body;
+  EXPECT_NE(error["error"]["message"].get<std::string>().find("PostgreSQL"), std::string::npos)
+      << res->body;
+  res = client.Post("/api/v1/recordings", PcaUpload(2, nullptr));
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 503) << res->body;  // not acknowledged: the client sends it again
+  res = client.Get("/healthz");
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 503);
+  EXPECT_EQ(json::parse(res->body)["status"], "unavailable");
+  res = client.Get("/metrics");
+  ASSERT_TRUE(res);
+  EXPECT_NE(res->body.find("calibd_database_up{backend=\"postgresql\"} 0"), std::string::npos);
+
+  ASSERT_TRUE(cluster_->Start());
+  res = client.Get(("/api/v1/recordings/" + std::to_string(first) + "/data").c_str());
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 200) << res->body;
+  EXPECT_EQ(res->body, first_csv);
+  res = client.Post("/api/v1/recordings", PcaUpload(2, nullptr));
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 201) << res->body;
+  res = client.Get("/metrics");
+  ASSERT_TRUE(res);
+  EXPECT_NE(res->body.find("calibd_database_up{backend=\"postgresql\"} 1"), std::string::npos);
+  EXPECT_EQ(server.Signal(SIGTERM), 0) << server.log();
+}
+
+// Three hosts on one database, uploads spread over them, one killed -9 every second or so and
+// restarted: every acknowledged upload is there byte-exact, every job succeeds, exactly one
+// result per job. (bench/pg_hosts_soak.sh runs the one-minute version.)
+TEST_F(PgServe, ThreeHostsUnderKillNineLoseNothingAndRunEveryJobOnce) {
+  constexpr int kHosts = 3;
+  const int kKills = sanitizer::kSanitizer ? 4 : 8;
+  std::vector<std::unique_ptr<ServerProcess>> hosts(kHosts);
+  std::vector<std::mutex> host_mu(kHosts);
+  for (int h = 0; h < kHosts; ++h) {
+    hosts[h] = std::make_unique<ServerProcess>(uri_, tmp_.path().string(),
+                                               std::vector<std::string>{"--workers", "2"});
+    ASSERT_GT(hosts[h]->port(), 0) << hosts[h]->log();
+  }
+  std::mutex mu;
+  std::map<int64_t, std::string> acknowledged;  // recording id -> bytes
+  std::set<int64_t> jobs;
+  std::atomic<bool> stop{false};
+  std::atomic<uint64_t> seed{1000};
+  std::vector<std::thread> uploaders;
+  for (int u = 0; u < kHosts; ++u) {
+    uploaders.emplace_back([&, u] {
+      for (int round = u; !stop; ++round) {
+        const int h = round % kHosts;
+        int port;
+        {
+          std::lock_guard<std::mutex> lock(host_mu[h]);
+          port = hosts[h]->port();
+        }
+        httplib::Client client("127.0.0.1", port);
+        client.set_read_timeout(30, 0);
+        client.set_connection_timeout(2, 0);
+        std::string csv;
+        auto res = client.Post("/api/v1/recordings", PcaUpload(seed++, &csv));
+        if (res && res->status == 201) {
+          json body = json::parse(res->body);
+          std::lock_guard<std::mutex> lock(mu);
+          acknowledged[body["recording"]["id"]] = csv;
+          jobs.insert(body["job"]["id"].get<int64_t>());
+        }
+      }
+    });
+  }
+  std::mt19937_64 rng(20261124);
+  for (int k = 0; k < kKills; ++k) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(700 + rng() % 800));
+    const int h = k % kHosts;
+    auto fresh = std::make_unique<ServerProcess>(uri_, tmp_.path().string(),
+                                                 std::vector<std::string>{"--workers", "2"});
+    ASSERT_GT(fresh->port(), 0) << fresh->log();
+    std::unique_ptr<ServerProcess> old;
+    {
+      std::lock_guard<std::mutex> lock(host_mu[h]);
+      old = std::move(hosts[h]);
+      hosts[h] = std::move(fresh);  // new uploads go to the restarted host
+    }
+    old->Signal(SIGKILL);
+  }
+  stop = true;
+  for (auto& t : uploaders) t.join();
+  ASSERT_GT(acknowledged.size(), static_cast<size_t>(kKills));
+
+  auto client = hosts[0]->Client();
+  for (const auto& [id, bytes] : acknowledged) {
+    auto res = client.Get(("/api/v1/recordings/" + std::to_string(id) + "/data").c_str());
+    ASSERT_TRUE(res);
+    ASSERT_EQ(res->status, 200) << "recording " << id << " lost";
+    EXPECT_EQ(res->body, bytes) << "recording " << id << " differs";
+  }
+  // Drain: jobs of killed hosts are taken back by the restarted host of the same machine.
+  json health;
+  for (int i = 0; i < 3000; ++i) {
+    auto res = client.Get("/healthz");
+    if (res && res->status == 200) {
+      health = json::parse(res->body);
+      if (health["queued"] == 0 && health["running"] == 0) break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_EQ(health["queued"], 0) << health.dump();
+  EXPECT_EQ(health["running"], 0) << health.dump();
+  for (int64_t id : jobs) {
+    auto res = client.Get(("/api/v1/jobs/" + std::to_string(id)).c_str());
+    ASSERT_TRUE(res);
+    ASSERT_EQ(res->status, 200);
+    EXPECT_EQ(json::parse(res->body)["status"], "succeeded") << res->body;
+  }
+  for (auto& h : hosts) EXPECT_EQ(h->Signal(SIGTERM), 0) << h->log();
+
+  // In the database: every job succeeded, with exactly one result each, every recording sound.
+  std::unique_ptr<storage::PgConn> sql;
+  ASSERT_TRUE(storage::PgConn::Connect(uri_, "test", &sql).ok());
+  storage::PgResult r;
+  ASSERT_TRUE(sql->Exec("SELECT COUNT(*), COUNT(*) FILTER (WHERE status = 'succeeded'), "
+                        "(SELECT COUNT(*) FROM results), "
+                        "(SELECT COUNT(DISTINCT job_id) FROM results) FROM jobs",
+                        {}, &r)
+                  .ok());
+  EXPECT_GE(r.Int(0, 0), static_cast<int64_t>(jobs.size()));
+  EXPECT_EQ(r.Int(0, 1), r.Int(0, 0));  // every job, acknowledged or not, succeeded
+  EXPECT_EQ(r.Int(0, 2), r.Int(0, 0));  // one result per job
+  EXPECT_EQ(r.Int(0, 3), r.Int(0, 0));
+  std::unique_ptr<storage::Store> store;
+  ASSERT_TRUE(storage::Store::Open(uri_, {}, &store).ok());
+  std::string integrity;
+  ASSERT_TRUE(store->IntegrityCheck(&integrity).ok());
+  EXPECT_EQ(integrity, "ok");
+}
+
+}  // namespace
+}  // namespace calibd::server

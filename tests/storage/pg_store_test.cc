@@ -1,0 +1,361 @@
+// PgStore: what only the PostgreSQL backend promises beyond the shared Store contract
+// (store_test.cc runs that against both): several stores (as on several hosts) on one database,
+// schema versioning under concurrent openers, chunked recordings, LISTEN/NOTIFY, and a server
+// that goes away and comes back. Runs against a throw-away cluster (pg_test_cluster.h).
+#include "storage/pg_store.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <mutex>
+#include <set>
+#include <thread>
+#include <vector>
+
+#include "storage/pg_conn.h"
+#include "storage/store.h"
+#include "tests/lib/sanitizer.h"
+#include "tests/storage/pg_test_cluster.h"
+#include "tests/storage/storage_test_util.h"
+
+namespace calibd::storage {
+namespace {
+
+using testing::FakeClock;
+using testing::PgTestCluster;
+using testing::RandomBytes;
+
+class PgStoreTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    cluster_ = PgTestCluster::Get();
+    ASSERT_NE(cluster_, nullptr);
+    uri_ = cluster_->NewDatabase();
+  }
+
+  std::unique_ptr<Store> Open(StoreOptions o = {}) {
+    if (!o.now_ms) o.now_ms = clock_.Fn();
+    std::unique_ptr<Store> store;
+    Status s = Store::Open(uri_, o, &store);
+    EXPECT_TRUE(s.ok()) << s.ToString();
+    return store;
+  }
+
+  std::unique_ptr<PgConn> Sql() {
+    std::unique_ptr<PgConn> c;
+    Status s = PgConn::Connect(uri_, "test", &c);
+    EXPECT_TRUE(s.ok()) << s.ToString();
+    return c;
+  }
+
+  int64_t Put(Store* store, const std::string& bytes, const std::string& device = "SN1") {
+    NewRecording r;
+    r.data = bytes;
+    r.device = device;
+    RecordingInfo info;
+    Status s = store->PutRecording(r, &info, nullptr);
+    EXPECT_TRUE(s.ok()) << s.ToString();
+    return info.id;
+  }
+
+  PgTestCluster* cluster_ = nullptr;
+  std::string uri_;
+  FakeClock clock_;
+};
+
+TEST_F(PgStoreTest, OpenPicksThePostgresBackendForUrisAndKeywordStrings) {
+  EXPECT_TRUE(Store::IsPostgresTarget("postgresql://u@db/calibd"));
+  EXPECT_TRUE(Store::IsPostgresTarget("postgres:///calibd?host=/run/postgresql"));
+  EXPECT_TRUE(Store::IsPostgresTarget("host=db dbname=calibd"));
+  EXPECT_TRUE(Store::IsPostgresTarget("host=/run/postgresql dbname=calibd"));
+  EXPECT_TRUE(Store::IsPostgresTarget("service = calibd"));
+  EXPECT_FALSE(Store::IsPostgresTarget("data/calibd.db"));
+  EXPECT_FALSE(Store::IsPostgresTarget("/var/lib/calibd/calibd.db"));
+  EXPECT_FALSE(Store::IsPostgresTarget("./a=b.db"));
+  EXPECT_FALSE(Store::IsPostgresTarget("calibd.db"));
+  EXPECT_FALSE(Store::IsPostgresTarget("=x"));
+  auto store = Open();
+  ASSERT_NE(store, nullptr);
+  EXPECT_STREQ(store->backend(), "postgresql");
+}
+
+TEST_F(PgStoreTest, PasswordsNeverAppearInTheDisplayedTarget) {
+  EXPECT_EQ(RedactConnectionTarget("postgresql://calibd:s3cret@db:5432/calibd"),
+            "postgresql://calibd:***@db:5432/calibd");
+  EXPECT_EQ(RedactConnectionTarget("host=db password=s3cret dbname=calibd"),
+            "host=db password=*** dbname=calibd");
+  EXPECT_EQ(RedactConnectionTarget("postgresql:///calibd?user=u&password=s3cret&host=/tmp"),
+            "postgresql:///calibd?user=u&password=***&host=/tmp");
+  EXPECT_EQ(RedactConnectionTarget("postgresql://db/calibd"), "postgresql://db/calibd");
+}
+
+TEST_F(PgStoreTest, UnreachableServerIsBusyNamingTheTargetWithoutItsPassword) {
+  std::unique_ptr<Store> store;
+  Status s =
+      Store::Open("postgresql://u:pw@/calibd?host=" + cluster_->dir() + "/nowhere", {}, &store);
+  EXPECT_EQ(s.code(), StatusCode::kBusy) << s.ToString();
+  EXPECT_NE(s.message().find("cannot connect to PostgreSQL"), std::string::npos) << s.message();
+  EXPECT_EQ(s.message().find("pw"), std::string::npos) << s.message();
+}
+
+TEST_F(PgStoreTest, ManyProcessesOpeningAFreshDatabaseAtOnceMigrateItOnce) {
+  constexpr int kOpeners = 8;
+  std::vector<std::thread> threads;
+  std::atomic<int> ok{0};
+  for (int i = 0; i < kOpeners; ++i) {
+    threads.emplace_back([&] {
+      std::unique_ptr<Store> store;
+      Status s = Store::Open(uri_, {}, &store);
+      if (s.ok())
+        ++ok;
+      else
+        ADD_FAILURE() << s.ToString();
+    });
+  }
+  for (auto& t : threads) t.join();
+  EXPECT_EQ(ok.load(), kOpeners);
+  auto c = Sql();
+  int64_t version = 0;
+  ASSERT_TRUE(PgSchemaVersion(c.get(), &version).ok());
+  EXPECT_EQ(version, kPgSchemaVersion);
+  PgResult rows;
+  ASSERT_TRUE(c->Exec("SELECT COUNT(*) FROM calibd_schema", {}, &rows).ok());
+  EXPECT_EQ(rows.Int(0, 0), 1);
+}
+
+TEST_F(PgStoreTest, RefusesADatabaseWithANewerSchema) {
+  ASSERT_NE(Open(), nullptr);
+  auto c = Sql();
+  ASSERT_TRUE(c->ExecScript("UPDATE calibd_schema SET version = 99").ok());
+  std::unique_ptr<Store> store;
+  Status s = Store::Open(uri_, {}, &store);
+  EXPECT_EQ(s.code(), StatusCode::kConflict) << s.ToString();
+  EXPECT_NE(s.message().find("newer than this calibd supports"), std::string::npos);
+}
+
+TEST_F(PgStoreTest, ReadOnlyStoreReadsButRefusesWrites) {
+  auto rw = Open();
+  int64_t rec = Put(rw.get(), "abc");
+  StoreOptions o;
+  o.read_only = true;
+  auto ro = Open(o);
+  ASSERT_NE(ro, nullptr);
+  std::string back;
+  ASSERT_TRUE(ro->ReadRecordingBytes(rec, &back).ok());
+  EXPECT_EQ(back, "abc");
+  JobInfo job;
+  EXPECT_EQ(ro->EnqueueJob(rec, "pca", "", "{}", &job).code(), StatusCode::kIoError);
+  StoreOptions quota;
+  quota.max_page_count = 10;
+  std::unique_ptr<Store> refused;
+  EXPECT_EQ(Store::Open(uri_, quota, &refused).code(), StatusCode::kInvalidInput);
+}
+
+TEST_F(PgStoreTest, RecordingsAreStoredInChunksOfAtMostOneMebibyte) {
+  auto store = Open();
+  const std::string bytes = RandomBytes((5u << 20) + 123, 7);
+  int64_t rec = Put(store.get(), bytes);
+  auto c = Sql();
+  PgResult r;
+  ASSERT_TRUE(c->Exec("SELECT COUNT(*), MAX(length(data)), SUM(length(data)) FROM "
+                      "recording_chunks WHERE recording_id = $1",
+                      {PgInt(rec)}, &r)
+                  .ok());
+  EXPECT_EQ(r.Int(0, 0), 6);
+  EXPECT_EQ(r.Int(0, 1), 1 << 20);
+  EXPECT_EQ(r.Int(0, 2), static_cast<int64_t>(bytes.size()));
+  std::string back;
+  ASSERT_TRUE(store->ReadRecordingBytes(rec, &back).ok());
+  EXPECT_TRUE(back == bytes);
+  std::string check;
+  ASSERT_TRUE(store->IntegrityCheck(&check).ok());
+  EXPECT_EQ(check, "ok");
+  // A lost chunk is reported, not silently served short.
+  ASSERT_TRUE(
+      c->Exec("DELETE FROM recording_chunks WHERE recording_id = $1 AND seq = 3", {PgInt(rec)})
+          .ok());
+  ASSERT_TRUE(store->IntegrityCheck(&check).ok());
+  EXPECT_NE(check, "ok");
+  EXPECT_EQ(store->ReadRecordingBytes(rec, &back).code(), StatusCode::kCorruption);
+}
+
+TEST_F(PgStoreTest, IdenticalUploadsOnSeveralHostsAtOnceAreStoredOnce) {
+  constexpr int kHosts = 4;
+  std::vector<std::unique_ptr<Store>> hosts;
+  for (int i = 0; i < kHosts; ++i) hosts.push_back(Open());
+  const std::string bytes = RandomBytes(3u << 20, 11);
+  std::vector<int64_t> ids(kHosts);
+  std::vector<int> existed(kHosts);
+  std::vector<std::thread> threads;
+  for (int i = 0; i < kHosts; ++i) {
+    threads.emplace_back([&, i] {
+      NewRecording r;
+      r.data = bytes;
+      r.job = NewJob{"pca", "SN" + std::to_string(i), "{}"};
+      RecordingInfo info;
+      bool dup = false;
+      Status s = hosts[i]->PutRecording(r, &info, &dup);
+      EXPECT_TRUE(s.ok()) << s.ToString();
+      ids[i] = info.id;
+      existed[i] = dup;
+    });
+  }
+  for (auto& t : threads) t.join();
+  for (int i = 1; i < kHosts; ++i) EXPECT_EQ(ids[i], ids[0]);
+  int fresh = 0;
+  for (int e : existed) fresh += e ? 0 : 1;
+  EXPECT_EQ(fresh, 1);
+  int64_t jobs = 0;
+  ASSERT_TRUE(hosts[0]->CountJobs(JobFilter(), &jobs).ok());
+  EXPECT_EQ(jobs, kHosts);  // every upload's job, all against the one recording
+}
+
+TEST_F(PgStoreTest, HostsClaimingConcurrentlyNeverGetTheSameJob) {
+  constexpr int kHosts = 3, kThreads = 3;
+  const int kJobs = sanitizer::kSanitizer ? 60 : 150;
+  auto setup = Open();
+  int64_t rec = Put(setup.get(), "x");
+  for (int i = 0; i < kJobs; ++i) {
+    JobInfo job;
+    ASSERT_TRUE(setup->EnqueueJob(rec, "pca", "", "{}", &job).ok());
+  }
+  std::vector<std::unique_ptr<Store>> hosts;
+  for (int i = 0; i < kHosts; ++i) hosts.push_back(Open());
+  std::mutex mu;
+  std::multiset<int64_t> done;
+  std::vector<std::thread> threads;
+  for (int h = 0; h < kHosts; ++h) {
+    for (int t = 0; t < kThreads; ++t) {
+      threads.emplace_back([&, h, t] {
+        const std::string me = "h" + std::to_string(h) + "-" + std::to_string(t);
+        for (;;) {
+          JobInfo job;
+          bool claimed = false;
+          Status s = hosts[h]->ClaimJob(me, 60000, &job, &claimed);
+          if (!s.ok()) {
+            ADD_FAILURE() << s.ToString();
+            return;
+          }
+          if (!claimed) return;
+          s = hosts[h]->CompleteJob(job.id, me, "{\"by\":\"" + me + "\"}");
+          EXPECT_TRUE(s.ok()) << s.ToString();
+          std::lock_guard<std::mutex> lock(mu);
+          done.insert(job.id);
+        }
+      });
+    }
+  }
+  for (auto& t : threads) t.join();
+  EXPECT_EQ(static_cast<int>(done.size()), kJobs);
+  EXPECT_EQ(static_cast<int>(std::set<int64_t>(done.begin(), done.end()).size()), kJobs);
+  auto c = Sql();
+  PgResult r;
+  ASSERT_TRUE(c->Exec("SELECT COUNT(*) FROM results", {}, &r).ok());
+  EXPECT_EQ(r.Int(0, 0), kJobs);
+}
+
+TEST_F(PgStoreTest, TwoHostsRacingOnAnExpiredLeaseStoreOneResult) {
+  auto a = Open();
+  auto b = Open();
+  int64_t rec = Put(a.get(), "race");
+  JobInfo job;
+  ASSERT_TRUE(a->EnqueueJob(rec, "pca", "SN1", "{}", &job).ok());
+  JobInfo claimed_a, claimed_b;
+  bool got = false;
+  ASSERT_TRUE(a->ClaimJob("hostA-1", 1000, &claimed_a, &got).ok() && got);
+  clock_.Advance(1500);  // host A hangs past its lease
+  ASSERT_TRUE(b->ClaimJob("hostB-1", 1000, &claimed_b, &got).ok() && got);
+  EXPECT_EQ(claimed_b.id, job.id);
+  EXPECT_EQ(claimed_b.attempts, 2);
+  // Both finish at the same moment with different results: only the holder's is stored.
+  Status sa, sb;
+  std::thread ta([&] { sa = a->CompleteJob(job.id, "hostA-1", "{\"by\":\"A\"}"); });
+  std::thread tb([&] { sb = b->CompleteJob(job.id, "hostB-1", "{\"by\":\"B\"}"); });
+  ta.join();
+  tb.join();
+  EXPECT_EQ(sa.code(), StatusCode::kConflict) << sa.ToString();
+  EXPECT_TRUE(sb.ok()) << sb.ToString();
+  JobInfo final_job;
+  ASSERT_TRUE(a->GetJob(job.id, &final_job).ok());
+  EXPECT_EQ(final_job.result_json, "{\"by\":\"B\"}");
+  // B again with its result: idempotent; A with B's result: also OK (the identical result).
+  EXPECT_TRUE(b->CompleteJob(job.id, "hostB-1", "{\"by\":\"B\"}").ok());
+  EXPECT_TRUE(a->CompleteJob(job.id, "hostA-1", "{\"by\":\"B\"}").ok());
+}
+
+TEST_F(PgStoreTest, ListenerHearsJobsEnqueuedByAnotherHost) {
+  auto worker_host = Open();
+  auto upload_host = Open();
+  std::mutex mu;
+  std::condition_variable cv;
+  int heard = 0;
+  ASSERT_TRUE(worker_host->SetJobListener([&] {
+    std::lock_guard<std::mutex> lock(mu);
+    ++heard;
+    cv.notify_all();
+  }));
+  // The listener announces itself once when connected (jobs may predate it); wait for that.
+  {
+    std::unique_lock<std::mutex> lock(mu);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return heard >= 1; }));
+    heard = 0;
+  }
+  int64_t rec = Put(upload_host.get(), "notify");
+  {
+    std::unique_lock<std::mutex> lock(mu);
+    EXPECT_EQ(heard, 0);  // an upload without a job wakes nobody
+  }
+  JobInfo job;
+  ASSERT_TRUE(upload_host->EnqueueJob(rec, "pca", "", "{}", &job).ok());
+  std::unique_lock<std::mutex> lock(mu);
+  EXPECT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return heard >= 1; }));
+  lock.unlock();
+  worker_host->SetJobListener(nullptr);
+}
+
+// Stops and restarts the cluster.
+TEST_F(PgStoreTest, ServerRestartedWhileTheStoreWasIdleIsInvisibleToItsNextCalls) {
+  auto store = Open();
+  int64_t rec = Put(store.get(), "before the restart");
+  RecordingInfo info;
+  ASSERT_TRUE(store->GetRecording(rec, &info).ok());  // idle pooled connections now
+  ASSERT_TRUE(cluster_->Stop());
+  ASSERT_TRUE(cluster_->Start());
+  Status s = store->GetRecording(rec, &info);  // a read: runs again on a fresh connection
+  EXPECT_TRUE(s.ok()) << s.ToString();
+  ASSERT_TRUE(cluster_->Stop());
+  ASSERT_TRUE(cluster_->Start());
+  JobInfo job;
+  s = store->EnqueueJob(rec, "pca", "", "{}", &job);  // a write whose BEGIN found it dead
+  EXPECT_TRUE(s.ok()) << s.ToString();
+}
+
+// Last in this file: it stops and restarts the cluster.
+TEST_F(PgStoreTest, ServerGoingAwayIsBusyAndTheStoreReconnectsByItself) {
+  auto store = Open();
+  int64_t rec = Put(store.get(), "before the outage");
+  ASSERT_TRUE(cluster_->Stop());
+  JobInfo job;
+  Status s = store->EnqueueJob(rec, "pca", "", "{}", &job);
+  EXPECT_EQ(s.code(), StatusCode::kBusy) << s.ToString();
+  EXPECT_EQ(store->Ping().code(), StatusCode::kBusy);
+  RecordingInfo info;
+  s = store->GetRecording(rec, &info);
+  EXPECT_EQ(s.code(), StatusCode::kBusy) << s.ToString();
+  EXPECT_NE(s.message().find("PostgreSQL"), std::string::npos) << s.message();
+  EXPECT_EQ(s.message().find('\n'), std::string::npos) << s.message();  // one line
+  ASSERT_TRUE(cluster_->Start());
+  EXPECT_TRUE(store->Ping().ok());
+  ASSERT_TRUE(store->EnqueueJob(rec, "pca", "", "{}", &job).ok());
+  std::string back;
+  ASSERT_TRUE(store->ReadRecordingBytes(rec, &back).ok());
+  EXPECT_EQ(back, "before the outage");
+  int64_t n = 0;
+  ASSERT_TRUE(store->CountJobs(JobFilter(), &n).ok());
+  EXPECT_EQ(n, 1);  // the refused enqueue left nothing behind
+}
+
+}  // namespace
+}  // namespace calibd::storage
