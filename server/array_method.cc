@@ -1097,6 +1097,15 @@ namespace {
 class Array : public Method {
  public:
   const char* name() const override { return "array"; }
+  std::vector<ExportFormat> ExportFormats() const override {
+    return {CsvFormat(), CHeaderFormat()};
+  }
+  Status Export(const std::string& format, const nlohmann::json& result,
+                const ExportContext& context, std::string* out) const override {
+    if (format == "csv") return ArrayResultToCsv(result, out);
+    if (format == "h") return ArrayResultToHeader(result, context, out);
+    return NoSuchExport(format, name());
+  }
   const char* summary() const override {
     return "positions of the accelerometer triads of an inertial sensor array from a free, "
            "hand-twisted recording (Carlsson, Skog, Jalden: maximum likelihood)";

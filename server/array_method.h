@@ -191,6 +191,11 @@ Status SimulateArrayStaticFiles(const ArraySimulationFileOptions& options, int p
 Status SimulateArrayFullFiles(const ArraySimulationFileOptions& options, std::string* csv,
                               nlohmann::json* config, nlohmann::json* truth);
 
+// Exports of a array result (server/array_exports.cc; formats in server/exports.h).
+Status ArrayResultToCsv(const nlohmann::json& result, std::string* out);
+Status ArrayResultToHeader(const nlohmann::json& result, const ExportContext& context,
+                           std::string* out);
+
 }  // namespace calibd::server
 
 #endif  // CALIBD_SERVER_ARRAY_METHOD_H_

@@ -7,6 +7,7 @@
 
 #include "server/inertial_log.h"
 #include "server/noise_reference.h"
+#include "server/openvins_yaml.h"
 
 namespace calibd::server {
 
@@ -264,6 +265,18 @@ json DiagnosticsJson(const core::ImuResult& r) {
 class Imu : public Method {
  public:
   const char* name() const override { return "imu"; }
+  std::vector<ExportFormat> ExportFormats() const override {
+    return {CsvFormat(), CHeaderFormat(),
+            ExportFormat{"yaml", "OpenVINS kalibr_imu_chain.yaml", "application/yaml",
+                         "kalibr_imu_chain.yaml"}};
+  }
+  Status Export(const std::string& format, const nlohmann::json& result,
+                const ExportContext& context, std::string* out) const override {
+    if (format == "csv") return ImuResultToCsv(result, out);
+    if (format == "h") return ImuResultToHeader(result, context, out);
+    if (format == "yaml") return ImuResultToOpenVinsYaml(result, context, out);
+    return NoSuchExport(format, name());
+  }
   const char* summary() const override {
     return "accelerometer and gyroscope gains, misalignments and biases of each IMU from a "
            "hand-held log of static orientations joined by rotations (imu_tk model, ML)";

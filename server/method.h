@@ -3,9 +3,11 @@
 // registry of all of them (server/methods.cc).
 //
 // Adding a method: its numerics in core/, its adapter server/<name>_method.{h,cc} (config keys to
-// core options, core result to the SPEC §4 result JSON, a class implementing Method), and one
-// line in AllMethods(). The CLI's `calibrate`, the upload and job routes, the job list filters and
-// the OpenAPI document find methods through the registry.
+// core options, core result to the SPEC §4 result JSON, a class implementing Method) with its
+// exports (server/<name>_exports.cc), its report (web/<name>_report.cc, registered in
+// web/method_reports.cc), and one line in AllMethods(). The CLI's `calibrate` and `simulate`, the
+// upload, job and export routes, the job list filters and the OpenAPI document find methods
+// through the registry.
 #ifndef CALIBD_SERVER_METHOD_H_
 #define CALIBD_SERVER_METHOD_H_
 
@@ -18,6 +20,7 @@
 #include "core/block_lm.h"
 #include "core/status.h"
 #include "server/acceptance.h"
+#include "server/exports.h"
 #include "server/recording.h"
 
 namespace calibd::server {
@@ -55,6 +58,14 @@ class Method {
   // rejection. Deterministic.
   virtual void Judge(const nlohmann::json& result, const nlohmann::json& config,
                      const AcceptanceLimits& limits, Verdict* verdict) const = 0;
+  // The formats its results export to besides JSON, in the order the pages offer them.
+  virtual std::vector<ExportFormat> ExportFormats() const = 0;
+  // Writes a result this method's Run wrote (as stored) in one of its ExportFormats().
+  // kInvalidInput naming `format` for a format it does not have; kNotDeterminable when the result
+  // lacks a value the format needs (an undefined figure is never written as 0); kInternal when
+  // the result lacks its SPEC keys.
+  virtual Status Export(const std::string& format, const nlohmann::json& result,
+                        const ExportContext& context, std::string* out) const = 0;
   // The job's peak memory per value of the recording (rows x columns), in bytes: the parser's
   // doubles (8) plus what the method's run holds at its peak, measured on large recordings
   // (bench/README.md, "Memory budget per job"). Used by the per-job budget (server/job_budget.h)

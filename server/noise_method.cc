@@ -51,6 +51,17 @@ Status ParseNoiseConfig(const json& config, core::NoiseOptions* options, Inertia
 class Noise : public Method {
  public:
   const char* name() const override { return "noise"; }
+  std::vector<ExportFormat> ExportFormats() const override {
+    return {CsvFormat(), CHeaderFormat(),
+            ExportFormat{"yaml", "Kalibr imu.yaml", "application/yaml", "imu.yaml"}};
+  }
+  Status Export(const std::string& format, const nlohmann::json& result,
+                const ExportContext& context, std::string* out) const override {
+    if (format == "csv") return NoiseResultToCsv(result, out);
+    if (format == "h") return NoiseResultToHeader(result, context, out);
+    if (format == "yaml") return NoiseResultToKalibrYaml(result, context, out);
+    return NoSuchExport(format, name());
+  }
   const char* summary() const override {
     return "white noise density, bias instability and random walk of every channel of a long "
            "stationary log (Allan deviation, IEEE Std 952)";

@@ -399,6 +399,15 @@ namespace {
 class Pca : public Method {
  public:
   const char* name() const override { return "pca"; }
+  std::vector<ExportFormat> ExportFormats() const override {
+    return {CsvFormat(), CHeaderFormat()};
+  }
+  Status Export(const std::string& format, const nlohmann::json& result,
+                const ExportContext& context, std::string* out) const override {
+    if (format == "csv") return PcaResultToCsv(result, out);
+    if (format == "h") return PcaResultToHeader(result, context, out);
+    return NoSuchExport(format, name());
+  }
   const char* summary() const override {
     return "sensitivity vectors (axis x scale) and biases of m single-axis sensors from static "
            "positions (Rupniewski, PCA-aided calibration)";

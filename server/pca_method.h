@@ -53,6 +53,11 @@ void JudgePca(const nlohmann::json& result, const nlohmann::json& config,
 Status SimulatePcaFiles(const core::PcaSimulationOptions& options, std::string* csv,
                         nlohmann::json* config, nlohmann::json* truth);
 
+// Exports of a pca result (server/pca_exports.cc; formats in server/exports.h).
+Status PcaResultToCsv(const nlohmann::json& result, std::string* out);
+Status PcaResultToHeader(const nlohmann::json& result, const ExportContext& context,
+                         std::string* out);
+
 }  // namespace calibd::server
 
 #endif  // CALIBD_SERVER_PCA_METHOD_H_

@@ -1145,9 +1145,22 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
   const std::string serial = req.matches[1];
   std::string method = req.get_param_value("method");
   const std::string format = req.has_param("format") ? req.get_param_value("format") : "json";
-  if (format != "json" && format != "csv" && format != "h" && format != "yaml") {
-    return (void)SendStatus(
-        res, Status::InvalidInput("format must be json, csv, h or yaml").WithField("format"));
+  // json, or a format some method exports (Method::ExportFormats).
+  std::vector<std::string> formats = {"json"};
+  for (const Method* m : AllMethods()) {
+    for (const ExportFormat& f : m->ExportFormats()) {
+      if (std::find(formats.begin(), formats.end(), f.format) == formats.end()) {
+        formats.push_back(f.format);
+      }
+    }
+  }
+  if (std::find(formats.begin(), formats.end(), format) == formats.end()) {
+    std::string list;
+    for (size_t i = 0; i < formats.size(); ++i) {
+      list += (i == 0 ? "" : i + 1 == formats.size() ? " or " : ", ") + formats[i];
+    }
+    return (void)SendStatus(res,
+                            Status::InvalidInput("format must be " + list).WithField("format"));
   }
   storage::JobInfo job;
   Status s;
@@ -1253,30 +1266,21 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
   json result;
   s = ParseJsonText(job.result_json, "stored result", &result);
   if (!s.ok()) return (void)SendStatus(res, Status::Internal("stored result is not JSON"));
+  // The method writes its own formats (Method::Export).
+  const Method* exporter = FindMethod(method);
+  if (exporter == nullptr) return (void)SendStatus(res, Status::Internal("unknown stored method"));
+  const std::vector<ExportFormat> exports = exporter->ExportFormats();
+  const auto f = std::find_if(exports.begin(), exports.end(),
+                              [&](const ExportFormat& e) { return e.format == format; });
+  if (f == exports.end()) return (void)SendStatus(res, NoSuchExport(format, exporter->name()));
   std::string text;
-  if (format == "csv") {
-    s = ResultToCsv(result, &text);
-    if (!s.ok()) return (void)SendStatus(res, s);
-    res.set_header("Content-Disposition",
-                   "attachment; filename=\"calibration-" + std::to_string(job.id) + ".csv\"");
-    res.set_content(text, "text/csv");
-    return;
-  }
-  ExportContext context{job.id, serial, method, job.finished_at};
-  if (format == "yaml") {
-    s = ResultToKalibrYaml(result, context, &text);
-    if (!s.ok()) return (void)SendStatus(res, s);
-    res.set_header("Content-Disposition", method == "imu"
-                                              ? "attachment; filename=\"kalibr_imu_chain.yaml\""
-                                              : "attachment; filename=\"imu.yaml\"");
-    res.set_content(text, "application/yaml");
-    return;
-  }
-  s = ResultToHeader(result, context, &text);
+  s = exporter->Export(format, result, ExportContext{job.id, serial, method, job.finished_at},
+                       &text);
   if (!s.ok()) return (void)SendStatus(res, s);
-  res.set_header("Content-Disposition",
-                 "attachment; filename=\"calibration-" + std::to_string(job.id) + ".h\"");
-  res.set_content(text, "text/x-c");  // C99 and C++
+  const std::string file_name =
+      f->file_name.empty() ? "calibration-" + std::to_string(job.id) + "." + format : f->file_name;
+  res.set_header("Content-Disposition", "attachment; filename=\"" + file_name + "\"");
+  res.set_content(text, f->content_type);
 }
 
 void Service::Impl::HandleRecording(const httplib::Request& req, httplib::Response& res) {
