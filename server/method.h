@@ -12,9 +12,11 @@
 #define CALIBD_SERVER_METHOD_H_
 
 #include <atomic>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "core/block_lm.h"
@@ -23,7 +25,19 @@
 #include "server/exports.h"
 #include "server/recording.h"
 
+namespace CLI {
+class App;  // CLI11 (server/cli.cc)
+}  // namespace CLI
+
 namespace calibd::server {
+
+// The files of `calibd simulate NAME` (server/cli.cc writes them into --out).
+struct SimulatedFiles {
+  std::string csv;        // recording.csv
+  nlohmann::json config;  // config.json
+  nlohmann::json truth;   // truth.json: the parameters the simulation used
+  std::vector<std::pair<std::string, std::string>> extra;  // further files: name, content
+};
 
 // What a run may consult besides its inputs.
 struct RunContext {
@@ -66,6 +80,16 @@ class Method {
   // the result lacks its SPEC keys.
   virtual Status Export(const std::string& format, const nlohmann::json& result,
                         const ExportContext& context, std::string* out) const = 0;
+  // `calibd simulate NAME`: one line for its --help ("" when the method has no simulation).
+  virtual const char* simulate_summary() const { return ""; }
+  // Adds the simulation's options (all but --out, which the CLI adds) to `command`, the
+  // subcommand the CLI made with the method's name and simulate_summary(), and returns what
+  // makes the files once the command line has been parsed (deterministic per seed). Called once
+  // per process; the options it binds live as long as the returned function.
+  virtual std::function<Status(SimulatedFiles*)> AddSimulateOptions(CLI::App* command) const {
+    (void)command;
+    return {};
+  }
   // The job's peak memory per value of the recording (rows x columns), in bytes: the parser's
   // doubles (8) plus what the method's run holds at its peak, measured on large recordings
   // (bench/README.md, "Memory budget per job"). Used by the per-job budget (server/job_budget.h)
