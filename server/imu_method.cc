@@ -267,6 +267,7 @@ json DiagnosticsJson(const core::ImuResult& r) {
 class Imu : public Method {
  public:
   const char* name() const override { return "imu"; }
+  bool NeedsIncreasingTime() const override { return true; }
   const char* simulate_summary() const override {
     return "one IMU placed by hand in n static orientations joined by rotations (imu_tk set-up), "
            "with biases, scale errors and misalignments";

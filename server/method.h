@@ -57,6 +57,9 @@ class Method {
   virtual const char* summary() const = 0;
   // Whether it can calibrate a recording of this layout (a log may suit several methods).
   virtual bool Reads(Layout layout) const = 0;
+  // Whether its recordings need a time column `t` that increases strictly (the raw-log methods):
+  // an upload with a `t` that repeats or goes back is then refused at once (400 naming the line).
+  virtual bool NeedsIncreasingTime() const { return false; }
   // The method's own config keys (the common keys method and device are checked by the caller;
   // unknown keys are errors). kInvalidInput naming the key (Status::field()).
   virtual Status ValidateConfig(const nlohmann::json& config) const = 0;

@@ -53,6 +53,7 @@ Status ParseNoiseConfig(const json& config, core::NoiseOptions* options, Inertia
 class Noise : public Method {
  public:
   const char* name() const override { return "noise"; }
+  bool NeedsIncreasingTime() const override { return true; }
   const char* simulate_summary() const override {
     return "one IMU at rest: a stationary log with known white noise and random walk";
   }

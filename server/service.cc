@@ -852,7 +852,7 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     if (!s.ok()) return finish(SendStatus(res, s));
     s = ValidateConfig(config, &common);
     if (!s.ok()) return finish(SendStatus(res, s));
-    if (common.method == "imu" || common.method == "noise") {  // raw-log methods: t increases
+    if (FindMethod(common.method)->NeedsIncreasingTime()) {  // raw-log methods
       s = CheckTimesIncrease(summary, common.method);
       if (!s.ok()) return finish(SendStatus(res, s));
     }
