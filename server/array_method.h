@@ -11,7 +11,7 @@
 
 #include "core/array.h"
 #include "core/array_full.h"
-#include "core/status.h"
+#include "base/status.h"
 #include "server/method.h"
 #include "server/recording.h"
 

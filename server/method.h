@@ -20,7 +20,7 @@
 #include <vector>
 
 #include "core/block_lm.h"
-#include "core/status.h"
+#include "base/status.h"
 #include "server/acceptance.h"
 #include "server/exports.h"
 #include "server/recording.h"

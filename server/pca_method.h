@@ -8,7 +8,7 @@
 
 #include "core/pca.h"
 #include "core/pca_simulation.h"
-#include "core/status.h"
+#include "base/status.h"
 #include "server/method.h"
 #include "server/recording.h"
 

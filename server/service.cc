@@ -1,7 +1,6 @@
 #include "server/service.h"
 
 #include <arpa/inet.h>
-#include <openssl/evp.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -17,6 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "base/sha256.h"
 #include "core/task_pool.h"
 #include "server/acceptance.h"
 #include "server/config.h"
@@ -44,29 +44,6 @@ using nlohmann::json;
 namespace {
 
 thread_local std::chrono::steady_clock::time_point t_request_start;
-
-// The SHA-256 of an upload, computed while it streams.
-class Sha256 {
- public:
-  Sha256() : ctx_(EVP_MD_CTX_new()) { EVP_DigestInit_ex(ctx_, EVP_sha256(), nullptr); }
-  ~Sha256() { EVP_MD_CTX_free(ctx_); }
-  void Update(const char* data, size_t len) { EVP_DigestUpdate(ctx_, data, len); }
-  std::string HexDigest() {
-    unsigned char digest[EVP_MAX_MD_SIZE];
-    unsigned int len = 0;
-    EVP_DigestFinal_ex(ctx_, digest, &len);
-    static const char* hex = "0123456789abcdef";
-    std::string out;
-    for (unsigned int i = 0; i < len; ++i) {
-      out += hex[digest[i] >> 4];
-      out += hex[digest[i] & 15];
-    }
-    return out;
-  }
-
- private:
-  EVP_MD_CTX* ctx_;
-};
 
 // A staged upload file, removed when this goes out of scope.
 class StagingFile {
@@ -699,7 +676,7 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
                                             std::to_string(options.max_upload_bytes) + " bytes");
       return false;
     }
-    sha.Update(data, len);
+    sha.Update(std::string_view(data, len));
     if (!staged.Write(data, len)) {
       body_status = Status::IoError("cannot write the upload to disk");
       return false;
