@@ -9,7 +9,6 @@
 
 namespace calibd::server {
 
-using nlohmann::json;
 
 namespace {
 

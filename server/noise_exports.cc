@@ -7,7 +7,6 @@
 
 namespace calibd::server {
 
-using nlohmann::json;
 
 namespace {
 

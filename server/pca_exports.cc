@@ -8,7 +8,6 @@
 
 namespace calibd::server {
 
-using nlohmann::json;
 
 namespace {
 
