@@ -42,7 +42,7 @@
 #include <vector>
 
 #include "core/block_lm.h"
-#include "core/status.h"
+#include "base/status.h"
 
 namespace calibd::core {
 

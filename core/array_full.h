@@ -71,7 +71,7 @@
 
 #include "core/block_lm.h"
 #include "core/static_detection.h"
-#include "core/status.h"
+#include "base/status.h"
 
 namespace calibd::core {
 

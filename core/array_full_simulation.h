@@ -17,7 +17,7 @@
 
 #include "core/array_full.h"
 #include "core/array_simulation.h"
-#include "core/status.h"
+#include "base/status.h"
 
 namespace calibd::core {
 

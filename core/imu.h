@@ -53,7 +53,7 @@
 #include <vector>
 
 #include "core/static_detection.h"
-#include "core/status.h"
+#include "base/status.h"
 
 namespace calibd::core {
 

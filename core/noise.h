@@ -63,7 +63,7 @@
 #include <vector>
 
 #include "core/allan.h"
-#include "core/status.h"
+#include "base/status.h"
 
 namespace calibd::core {
 

@@ -1,9 +1,11 @@
 #include "server/array_method.h"
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <memory>
 
 #include "core/array_full.h"
 #include "core/array_full_simulation.h"
@@ -1120,6 +1122,101 @@ namespace {
 class Array : public Method {
  public:
   const char* name() const override { return "array"; }
+  const char* simulate_summary() const override {
+    return "Carlsson et al. Section IV: 32 IMUs on a 4x4 grid, top and underside of a PCB";
+  }
+  std::function<Status(SimulatedFiles*)> AddSimulateOptions(CLI::App* command) const override {
+    struct State {
+      ArraySimulationFileOptions options;
+      std::string model = "positions";
+      int static_positions = 0;
+    };
+    auto state = std::make_shared<State>();
+    command->add_option("--seed", state->options.seed, "random seed")->capture_default_str();
+    command->add_option("-N,--samples", state->options.samples, "number of samples N")
+        ->check(CLI::Range(1, 100000000))
+        ->capture_default_str();
+    command->add_option("--omega", state->options.omega_norm_dps, "‖ω‖ in °/s")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command->add_option("--omega-dot", state->options.omega_dot_norm_dps2, "‖ω̇‖ in °/s²")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command->add_option("--accel-noise", state->options.accel_noise, "σ_a in m/s²")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command->add_option("--gyro-noise", state->options.gyro_noise_dps, "σ_g in °/s")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command
+        ->add_option("--position-perturbation", state->options.position_perturbation,
+                     "σ of the true positions around the nominal grid, m")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command->add_option("--gyro-unit", state->options.gyro_unit, "unit of the gyroscope columns")
+        ->check(CLI::IsMember({"rad/s", "deg/s"}))
+        ->capture_default_str();
+
+    command
+        ->add_option("--accel-bias", state->options.accel_bias,
+                     "σ of each accelerometer bias, m/s² (a per-triad error of the board)")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command
+        ->add_option("--accel-scale-error", state->options.accel_scale_error,
+                     "σ of each accelerometer's relative scale-factor error")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command
+        ->add_option("--accel-misalignment", state->options.accel_misalignment,
+                     "σ of each accelerometer axis tilt, rad")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command
+        ->add_option("--model", state->model,
+                     "positions: the seed's set-up (ideal triads); full: per-triad accelerometer "
+                     "and gyroscope errors, 20 statics then the dynamic phase (-N samples), for "
+                     "model full")
+        ->check(CLI::IsMember({"positions", "full"}))
+        ->capture_default_str();
+    command->add_option("--board", state->options.board, "with --model full: mimu4444 or paper32")
+        ->check(CLI::IsMember({"mimu4444", "paper32"}))
+        ->capture_default_str();
+    command
+        ->add_option("--static-positions", state->static_positions,
+                     "also write static.csv and static_config.json: the same board in n static "
+                     "orientations, for a pca calibration with bias: estimate")
+        ->check(CLI::Range(0, 1000000));
+    command
+        ->add_option("--static-samples", state->options.static_samples,
+                     "samples averaged per static position (noise σ_a/√samples)")
+        ->check(CLI::Range(int64_t{1}, int64_t{1000000000}))
+        ->capture_default_str();
+    return [state](SimulatedFiles* files) {
+      if (state->model == "full") {
+        return SimulateArrayFullFiles(state->options, &files->csv, &files->config, &files->truth);
+      }
+      Status s = SimulateArrayFiles(state->options, &files->csv, &files->config, &files->truth);
+      if (!s.ok() || state->static_positions == 0) return s;
+      std::string static_csv;
+      nlohmann::json static_config;
+      s = SimulateArrayStaticFiles(state->options, state->static_positions, &static_csv,
+                                   &static_config);
+      if (!s.ok()) return s;
+      files->extra = {{"static.csv", static_csv},
+                      {"static_config.json", static_config.dump(2) + "\n"}};
+      return s;
+    };
+  }
+  std::vector<ExportFormat> ExportFormats() const override {
+    return {CsvFormat(), CHeaderFormat()};
+  }
+  Status Export(const std::string& format, const nlohmann::json& result,
+                const ExportContext& context, std::string* out) const override {
+    if (format == "csv") return ArrayResultToCsv(result, out);
+    if (format == "h") return ArrayResultToHeader(result, context, out);
+    return NoSuchExport(format, name());
+  }
   const char* summary() const override {
     return "positions of the accelerometer triads of an inertial sensor array from a free, "
            "hand-twisted recording (Carlsson, Skog, Jalden: maximum likelihood)";

@@ -11,7 +11,7 @@
 
 #include "core/array.h"
 #include "core/array_full.h"
-#include "core/status.h"
+#include "base/status.h"
 #include "server/method.h"
 #include "server/recording.h"
 
@@ -194,6 +194,11 @@ Status SimulateArrayStaticFiles(const ArraySimulationFileOptions& options, int p
 // parameters.imus],"seed","options"}). kInvalidInput for an unknown board or unit.
 Status SimulateArrayFullFiles(const ArraySimulationFileOptions& options, std::string* csv,
                               nlohmann::json* config, nlohmann::json* truth);
+
+// Exports of a array result (server/array_exports.cc; formats in server/exports.h).
+Status ArrayResultToCsv(const nlohmann::json& result, std::string* out);
+Status ArrayResultToHeader(const nlohmann::json& result, const ExportContext& context,
+                           std::string* out);
 
 }  // namespace calibd::server
 

@@ -9,11 +9,8 @@
 #include <thread>
 
 #include "server/acceptance.h"
-#include "server/array_method.h"
 #include "server/config.h"
-#include "server/imu_method.h"
-#include "server/noise_method.h"
-#include "server/pca_method.h"
+#include "server/method.h"
 #include "server/serve.h"
 
 namespace calibd::server {
@@ -246,179 +243,15 @@ int RunCli(int argc, char** argv) {
                          "write DIR/recording.csv, DIR/config.json and DIR/truth.json of a paper's "
                          "simulation set-up (deterministic per seed)");
   simulate_cmd->require_subcommand(1);
+  // One subcommand per method that has a simulation (Method::AddSimulateOptions).
   std::string out_dir;
-  core::PcaSimulationOptions pca_sim;
-  CLI::App* sim_pca = simulate_cmd->add_subcommand(
-      "pca",
-      "Rupniewski Section IV: 4 gyroscope triads of a_model, axes perturbed, n random "
-      "orientations");
-  sim_pca->add_option("--out", out_dir, "output directory")->required();
-  sim_pca->add_option("--seed", pca_sim.seed, "random seed")->capture_default_str();
-  sim_pca->add_option("-n,--positions", pca_sim.positions, "number of positions n")
-      ->check(CLI::Range(1, 10000000))
-      ->capture_default_str();
-  sim_pca->add_option("--noise", pca_sim.noise_std, "reading noise σ")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_pca->add_option("--magnitude", pca_sim.magnitude, "field magnitude c")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  sim_pca
-      ->add_option("--axis-perturbation", pca_sim.axis_perturbation,
-                   "σ of the perturbation of each sensitivity vector")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-
-  ArraySimulationFileOptions array_sim;
-  CLI::App* sim_array = simulate_cmd->add_subcommand(
-      "array", "Carlsson et al. Section IV: 32 IMUs on a 4x4 grid, top and underside of a PCB");
-  sim_array->add_option("--out", out_dir, "output directory")->required();
-  sim_array->add_option("--seed", array_sim.seed, "random seed")->capture_default_str();
-  sim_array->add_option("-N,--samples", array_sim.samples, "number of samples N")
-      ->check(CLI::Range(1, 100000000))
-      ->capture_default_str();
-  sim_array->add_option("--omega", array_sim.omega_norm_dps, "‖ω‖ in °/s")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_array->add_option("--omega-dot", array_sim.omega_dot_norm_dps2, "‖ω̇‖ in °/s²")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_array->add_option("--accel-noise", array_sim.accel_noise, "σ_a in m/s²")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_array->add_option("--gyro-noise", array_sim.gyro_noise_dps, "σ_g in °/s")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_array
-      ->add_option("--position-perturbation", array_sim.position_perturbation,
-                   "σ of the true positions around the nominal grid, m")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_array->add_option("--gyro-unit", array_sim.gyro_unit, "unit of the gyroscope columns")
-      ->check(CLI::IsMember({"rad/s", "deg/s"}))
-      ->capture_default_str();
-
-  sim_pca
-      ->add_option("--bias", pca_sim.bias_std,
-                   "σ of a constant bias added to each sensor (the config then says "
-                   "bias: estimate)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_array
-      ->add_option("--accel-bias", array_sim.accel_bias,
-                   "σ of each accelerometer bias, m/s² (a per-triad error of the board)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_array
-      ->add_option("--accel-scale-error", array_sim.accel_scale_error,
-                   "σ of each accelerometer's relative scale-factor error")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_array
-      ->add_option("--accel-misalignment", array_sim.accel_misalignment,
-                   "σ of each accelerometer axis tilt, rad")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  std::string array_model = "positions";
-  sim_array
-      ->add_option("--model", array_model,
-                   "positions: the seed's set-up (ideal triads); full: per-triad accelerometer "
-                   "and gyroscope errors, 20 statics then the dynamic phase (-N samples), for "
-                   "model full")
-      ->check(CLI::IsMember({"positions", "full"}))
-      ->capture_default_str();
-  sim_array->add_option("--board", array_sim.board, "with --model full: mimu4444 or paper32")
-      ->check(CLI::IsMember({"mimu4444", "paper32"}))
-      ->capture_default_str();
-  int static_positions = 0;
-  sim_array
-      ->add_option("--static-positions", static_positions,
-                   "also write static.csv and static_config.json: the same board in n static "
-                   "orientations, for a pca calibration with bias: estimate")
-      ->check(CLI::Range(0, 1000000));
-  sim_array
-      ->add_option("--static-samples", array_sim.static_samples,
-                   "samples averaged per static position (noise σ_a/√samples)")
-      ->check(CLI::Range(int64_t{1}, int64_t{1000000000}))
-      ->capture_default_str();
-
-  core::ImuSimulationOptions imu_sim;
-  CLI::App* sim_imu = simulate_cmd->add_subcommand(
-      "imu",
-      "one IMU placed by hand in n static orientations joined by rotations (imu_tk set-up), with "
-      "biases, scale errors and misalignments");
-  sim_imu->add_option("--out", out_dir, "output directory")->required();
-  sim_imu->add_option("--seed", imu_sim.seed, "random seed")->capture_default_str();
-  sim_imu->add_option("--statics", imu_sim.statics, "static orientations")
-      ->check(CLI::Range(1, 10000))
-      ->capture_default_str();
-  sim_imu->add_option("--static-seconds", imu_sim.static_duration, "seconds per static")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  sim_imu->add_option("--rotation-seconds", imu_sim.rotation_duration, "seconds per rotation")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  sim_imu->add_option("--rate", imu_sim.rate, "samples per second")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  sim_imu->add_option("--accel-noise", imu_sim.accel_noise, "σ per sample, m/s²")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_imu->add_option("--gyro-noise", imu_sim.gyro_noise, "σ per sample, rad/s")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_imu->add_option("--scale-error", imu_sim.scale_error, "σ of the relative scale errors")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_imu->add_option("--misalignment", imu_sim.misalignment, "σ of the misalignments, rad")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_imu->add_option("--accel-bias", imu_sim.accel_bias, "σ of the accelerometer biases, m/s²")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_imu->add_option("--gyro-bias", imu_sim.gyro_bias, "σ of the gyroscope biases, rad/s")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_imu
-      ->add_option("--gyro-bias-drift", imu_sim.gyro_bias_drift,
-                   "linear gyroscope bias drift, rad/s per s")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_imu
-      ->add_option("--initial-motion", imu_sim.initial_motion,
-                   "seconds of rotation before the first static")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-
-  NoiseSimulationFileOptions noise_sim;
-  CLI::App* sim_noise = simulate_cmd->add_subcommand(
-      "noise", "one IMU at rest: a stationary log with known white noise and random walk");
-  sim_noise->add_option("--out", out_dir, "output directory")->required();
-  sim_noise->add_option("--seed", noise_sim.seed, "random seed")->capture_default_str();
-  sim_noise->add_option("--rate", noise_sim.rate, "samples per second")
-      ->check(CLI::Range(1.0, 100000.0))
-      ->capture_default_str();
-  sim_noise->add_option("--seconds", noise_sim.seconds, "log length, s")
-      ->check(CLI::Range(1.0, 1e6))
-      ->capture_default_str();
-  sim_noise->add_option("--accel-noise", noise_sim.accel_noise, "accelerometer N, m/s²/√Hz")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_noise
-      ->add_option("--accel-random-walk", noise_sim.accel_random_walk, "accelerometer K, m/s³/√Hz")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_noise->add_option("--gyro-noise", noise_sim.gyro_noise, "gyroscope N, rad/s/√Hz")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_noise->add_option("--gyro-random-walk", noise_sim.gyro_random_walk, "gyroscope K, rad/s²/√Hz")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sim_noise
-      ->add_option("--bias-instability", noise_sim.bias_instability,
-                   "B of every channel, as a multiple of its N (0: none)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
+  std::vector<std::pair<CLI::App*, std::function<Status(SimulatedFiles*)>>> simulations;
+  for (const Method* method : AllMethods()) {
+    if (*method->simulate_summary() == '\0') continue;
+    CLI::App* command = simulate_cmd->add_subcommand(method->name(), method->simulate_summary());
+    command->add_option("--out", out_dir, "output directory")->required();
+    simulations.emplace_back(command, method->AddSimulateOptions(command));
+  }
 
   try {
     app.parse(argc, argv);
@@ -429,52 +262,20 @@ int RunCli(int argc, char** argv) {
 
   if (*serve_cmd) return RunServe(serve);
   if (*calibrate_cmd) return Calibrate(recording_path, config_path, compact, acceptance_path);
-  if (*sim_pca) {
-    std::string csv;
-    json config, truth;
-    Status s = SimulatePcaFiles(pca_sim, &csv, &config, &truth);
+  for (const auto& [command, simulate] : simulations) {
+    if (!*command) continue;
+    SimulatedFiles files;
+    Status s = simulate(&files);
     if (!s.ok()) return Report(s);
-    return WriteSimulation(out_dir, csv, config, truth);
-  }
-  if (*sim_imu) {
-    std::string csv;
-    json config, truth;
-    Status s = SimulateImuFiles(imu_sim, &csv, &config, &truth);
-    if (!s.ok()) return Report(s);
-    return WriteSimulation(out_dir, csv, config, truth);
-  }
-  if (*sim_noise) {
-    std::string csv;
-    json config, truth;
-    Status s = SimulateNoiseFiles(noise_sim, &csv, &config, &truth);
-    if (!s.ok()) return Report(s);
-    return WriteSimulation(out_dir, csv, config, truth);
-  }
-  if (*sim_array && array_model == "full") {
-    std::string csv;
-    json config, truth;
-    Status s = SimulateArrayFullFiles(array_sim, &csv, &config, &truth);
-    if (!s.ok()) return Report(s);
-    return WriteSimulation(out_dir, csv, config, truth);
-  }
-  if (*sim_array) {
-    std::string csv;
-    json config, truth;
-    Status s = SimulateArrayFiles(array_sim, &csv, &config, &truth);
-    if (!s.ok()) return Report(s);
-    const int code = WriteSimulation(out_dir, csv, config, truth);
-    if (code != kExitOk || static_positions == 0) return code;
-    std::string static_csv;
-    json static_config;
-    s = SimulateArrayStaticFiles(array_sim, static_positions, &static_csv, &static_config);
-    if (!s.ok()) return Report(s);
-    for (const auto& [name, content] :
-         {std::pair<std::string, std::string>{"static.csv", static_csv},
-          {"static_config.json", static_config.dump(2) + "\n"}}) {
+    const int code = WriteSimulation(out_dir, files.csv, files.config, files.truth);
+    if (code != kExitOk || files.extra.empty()) return code;
+    std::string names;
+    for (const auto& [name, content] : files.extra) {
       s = WriteFileAtomically(out_dir, name, content);
       if (!s.ok()) return Report(s);
+      names += (names.empty() ? "" : " and ") + name;
     }
-    std::cerr << "calibd: wrote static.csv and static_config.json\n";
+    std::cerr << "calibd: wrote " << names << "\n";
     return kExitOk;
   }
   return kExitFailure;

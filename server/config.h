@@ -10,7 +10,7 @@
 #include <string_view>
 
 #include "core/block_lm.h"
-#include "core/status.h"
+#include "base/status.h"
 #include "server/recording.h"
 
 namespace calibd::server {

@@ -1,14 +1,32 @@
 // Representations of a stored calibration for production tooling (GET .../calibration?format=):
-// the result JSON as stored, CSV (one row per sensor / triad), and a C99/C++ header.
+// the result JSON as stored, CSV (one row per sensor / triad), and a C99/C++ header. Each method
+// writes its own (Method::Export, server/<name>_exports.cc); the functions here find the
+// result's method in the registry and ask it.
 #ifndef CALIBD_SERVER_EXPORTS_H_
 #define CALIBD_SERVER_EXPORTS_H_
 
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
-#include "core/status.h"
+#include "base/status.h"
 
 namespace calibd::server {
+
+// A representation of a method's results for production tooling besides the result JSON
+// (GET /api/v1/devices/{serial}/calibration?format=FORMAT).
+struct ExportFormat {
+  std::string format;        // the query's value: "csv", "h", "yaml"
+  std::string label;         // link text on the pages: "CSV", "C header", "Kalibr imu.yaml"
+  std::string content_type;  // of the answer: "text/csv"
+  std::string file_name;     // Content-Disposition file name; "": calibration-JOB.FORMAT
+};
+
+// CSV (one row per sensor / triad / channel) and the C header: every method has both.
+ExportFormat CsvFormat();
+ExportFormat CHeaderFormat();
+// kInvalidInput naming `format`: "<method> results have no format=FORMAT".
+Status NoSuchExport(const std::string& format, const char* method);
 
 // Who and when, for the header comment of the exports.
 struct ExportContext {
@@ -20,7 +38,8 @@ struct ExportContext {
 
 // pca: name,scale,scale_std,axis_*,axis_std_rad,bias,bias_std,sensitivity_*;
 // array: name,x,y,z,offset_x,offset_y,offset_z,std_x,std_y,std_z. Full double precision.
-// kInternal if the result lacks the SPEC keys (a stored result always has them).
+// kInternal if the result lacks the SPEC keys (a stored result always has them) or names no
+// known method.
 Status ResultToCsv(const nlohmann::json& result, std::string* out);
 // Kalibr's imu.yaml (accelerometer_/gyroscope_noise_density and _random_walk, the largest over
 // the axes, update_rate) of a noise result; for an imu result, OpenVINS's kalibr_imu_chain.yaml

@@ -144,21 +144,6 @@ std::string SanitizeForLog(const std::string& s) {
   return out;
 }
 
-std::string UrlEncode(const std::string& s) {
-  static const char* hex = "0123456789ABCDEF";
-  std::string out;
-  for (unsigned char c : s) {
-    if (isalnum(c) || c == '-' || c == '_' || c == '.' || c == '~') {
-      out += static_cast<char>(c);
-    } else {
-      out += '%';
-      out += hex[c >> 4];
-      out += hex[c & 15];
-    }
-  }
-  return out;
-}
-
 bool IfNoneMatchHits(const std::string& header, const std::string& etag) {
   if (header.empty()) return false;
   size_t pos = 0;

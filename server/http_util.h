@@ -13,13 +13,16 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "core/status.h"
+#include "base/status.h"
+#include "base/url.h"
 
 namespace calibd::storage {
 class Store;
 }
 
 namespace calibd::server {
+
+using ::calibd::UrlEncode;  // base/url.h
 
 // "HOST:PORT" or "[V6]:PORT" -> parts. False when malformed (port must be 0..65535).
 bool SplitHostPort(const std::string& listen, std::string* host, int* port);
@@ -41,7 +44,6 @@ std::string ToLower(std::string s);
 std::string RouteLabel(const std::string& path);
 // Printable ASCII only, at most 200 characters: safe for a log line.
 std::string SanitizeForLog(const std::string& s);
-std::string UrlEncode(const std::string& s);
 // True when an If-None-Match header value matches `etag` (a list, or "*").
 bool IfNoneMatchHits(const std::string& header, const std::string& etag);
 // "GET, HEAD" style list of the methods a known path allows; "" for an unknown path.

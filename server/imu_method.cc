@@ -1,12 +1,15 @@
 #include "server/imu_method.h"
 
+#include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <set>
 #include <tuple>
 
 #include "server/inertial_log.h"
 #include "server/noise_reference.h"
+#include "server/openvins_yaml.h"
 
 namespace calibd::server {
 
@@ -264,6 +267,70 @@ json DiagnosticsJson(const core::ImuResult& r) {
 class Imu : public Method {
  public:
   const char* name() const override { return "imu"; }
+  bool NeedsIncreasingTime() const override { return true; }
+  const char* simulate_summary() const override {
+    return "one IMU placed by hand in n static orientations joined by rotations (imu_tk set-up), "
+           "with biases, scale errors and misalignments";
+  }
+  std::function<Status(SimulatedFiles*)> AddSimulateOptions(CLI::App* command) const override {
+    auto options = std::make_shared<core::ImuSimulationOptions>();
+    command->add_option("--seed", options->seed, "random seed")->capture_default_str();
+    command->add_option("--statics", options->statics, "static orientations")
+        ->check(CLI::Range(1, 10000))
+        ->capture_default_str();
+    command->add_option("--static-seconds", options->static_duration, "seconds per static")
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
+    command->add_option("--rotation-seconds", options->rotation_duration, "seconds per rotation")
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
+    command->add_option("--rate", options->rate, "samples per second")
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
+    command->add_option("--accel-noise", options->accel_noise, "σ per sample, m/s²")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command->add_option("--gyro-noise", options->gyro_noise, "σ per sample, rad/s")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command->add_option("--scale-error", options->scale_error, "σ of the relative scale errors")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command->add_option("--misalignment", options->misalignment, "σ of the misalignments, rad")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command->add_option("--accel-bias", options->accel_bias, "σ of the accelerometer biases, m/s²")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command->add_option("--gyro-bias", options->gyro_bias, "σ of the gyroscope biases, rad/s")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command
+        ->add_option("--gyro-bias-drift", options->gyro_bias_drift,
+                     "linear gyroscope bias drift, rad/s per s")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command
+        ->add_option("--initial-motion", options->initial_motion,
+                     "seconds of rotation before the first static")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    return [options](SimulatedFiles* files) {
+      return SimulateImuFiles(*options, &files->csv, &files->config, &files->truth);
+    };
+  }
+  std::vector<ExportFormat> ExportFormats() const override {
+    return {CsvFormat(), CHeaderFormat(),
+            ExportFormat{"yaml", "OpenVINS kalibr_imu_chain.yaml", "application/yaml",
+                         "kalibr_imu_chain.yaml"}};
+  }
+  Status Export(const std::string& format, const nlohmann::json& result,
+                const ExportContext& context, std::string* out) const override {
+    if (format == "csv") return ImuResultToCsv(result, out);
+    if (format == "h") return ImuResultToHeader(result, context, out);
+    if (format == "yaml") return ImuResultToOpenVinsYaml(result, context, out);
+    return NoSuchExport(format, name());
+  }
   const char* summary() const override {
     return "accelerometer and gyroscope gains, misalignments and biases of each IMU from a "
            "hand-held log of static orientations joined by rotations (imu_tk model, ML)";

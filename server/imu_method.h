@@ -35,6 +35,8 @@
 
 namespace calibd::server {
 
+class HeaderWriter;  // server/export_util.h
+
 // The `imu` method for the registry: reads inertial logs (the array layout with `t`).
 const Method& ImuMethod();
 
@@ -47,6 +49,15 @@ Status ParseImuOptions(const nlohmann::json& config, core::ImuOptions* options);
 // ({"accelerometer"/"gyroscope": {"bias","scale","misalignment","matrix"}}).
 Status SimulateImuFiles(const core::ImuSimulationOptions& options, std::string* csv,
                         nlohmann::json* config, nlohmann::json* truth);
+
+// Exports of a imu result (server/imu_exports.cc; formats in server/exports.h).
+Status ImuResultToCsv(const nlohmann::json& result, std::string* out);
+Status ImuResultToHeader(const nlohmann::json& result, const ExportContext& context,
+                         std::string* out);
+// The per-IMU part of the C header (macros prefixed `sub`): per IMU a = MATRIX (y - BIAS) for
+// both triads; also written for an array result of the full model (sub "IMU_").
+Status ImuHeader(const nlohmann::json& params, const nlohmann::json& unc, const std::string& sub,
+                 HeaderWriter* w);
 
 }  // namespace calibd::server
 

@@ -8,7 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "core/status.h"
+#include "base/status.h"
 #include "server/recording.h"
 
 namespace calibd::server {

@@ -13,7 +13,7 @@
 #include <cstdint>
 #include <nlohmann/json.hpp>
 
-#include "core/status.h"
+#include "base/status.h"
 #include "server/method.h"
 
 namespace calibd::server {

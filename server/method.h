@@ -3,24 +3,41 @@
 // registry of all of them (server/methods.cc).
 //
 // Adding a method: its numerics in core/, its adapter server/<name>_method.{h,cc} (config keys to
-// core options, core result to the SPEC §4 result JSON, a class implementing Method), and one
-// line in AllMethods(). The CLI's `calibrate`, the upload and job routes, the job list filters and
-// the OpenAPI document find methods through the registry.
+// core options, core result to the SPEC §4 result JSON, a class implementing Method) with its
+// exports (server/<name>_exports.cc), its report (web/<name>_report.cc, registered in
+// web/method_reports.cc), and one line in AllMethods(). The CLI's `calibrate` and `simulate`, the
+// upload, job and export routes, the job list filters and the OpenAPI document find methods
+// through the registry.
 #ifndef CALIBD_SERVER_METHOD_H_
 #define CALIBD_SERVER_METHOD_H_
 
 #include <atomic>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "core/block_lm.h"
-#include "core/status.h"
+#include "base/status.h"
 #include "server/acceptance.h"
+#include "server/exports.h"
 #include "server/recording.h"
 
+namespace CLI {
+class App;  // CLI11 (server/cli.cc)
+}  // namespace CLI
+
 namespace calibd::server {
+
+// The files of `calibd simulate NAME` (server/cli.cc writes them into --out).
+struct SimulatedFiles {
+  std::string csv;        // recording.csv
+  nlohmann::json config;  // config.json
+  nlohmann::json truth;   // truth.json: the parameters the simulation used
+  std::vector<std::pair<std::string, std::string>> extra;  // further files: name, content
+};
 
 // What a run may consult besides its inputs.
 struct RunContext {
@@ -40,6 +57,9 @@ class Method {
   virtual const char* summary() const = 0;
   // Whether it can calibrate a recording of this layout (a log may suit several methods).
   virtual bool Reads(Layout layout) const = 0;
+  // Whether its recordings need a time column `t` that increases strictly (the raw-log methods):
+  // an upload with a `t` that repeats or goes back is then refused at once (400 naming the line).
+  virtual bool NeedsIncreasingTime() const { return false; }
   // The method's own config keys (the common keys method and device are checked by the caller;
   // unknown keys are errors). kInvalidInput naming the key (Status::field()).
   virtual Status ValidateConfig(const nlohmann::json& config) const = 0;
@@ -55,6 +75,24 @@ class Method {
   // rejection. Deterministic.
   virtual void Judge(const nlohmann::json& result, const nlohmann::json& config,
                      const AcceptanceLimits& limits, Verdict* verdict) const = 0;
+  // The formats its results export to besides JSON, in the order the pages offer them.
+  virtual std::vector<ExportFormat> ExportFormats() const = 0;
+  // Writes a result this method's Run wrote (as stored) in one of its ExportFormats().
+  // kInvalidInput naming `format` for a format it does not have; kNotDeterminable when the result
+  // lacks a value the format needs (an undefined figure is never written as 0); kInternal when
+  // the result lacks its SPEC keys.
+  virtual Status Export(const std::string& format, const nlohmann::json& result,
+                        const ExportContext& context, std::string* out) const = 0;
+  // `calibd simulate NAME`: one line for its --help ("" when the method has no simulation).
+  virtual const char* simulate_summary() const { return ""; }
+  // Adds the simulation's options (all but --out, which the CLI adds) to `command`, the
+  // subcommand the CLI made with the method's name and simulate_summary(), and returns what
+  // makes the files once the command line has been parsed (deterministic per seed). Called once
+  // per process; the options it binds live as long as the returned function.
+  virtual std::function<Status(SimulatedFiles*)> AddSimulateOptions(CLI::App* command) const {
+    (void)command;
+    return {};
+  }
   // The job's peak memory per value of the recording (rows x columns), in bytes: the parser's
   // doubles (8) plus what the method's run holds at its peak, measured on large recordings
   // (bench/README.md, "Memory budget per job"). Used by the per-job budget (server/job_budget.h)

@@ -1,7 +1,9 @@
 #include "server/noise_method.h"
 
+#include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <set>
 
 #include "server/inertial_log.h"
@@ -51,6 +53,52 @@ Status ParseNoiseConfig(const json& config, core::NoiseOptions* options, Inertia
 class Noise : public Method {
  public:
   const char* name() const override { return "noise"; }
+  bool NeedsIncreasingTime() const override { return true; }
+  const char* simulate_summary() const override {
+    return "one IMU at rest: a stationary log with known white noise and random walk";
+  }
+  std::function<Status(SimulatedFiles*)> AddSimulateOptions(CLI::App* command) const override {
+    auto options = std::make_shared<NoiseSimulationFileOptions>();
+    command->add_option("--seed", options->seed, "random seed")->capture_default_str();
+    command->add_option("--rate", options->rate, "samples per second")
+        ->check(CLI::Range(1.0, 100000.0))
+        ->capture_default_str();
+    command->add_option("--seconds", options->seconds, "log length, s")
+        ->check(CLI::Range(1.0, 1e6))
+        ->capture_default_str();
+    command->add_option("--accel-noise", options->accel_noise, "accelerometer N, m/s²/√Hz")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command
+        ->add_option("--accel-random-walk", options->accel_random_walk, "accelerometer K, m/s³/√Hz")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command->add_option("--gyro-noise", options->gyro_noise, "gyroscope N, rad/s/√Hz")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command->add_option("--gyro-random-walk", options->gyro_random_walk, "gyroscope K, rad/s²/√Hz")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command
+        ->add_option("--bias-instability", options->bias_instability,
+                     "B of every channel, as a multiple of its N (0: none)")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    return [options](SimulatedFiles* files) {
+      return SimulateNoiseFiles(*options, &files->csv, &files->config, &files->truth);
+    };
+  }
+  std::vector<ExportFormat> ExportFormats() const override {
+    return {CsvFormat(), CHeaderFormat(),
+            ExportFormat{"yaml", "Kalibr imu.yaml", "application/yaml", "imu.yaml"}};
+  }
+  Status Export(const std::string& format, const nlohmann::json& result,
+                const ExportContext& context, std::string* out) const override {
+    if (format == "csv") return NoiseResultToCsv(result, out);
+    if (format == "h") return NoiseResultToHeader(result, context, out);
+    if (format == "yaml") return NoiseResultToKalibrYaml(result, context, out);
+    return NoSuchExport(format, name());
+  }
   const char* summary() const override {
     return "white noise density, bias instability and random walk of every channel of a long "
            "stationary log (Allan deviation, IEEE Std 952)";

@@ -48,6 +48,15 @@ Status SimulateNoiseFiles(const NoiseSimulationFileOptions& options, std::string
 // The result JSON of a core result (used by the method; exposed for tests).
 nlohmann::json NoiseResultToJson(const core::NoiseResult& result, int taus_per_decade);
 
+// Exports of a noise result (server/noise_exports.cc; formats in server/exports.h).
+Status NoiseResultToCsv(const nlohmann::json& result, std::string* out);
+Status NoiseResultToHeader(const nlohmann::json& result, const ExportContext& context,
+                           std::string* out);
+// Kalibr's imu.yaml of a noise result (format=yaml): the largest figure over the axes per sensor
+// type; kNotDeterminable when a figure is null (the log could not show it).
+Status NoiseResultToKalibrYaml(const nlohmann::json& result, const ExportContext& context,
+                               std::string* out);
+
 }  // namespace calibd::server
 
 #endif  // CALIBD_SERVER_NOISE_METHOD_H_

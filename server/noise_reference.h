@@ -21,7 +21,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 
-#include "core/status.h"
+#include "base/status.h"
 #include "storage/store.h"
 
 namespace calibd::server {

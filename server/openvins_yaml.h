@@ -26,7 +26,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "core/status.h"
+#include "base/status.h"
 #include "server/exports.h"
 
 namespace calibd::server {

@@ -1,7 +1,9 @@
 #include "server/pca_method.h"
 
+#include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <set>
 #include <utility>
 
@@ -399,6 +401,47 @@ namespace {
 class Pca : public Method {
  public:
   const char* name() const override { return "pca"; }
+  const char* simulate_summary() const override {
+    return "Rupniewski Section IV: 4 gyroscope triads of a_model, axes perturbed, n random "
+           "orientations";
+  }
+  std::function<Status(SimulatedFiles*)> AddSimulateOptions(CLI::App* command) const override {
+    auto options = std::make_shared<core::PcaSimulationOptions>();
+    command->add_option("--seed", options->seed, "random seed")->capture_default_str();
+    command->add_option("-n,--positions", options->positions, "number of positions n")
+        ->check(CLI::Range(1, 10000000))
+        ->capture_default_str();
+    command->add_option("--noise", options->noise_std, "reading noise σ")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command->add_option("--magnitude", options->magnitude, "field magnitude c")
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
+    command
+        ->add_option("--axis-perturbation", options->axis_perturbation,
+                     "σ of the perturbation of each sensitivity vector")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    command
+        ->add_option("--bias", options->bias_std,
+                     "σ of a constant bias added to each sensor (the config then says "
+                     "bias: estimate)")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    return [options](SimulatedFiles* files) {
+      Status s = SimulatePcaFiles(*options, &files->csv, &files->config, &files->truth);
+      return s;
+    };
+  }
+  std::vector<ExportFormat> ExportFormats() const override {
+    return {CsvFormat(), CHeaderFormat()};
+  }
+  Status Export(const std::string& format, const nlohmann::json& result,
+                const ExportContext& context, std::string* out) const override {
+    if (format == "csv") return PcaResultToCsv(result, out);
+    if (format == "h") return PcaResultToHeader(result, context, out);
+    return NoSuchExport(format, name());
+  }
   const char* summary() const override {
     return "sensitivity vectors (axis x scale) and biases of m single-axis sensors from static "
            "positions (Rupniewski, PCA-aided calibration)";

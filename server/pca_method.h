@@ -8,7 +8,7 @@
 
 #include "core/pca.h"
 #include "core/pca_simulation.h"
-#include "core/status.h"
+#include "base/status.h"
 #include "server/method.h"
 #include "server/recording.h"
 
@@ -52,6 +52,11 @@ void JudgePca(const nlohmann::json& result, const nlohmann::json& config,
 // "seed", "options"}). Deterministic for a seed.
 Status SimulatePcaFiles(const core::PcaSimulationOptions& options, std::string* csv,
                         nlohmann::json* config, nlohmann::json* truth);
+
+// Exports of a pca result (server/pca_exports.cc; formats in server/exports.h).
+Status PcaResultToCsv(const nlohmann::json& result, std::string* out);
+Status PcaResultToHeader(const nlohmann::json& result, const ExportContext& context,
+                         std::string* out);
 
 }  // namespace calibd::server
 

@@ -14,7 +14,8 @@
 #include <string_view>
 #include <vector>
 
-#include "core/status.h"
+#include "base/status.h"
+#include "base/utf8.h"
 
 namespace calibd::server {
 
@@ -117,8 +118,7 @@ bool ParseDecimalFast(std::string_view text, double* value);
 // or it is outside the fast path. The recording parser's one-pass row reader is built on it.
 const char* ParseDecimalPrefixFast(const char* p, const char* end, double* value);
 
-// True when `s` is well-formed UTF-8 (no overlong forms, surrogates or values past U+10FFFF).
-bool IsValidUtf8(std::string_view s);
+using ::calibd::IsValidUtf8;  // base/utf8.h
 
 // Convenience: parse a whole buffer (collecting).
 Status ParseRecording(std::string_view bytes, RecordingParser* parser);

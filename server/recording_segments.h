@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "core/static_detection.h"
-#include "core/status.h"
+#include "base/status.h"
 #include "storage/store.h"
 
 namespace calibd::server {

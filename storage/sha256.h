@@ -1,33 +1,14 @@
-// Incremental SHA-256 (OpenSSL EVP), for recordings streamed in chunks and result ETags.
-//
-// Thread-compatible: one Sha256 per thread.
+// Forwarding header: SHA-256 lives in the base library (base/sha256.h), shared by storage (stored
+// recordings, result ETags) and server (uploads hashed while they stream).
 #ifndef CALIBD_STORAGE_SHA256_H_
 #define CALIBD_STORAGE_SHA256_H_
 
-#include <string>
-#include <string_view>
-
-struct evp_md_ctx_st;
+#include "base/sha256.h"
 
 namespace calibd::storage {
 
-class Sha256 {
- public:
-  Sha256();
-  ~Sha256();
-  Sha256(const Sha256&) = delete;
-  Sha256& operator=(const Sha256&) = delete;
-
-  void Update(std::string_view bytes);
-  // Lower-case hex digest (64 characters). Call once; the object is then reset for reuse.
-  std::string HexDigest();
-
- private:
-  evp_md_ctx_st* ctx_;
-};
-
-// Lower-case hex SHA-256 of `bytes`.
-std::string Sha256Hex(std::string_view bytes);
+using ::calibd::Sha256;
+using ::calibd::Sha256Hex;
 
 }  // namespace calibd::storage
 

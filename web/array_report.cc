@@ -476,4 +476,29 @@ std::string ArrayDrift(const std::vector<const JobSummary*>& jobs) {
   return out + "<div class=\"plots\">" + Figure(RenderXYPlot(o, series), "") + "</div>";
 }
 
+namespace {
+
+class ArrayReportImpl : public MethodReport {
+ public:
+  const char* method() const override { return "array"; }
+  std::string Section(const JobView& view) const override { return ArrayReport(view); }
+  std::string KeyFigures(const json& result) const override {
+    const ArrayFigures f = ComputeArrayFigures(result);
+    if (!std::isfinite(f.rms_offset) && !std::isfinite(f.worst_sigma)) return "";
+    return "offset RMS " + FormatMicrometres(f.rms_offset) + " \xC2\xB7 " + kSigma +
+           " \xE2\x89\xA4 " + FormatMicrometres(f.worst_sigma, 2);
+  }
+  std::string Drift(const std::vector<const JobSummary*>& jobs) const override {
+    return ArrayDrift(jobs);
+  }
+  std::vector<Download> Downloads() const override { return {{"csv", "CSV"}, {"h", "C header"}}; }
+};
+
+}  // namespace
+
+const MethodReport& ArrayMethodReport() {
+  static const ArrayReportImpl& report = *new ArrayReportImpl();
+  return report;
+}
+
 }  // namespace calibd::web::internal

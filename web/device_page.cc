@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "web/html.h"
+#include "web/method_report.h"
 #include "web/pages.h"
 #include "web/report_common.h"
 #include "web/reports.h"
@@ -66,17 +67,19 @@ std::string DeviceBody(const DeviceView& v) {
   }
   out += Section("calibrations", "Calibrations", table);
   std::string drift;
-  for (const char* method : {"pca", "array"}) {
-    const std::string m = method;
+  for (const MethodReport* report : AllMethodReports()) {
+    const std::string m = report->method();
     std::vector<const JobSummary*> ok;
     for (const auto& j : jobs) {
       // Only what production tooling could have fetched: accepted, not revoked.
       if (GateState(j) == "accepted" && j.method == m && j.result.is_object()) ok.push_back(&j);
     }
     if (ok.size() < 2) continue;
+    const std::string tables = Guard("Drift", [&] { return report->Drift(ok); });
+    if (tables.empty()) continue;  // the method has no drift tables
     drift += "<h3>" + m + " (" + std::to_string(ok.size()) +
              " accepted calibrations; rejected and revoked ones are not compared)</h3>";
-    drift += Guard("Drift", [&] { return m == "pca" ? PcaDrift(ok) : ArrayDrift(ok); });
+    drift += tables;
   }
   if (drift.empty()) {
     drift =

@@ -11,7 +11,14 @@
 #include <string>
 #include <string_view>
 
+#include "base/url.h"
+#include "base/utf8.h"
+
 namespace calibd::web {
+
+// From the base library (base/url.h, base/utf8.h).
+using ::calibd::SanitizeUtf8;
+using ::calibd::UrlEncode;
 
 // Escapes text content: & < > " ' become entities; invalid UTF-8 becomes U+FFFD; control
 // characters other than tab and newline are dropped.
@@ -20,13 +27,6 @@ std::string EscapeText(std::string_view s);
 // Escapes an attribute value (to be written between double quotes). Same mapping as EscapeText;
 // tabs and newlines also become character references.
 std::string EscapeAttr(std::string_view s);
-
-// Percent-encodes a URL path segment or query value (RFC 3986 unreserved characters kept).
-// The result still has to go through EscapeAttr (it does not need to, but it is harmless).
-std::string UrlEncode(std::string_view s);
-
-// Replaces invalid UTF-8 sequences with U+FFFD (used before handing strings to nlohmann::json).
-std::string SanitizeUtf8(std::string_view s);
 
 // ---------------------------------------------------------------------------------------------
 // Numbers. All return "–" (en dash) for NaN and "∞"/"−∞" for infinities, and never "-0".

@@ -143,4 +143,22 @@ std::string ImuReport(const JobView& view) {
   return out;
 }
 
+namespace {
+
+class ImuReportImpl : public MethodReport {
+ public:
+  const char* method() const override { return "imu"; }
+  std::string Section(const JobView& view) const override { return ImuReport(view); }
+  std::vector<Download> Downloads() const override {
+    return {{"csv", "CSV"}, {"h", "C header"}, {"yaml", "OpenVINS kalibr_imu_chain.yaml"}};
+  }
+};
+
+}  // namespace
+
+const MethodReport& ImuMethodReport() {
+  static const ImuReportImpl& report = *new ImuReportImpl();
+  return report;
+}
+
 }  // namespace calibd::web::internal

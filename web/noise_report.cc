@@ -134,4 +134,22 @@ std::string NoiseReport(const JobView& view) {
   return out;
 }
 
+namespace {
+
+class NoiseReportImpl : public MethodReport {
+ public:
+  const char* method() const override { return "noise"; }
+  std::string Section(const JobView& view) const override { return NoiseReport(view); }
+  std::vector<Download> Downloads() const override {
+    return {{"csv", "CSV"}, {"h", "C header"}, {"yaml", "Kalibr imu.yaml"}};
+  }
+};
+
+}  // namespace
+
+const MethodReport& NoiseMethodReport() {
+  static const NoiseReportImpl& report = *new NoiseReportImpl();
+  return report;
+}
+
 }  // namespace calibd::web::internal

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "web/html.h"
+#include "web/method_report.h"
 #include "web/report_common.h"
 #include "web/reports.h"
 #include "web/svg_plot.h"
@@ -220,14 +221,8 @@ std::string JobBody(const JobView& view) {
     out += Section("model", "Model",
                    model.empty() ? NotAvailable("The model statement")
                                  : "<p class=\"model\">" + E(model) + "</p>");
-    if (method == "pca") {
-      out += PcaReport(view);
-    } else if (method == "array") {
-      out += ArrayReport(view);
-    } else if (method == "noise") {
-      out += NoiseReport(view);
-    } else if (method == "imu") {
-      out += ImuReport(view);
+    if (const MethodReport* report = FindMethodReport(method)) {
+      out += report->Section(view);
     } else {
       out += NotAvailable("A report for method \"" + method + "\"");
     }
@@ -248,19 +243,9 @@ std::string KeyFigures(const std::string& method, const json& result) {
   if (!result.is_object()) return kDash;
   std::string m = Str(Get(result, "method"));
   if (m.empty()) m = method;
-  if (m == "pca") {
-    const PcaFigures f = ComputePcaFigures(result);
-    if (!std::isfinite(f.worst_rel_scale_std) && !std::isfinite(f.rank_gap)) return kDash;
-    return std::string(kSigma) + "(scale) \xE2\x89\xA4 " + Percent(f.worst_rel_scale_std) +
-           " \xC2\xB7 gap " + FormatSig(f.rank_gap, 3);
-  }
-  if (m == "array") {
-    const ArrayFigures f = ComputeArrayFigures(result);
-    if (!std::isfinite(f.rms_offset) && !std::isfinite(f.worst_sigma)) return kDash;
-    return "offset RMS " + FormatMicrometres(f.rms_offset) + " \xC2\xB7 " + kSigma +
-           " \xE2\x89\xA4 " + FormatMicrometres(f.worst_sigma, 2);
-  }
-  return kDash;
+  const MethodReport* report = FindMethodReport(m);
+  const std::string figures = report != nullptr ? report->KeyFigures(result) : "";
+  return figures.empty() ? kDash : figures;
 }
 
 std::string GateState(const JobSummary& job) {

@@ -509,4 +509,29 @@ std::string PcaDrift(const std::vector<const JobSummary*>& jobs) {
   return out + "<div class=\"plots\">" + figs + "</div>";
 }
 
+namespace {
+
+class PcaReportImpl : public MethodReport {
+ public:
+  const char* method() const override { return "pca"; }
+  std::string Section(const JobView& view) const override { return PcaReport(view); }
+  std::string KeyFigures(const json& result) const override {
+    const PcaFigures f = ComputePcaFigures(result);
+    if (!std::isfinite(f.worst_rel_scale_std) && !std::isfinite(f.rank_gap)) return "";
+    return std::string(kSigma) + "(scale) \xE2\x89\xA4 " + Percent(f.worst_rel_scale_std) +
+           " \xC2\xB7 gap " + FormatSig(f.rank_gap, 3);
+  }
+  std::string Drift(const std::vector<const JobSummary*>& jobs) const override {
+    return PcaDrift(jobs);
+  }
+  std::vector<Download> Downloads() const override { return {{"csv", "CSV"}, {"h", "C header"}}; }
+};
+
+}  // namespace
+
+const MethodReport& PcaMethodReport() {
+  static const PcaReportImpl& report = *new PcaReportImpl();
+  return report;
+}
+
 }  // namespace calibd::web::internal

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "web/html.h"
+#include "web/method_report.h"
 #include "web/report_common.h"
 #include "web/reports.h"
 #include "web/svg_plot.h"
@@ -391,11 +392,11 @@ double Norm3(const double* v) { return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2
 
 // The export formats of a method's calibration (GET .../calibration?format=).
 std::string ExportLinks(const std::string& base, const std::string& method) {
-  std::string out = "<a href=\"" + A(base + "json") + "\">JSON</a> \xC2\xB7 <a href=\"" +
-                    A(base + "csv") + "\">CSV</a>";
-  out += " \xC2\xB7 <a href=\"" + A(base + "h") + "\">C header</a>";
-  if (method == "noise") {
-    out += " \xC2\xB7 <a href=\"" + A(base + "yaml") + "\">Kalibr imu.yaml</a>";
+  std::string out = "<a href=\"" + A(base + "json") + "\">JSON</a>";
+  if (const MethodReport* report = FindMethodReport(method)) {
+    for (const auto& d : report->Downloads()) {
+      out += " \xC2\xB7 <a href=\"" + A(base + d.format) + "\">" + E(d.label) + "</a>";
+    }
   }
   return out;
 }

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "web/method_report.h"
 #include "web/pages.h"
 #include "web/report_common.h"
 
@@ -34,6 +35,12 @@ std::string ArrayDrift(const std::vector<const JobSummary*>& jobs);
 // noise (web/noise_report.cc) and imu (web/imu_report.cc).
 std::string NoiseReport(const JobView& view);
 std::string ImuReport(const JobView& view);
+
+// The registry entries (web/method_reports.cc).
+const MethodReport& PcaMethodReport();
+const MethodReport& ArrayMethodReport();
+const MethodReport& ImuMethodReport();
+const MethodReport& NoiseMethodReport();
 
 }  // namespace calibd::web::internal
 

@@ -45,13 +45,8 @@ TEST(ArrayFullMethod, CalibratesASimulatedBoardThroughTheServerWithinItsUncertai
   config["device"] = "ARRAY-1";
   TestServer server;
   ASSERT_EQ(server.error(), "");
-  auto res = server.Client().Post(
-      "/api/v1/recordings",
-      httplib::MultipartFormDataItems{{"recording", csv, "array.csv", "text/csv"},
-                                      {"config", config.dump(), "", "application/json"}});
-  ASSERT_TRUE(res);
-  ASSERT_EQ(res->status, 201) << res->body;
-  json job = server.WaitForJob(json::parse(res->body)["job"]["id"]);
+  json job = server.UploadAndWait(csv, config, "array.csv");
+  ASSERT_FALSE(job.is_null());
   ASSERT_EQ(job["status"], "succeeded") << job.dump();
   const json& r = job["result"];
   EXPECT_EQ(r["method"], "array");

@@ -31,15 +31,7 @@ using testing::TestServer;
 json Calibrate(const TestServer& server, const std::string& csv, json config,
                const std::string& device) {
   config["device"] = device;
-  auto res = server.Client().Post(
-      "/api/v1/recordings",
-      httplib::MultipartFormDataItems{{"recording", csv, "r.csv", "text/csv"},
-                                      {"config", config.dump(), "", "application/json"}});
-  if (!res || res->status != 201) {
-    ADD_FAILURE() << "upload failed: " << (res ? res->body : "no answer");
-    return json();
-  }
-  return server.WaitForJob(json::parse(res->body)["job"]["id"].get<int64_t>());
+  return server.UploadAndWait(csv, config, "r.csv");
 }
 
 std::string FetchHeader(const TestServer& server, const std::string& serial,

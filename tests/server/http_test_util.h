@@ -99,6 +99,29 @@ class TestServer {
     return client;
   }
 
+  // Uploads `csv` with its `config` as multipart/form-data (as `curl -F recording=@... -F
+  // config=@...`), then waits for the upload's job: the finished job's JSON (status succeeded or
+  // failed). When the upload is not answered 201 with a job, a test failure naming the answer and
+  // a null JSON.
+  nlohmann::json UploadAndWait(const std::string& csv, const nlohmann::json& config,
+                               const std::string& file_name = "recording.csv") const {
+    auto res = Client().Post(
+        "/api/v1/recordings",
+        httplib::MultipartFormDataItems{{"recording", csv, file_name, "text/csv"},
+                                        {"config", config.dump(), "", "application/json"}});
+    if (!res || res->status != 201) {
+      ADD_FAILURE() << "upload not accepted: "
+                    << (res ? std::to_string(res->status) + " " + res->body : "no answer");
+      return nullptr;
+    }
+    const nlohmann::json body = nlohmann::json::parse(res->body, nullptr, false);
+    if (!body.is_object() || !body.contains("job") || !body["job"].contains("id")) {
+      ADD_FAILURE() << "the upload's answer has no job: " << res->body;
+      return nullptr;
+    }
+    return WaitForJob(body["job"]["id"].get<int64_t>());
+  }
+
   // Polls GET /api/v1/jobs/{id} until the job is succeeded or failed (or 120 s passed).
   nlohmann::json WaitForJob(int64_t id) const {
     auto client = Client();

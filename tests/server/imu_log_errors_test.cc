@@ -89,13 +89,8 @@ TEST(InertialLogErrors, GapsAreReportedWithTheirTimesInTheImuResult) {
   const double gap_end = std::stod(lines[first]);
   TestServer server;
   ASSERT_EQ(server.error(), "");
-  auto res = server.Client().Post(
-      "/api/v1/recordings",
-      httplib::MultipartFormDataItems{{"recording", Join(lines), "imu.csv", "text/csv"},
-                                      {"config", config.dump(), "", "application/json"}});
-  ASSERT_TRUE(res);
-  ASSERT_EQ(res->status, 201) << res->body;
-  json job = server.WaitForJob(json::parse(res->body)["job"]["id"]);
+  json job = server.UploadAndWait(Join(lines), config, "imu.csv");
+  ASSERT_FALSE(job.is_null());
   ASSERT_EQ(job["status"], "succeeded") << job.dump();
   const json& gaps = job["result"]["diagnostics"]["gaps"];
   ASSERT_EQ(gaps.size(), 1u) << gaps.dump();
@@ -139,13 +134,8 @@ TEST(InertialLogErrors, TooFewStaticsFailTheJobSayingFoundNeededAndWhichOrientat
   const std::string csv = SimulatedLog(5, &config);
   TestServer server;
   ASSERT_EQ(server.error(), "");
-  auto res = server.Client().Post(
-      "/api/v1/recordings",
-      httplib::MultipartFormDataItems{{"recording", csv, "imu.csv", "text/csv"},
-                                      {"config", config.dump(), "", "application/json"}});
-  ASSERT_TRUE(res);
-  ASSERT_EQ(res->status, 201) << res->body;
-  json job = server.WaitForJob(json::parse(res->body)["job"]["id"]);
+  json job = server.UploadAndWait(csv, config, "imu.csv");
+  ASSERT_FALSE(job.is_null());
   ASSERT_EQ(job["status"], "failed") << job.dump();
   EXPECT_EQ(job["error"]["code"], "not_determinable");
   const std::string m = job["error"]["message"];

@@ -58,18 +58,13 @@ TEST(ModelStatement, EveryMethodsResultAndReportStateTheEquation) {
   for (Case& c : cases) {
     SCOPED_TRACE(c.method);
     c.config["device"] = "MODEL-1";
-    auto res = server.Client().Post(
-        "/api/v1/recordings",
-        httplib::MultipartFormDataItems{{"recording", c.csv, "r.csv", "text/csv"},
-                                        {"config", c.config.dump(), "", "application/json"}});
-    ASSERT_TRUE(res);
-    ASSERT_EQ(res->status, 201) << res->body;
-    const int64_t id = json::parse(res->body)["job"]["id"];
-    const json job = server.WaitForJob(id);
+    const json job = server.UploadAndWait(c.csv, c.config, "r.csv");
+    ASSERT_FALSE(job.is_null());
     ASSERT_EQ(job["status"], "succeeded") << job.dump();
     const json& model = job["result"]["model"];
     ASSERT_TRUE(model.is_string());
     EXPECT_NE(model.get<std::string>().find(c.equation), std::string::npos) << model;
+    const int64_t id = job["id"];
     auto page = server.Client().Get(("/jobs/" + std::to_string(id)).c_str());
     ASSERT_TRUE(page);
     ASSERT_EQ(page->status, 200);

@@ -162,13 +162,8 @@ TEST(OpenVinsYaml, TheCalibrationRouteServesItForAnImuJobInCounts) {
   config["device"] = "OV-1";
   TestServer server;
   ASSERT_EQ(server.error(), "");
-  auto res = server.Client().Post(
-      "/api/v1/recordings",
-      httplib::MultipartFormDataItems{{"recording", csv, "imu.csv", "text/csv"},
-                                      {"config", config.dump(), "", "application/json"}});
-  ASSERT_TRUE(res);
-  ASSERT_EQ(res->status, 201) << res->body;
-  json job = server.WaitForJob(json::parse(res->body)["job"]["id"]);
+  json job = server.UploadAndWait(csv, config, "imu.csv");
+  ASSERT_FALSE(job.is_null());
   ASSERT_EQ(job["status"], "succeeded") << job.dump();
   EXPECT_DOUBLE_EQ(job["result"]["parameters"]["accel_unit"].get<double>(), 0.0024);
   EXPECT_NEAR(job["result"]["diagnostics"]["rate"].get<double>(), sim.rate, 1e-6);

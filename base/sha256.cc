@@ -1,10 +1,10 @@
-#include "storage/sha256.h"
+#include "base/sha256.h"
 
 #include <openssl/evp.h>
 
 #include <cstdlib>
 
-namespace calibd::storage {
+namespace calibd {
 
 Sha256::Sha256() : ctx_(EVP_MD_CTX_new()) {
   if (ctx_ == nullptr || EVP_DigestInit_ex(ctx_, EVP_sha256(), nullptr) != 1) std::abort();
@@ -36,4 +36,4 @@ std::string Sha256Hex(std::string_view bytes) {
   return h.HexDigest();
 }
 
-}  // namespace calibd::storage
+}  // namespace calibd

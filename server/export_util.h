@@ -1,0 +1,104 @@
+// Shared pieces of the exports of every method (server/<name>_exports.cc): CSV cells, C literals
+// and comments, and the C header's frame (WriteCHeader). Internal to server/.
+#ifndef CALIBD_SERVER_EXPORT_UTIL_H_
+#define CALIBD_SERVER_EXPORT_UTIL_H_
+
+#include <cstddef>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "base/status.h"
+#include "server/exports.h"
+
+namespace calibd::server {
+
+using json = nlohmann::json;
+
+// A CSV cell of a number at full precision (%.17g); "" for null (an undefined value).
+std::string CsvNumber(const json& v);
+// CSV field: quoted when it holds a comma, quote or line break.
+std::string CsvField(const std::string& s);
+// For a // comment: printable ASCII only.
+std::string CommentSafe(const std::string& s);
+// A C string literal (escaped; no trigraph can form).
+std::string CString(const std::string& s);
+// "x", "y", "z" for d <= 3, else "1", "2", ...
+std::vector<std::string> AxisNames(size_t d);
+// Member `key` of an object; a null json when absent or not an object.
+const json& JsonAt(const json& obj, const char* key);
+// For a /* */ comment of the C header: printable ASCII, and no "*/" or "/*".
+std::string CComment(const std::string& s);
+// Letters and digits kept (upper case), every other byte '_' (identifier stems).
+std::string IdentifierStem(const std::string& s);
+std::string LowerCase(std::string s);
+// A C double literal (full precision); v must be finite.
+std::string CDouble(double v);
+// Reads `n` numbers of a JSON array into *out; false when the shape is wrong or any is null.
+bool Numbers(const json& v, size_t n, std::vector<double>* out);
+
+// Writes a C99/C++ header. Constants are `static const` (internal linkage in both languages) or
+// macros, all named PREFIX_...; functions prefix_... (lower case).
+class HeaderWriter {
+ public:
+  HeaderWriter(const ExportContext& context, const std::string& method)
+      : macro_("CALIBD_" + IdentifierStem(context.device) + "_" + IdentifierStem(method) + "_"),
+        func_(LowerCase(macro_)) {}
+
+  const std::string& macro() const { return macro_; }
+  const std::string& func() const { return func_; }
+  std::ostringstream& out() { return h_; }
+
+  void Define(const std::string& name, const std::string& value, const std::string& comment) {
+    h_ << "#define " << macro_ << name << " " << value;
+    if (!comment.empty()) h_ << "  /* " << CComment(comment) << " */";
+    h_ << "\n";
+  }
+  void Array1(const std::string& name, const std::vector<double>& v, const std::string& comment) {
+    if (!comment.empty()) h_ << "/* " << CComment(comment) << " */\n";
+    h_ << "static const double " << macro_ << name << "[" << v.size() << "] = {";
+    for (size_t i = 0; i < v.size(); ++i) h_ << (i ? ", " : "") << CDouble(v[i]);
+    h_ << "};\n";
+  }
+  void Array2(const std::string& name, const std::vector<std::vector<double>>& rows, size_t cols,
+              const std::string& comment) {
+    if (!comment.empty()) h_ << "/* " << CComment(comment) << " */\n";
+    h_ << "static const double " << macro_ << name << "[" << rows.size() << "][" << cols
+       << "] = {\n";
+    for (const auto& row : rows) {
+      h_ << "    {";
+      for (size_t c = 0; c < row.size(); ++c) h_ << (c ? ", " : "") << CDouble(row[c]);
+      h_ << "},\n";
+    }
+    h_ << "};\n";
+  }
+  void Names(const std::string& name, const std::vector<std::string>& names) {
+    h_ << "static const char* const " << macro_ << name << "[" << names.size() << "] = {";
+    for (size_t i = 0; i < names.size(); ++i) h_ << (i ? ", " : "") << CString(names[i]);
+    h_ << "};\n";
+  }
+
+ private:
+  std::string macro_, func_;
+  std::ostringstream h_;
+};
+
+// Per-entry standard deviations: the array when every entry is defined, else a comment naming
+// the entries whose σ is undefined (never a made-up 0).
+void StdArray1(HeaderWriter* w, const std::string& name, const json& items, const char* key,
+               const std::vector<std::string>& names, const std::string& comment);
+
+// The C header of a result (server/exports.h, ResultToHeader): the comment (method, device, job,
+// time, `model_comment`: lines starting " * "), the include guard, JOB_ID, DEVICE, FINISHED_AT,
+// then what `body_writer` writes from the result's parameters and uncertainty.
+Status WriteCHeader(
+    const json& result, const ExportContext& context, const std::string& method,
+    const char* model_comment,
+    const std::function<Status(const json& params, const json& unc, HeaderWriter* w)>& body_writer,
+    std::string* out);
+
+}  // namespace calibd::server
+
+#endif  // CALIBD_SERVER_EXPORT_UTIL_H_

@@ -1,0 +1,352 @@
+// The API's jobs, decisions, devices, exports and recordings (server/service_impl.h).
+#include "server/service_impl.h"
+
+namespace calibd::server {
+
+using nlohmann::json;
+
+void Service::Impl::HandleGetJob(const httplib::Request& req, httplib::Response& res) {
+  int64_t id = 0;
+  if (!ParseId(req.matches[1], &id)) {
+    SendError(res, 404, "not_found", "no such job");
+    return;
+  }
+  storage::JobInfo job;
+  Status s = store->GetJob(id, &job);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  json body = JobJson(job, true);
+  std::vector<storage::JobEvent> events;
+  s = store->ListJobEvents(id, &events);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  body["events"] = json::array();
+  for (const auto& e : events) body["events"].push_back(EventJson(e));
+  res.set_content(JsonBody(body), "application/json");
+}
+
+// POST /api/v1/jobs/{id}/revoke and /accept {"reason": "..."}: a person's decision on a result
+// (Store::RevokeJob / AcceptJob). The token check ran in the request filter (a write).
+void Service::Impl::HandleDecision(const httplib::Request& req, httplib::Response& res,
+                                   bool revoke) {
+  constexpr size_t kMaxReason = 500;
+  int64_t id = 0;
+  if (!ParseId(req.matches[1], &id)) {
+    SendError(res, 404, "not_found", "no such job");
+    return;
+  }
+  const std::string media = ToLower(req.get_header_value("Content-Type"));
+  if (media.rfind("application/json", 0) != 0) {
+    SendError(res, 415, "unsupported_media_type", "send {\"reason\": \"...\"} as application/json");
+    return;
+  }
+  json body;
+  Status s = ParseJsonText(req.body, "request body", &body);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  if (!body.is_object()) {
+    SendError(res, 400, "invalid_input", "the body must be a JSON object {\"reason\": \"...\"}");
+    return;
+  }
+  for (auto& [key, value] : body.items()) {
+    if (key != "reason") {
+      return (void)SendStatus(
+          res, Status::InvalidInput("unknown key '" + key.substr(0, 64) + "' (expected reason)")
+                   .WithField(key.substr(0, 64)));
+    }
+  }
+  auto reason = body.find("reason");
+  std::string text;
+  if (reason != body.end() && reason->is_string()) text = reason->get<std::string>();
+  while (!text.empty() && isspace(static_cast<unsigned char>(text.back()))) text.pop_back();
+  while (!text.empty() && isspace(static_cast<unsigned char>(text.front()))) text.erase(0, 1);
+  if (text.empty()) {
+    return (void)SendStatus(res, Status::InvalidInput(std::string("'reason' is required: say why "
+                                                                  "the result is ") +
+                                                      (revoke ? "revoked" : "accepted"))
+                                     .WithField("reason"));
+  }
+  if (text.size() > kMaxReason) {
+    return (void)SendStatus(res,
+                            Status::InvalidInput("'reason' has " + std::to_string(text.size()) +
+                                                 " bytes; at most " + std::to_string(kMaxReason))
+                                .WithField("reason"));
+  }
+  for (unsigned char ch : text) {
+    if (ch < 0x20 && ch != '\t') {
+      return (void)SendStatus(
+          res,
+          Status::InvalidInput("'reason' may not contain control characters").WithField("reason"));
+    }
+  }
+  const std::string actor = token.empty() ? "anonymous" : "token";
+  storage::JobEvent event;
+  s = revoke ? store->RevokeJob(id, text, actor, &event)
+             : store->AcceptJob(id, text, actor, &event);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  storage::JobInfo job;
+  s = store->GetJob(id, &job);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  json out = JobJson(job, false);
+  out["event"] = EventJson(event);
+  res.set_content(JsonBody(json{{"job", out}}), "application/json");
+}
+
+void Service::Impl::HandleListJobs(const httplib::Request& req, httplib::Response& res) {
+  storage::JobFilter filter;
+  for (const auto& [key, value] : req.params) {
+    if (key == "device") {
+      filter.device = value;
+    } else if (key == "method") {
+      if (FindMethod(value) == nullptr) {
+        return (void)SendStatus(
+            res,
+            Status::InvalidInput("method must be " + MethodNamesForMessage()).WithField("method"));
+      }
+      filter.method = value;
+    } else if (key == "verdict") {
+      if (value != "accepted" && value != "rejected" && value != "revoked") {
+        return (void)SendStatus(
+            res, Status::InvalidInput("verdict must be accepted, rejected or revoked")
+                     .WithField("verdict"));
+      }
+      filter.state = value;
+    } else if (key == "status") {
+      if (value != "queued" && value != "running" && value != "succeeded" && value != "failed") {
+        return (void)SendStatus(
+            res, Status::InvalidInput("status must be queued, running, succeeded or failed")
+                     .WithField("status"));
+      }
+      filter.status = value;
+    } else if (key == "limit") {
+      int64_t limit;
+      if (!ParseId(value, &limit) || limit > 500) {
+        return (void)SendStatus(res,
+                                Status::InvalidInput("limit must be 1..500").WithField("limit"));
+      }
+      filter.limit = static_cast<int>(limit);
+    } else if (key == "before") {
+      if (!ParseId(value, &filter.before)) {
+        return (void)SendStatus(
+            res, Status::InvalidInput("before must be a job id").WithField("before"));
+      }
+    } else if (key == "include_results") {
+      filter.include_results = value == "1" || value == "true";
+    } else {
+      return (void)SendStatus(
+          res, Status::InvalidInput("unknown query parameter '" + key.substr(0, 64) + "'")
+                   .WithField(key.substr(0, 64)));
+    }
+  }
+  std::vector<storage::JobInfo> jobs;
+  Status s = store->ListJobs(filter, &jobs);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  json list = json::array();
+  for (const auto& job : jobs) list.push_back(JobJson(job, filter.include_results));
+  json body = {{"jobs", list}, {"next", json()}};
+  if (static_cast<int>(jobs.size()) == filter.limit && !jobs.empty()) {
+    httplib::Params next = req.params;
+    next.erase("before");
+    next.emplace("before", std::to_string(jobs.back().id));
+    body["next"] = "/api/v1/jobs?" + httplib::detail::params_to_query_str(next);
+  }
+  res.set_content(JsonBody(body), "application/json");
+}
+
+void Service::Impl::HandleDevices(const httplib::Request&, httplib::Response& res) {
+  std::vector<storage::DeviceInfo> devices;
+  Status s = store->ListDevices(&devices);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  json list = json::array();
+  for (const auto& d : devices) {
+    json latest = json::object();
+    for (const auto& c : d.latest) {
+      latest[c.method] = {
+          {"job_id", c.job_id},
+          {"calibrated_at", c.calibrated_at},
+          {"url", "/api/v1/devices/" + UrlEncode(d.serial) + "/calibration?method=" + c.method}};
+    }
+    list.push_back({{"serial", d.serial},
+                    {"first_seen", NullIfEmpty(d.first_seen)},
+                    {"latest", latest},
+                    {"url", "/devices/" + UrlEncode(d.serial)}});
+  }
+  res.set_content(JsonBody(json{{"devices", list}}), "application/json");
+}
+
+void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response& res) {
+  const std::string serial = req.matches[1];
+  std::string method = req.get_param_value("method");
+  const std::string format = req.has_param("format") ? req.get_param_value("format") : "json";
+  // json, or a format some method exports (Method::ExportFormats).
+  std::vector<std::string> formats = {"json"};
+  for (const Method* m : AllMethods()) {
+    for (const ExportFormat& f : m->ExportFormats()) {
+      if (std::find(formats.begin(), formats.end(), f.format) == formats.end()) {
+        formats.push_back(f.format);
+      }
+    }
+  }
+  if (std::find(formats.begin(), formats.end(), format) == formats.end()) {
+    std::string list;
+    for (size_t i = 0; i < formats.size(); ++i) {
+      list += (i == 0 ? "" : i + 1 == formats.size() ? " or " : ", ") + formats[i];
+    }
+    return (void)SendStatus(res,
+                            Status::InvalidInput("format must be " + list).WithField("format"));
+  }
+  storage::JobInfo job;
+  Status s;
+  if (req.has_param("job")) {
+    // One job's result, whatever its verdict (the response says it in X-Calibd-State), but only
+    // for this device: a job id never reaches another device's calibration.
+    int64_t id = 0;
+    if (!ParseId(req.get_param_value("job"), &id)) {
+      return (void)SendStatus(
+          res, Status::InvalidInput("job must be a job id (a positive integer)").WithField("job"));
+    }
+    s = store->GetJob(id, &job);
+    if (s.code() != StatusCode::kNotFound && !s.ok()) return (void)SendStatus(res, s);
+    if (s.code() == StatusCode::kNotFound || job.device != serial) {
+      SendError(res, 404, "not_found",
+                "device '" + serial + "' has no job " + std::to_string(id) +
+                    (s.ok() ? " (that job is " +
+                                  (job.device.empty() ? std::string("of no device")
+                                                      : "another device's") +
+                                  ")"
+                            : std::string()));
+      return;
+    }
+    if (job.status != "succeeded") {
+      SendError(res, 404, "not_found",
+                "job " + std::to_string(id) + " is " + job.status + ": it has no result");
+      return;
+    }
+    if (!method.empty() && method != job.method) {
+      SendError(
+          res, 404, "not_found",
+          "job " + std::to_string(id) + " is a " + job.method + " calibration, not " + method);
+      return;
+    }
+    method = job.method;
+  } else if (method.empty()) {
+    std::vector<storage::DeviceInfo> devices;
+    Status s = store->ListDevices(&devices);
+    if (!s.ok()) return (void)SendStatus(res, s);
+    std::vector<std::string> methods;
+    for (const auto& d : devices) {
+      if (d.serial != serial) continue;
+      for (const auto& c : d.latest) methods.push_back(c.method);
+    }
+    if (methods.size() > 1) {
+      return (void)SendStatus(res, Status::InvalidInput("device '" + serial +
+                                                        "' has calibrations of several "
+                                                        "methods: add ?method=NAME")
+                                       .WithField("method"));
+    }
+    if (methods.empty()) {
+      const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
+      SendError(res, 404, "not_found",
+                hint.empty()
+                    ? "no accepted calibration for device '" + serial +
+                          "' (rejected and revoked results are never served; see /devices/" +
+                          UrlEncode(serial) + ")"
+                    : hint);
+      return;
+    }
+    method = methods[0];
+  } else if (FindMethod(method) == nullptr) {
+    return (void)SendStatus(
+        res, Status::InvalidInput("method must be " + MethodNamesForMessage()).WithField("method"));
+  }
+  if (!req.has_param("job")) {
+    s = store->LatestResult(serial, method, &job);
+    if (s.code() == StatusCode::kNotFound) {
+      const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
+      SendError(res, 404, "not_found",
+                hint.empty()
+                    ? "no accepted " + method + " calibration for device '" + serial +
+                          "' (rejected and revoked results are never served; see /devices/" +
+                          UrlEncode(serial) + ")"
+                    : hint);
+      return;
+    }
+    if (!s.ok()) return (void)SendStatus(res, s);
+  }
+  const std::string etag = "\"" + job.result_sha256.substr(0, 32) + "-" + format + "\"";
+  res.set_header("ETag", etag);
+  res.set_header("Cache-Control", "no-cache");
+  res.set_header("X-Calibd-Job", std::to_string(job.id));
+  res.set_header("X-Calibd-State", job.state);
+  if (IfNoneMatchHits(req.get_header_value("If-None-Match"), etag)) {
+    res.status = 304;
+    return;
+  }
+  if (format == "json") {
+    // The hot path of production tooling: the stored result is valid JSON text already (the
+    // worker wrote it with json::dump), so it is embedded as is, without parsing it again.
+    json head = {{"device", serial},   {"method", method},
+                 {"job_id", job.id},   {"calibrated_at", job.finished_at},
+                 {"state", job.state}, {"result", nullptr}};
+    std::string body = head.dump(-1, ' ', false, json::error_handler_t::replace);
+    const std::string placeholder = "\"result\":null";
+    const size_t at = body.rfind(placeholder);
+    body.replace(at, placeholder.size(), "\"result\":" + job.result_json);
+    body += "\n";
+    res.set_content(std::move(body), "application/json");
+    return;
+  }
+  json result;
+  s = ParseJsonText(job.result_json, "stored result", &result);
+  if (!s.ok()) return (void)SendStatus(res, Status::Internal("stored result is not JSON"));
+  // The method writes its own formats (Method::Export).
+  const Method* exporter = FindMethod(method);
+  if (exporter == nullptr) return (void)SendStatus(res, Status::Internal("unknown stored method"));
+  const std::vector<ExportFormat> exports = exporter->ExportFormats();
+  const auto f = std::find_if(exports.begin(), exports.end(),
+                              [&](const ExportFormat& e) { return e.format == format; });
+  if (f == exports.end()) return (void)SendStatus(res, NoSuchExport(format, exporter->name()));
+  std::string text;
+  s = exporter->Export(format, result, ExportContext{job.id, serial, method, job.finished_at},
+                       &text);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  const std::string file_name =
+      f->file_name.empty() ? "calibration-" + std::to_string(job.id) + "." + format : f->file_name;
+  res.set_header("Content-Disposition", "attachment; filename=\"" + file_name + "\"");
+  res.set_content(text, f->content_type);
+}
+
+void Service::Impl::HandleRecording(const httplib::Request& req, httplib::Response& res) {
+  int64_t id = 0;
+  if (!ParseId(req.matches[1], &id)) {
+    SendError(res, 404, "not_found", "no such recording");
+    return;
+  }
+  storage::RecordingInfo info;
+  Status s = store->GetRecording(id, &info);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  res.set_content(JsonBody(RecordingJson(info)), "application/json");
+}
+
+void Service::Impl::HandleRecordingData(const httplib::Request& req, httplib::Response& res) {
+  int64_t id = 0;
+  if (!ParseId(req.matches[1], &id)) {
+    SendError(res, 404, "not_found", "no such recording");
+    return;
+  }
+  storage::RecordingInfo info;
+  Status s = store->GetRecording(id, &info);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  res.set_header("Content-Disposition",
+                 "attachment; filename=\"recording-" + std::to_string(id) + ".csv\"");
+  res.set_header("ETag", "\"" + info.sha256 + "\"");
+  storage::Store* st = store.get();
+  res.set_content_provider(static_cast<size_t>(info.bytes), "text/csv",
+                           [st, id](size_t offset, size_t, httplib::DataSink& sink) {
+                             if (offset != 0)
+                               return false;  // everything is written in the first call
+                             Status rs = st->ReadRecordingData(id, [&sink](std::string_view chunk) {
+                               return sink.write(chunk.data(), chunk.size());
+                             });
+                             return rs.ok();
+                           });
+}
+
+}  // namespace calibd::server

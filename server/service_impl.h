@@ -1,0 +1,107 @@
+// The internals of Service (server/service.h) shared by its files: service.cc (lifecycle,
+// routes table, policy: authorization, health, metrics), upload_routes.cc (uploads and new jobs),
+// job_routes.cc (jobs, decisions, devices, exports, recordings) and api_json.cc (the API's JSON
+// of jobs, events and recordings). Internal to server/.
+#ifndef CALIBD_SERVER_SERVICE_IMPL_H_
+#define CALIBD_SERVER_SERVICE_IMPL_H_
+
+#include <arpa/inet.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "base/sha256.h"
+#include "core/task_pool.h"
+#include "server/acceptance.h"
+#include "server/config.h"
+#include "server/device_lookup.h"
+#include "server/exports.h"
+#include "server/gzip_stream.h"
+#include "server/http_server.h"
+#include "server/http_util.h"
+#include "server/inertial_log.h"
+#include "server/instance.h"
+#include "server/job_budget.h"
+#include "server/method.h"
+#include "server/metrics.h"
+#include "server/noise_reference.h"
+#include "server/recording.h"
+#include "server/recording_routes.h"
+#include "server/service.h"
+#include "server/worker_pool.h"
+#include "storage/store.h"
+
+namespace calibd::server {
+
+namespace fs = std::filesystem;
+
+struct Service::Impl {
+  ServeOptions options;
+  std::string host;
+  int requested_port = 0;
+  int bound_port = 0;
+  int listen_fd = -1;            // the listening socket, noted by the socket-options hook (Bind)
+  std::string token;             // empty: no authentication
+  nlohmann::json acceptance;     // server-wide acceptance limits (--acceptance), null for none
+  int64_t job_memory_bytes = 0;  // the per-job memory budget in force (server/job_budget.h)
+  fs::path staging_dir;
+  std::unique_ptr<storage::Store> store;
+  std::unique_ptr<ProcessInstance> instance;  // after store: removed before the store closes
+  Metrics metrics;
+  // The jobs' parallel numerics: cores - 1 threads shared by every worker (each worker computes
+  // too), so W concurrent jobs use at most W + cores - 1 threads. Outlives the workers.
+  std::unique_ptr<core::TaskPool> numerics;
+  std::unique_ptr<WorkerPool> workers;
+  std::unique_ptr<HttpServer> http;  // destroyed first: its request threads use the rest
+  std::once_flag shutdown_once;
+  bool shutdown_clean = true;
+
+  void SetupRoutes();
+  // Takes back at once the jobs of calibd processes of this host that died (kill -9, crash)
+  // while holding them, instead of waiting for their leases to expire (ProcessInstance).
+  void ReapDeadProcesses();
+  bool Authorized(const httplib::Request& req) const;
+  void HandleUpload(const httplib::Request& req, httplib::Response& res,
+                    const httplib::ContentReader& reader);
+  void HandleCreateJob(const httplib::Request& req, httplib::Response& res);
+  void HandleGetJob(const httplib::Request& req, httplib::Response& res);
+  void HandleDecision(const httplib::Request& req, httplib::Response& res, bool revoke);
+  void HandleListJobs(const httplib::Request& req, httplib::Response& res);
+  void HandleDevices(const httplib::Request& req, httplib::Response& res);
+  void HandleLatest(const httplib::Request& req, httplib::Response& res);
+  void HandleRecording(const httplib::Request& req, httplib::Response& res);
+  void HandleRecordingData(const httplib::Request& req, httplib::Response& res);
+  void HandleHealth(const httplib::Request& req, httplib::Response& res);
+  void HandleMetrics(const httplib::Request& req, httplib::Response& res);
+};
+
+// --- The API's JSON (api_json.cc).
+nlohmann::json NullIfEmpty(const std::string& s);  // null for ""
+// A job as the API shows it (SPEC §5); the result only when `with_result`.
+nlohmann::json JobJson(const storage::JobInfo& job, bool with_result);
+nlohmann::json EventJson(const storage::JobEvent& e);
+nlohmann::json RecordingJson(const storage::RecordingInfo& r);
+// A positive decimal id of at most 18 digits.
+bool ParseId(const std::string& text, int64_t* id);
+
+// --- Uploads (upload_routes.cc).
+bool IsGzipEncoding(const std::string& encoding);  // "gzip" or "x-gzip", any case
+// Over HTTP, an array config may name its accelerometer calibration by a succeeded pca job:
+// {"accelerometer_calibration": {"job": ID}} becomes {"job": ID, "result": {...}} before the job
+// is stored.
+Status ResolveCalibrationReference(storage::Store* store, nlohmann::json* config);
+
+}  // namespace calibd::server
+
+#endif  // CALIBD_SERVER_SERVICE_IMPL_H_
