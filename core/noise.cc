@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <thread>
+#include <utility>
 
 namespace calibd::core {
 namespace {
@@ -585,7 +586,7 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
         dt[static_cast<size_t>(i - 1)] = t[i] - t[i - 1];
       }
     }
-    tau0 = Median(dt);
+    tau0 = Median(std::move(dt));  // no copy: one double per sample at a time
     double worst = 0;
     int64_t worst_index = 1;
     for (int64_t i = 1; i < n; ++i) {

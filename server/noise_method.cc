@@ -114,7 +114,7 @@ class Noise : public Method {
   // as double and one channel's cumulative sum (double) at a time.
   double PeakBytesPerValue(const json& config) const override {
     (void)config;
-    return 8;
+    return 7;
   }
   Status Run(RecordingParser* parser, const json& config, const RunContext& context,
              json* result) const override {

@@ -65,7 +65,7 @@ TEST(JobBudget, EstimateGrowsWithTheRecordingAndTheMethodsPeak) {
 TEST(JobBudget, ATwoHourNoiseLogFitsTheSmallestDefaultBudget) {
   // The noise job holds its samples as float (4 B), t as double and one channel's cumulative sum
   // (double): (6 · 4 + 8 + 8) / 7 bytes per value of a 6-channel log with t, plus what the
-  // server holds anyway (bench/README.md measures 149 MiB for 2 h at 400 Hz, 7.7 B a value).
+  // server holds anyway (bench/README.md measures 127 MiB for 2 h at 400 Hz, 6.6 B a value).
   const Method& noise = *FindMethod("noise");
   const json config = {{"method", "noise"}};
   EXPECT_GE(noise.PeakBytesPerValue(config), (6.0 * 4 + 8 + 8) / 7);
