@@ -12,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "web/device_drift.h"
 #include "web/html.h"
 #include "web/svg_plot.h"
 
@@ -2078,7 +2079,7 @@ std::string DeviceBody(const DeviceView& v) {
   }
   out += Section("calibrations", "Calibrations", table);
   std::string drift;
-  for (const char* method : {"pca", "array"}) {
+  for (const char* method : {"pca", "array", "imu", "noise"}) {
     const std::string m = method;
     std::vector<const JobSummary*> ok;
     for (const auto& j : jobs) {
@@ -2088,7 +2089,9 @@ std::string DeviceBody(const DeviceView& v) {
     if (ok.size() < 2) continue;
     drift += "<h3>" + m + " (" + std::to_string(ok.size()) +
              " accepted calibrations; rejected and revoked ones are not compared)</h3>";
-    drift += Guard("Drift", [&] { return m == "pca" ? PcaDrift(ok) : ArrayDrift(ok); });
+    drift += Guard("Drift", [&] {
+      return m == "pca" ? PcaDrift(ok) : m == "array" ? ArrayDrift(ok) : RawLogDriftHtml(m, ok);
+    });
   }
   if (drift.empty()) {
     drift =
