@@ -1041,6 +1041,7 @@ Status RecordingParser::TakeArray(ArrayRecording* out) {
 }
 
 void RecordingParser::CollectArrayAsFloat(double accel_scale, double gyro_scale) {
+  if (impl_->have_header) return;  // too late: the numbers are already held as double
   impl_->as_float = true;
   impl_->float_scale_accel = accel_scale;
   impl_->float_scale_gyro = gyro_scale;

@@ -109,7 +109,8 @@ class RecordingParser {
   // Optional, before the first Feed of a collecting parser: keep an array recording's numbers as
   // float (4 bytes a value instead of 8), each multiplied by the scale of its kind in double
   // before the one rounding to float; TakeArrayFloat then hands them out (TakeArray refuses).
-  // Does nothing to a pca recording.
+  // Does nothing to a pca recording, nor once the header has been read (collects_float() then
+  // stays false).
   void CollectArrayAsFloat(double accel_scale, double gyro_scale);
   // Whether CollectArrayAsFloat was called, and with which scales (either pointer may be null).
   bool collects_float(double* accel_scale = nullptr, double* gyro_scale = nullptr) const;

@@ -169,6 +169,16 @@ TEST(RecordingParser, FloatCollectionHoldsEachReadingTimesItsScaleRoundedOnce) {
     EXPECT_EQ(got.accel, (want.accel * accel_scale).cast<float>().eval()) << hint;
     EXPECT_EQ(got.gyro, (want.gyro * gyro_scale).cast<float>().eval()) << hint;
   }
+  // Asked too late (after the header): the parser goes on with doubles and says so.
+  RecordingParser late("arr.csv", true);
+  ASSERT_TRUE(late.Feed(text.substr(0, 40)).ok());
+  late.CollectArrayAsFloat(accel_scale, gyro_scale);
+  EXPECT_FALSE(late.collects_float());
+  ASSERT_TRUE(late.Feed(text.substr(40)).ok());
+  ASSERT_TRUE(late.Finish().ok());
+  ArrayRecording as_double;
+  ASSERT_TRUE(late.TakeArray(&as_double).ok());
+  EXPECT_EQ(as_double.accel, want.accel);
   RecordingParser doubles("arr.csv", true);
   EXPECT_FALSE(doubles.collects_float());
   ASSERT_TRUE(ParseAll(text, &doubles).ok());
