@@ -19,6 +19,11 @@ curl -sf -F "recording=@$dir/recording.csv" -F "config=@$dir/config.json" \
 job=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["job"]["id"])' "$tmp/upload.json")
 echo "after the upload: $(($(hwm) / 1024)) MiB"
 until curl -sf "$base/api/v1/jobs/$job" | grep -q '"status": "\(succeeded\|failed\)"'; do sleep 0.2; done
-curl -sf "$base/api/v1/jobs/$job" | python3 -c \
-  'import json, sys; j = json.load(sys.stdin); print("job", j["status"], (j.get("error") or {}).get("message", ""))'
+curl -sf "$base/api/v1/jobs/$job" | python3 -c '
+import datetime, json, sys
+j = json.load(sys.stdin)
+def t(s): return datetime.datetime.fromisoformat(s.replace("Z", "+00:00"))
+ran = (t(j["finished_at"]) - t(j["started_at"])).total_seconds() if j.get("started_at") else float("nan")
+print("job", j["status"], "ran %.2f s (started_at to finished_at: parse and method)" % ran,
+      (j.get("error") or {}).get("message", ""))'
 echo "after the job: $(($(hwm) / 1024)) MiB"

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 
 namespace calibd::core {
@@ -85,6 +86,7 @@ bool AllanOptions::IsValid(std::string* error) const {
     return fail("taus_per_decade must be between 0 (octaves) and 100");
   }
   if (!(confidence > 0 && confidence < 1)) return fail("confidence must be in (0, 1)");
+  if (threads < 0) return fail("threads must be >= 0 (0: hardware concurrency)");
   return true;
 }
 
@@ -106,15 +108,18 @@ std::vector<int64_t> AllanClusterSizes(int64_t n, int taus_per_decade) {
 }
 
 std::vector<double> OverlappingAllanVariance(const float* y, int64_t n,
-                                             const std::vector<int64_t>& clusters) {
+                                             const std::vector<int64_t>& clusters, int threads,
+                                             const TaskExecutor& executor) {
   std::vector<double> avar(clusters.size(), std::numeric_limits<double>::quiet_NaN());
   if (n < 2) return avar;
   const std::vector<double> s = CentredCumulativeSum(y, n);
   // Blocks of kBlock cluster starts, each block's partial sum (double) added to a long double
-  // total per cluster size. Cache blocking: every cluster size with 2m <= kBlock is done block by
-  // block, all of them while the block's window of S (at most 2·kBlock doubles) is in cache, so
-  // the short cluster times cost one pass over S together instead of one pass each.
-  constexpr int64_t kBlock = 8192;
+  // total per cluster size, in block order. Cache blocking: every cluster size with 2m <= kBlock
+  // is done block by block, all of them while the block's window of S (at most 2·kBlock doubles)
+  // is in cache, so the short cluster times cost one pass over S together instead of one pass
+  // each. Tasks: one per block for the short cluster sizes, one per (long cluster size, block);
+  // kGroup blocks at a time, so the partial sums take O(clusters · kGroup) memory.
+  constexpr int64_t kBlock = 8192, kGroup = 256;
   std::vector<long double> total(clusters.size(), 0.0L);
   std::vector<size_t> small, large;
   for (size_t j = 0; j < clusters.size(); ++j) {
@@ -122,18 +127,40 @@ std::vector<double> OverlappingAllanVariance(const float* y, int64_t n,
     if (m < 1 || 2 * m > n) continue;
     (2 * m <= kBlock ? small : large).push_back(j);
   }
-  for (int64_t begin = 0; begin < n; begin += kBlock) {
-    for (size_t j : small) {
-      const int64_t count = n - 2 * clusters[j] + 1;
-      const int64_t end = std::min(begin + kBlock, count);
-      if (begin < end) total[j] += SecondDifferenceSquares(s.data(), clusters[j], begin, end);
-    }
-  }
-  for (size_t j : large) {
+  const int64_t blocks = (n + kBlock - 1) / kBlock;
+  const int64_t ns = static_cast<int64_t>(small.size()), nl = static_cast<int64_t>(large.size());
+  std::vector<double> partial(static_cast<size_t>((ns + nl) * kGroup), 0.0);
+  auto block_sum = [&](size_t j, int64_t block) {
     const int64_t count = n - 2 * clusters[j] + 1;
-    for (int64_t begin = 0; begin < count; begin += kBlock) {
-      total[j] +=
-          SecondDifferenceSquares(s.data(), clusters[j], begin, std::min(begin + kBlock, count));
+    const int64_t begin = block * kBlock, end = std::min(begin + kBlock, count);
+    return begin < end ? SecondDifferenceSquares(s.data(), clusters[j], begin, end) : 0.0;
+  };
+  for (int64_t g0 = 0; g0 < blocks; g0 += kGroup) {
+    const int64_t gb = std::min(kGroup, blocks - g0);
+    const std::function<void(int64_t)> task = [&](int64_t item) {
+      if (item < gb) {
+        for (int64_t a = 0; a < ns; ++a) {
+          partial[static_cast<size_t>(a * kGroup + item)] = block_sum(small[a], g0 + item);
+        }
+      } else {
+        const int64_t a = (item - gb) / gb, b = (item - gb) % gb;
+        partial[static_cast<size_t>((ns + a) * kGroup + b)] = block_sum(large[a], g0 + b);
+      }
+    };
+    const int64_t tasks = gb * (1 + nl);
+    if (executor) {
+      executor(tasks, task);
+    } else if (threads == 1) {
+      for (int64_t i = 0; i < tasks; ++i) task(i);
+    } else {
+      RunTasksOnThreads(threads, tasks, task);
+    }
+    for (int64_t a = 0; a < ns + nl; ++a) {
+      const size_t j = a < ns ? small[a] : large[a - ns];
+      const int64_t count = n - 2 * clusters[j] + 1;
+      for (int64_t b = 0; b < gb; ++b) {
+        if ((g0 + b) * kBlock < count) total[j] += partial[static_cast<size_t>(a * kGroup + b)];
+      }
     }
   }
   for (size_t j = 0; j < clusters.size(); ++j) {
@@ -311,7 +338,7 @@ Status ComputeAllanDeviation(const float* y, int64_t n, double tau0, const Allan
   curve->tau0 = tau0;
   curve->samples = n;
   curve->cluster = AllanClusterSizes(n, options.taus_per_decade);
-  curve->avar = OverlappingAllanVariance(y, n, curve->cluster);
+  curve->avar = OverlappingAllanVariance(y, n, curve->cluster, options.threads, options.executor);
   for (size_t j = 0; j < curve->cluster.size(); ++j) {
     curve->tau.push_back(static_cast<double>(curve->cluster[j]) * tau0);
     curve->adev.push_back(std::sqrt(curve->avar[j]));

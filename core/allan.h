@@ -19,8 +19,12 @@
 // white FM (white rate noise: the angle/velocity random walk N), flicker FM (bias instability B)
 // and random-walk FM (rate random walk K). N in those formulas is the number of phase points, n+1.
 //
-// Memory: one double per sample (the cumulative sum) while a channel is processed; the samples
-// themselves stay float and are not copied. Thread-compatible: no shared state.
+// Memory: one double per sample (the cumulative sum, 8 bytes a sample: the precision above) while
+// a channel is processed; the samples themselves stay float and are not copied. The cluster
+// sizes and blocks of cluster starts of one channel run on several threads (AllanOptions) over
+// that one sum; each block's partial sum goes to its own slot and the slots are added in block
+// order, so the result is bit-identical for any number of threads. Thread-compatible: no shared
+// state.
 #ifndef CALIBD_CORE_ALLAN_H_
 #define CALIBD_CORE_ALLAN_H_
 
@@ -29,6 +33,7 @@
 #include <vector>
 
 #include "base/status.h"
+#include "core/block_lm.h"
 
 namespace calibd::core {
 
@@ -48,6 +53,11 @@ struct AllanOptions {
   // Two-sided probability of the confidence interval; default 0.6827 (±1σ of a normal), so that
   // the interval is comparable with the 1σ uncertainties of the terms. 0 < confidence < 1.
   double confidence = 0.6827;
+  // Threads of one channel's computation when no executor is given; 0 = hardware concurrency.
+  // The result does not depend on it. >= 0.
+  int threads = 1;
+  // Optional: runs the blocks instead of the built-in threads (e.g. the server's shared pool).
+  TaskExecutor executor;
 
   bool IsValid(std::string* error) const;
 };
@@ -57,9 +67,11 @@ struct AllanOptions {
 std::vector<int64_t> AllanClusterSizes(int64_t n, int taus_per_decade);
 
 // Overlapping Allan variance σ²(m·τ0) of y[0..n) for every m in `clusters` (each 1 <= m <= n/2),
-// O(n) per cluster size from the centred cumulative sum. Precondition: y finite.
+// O(n) per cluster size from the centred cumulative sum, on `threads` threads (or `executor`;
+// see AllanOptions), bit-identical for any number. Precondition: y finite.
 std::vector<double> OverlappingAllanVariance(const float* y, int64_t n,
-                                             const std::vector<int64_t>& clusters);
+                                             const std::vector<int64_t>& clusters, int threads = 1,
+                                             const TaskExecutor& executor = {});
 
 // The same by direct summation of every cluster average, O(n·m) per cluster size, accumulated in
 // long double: the reference for tests and benchmarks, not for production use.

@@ -4,10 +4,10 @@
 #include <Eigen/Core>
 #include <Eigen/LU>
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <thread>
+#include <utility>
 
 namespace calibd::core {
 namespace {
@@ -419,6 +419,8 @@ Status AnalyseChannel(const NoiseChannelInput& in, int64_t n, double tau0,
   AllanOptions ao;
   ao.taus_per_decade = options.taus_per_decade;
   ao.confidence = options.confidence;
+  ao.threads = options.threads;
+  ao.executor = options.executor;
   Status s = ComputeAllanDeviation(y, n, tau0, ao, &ch->allan);
   if (!s.ok()) return s;
   if (lo == hi) {
@@ -584,7 +586,7 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
         dt[static_cast<size_t>(i - 1)] = t[i] - t[i - 1];
       }
     }
-    tau0 = Median(dt);
+    tau0 = Median(std::move(dt));  // no copy: one double per sample at a time
     double worst = 0;
     int64_t worst_index = 1;
     for (int64_t i = 1; i < n; ++i) {
@@ -628,26 +630,12 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
   result->rate = 1 / tau0;
   result->duration = static_cast<double>(n) * tau0;
 
-  // Channels in parallel; each writes only its own slot.
+  // Channels one at a time, so that one cumulative sum (8 bytes a sample) is held at a time;
+  // each channel's Allan variance runs on the threads (bit-identical for any number).
   const size_t count = problem.channels.size();
   result->channels.resize(count);
-  std::vector<Status> status(count);
-  const int threads = static_cast<int>(std::min<size_t>(
-      count, options.threads > 0 ? static_cast<size_t>(options.threads)
-                                 : std::max(1u, std::thread::hardware_concurrency())));
-  std::atomic<size_t> next{0};
-  auto work = [&]() {
-    for (;;) {
-      const size_t c = next.fetch_add(1);
-      if (c >= count) return;
-      status[c] = AnalyseChannel(problem.channels[c], n, tau0, options, &result->channels[c]);
-    }
-  };
-  std::vector<std::thread> pool;
-  for (int i = 1; i < threads; ++i) pool.emplace_back(work);
-  work();
-  for (auto& th : pool) th.join();
-  for (const Status& s : status) {
+  for (size_t c = 0; c < count; ++c) {
+    Status s = AnalyseChannel(problem.channels[c], n, tau0, options, &result->channels[c]);
     if (!s.ok()) return Fail(s, result);
   }
   result->stationary = true;

@@ -38,11 +38,12 @@
 // max_jump_ratio × their robust spread, means the sensor moved) → kNotDeterminable with the curve
 // and terms still computed for the report but usable = false.
 //
-// Memory: the samples are read in place (float, not copied); per worker thread one double per
-// sample (the cumulative sum) while a channel is processed, and one double per sample for the
-// median Δt when timestamps are given. Time: O(n · cluster times) per channel (bench/noise_bench:
-// 2 h at 400 Hz, 6 channels, ~0.5 s of CPU); channels run on `threads` threads and the result
-// does not depend on their number.
+// Memory: the samples are read in place (float, not copied); one double per sample (the
+// cumulative sum of the channel being processed: channels run one after the other), and, before
+// that and released first, one double per sample for the median Δt when timestamps are given.
+// Time: O(n · cluster times) per channel (bench/noise_bench: 2 h at 400 Hz, 6 channels, ~0.5 s
+// of CPU); each channel's cluster times run on `threads` threads and the result does not depend
+// on their number.
 //
 // SPEC §7 result JSON from NoiseResult (for the server):
 //   parameters.channels[i]  {name, unit, white_noise: white_noise.value, bias_instability:
@@ -99,8 +100,11 @@ struct NoiseOptions {
   // median absolute deviation of the jumps, at least the white-noise expectation) means the
   // sensor moved (tilted, knocked). > 1.
   double max_jump_ratio = 10.0;
-  // Worker threads over channels; 0 = std::thread::hardware_concurrency(). >= 0.
+  // Threads of each channel's Allan variance (channels run one at a time: one cumulative sum in
+  // memory); 0 = std::thread::hardware_concurrency(). The result does not depend on it. >= 0.
   int threads = 0;
+  // Optional: runs those tasks instead of the built-in threads (e.g. the server's shared pool).
+  TaskExecutor executor;
 
   bool IsValid(std::string* error) const;
 };

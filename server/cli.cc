@@ -100,6 +100,7 @@ int Calibrate(const std::string& recording_path, const std::string& config_path,
   s = ValidateConfig(config, &common);
   if (!s.ok()) return Report(s.WithFile(config_path));
   RecordingParser parser(recording_path, /*collect=*/true);
+  PrepareParser(config, &parser);
   s = ParseRecordingFile(recording_path, &parser);
   if (!s.ok()) return Report(s);
   json result;

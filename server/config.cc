@@ -160,6 +160,14 @@ void JudgeResult(const Method& method, const json& config, const json& acceptanc
   (*result)["verdict"] = verdict.ToJson(limits);
 }
 
+void PrepareParser(const json& config, RecordingParser* parser) {
+  if (!config.is_object()) return;
+  const auto it = config.find("method");
+  if (it == config.end() || !it->is_string()) return;
+  const Method* method = FindMethod(it->get_ref<const std::string&>());
+  if (method != nullptr) method->PrepareParser(WithoutAcceptance(config), parser);
+}
+
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, const json& config,
                        json* result, const std::atomic<bool>* cancel,
                        const json& acceptance_defaults, core::TaskExecutor executor) {
@@ -187,6 +195,7 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
 Status Calibrate(std::string_view recording, const std::string& file_name, const json& config,
                  json* result, const std::atomic<bool>* cancel, const json& acceptance_defaults) {
   RecordingParser parser(file_name, /*collect=*/true);
+  PrepareParser(config, &parser);
   Status s = ParseRecording(recording, &parser);
   if (!s.ok()) return s;
   return CalibrateParsed(&parser, file_name, config, result, cancel, acceptance_defaults);

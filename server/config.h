@@ -63,6 +63,11 @@ Status Calibrate(std::string_view recording, const std::string& file_name,
                  const std::atomic<bool>* cancel = nullptr,
                  const nlohmann::json& acceptance_defaults = nlohmann::json());
 
+// Before feeding a collecting parser for CalibrateParsed: lets the config's method choose how
+// the numbers are held (Method::PrepareParser). Does nothing for an unknown method or a config
+// that is not an object (CalibrateParsed then reports the error).
+void PrepareParser(const nlohmann::json& config, RecordingParser* parser);
+
 // The same, from a parser that has already been fed and finished (collecting).
 // `executor` (optional): see RunContext::executor.
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name,

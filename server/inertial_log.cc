@@ -68,7 +68,12 @@ Status CheckTimesIncrease(const RecordingSummary& summary, const std::string& me
 
 Status CheckLogTimes(const ArrayRecording& recording, const std::string& method,
                      const RecordingSummary* summary) {
-  if (recording.t.size() == 0) {
+  return CheckLogTimes(recording.t, method, summary);
+}
+
+Status CheckLogTimes(const Eigen::VectorXd& t, const std::string& method,
+                     const RecordingSummary* summary) {
+  if (t.size() == 0) {
     return Status::InvalidInput("the " + method +
                                 " method needs the time column 't' (seconds) in the log")
         .WithField("t");
@@ -76,12 +81,12 @@ Status CheckLogTimes(const ArrayRecording& recording, const std::string& method,
   if (summary != nullptr && summary->t_disorder_line > 0) {
     return CheckTimesIncrease(*summary, method);
   }
-  for (Eigen::Index i = 1; i < recording.t.size(); ++i) {
-    if (!(recording.t[i] > recording.t[i - 1])) {
+  for (Eigen::Index i = 1; i < t.size(); ++i) {
+    if (!(t[i] > t[i - 1])) {
       char buf[160];
       std::snprintf(buf, sizeof buf,
                     "t must increase strictly: sample %lld has t = %.9g s after t = %.9g s",
-                    static_cast<long long>(i), recording.t[i], recording.t[i - 1]);
+                    static_cast<long long>(i), t[i], t[i - 1]);
       // Data rows start on line 2 when the file has no comments; the parser's own errors carry
       // exact lines, this check names the sample.
       return Status::InvalidInput(buf).WithField("t");

@@ -28,6 +28,9 @@ Status ParseInertialUnits(const nlohmann::json& config, InertialUnits* units);
 // it, by its sample index. `method` names the method in the message.
 Status CheckLogTimes(const ArrayRecording& recording, const std::string& method,
                      const RecordingSummary* summary = nullptr);
+// The same for the times alone (e.g. of an ArrayRecordingFloat).
+Status CheckLogTimes(const Eigen::VectorXd& t, const std::string& method,
+                     const RecordingSummary* summary = nullptr);
 // From the parser's summary alone (at upload, before the log is stored): kInvalidInput with the
 // line and column of the first t that does not increase, else Ok.
 Status CheckTimesIncrease(const RecordingSummary& summary, const std::string& method);

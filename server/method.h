@@ -68,6 +68,14 @@ class Method {
   // kNotDeterminable (the data cannot determine the parameters; the message says what to record).
   virtual Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
                      nlohmann::json* result) const = 0;
+  // Called before the recording is fed to the collecting parser that Run will take it from
+  // (server/config.h PrepareParser): a method may ask for a leaner collection, e.g.
+  // RecordingParser::CollectArrayAsFloat. `config` may be invalid (Run reports that); Run must
+  // also accept a parser that was not prepared.
+  virtual void PrepareParser(const nlohmann::json& config, RecordingParser* parser) const {
+    (void)config;
+    (void)parser;
+  }
   // The acceptance gate (SPEC §4 `verdict`): judges a result this method's Run wrote (with the
   // config it ran with, `acceptance` removed) against the limits in force (server/acceptance.h),
   // calling verdict->Reject once per failed rule with words a line operator understands (what is

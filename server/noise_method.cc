@@ -151,26 +151,51 @@ class Noise : public Method {
                         "white-noise density far above any MEMS sensor: check accel_unit "
                         "and gyro_unit, and that the device was at rest");
   }
-  Status Run(RecordingParser* parser, const json& config, const RunContext&,
+  void PrepareParser(const json& config, RecordingParser* parser) const override {
+    core::NoiseOptions options;
+    InertialUnits units;
+    if (ParseNoiseConfig(config, &options, &units).ok()) {
+      parser->CollectArrayAsFloat(units.accel, units.gyro);
+    }
+  }
+  // Measured (bench/README.md, "Memory budget per job"): the samples as float (4 B a value), t
+  // as double and one channel's cumulative sum (double) at a time.
+  double PeakBytesPerValue(const json& config) const override {
+    (void)config;
+    return 7;
+  }
+  Status Run(RecordingParser* parser, const json& config, const RunContext& context,
              json* result) const override {
     core::NoiseOptions options;
     InertialUnits units;
     Status s = ParseNoiseConfig(config, &options, &units);
     if (!s.ok()) return s;
-    ArrayRecording log;
-    s = parser->TakeArray(&log);
+    options.executor = context.executor;
+    // The samples as floats in SI, one column per channel (the analysis reads them in place).
+    // A prepared parser (PrepareParser) collected them so: held once, 4 bytes a value. Otherwise
+    // the parser's doubles are converted (the same rounding: reading × unit in double, then to
+    // float) and released kind by kind.
+    ArrayRecordingFloat log;
+    double accel_scale = 0, gyro_scale = 0;
+    if (parser->collects_float(&accel_scale, &gyro_scale) && accel_scale == units.accel &&
+        gyro_scale == units.gyro) {
+      s = parser->TakeArrayFloat(&log);
+      if (!s.ok()) return s;
+    } else {
+      ArrayRecording doubles;
+      s = parser->TakeArray(&doubles);
+      if (!s.ok()) return s;
+      log.accel_names = std::move(doubles.accel_names);
+      log.gyro_names = std::move(doubles.gyro_names);
+      log.t = std::move(doubles.t);
+      log.accel = (doubles.accel * units.accel).cast<float>();
+      doubles.accel.resize(0, 0);
+      log.gyro = (doubles.gyro * units.gyro).cast<float>();
+    }
+    s = CheckLogTimes(log.t, "noise", &parser->summary());
     if (!s.ok()) return s;
-    s = CheckLogTimes(log, "noise", &parser->summary());
-    if (!s.ok()) return s;
-    // The samples as floats in SI, one column per channel (the analysis reads them in place);
-    // the parser's doubles are released channel by channel group.
     const Eigen::Index n = log.t.size();
     const Eigen::Index na = log.accel.cols(), ng = log.gyro.cols();
-    Eigen::MatrixXf samples(n, na + ng);
-    samples.leftCols(na) = (log.accel * units.accel).cast<float>();
-    log.accel.resize(0, 0);
-    samples.rightCols(ng) = (log.gyro * units.gyro).cast<float>();
-    log.gyro.resize(0, 0);
     core::NoiseProblem problem;
     problem.samples = n;
     problem.times = log.t.data();
@@ -179,8 +204,8 @@ class Noise : public Method {
       const bool accel = c < na;
       const Eigen::Index triad = (accel ? c : c - na) / 3;
       const std::string base = accel ? log.accel_names[triad] : log.gyro_names[triad];
-      problem.channels.push_back(
-          {base + "_" + kAxes[c % 3], accel ? "m/s^2" : "rad/s", samples.col(c).data()});
+      problem.channels.push_back({base + "_" + kAxes[c % 3], accel ? "m/s^2" : "rad/s",
+                                  accel ? log.accel.col(c).data() : log.gyro.col(c - na).data()});
     }
     core::NoiseResult r;
     s = core::EstimateNoise(problem, options, &r);

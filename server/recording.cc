@@ -299,6 +299,12 @@ struct RecordingParser::Impl {
   int64_t direct_rows = 0;  // rows written into the matrices
   Eigen::MatrixXd direct_accel, direct_gyro;
   Eigen::VectorXd direct_t;
+  // CollectArrayAsFloat: the array numbers times the scale of their kind (in double), rounded
+  // once to float, in these instead of the double buffers above (t stays double).
+  bool as_float = false;
+  double float_scale_accel = 1, float_scale_gyro = 1;
+  std::vector<float> array_values_f;  // row-major, as array_values
+  Eigen::MatrixXf direct_accel_f, direct_gyro_f;
 
   Status Fail(std::string message, int64_t column = 0, std::string field = {}) {
     Status s = Status::InvalidInput(std::move(message));
@@ -570,8 +576,13 @@ struct RecordingParser::Impl {
     // server/job_budget.h bounds real jobs far below that).
     if (collect && expected_rows > 0 && expected_rows <= (int64_t{1} << 30) / width) {
       direct = true;
-      direct_accel.resize(expected_rows, 3 * accel_triads);
-      direct_gyro.resize(expected_rows, 3 * gyro_triads);
+      if (as_float) {
+        direct_accel_f.resize(expected_rows, 3 * accel_triads);
+        direct_gyro_f.resize(expected_rows, 3 * gyro_triads);
+      } else {
+        direct_accel.resize(expected_rows, 3 * accel_triads);
+        direct_gyro.resize(expected_rows, 3 * gyro_triads);
+      }
       if (has_t) direct_t.resize(expected_rows);
     }
     return Status::Ok();
@@ -666,30 +677,54 @@ struct RecordingParser::Impl {
     }
     if (!collect) return;
     if (direct && direct_rows == expected_rows) LeaveDirectCollection();
+    const int ka = 3 * accel_triads, kg = 3 * gyro_triads;
     if (direct) {
-      const int ka = 3 * accel_triads, kg = 3 * gyro_triads;
-      for (int j = 0; j < ka; ++j) direct_accel(direct_rows, j) = row_values[j];
-      for (int j = 0; j < kg; ++j) direct_gyro(direct_rows, j) = row_values[ka + j];
+      if (as_float) {
+        for (int j = 0; j < ka; ++j) direct_accel_f(direct_rows, j) = AccelFloat(row_values[j]);
+        for (int j = 0; j < kg; ++j) direct_gyro_f(direct_rows, j) = GyroFloat(row_values[ka + j]);
+      } else {
+        for (int j = 0; j < ka; ++j) direct_accel(direct_rows, j) = row_values[j];
+        for (int j = 0; j < kg; ++j) direct_gyro(direct_rows, j) = row_values[ka + j];
+      }
       if (has_t) direct_t(direct_rows) = t;
       ++direct_rows;
       return;
     }
-    array_values.insert(array_values.end(), row_values.begin(), row_values.end());
+    if (as_float) {
+      for (int j = 0; j < ka; ++j) array_values_f.push_back(AccelFloat(row_values[j]));
+      for (int j = 0; j < kg; ++j) array_values_f.push_back(GyroFloat(row_values[ka + j]));
+    } else {
+      array_values.insert(array_values.end(), row_values.begin(), row_values.end());
+    }
     if (has_t) t_values.push_back(t);
   }
+
+  float AccelFloat(double v) const { return static_cast<float>(v * float_scale_accel); }
+  float GyroFloat(double v) const { return static_cast<float>(v * float_scale_gyro); }
 
   // More rows than announced: the rows so far move to the row-major buffers.
   void LeaveDirectCollection() {
     const int ka = 3 * accel_triads, kg = 3 * gyro_triads;
-    array_values.reserve(static_cast<size_t>(2 * direct_rows * (ka + kg)));
+    if (as_float) {
+      array_values_f.reserve(static_cast<size_t>(2 * direct_rows * (ka + kg)));
+    } else {
+      array_values.reserve(static_cast<size_t>(2 * direct_rows * (ka + kg)));
+    }
     for (int64_t n = 0; n < direct_rows; ++n) {
-      for (int j = 0; j < ka; ++j) array_values.push_back(direct_accel(n, j));
-      for (int j = 0; j < kg; ++j) array_values.push_back(direct_gyro(n, j));
+      if (as_float) {
+        for (int j = 0; j < ka; ++j) array_values_f.push_back(direct_accel_f(n, j));
+        for (int j = 0; j < kg; ++j) array_values_f.push_back(direct_gyro_f(n, j));
+      } else {
+        for (int j = 0; j < ka; ++j) array_values.push_back(direct_accel(n, j));
+        for (int j = 0; j < kg; ++j) array_values.push_back(direct_gyro(n, j));
+      }
       if (has_t) t_values.push_back(direct_t(n));
     }
     direct = false;
     direct_accel.resize(0, 0);
     direct_gyro.resize(0, 0);
+    direct_accel_f.resize(0, 0);
+    direct_gyro_f.resize(0, 0);
     direct_t.resize(0);
   }
 
@@ -853,6 +888,15 @@ struct RecordingParser::Impl {
   }
 };
 
+namespace {
+Status NotArray(const std::string& file_name) {
+  return Status::InvalidInput(
+             "this is a pca recording (first column 'position'), not an array recording "
+             "(columns aK_x.., gJ_x..)")
+      .WithFile(file_name);
+}
+}  // namespace
+
 RecordingParser::RecordingParser(std::string file_name, bool collect, RecordingLimits limits)
     : impl_(std::make_unique<Impl>()) {
   impl_->file_name = std::move(file_name);
@@ -923,12 +967,8 @@ Status RecordingParser::TakeArray(ArrayRecording* out) {
   if (!d.finished || !d.error.ok() || !d.collect) {
     return Status::Internal("TakeArray needs a successful Finish() of a collecting parser");
   }
-  if (d.summary.layout != Layout::kArray) {
-    return Status::InvalidInput(
-               "this is a pca recording (first column 'position'), not an array recording "
-               "(columns aK_x.., gJ_x..)")
-        .WithFile(d.file_name);
-  }
+  if (d.summary.layout != Layout::kArray) return NotArray(d.file_name);
+  if (d.as_float) return Status::Internal("the array was collected as float: TakeArrayFloat");
   const int64_t rows = d.summary.rows;
   out->accel_names.assign(d.summary.sensors.begin(), d.summary.sensors.begin() + d.accel_triads);
   out->gyro_names.assign(d.summary.sensors.begin() + d.accel_triads, d.summary.sensors.end());
@@ -960,6 +1000,63 @@ Status RecordingParser::TakeArray(ArrayRecording* out) {
     out->t.resize(0);
   }
   std::vector<double>().swap(d.array_values);
+  return Status::Ok();
+}
+
+void RecordingParser::CollectArrayAsFloat(double accel_scale, double gyro_scale) {
+  if (impl_->have_header) return;  // too late: the numbers are already held as double
+  impl_->as_float = true;
+  impl_->float_scale_accel = accel_scale;
+  impl_->float_scale_gyro = gyro_scale;
+}
+
+bool RecordingParser::collects_float(double* accel_scale, double* gyro_scale) const {
+  if (!impl_->as_float) return false;
+  if (accel_scale != nullptr) *accel_scale = impl_->float_scale_accel;
+  if (gyro_scale != nullptr) *gyro_scale = impl_->float_scale_gyro;
+  return true;
+}
+
+Status RecordingParser::TakeArrayFloat(ArrayRecordingFloat* out) {
+  Impl& d = *impl_;
+  if (!d.finished || !d.error.ok() || !d.collect || !d.as_float) {
+    return Status::Internal(
+        "TakeArrayFloat needs a successful Finish() of a parser collecting floats");
+  }
+  if (d.summary.layout != Layout::kArray) return NotArray(d.file_name);
+  const int64_t rows = d.summary.rows;
+  out->accel_names.assign(d.summary.sensors.begin(), d.summary.sensors.begin() + d.accel_triads);
+  out->gyro_names.assign(d.summary.sensors.begin() + d.accel_triads, d.summary.sensors.end());
+  out->accel_scale = d.float_scale_accel;
+  out->gyro_scale = d.float_scale_gyro;
+  if (d.direct) {
+    if (d.direct_rows == d.direct_accel_f.rows()) {
+      out->accel = std::move(d.direct_accel_f);
+      out->gyro = std::move(d.direct_gyro_f);
+      out->t = d.has_t ? std::move(d.direct_t) : Eigen::VectorXd();
+    } else {
+      out->accel = d.direct_accel_f.topRows(d.direct_rows);
+      out->gyro = d.direct_gyro_f.topRows(d.direct_rows);
+      out->t = d.has_t ? Eigen::VectorXd(d.direct_t.head(d.direct_rows)) : Eigen::VectorXd();
+    }
+    d.direct = false;
+    d.direct_accel_f.resize(0, 0);
+    d.direct_gyro_f.resize(0, 0);
+    d.direct_t.resize(0);
+    return Status::Ok();
+  }
+  const int width = 3 * (d.accel_triads + d.gyro_triads);
+  Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> all(
+      d.array_values_f.data(), rows, width);
+  out->accel = all.leftCols(3 * d.accel_triads);
+  out->gyro = all.rightCols(3 * d.gyro_triads);
+  if (d.has_t) {
+    out->t = Eigen::Map<const Eigen::VectorXd>(d.t_values.data(), rows);
+  } else {
+    out->t.resize(0);
+  }
+  std::vector<float>().swap(d.array_values_f);
+  std::vector<double>().swap(d.t_values);
   return Status::Ok();
 }
 

@@ -53,6 +53,19 @@ struct ArrayRecording {
   Eigen::VectorXd t;                     // N seconds, or empty when there is no `t` column
 };
 
+// An array recording held as floats (RecordingParser::CollectArrayAsFloat): what the raw-log
+// methods analyse, at half the memory of ArrayRecording. Each value is the reading times the
+// scale of its kind, computed in double and rounded once to float; t stays double (a float has
+// 0.5 ms resolution at t = 2 h, too coarse for the sample period and its jitter).
+struct ArrayRecordingFloat {
+  std::vector<std::string> accel_names;  // "a0".."a{K-1}", by index
+  std::vector<std::string> gyro_names;   // "g0".."g{G-1}", by index
+  Eigen::MatrixXf accel;                 // N × 3K: a0_x a0_y a0_z a1_x ... times accel_scale
+  Eigen::MatrixXf gyro;                  // N × 3G: g0_x ... times gyro_scale
+  Eigen::VectorXd t;                     // N seconds, or empty when there is no `t` column
+  double accel_scale = 1, gyro_scale = 1;
+};
+
 // What storage keeps about a recording without re-reading it.
 struct RecordingSummary {
   Layout layout = Layout::kPcaAveraged;
@@ -94,6 +107,14 @@ class RecordingParser {
   // into the matrices TakeArray hands out: held once, instead of a growing row-major buffer
   // (up to 2x slack) plus the matrices copied from it. A wrong hint changes nothing but memory.
   void ExpectRows(int64_t rows);
+  // Optional, before the first Feed of a collecting parser: keep an array recording's numbers as
+  // float (4 bytes a value instead of 8), each multiplied by the scale of its kind in double
+  // before the one rounding to float; TakeArrayFloat then hands them out (TakeArray refuses).
+  // Does nothing to a pca recording, nor once the header has been read (collects_float() then
+  // stays false).
+  void CollectArrayAsFloat(double accel_scale, double gyro_scale);
+  // Whether CollectArrayAsFloat was called, and with which scales (either pointer may be null).
+  bool collects_float(double* accel_scale = nullptr, double* gyro_scale = nullptr) const;
   // End of input: checks the last line and the whole-file rules (e.g. every raw position has
   // static and moving rows). Must be called once after the last Feed.
   Status Finish();
@@ -102,6 +123,7 @@ class RecordingParser {
   // Valid after a successful Finish() of a collecting parser, for the matching layout.
   Status TakePca(PcaRecording* out);
   Status TakeArray(ArrayRecording* out);
+  Status TakeArrayFloat(ArrayRecordingFloat* out);
 
  private:
   struct Impl;

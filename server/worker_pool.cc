@@ -166,7 +166,8 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
   if (s.ok()) {
     try {
       // The stored bytes stream through the collecting parser in the store's 1 MiB pieces, so
-      // a job holds the recording's numbers (8 bytes a value), never its text as well. The read
+      // a job holds the recording's numbers (8 bytes a value, 4 for a method that collects
+      // floats), never its text as well. The read
       // keeps one snapshot of the recording for the whole parse.
       const std::string file_name = "recording " + std::to_string(job.recording_id);
       storage::RecordingInfo recording;
@@ -184,6 +185,7 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       }
       RecordingParser parser(file_name, /*collect=*/true);
       parser.ExpectRows(recording.rows);
+      PrepareParser(config, &parser);  // e.g. noise: the samples as float
       Status parsed;
       s = store_->ReadRecordingData(job.recording_id, [&](std::string_view chunk) {
         parsed = parser.Feed(chunk);

@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "web/device_drift.h"
 #include "web/html.h"
 #include "web/report_common.h"
 #include "web/reports.h"
@@ -149,6 +150,9 @@ class ImuReportImpl : public MethodReport {
  public:
   const char* method() const override { return "imu"; }
   std::string Section(const JobView& view) const override { return ImuReport(view); }
+  std::string Drift(const std::vector<const JobSummary*>& jobs) const override {
+    return ImuDriftHtml(jobs);  // web/device_drift.h
+  }
   std::vector<Download> Downloads() const override {
     return {{"csv", "CSV"}, {"h", "C header"}, {"yaml", "OpenVINS kalibr_imu_chain.yaml"}};
   }

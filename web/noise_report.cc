@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "web/device_drift.h"
 #include "web/html.h"
 #include "web/report_common.h"
 #include "web/reports.h"
@@ -140,6 +141,9 @@ class NoiseReportImpl : public MethodReport {
  public:
   const char* method() const override { return "noise"; }
   std::string Section(const JobView& view) const override { return NoiseReport(view); }
+  std::string Drift(const std::vector<const JobSummary*>& jobs) const override {
+    return NoiseDriftHtml(jobs);  // web/device_drift.h
+  }
   std::vector<Download> Downloads() const override {
     return {{"csv", "CSV"}, {"h", "C header"}, {"yaml", "Kalibr imu.yaml"}};
   }

@@ -17,7 +17,8 @@
 //                   residual-histogram-accelerometer, residual-histogram-gyroscope (only when
 //                   the result carries histograms), excitation-omega, excitation-omega-dot
 //                   (only when it carries diagnostics.motion.omega_norm / omega_dot_norm)
-//            device: drift-scale, drift-axis, drift-position
+//            device: drift-scale, drift-axis, drift-position (noise and imu drift: see
+//            web/device_drift.h for its tables and plots)
 //            (pca axes-xz only for d >= 3; array positions-* and position-sigma only when the
 //            result has positions; the others are always present on a job with a result of
 //            that method, saying "no data" when their keys are missing)

@@ -62,6 +62,20 @@ TEST(JobBudget, EstimateGrowsWithTheRecordingAndTheMethodsPeak) {
   EXPECT_NE(s.message().find("--job-memory-bytes"), std::string::npos) << s.message();
 }
 
+TEST(JobBudget, ATwoHourNoiseLogFitsTheSmallestDefaultBudget) {
+  // The noise job holds its samples as float (4 B), t as double and one channel's cumulative sum
+  // (double): (6 · 4 + 8 + 8) / 7 bytes per value of a 6-channel log with t, plus what the
+  // server holds anyway (bench/README.md measures 127 MiB for 2 h at 400 Hz, 6.6 B a value).
+  const Method& noise = *FindMethod("noise");
+  const json config = {{"method", "noise"}};
+  EXPECT_GE(noise.PeakBytesPerValue(config), (6.0 * 4 + 8 + 8) / 7);
+  EXPECT_LE(noise.PeakBytesPerValue(config), 8.0);  // the whole server: not the values as doubles
+  const RecordingShape two_hours{7200 * 400, 7};
+  EXPECT_TRUE(CheckJobBudget(noise, two_hours, config, 256 << 20).ok());
+  EXPECT_EQ(CheckJobBudget(noise, two_hours, config, 128 << 20).code(),
+            StatusCode::kNotDeterminable);
+}
+
 TEST(JobBudget, DefaultSharesHalfTheMemoryAmongTheWorkersWithinBounds) {
   const int64_t one = DefaultJobMemoryBytes(1);
   const int64_t many = DefaultJobMemoryBytes(1000);

@@ -140,6 +140,36 @@ TEST(NoiseMethod, ReadingUnitsAreConvertedToSi) {
   }
 }
 
+TEST(NoiseMethod, FloatCollectionGivesTheSameResultAsConvertingTheParsersDoubles) {
+  // The server prepares the parser (PrepareParser: the samples collected as float, 4 bytes a
+  // value); a parser that was not prepared hands out doubles that Run converts. Both round
+  // reading × unit once to float, so the results are identical, units and all.
+  NoiseSimulationFileOptions sim;
+  sim.rate = 100;
+  sim.seconds = 300;
+  std::string csv;
+  json config, truth;
+  ASSERT_TRUE(SimulateNoiseFiles(sim, &csv, &config, &truth).ok());
+  config["accel_unit"] = 0.00239420;
+  config["gyro_unit"] = "deg/s";
+  RecordingParser prepared("log.csv", true), plain("log.csv", true);
+  PrepareParser(config, &prepared);
+  ASSERT_TRUE(prepared.collects_float());
+  ASSERT_FALSE(plain.collects_float());
+  ASSERT_TRUE(ParseRecording(csv, &prepared).ok());
+  ASSERT_TRUE(ParseRecording(csv, &plain).ok());
+  json a, b;
+  ASSERT_TRUE(CalibrateParsed(&prepared, "log.csv", config, &a).ok());
+  ASSERT_TRUE(CalibrateParsed(&plain, "log.csv", config, &b).ok());
+  EXPECT_EQ(a.dump(), b.dump());
+  // A parser prepared with other scales (e.g. a config changed afterwards) is not misread.
+  RecordingParser other("log.csv", true);
+  other.CollectArrayAsFloat(1.0, 1.0);
+  ASSERT_TRUE(ParseRecording(csv, &other).ok());
+  json c;
+  EXPECT_EQ(CalibrateParsed(&other, "log.csv", config, &c).code(), StatusCode::kInternal);
+}
+
 TEST(NoiseMethod, BadInputIsNamed) {
   NoiseSimulationFileOptions sim;
   sim.rate = 100;

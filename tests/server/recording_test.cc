@@ -135,6 +135,57 @@ TEST(RecordingParser, ARowCountHintNeverChangesWhatIsRead) {
   }
 }
 
+TEST(RecordingParser, FloatCollectionHoldsEachReadingTimesItsScaleRoundedOnce) {
+  // Readings with more digits than a float holds, in a column order that is not the layout's.
+  std::string text = "g0_z,t,a0_x,a0_y,a0_z,g0_x,g0_y\n";
+  for (int n = 0; n < 40; ++n) {
+    text += std::to_string(0.1 + 1e-7 * n) + "," + std::to_string(0.0025 * n) + ",3276" +
+            std::to_string(n % 10) + ".123456789,-1.000000123,9.80665432," + std::to_string(-n) +
+            ".5,17.0000001\n";
+  }
+  const double accel_scale = 0.00239420, gyro_scale = 0.017453292519943295;
+  RecordingParser plain("arr.csv", true);
+  ASSERT_TRUE(ParseAll(text, &plain).ok());
+  ArrayRecording want;
+  ASSERT_TRUE(plain.TakeArray(&want).ok());
+  // Exact, too small and no hint: straight into the matrices, spilled to the buffer, buffered.
+  for (int64_t hint : {int64_t{40}, int64_t{9}, int64_t{0}}) {
+    RecordingParser floats("arr.csv", true);
+    floats.ExpectRows(hint);
+    floats.CollectArrayAsFloat(accel_scale, gyro_scale);
+    double a = 0, g = 0;
+    ASSERT_TRUE(floats.collects_float(&a, &g));
+    EXPECT_EQ(a, accel_scale);
+    EXPECT_EQ(g, gyro_scale);
+    ASSERT_TRUE(ParseAll(text, &floats).ok());
+    ArrayRecording refused;
+    EXPECT_EQ(floats.TakeArray(&refused).code(), StatusCode::kInternal);
+    ArrayRecordingFloat got;
+    ASSERT_TRUE(floats.TakeArrayFloat(&got).ok()) << hint;
+    EXPECT_EQ(got.accel_names, want.accel_names);
+    EXPECT_EQ(got.gyro_names, want.gyro_names);
+    EXPECT_EQ(got.accel_scale, accel_scale);
+    EXPECT_EQ(got.t, want.t) << hint;  // times stay double, untouched
+    EXPECT_EQ(got.accel, (want.accel * accel_scale).cast<float>().eval()) << hint;
+    EXPECT_EQ(got.gyro, (want.gyro * gyro_scale).cast<float>().eval()) << hint;
+  }
+  // Asked too late (after the header): the parser goes on with doubles and says so.
+  RecordingParser late("arr.csv", true);
+  ASSERT_TRUE(late.Feed(text.substr(0, 40)).ok());
+  late.CollectArrayAsFloat(accel_scale, gyro_scale);
+  EXPECT_FALSE(late.collects_float());
+  ASSERT_TRUE(late.Feed(text.substr(40)).ok());
+  ASSERT_TRUE(late.Finish().ok());
+  ArrayRecording as_double;
+  ASSERT_TRUE(late.TakeArray(&as_double).ok());
+  EXPECT_EQ(as_double.accel, want.accel);
+  RecordingParser doubles("arr.csv", true);
+  EXPECT_FALSE(doubles.collects_float());
+  ASSERT_TRUE(ParseAll(text, &doubles).ok());
+  ArrayRecordingFloat none;
+  EXPECT_EQ(doubles.TakeArrayFloat(&none).code(), StatusCode::kInternal);
+}
+
 TEST(RecordingParser, ArrayWithoutTimeColumnHasEmptyT) {
   RecordingParser parser("arr.csv", true);
   ASSERT_TRUE(ParseAll("a0_x,a0_y,a0_z\n1,2,3\n", &parser).ok());

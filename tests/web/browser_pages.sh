@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Renders every HTML page of a real server in Debian's headless Chromium: a screenshot per page
 # (kept in $CALIBD_SCREENSHOT_DIR when set) and checks of the DOM dump for the expected tables
-# and plots. Usage: browser_pages.sh CALIBD_BINARY
+# and plots. Usage: browser_pages.sh CALIBD_BINARY (KEEP_TMP=1 keeps the DOM dumps and database)
 set -euo pipefail
 bin=$(realpath "$1")
 chromium=$(command -v chromium || true)
@@ -13,7 +13,7 @@ shots=${CALIBD_SCREENSHOT_DIR:-$tmp/shots}
 mkdir -p "$shots"
 cleanup() {
   stop_calibd
-  rm -rf "$tmp"
+  [ -n "${KEEP_TMP:-}" ] || rm -rf "$tmp"
 }
 trap cleanup EXIT
 
@@ -74,6 +74,16 @@ j7=$(upload "$tmp/imu" 'IMU-1')
 wait_job "$j7"
 r7=$(curl -sf "$base/api/v1/jobs/$j7" |
   python3 -c 'import json, sys; print(json.load(sys.stdin)["recording_id"])')
+# Two accepted imu and two accepted noise calibrations of one device: its page shows how the
+# IMU intrinsics and the noise terms drift.
+for s in 5 6; do "$bin" simulate imu --out "$tmp/imu$s" --seed "$s" --statics 20 2>/dev/null; done
+for s in 3 4; do
+  "$bin" simulate noise --out "$tmp/noise$s" --seed "$s" --seconds 600 --rate 100 2>/dev/null
+done
+for d in imu5 imu6 noise3 noise4; do
+  jd=$(upload "$tmp/$d" 'IMU-DRIFT')
+  wait_job "$jd"
+done
 
 render() {  # render NAME PATH -> DOM dump in $tmp/NAME.html, screenshot in $shots/NAME.png
   local flags=(--headless --no-sandbox --disable-gpu --disable-background-networking
@@ -111,6 +121,7 @@ render missing /jobs/999999
 render devices /devices
 render recording "/recordings/$r7"
 render full "/jobs/$j8"
+render device-drift /devices/IMU-DRIFT
 
 expect history 'class="page-history' 'table-history' 'form class="filters\|class="filters'
 expect pca 'class="page-job' 'table-pca-parameters' 'plot-singular-values' 'plot-magnitude-error' \
@@ -139,7 +150,10 @@ expect array 'class="model"'
 reject failed 'class="advice"'
 expect recording 'class="page-recording' 'plot-timeline-accel' 'plot-timeline-gyro' \
   'table-intervals' 'table-thresholds' "href=\"/jobs/$j7\""
-for page in history pca array failed device devices revoked rejected recording full; do
+expect device-drift 'imu (2 accepted calibrations' 'noise (2 accepted calibrations' \
+  'table-drift-imu' 'table-drift-noise' 'data-sensor="accelerometer"' 'data-sensor="gyroscope"' \
+  'plot-drift-imu-scale' 'plot-drift-noise-accel' 'plot-drift-noise-gyro'
+for page in history pca array failed device devices revoked rejected recording full device-drift; do
   reject "$page" '<script' '<img'
   if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"

@@ -1,0 +1,514 @@
+#include "web/device_drift.h"
+
+#include <algorithm>
+#include <cmath>
+#include <ctime>
+#include <limits>
+#include <nlohmann/json.hpp>
+
+#include "web/html.h"
+#include "web/svg_plot.h"
+
+namespace calibd::web {
+namespace {
+
+using json = nlohmann::json;
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+const char kDash[] = "\xE2\x80\x93";
+const char kPlusMinus[] = " \xC2\xB1 ";
+const char kSigma[] = "\xCF\x83";
+constexpr double kSignificant = 3;  // a change of this many σ of the difference is marked
+
+// ----- Reading results (any key may be missing or of the wrong type).
+
+const json* Get(const json* j, const char* key) {
+  if (j == nullptr || !j->is_object()) return nullptr;
+  const auto it = j->find(key);
+  return it == j->end() ? nullptr : &*it;
+}
+const json* At(const json* j, size_t i) {
+  return j != nullptr && j->is_array() && i < j->size() ? &(*j)[i] : nullptr;
+}
+double Num(const json* j) { return j != nullptr && j->is_number() ? j->get<double>() : kNaN; }
+std::string Str(const json* j) {
+  return j != nullptr && j->is_string() ? j->get<std::string>() : "";
+}
+
+// The entry of `list` named `name`, else the one at `index` when it has no name.
+const json* Named(const json* list, const std::string& name, size_t index) {
+  if (list == nullptr || !list->is_array()) return nullptr;
+  for (const json& e : *list) {
+    if (Str(Get(&e, "name")) == name) return &e;
+  }
+  const json* e = At(list, index);
+  return e != nullptr && Str(Get(e, "name")).empty() ? e : nullptr;
+}
+
+// ----- Formatting.
+
+std::string E(const std::string& s) { return EscapeText(s); }
+
+std::string JobLink(int64_t id) {
+  return "<a href=\"/jobs/" + std::to_string(id) + "\">#" + std::to_string(id) + "</a>";
+}
+
+double JobTime(const JobSummary& j) {
+  double t;
+  if (ParseTimestamp(j.created_at, &t)) return t;
+  if (ParseTimestamp(j.finished_at, &t)) return t;
+  return kNaN;
+}
+
+std::string UtcDate(double t) {
+  if (!std::isfinite(t) || std::fabs(t) > 1e12) return kDash;
+  const auto tt = static_cast<time_t>(std::floor(t));
+  std::tm tm{};
+  if (gmtime_r(&tt, &tm) == nullptr) return kDash;
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M UTC", &tm);
+  return buf;
+}
+
+std::string Signed(double v, int sig) { return (v > 0 ? "+" : "") + FormatSig(v, sig); }
+
+// "m/s^2" -> "m/s²" for headings.
+std::string PrettyUnit(const std::string& unit) {
+  std::string u = unit;
+  const auto p = u.find("^2");
+  if (p != std::string::npos) u.replace(p, 2, "\xC2\xB2");
+  return u;
+}
+
+std::string ValueCell(double v, double s, int sig = 4) {
+  if (!std::isfinite(v)) return "<td class=\"num muted\">not visible</td>";
+  return "<td class=\"num\">" + FormatSig(v, sig) +
+         (std::isfinite(s) ? kPlusMinus + FormatSig(s, 2) : std::string()) + "</td>";
+}
+
+// z = Δ / √(σ_before² + σ_now²); NaN when a σ is missing.
+double ZScore(double delta, double s_before, double s_now) {
+  const double s = std::sqrt(s_before * s_before + s_now * s_now);
+  return std::isfinite(delta) && s > 0 ? delta / s : kNaN;
+}
+
+std::string ZText(double z) {
+  return std::isfinite(z) ? FormatSig(std::fabs(z), 2) + " " + kSigma
+                          : std::string(kDash) + " " + kSigma;
+}
+
+// A change cell: lines of "Δ (zσ)"; marked when any |z| reaches kSignificant.
+std::string ChangeCell(const std::vector<std::pair<std::string, double>>& lines) {
+  bool significant = false;
+  std::string text;
+  for (size_t i = 0; i < lines.size(); ++i) {
+    significant = significant || std::fabs(lines[i].second) >= kSignificant;
+    text += (i ? "<br>" : "") + lines[i].first + " <span class=\"muted small\">(" +
+            ZText(lines[i].second) + ")</span>";
+  }
+  return std::string("<td class=\"num") + (significant ? " drift-significant" : "") + "\">" +
+         (significant ? "<strong>" + text + "</strong>" : text) + "</td>";
+}
+
+std::string NoChangeCell(const std::string& why) {
+  return "<td class=\"num muted small\">" + why + "</td>";
+}
+
+// x of each job for the plots: days since the first calibration (hours when they span less than
+// two days), or the calibration number when a time is missing.
+struct TimeAxis {
+  std::string title;
+  std::vector<double> x;
+};
+
+TimeAxis MakeTimeAxis(const std::vector<const JobSummary*>& jobs) {
+  TimeAxis ax;
+  std::vector<double> t;
+  bool all = !jobs.empty();
+  for (const JobSummary* j : jobs) {
+    t.push_back(JobTime(*j));
+    all = all && std::isfinite(t.back());
+  }
+  if (!all) {
+    for (size_t i = 0; i < jobs.size(); ++i) ax.x.push_back(static_cast<double>(i + 1));
+    ax.title = "calibration number";
+    return ax;
+  }
+  const double span = t.back() - t.front();
+  const double unit = span < 2 * 86400 ? 3600 : 86400;
+  for (double v : t) ax.x.push_back((v - t.front()) / unit);
+  ax.title = std::string(unit == 3600 ? "hours" : "days") + " since " + UtcDate(t.front());
+  return ax;
+}
+
+std::string OmittedNote(size_t n) {
+  if (n <= kMaxDriftCalibrations) return "";
+  return "<p class=\"muted small\">" + std::to_string(n - kMaxDriftCalibrations) +
+         " older calibrations not listed; the plots show every calibration.</p>";
+}
+
+std::string CalibrationCells(const JobSummary& j, size_t rows) {
+  const std::string span = rows > 1 ? " rowspan=\"" + std::to_string(rows) + "\"" : "";
+  return "<td" + span + ">" + JobLink(j.id) + "</td><td class=\"time\"" + span + ">" +
+         E(UtcDate(JobTime(j))) + "</td>";
+}
+
+// ----- noise
+
+struct Term {
+  double value = kNaN, std = kNaN;  // value NaN: not visible
+};
+
+struct NoiseChannel {
+  std::string name, unit;
+  Term n, b, k;
+  double b_tau = kNaN;
+};
+
+std::vector<NoiseChannel> ReadNoise(const json& result) {
+  std::vector<NoiseChannel> out;
+  const json* channels = Get(Get(&result, "parameters"), "channels");
+  const json* stds = Get(Get(&result, "uncertainty"), "channels");
+  if (channels == nullptr || !channels->is_array()) return out;
+  for (size_t i = 0; i < channels->size(); ++i) {
+    const json* c = &(*channels)[i];
+    NoiseChannel ch;
+    ch.name = Str(Get(c, "name"));
+    if (ch.name.empty()) continue;
+    ch.unit = Str(Get(c, "unit"));
+    const json* u = Named(stds, ch.name, i);
+    ch.n = {Num(Get(c, "white_noise")), Num(Get(u, "white_noise_std"))};
+    ch.b = {Num(Get(c, "bias_instability")), Num(Get(u, "bias_instability_std"))};
+    ch.k = {Num(Get(c, "random_walk")), Num(Get(u, "random_walk_std"))};
+    ch.b_tau = Num(Get(c, "bias_instability_tau"));
+    out.push_back(std::move(ch));
+  }
+  return out;
+}
+
+const NoiseChannel* FindChannel(const std::vector<NoiseChannel>& list, const std::string& name) {
+  for (const NoiseChannel& c : list) {
+    if (c.name == name) return &c;
+  }
+  return nullptr;
+}
+
+std::string TermChange(const Term& before, const Term& now) {
+  const bool was = std::isfinite(before.value), is = std::isfinite(now.value);
+  if (!was && !is) return NoChangeCell(kDash);
+  if (!was) return NoChangeCell("now visible");
+  if (!is) return NoChangeCell("no longer visible");
+  const double delta = now.value - before.value;
+  const double rel = before.value != 0 ? delta / std::fabs(before.value) * 100 : kNaN;
+  return ChangeCell({{Signed(rel, 3) + " %", ZScore(delta, before.std, now.std)}});
+}
+
+std::string NoiseTable(const std::vector<const JobSummary*>& jobs,
+                       const std::vector<std::vector<NoiseChannel>>& data, char kind) {
+  const std::string sensor = kind == 'a' ? "accelerometer" : "gyroscope";
+  std::string unit = kind == 'a' ? "m/s^2" : "rad/s";
+  for (const auto& list : data) {
+    for (const NoiseChannel& c : list) {
+      if (c.name[0] == kind && !c.unit.empty()) unit = c.unit;
+    }
+  }
+  unit = E(PrettyUnit(unit));
+  std::string rows;
+  const size_t first =
+      jobs.size() > kMaxDriftCalibrations ? jobs.size() - kMaxDriftCalibrations : 0;
+  for (size_t k = first; k < jobs.size(); ++k) {
+    std::vector<const NoiseChannel*> mine;
+    for (const NoiseChannel& c : data[k]) {
+      if (c.name[0] == kind) mine.push_back(&c);
+    }
+    for (size_t i = 0; i < mine.size(); ++i) {
+      const NoiseChannel& c = *mine[i];
+      const NoiseChannel* prev = nullptr;
+      for (size_t p = k; p-- > 0 && prev == nullptr;) prev = FindChannel(data[p], c.name);
+      rows += "<tr>" + (i == 0 ? CalibrationCells(*jobs[k], mine.size()) : std::string()) +
+              "<td class=\"name\">" + E(c.name) + "</td>";
+      const std::string first_cell = NoChangeCell("first");
+      rows += ValueCell(c.n.value, c.n.std) + (prev ? TermChange(prev->n, c.n) : first_cell) +
+              ValueCell(c.b.value, c.b.std) + "<td class=\"num\">" +
+              (std::isfinite(c.b.value) ? FormatSig(c.b_tau, 3) : std::string(kDash)) + "</td>" +
+              (prev ? TermChange(prev->b, c.b) : first_cell) + ValueCell(c.k.value, c.k.std) +
+              (prev ? TermChange(prev->k, c.k) : first_cell) + "</tr>";
+    }
+  }
+  if (rows.empty()) return "";
+  const std::string change = "<th class=\"num\">change vs previous</th>";
+  return "<h4>" + std::string(kind == 'a' ? "Accelerometers" : "Gyroscopes") +
+         "</h4><div class=\"table-wrap\"><table class=\"table-drift-noise\" data-sensor=\"" +
+         sensor +
+         "\"><thead><tr><th>calibration</th><th>when</th><th>channel</th>"
+         "<th class=\"num\">white noise N (" +
+         unit + "/\xE2\x88\x9AHz)</th>" + change + "<th class=\"num\">bias instability B (" + unit +
+         ")</th><th class=\"num\">at \xCF\x84 (s)</th>" + change +
+         "<th class=\"num\">random walk K (" + unit + "/s/\xE2\x88\x9AHz)</th>" + change +
+         "</tr></thead><tbody>" + rows + "</tbody></table></div>";
+}
+
+std::string NoisePlot(const TimeAxis& ax, const std::vector<std::vector<NoiseChannel>>& data,
+                      char kind) {
+  std::vector<std::string> names;
+  std::string unit = kind == 'a' ? "m/s^2" : "rad/s";
+  for (const auto& list : data) {
+    for (const NoiseChannel& c : list) {
+      if (c.name[0] != kind) continue;
+      if (!c.unit.empty()) unit = c.unit;
+      if (std::find(names.begin(), names.end(), c.name) == names.end()) names.push_back(c.name);
+    }
+  }
+  std::vector<Series> series;
+  for (const std::string& name : names) {
+    Series s;
+    s.label = name;
+    s.marker = Marker::kCircle;
+    for (size_t k = 0; k < data.size(); ++k) {
+      const NoiseChannel* c = FindChannel(data[k], name);
+      if (c == nullptr || !std::isfinite(c->n.value)) continue;
+      s.x.push_back(ax.x[k]);
+      s.y.push_back(c->n.value);
+      s.y_err.push_back(std::isfinite(c->n.std) ? c->n.std : 0.0);
+    }
+    if (!s.x.empty()) series.push_back(std::move(s));
+  }
+  if (series.empty()) return "";
+  PlotOptions o;
+  o.name = std::string("drift-noise-") + (kind == 'a' ? "accel" : "gyro");
+  o.title = std::string(kind == 'a' ? "Accelerometers" : "Gyroscopes") +
+            ": white noise density over time";
+  o.x.title = ax.title;
+  o.y.title = "N (" + PrettyUnit(unit) + "/\xE2\x88\x9AHz)";
+  o.y.include_zero = true;
+  return "<figure>" + RenderXYPlot(o, series) +
+         "<figcaption>Bars: \xC2\xB1"
+         "1\xCF\x83 of each calibration.</figcaption></figure>";
+}
+
+// ----- imu
+
+struct ImuSensor {
+  double scale[3], scale_std[3], bias[3], bias_std[3], t[9], t_std[9];
+};
+
+struct ImuEntry {
+  std::string name;
+  ImuSensor sensor[2];  // accelerometer, gyroscope
+};
+
+const char* const kSensors[2] = {"accelerometer", "gyroscope"};
+
+void ReadVec(const json* v, double* out, size_t n) {
+  for (size_t i = 0; i < n; ++i) out[i] = Num(At(v, i));
+}
+void ReadMat(const json* m, double* out) {
+  for (size_t r = 0; r < 3; ++r) ReadVec(At(m, r), out + 3 * r, 3);
+}
+
+std::vector<ImuEntry> ReadImus(const json& result) {
+  std::vector<ImuEntry> out;
+  const json* imus = Get(Get(&result, "parameters"), "imus");
+  const json* stds = Get(Get(&result, "uncertainty"), "imus");
+  if (imus == nullptr || !imus->is_array()) return out;
+  for (size_t i = 0; i < imus->size(); ++i) {
+    const json* p = &(*imus)[i];
+    ImuEntry e;
+    e.name = Str(Get(p, "name"));
+    if (e.name.empty()) e.name = std::to_string(i);
+    const json* u = Named(stds, e.name, i);
+    for (int s = 0; s < 2; ++s) {
+      const json* ps = Get(p, kSensors[s]);
+      const json* us = Get(u, kSensors[s]);
+      ImuSensor& x = e.sensor[s];
+      ReadVec(Get(ps, "scale"), x.scale, 3);
+      ReadVec(Get(us, "scale_std"), x.scale_std, 3);
+      ReadVec(Get(ps, "bias"), x.bias, 3);
+      ReadVec(Get(us, "bias_std"), x.bias_std, 3);
+      ReadMat(Get(ps, "misalignment"), x.t);
+      ReadMat(Get(us, "misalignment_std"), x.t_std);
+    }
+    out.push_back(std::move(e));
+  }
+  return out;
+}
+
+const ImuEntry* FindImu(const std::vector<ImuEntry>& list, const std::string& name) {
+  for (const ImuEntry& e : list) {
+    if (e.name == name) return &e;
+  }
+  return nullptr;
+}
+
+std::string Vec3Cell(const double* v, const double* s, int sig) {
+  std::string text;
+  for (int k = 0; k < 3; ++k) {
+    text += (k ? "<br>" : "") + FormatSig(v[k], sig) +
+            (std::isfinite(s[k]) ? kPlusMinus + FormatSig(s[k], 2) : std::string());
+  }
+  return "<td class=\"num\">" + text + "</td>";
+}
+
+// T − I in mrad, three rows.
+std::string MisalignmentCell(const double* t) {
+  std::string text;
+  for (int r = 0; r < 3; ++r) {
+    text += r ? "<br>" : "";
+    for (int c = 0; c < 3; ++c) {
+      text += (c ? " " : "") + FormatFixed((t[3 * r + c] - (r == c ? 1.0 : 0.0)) * 1e3, 2);
+    }
+  }
+  return "<td class=\"num small\">" + text + "</td>";
+}
+
+const char* const kEntry[9] = {"xx", "xy", "xz", "yx", "yy", "yz", "zx", "zy", "zz"};
+
+std::string ImuRows(const JobSummary& job, const ImuEntry& e, const ImuEntry* prev,
+                    bool first_of_job, size_t job_rows) {
+  std::string rows;
+  for (int s = 0; s < 2; ++s) {
+    const ImuSensor& x = e.sensor[s];
+    rows += "<tr>" + (first_of_job && s == 0 ? CalibrationCells(job, job_rows) : std::string()) +
+            (s == 0 ? "<td class=\"name\" rowspan=\"2\">" + E(e.name) + "</td>" : std::string()) +
+            "<td>" + kSensors[s] + "</td>" + Vec3Cell(x.scale, x.scale_std, 7);
+    if (prev == nullptr) {
+      rows += NoChangeCell("first");
+    } else {
+      const ImuSensor& y = prev->sensor[s];
+      std::vector<std::pair<std::string, double>> lines;
+      for (int k = 0; k < 3; ++k) {
+        const double d = x.scale[k] - y.scale[k];
+        const double ppm = y.scale[k] != 0 ? d / std::fabs(y.scale[k]) * 1e6 : kNaN;
+        lines.push_back({Signed(ppm, 3) + " ppm", ZScore(d, y.scale_std[k], x.scale_std[k])});
+      }
+      rows += ChangeCell(lines);
+    }
+    rows += MisalignmentCell(x.t);
+    if (prev == nullptr) {
+      rows += NoChangeCell("first");
+    } else {
+      const ImuSensor& y = prev->sensor[s];
+      int worst = -1;
+      for (int i = 0; i < 9; ++i) {
+        const double d = std::fabs(x.t[i] - y.t[i]);
+        if (std::isfinite(d) && (worst < 0 || d > std::fabs(x.t[worst] - y.t[worst]))) worst = i;
+      }
+      if (worst < 0) {
+        rows += NoChangeCell(kDash);
+      } else {
+        const double d = x.t[worst] - y.t[worst];
+        rows += ChangeCell({{Signed(d * 1e3, 3) + " mrad (" + kEntry[worst] + ")",
+                             ZScore(d, y.t_std[worst], x.t_std[worst])}});
+      }
+    }
+    rows += Vec3Cell(x.bias, x.bias_std, 6);
+    if (prev == nullptr) {
+      rows += NoChangeCell("first");
+    } else {
+      const ImuSensor& y = prev->sensor[s];
+      std::vector<std::pair<std::string, double>> lines;
+      for (int k = 0; k < 3; ++k) {
+        const double d = x.bias[k] - y.bias[k];
+        lines.push_back({Signed(d, 3), ZScore(d, y.bias_std[k], x.bias_std[k])});
+      }
+      rows += ChangeCell(lines);
+    }
+    rows += "</tr>";
+  }
+  return rows;
+}
+
+std::string ImuScalePlot(const TimeAxis& ax, const std::vector<std::vector<ImuEntry>>& data) {
+  std::vector<std::string> names;
+  for (const auto& list : data) {
+    for (const ImuEntry& e : list) {
+      if (std::find(names.begin(), names.end(), e.name) == names.end()) names.push_back(e.name);
+    }
+  }
+  std::vector<Series> series;
+  for (const std::string& name : names) {
+    for (int s = 0; s < 2; ++s) {
+      for (int k = 0; k < 3; ++k) {
+        Series line;
+        line.label = name + " " + (s == 0 ? "a" : "g") + "_" + "xyz"[k];
+        line.marker = Marker::kCircle;
+        line.dashed = s == 1;
+        double first = kNaN;
+        for (size_t j = 0; j < data.size(); ++j) {
+          const ImuEntry* e = FindImu(data[j], name);
+          if (e == nullptr || !std::isfinite(e->sensor[s].scale[k])) continue;
+          if (!std::isfinite(first)) first = e->sensor[s].scale[k];
+          line.x.push_back(ax.x[j]);
+          line.y.push_back(first != 0 ? (e->sensor[s].scale[k] - first) / std::fabs(first) * 1e6
+                                      : kNaN);
+        }
+        if (!line.x.empty()) series.push_back(std::move(line));
+      }
+    }
+  }
+  if (series.empty()) return "";
+  PlotOptions o;
+  o.name = "drift-imu-scale";
+  o.title = "IMU scale factor change since the first calibration";
+  o.x.title = ax.title;
+  o.y.title = "\xCE\x94scale / scale (ppm)";
+  o.y.include_zero = true;
+  return "<figure>" + RenderXYPlot(o, series) +
+         "<figcaption>Solid: accelerometer axes; dashed: gyroscope axes.</figcaption></figure>";
+}
+
+}  // namespace
+
+std::string NoiseDriftHtml(const std::vector<const JobSummary*>& jobs) {
+  if (jobs.empty()) return "";
+  std::vector<std::vector<NoiseChannel>> data;
+  for (const JobSummary* j : jobs) data.push_back(ReadNoise(j->result));
+  const TimeAxis ax = MakeTimeAxis(jobs);
+  std::string tables = NoiseTable(jobs, data, 'a') + NoiseTable(jobs, data, 'g');
+  if (tables.empty()) return "<p class=\"muted\">No noise terms in these results.</p>";
+  const std::string figs = NoisePlot(ax, data, 'a') + NoisePlot(ax, data, 'g');
+  return tables + OmittedNote(jobs.size()) +
+         "<p class=\"muted small\">\xC2\xB1 is one standard deviation. A change is given "
+         "relative to the previous calibration and in standard deviations of the difference, "
+         "\xE2\x88\x9A(\xCF\x83\xE2\x82\x81\xC2\xB2 + \xCF\x83\xE2\x82\x82\xC2\xB2); from 3 on "
+         "it is marked: more than the two logs' own uncertainty explains (the sensor, its "
+         "temperature or its mounting changed).</p>" +
+         (figs.empty() ? std::string() : "<div class=\"plots\">" + figs + "</div>");
+}
+
+std::string ImuDriftHtml(const std::vector<const JobSummary*>& jobs) {
+  if (jobs.empty()) return "";
+  std::vector<std::vector<ImuEntry>> data;
+  for (const JobSummary* j : jobs) data.push_back(ReadImus(j->result));
+  std::string rows;
+  const size_t first =
+      jobs.size() > kMaxDriftCalibrations ? jobs.size() - kMaxDriftCalibrations : 0;
+  for (size_t k = first; k < jobs.size(); ++k) {
+    for (size_t i = 0; i < data[k].size(); ++i) {
+      const ImuEntry& e = data[k][i];
+      const ImuEntry* prev = nullptr;
+      for (size_t p = k; p-- > 0 && prev == nullptr;) prev = FindImu(data[p], e.name);
+      rows += ImuRows(*jobs[k], e, prev, i == 0, 2 * data[k].size());
+    }
+  }
+  if (rows.empty()) return "<p class=\"muted\">No IMU parameters in these results.</p>";
+  const std::string change = "<th class=\"num\">change vs previous</th>";
+  const std::string figs = ImuScalePlot(MakeTimeAxis(jobs), data);
+  return "<div class=\"table-wrap\"><table class=\"table-drift-imu\"><thead><tr>"
+         "<th>calibration</th><th>when</th><th>IMU</th><th>sensor</th>"
+         "<th class=\"num\">scale K, x y z<br>(SI per reading unit)</th>" +
+         change +
+         "<th class=\"num\">misalignment T \xE2\x88\x92 I<br>(3 rows, mrad)</th>"
+         "<th class=\"num\">largest \xCE\x94T<br>vs previous</th>"
+         "<th class=\"num\">bias b, x y z<br>(reading units)</th>" +
+         change + "</tr></thead><tbody>" + rows + "</tbody></table></div>" +
+         OmittedNote(jobs.size()) +
+         "<p class=\"muted small\">\xC2\xB1 is one standard deviation. Changes are against the "
+         "previous calibration of the same IMU, with their size in standard deviations of the "
+         "difference; from 3 on they are marked. T compares between calibrations: the body frame "
+         "is the accelerometer's by convention (SPEC \xC2\xA7"
+         "7).</p>" +
+         (figs.empty() ? std::string() : "<div class=\"plots\">" + figs + "</div>");
+}
+
+}  // namespace calibd::web
