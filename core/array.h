@@ -41,8 +41,8 @@
 #include <string>
 #include <vector>
 
-#include "core/block_lm.h"
 #include "base/status.h"
+#include "core/block_lm.h"
 
 namespace calibd::core {
 

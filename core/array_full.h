@@ -69,9 +69,9 @@
 #include <string>
 #include <vector>
 
+#include "base/status.h"
 #include "core/block_lm.h"
 #include "core/static_detection.h"
-#include "base/status.h"
 
 namespace calibd::core {
 

@@ -15,9 +15,9 @@
 #include <string>
 #include <vector>
 
+#include "base/status.h"
 #include "core/array_full.h"
 #include "core/array_simulation.h"
-#include "base/status.h"
 
 namespace calibd::core {
 

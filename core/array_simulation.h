@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "core/array.h"
 #include "base/status.h"
+#include "core/array.h"
 
 namespace calibd::core {
 

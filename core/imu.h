@@ -52,8 +52,8 @@
 #include <string>
 #include <vector>
 
-#include "core/static_detection.h"
 #include "base/status.h"
+#include "core/static_detection.h"
 
 namespace calibd::core {
 

@@ -63,8 +63,8 @@
 #include <string>
 #include <vector>
 
-#include "core/allan.h"
 #include "base/status.h"
+#include "core/allan.h"
 
 namespace calibd::core {
 

@@ -9,7 +9,6 @@
 
 namespace calibd::server {
 
-
 namespace {
 
 // The equation, stated in the header's comment.

@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
+#include "base/status.h"
 #include "core/array.h"
 #include "core/array_full.h"
-#include "base/status.h"
 #include "server/method.h"
 #include "server/recording.h"
 

@@ -9,8 +9,8 @@
 #include <string>
 #include <string_view>
 
-#include "core/block_lm.h"
 #include "base/status.h"
+#include "core/block_lm.h"
 #include "server/recording.h"
 
 namespace calibd::server {

@@ -6,7 +6,6 @@
 
 namespace calibd::server {
 
-
 std::string CsvNumber(const json& v) {
   if (!v.is_number()) return "";  // null: undefined value, an empty CSV cell
   char buf[40];

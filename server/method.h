@@ -19,8 +19,8 @@
 #include <utility>
 #include <vector>
 
-#include "core/block_lm.h"
 #include "base/status.h"
+#include "core/block_lm.h"
 #include "server/acceptance.h"
 #include "server/exports.h"
 #include "server/recording.h"

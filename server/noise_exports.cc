@@ -7,7 +7,6 @@
 
 namespace calibd::server {
 
-
 namespace {
 
 // The equation, stated in the header's comment.

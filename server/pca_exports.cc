@@ -8,7 +8,6 @@
 
 namespace calibd::server {
 
-
 namespace {
 
 // The equation, stated in the header's comment.

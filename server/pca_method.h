@@ -6,9 +6,9 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "base/status.h"
 #include "core/pca.h"
 #include "core/pca_simulation.h"
-#include "base/status.h"
 #include "server/method.h"
 #include "server/recording.h"
 

@@ -14,8 +14,8 @@
 #include <string>
 #include <vector>
 
-#include "core/static_detection.h"
 #include "base/status.h"
+#include "core/static_detection.h"
 #include "storage/store.h"
 
 namespace calibd::server {
