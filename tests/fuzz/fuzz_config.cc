@@ -17,6 +17,7 @@
 #include <string_view>
 
 #include "server/config.h"
+#include "server/method.h"
 
 namespace {
 
@@ -48,7 +49,8 @@ void CheckValidate(const json& config) {
   CommonConfig common;
   Status s = calibd::server::ValidateConfig(config, &common);
   if (s.ok()) {
-    Check(common.method == "pca" || common.method == "array", "accepted an unknown method");
+    // Every method of the registry is valid (pca, array, imu, noise); nothing else is.
+    Check(calibd::server::FindMethod(common.method) != nullptr, "accepted an unknown method");
     Check(common.device.size() <= 128, "accepted an overlong device");
     // What the server stores for a job: must not throw, whatever the strings hold.
     (void)config.dump(-1, ' ', false, json::error_handler_t::replace);
