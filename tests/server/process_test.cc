@@ -1,7 +1,6 @@
 // Tests of the real `calibd serve` process: graceful shutdown on SIGTERM and crash safety under
 // kill -9 (SPEC §6). The server is the built binary, started with fork/exec on a free port
 // (tests/lib/server_process.h).
-#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
