@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "server/config.h"
+#include "server/method.h"
 
 namespace calibd::server {
 
@@ -14,140 +15,44 @@ using nlohmann::json;
 
 namespace {
 
-// ---- THE table of acceptance limits and their defaults (README "Acceptance gate") ----
-//
-// Defaults are meant to pass a sound calibration of a MEMS sensor made as the README describes and
-// to stop the mistakes seen on production lines: poorly spread orientations, unit mix-ups, too
-// few or too noisy data. A line tightens them to its own tolerances (`serve --acceptance`).
-
-// Shared by pca, imu and array (the latter only for `model: full` results, parameters.imus).
-constexpr AcceptanceKey kMaxScaleStd = {
-    "max_scale_std", "largest 1 sigma of a scale factor, relative to it (0.01 = 1 %)", 0.01};
-constexpr AcceptanceKey kMaxAxisStd = {
-    "max_axis_std",
-    "largest 1 sigma of an axis direction (pca) or misalignment entry (imu, array full), rad",
-    0.01};  // 0.57 degrees
-constexpr AcceptanceKey kScaleRange = {
-    "scale_range",
-    "allowed relative deviation of a scale factor from its nominal, |scale/nominal - 1|", 0.1};
-constexpr AcceptanceKey kImplausible = {
-    "implausible_factor",
-    "a scale factor this many times above or below its nominal is physically implausible (a "
-    "unit mix-up) and rejected even when scale_range is null",
-    3.0};
-constexpr AcceptanceKey kMaxChi2 = {
-    "max_chi2",
-    "largest residual against the noise: mean squared residual / sigma^2 (1 when the model "
-    "explains the data down to the noise)",
-    4.0};
-
-// imu and array full: biases in SI, (bias - nominal bias) x nominal unit.
-constexpr AcceptanceKey kAccelBiasStd = {"max_accel_bias_std",
-                                         "largest 1 sigma of an accelerometer bias, m/s^2", 0.05};
-constexpr AcceptanceKey kGyroBiasStd = {"max_gyro_bias_std",
-                                        "largest 1 sigma of a gyroscope bias, rad/s", 0.005};
-constexpr AcceptanceKey kAccelBias = {
-    "max_accel_bias", "largest accelerometer bias (beyond the nominal bias), m/s^2", 2.0};
-constexpr AcceptanceKey kGyroBias = {
-    "max_gyro_bias", "largest gyroscope bias (beyond the nominal bias), rad/s", 0.2};  // 11 deg/s
-
-const std::vector<AcceptanceKey>& PcaKeys() {
-  static const std::vector<AcceptanceKey>& keys = *new std::vector<AcceptanceKey>{
-      kMaxScaleStd,
-      kMaxAxisStd,
-      {"max_bias_std", "largest 1 sigma of a bias, relative to the field magnitude", 0.01},
-      kScaleRange,
-      kImplausible,
-      kMaxChi2,  // only judged when noise_std is given (otherwise sigma is the residual itself)
-      {"min_scatter",
-       "smallest spread of the orientations: d x the smallest eigenvalue of the field directions' "
-       "scatter (1 uniform, 0 all in a plane); diagnostics.coverage.scatter_min",
-       0.3},  // core::PcaCoverage::kMinScatter
-      {"min_design",
-       "smallest eigenvalue of the quadric fit's design relative to a uniform sphere (what the "
-       "angles between axes are estimated from); diagnostics.coverage.design_min",
-       0.05},  // core::PcaCoverage::kMinDesign
-  };
-  return keys;
-}
-
-const std::vector<AcceptanceKey>& ImuKeys() {
-  static const std::vector<AcceptanceKey>& keys = *new std::vector<AcceptanceKey>{
-      kMaxScaleStd,
-      kMaxAxisStd,
-      kScaleRange,
-      kImplausible,
-      kAccelBiasStd,
-      kGyroBiasStd,
-      kAccelBias,
-      kGyroBias,
-      // No default: a static's mean is so precise (thousands of samples) that on real hardware
-      // unmodelled effects, not the noise, set the residual (imu_tk's own Xsens log: chi2/dof 30
-      // with |a| - g at 1.1 mm/s^2 RMS). The physical residuals below judge the fit instead.
-      {kMaxChi2.name, kMaxChi2.meaning, std::nullopt},
-      {"max_accel_residual",
-       "largest RMS of |a| - g over the statics after calibration, m/s^2 "
-       "(diagnostics.imus[].residuals.accel_norm_rms_after)",
-       0.02},  // 0.2 % of g; imu_tk's Xsens log: 0.0011
-      {"max_gyro_residual",
-       "largest RMS gravity-direction error per rotation after calibration, rad "
-       "(diagnostics.imus[].residuals.gyro_direction_rms_after)",
-       0.02},  // 1.1 degrees; imu_tk's Xsens log: 0.0079
-  };
-  return keys;
-}
-
-const std::vector<AcceptanceKey>& ArrayKeys() {
-  static const std::vector<AcceptanceKey>& keys = *new std::vector<AcceptanceKey>{
-      {"max_position_std", "largest 1 sigma of a position coordinate, m", 1e-4},  // 0.1 mm
-      {"max_offset",
-       "largest distance of a triad from its nominal position in `geometry`, m (a wrong geometry "
-       "or gyro_unit shows here)",
-       0.005},   // 5 mm
-      kMaxChi2,  // residual RMS against accel_noise and gyro_noise, each
-      // model full (parameters.imus) only:
-      kMaxScaleStd,
-      kMaxAxisStd,
-      kScaleRange,
-      kImplausible,
-      kAccelBiasStd,
-      kGyroBiasStd,
-      kAccelBias,
-      kGyroBias};
-  return keys;
-}
-
-const std::vector<AcceptanceKey>& NoiseKeys() {
-  static const std::vector<AcceptanceKey>& keys = *new std::vector<AcceptanceKey>{
-      {"max_white_noise_std",
-       "largest 1 sigma of a white-noise density, relative to it (log too short)", 0.2},
-      {"max_accel_white_noise",
-       "largest accelerometer white-noise density, m/s^2/sqrt(Hz) (far above any MEMS part: "
-       "units or a moving device)",
-       0.1},
-      {"max_gyro_white_noise",
-       "largest gyroscope white-noise density, rad/s/sqrt(Hz) (far above any MEMS part: units or "
-       "a moving device)",
-       0.01},
-  };
-  return keys;
-}
-
 std::string KeyList(const std::vector<AcceptanceKey>& keys) {
   std::string out;
   for (const AcceptanceKey& k : keys) out += (out.empty() ? "" : ", ") + std::string(k.name);
   return out;
 }
 
+// "pca, array, imu or noise": the registry's methods, unquoted.
+std::string MethodNameList() {
+  const std::vector<const Method*>& methods = AllMethods();
+  std::string out;
+  for (size_t i = 0; i < methods.size(); ++i) {
+    if (i > 0) out += i + 1 == methods.size() ? " or " : ", ";
+    out += methods[i]->name();
+  }
+  return out;
+}
+
 }  // namespace
 
 const std::vector<AcceptanceKey>& AcceptanceKeys(const std::string& method) {
-  static const std::vector<AcceptanceKey> kNone;
-  if (method == "pca") return PcaKeys();
-  if (method == "imu") return ImuKeys();
-  if (method == "array") return ArrayKeys();
-  if (method == "noise") return NoiseKeys();
-  return kNone;
+  static const std::vector<AcceptanceKey>& kNone = *new std::vector<AcceptanceKey>();
+  const Method* m = FindMethod(method);
+  return m == nullptr ? kNone : m->AcceptanceKeys();
+}
+
+const std::vector<AcceptanceKey>& ImuTriadKeys() {
+  using namespace limit_keys;
+  static const std::vector<AcceptanceKey>& keys =
+      *new std::vector<AcceptanceKey>{kMaxScaleStd,  kMaxAxisStd,  kScaleRange, kImplausible,
+                                      kAccelBiasStd, kGyroBiasStd, kAccelBias,  kGyroBias};
+  return keys;
+}
+
+std::vector<AcceptanceKey> JoinKeys(std::initializer_list<std::vector<AcceptanceKey>> parts) {
+  std::vector<AcceptanceKey> out;
+  for (const std::vector<AcceptanceKey>& part : parts)
+    out.insert(out.end(), part.begin(), part.end());
+  return out;
 }
 
 std::optional<double> AcceptanceLimits::Get(const std::string& key) const {
@@ -198,8 +103,8 @@ Status ValidateServerAcceptance(const json& value, const std::string& file) {
   }
   for (const auto& [method, limits] : value.items()) {
     if (AcceptanceKeys(method).empty()) {
-      return Status::InvalidInput(file + ": '" + method +
-                                  "' is not a method (pca, array, imu or noise)")
+      return Status::InvalidInput(file + ": '" + method + "' is not a method (" + MethodNameList() +
+                                  ")")
           .WithField(method);
     }
     Status s = ValidateAcceptance(limits, method, file + ": " + method, method);

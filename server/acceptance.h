@@ -1,14 +1,17 @@
 // The acceptance gate (SPEC §4 `verdict`, issue #11): every result is judged against limits before
-// a production line may fetch it. This file holds the one table of limits with their defaults per
-// method (acceptance.cc, AcceptanceKeys), their validation, the merge of built-in defaults,
-// server-wide defaults (`calibd serve --acceptance FILE.json`) and the config's `acceptance`
-// object, and the helpers the methods' judges share (server/<name>_method.cc, Method::Judge).
+// a production line may fetch it. Each method names its limits with their built-in defaults
+// (Method::AcceptanceKeys, in server/<name>_method.cc beside its Judge); this file holds only the
+// generic machinery: the keys several methods share, the validation of a method's `acceptance`
+// object, the merge of built-in defaults, server-wide defaults (`calibd serve --acceptance
+// FILE.json`) and the config's `acceptance` object, the Verdict, and the helpers the methods'
+// judges share (Method::Judge).
 //
 // A limit's value is a number, or null for "no limit". A verdict is "accepted" when no rule
 // fired, else "rejected" with one reason per failed rule, in words for a line operator.
 #ifndef CALIBD_SERVER_ACCEPTANCE_H_
 #define CALIBD_SERVER_ACCEPTANCE_H_
 
+#include <initializer_list>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -26,8 +29,52 @@ struct AcceptanceKey {
   std::optional<double> default_value;  // nullopt: no limit unless set
 };
 
-// The keys of `method` ("pca", "array", "imu", "noise") with their built-in defaults; empty for
-// an unknown method.
+// Keys several methods share, with one meaning and default wherever they appear (a method lists
+// them in its Method::AcceptanceKeys). Defaults are meant to pass a sound calibration of a MEMS
+// sensor made as the README describes and to stop the mistakes seen on production lines: poorly
+// spread orientations, unit mix-ups, too few or too noisy data. A line tightens them to its own
+// tolerances (`serve --acceptance`).
+namespace limit_keys {
+// pca, imu and array (the latter only for `model: full` results, parameters.imus).
+inline constexpr AcceptanceKey kMaxScaleStd = {
+    "max_scale_std", "largest 1 sigma of a scale factor, relative to it (0.01 = 1 %)", 0.01};
+inline constexpr AcceptanceKey kMaxAxisStd = {
+    "max_axis_std",
+    "largest 1 sigma of an axis direction (pca) or misalignment entry (imu, array full), rad",
+    0.01};  // 0.57 degrees
+inline constexpr AcceptanceKey kScaleRange = {
+    "scale_range",
+    "allowed relative deviation of a scale factor from its nominal, |scale/nominal - 1|", 0.1};
+inline constexpr AcceptanceKey kImplausible = {
+    "implausible_factor",
+    "a scale factor this many times above or below its nominal is physically implausible (a "
+    "unit mix-up) and rejected even when scale_range is null",
+    3.0};
+inline constexpr AcceptanceKey kMaxChi2 = {
+    "max_chi2",
+    "largest residual against the noise: mean squared residual / sigma^2 (1 when the model "
+    "explains the data down to the noise)",
+    4.0};
+// imu and array full (JudgeImuTriads): biases in SI, (bias - nominal bias) x nominal unit.
+inline constexpr AcceptanceKey kAccelBiasStd = {
+    "max_accel_bias_std", "largest 1 sigma of an accelerometer bias, m/s^2", 0.05};
+inline constexpr AcceptanceKey kGyroBiasStd = {"max_gyro_bias_std",
+                                               "largest 1 sigma of a gyroscope bias, rad/s", 0.005};
+inline constexpr AcceptanceKey kAccelBias = {
+    "max_accel_bias", "largest accelerometer bias (beyond the nominal bias), m/s^2", 2.0};
+inline constexpr AcceptanceKey kGyroBias = {
+    "max_gyro_bias", "largest gyroscope bias (beyond the nominal bias), rad/s", 0.2};  // 11 deg/s
+}  // namespace limit_keys
+
+// The keys JudgeImuTriads reads, in this order: kMaxScaleStd, kMaxAxisStd, kScaleRange,
+// kImplausible, kAccelBiasStd, kGyroBiasStd, kAccelBias, kGyroBias (imu, array full).
+const std::vector<AcceptanceKey>& ImuTriadKeys();
+
+// The parts one after the other: a method's table built from shared runs of keys.
+std::vector<AcceptanceKey> JoinKeys(std::initializer_list<std::vector<AcceptanceKey>> parts);
+
+// The keys of the registered method `method` (its Method::AcceptanceKeys); empty for a name the
+// registry (server/methods.cc) does not know.
 const std::vector<AcceptanceKey>& AcceptanceKeys(const std::string& method);
 
 // The limits in force for one result: every key of the method, nullopt = no limit.

@@ -1243,6 +1243,21 @@ class Array : public Method {
              const AcceptanceLimits& limits, Verdict* verdict) const override {
     JudgeArray(result, config, limits, verdict);
   }
+  const std::vector<AcceptanceKey>& AcceptanceKeys() const override {
+    static const std::vector<AcceptanceKey>& keys = *new std::vector<AcceptanceKey>(JoinKeys({
+        {
+            {"max_position_std", "largest 1 sigma of a position coordinate, m", 1e-4},  // 0.1 mm
+            {"max_offset",
+             "largest distance of a triad from its nominal position in `geometry`, m (a wrong "
+             "geometry or gyro_unit shows here)",
+             0.005},               // 5 mm
+            limit_keys::kMaxChi2,  // residual RMS against accel_noise and gyro_noise, each
+        },
+        ImuTriadKeys(),  // model full (parameters.imus) only
+    }));
+    return keys;
+  }
+
   Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
              nlohmann::json* result) const override {
     ArrayRecording recording;

@@ -5,12 +5,29 @@ namespace calibd::server {
 
 using nlohmann::json;
 
+namespace {
+
+// The id of the path's {id} (req.matches[1]); false after answering 404 "no such <what>".
+bool PathId(const httplib::Request& req, httplib::Response& res, const char* what, int64_t* id) {
+  if (ParseId(req.matches[1], id)) return true;
+  SendError(res, 404, "not_found", std::string("no such ") + what);
+  return false;
+}
+
+// The recording of the path's {id}, and that id; false after answering 404 or the store's error.
+bool PathRecording(storage::Store* store, const httplib::Request& req, httplib::Response& res,
+                   int64_t* id, storage::RecordingInfo* info) {
+  if (!PathId(req, res, "recording", id)) return false;
+  const Status s = store->GetRecording(*id, info);
+  if (!s.ok()) SendStatus(res, s);
+  return s.ok();
+}
+
+}  // namespace
+
 void Service::Impl::HandleGetJob(const httplib::Request& req, httplib::Response& res) {
   int64_t id = 0;
-  if (!ParseId(req.matches[1], &id)) {
-    SendError(res, 404, "not_found", "no such job");
-    return;
-  }
+  if (!PathId(req, res, "job", &id)) return;
   storage::JobInfo job;
   Status s = store->GetJob(id, &job);
   if (!s.ok()) return (void)SendStatus(res, s);
@@ -29,10 +46,7 @@ void Service::Impl::HandleDecision(const httplib::Request& req, httplib::Respons
                                    bool revoke) {
   constexpr size_t kMaxReason = 500;
   int64_t id = 0;
-  if (!ParseId(req.matches[1], &id)) {
-    SendError(res, 404, "not_found", "no such job");
-    return;
-  }
+  if (!PathId(req, res, "job", &id)) return;
   const std::string media = ToLower(req.get_header_value("Content-Type"));
   if (media.rfind("application/json", 0) != 0) {
     SendError(res, 415, "unsupported_media_type", "send {\"reason\": \"...\"} as application/json");
@@ -315,25 +329,15 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
 
 void Service::Impl::HandleRecording(const httplib::Request& req, httplib::Response& res) {
   int64_t id = 0;
-  if (!ParseId(req.matches[1], &id)) {
-    SendError(res, 404, "not_found", "no such recording");
-    return;
-  }
   storage::RecordingInfo info;
-  Status s = store->GetRecording(id, &info);
-  if (!s.ok()) return (void)SendStatus(res, s);
+  if (!PathRecording(store.get(), req, res, &id, &info)) return;
   res.set_content(JsonBody(RecordingJson(info)), "application/json");
 }
 
 void Service::Impl::HandleRecordingData(const httplib::Request& req, httplib::Response& res) {
   int64_t id = 0;
-  if (!ParseId(req.matches[1], &id)) {
-    SendError(res, 404, "not_found", "no such recording");
-    return;
-  }
   storage::RecordingInfo info;
-  Status s = store->GetRecording(id, &info);
-  if (!s.ok()) return (void)SendStatus(res, s);
+  if (!PathRecording(store.get(), req, res, &id, &info)) return;
   res.set_header("Content-Disposition",
                  "attachment; filename=\"recording-" + std::to_string(id) + ".csv\"");
   res.set_header("ETag", "\"" + info.sha256 + "\"");

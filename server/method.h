@@ -4,7 +4,8 @@
 //
 // Adding a method: its numerics in core/, its adapter server/<name>_method.{h,cc} (config keys to
 // core options, core result to the SPEC §4 result JSON, a class implementing Method) with its
-// exports (server/<name>_exports.cc), its report (web/<name>_report.cc, registered in
+// exports (server/<name>_exports.cc) and its acceptance limits (AcceptanceKeys, beside Judge), its
+// report (web/<name>_report.cc, registered in
 // web/method_reports.cc), and one line in AllMethods(). The CLI's `calibrate` and `simulate`, the
 // upload, job and export routes, the job list filters and the OpenAPI document find methods
 // through the registry.
@@ -83,6 +84,12 @@ class Method {
   // rejection. Deterministic.
   virtual void Judge(const nlohmann::json& result, const nlohmann::json& config,
                      const AcceptanceLimits& limits, Verdict* verdict) const = 0;
+  // The limits its Judge reads, each with its meaning and built-in default (nullopt: no limit
+  // unless set); keys several methods share come from server/acceptance.h (limit_keys). A config's
+  // `acceptance` object and the server-wide defaults (`serve --acceptance`) may set only these
+  // keys: any other is refused naming it. The order is the one error messages list them in.
+  // Never empty; the vector lives for the process.
+  virtual const std::vector<AcceptanceKey>& AcceptanceKeys() const = 0;
   // The formats its results export to besides JSON, in the order the pages offer them.
   virtual std::vector<ExportFormat> ExportFormats() const = 0;
   // Writes a result this method's Run wrote (as stored) in one of its ExportFormats().

@@ -109,6 +109,21 @@ class Noise : public Method {
     InertialUnits units;
     return ParseNoiseConfig(config, &options, &units);
   }
+  const std::vector<AcceptanceKey>& AcceptanceKeys() const override {
+    static const std::vector<AcceptanceKey>& keys = *new std::vector<AcceptanceKey>{
+        {"max_white_noise_std",
+         "largest 1 sigma of a white-noise density, relative to it (log too short)", 0.2},
+        {"max_accel_white_noise",
+         "largest accelerometer white-noise density, m/s^2/sqrt(Hz) (far above any MEMS part: "
+         "units or a moving device)",
+         0.1},
+        {"max_gyro_white_noise",
+         "largest gyroscope white-noise density, rad/s/sqrt(Hz) (far above any MEMS part: units "
+         "or a moving device)",
+         0.01},
+    };
+    return keys;
+  }
   void Judge(const json& result, const json&, const AcceptanceLimits& limits,
              Verdict* verdict) const override {
     const json diag = result.value("diagnostics", json::object());

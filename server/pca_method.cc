@@ -457,6 +457,26 @@ class Pca : public Method {
              const AcceptanceLimits& limits, Verdict* verdict) const override {
     JudgePca(result, config, limits, verdict);
   }
+  const std::vector<AcceptanceKey>& AcceptanceKeys() const override {
+    using namespace limit_keys;
+    static const std::vector<AcceptanceKey>& keys = *new std::vector<AcceptanceKey>{
+        kMaxScaleStd,
+        kMaxAxisStd,
+        {"max_bias_std", "largest 1 sigma of a bias, relative to the field magnitude", 0.01},
+        kScaleRange,
+        kImplausible,
+        kMaxChi2,  // only judged when noise_std is given (otherwise sigma is the residual itself)
+        {"min_scatter",
+         "smallest spread of the orientations: d x the smallest eigenvalue of the field "
+         "directions' scatter (1 uniform, 0 all in a plane); diagnostics.coverage.scatter_min",
+         0.3},  // core::PcaCoverage::kMinScatter
+        {"min_design",
+         "smallest eigenvalue of the quadric fit's design relative to a uniform sphere (what the "
+         "angles between axes are estimated from); diagnostics.coverage.design_min",
+         0.05},  // core::PcaCoverage::kMinDesign
+    };
+    return keys;
+  }
   Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext&,
              nlohmann::json* result) const override {
     PcaRecording recording;

@@ -306,6 +306,46 @@ struct RecordingParser::Impl {
   std::vector<float> array_values_f;  // row-major, as array_values
   Eigen::MatrixXf direct_accel_f, direct_gyro_f;
 
+  // Hands the collected array to `out` (an ArrayRecording or ArrayRecordingFloat: TakeArray,
+  // TakeArrayFloat) from the members that collected it, `acc`, `gyr` and `values` (the double or
+  // the float ones): the preallocated matrices without a copy when the row hint was exact (their
+  // first direct_rows rows when fewer came), else the row-major values split into accelerometer
+  // and gyroscope columns. The parser's copies are released.
+  template <typename Out, typename Matrix, typename Scalar>
+  void HandOverArray(Matrix* acc, Matrix* gyr, std::vector<Scalar>* values, Out* out) {
+    out->accel_names.assign(summary.sensors.begin(), summary.sensors.begin() + accel_triads);
+    out->gyro_names.assign(summary.sensors.begin() + accel_triads, summary.sensors.end());
+    if (direct) {
+      // Handed over without a copy when the hint was exact (fewer rows: the rows there are).
+      if (direct_rows == acc->rows()) {
+        out->accel = std::move(*acc);
+        out->gyro = std::move(*gyr);
+        out->t = has_t ? std::move(direct_t) : Eigen::VectorXd();
+      } else {
+        out->accel = acc->topRows(direct_rows);
+        out->gyro = gyr->topRows(direct_rows);
+        out->t = has_t ? Eigen::VectorXd(direct_t.head(direct_rows)) : Eigen::VectorXd();
+      }
+      direct = false;
+      acc->resize(0, 0);
+      gyr->resize(0, 0);
+      direct_t.resize(0);
+      return;
+    }
+    const int width = 3 * (accel_triads + gyro_triads);
+    Eigen::Map<const Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> all(
+        values->data(), summary.rows, width);
+    out->accel = all.leftCols(3 * accel_triads);
+    out->gyro = all.rightCols(3 * gyro_triads);
+    if (has_t) {
+      out->t = Eigen::Map<const Eigen::VectorXd>(t_values.data(), summary.rows);
+    } else {
+      out->t.resize(0);
+    }
+    std::vector<Scalar>().swap(*values);
+    std::vector<double>().swap(t_values);
+  }
+
   Status Fail(std::string message, int64_t column = 0, std::string field = {}) {
     Status s = Status::InvalidInput(std::move(message));
     s.WithFile(file_name).WithLocation(line_no, column);
@@ -969,37 +1009,7 @@ Status RecordingParser::TakeArray(ArrayRecording* out) {
   }
   if (d.summary.layout != Layout::kArray) return NotArray(d.file_name);
   if (d.as_float) return Status::Internal("the array was collected as float: TakeArrayFloat");
-  const int64_t rows = d.summary.rows;
-  out->accel_names.assign(d.summary.sensors.begin(), d.summary.sensors.begin() + d.accel_triads);
-  out->gyro_names.assign(d.summary.sensors.begin() + d.accel_triads, d.summary.sensors.end());
-  if (d.direct) {
-    // Handed over without a copy when the hint was exact (fewer rows: the rows there are).
-    if (d.direct_rows == d.direct_accel.rows()) {
-      out->accel = std::move(d.direct_accel);
-      out->gyro = std::move(d.direct_gyro);
-      out->t = d.has_t ? std::move(d.direct_t) : Eigen::VectorXd();
-    } else {
-      out->accel = d.direct_accel.topRows(d.direct_rows);
-      out->gyro = d.direct_gyro.topRows(d.direct_rows);
-      out->t = d.has_t ? Eigen::VectorXd(d.direct_t.head(d.direct_rows)) : Eigen::VectorXd();
-    }
-    d.direct = false;
-    d.direct_accel.resize(0, 0);
-    d.direct_gyro.resize(0, 0);
-    d.direct_t.resize(0);
-    return Status::Ok();
-  }
-  const int width = 3 * (d.accel_triads + d.gyro_triads);
-  Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> all(
-      d.array_values.data(), rows, width);
-  out->accel = all.leftCols(3 * d.accel_triads);
-  out->gyro = all.rightCols(3 * d.gyro_triads);
-  if (d.has_t) {
-    out->t = Eigen::Map<const Eigen::VectorXd>(d.t_values.data(), rows);
-  } else {
-    out->t.resize(0);
-  }
-  std::vector<double>().swap(d.array_values);
+  d.HandOverArray(&d.direct_accel, &d.direct_gyro, &d.array_values, out);
   return Status::Ok();
 }
 
@@ -1024,39 +1034,9 @@ Status RecordingParser::TakeArrayFloat(ArrayRecordingFloat* out) {
         "TakeArrayFloat needs a successful Finish() of a parser collecting floats");
   }
   if (d.summary.layout != Layout::kArray) return NotArray(d.file_name);
-  const int64_t rows = d.summary.rows;
-  out->accel_names.assign(d.summary.sensors.begin(), d.summary.sensors.begin() + d.accel_triads);
-  out->gyro_names.assign(d.summary.sensors.begin() + d.accel_triads, d.summary.sensors.end());
   out->accel_scale = d.float_scale_accel;
   out->gyro_scale = d.float_scale_gyro;
-  if (d.direct) {
-    if (d.direct_rows == d.direct_accel_f.rows()) {
-      out->accel = std::move(d.direct_accel_f);
-      out->gyro = std::move(d.direct_gyro_f);
-      out->t = d.has_t ? std::move(d.direct_t) : Eigen::VectorXd();
-    } else {
-      out->accel = d.direct_accel_f.topRows(d.direct_rows);
-      out->gyro = d.direct_gyro_f.topRows(d.direct_rows);
-      out->t = d.has_t ? Eigen::VectorXd(d.direct_t.head(d.direct_rows)) : Eigen::VectorXd();
-    }
-    d.direct = false;
-    d.direct_accel_f.resize(0, 0);
-    d.direct_gyro_f.resize(0, 0);
-    d.direct_t.resize(0);
-    return Status::Ok();
-  }
-  const int width = 3 * (d.accel_triads + d.gyro_triads);
-  Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> all(
-      d.array_values_f.data(), rows, width);
-  out->accel = all.leftCols(3 * d.accel_triads);
-  out->gyro = all.rightCols(3 * d.gyro_triads);
-  if (d.has_t) {
-    out->t = Eigen::Map<const Eigen::VectorXd>(d.t_values.data(), rows);
-  } else {
-    out->t.resize(0);
-  }
-  std::vector<float>().swap(d.array_values_f);
-  std::vector<double>().swap(d.t_values);
+  d.HandOverArray(&d.direct_accel_f, &d.direct_gyro_f, &d.array_values_f, out);
   return Status::Ok();
 }
 

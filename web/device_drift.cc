@@ -97,17 +97,28 @@ std::string ZText(double z) {
                           : std::string(kDash) + " " + kSigma;
 }
 
-// A change cell: lines of "Δ (zσ)"; marked when any |z| reaches kSignificant.
+// A change cell: lines of "Δ (zσ)"; a single change has its (zσ) on a line of its own, which
+// keeps the column narrow. Marked when any |z| reaches kSignificant.
 std::string ChangeCell(const std::vector<std::pair<std::string, double>>& lines) {
   bool significant = false;
   std::string text;
+  const char* const gap = lines.size() == 1 ? "<br>" : " ";
   for (size_t i = 0; i < lines.size(); ++i) {
     significant = significant || std::fabs(lines[i].second) >= kSignificant;
-    text += (i ? "<br>" : "") + lines[i].first + " <span class=\"muted small\">(" +
+    text += (i ? "<br>" : "") + lines[i].first + gap + "<span class=\"muted small\">(" +
             ZText(lines[i].second) + ")</span>";
   }
   return std::string("<td class=\"num") + (significant ? " drift-significant" : "") + "\">" +
          (significant ? "<strong>" + text + "</strong>" : text) + "</td>";
+}
+
+// One line of a change cell: now − before, relative to |before| times `per` (100: %, 1e6: ppm)
+// or absolute when `per` is 0, followed by `unit`; with the change in σ of the difference.
+std::pair<std::string, double> ChangeLine(double before, double s_before, double now, double s_now,
+                                          double per, const std::string& unit) {
+  const double delta = now - before;
+  const double shown = per == 0 ? delta : before != 0 ? delta / std::fabs(before) * per : kNaN;
+  return {Signed(shown, 3) + unit, ZScore(delta, s_before, s_now)};
 }
 
 std::string NoChangeCell(const std::string& why) {
@@ -147,11 +158,19 @@ std::string OmittedNote(size_t n) {
          " older calibrations not listed; the plots show every calibration.</p>";
 }
 
-std::string CalibrationCells(const JobSummary& j, size_t rows) {
+// The calibration cell spanning a job's rows: its link, and below it its date and time (two short
+// lines instead of a wide "when" column, so the drift tables fit 1280 px).
+std::string CalibrationCell(const JobSummary& j, size_t rows) {
   const std::string span = rows > 1 ? " rowspan=\"" + std::to_string(rows) + "\"" : "";
-  return "<td" + span + ">" + JobLink(j.id) + "</td><td class=\"time\"" + span + ">" +
-         E(UtcDate(JobTime(j))) + "</td>";
+  std::string when = E(UtcDate(JobTime(j)));
+  const size_t space = when.find(' ');
+  if (space != std::string::npos) when.replace(space, 1, "<br>");
+  return "<td class=\"time\"" + span + ">" + JobLink(j.id) + "<br><span class=\"muted small\">" +
+         when + "</span></td>";
 }
+
+// The change columns' heading: the note under each table says against what and in which units.
+const char kChangeHeading[] = "<th class=\"num\">change</th>";
 
 // ----- noise
 
@@ -198,9 +217,7 @@ std::string TermChange(const Term& before, const Term& now) {
   if (!was && !is) return NoChangeCell(kDash);
   if (!was) return NoChangeCell("now visible");
   if (!is) return NoChangeCell("no longer visible");
-  const double delta = now.value - before.value;
-  const double rel = before.value != 0 ? delta / std::fabs(before.value) * 100 : kNaN;
-  return ChangeCell({{Signed(rel, 3) + " %", ZScore(delta, before.std, now.std)}});
+  return ChangeCell({ChangeLine(before.value, before.std, now.value, now.std, 100, " %")});
 }
 
 std::string NoiseTable(const std::vector<const JobSummary*>& jobs,
@@ -225,7 +242,7 @@ std::string NoiseTable(const std::vector<const JobSummary*>& jobs,
       const NoiseChannel& c = *mine[i];
       const NoiseChannel* prev = nullptr;
       for (size_t p = k; p-- > 0 && prev == nullptr;) prev = FindChannel(data[p], c.name);
-      rows += "<tr>" + (i == 0 ? CalibrationCells(*jobs[k], mine.size()) : std::string()) +
+      rows += "<tr>" + (i == 0 ? CalibrationCell(*jobs[k], mine.size()) : std::string()) +
               "<td class=\"name\">" + E(c.name) + "</td>";
       const std::string first_cell = NoChangeCell("first");
       rows += ValueCell(c.n.value, c.n.std) + (prev ? TermChange(prev->n, c.n) : first_cell) +
@@ -236,11 +253,11 @@ std::string NoiseTable(const std::vector<const JobSummary*>& jobs,
     }
   }
   if (rows.empty()) return "";
-  const std::string change = "<th class=\"num\">change vs previous</th>";
+  const std::string change = kChangeHeading;
   return "<h4>" + std::string(kind == 'a' ? "Accelerometers" : "Gyroscopes") +
          "</h4><div class=\"table-wrap\"><table class=\"table-drift-noise\" data-sensor=\"" +
          sensor +
-         "\"><thead><tr><th>calibration</th><th>when</th><th>channel</th>"
+         "\"><thead><tr><th>calibration</th><th>channel</th>"
          "<th class=\"num\">white noise N (" +
          unit + "/\xE2\x88\x9AHz)</th>" + change + "<th class=\"num\">bias instability B (" + unit +
          ")</th><th class=\"num\">at \xCF\x84 (s)</th>" + change +
@@ -349,71 +366,66 @@ std::string Vec3Cell(const double* v, const double* s, int sig) {
   return "<td class=\"num\">" + text + "</td>";
 }
 
-// T − I in mrad, three rows.
+// T − I in mrad: its largest |entry| shown, the three rows collapsed beneath it (a <details>
+// the reader opens), so the column stays narrow.
 std::string MisalignmentCell(const double* t) {
   std::string text;
+  double largest = kNaN;
   for (int r = 0; r < 3; ++r) {
     text += r ? "<br>" : "";
     for (int c = 0; c < 3; ++c) {
-      text += (c ? " " : "") + FormatFixed((t[3 * r + c] - (r == c ? 1.0 : 0.0)) * 1e3, 2);
+      const double mrad = (t[3 * r + c] - (r == c ? 1.0 : 0.0)) * 1e3;
+      text += (c ? " " : "") + FormatFixed(mrad, 2);
+      if (std::isfinite(mrad) && !(std::fabs(mrad) <= largest)) largest = std::fabs(mrad);
     }
   }
-  return "<td class=\"num small\">" + text + "</td>";
+  return "<td class=\"num small\"><details><summary>" +
+         (std::isfinite(largest) ? "max " + FormatFixed(largest, 2) : std::string(kDash)) +
+         "</summary>" + text + "</details></td>";
 }
 
 const char* const kEntry[9] = {"xx", "xy", "xz", "yx", "yy", "yz", "zx", "zy", "zz"};
 
+// The change of a vector's x, y and z (scale factors, biases) against the previous calibration,
+// as ChangeLine.
+std::string Vec3Change(const double* before, const double* s_before, const double* now,
+                       const double* s_now, double per, const std::string& unit) {
+  std::vector<std::pair<std::string, double>> lines;
+  for (int k = 0; k < 3; ++k) {
+    lines.push_back(ChangeLine(before[k], s_before[k], now[k], s_now[k], per, unit));
+  }
+  return ChangeCell(lines);
+}
+
+// The largest change of an entry of T against the previous calibration, in mrad, naming it.
+std::string MisalignmentChange(const ImuSensor& before, const ImuSensor& now) {
+  int worst = -1;
+  for (int i = 0; i < 9; ++i) {
+    const double d = std::fabs(now.t[i] - before.t[i]);
+    if (std::isfinite(d) && (worst < 0 || d > std::fabs(now.t[worst] - before.t[worst]))) {
+      worst = i;
+    }
+  }
+  if (worst < 0) return NoChangeCell(kDash);
+  const double d = now.t[worst] - before.t[worst];
+  return ChangeCell({{Signed(d * 1e3, 3) + " mrad (" + kEntry[worst] + ")",
+                      ZScore(d, before.t_std[worst], now.t_std[worst])}});
+}
+
 std::string ImuRows(const JobSummary& job, const ImuEntry& e, const ImuEntry* prev,
                     bool first_of_job, size_t job_rows) {
+  const std::string first = NoChangeCell("first");
   std::string rows;
   for (int s = 0; s < 2; ++s) {
     const ImuSensor& x = e.sensor[s];
-    rows += "<tr>" + (first_of_job && s == 0 ? CalibrationCells(job, job_rows) : std::string()) +
+    const ImuSensor* y = prev != nullptr ? &prev->sensor[s] : nullptr;
+    rows += "<tr>" + (first_of_job && s == 0 ? CalibrationCell(job, job_rows) : std::string()) +
             (s == 0 ? "<td class=\"name\" rowspan=\"2\">" + E(e.name) + "</td>" : std::string()) +
-            "<td>" + kSensors[s] + "</td>" + Vec3Cell(x.scale, x.scale_std, 7);
-    if (prev == nullptr) {
-      rows += NoChangeCell("first");
-    } else {
-      const ImuSensor& y = prev->sensor[s];
-      std::vector<std::pair<std::string, double>> lines;
-      for (int k = 0; k < 3; ++k) {
-        const double d = x.scale[k] - y.scale[k];
-        const double ppm = y.scale[k] != 0 ? d / std::fabs(y.scale[k]) * 1e6 : kNaN;
-        lines.push_back({Signed(ppm, 3) + " ppm", ZScore(d, y.scale_std[k], x.scale_std[k])});
-      }
-      rows += ChangeCell(lines);
-    }
-    rows += MisalignmentCell(x.t);
-    if (prev == nullptr) {
-      rows += NoChangeCell("first");
-    } else {
-      const ImuSensor& y = prev->sensor[s];
-      int worst = -1;
-      for (int i = 0; i < 9; ++i) {
-        const double d = std::fabs(x.t[i] - y.t[i]);
-        if (std::isfinite(d) && (worst < 0 || d > std::fabs(x.t[worst] - y.t[worst]))) worst = i;
-      }
-      if (worst < 0) {
-        rows += NoChangeCell(kDash);
-      } else {
-        const double d = x.t[worst] - y.t[worst];
-        rows += ChangeCell({{Signed(d * 1e3, 3) + " mrad (" + kEntry[worst] + ")",
-                             ZScore(d, y.t_std[worst], x.t_std[worst])}});
-      }
-    }
-    rows += Vec3Cell(x.bias, x.bias_std, 6);
-    if (prev == nullptr) {
-      rows += NoChangeCell("first");
-    } else {
-      const ImuSensor& y = prev->sensor[s];
-      std::vector<std::pair<std::string, double>> lines;
-      for (int k = 0; k < 3; ++k) {
-        const double d = x.bias[k] - y.bias[k];
-        lines.push_back({Signed(d, 3), ZScore(d, y.bias_std[k], x.bias_std[k])});
-      }
-      rows += ChangeCell(lines);
-    }
-    rows += "</tr>";
+            "<td>" + kSensors[s] + "</td>" + Vec3Cell(x.scale, x.scale_std, 7) +
+            (y ? Vec3Change(y->scale, y->scale_std, x.scale, x.scale_std, 1e6, " ppm") : first) +
+            MisalignmentCell(x.t) + (y ? MisalignmentChange(*y, x) : first) +
+            Vec3Cell(x.bias, x.bias_std, 6) +
+            (y ? Vec3Change(y->bias, y->bias_std, x.bias, x.bias_std, 0, "") : first) + "</tr>";
   }
   return rows;
 }
@@ -492,21 +504,22 @@ std::string ImuDriftHtml(const std::vector<const JobSummary*>& jobs) {
     }
   }
   if (rows.empty()) return "<p class=\"muted\">No IMU parameters in these results.</p>";
-  const std::string change = "<th class=\"num\">change vs previous</th>";
+  const std::string change = kChangeHeading;
   const std::string figs = ImuScalePlot(MakeTimeAxis(jobs), data);
   return "<div class=\"table-wrap\"><table class=\"table-drift-imu\"><thead><tr>"
-         "<th>calibration</th><th>when</th><th>IMU</th><th>sensor</th>"
-         "<th class=\"num\">scale K, x y z<br>(SI per reading unit)</th>" +
+         "<th>calibration</th><th>IMU</th><th>sensor</th>"
+         "<th class=\"num\">scale K, x y z (SI per reading unit)</th>" +
          change +
-         "<th class=\"num\">misalignment T \xE2\x88\x92 I<br>(3 rows, mrad)</th>"
-         "<th class=\"num\">largest \xCE\x94T<br>vs previous</th>"
-         "<th class=\"num\">bias b, x y z<br>(reading units)</th>" +
+         "<th class=\"num\">misalignment T \xE2\x88\x92 I (mrad)</th>"
+         "<th class=\"num\">largest \xCE\x94T (mrad)</th>"
+         "<th class=\"num\">bias b, x y z (reading units)</th>" +
          change + "</tr></thead><tbody>" + rows + "</tbody></table></div>" +
          OmittedNote(jobs.size()) +
          "<p class=\"muted small\">\xC2\xB1 is one standard deviation. Changes are against the "
          "previous calibration of the same IMU, with their size in standard deviations of the "
-         "difference; from 3 on they are marked. T compares between calibrations: the body frame "
-         "is the accelerometer's by convention (SPEC \xC2\xA7"
+         "difference; from 3 on they are marked. The misalignment column shows the largest "
+         "|T \xE2\x88\x92 I| entry: open it for the three rows. T compares between calibrations: "
+         "the body frame is the accelerometer's by convention (SPEC \xC2\xA7"
          "7).</p>" +
          (figs.empty() ? std::string() : "<div class=\"plots\">" + figs + "</div>");
 }

@@ -15,14 +15,17 @@
 //          relative (%) and in standard deviations of the difference, √(σ_prev² + σ_now²).
 //          A plot per sensor type of N over time with ±1σ bars.
 //   imu    one table, a row per calibration, IMU and sensor (accelerometer, gyroscope): scale
-//          factors K (x y z ± 1σ, SI per reading unit), misalignment T − I (3 rows, mrad), biases
+//          factors K (x y z ± 1σ, SI per reading unit), misalignment T − I (mrad: its largest
+//          |entry|, the 3 rows collapsed beneath it in a <details>), biases
 //          b (x y z ± 1σ, reading units), and the changes against the previous calibration of that
 //          IMU: Δscale in ppm, the largest |ΔT| entry in mrad, Δb in reading units, each with its
 //          size in standard deviations. A plot of every scale factor's change (ppm) since the
 //          first calibration. T is comparable between calibrations: the body frame is the
 //          accelerometer's by convention (SPEC §7), not a choice of the fit.
 //   A change of 3 or more standard deviations is marked (class drift-significant): more than
-//   the two calibrations' own uncertainty explains.
+//   the two calibrations' own uncertainty explains. Each calibration's cell holds its link and,
+//   below, its date; the tables use a smaller type and wrapping headings so that they fit a
+//   1280 px wide window (tests/web/browser_pages.sh measures it).
 //
 // DOM hooks (stable): table.table-drift-noise (one per sensor type, data-sensor="accelerometer"
 // | "gyroscope"), table.table-drift-imu, td.drift-significant, svg.plot-drift-noise-accel,

@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <cmath>
 #include <cstdio>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -186,6 +187,60 @@ TEST(Gate, InvalidAcceptanceKeysAreErrorsNamingThem) {
   EXPECT_EQ(ValidateServerAcceptance(json{{"pcb", json::object()}}, "f.json").field(), "pcb");
   EXPECT_EQ(ValidateServerAcceptance(json{{"imu", {{"max_offset", 1}}}}, "f.json").field(),
             "imu.max_offset");
+}
+
+// Every method of the registry names its own limits (Method::AcceptanceKeys): each with a
+// meaning, a default that is a number >= 0 or none, no key twice. They are the limits in force
+// when nothing overrides them, and a config may set each of them.
+TEST(Gate, EveryRegisteredMethodSuppliesItsLimitsWithTheirDefaults) {
+  for (const Method* m : AllMethods()) {
+    SCOPED_TRACE(m->name());
+    const std::vector<AcceptanceKey>& keys = m->AcceptanceKeys();
+    ASSERT_FALSE(keys.empty());
+    EXPECT_EQ(&AcceptanceKeys(m->name()), &keys);  // the generic lookup asks the method
+    std::set<std::string> names;
+    json defaults = json::object();
+    for (const AcceptanceKey& k : keys) {
+      EXPECT_TRUE(names.insert(k.name).second) << k.name << " is listed twice";
+      EXPECT_GT(std::string(k.meaning).size(), 10u) << k.name;
+      if (k.default_value) {
+        EXPECT_TRUE(std::isfinite(*k.default_value)) << k.name;
+        EXPECT_GE(*k.default_value, 0) << k.name;
+      }
+      defaults[k.name] = k.default_value ? json(*k.default_value) : json(nullptr);
+    }
+    EXPECT_EQ(EffectiveAcceptance(m->name(), json(), json::object()).ToJson(), defaults);
+    EXPECT_TRUE(
+        ValidateAcceptance(defaults, m->name(), "config key 'acceptance'", "acceptance").ok());
+  }
+  EXPECT_TRUE(AcceptanceKeys("no-such-method").empty());
+}
+
+TEST(Gate, UnknownLimitKeysAreRefusedNamingTheKeyForEveryMethod) {
+  for (const Method* m : AllMethods()) {
+    SCOPED_TRACE(m->name());
+    const std::string name = m->name();
+    Status s = ValidateAcceptance(json{{"max_nonsense", 1}}, name, "config key 'acceptance'",
+                                  "acceptance");
+    EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+    EXPECT_EQ(s.field(), "acceptance.max_nonsense");
+    EXPECT_NE(s.message().find("'max_nonsense' is not an acceptance limit of " + name),
+              std::string::npos)
+        << s.message();
+    for (const AcceptanceKey& k : m->AcceptanceKeys()) {
+      EXPECT_NE(s.message().find(k.name), std::string::npos) << s.message();  // the known keys
+    }
+    s = ValidateServerAcceptance(json{{name, {{"max_nonsense", 1}}}}, "limits.json");
+    EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+    EXPECT_EQ(s.field(), name + ".max_nonsense");
+    EXPECT_EQ(s.message().rfind("limits.json: " + name + ": 'max_nonsense'", 0), 0u) << s.message();
+  }
+  // A name the registry does not know is no method; the message lists the registered ones.
+  const Status s = ValidateServerAcceptance(json{{"pcb", json::object()}}, "limits.json");
+  EXPECT_EQ(s.field(), "pcb");
+  for (const Method* m : AllMethods()) {
+    EXPECT_NE(s.message().find(m->name()), std::string::npos) << s.message();
+  }
 }
 
 // ---- imu: results built by hand around the limits ----

@@ -1,7 +1,8 @@
 // Real `calibd serve` processes on one PostgreSQL database (serve --db postgresql://...): several
 // hosts sharing the queue under kill -9, and a database that goes away and comes back. The
 // database is a throw-away cluster this program starts (tests/storage/pg_test_cluster.h); the
-// servers are the built binary, started with fork/exec on free ports.
+// servers are the built binary, started with fork/exec on free ports (tests/lib/server_process.h),
+// each with the test's temporary folder as its TMPDIR, where a PostgreSQL calibd stages uploads.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -20,6 +21,7 @@
 #include "storage/pg_conn.h"
 #include "storage/store.h"
 #include "tests/lib/sanitizer.h"
+#include "tests/lib/server_process.h"
 #include "tests/server/http_test_util.h"
 #include "tests/storage/pg_test_cluster.h"
 
@@ -28,82 +30,8 @@ namespace {
 
 using nlohmann::json;
 using storage::testing::PgTestCluster;
-
-// `calibd serve` as a child process; its stderr is collected to learn the port (as in
-// process_test.cc). `tmpdir` becomes its TMPDIR, where a PostgreSQL calibd stages uploads (so
-// the staging folders go with the test's temporary folder).
-class ServerProcess {
- public:
-  ServerProcess(const std::string& db, const std::string& tmpdir,
-                std::vector<std::string> extra = {}) {
-    int fds[2];
-    if (pipe(fds) != 0) return;
-    pid_ = fork();
-    if (pid_ == 0) {
-      dup2(fds[1], 2);
-      close(fds[0]);
-      close(fds[1]);
-      setenv("TMPDIR", tmpdir.c_str(), 1);
-      std::vector<std::string> args = {CALIBD_BINARY, "serve",       "--db",           db,
-                                       "--listen",    "127.0.0.1:0", "--no-access-log"};
-      args.insert(args.end(), extra.begin(), extra.end());
-      std::vector<char*> argv;
-      for (auto& a : args) argv.push_back(a.data());
-      argv.push_back(nullptr);
-      execv(CALIBD_BINARY, argv.data());
-      _exit(127);
-    }
-    close(fds[1]);
-    reader_ = std::thread([this, fd = fds[0]] {
-      char buf[4096];
-      ssize_t n;
-      while ((n = read(fd, buf, sizeof buf)) > 0) {
-        std::lock_guard<std::mutex> lock(mu_);
-        log_.append(buf, static_cast<size_t>(n));
-      }
-      close(fd);
-    });
-    for (int i = 0; i < 3000 && port_ == 0; ++i) {
-      {
-        std::lock_guard<std::mutex> lock(mu_);
-        const size_t at = log_.find("listening on http://127.0.0.1:");
-        if (at != std::string::npos) port_ = std::atoi(log_.c_str() + at + 30);
-      }
-      if (port_ == 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-  }
-  ~ServerProcess() {
-    if (pid_ > 0 && !exited_) Signal(SIGKILL);
-    if (reader_.joinable()) reader_.join();
-  }
-
-  int port() const { return port_; }
-  int Signal(int sig) {
-    kill(pid_, sig);
-    int status = 0;
-    waitpid(pid_, &status, 0);
-    exited_ = true;
-    return status;
-  }
-  std::string log() {
-    std::lock_guard<std::mutex> lock(mu_);
-    return log_;
-  }
-  httplib::Client Client() const {
-    httplib::Client c("127.0.0.1", port_);
-    c.set_read_timeout(30, 0);
-    c.set_connection_timeout(5, 0);
-    return c;
-  }
-
- private:
-  pid_t pid_ = -1;
-  int port_ = 0;
-  bool exited_ = false;
-  std::mutex mu_;
-  std::string log_;
-  std::thread reader_;
-};
+using testing::ServerProcess;
+using testing::WaitUntilIdle;
 
 httplib::MultipartFormDataItems PcaUpload(uint64_t seed, std::string* csv_out) {
   core::PcaSimulationOptions sim;
@@ -131,7 +59,7 @@ class PgServe : public ::testing::Test {
 };
 
 TEST_F(PgServe, DatabaseGoneGivesServiceUnavailableAndCalibdReconnectsByItself) {
-  ServerProcess server(uri_, tmp_.path().string(), {"--workers", "1"});
+  ServerProcess server(uri_, {"--workers", "1"}, tmp_.path().string());
   ASSERT_GT(server.port(), 0) << server.log();
   auto client = server.Client();
   std::string first_csv;
@@ -188,8 +116,8 @@ TEST_F(PgServe, ThreeHostsUnderKillNineLoseNothingAndRunEveryJobOnce) {
   std::vector<std::unique_ptr<ServerProcess>> hosts(kHosts);
   std::vector<std::mutex> host_mu(kHosts);
   for (int h = 0; h < kHosts; ++h) {
-    hosts[h] = std::make_unique<ServerProcess>(uri_, tmp_.path().string(),
-                                               std::vector<std::string>{"--workers", "2"});
+    hosts[h] = std::make_unique<ServerProcess>(uri_, std::vector<std::string>{"--workers", "2"},
+                                               tmp_.path().string());
     ASSERT_GT(hosts[h]->port(), 0) << hosts[h]->log();
   }
   std::mutex mu;
@@ -225,8 +153,8 @@ TEST_F(PgServe, ThreeHostsUnderKillNineLoseNothingAndRunEveryJobOnce) {
   for (int k = 0; k < kKills; ++k) {
     std::this_thread::sleep_for(std::chrono::milliseconds(700 + rng() % 800));
     const int h = k % kHosts;
-    auto fresh = std::make_unique<ServerProcess>(uri_, tmp_.path().string(),
-                                                 std::vector<std::string>{"--workers", "2"});
+    auto fresh = std::make_unique<ServerProcess>(uri_, std::vector<std::string>{"--workers", "2"},
+                                                 tmp_.path().string());
     ASSERT_GT(fresh->port(), 0) << fresh->log();
     std::unique_ptr<ServerProcess> old;
     {
@@ -248,15 +176,7 @@ TEST_F(PgServe, ThreeHostsUnderKillNineLoseNothingAndRunEveryJobOnce) {
     EXPECT_EQ(res->body, bytes) << "recording " << id << " differs";
   }
   // Drain: jobs of killed hosts are taken back by the restarted host of the same machine.
-  json health;
-  for (int i = 0; i < 3000; ++i) {
-    auto res = client.Get("/healthz");
-    if (res && res->status == 200) {
-      health = json::parse(res->body);
-      if (health["queued"] == 0 && health["running"] == 0) break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
+  const json health = WaitUntilIdle(client, 60000);
   EXPECT_EQ(health["queued"], 0) << health.dump();
   EXPECT_EQ(health["running"], 0) << health.dump();
   for (int64_t id : jobs) {

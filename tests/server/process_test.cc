@@ -1,6 +1,6 @@
 // Tests of the real `calibd serve` process: graceful shutdown on SIGTERM and crash safety under
-// kill -9 (SPEC §6). The server is the built binary, started with fork/exec on a free port.
-#include <fcntl.h>
+// kill -9 (SPEC §6). The server is the built binary, started with fork/exec on a free port
+// (tests/lib/server_process.h).
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -17,92 +17,16 @@
 #include "server/pca_method.h"
 #include "storage/store.h"
 #include "tests/lib/sanitizer.h"
+#include "tests/lib/server_process.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {
 namespace {
 
 using nlohmann::json;
-
-// `calibd serve` as a child process; its stderr is collected to learn the port.
-class ServerProcess {
- public:
-  ServerProcess(const std::string& db, std::vector<std::string> extra = {}) {
-    int fds[2];
-    if (pipe(fds) != 0) return;
-    pid_ = fork();
-    if (pid_ == 0) {
-      dup2(fds[1], 2);
-      close(fds[0]);
-      close(fds[1]);
-      std::vector<std::string> args = {CALIBD_BINARY, "serve",       "--db",           db,
-                                       "--listen",    "127.0.0.1:0", "--no-access-log"};
-      args.insert(args.end(), extra.begin(), extra.end());
-      std::vector<char*> argv;
-      for (auto& a : args) argv.push_back(a.data());
-      argv.push_back(nullptr);
-      execv(CALIBD_BINARY, argv.data());
-      _exit(127);
-    }
-    close(fds[1]);
-    reader_ = std::thread([this, fd = fds[0]] {
-      char buf[4096];
-      ssize_t n;
-      while ((n = read(fd, buf, sizeof buf)) > 0) {
-        std::lock_guard<std::mutex> lock(mu_);
-        log_.append(buf, static_cast<size_t>(n));
-      }
-      close(fd);
-    });
-    for (int i = 0; i < 500 && port_ == 0; ++i) {
-      {
-        std::lock_guard<std::mutex> lock(mu_);
-        const size_t at = log_.find("listening on http://127.0.0.1:");
-        if (at != std::string::npos) port_ = std::atoi(log_.c_str() + at + 30);
-      }
-      if (port_ == 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-  }
-  ~ServerProcess() {
-    if (pid_ > 0 && !exited_) Signal(SIGKILL);
-    if (reader_.joinable()) reader_.join();
-  }
-
-  int port() const { return port_; }
-  // Sends `sig` and waits for the process; returns its wait status.
-  int Signal(int sig) {
-    kill(pid_, sig);
-    int status = 0;
-    waitpid(pid_, &status, 0);
-    exited_ = true;
-    return status;
-  }
-  std::string log() {
-    std::lock_guard<std::mutex> lock(mu_);
-    return log_;
-  }
-  httplib::Client Client() const {
-    httplib::Client c("127.0.0.1", port_);
-    c.set_read_timeout(30, 0);
-    c.set_connection_timeout(5, 0);
-    return c;
-  }
-
- private:
-  pid_t pid_ = -1;
-  int port_ = 0;
-  bool exited_ = false;
-  std::mutex mu_;
-  std::string log_;
-  std::thread reader_;
-};
-
-json GetJob(const httplib::Client& const_client, int64_t id) {
-  auto& client = const_cast<httplib::Client&>(const_client);
-  auto res = client.Get(("/api/v1/jobs/" + std::to_string(id)).c_str());
-  if (!res || res->status != 200) return json();
-  return json::parse(res->body);
-}
+using testing::GetJob;
+using testing::ServerProcess;
+using testing::WaitUntilIdle;
 
 json WaitForStatus(ServerProcess& server, int64_t id, const std::set<std::string>& statuses,
                    int timeout_ms = 120000) {
@@ -205,7 +129,8 @@ TEST(ServeProcess, KillNineJobRunsAgainAtOnceAfterRestartButALiveHoldersJobIsLef
     ServerProcess other(db, {"--workers", "1"});
     ASSERT_GT(other.port(), 0) << other.log();
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
-    job = GetJob(other.Client(), id);
+    auto other_client = other.Client();
+    job = GetJob(other_client, id);
     EXPECT_EQ(job["attempts"], 1) << job.dump();
     other.Signal(SIGTERM);
 
@@ -292,14 +217,7 @@ TEST(ServeProcess, KillNineNeverLosesAnAcknowledgedUploadOrJob) {
     EXPECT_EQ(job["status"], "succeeded") << job.dump();
   }
   // Uploads committed but not acknowledged (killed before the answer) have jobs too: drain.
-  for (int i = 0; i < 6000; ++i) {
-    auto res = client.Get("/healthz");
-    if (res && res->status == 200) {
-      json h = json::parse(res->body);
-      if (h["queued"] == 0 && h["running"] == 0) break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
+  WaitUntilIdle(client, 120000);
   final_server.Signal(SIGTERM);
 
   std::unique_ptr<storage::Store> store;

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Renders every HTML page of a real server in Debian's headless Chromium: a screenshot per page
-# (kept in $CALIBD_SCREENSHOT_DIR when set) and checks of the DOM dump for the expected tables
-# and plots. Usage: browser_pages.sh CALIBD_BINARY (KEEP_TMP=1 keeps the DOM dumps and database)
+# (kept in $CALIBD_SCREENSHOT_DIR when set), checks of the DOM dump for the expected tables
+# and plots, and of every table's width at 1280 px (table_widths.py).
+# Usage: browser_pages.sh CALIBD_BINARY (KEEP_TMP=1 keeps the DOM dumps and database)
 set -euo pipefail
 bin=$(realpath "$1")
 chromium=$(command -v chromium || true)
@@ -159,6 +160,16 @@ for page in history pca array failed device devices revoked rejected recording f
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"
   else passed=$((passed + 1)); fi
 done
+# Every table fits a 1280 px wide window (a laptop screen): none scrolls sideways in its
+# .table-wrap, no page scrolls sideways. table_widths.py measures them in the same Chromium.
+if python3 "$(dirname "$0")/table_widths.py" "$chromium" "$tmp/profile-widths" "$base/" \
+  "$base/jobs/$j2" "$base/jobs/$j3" "$base/jobs/$j4" "$base/jobs/$j5" "$base/jobs/$j8" \
+  "$base/devices" "$base/devices/$hostile" "$base/devices/IMU-DRIFT" "$base/recordings/$r7" \
+  >"$tmp/widths.log" 2>&1; then
+  passed=$((passed + 1))
+else
+  failed=$((failed + 1)); echo "FAIL: a table is wider than 1280 px allows:"; cat "$tmp/widths.log"
+fi
 echo "browser pages: screenshots in $shots"
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

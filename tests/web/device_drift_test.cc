@@ -142,6 +142,10 @@ TEST(ImuDrift, ShowsScalesMisalignmentsAndBiasesWithTheirChangesInSigma) {
   EXPECT_EQ(Count(html, "drift-significant"), 1u);
   EXPECT_TRUE(Has(html, "1.000100 \xC2\xB1 1.0e-6"));
   EXPECT_TRUE(Has(html, "0.20 0.00"));  // T − I in mrad, first row of the second calibration
+  // The rows of T − I are collapsed under its largest entry (the table fits 1280 px).
+  EXPECT_TRUE(Has(html, "<details><summary>max 0.20</summary>0.00 0.20 0.00<br>"));
+  // Both sensors of the first calibration and the gyroscope of the second are the identity.
+  EXPECT_EQ(Count(html, "<details><summary>max 0.00</summary>"), 3u);
   EXPECT_TRUE(Has(html, "class=\"plot plot-drift-imu-scale\""));
   EXPECT_EQ(Count(html, "<td>accelerometer</td>"), 2u);
   EXPECT_EQ(Count(html, "<td>gyroscope</td>"), 2u);
