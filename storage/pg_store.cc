@@ -11,7 +11,6 @@
 #include <chrono>
 #include <cstring>
 #include <exception>
-#include <nlohmann/json.hpp>
 #include <utility>
 
 #include "storage/pg_conn.h"
@@ -65,56 +64,28 @@ Status HashFile(const std::string& path, std::string* sha) {
   return Status::Ok();
 }
 
-// Job columns in the order ReadJob expects; `%s` the result column or NULL.
-constexpr const char* kJobColumns =
-    "SELECT j.id, j.recording_id, j.method, j.device, j.config_json, j.status, j.attempts, "
-    "j.lease_owner, j.lease_expires_at, j.created_at, j.started_at, j.finished_at, "
-    "j.error_code, j.error_message, j.not_before, r.sha256, r.verdict, r.decision, ";
-constexpr const char* kJobFrom = " FROM jobs j LEFT JOIN results r ON r.job_id = j.id ";
+// The current row of a result, for the readers of store_internal.h.
+class PgRow final : public internal::Row {
+ public:
+  PgRow(const PgResult& r, int row) : r_(r), row_(row) {}
+  bool IsNull(int col) const override { return r_.IsNull(row_, col); }
+  int64_t Int(int col) const override { return r_.Int(row_, col); }
+  std::string Text(int col) const override { return r_.Text(row_, col); }
 
-std::string JobSelect(bool with_result) {
-  return std::string(kJobColumns) + (with_result ? "r.result_json" : "NULL") + kJobFrom;
-}
-
-void ReadJob(const PgResult& r, int row, JobInfo* job) {
-  *job = JobInfo();
-  job->id = r.Int(row, 0);
-  job->recording_id = r.Int(row, 1);
-  job->method = r.Text(row, 2);
-  job->device = r.Text(row, 3);
-  job->config_json = r.Text(row, 4);
-  job->status = r.Text(row, 5);
-  job->attempts = r.Int(row, 6);
-  job->lease_owner = r.Text(row, 7);
-  auto ms = [&](int col, int64_t* raw, std::string* text) {
-    *raw = r.Int(row, col);
-    *text = r.IsNull(row, col) ? std::string() : FormatTimestamp(*raw);
-  };
-  ms(8, &job->lease_expires_at_ms, &job->lease_expires_at);
-  ms(9, &job->created_at_ms, &job->created_at);
-  ms(10, &job->started_at_ms, &job->started_at);
-  ms(11, &job->finished_at_ms, &job->finished_at);
-  job->error_code = r.Text(row, 12);
-  job->error_message = r.Text(row, 13);
-  job->not_before_ms = r.Int(row, 14);
-  if (job->status == "succeeded") {
-    job->result_sha256 = r.Text(row, 15);
-    job->verdict = r.Text(row, 16);
-    job->decision = r.Text(row, 17);
-    job->state = job->decision.empty() ? job->verdict : job->decision;
-    job->result_json = r.Text(row, 18);
-  }
-}
+ private:
+  const PgResult& r_;
+  int row_;
+};
 
 // for_update: lock the job row (SELECT ... FOR UPDATE OF j) until the transaction ends.
 Status LoadJob(PgConn* c, int64_t id, bool with_result, JobInfo* out, bool for_update = false) {
   const std::string sql =
-      JobSelect(with_result) + "WHERE j.id = $1" + (for_update ? " FOR UPDATE OF j" : "");
+      internal::JobSelect(with_result) + "WHERE j.id = $1" + (for_update ? " FOR UPDATE OF j" : "");
   PgResult r;
   Status s = c->Exec(sql.c_str(), {PgInt(id)}, &r);
   if (!s.ok()) return s;
   if (r.rows() == 0) return Status::NotFound("job " + std::to_string(id) + " not found");
-  ReadJob(r, 0, out);
+  internal::ReadJob(PgRow(r, 0), out);
   return Status::Ok();
 }
 
@@ -126,27 +97,7 @@ Status LoadRecording(PgConn* c, int64_t id, RecordingInfo* out) {
       {PgInt(id)}, &r);
   if (!s.ok()) return s;
   if (r.rows() == 0) return Status::NotFound("recording " + std::to_string(id) + " not found");
-  RecordingInfo info;
-  info.id = r.Int(0, 0);
-  info.sha256 = r.Text(0, 1);
-  info.bytes = r.Int(0, 2);
-  info.rows = r.Int(0, 3);
-  info.layout = r.Text(0, 4);
-  info.device = r.Text(0, 5);
-  info.file_name = r.Text(0, 6);
-  info.created_at_ms = r.Int(0, 7);
-  info.created_at = FormatTimestamp(info.created_at_ms);
-  info.columns_json = r.Text(0, 8);
-  info.sensors_json = r.Text(0, 9);
-  nlohmann::json summary;
-  summary["layout"] = info.layout;
-  summary["rows"] = info.rows;
-  auto columns = nlohmann::json::parse(info.columns_json, nullptr, false);
-  auto sensors = nlohmann::json::parse(info.sensors_json, nullptr, false);
-  summary["columns"] = columns.is_discarded() ? nlohmann::json::array() : columns;
-  summary["sensors"] = sensors.is_discarded() ? nlohmann::json::array() : sensors;
-  info.summary_json = summary.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-  *out = std::move(info);
+  internal::ReadRecording(PgRow(r, 0), out);
   return Status::Ok();
 }
 
@@ -426,13 +377,8 @@ void PgStore::ListenLoop() {
 // ---- recordings ------------------------------------------------------------------------------
 
 Status PgStore::PutRecording(const NewRecording& r, RecordingInfo* out, bool* existed) {
-  if (!r.columns_json.empty() && !internal::IsJsonArray(r.columns_json)) {
-    return Status::InvalidInput("storage: columns_json is not a JSON array");
-  }
-  if (!r.sensors_json.empty() && !internal::IsJsonArray(r.sensors_json)) {
-    return Status::InvalidInput("storage: sensors_json is not a JSON array");
-  }
-  if (r.job && r.job->method.empty()) return Status::InvalidInput("storage: a job needs a method");
+  Status valid = internal::ValidateNewRecording(r);
+  if (!valid.ok()) return valid;
   std::string sha = r.path.empty() ? Sha256Hex(r.data) : r.sha256;
   if (sha.empty()) {
     Status s = HashFile(r.path, &sha);  // the hash is the key: know it before the transaction
@@ -687,8 +633,8 @@ Status PgStore::ExpireLeasesOf(const std::string& owner_prefix, int64_t* taken_b
 Status PgStore::ClaimJob(const std::string& worker_id, int64_t lease_ms, JobInfo* out,
                          bool* claimed) {
   *claimed = false;
-  if (worker_id.empty()) return Status::InvalidInput("storage: worker_id must not be empty");
-  if (lease_ms <= 0) return Status::InvalidInput("storage: lease_ms must be positive");
+  Status valid = internal::ValidateClaim(worker_id, lease_ms);
+  if (!valid.ok()) return valid;
   {
     // Cheap check without a transaction, so idle workers polling cost one indexed lookup.
     bool any = false;
@@ -740,15 +686,7 @@ Status PgStore::RequireHolder(PgConn* c, int64_t job_id, const std::string& work
                               const char* action, JobInfo* job) {
   Status s = LoadJob(c, job_id, false, job, /*for_update=*/true);
   if (!s.ok()) return s;
-  if (job->status != "running") {
-    return Status::Conflict("cannot " + std::string(action) + " job " + std::to_string(job_id) +
-                            ": it is " + job->status + ", not running");
-  }
-  if (job->lease_owner != worker_id) {
-    return Status::Conflict("cannot " + std::string(action) + " job " + std::to_string(job_id) +
-                            ": it is leased by " + job->lease_owner + ", not " + worker_id);
-  }
-  return Status::Ok();
+  return internal::CheckHolder(*job, worker_id, action);
 }
 
 Status PgStore::RenewLease(int64_t job_id, const std::string& worker_id, int64_t lease_ms) {
@@ -778,13 +716,9 @@ Status PgStore::CompleteJob(int64_t job_id, const std::string& worker_id,
     // The row lock serialises every transition of this job across hosts.
     Status s = LoadJob(c, job_id, false, &job, /*for_update=*/true);
     if (!s.ok()) return s;
-    if (job.status == "succeeded") {
-      if (job.result_sha256 == sha) return Status::Ok();  // the same run again: nothing to do
-      return Status::Conflict("job " + std::to_string(job_id) +
-                              " already succeeded with a different result");
-    }
-    s = RequireHolder(c, job_id, worker_id, "complete", &job);
-    if (!s.ok()) return s;
+    bool done = false;
+    s = internal::CheckCompletion(job, worker_id, sha, &done);
+    if (!s.ok() || done) return s;
     const int64_t now = Now();
     s = c->Exec(
         "INSERT INTO results (job_id, result_json, sha256, created_at, verdict) "
@@ -855,11 +789,11 @@ Status PgStore::ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) {
   out->clear();
   Status s = internal::ValidateFilter(filter);
   if (!s.ok()) return s;
-  const int limit = std::clamp(filter.limit <= 0 ? 50 : filter.limit, 1, 500);
+  const int limit = internal::PageLimit(filter);
   int n = 0;
   const std::string where = FilterSql(filter, true, &n);
-  const std::string sql = JobSelect(filter.include_results) + where + "ORDER BY j.id DESC LIMIT $" +
-                          std::to_string(n + 1);
+  const std::string sql = internal::JobSelect(filter.include_results) + where +
+                          "ORDER BY j.id DESC LIMIT $" + std::to_string(n + 1);
   std::vector<PgParam> params = FilterParams(filter, true);
   params.push_back(PgInt(limit));
   return Read([&](PgConn* c) {
@@ -868,7 +802,7 @@ Status PgStore::ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) {
     if (!s.ok()) return s;
     for (int i = 0; i < res.rows(); ++i) {
       JobInfo job;
-      ReadJob(res, i, &job);
+      internal::ReadJob(PgRow(res, i), &job);
       out->push_back(std::move(job));
     }
     return Status::Ok();
@@ -901,31 +835,14 @@ Status PgStore::ListDevices(std::vector<DeviceInfo>* out) {
         "ORDER BY d.serial COLLATE \"C\", c.method COLLATE \"C\"",
         {}, &res);
     if (!s.ok()) return s;
-    for (int i = 0; i < res.rows(); ++i) {
-      std::string serial = res.Text(i, 0);
-      if (out->empty() || out->back().serial != serial) {
-        DeviceInfo d;
-        d.serial = serial;
-        d.first_seen_ms = res.Int(i, 1);
-        d.first_seen = FormatTimestamp(d.first_seen_ms);
-        out->push_back(std::move(d));
-      }
-      if (!res.IsNull(i, 2)) {
-        DeviceCalibration cal;
-        cal.method = res.Text(i, 2);
-        cal.job_id = res.Int(i, 3);
-        cal.calibrated_at_ms = res.Int(i, 4);
-        cal.calibrated_at = FormatTimestamp(cal.calibrated_at_ms);
-        out->back().latest.push_back(std::move(cal));
-      }
-    }
+    for (int i = 0; i < res.rows(); ++i) internal::AddDeviceRow(PgRow(res, i), out);
     return Status::Ok();
   });
 }
 
 Status PgStore::LatestResult(const std::string& device, const std::string& method, JobInfo* out) {
   const std::string sql =
-      JobSelect(true) +
+      internal::JobSelect(true) +
       "WHERE j.id = (SELECT job_id FROM device_calibrations WHERE device = $1 AND method = $2)";
   return Read([&](PgConn* c) {
     PgResult res;
@@ -934,7 +851,7 @@ Status PgStore::LatestResult(const std::string& device, const std::string& metho
     if (res.rows() == 0) {
       return Status::NotFound("no succeeded " + method + " calibration for device " + device);
     }
-    ReadJob(res, 0, out);
+    internal::ReadJob(PgRow(res, 0), out);
     return Status::Ok();
   });
 }
@@ -945,87 +862,38 @@ Status PgStore::QueueDepth(QueueCounts* out) {
     PgResult res;
     Status s = c->Exec("SELECT status, COUNT(*) FROM jobs GROUP BY status", {}, &res);
     if (!s.ok()) return s;
-    for (int i = 0; i < res.rows(); ++i) {
-      const std::string status = res.Text(i, 0);
-      const int64_t n = res.Int(i, 1);
-      if (status == "queued") out->queued = n;
-      if (status == "running") out->running = n;
-      if (status == "succeeded") out->succeeded = n;
-      if (status == "failed") out->failed = n;
-    }
+    for (int i = 0; i < res.rows(); ++i) internal::AddQueueCount(PgRow(res, i), out);
     return Status::Ok();
   });
 }
 
 // ---- the acceptance gate's decisions -----------------------------------------------------------
 
-Status PgStore::DecideLocked(PgConn* c, int64_t job_id, const std::string& action,
-                             const std::string& reason, const std::string& actor, JobEvent* out) {
-  JobInfo job;
-  Status s = LoadJob(c, job_id, false, &job, /*for_update=*/true);
-  if (!s.ok()) return s;
-  const std::string id = "job " + std::to_string(job_id);
-  const bool revoke = action == "revoke";
-  if (job.status != "succeeded") {
-    return Status::Conflict(id + " is " + job.status + ": it has no result to " + action);
-  }
-  if (revoke && job.state == "revoked") return Status::Conflict(id + " is already revoked");
-  if (revoke && job.state == "rejected") {
-    return Status::Conflict(id +
-                            " was rejected by the acceptance gate and is not served: "
-                            "there is nothing to revoke");
-  }
-  if (!revoke && job.state == "accepted") {
-    return Status::Conflict(
-        id + " is already accepted" +
-        (job.decision.empty() ? std::string(" by the acceptance gate") : std::string()));
-  }
-  const int64_t now = Now();
-  s = c->Exec("UPDATE results SET decision = $2 WHERE job_id = $1",
-              {PgInt(job_id), PgText(revoke ? "revoked" : "accepted")});
-  if (!s.ok()) return s;
-  PgResult res;
-  s = c->Exec(
-      "INSERT INTO job_events (job_id, action, reason, actor, created_at) "
-      "VALUES ($1, $2, $3, $4, $5) RETURNING id",
-      {PgInt(job_id), PgText(action), PgText(reason), PgText(actor), PgInt(now)}, &res);
-  if (!s.ok()) return s;
+Status PgStore::Decide(int64_t job_id, bool revoke, const std::string& reason,
+                       const std::string& actor, JobEvent* out) {
   JobEvent event;
-  event.id = res.Int(0, 0);
-  event.job_id = job_id;
-  event.action = action;
-  event.reason = reason;
-  event.actor = actor;
-  event.created_at_ms = now;
-  event.created_at = FormatTimestamp(now);
-  if (!job.device.empty()) {
-    s = RefreshLatest(c, job.device, job.method);
+  Status s = Txn([&](PgConn* c) {
+    JobInfo job;
+    Status s = LoadJob(c, job_id, false, &job, /*for_update=*/true);
     if (!s.ok()) return s;
-  }
-  *out = std::move(event);
-  return Status::Ok();
-}
-
-Status PgStore::RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                          JobEvent* out) {
-  if (reason.empty()) {
-    return Status::InvalidInput("a revocation needs a reason").WithField("reason");
-  }
-  JobEvent event;
-  Status s =
-      Txn([&](PgConn* c) { return DecideLocked(c, job_id, "revoke", reason, actor, &event); });
-  if (s.ok() && out != nullptr) *out = std::move(event);
-  return s;
-}
-
-Status PgStore::AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                          JobEvent* out) {
-  if (reason.empty()) {
-    return Status::InvalidInput("an acceptance needs a reason").WithField("reason");
-  }
-  JobEvent event;
-  Status s =
-      Txn([&](PgConn* c) { return DecideLocked(c, job_id, "accept", reason, actor, &event); });
+    s = internal::CheckDecision(job, revoke);
+    if (!s.ok()) return s;
+    const int64_t now = Now();
+    s = c->Exec("UPDATE results SET decision = $2 WHERE job_id = $1",
+                {PgInt(job_id), PgText(internal::DecisionValue(revoke))});
+    if (!s.ok()) return s;
+    PgResult res;
+    s = c->Exec(
+        "INSERT INTO job_events (job_id, action, reason, actor, created_at) "
+        "VALUES ($1, $2, $3, $4, $5) RETURNING id",
+        {PgInt(job_id), PgText(internal::DecisionAction(revoke)), PgText(reason), PgText(actor),
+         PgInt(now)},
+        &res);
+    if (!s.ok()) return s;
+    event = internal::MakeDecisionEvent(res.Int(0, 0), job_id, revoke, reason, actor, now);
+    if (!job.device.empty()) return RefreshLatest(c, job.device, job.method);
+    return Status::Ok();
+  });
   if (s.ok() && out != nullptr) *out = std::move(event);
   return s;
 }
@@ -1044,13 +912,7 @@ Status PgStore::ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) {
     std::vector<JobEvent> events;
     for (int i = 0; i < res.rows(); ++i) {
       JobEvent e;
-      e.id = res.Int(i, 0);
-      e.job_id = res.Int(i, 1);
-      e.action = res.Text(i, 2);
-      e.reason = res.Text(i, 3);
-      e.actor = res.Text(i, 4);
-      e.created_at_ms = res.Int(i, 5);
-      e.created_at = FormatTimestamp(e.created_at_ms);
+      internal::ReadJobEvent(PgRow(res, i), &e);
       events.push_back(std::move(e));
     }
     *out = std::move(events);

@@ -98,10 +98,6 @@ class PgStore final : public Store {
   Status ListDevices(std::vector<DeviceInfo>* out) override;
   Status LatestResult(const std::string& device, const std::string& method, JobInfo* out) override;
   Status QueueDepth(QueueCounts* out) override;
-  Status RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                   JobEvent* out = nullptr) override;
-  Status AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                   JobEvent* out = nullptr) override;
   Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) override;
   // Checks that every recording's chunks add up to its size: "ok", or the ids that do not.
   Status IntegrityCheck(std::string* result) override;
@@ -128,8 +124,8 @@ class PgStore final : public Store {
   Status RecoverLocked(PgConn* c, int64_t now, int64_t* recovered);
   Status RequireHolder(PgConn* c, int64_t job_id, const std::string& worker_id, const char* action,
                        JobInfo* job);
-  Status DecideLocked(PgConn* c, int64_t job_id, const std::string& action,
-                      const std::string& reason, const std::string& actor, JobEvent* out);
+  Status Decide(int64_t job_id, bool revoke, const std::string& reason, const std::string& actor,
+                JobEvent* out) override;
   void ListenLoop();
 
   std::string target_;  // with the password: never logged

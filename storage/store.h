@@ -326,13 +326,13 @@ class Store {
   // kConflict (message says why) unless the job succeeded and its result is served (a queued,
   // running or failed job has no result; a rejected one is not served; a revoked one already is);
   // kInvalidInput for an empty reason; kNotFound.
-  virtual Status RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                           JobEvent* out = nullptr) = 0;
+  Status RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,
+                   JobEvent* out = nullptr);
   // Accepts a result the gate rejected, or re-accepts a revoked one (state -> "accepted"): it is
   // then served when it is the device's latest served one. kConflict unless the job succeeded
   // and its state is "rejected" or "revoked"; otherwise as RevokeJob.
-  virtual Status AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                           JobEvent* out = nullptr) = 0;
+  Status AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
+                   JobEvent* out = nullptr);
   // The job's decisions, oldest first. kNotFound for no such job.
   virtual Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) = 0;
 
@@ -348,6 +348,11 @@ class Store {
  protected:
   Store(std::string path, StoreOptions options);
   int64_t Now() const { return options_.now_ms(); }
+  // RevokeJob (revoke) or AcceptJob, the reason checked: one transaction that loads the job
+  // (locked), checks internal::CheckDecision, stores the decision and its event and refreshes the
+  // device's latest calibration. `out` may be null.
+  virtual Status Decide(int64_t job_id, bool revoke, const std::string& reason,
+                        const std::string& actor, JobEvent* out) = 0;
 
   std::string path_;
   StoreOptions options_;
