@@ -54,28 +54,26 @@ Status SqliteStore::GetJob(int64_t id, JobInfo* out) {
 namespace {
 
 // WHERE clause from constant fragments; the values are bound by BindFilter in the same order.
-Status FilterSql(const JobFilter& f, bool with_cursor, std::string* where) {
-  Status valid = internal::ValidateFilter(f);
-  if (!valid.ok()) return valid;
-  *where = "WHERE 1 ";
+std::string FilterSql(const JobFilter& f, bool with_cursor) {
+  std::string where = "WHERE 1 ";
   int n = 0;
-  if (!f.device.empty()) *where += "AND j.device = ?" + std::to_string(++n) + " ";
-  if (!f.method.empty()) *where += "AND j.method = ?" + std::to_string(++n) + " ";
-  if (!f.status.empty()) *where += "AND j.status = ?" + std::to_string(++n) + " ";
-  if (!f.state.empty()) {
-    *where += "AND j.status = 'succeeded' AND COALESCE(r.decision, r.verdict) = ?" +
-              std::to_string(++n) + " ";
+  if (!f.device.empty()) where += "AND j.device = ?" + std::to_string(++n) + " ";
+  if (!f.method.empty()) where += "AND j.method = ?" + std::to_string(++n) + " ";
+  if (f.status) where += "AND j.status = ?" + std::to_string(++n) + " ";
+  if (f.state) {
+    where += "AND j.status = 'succeeded' AND COALESCE(r.decision, r.verdict) = ?" +
+             std::to_string(++n) + " ";
   }
-  if (with_cursor && f.before > 0) *where += "AND j.id < ?" + std::to_string(++n) + " ";
-  return Status::Ok();
+  if (with_cursor && f.before > 0) where += "AND j.id < ?" + std::to_string(++n) + " ";
+  return where;
 }
 
 int BindFilter(Stmt* st, const JobFilter& f, bool with_cursor) {
   int n = 0;
   if (!f.device.empty()) st->BindText(++n, f.device);
   if (!f.method.empty()) st->BindText(++n, f.method);
-  if (!f.status.empty()) st->BindText(++n, f.status);
-  if (!f.state.empty()) st->BindText(++n, f.state);
+  if (f.status) st->BindText(++n, Name(*f.status));
+  if (f.state) st->BindText(++n, Name(*f.state));
   if (with_cursor && f.before > 0) st->BindInt(++n, f.before);
   return n;
 }
@@ -84,16 +82,15 @@ int BindFilter(Stmt* st, const JobFilter& f, bool with_cursor) {
 
 Status SqliteStore::ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) {
   out->clear();
-  std::string where;
-  Status s = FilterSql(filter, true, &where);
-  if (!s.ok()) return s;
+  const std::string where = FilterSql(filter, true);
   const int limit = internal::PageLimit(filter);
   Conn conn(this);
-  s = conn.Open();
+  Status s = conn.Open();
   if (!s.ok()) return s;
   Stmt st;
   const int limit_param = 1 + (!filter.device.empty()) + (!filter.method.empty()) +
-                          (!filter.status.empty()) + (!filter.state.empty()) + (filter.before > 0);
+                          filter.status.has_value() + filter.state.has_value() +
+                          (filter.before > 0);
   s = conn.db()->Prepare(internal::JobSelect(filter.include_results) + where +
                              "ORDER BY j.id DESC LIMIT ?" + std::to_string(limit_param),
                          &st);
@@ -112,11 +109,9 @@ Status SqliteStore::ListJobs(const JobFilter& filter, std::vector<JobInfo>* out)
 }
 
 Status SqliteStore::CountJobs(const JobFilter& filter, int64_t* count) {
-  std::string where;
-  Status s = FilterSql(filter, false, &where);
-  if (!s.ok()) return s;
+  const std::string where = FilterSql(filter, false);
   Conn conn(this);
-  s = conn.Open();
+  Status s = conn.Open();
   if (!s.ok()) return s;
   Stmt st;
   s = conn.db()->Prepare(

@@ -12,6 +12,15 @@
 #include "storage/sqlite_store.h"
 #include "storage/store_internal.h"
 
+namespace calibd {
+
+void to_json(nlohmann::json& j, JobStatus v) { j = Name(v); }
+void to_json(nlohmann::json& j, GateVerdict v) { j = Name(v); }
+void to_json(nlohmann::json& j, Decision v) { j = Name(v); }
+void to_json(nlohmann::json& j, ServeState v) { j = Name(v); }
+
+}  // namespace calibd
+
 namespace calibd::storage {
 
 namespace internal {
@@ -27,39 +36,22 @@ bool IsJsonArray(const std::string& text) {
   return !j.is_discarded() && j.is_array();
 }
 
-bool IsValidStatus(const std::string& s) {
-  return s == "queued" || s == "running" || s == "succeeded" || s == "failed";
-}
-
 int64_t Backoff(const StoreOptions& o, int64_t failures) {
   int64_t delay = std::max<int64_t>(o.backoff_base_ms, 0);
   for (int64_t i = 1; i < failures && delay < o.backoff_max_ms; ++i) delay *= 2;
   return std::min(delay, o.backoff_max_ms);
 }
 
-std::string VerdictOf(const std::string& result_json) {
+GateVerdict VerdictOf(const std::string& result_json) {
   auto j = nlohmann::json::parse(result_json, nullptr, /*allow_exceptions=*/false);
-  if (j.is_discarded() || !j.is_object()) return "accepted";
+  if (j.is_discarded() || !j.is_object()) return GateVerdict::kAccepted;
   auto v = j.find("verdict");
-  if (v == j.end() || !v->is_object()) return "accepted";
+  if (v == j.end() || !v->is_object()) return GateVerdict::kAccepted;
   auto status = v->find("status");
   if (status != v->end() && status->is_string() && status->get<std::string>() == "rejected") {
-    return "rejected";
+    return GateVerdict::kRejected;
   }
-  return "accepted";
-}
-
-Status ValidateFilter(const JobFilter& f) {
-  if (!f.status.empty() && !IsValidStatus(f.status)) {
-    return Status::InvalidInput("unknown job status '" + f.status +
-                                "' (queued, running, succeeded or failed)")
-        .WithField("status");
-  }
-  if (!f.state.empty() && f.state != "accepted" && f.state != "rejected" && f.state != "revoked") {
-    return Status::InvalidInput("unknown verdict '" + f.state + "' (accepted, rejected or revoked)")
-        .WithField("verdict");
-  }
-  return Status::Ok();
+  return GateVerdict::kAccepted;
 }
 
 int PageLimit(const JobFilter& f) { return std::clamp(f.limit <= 0 ? 50 : f.limit, 1, 500); }
@@ -94,7 +86,7 @@ void ReadJob(const Row& row, JobInfo* job) {
   job->method = row.Text(2);
   job->device = row.Text(3);
   job->config_json = row.Text(4);
-  job->status = row.Text(5);
+  Parse(row.Text(5), &job->status);  // the schema's CHECK admits only the four
   job->attempts = row.Int(6);
   job->lease_owner = row.Text(7);
   auto ms = [&](int col, int64_t* raw, std::string* text) {
@@ -108,11 +100,17 @@ void ReadJob(const Row& row, JobInfo* job) {
   job->error_code = row.Text(12);
   job->error_message = row.Text(13);
   job->not_before_ms = row.Int(14);
-  if (job->status == "succeeded") {
+  if (job->status == JobStatus::kSucceeded) {
     job->result_sha256 = row.Text(15);
-    job->verdict = row.Text(16);
-    job->decision = row.Text(17);
-    job->state = job->decision.empty() ? job->verdict : job->decision;
+    Parse(row.Text(16), &job->verdict);
+    Parse(row.Text(17), &job->decision);
+    if (job->decision != Decision::kNone) {
+      job->state =
+          job->decision == Decision::kRevoked ? ServeState::kRevoked : ServeState::kAccepted;
+    } else if (job->verdict != GateVerdict::kNone) {
+      job->state =
+          job->verdict == GateVerdict::kRejected ? ServeState::kRejected : ServeState::kAccepted;
+    }
     job->result_json = row.Text(18);
   }
 }
@@ -173,20 +171,31 @@ void AddDeviceRow(const Row& row, std::vector<DeviceInfo>* devices) {
 }
 
 void AddQueueCount(const Row& row, QueueCounts* out) {
-  const std::string status = row.Text(0);
+  JobStatus status;
+  if (!Parse(row.Text(0), &status)) return;
   const int64_t n = row.Int(1);
-  if (status == "queued") out->queued = n;
-  if (status == "running") out->running = n;
-  if (status == "succeeded") out->succeeded = n;
-  if (status == "failed") out->failed = n;
+  switch (status) {
+    case JobStatus::kQueued:
+      out->queued = n;
+      break;
+    case JobStatus::kRunning:
+      out->running = n;
+      break;
+    case JobStatus::kSucceeded:
+      out->succeeded = n;
+      break;
+    case JobStatus::kFailed:
+      out->failed = n;
+      break;
+  }
 }
 
 // ---- job state rules ----------------------------------------------------------------------------
 
 Status CheckHolder(const JobInfo& job, const std::string& worker_id, const char* action) {
-  if (job.status != "running") {
+  if (job.status != JobStatus::kRunning) {
     return Status::Conflict("cannot " + std::string(action) + " job " + std::to_string(job.id) +
-                            ": it is " + job.status + ", not running");
+                            ": it is " + Name(job.status) + ", not running");
   }
   if (job.lease_owner != worker_id) {
     return Status::Conflict("cannot " + std::string(action) + " job " + std::to_string(job.id) +
@@ -198,7 +207,7 @@ Status CheckHolder(const JobInfo& job, const std::string& worker_id, const char*
 Status CheckCompletion(const JobInfo& job, const std::string& worker_id, const std::string& sha,
                        bool* done) {
   *done = false;
-  if (job.status == "succeeded") {
+  if (job.status == JobStatus::kSucceeded) {
     if (job.result_sha256 == sha) {  // the same run again: nothing to do
       *done = true;
       return Status::Ok();
@@ -209,7 +218,9 @@ Status CheckCompletion(const JobInfo& job, const std::string& worker_id, const s
   return CheckHolder(job, worker_id, "complete");
 }
 
-const char* DecisionValue(bool revoke) { return revoke ? "revoked" : "accepted"; }
+const char* DecisionValue(bool revoke) {
+  return Name(revoke ? Decision::kRevoked : Decision::kAccepted);
+}
 const char* DecisionAction(bool revoke) { return revoke ? "revoke" : "accept"; }
 
 Status ValidateDecision(bool revoke, const std::string& reason) {
@@ -221,20 +232,22 @@ Status ValidateDecision(bool revoke, const std::string& reason) {
 
 Status CheckDecision(const JobInfo& job, bool revoke) {
   const std::string id = "job " + std::to_string(job.id);
-  if (job.status != "succeeded") {
-    return Status::Conflict(id + " is " + job.status + ": it has no result to " +
+  if (job.status != JobStatus::kSucceeded) {
+    return Status::Conflict(id + " is " + Name(job.status) + ": it has no result to " +
                             DecisionAction(revoke));
   }
-  if (revoke && job.state == "revoked") return Status::Conflict(id + " is already revoked");
-  if (revoke && job.state == "rejected") {
+  if (revoke && job.state == ServeState::kRevoked) {
+    return Status::Conflict(id + " is already revoked");
+  }
+  if (revoke && job.state == ServeState::kRejected) {
     return Status::Conflict(id +
                             " was rejected by the acceptance gate and is not served: "
                             "there is nothing to revoke");
   }
-  if (!revoke && job.state == "accepted") {
+  if (!revoke && job.state == ServeState::kAccepted) {
     return Status::Conflict(
         id + " is already accepted" +
-        (job.decision.empty() ? std::string(" by the acceptance gate") : std::string()));
+        (job.decision == Decision::kNone ? std::string(" by the acceptance gate") : std::string()));
   }
   return Status::Ok();
 }

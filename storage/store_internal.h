@@ -22,15 +22,11 @@ inline constexpr size_t kChunkBytes = 1 << 20;
 int64_t SystemNowMs();
 // Whether `text` parses as a JSON array.
 bool IsJsonArray(const std::string& text);
-// One of "queued", "running", "succeeded", "failed".
-bool IsValidStatus(const std::string& status);
 // Back-off after the n-th transient failure: min(base * 2^(n-1), max) (StoreOptions).
 int64_t Backoff(const StoreOptions& o, int64_t failures);
-// The acceptance gate's verdict of a result: "rejected" when the JSON's verdict.status is
-// "rejected", else "accepted" (no verdict, or not JSON, included).
-std::string VerdictOf(const std::string& result_json);
-// Validates a JobFilter's status and state (kInvalidInput naming the field).
-Status ValidateFilter(const JobFilter& f);
+// The acceptance gate's verdict of a result: kRejected when the JSON's verdict.status is
+// "rejected", else kAccepted (no verdict, or not JSON, included).
+GateVerdict VerdictOf(const std::string& result_json);
 // ListJobs' page size: filter.limit clamped to 1..500, 50 when unset.
 int PageLimit(const JobFilter& f);
 
