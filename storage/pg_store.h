@@ -61,7 +61,7 @@ inline constexpr int kPgSchemaVersion = 1;
 // `target` with the password of a URI or keyword string replaced by "***" (for logs, /healthz).
 std::string RedactConnectionTarget(const std::string& target);
 
-class PgConn;  // one libpq connection (pg_store.cc)
+class PgConn;  // one libpq connection (pg_conn.h)
 
 class PgStore final : public Store {
  public:
@@ -105,7 +105,7 @@ class PgStore final : public Store {
   Status Checkpoint() override;
 
  private:
-  class Lease;  // a pooled connection, returned on destruction
+  class Lease;  // a pooled connection, returned on destruction (pg_store_internal.h)
   PgStore(std::string target, StoreOptions options);
   Status NewConnection(std::unique_ptr<PgConn>* out);
   Status Acquire(std::unique_ptr<PgConn>* out, bool* pooled);
