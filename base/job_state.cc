@@ -1,6 +1,7 @@
 #include "base/job_state.h"
 
-#include <iterator>
+#include <cstddef>
+#include <ostream>
 
 namespace calibd {
 namespace {
@@ -37,5 +38,10 @@ bool Parse(std::string_view text, Decision* out) { return ParseName(text, kDecis
 bool Parse(std::string_view text, ServeState* out) {
   return ParseName(text, kServeStateNames, out);
 }
+
+std::ostream& operator<<(std::ostream& os, JobStatus v) { return os << Name(v); }
+std::ostream& operator<<(std::ostream& os, GateVerdict v) { return os << Name(v); }
+std::ostream& operator<<(std::ostream& os, Decision v) { return os << Name(v); }
+std::ostream& operator<<(std::ostream& os, ServeState v) { return os << Name(v); }
 
 }  // namespace calibd

@@ -4,6 +4,7 @@
 #ifndef CALIBD_BASE_JOB_STATE_H_
 #define CALIBD_BASE_JOB_STATE_H_
 
+#include <iosfwd>
 #include <string_view>
 
 namespace calibd {
@@ -33,6 +34,12 @@ bool Parse(std::string_view text, JobStatus* out);
 bool Parse(std::string_view text, GateVerdict* out);
 bool Parse(std::string_view text, Decision* out);
 bool Parse(std::string_view text, ServeState* out);
+
+// Writes Name(value) (test failure messages, logs); kNone writes "".
+std::ostream& operator<<(std::ostream& os, JobStatus v);
+std::ostream& operator<<(std::ostream& os, GateVerdict v);
+std::ostream& operator<<(std::ostream& os, Decision v);
+std::ostream& operator<<(std::ostream& os, ServeState v);
 
 }  // namespace calibd
 

@@ -2,6 +2,7 @@
 // vocabulary.
 #include <gtest/gtest.h>
 
+#include <sstream>
 #include <string>
 #include <utility>
 
@@ -93,6 +94,9 @@ TEST(JobState, EveryValueHasTheSpecNameAndParsesBack) {
   Decision decision = Decision::kNone;
   ASSERT_TRUE(Parse("revoked", &decision));
   EXPECT_EQ(decision, Decision::kRevoked);
+  std::ostringstream printed;  // what a failing EXPECT_EQ shows
+  printed << JobStatus::kRunning << "/" << ServeState::kRevoked << "/" << GateVerdict::kRejected;
+  EXPECT_EQ(printed.str(), "running/revoked/rejected");
 }
 
 TEST(JobState, UnknownTextIsRefusedAndLeavesTheValue) {
