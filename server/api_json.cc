@@ -10,7 +10,7 @@ json NullIfEmpty(const std::string& s) { return s.empty() ? json() : json(s); }
 // A job as the API shows it (SPEC §5).
 json JobJson(const storage::JobInfo& job, bool with_result) {
   json j = {{"id", job.id},
-            {"status", job.status},
+            {"status", Name(job.status)},
             {"device", NullIfEmpty(job.device)},
             {"method", job.method},
             {"recording_id", job.recording_id},
@@ -22,7 +22,7 @@ json JobJson(const storage::JobInfo& job, bool with_result) {
             {"result", json()},
             {"url", "/api/v1/jobs/" + std::to_string(job.id)},
             {"report_url", "/jobs/" + std::to_string(job.id)}};
-  if (!job.error_code.empty() && job.status != "succeeded") {
+  if (!job.error_code.empty() && job.status != JobStatus::kSucceeded) {
     j["error"] = {{"code", job.error_code}, {"message", job.error_message}};
   }
   json config;
@@ -33,9 +33,9 @@ json JobJson(const storage::JobInfo& job, bool with_result) {
   }
   // The acceptance gate: the gate's verdict, a person's decision, and what follows (only the
   // "accepted" state is ever served as the device's calibration).
-  j["verdict"] = NullIfEmpty(job.verdict);
-  j["revoked"] = job.decision == "revoked";
-  j["state"] = NullIfEmpty(job.state);
+  j["verdict"] = NullIfEmpty(Name(job.verdict));
+  j["revoked"] = job.decision == Decision::kRevoked;
+  j["state"] = NullIfEmpty(Name(job.state));
   return j;
 }
 

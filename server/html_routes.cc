@@ -25,7 +25,7 @@ web::JobSummary Summarize(const storage::JobInfo& job) {
   s.started_at = job.started_at;
   s.finished_at = job.finished_at;
   s.attempts = static_cast<int>(job.attempts);
-  if (job.status != "succeeded") s.error = job.error_message;
+  if (job.status != JobStatus::kSucceeded) s.error = job.error_message;
   if (!job.result_json.empty()) {
     json result;
     if (ParseJsonText(job.result_json, "result", &result).ok()) s.result = std::move(result);
@@ -39,7 +39,7 @@ web::JobSummary Summarize(const storage::JobInfo& job) {
 web::JobSummary SummarizeWithEvents(storage::Store* store, const storage::JobInfo& job,
                                     bool always) {
   web::JobSummary s = Summarize(job);
-  if (!always && job.decision.empty()) return s;
+  if (!always && job.decision == Decision::kNone) return s;
   std::vector<storage::JobEvent> events;
   if (store->ListJobEvents(job.id, &events).ok()) {
     for (const auto& e : events) s.events.push_back({e.action, e.reason, e.actor, e.created_at});
@@ -89,13 +89,11 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
     if (FindMethod(method) != nullptr) view.filter.method = filter.method = method;
     view.methods.clear();
     for (const Method* m : AllMethods()) view.methods.push_back(m->name());
-    if (status == "queued" || status == "running" || status == "succeeded" || status == "failed") {
-      view.filter.status = filter.status = status;
-    }
+    JobStatus parsed_status;
+    if (Parse(status, &parsed_status)) view.filter.status = filter.status = parsed_status;
     const std::string verdict = req.get_param_value("verdict");
-    if (verdict == "accepted" || verdict == "rejected" || verdict == "revoked") {
-      view.filter.verdict = filter.state = verdict;
-    }
+    ServeState state;
+    if (!verdict.empty() && Parse(verdict, &state)) view.filter.verdict = filter.state = state;
     if (req.has_param("before") && !ParsePositive(req.get_param_value("before"), &filter.before)) {
       return SendPage(res, 400, web::RenderErrorPage(400, "'before' must be a job id"));
     }

@@ -116,19 +116,21 @@ void Service::Impl::HandleListJobs(const httplib::Request& req, httplib::Respons
       }
       filter.method = value;
     } else if (key == "verdict") {
-      if (value != "accepted" && value != "rejected" && value != "revoked") {
+      ServeState state;
+      if (value.empty() || !Parse(value, &state)) {
         return (void)SendStatus(
             res, Status::InvalidInput("verdict must be accepted, rejected or revoked")
                      .WithField("verdict"));
       }
-      filter.state = value;
+      filter.state = state;
     } else if (key == "status") {
-      if (value != "queued" && value != "running" && value != "succeeded" && value != "failed") {
+      JobStatus status;
+      if (!Parse(value, &status)) {
         return (void)SendStatus(
             res, Status::InvalidInput("status must be queued, running, succeeded or failed")
                      .WithField("status"));
       }
-      filter.status = value;
+      filter.status = status;
     } else if (key == "limit") {
       int64_t limit;
       if (!ParseId(value, &limit) || limit > 500) {
@@ -228,9 +230,9 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
                             : std::string()));
       return;
     }
-    if (job.status != "succeeded") {
+    if (job.status != JobStatus::kSucceeded) {
       SendError(res, 404, "not_found",
-                "job " + std::to_string(id) + " is " + job.status + ": it has no result");
+                "job " + std::to_string(id) + " is " + Name(job.status) + ": it has no result");
       return;
     }
     if (!method.empty() && method != job.method) {
@@ -288,7 +290,7 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
   res.set_header("ETag", etag);
   res.set_header("Cache-Control", "no-cache");
   res.set_header("X-Calibd-Job", std::to_string(job.id));
-  res.set_header("X-Calibd-State", job.state);
+  res.set_header("X-Calibd-State", Name(job.state));
   if (IfNoneMatchHits(req.get_header_value("If-None-Match"), etag)) {
     res.status = 304;
     return;
@@ -296,9 +298,9 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
   if (format == "json") {
     // The hot path of production tooling: the stored result is valid JSON text already (the
     // worker wrote it with json::dump), so it is embedded as is, without parsing it again.
-    json head = {{"device", serial},   {"method", method},
-                 {"job_id", job.id},   {"calibrated_at", job.finished_at},
-                 {"state", job.state}, {"result", nullptr}};
+    json head = {{"device", serial},         {"method", method},
+                 {"job_id", job.id},         {"calibrated_at", job.finished_at},
+                 {"state", Name(job.state)}, {"result", nullptr}};
     std::string body = head.dump(-1, ' ', false, json::error_handler_t::replace);
     const std::string placeholder = "\"result\":null";
     const size_t at = body.rfind(placeholder);

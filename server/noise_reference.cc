@@ -26,9 +26,9 @@ Status Resolve(storage::Store* store, const std::string& key, json* value) {
   if (s.code() == StatusCode::kNotFound)
     return KeyError(key, "there is no job " + std::to_string(id));
   if (!s.ok()) return s;
-  if (job.method != "noise" || job.status != "succeeded") {
-    return KeyError(key, "job " + std::to_string(id) + " is a " + job.status + " " + job.method +
-                             " job; it must be a succeeded noise job");
+  if (job.method != "noise" || job.status != JobStatus::kSucceeded) {
+    return KeyError(key, "job " + std::to_string(id) + " is a " + Name(job.status) + " " +
+                             job.method + " job; it must be a succeeded noise job");
   }
   json result;
   if (!ParseJsonText(job.result_json, "result", &result).ok()) {

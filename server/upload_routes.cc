@@ -84,17 +84,17 @@ Status ResolveCalibrationReference(storage::Store* store, json* config) {
         .WithField("accelerometer_calibration");
   }
   if (!s.ok()) return s;
-  if (job.method != "pca" || job.status != "succeeded") {
+  if (job.method != "pca" || job.status != JobStatus::kSucceeded) {
     return Status::InvalidInput("accelerometer_calibration: job " + std::to_string(id) + " is a " +
-                                job.status + " " + job.method +
+                                Name(job.status) + " " + job.method +
                                 " job; it must be a succeeded pca job")
         .WithField("accelerometer_calibration");
   }
   if (!job.served()) {
     // The gate applies to calibrations that feed other calibrations too.
     return Status::InvalidInput(
-               "accelerometer_calibration: job " + std::to_string(id) + " is " + job.state +
-               (job.state == "rejected" ? " by the acceptance gate" : std::string()) +
+               "accelerometer_calibration: job " + std::to_string(id) + " is " + Name(job.state) +
+               (job.state == ServeState::kRejected ? " by the acceptance gate" : std::string()) +
                " (see /jobs/" + std::to_string(id) +
                "); use an accepted pca calibration, or accept this one with a "
                "reason first")

@@ -61,7 +61,7 @@ inline constexpr int kPgSchemaVersion = 1;
 // `target` with the password of a URI or keyword string replaced by "***" (for logs, /healthz).
 std::string RedactConnectionTarget(const std::string& target);
 
-class PgConn;  // one libpq connection (pg_store.cc)
+class PgConn;  // one libpq connection (pg_conn.h)
 
 class PgStore final : public Store {
  public:
@@ -98,10 +98,6 @@ class PgStore final : public Store {
   Status ListDevices(std::vector<DeviceInfo>* out) override;
   Status LatestResult(const std::string& device, const std::string& method, JobInfo* out) override;
   Status QueueDepth(QueueCounts* out) override;
-  Status RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                   JobEvent* out = nullptr) override;
-  Status AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                   JobEvent* out = nullptr) override;
   Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) override;
   // Checks that every recording's chunks add up to its size: "ok", or the ids that do not.
   Status IntegrityCheck(std::string* result) override;
@@ -109,7 +105,7 @@ class PgStore final : public Store {
   Status Checkpoint() override;
 
  private:
-  class Lease;  // a pooled connection, returned on destruction
+  class Lease;  // a pooled connection, returned on destruction (pg_store_internal.h)
   PgStore(std::string target, StoreOptions options);
   Status NewConnection(std::unique_ptr<PgConn>* out);
   Status Acquire(std::unique_ptr<PgConn>* out, bool* pooled);
@@ -128,8 +124,8 @@ class PgStore final : public Store {
   Status RecoverLocked(PgConn* c, int64_t now, int64_t* recovered);
   Status RequireHolder(PgConn* c, int64_t job_id, const std::string& worker_id, const char* action,
                        JobInfo* job);
-  Status DecideLocked(PgConn* c, int64_t job_id, const std::string& action,
-                      const std::string& reason, const std::string& actor, JobEvent* out);
+  Status Decide(int64_t job_id, bool revoke, const std::string& reason, const std::string& actor,
+                JobEvent* out) override;
   void ListenLoop();
 
   std::string target_;  // with the password: never logged

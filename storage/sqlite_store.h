@@ -60,16 +60,12 @@ class SqliteStore final : public Store {
   Status ListDevices(std::vector<DeviceInfo>* out) override;
   Status LatestResult(const std::string& device, const std::string& method, JobInfo* out) override;
   Status QueueDepth(QueueCounts* out) override;
-  Status RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                   JobEvent* out = nullptr) override;
-  Status AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                   JobEvent* out = nullptr) override;
   Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) override;
   Status IntegrityCheck(std::string* result) override;
   Status Checkpoint() override;
 
  private:
-  class Conn;     // a pooled connection, returned to the pool on destruction
+  class Conn;     // a pooled connection, returned to the pool (sqlite_store_internal.h)
   struct Writer;  // a write call waiting in the group-commit queue
   // Runs `op` inside a write transaction shared with other queued calls (group commit); `op`
   // must not begin or commit transactions (savepoints are fine) and may be run again in a fresh
@@ -87,8 +83,8 @@ class SqliteStore final : public Store {
                           JobInfo* out, bool inherit_device = true);
   Status RecoverLocked(Db* db, int64_t now, int64_t* recovered);
   Status LoadJob(Db* db, int64_t id, bool with_result, JobInfo* out);
-  Status DecideLocked(Db* db, int64_t job_id, const std::string& action, const std::string& reason,
-                      const std::string& actor, JobEvent* out);
+  Status Decide(int64_t job_id, bool revoke, const std::string& reason, const std::string& actor,
+                JobEvent* out) override;
   Status RequireHolder(Db* db, int64_t job_id, const std::string& worker_id, const char* action,
                        JobInfo* job);
 

@@ -37,15 +37,35 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <nlohmann/json_fwd.hpp>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "base/job_state.h"
 #include "core/status.h"
 #include "storage/db.h"
 
+namespace calibd {
+
+// JSON of the job vocabulary: its Name() as a string (so that nlohmann never writes one as its
+// number). kNone writes "": where SPEC §5 has null, write NullIfEmpty(Name(...)).
+void to_json(nlohmann::json& j, JobStatus v);
+void to_json(nlohmann::json& j, GateVerdict v);
+void to_json(nlohmann::json& j, Decision v);
+void to_json(nlohmann::json& j, ServeState v);
+
+}  // namespace calibd
+
 namespace calibd::storage {
+
+// The job vocabulary (base/job_state.h): JobStatus, GateVerdict, Decision, ServeState, with
+// Name() and Parse().
+using calibd::Decision;
+using calibd::GateVerdict;
+using calibd::JobStatus;
+using calibd::ServeState;
 
 // Formats milliseconds since the epoch as "YYYY-MM-DDTHH:MM:SS.mmmZ".
 std::string FormatTimestamp(int64_t ms);
@@ -113,7 +133,7 @@ struct JobInfo {
   std::string method;
   std::string device;
   std::string config_json;
-  std::string status;            // "queued" | "running" | "succeeded" | "failed"
+  JobStatus status = JobStatus::kQueued;
   int64_t attempts = 0;          // claims that counted (ReleaseJob does not count)
   std::string lease_owner;       // "" unless running
   std::string lease_expires_at;  // "" unless running
@@ -124,14 +144,14 @@ struct JobInfo {
   std::string error_message;
   std::string result_json;    // "" unless succeeded (and, for ListJobs, include_results)
   std::string result_sha256;  // hex SHA-256 of result_json, for an ETag
-  // The acceptance gate (succeeded jobs only, else ""): the gate's verdict of the result
-  // ("accepted" | "rejected"), a person's later decision ("" none, "revoked", "accepted"), and
-  // the state that follows: "accepted" (served as the device's calibration when latest),
-  // "rejected" or "revoked".
-  std::string verdict;
-  std::string decision;
-  std::string state;
-  bool served() const { return state == "accepted"; }
+  // The acceptance gate (succeeded jobs only, else kNone): the gate's verdict of the result
+  // (accepted | rejected), a person's later decision (none, revoked, accepted), and the state
+  // that follows: accepted (served as the device's calibration when latest), rejected or
+  // revoked.
+  GateVerdict verdict = GateVerdict::kNone;
+  Decision decision = Decision::kNone;
+  ServeState state = ServeState::kNone;
+  bool served() const { return state == ServeState::kAccepted; }
 };
 
 // One revoke/accept decision on a job's result (Store::RevokeJob, AcceptJob).
@@ -162,14 +182,14 @@ struct RecordingInfo {
 };
 
 struct JobFilter {
-  std::string device;            // "" = any
-  std::string method;            // "" = any
-  std::string status;            // "" = any; else one of the four states
-  int limit = 50;                // 1..500 (clamped); default 50
-  int64_t before = 0;            // cursor: only jobs with id < before; 0 = from the newest
-  std::string state;             // "" = any; "accepted" | "rejected" | "revoked" (JobInfo::state;
-                                 // implies succeeded)
-  bool include_results = false;  // fill result_json / result_sha256 of succeeded jobs
+  std::string device;               // "" = any
+  std::string method;               // "" = any
+  std::optional<JobStatus> status;  // none = any
+  int limit = 50;                   // 1..500 (clamped); default 50
+  int64_t before = 0;               // cursor: only jobs with id < before; 0 = from the newest
+  std::optional<ServeState> state;  // none = any; else JobInfo::state (implies succeeded; kNone
+                                    // matches nothing)
+  bool include_results = false;     // fill result_json / result_sha256 of succeeded jobs
 };
 
 struct DeviceCalibration {
@@ -326,13 +346,13 @@ class Store {
   // kConflict (message says why) unless the job succeeded and its result is served (a queued,
   // running or failed job has no result; a rejected one is not served; a revoked one already is);
   // kInvalidInput for an empty reason; kNotFound.
-  virtual Status RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                           JobEvent* out = nullptr) = 0;
+  Status RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,
+                   JobEvent* out = nullptr);
   // Accepts a result the gate rejected, or re-accepts a revoked one (state -> "accepted"): it is
   // then served when it is the device's latest served one. kConflict unless the job succeeded
   // and its state is "rejected" or "revoked"; otherwise as RevokeJob.
-  virtual Status AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
-                           JobEvent* out = nullptr) = 0;
+  Status AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
+                   JobEvent* out = nullptr);
   // The job's decisions, oldest first. kNotFound for no such job.
   virtual Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) = 0;
 
@@ -348,6 +368,11 @@ class Store {
  protected:
   Store(std::string path, StoreOptions options);
   int64_t Now() const { return options_.now_ms(); }
+  // RevokeJob (revoke) or AcceptJob, the reason checked: one transaction that loads the job
+  // (locked), checks internal::CheckDecision, stores the decision and its event and refreshes the
+  // device's latest calibration. `out` may be null.
+  virtual Status Decide(int64_t job_id, bool revoke, const std::string& reason,
+                        const std::string& actor, JobEvent* out) = 0;
 
   std::string path_;
   StoreOptions options_;

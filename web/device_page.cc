@@ -26,7 +26,7 @@ std::string DeviceBody(const DeviceView& v) {
   std::string out = "<h1>Device " + E(v.serial) + "</h1>";
   std::vector<std::string> methods;
   for (const auto& j : jobs) {
-    if (j.status == "succeeded" &&
+    if (j.status == JobStatus::kSucceeded &&
         std::find(methods.begin(), methods.end(), j.method) == methods.end()) {
       methods.push_back(j.method);
     }
@@ -51,7 +51,7 @@ std::string DeviceBody(const DeviceView& v) {
     for (size_t i = jobs.size(); i-- > 0;) {  // newest first
       const auto& j = jobs[i];
       std::string figures;
-      if (j.status == "failed") {
+      if (j.status == JobStatus::kFailed) {
         std::string e = j.error;
         if (e.size() > 90) e = e.substr(0, 90) + "\xE2\x80\xA6";
         figures = "<span class=\"muted\">" + E(e.empty() ? std::string("failed") : e) + "</span>";
@@ -72,7 +72,8 @@ std::string DeviceBody(const DeviceView& v) {
     std::vector<const JobSummary*> ok;
     for (const auto& j : jobs) {
       // Only what production tooling could have fetched: accepted, not revoked.
-      if (GateState(j) == "accepted" && j.method == m && j.result.is_object()) ok.push_back(&j);
+      if (GateState(j) == ServeState::kAccepted && j.method == m && j.result.is_object())
+        ok.push_back(&j);
     }
     if (ok.size() < 2) continue;
     const std::string tables = Guard("Drift", [&] { return report->Drift(ok); });

@@ -28,8 +28,8 @@ std::string FilterQuery(const HistoryFilter& f) {
   std::string q;
   if (!f.device.empty()) q += "&device=" + UrlEncode(f.device);
   if (!f.method.empty()) q += "&method=" + UrlEncode(f.method);
-  if (!f.status.empty()) q += "&status=" + UrlEncode(f.status);
-  if (!f.verdict.empty()) q += "&verdict=" + UrlEncode(f.verdict);
+  if (f.status) q += "&status=" + UrlEncode(Name(*f.status));
+  if (f.verdict) q += "&verdict=" + UrlEncode(Name(*f.verdict));
   return q;
 }
 
@@ -49,18 +49,17 @@ std::string HistoryBody(const HistoryView& v) {
       std::find(v.methods.begin(), v.methods.end(), v.filter.method) == v.methods.end()) {
     out += Option(v.filter.method, v.filter.method, v.filter.method);
   }
-  out +=
-      "</select></label><label>status<select name=\"status\">" + Option("", "any", v.filter.status);
-  for (const char* s : {"succeeded", "failed", "running", "queued"}) {
-    out += Option(s, s, v.filter.status);
+  const std::string status = v.filter.status ? Name(*v.filter.status) : "";
+  out += "</select></label><label>status<select name=\"status\">" + Option("", "any", status);
+  for (JobStatus s :
+       {JobStatus::kSucceeded, JobStatus::kFailed, JobStatus::kRunning, JobStatus::kQueued}) {
+    out += Option(Name(s), Name(s), status);
   }
-  if (!v.filter.status.empty() && v.filter.status != "succeeded" && v.filter.status != "failed" &&
-      v.filter.status != "running" && v.filter.status != "queued") {
-    out += Option(v.filter.status, v.filter.status, v.filter.status);
+  const std::string verdict = v.filter.verdict ? Name(*v.filter.verdict) : "";
+  out += "</select></label><label>verdict<select name=\"verdict\">" + Option("", "any", verdict);
+  for (ServeState s : {ServeState::kAccepted, ServeState::kRejected, ServeState::kRevoked}) {
+    out += Option(Name(s), Name(s), verdict);
   }
-  out += "</select></label><label>verdict<select name=\"verdict\">" +
-         Option("", "any", v.filter.verdict);
-  for (const char* s : {"accepted", "rejected", "revoked"}) out += Option(s, s, v.filter.verdict);
   out += "</select></label><button type=\"submit\">Filter</button>";
   out += "<a href=\"/\">clear</a></form>";
   if (v.total >= 0) {
@@ -75,7 +74,7 @@ std::string HistoryBody(const HistoryView& v) {
         "<th class=\"num\">warnings</th></tr></thead><tbody>";
     for (const auto& j : v.jobs) {
       std::string figures;
-      if (j.status == "failed") {
+      if (j.status == JobStatus::kFailed) {
         std::string e = j.error;
         if (e.size() > 90) e = e.substr(0, 90) + "\xE2\x80\xA6";
         figures = "<span class=\"muted\">" + E(e.empty() ? std::string("failed") : e) + "</span>";

@@ -11,6 +11,7 @@
 #include <string>
 #include <string_view>
 
+#include "base/job_state.h"
 #include "base/url.h"
 #include "base/utf8.h"
 
@@ -61,6 +62,7 @@ const char* Stylesheet();
 // A status badge: <span class="badge badge-succeeded">succeeded</span>. Unknown statuses get
 // class "badge-unknown"; the text is escaped.
 std::string StatusBadge(std::string_view status);
+inline std::string StatusBadge(JobStatus status) { return StatusBadge(Name(status)); }
 
 // A complete HTML5 document: <!doctype html>, <head> with charset, viewport, escaped <title>,
 // the stylesheet; <body> with a header bar (product name, link to /) and `body_html` (already

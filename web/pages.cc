@@ -53,7 +53,7 @@ std::string DownloadsHtml(const JobView& view) {
 
 std::string StatusCallout(const JobView& view) {
   const JobSummary& job = view.job;
-  if (job.status == "failed") {
+  if (job.status == JobStatus::kFailed) {
     std::string out =
         "<div class=\"callout callout-error\"><p><strong>The calibration failed."
         "</strong></p><p class=\"failure-reason\">" +
@@ -68,11 +68,11 @@ std::string StatusCallout(const JobView& view) {
     }
     return out + "</div>";
   }
-  if (job.status == "queued" || job.status == "running") {
-    return "<div class=\"callout\"><p>This job is " + E(job.status) +
+  if (job.status == JobStatus::kQueued || job.status == JobStatus::kRunning) {
+    return "<div class=\"callout\"><p>This job is " + E(Name(job.status)) +
            ". Reload the page to see the result when it has finished.</p></div>";
   }
-  if (job.status == "succeeded") {
+  if (job.status == JobStatus::kSucceeded) {
     // A pca result whose preconditions failed (diagnostics.usable == false) says why.
     const json* usable = Get(Get(job.result, "diagnostics"), "usable");
     if (usable != nullptr && usable->is_boolean() && !usable->get<bool>()) {
@@ -96,19 +96,19 @@ std::string StatusCallout(const JobView& view) {
 }
 
 std::string VerdictSection(const JobSummary& job) {
-  const std::string state = GateState(job);
-  if (state.empty()) return "";
+  const ServeState state = GateState(job);
+  if (state == ServeState::kNone) return "";
   const json* verdict = Get(job.result, "verdict");
   std::string out;
   const json* reasons = Array(Get(verdict, "reasons"));
   const std::string gate = Str(Get(verdict, "status"));
-  if (state == "accepted") {
+  if (state == ServeState::kAccepted) {
     out += "<div class=\"callout callout-ok verdict\"><p><strong>Accepted</strong>" +
            std::string(gate == "rejected" ? " by a person, overriding the acceptance gate"
                                           : " by the acceptance gate") +
            ": this result is served as the device's calibration when it is the latest "
            "accepted one.</p>";
-  } else if (state == "rejected") {
+  } else if (state == ServeState::kRejected) {
     out +=
         "<div class=\"callout callout-error verdict\"><p><strong>Rejected by the acceptance "
         "gate</strong>: this result is never served to production tooling. Record again "
@@ -145,8 +145,9 @@ std::string JobBody(const JobView& view) {
   out += "<h1>Calibration #" + std::to_string(job.id) + " \xC2\xB7 " +
          E(job.method.empty() ? std::string("?") : job.method) +
          (job.device.empty() ? "" : " \xC2\xB7 " + E(job.device)) + " " + StatusBadge(job.status) +
-         (GateState(job) == "rejected" || GateState(job) == "revoked"
-              ? " <span class=\"badge badge-" + GateState(job) + "\">" + GateState(job) + "</span>"
+         (GateState(job) == ServeState::kRejected || GateState(job) == ServeState::kRevoked
+              ? " <span class=\"badge badge-" + std::string(Name(GateState(job))) + "\">" +
+                    Name(GateState(job)) + "</span>"
               : std::string()) +
          "</h1>";
   out += VerdictSection(job);
@@ -227,7 +228,7 @@ std::string JobBody(const JobView& view) {
       out += NotAvailable("A report for method \"" + method + "\"");
     }
     out += Guard("Diagnostics", [&] { return DiagnosticsSection(job.result); });
-  } else if (job.status == "succeeded") {
+  } else if (job.status == JobStatus::kSucceeded) {
     out += NotAvailable("The result");
   }
   return out;
@@ -248,10 +249,11 @@ std::string KeyFigures(const std::string& method, const json& result) {
   return figures.empty() ? kDash : figures;
 }
 
-std::string GateState(const JobSummary& job) {
-  if (job.status != "succeeded") return "";
-  if (!job.state.empty()) return job.state;
-  return Str(Get(Get(job.result, "verdict"), "status")) == "rejected" ? "rejected" : "accepted";
+ServeState GateState(const JobSummary& job) {
+  if (job.status != JobStatus::kSucceeded) return ServeState::kNone;
+  if (job.state != ServeState::kNone) return job.state;
+  return Str(Get(Get(job.result, "verdict"), "status")) == "rejected" ? ServeState::kRejected
+                                                                      : ServeState::kAccepted;
 }
 
 std::string RenderJobPage(const JobView& view) {

@@ -41,8 +41,11 @@
 
 #include <cstdint>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
+
+#include "base/job_state.h"
 
 namespace calibd::web {
 
@@ -57,7 +60,7 @@ struct JobEventSummary {
 // One calibration job as stored (the fields of GET /api/v1/jobs/{id}).
 struct JobSummary {
   int64_t id = 0;
-  std::string status;       // "queued" | "running" | "succeeded" | "failed" (others shown as is)
+  JobStatus status = JobStatus::kQueued;
   std::string device;       // serial number; may be empty (no device given)
   std::string method;       // "pca" | "array" (others shown as is)
   std::string created_at;   // timestamps as stored: ISO 8601 UTC ("2026-11-22T04:04:04Z" or
@@ -66,22 +69,22 @@ struct JobSummary {
   int attempts = 0;         // times a worker claimed it
   std::string error;        // failure message in plain words (failed jobs), else empty
   nlohmann::json result;    // SPEC §4 result JSON; null when none (queued/running/failed)
-  // The acceptance gate (succeeded jobs): "accepted" | "rejected" | "revoked"; empty: taken from
+  // The acceptance gate (succeeded jobs): accepted | rejected | revoked; kNone: taken from
   // result.verdict.status (no verdict: accepted). Only accepted results are served and compared.
-  std::string state;
+  ServeState state = ServeState::kNone;
   std::vector<JobEventSummary> events;  // decisions, oldest first (the report shows them)
 };
 
-// The gate's state of a job as the pages show it: "" (not succeeded), "accepted", "rejected" or
-// "revoked".
-std::string GateState(const JobSummary& job);
+// The gate's state of a job as the pages show it: kNone (not succeeded), accepted, rejected or
+// revoked.
+ServeState GateState(const JobSummary& job);
 
 // Filters of the history page, echoed into its form. Empty: no filter.
 struct HistoryFilter {
   std::string device;
   std::string method;
-  std::string status;
-  std::string verdict;  // "accepted" | "rejected" | "revoked" (the acceptance gate's state)
+  std::optional<JobStatus> status;
+  std::optional<ServeState> verdict;  // the acceptance gate's state
 };
 
 // `/` — the calibration history.

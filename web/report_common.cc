@@ -404,10 +404,11 @@ std::string ExportLinks(const std::string& base, const std::string& method) {
 // A badge for a result the gate rejected or a person revoked, with the reason in words ("" for
 // an accepted result: the usual case needs no mark).
 std::string VerdictBadge(const JobSummary& job) {
-  const std::string state = GateState(job);
-  if (state != "rejected" && state != "revoked") return "";
+  const ServeState gate = GateState(job);
+  if (gate != ServeState::kRejected && gate != ServeState::kRevoked) return "";
+  const std::string state = Name(gate);
   std::string reason;
-  if (state == "revoked") {
+  if (gate == ServeState::kRevoked) {
     for (const auto& e : job.events) {
       if (e.action == "revoke") reason = e.reason;
     }

@@ -1,8 +1,12 @@
-// The base library (base/): UTF-8 validation and repair, URL encoding, SHA-256, Status.
+// The base library (base/): UTF-8 validation and repair, URL encoding, SHA-256, Status, the job
+// vocabulary.
 #include <gtest/gtest.h>
 
+#include <sstream>
 #include <string>
+#include <utility>
 
+#include "base/job_state.h"
 #include "base/sha256.h"
 #include "base/status.h"
 #include "base/url.h"
@@ -55,6 +59,59 @@ TEST(Sha256, MatchesTheFipsTestVectorsWholeAndInPieces) {
   EXPECT_EQ(sha.HexDigest(), "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1");
   sha.Update("abc");  // reset after a digest: usable again
   EXPECT_EQ(sha.HexDigest(), Sha256Hex("abc"));
+}
+
+TEST(JobState, EveryValueHasTheSpecNameAndParsesBack) {
+  const std::pair<JobStatus, const char*> statuses[] = {{JobStatus::kQueued, "queued"},
+                                                        {JobStatus::kRunning, "running"},
+                                                        {JobStatus::kSucceeded, "succeeded"},
+                                                        {JobStatus::kFailed, "failed"}};
+  for (const auto& [value, name] : statuses) {
+    EXPECT_STREQ(Name(value), name);
+    JobStatus parsed = value == JobStatus::kQueued ? JobStatus::kFailed : JobStatus::kQueued;
+    ASSERT_TRUE(Parse(name, &parsed)) << name;
+    EXPECT_EQ(parsed, value) << name;
+  }
+  const std::pair<ServeState, const char*> states[] = {{ServeState::kNone, ""},
+                                                       {ServeState::kAccepted, "accepted"},
+                                                       {ServeState::kRejected, "rejected"},
+                                                       {ServeState::kRevoked, "revoked"}};
+  for (const auto& [value, name] : states) {
+    EXPECT_STREQ(Name(value), name);
+    ServeState parsed = value == ServeState::kRevoked ? ServeState::kNone : ServeState::kRevoked;
+    ASSERT_TRUE(Parse(name, &parsed)) << name;
+    EXPECT_EQ(parsed, value) << name;
+  }
+  EXPECT_STREQ(Name(GateVerdict::kNone), "");
+  EXPECT_STREQ(Name(GateVerdict::kAccepted), "accepted");
+  EXPECT_STREQ(Name(GateVerdict::kRejected), "rejected");
+  EXPECT_STREQ(Name(Decision::kNone), "");
+  EXPECT_STREQ(Name(Decision::kRevoked), "revoked");
+  EXPECT_STREQ(Name(Decision::kAccepted), "accepted");
+  GateVerdict verdict = GateVerdict::kNone;
+  ASSERT_TRUE(Parse("rejected", &verdict));
+  EXPECT_EQ(verdict, GateVerdict::kRejected);
+  Decision decision = Decision::kNone;
+  ASSERT_TRUE(Parse("revoked", &decision));
+  EXPECT_EQ(decision, Decision::kRevoked);
+  std::ostringstream printed;  // what a failing EXPECT_EQ shows
+  printed << JobStatus::kRunning << "/" << ServeState::kRevoked << "/" << GateVerdict::kRejected;
+  EXPECT_EQ(printed.str(), "running/revoked/rejected");
+}
+
+TEST(JobState, UnknownTextIsRefusedAndLeavesTheValue) {
+  JobStatus status = JobStatus::kRunning;
+  for (const char* text : {"bogus", "", "Queued", "succeeded ", "revoked"}) {
+    EXPECT_FALSE(Parse(text, &status)) << text;
+    EXPECT_EQ(status, JobStatus::kRunning) << text;
+  }
+  ServeState state = ServeState::kRejected;
+  EXPECT_FALSE(Parse("queued", &state));
+  EXPECT_FALSE(Parse("Accepted", &state));
+  EXPECT_EQ(state, ServeState::kRejected);
+  GateVerdict verdict = GateVerdict::kAccepted;
+  EXPECT_FALSE(Parse("revoked", &verdict));  // a person's decision, not the gate's verdict
+  EXPECT_EQ(verdict, GateVerdict::kAccepted);
 }
 
 TEST(Status, CarriesCodeMessageAndLocation) {

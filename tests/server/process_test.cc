@@ -75,7 +75,7 @@ TEST(ServeProcess, SigtermLetsARunningJobFinishWithinTheGracePeriod) {
   ASSERT_TRUE(storage::Store::Open(db, {}, &store).ok());
   storage::JobInfo job;
   ASSERT_TRUE(store->GetJob(id, &job).ok());
-  EXPECT_EQ(job.status, "succeeded") << server.log();
+  EXPECT_EQ(job.status, JobStatus::kSucceeded) << server.log();
 }
 
 TEST(ServeProcess, SigtermAfterTheGracePeriodReleasesTheJobWhichRunsAfterRestart) {
@@ -100,7 +100,7 @@ TEST(ServeProcess, SigtermAfterTheGracePeriodReleasesTheJobWhichRunsAfterRestart
     ASSERT_TRUE(storage::Store::Open(db, {}, &store).ok());
     storage::JobInfo job;
     ASSERT_TRUE(store->GetJob(id, &job).ok());
-    EXPECT_EQ(job.status, "queued");
+    EXPECT_EQ(job.status, JobStatus::kQueued);
   }
   ServerProcess again(db, {"--workers", "1"});
   ASSERT_GT(again.port(), 0) << again.log();

@@ -121,7 +121,7 @@ class WorkerPoolTest : public ::testing::Test {
     return job;
   }
   // Polls until the job has `status` (at most two minutes: a liveness bound, not a speed claim).
-  storage::JobInfo WaitFor(int64_t id, const std::string& status) {
+  storage::JobInfo WaitFor(int64_t id, storage::JobStatus status) {
     storage::JobInfo job;
     for (int i = 0; i < 12000; ++i) {
       job = Job(id);
@@ -161,11 +161,11 @@ TEST_F(WorkerPoolTest, JobsOfEveryQueuedMethodComplete) {
   WorkerPool pool(store_.get(), &metrics_, o);
   pool.Start();
   pool.Notify();
-  const storage::JobInfo p = WaitFor(pca, "succeeded");
-  const storage::JobInfo a = WaitFor(array, "succeeded");
+  const storage::JobInfo p = WaitFor(pca, JobStatus::kSucceeded);
+  const storage::JobInfo a = WaitFor(array, JobStatus::kSucceeded);
   EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
-  ASSERT_EQ(p.status, "succeeded") << p.error_code << ": " << p.error_message;
-  ASSERT_EQ(a.status, "succeeded") << a.error_code << ": " << a.error_message;
+  ASSERT_EQ(p.status, JobStatus::kSucceeded) << p.error_code << ": " << p.error_message;
+  ASSERT_EQ(a.status, JobStatus::kSucceeded) << a.error_code << ": " << a.error_message;
   EXPECT_EQ(p.attempts, 1);
   EXPECT_EQ(a.attempts, 1);
   EXPECT_EQ(json::parse(p.result_json)["parameters"]["sensors"].size(), 12u);
@@ -183,7 +183,7 @@ TEST_F(WorkerPoolTest, StopWithAGracePeriodLetsTheRunningJobFinish) {
   pool.Notify();
   ASSERT_TRUE(gate.WaitEntered());
   EXPECT_EQ(pool.running_jobs(), 1);
-  EXPECT_EQ(Job(id).status, "running");
+  EXPECT_EQ(Job(id).status, JobStatus::kRunning);
   bool all_done = false;
   std::thread stopper([&] { all_done = pool.Stop(std::chrono::minutes(2)); });
   // Stop is now waiting (or about to) while the job is held; let the job go on.
@@ -192,7 +192,7 @@ TEST_F(WorkerPoolTest, StopWithAGracePeriodLetsTheRunningJobFinish) {
   stopper.join();
   EXPECT_TRUE(all_done);
   const storage::JobInfo job = Job(id);
-  EXPECT_EQ(job.status, "succeeded") << job.error_code << ": " << job.error_message;
+  EXPECT_EQ(job.status, JobStatus::kSucceeded) << job.error_code << ": " << job.error_message;
   EXPECT_EQ(job.attempts, 1);
   EXPECT_EQ(Outcomes("array", "succeeded"), 1);
 }
@@ -206,7 +206,7 @@ TEST_F(WorkerPoolTest, StopWithoutGraceReleasesTheRunningJobWithoutCountingTheAt
     WorkerPool pool(store_.get(), &metrics_, Options(counter.Fn()));
     pool.Start();
     pool.Notify();
-    ASSERT_EQ(WaitFor(whole, "succeeded").status, "succeeded");
+    ASSERT_EQ(WaitFor(whole, JobStatus::kSucceeded).status, JobStatus::kSucceeded);
     EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
     full_calls = counter.calls();
   }
@@ -227,13 +227,13 @@ TEST_F(WorkerPoolTest, StopWithoutGraceReleasesTheRunningJobWithoutCountingTheAt
   std::thread stopper([&] { all_done = pool.Stop(std::chrono::milliseconds(0)); });
   // Stop(0) gives the job back at once; only then does the held computation go on (and must
   // stop at its next check instead of computing to the end).
-  const storage::JobInfo released = WaitFor(id, "queued");
+  const storage::JobInfo released = WaitFor(id, JobStatus::kQueued);
   gate.Open();
   stopper.join();
   EXPECT_FALSE(all_done);
-  EXPECT_EQ(released.status, "queued");
+  EXPECT_EQ(released.status, JobStatus::kQueued);
   const storage::JobInfo job = Job(id);
-  EXPECT_EQ(job.status, "queued");
+  EXPECT_EQ(job.status, JobStatus::kQueued);
   EXPECT_EQ(job.attempts, 0) << "a released attempt is not counted";
   EXPECT_EQ(job.lease_owner, "");
   EXPECT_EQ(job.result_json, "");
@@ -245,9 +245,9 @@ TEST_F(WorkerPoolTest, StopWithoutGraceReleasesTheRunningJobWithoutCountingTheAt
   WorkerPool again(store_.get(), &metrics_, Options());
   again.Start();
   again.Notify();
-  const storage::JobInfo done = WaitFor(id, "succeeded");
+  const storage::JobInfo done = WaitFor(id, JobStatus::kSucceeded);
   EXPECT_TRUE(again.Stop(std::chrono::seconds(60)));
-  EXPECT_EQ(done.status, "succeeded") << done.error_code << ": " << done.error_message;
+  EXPECT_EQ(done.status, JobStatus::kSucceeded) << done.error_code << ": " << done.error_message;
   EXPECT_EQ(done.attempts, 1);
 }
 
@@ -285,7 +285,7 @@ void ExpectTakenBackJobIsCancelled(storage::Store* store, Metrics* metrics, int6
   EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
   storage::JobInfo job;
   ASSERT_TRUE(store->GetJob(id, &job).ok());
-  EXPECT_EQ(job.status, "running");
+  EXPECT_EQ(job.status, JobStatus::kRunning);
   EXPECT_EQ(job.lease_owner, "other:2-0");
   EXPECT_EQ(job.result_json, "");
   const std::string text = metrics->Render({}, {});
@@ -327,7 +327,7 @@ TEST_F(WorkerPoolTest, SharedExecutorIsUsedAndGivesTheIdenticalResult) {
     WorkerPool pool(store_.get(), &metrics_, Options());
     pool.Start();
     pool.Notify();
-    ASSERT_EQ(WaitFor(own, "succeeded").status, "succeeded");
+    ASSERT_EQ(WaitFor(own, JobStatus::kSucceeded).status, JobStatus::kSucceeded);
     EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
   }
   // The same recording and config again (a second job on the stored recording).
@@ -344,9 +344,10 @@ TEST_F(WorkerPoolTest, SharedExecutorIsUsedAndGivesTheIdenticalResult) {
                   }));
   pool.Start();
   pool.Notify();
-  const storage::JobInfo shared = WaitFor(second.id, "succeeded");
+  const storage::JobInfo shared = WaitFor(second.id, JobStatus::kSucceeded);
   EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
-  ASSERT_EQ(shared.status, "succeeded") << shared.error_code << ": " << shared.error_message;
+  ASSERT_EQ(shared.status, JobStatus::kSucceeded)
+      << shared.error_code << ": " << shared.error_message;
   EXPECT_GT(calls.load(), 0) << "the job did not use the shared executor";
   json a = json::parse(first.result_json), b = json::parse(shared.result_json);
   EXPECT_EQ(a["parameters"], b["parameters"]);

@@ -146,7 +146,7 @@ void ExpectResultsConsistent(Store* store, const std::string& path) {
     ASSERT_TRUE(store->ListJobs(f, &page).ok());
     if (page.empty()) break;
     for (const JobInfo& job : page) {
-      if (job.status != "succeeded") continue;
+      if (job.status != JobStatus::kSucceeded) continue;
       auto it = sha_of_recording.find(job.recording_id);
       if (it == sha_of_recording.end()) {
         RecordingInfo rec;

@@ -212,7 +212,7 @@ class ReadOnly : public ::testing::Test {
     EXPECT_EQ(back, bytes_);
     JobInfo job;
     ASSERT_TRUE(store->GetJob(job_, &job).ok());
-    EXPECT_EQ(job.status, "queued");
+    EXPECT_EQ(job.status, JobStatus::kQueued);
     int64_t n = 0;
     ASSERT_TRUE(store->CountJobs(JobFilter(), &n).ok());
     EXPECT_EQ(n, 1);

@@ -97,7 +97,7 @@ void ExpectEveryJobCompletedOnce(Store* store, const std::set<int64_t>& ids,
   for (int64_t id : ids) {
     JobInfo job;
     ASSERT_TRUE(store->GetJob(id, &job).ok());
-    ASSERT_EQ(job.status, "succeeded");
+    ASSERT_EQ(job.status, JobStatus::kSucceeded);
     EXPECT_EQ(job.attempts, 1) << "job " << id;
     EXPECT_EQ(job.result_json, "{\"job\":" + std::to_string(id) + "}");
   }

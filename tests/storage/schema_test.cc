@@ -125,7 +125,7 @@ TEST(Schema, Version1DataIsCarriedOverAndUsable) {
   EXPECT_EQ(bytes, "abc");
   JobInfo job;
   ASSERT_TRUE(store->GetJob(1, &job).ok());
-  EXPECT_EQ(job.status, "succeeded");
+  EXPECT_EQ(job.status, JobStatus::kSucceeded);
   EXPECT_EQ(job.result_json, result);
   EXPECT_EQ(job.result_sha256, Sha256Hex(result));  // hashed during the migration
   // Latest calibration: job 1 finished last (2500 > 2400) although job 2 was created later.
@@ -188,13 +188,14 @@ TEST(Schema, Version2ResultsGetTheirVerdictAndTheLatestBecomesTheLatestAccepted)
   ASSERT_TRUE(s.ok()) << s.ToString();
   JobInfo job;
   ASSERT_TRUE(store->GetJob(1, &job).ok());
-  EXPECT_EQ(job.verdict, "accepted");  // no verdict: results before the gate count as accepted
-  EXPECT_EQ(job.state, "accepted");
+  EXPECT_EQ(job.verdict,
+            GateVerdict::kAccepted);  // no verdict: results before the gate count as accepted
+  EXPECT_EQ(job.state, ServeState::kAccepted);
   ASSERT_TRUE(store->GetJob(2, &job).ok());
-  EXPECT_EQ(job.verdict, "rejected");
+  EXPECT_EQ(job.verdict, GateVerdict::kRejected);
   EXPECT_EQ(job.result_json, rejected);
   ASSERT_TRUE(store->GetJob(3, &job).ok());
-  EXPECT_EQ(job.verdict, "accepted");  // unreadable JSON: no verdict in it
+  EXPECT_EQ(job.verdict, GateVerdict::kAccepted);  // unreadable JSON: no verdict in it
   // The latest served is job 3 (finished 2500), not the rejected job 2 (3000).
   JobInfo latest;
   ASSERT_TRUE(store->LatestResult("SN1", "pca", &latest).ok());
@@ -219,13 +220,13 @@ TEST(Schema, Version2ResultsGetTheirVerdictAndTheLatestBecomesTheLatestAccepted)
   EXPECT_EQ(store->ListJobEvents(99, &events).code(), StatusCode::kNotFound);
   // Filters by state.
   JobFilter filter;
-  filter.state = "revoked";
+  filter.state = ServeState::kRevoked;
   std::vector<JobInfo> jobs;
   ASSERT_TRUE(store->ListJobs(filter, &jobs).ok());
   ASSERT_EQ(jobs.size(), 1u);
   EXPECT_EQ(jobs[0].id, 3);
   int64_t count = 0;
-  filter.state = "accepted";
+  filter.state = ServeState::kAccepted;
   ASSERT_TRUE(store->CountJobs(filter, &count).ok());
   EXPECT_EQ(count, 2);
   std::string check;

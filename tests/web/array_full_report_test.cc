@@ -286,7 +286,7 @@ TEST(ArrayFullReport, ResultsOfAnyShapeRenderAndOnlyFullResultsGetTheSections) {
 TEST(ArrayFullReport, TheJobPageOfAFullResultCarriesTheSections) {
   JobView v;
   v.job.id = 41;
-  v.job.status = "succeeded";
+  v.job.status = JobStatus::kSucceeded;
   v.job.method = "array";
   v.job.device = "BOARD-1";
   v.job.result = FullResult(8);

@@ -77,7 +77,7 @@ JobSummary Job(int64_t id, const std::string& method, const std::string& created
   j.id = id;
   j.device = "IMU-9";
   j.method = method;
-  j.status = "succeeded";
+  j.status = JobStatus::kSucceeded;
   j.created_at = j.started_at = j.finished_at = created;
   j.attempts = 1;
   j.result = std::move(result);
@@ -169,7 +169,7 @@ TEST(DevicePage, ShowsNoiseAndImuDriftOfAcceptedCalibrationsOnly) {
             Job(3, "noise", "2026-02-01T00:00:00Z", NoiseResult(1.1e-4, 0)),
             Job(4, "imu", "2026-02-02T00:00:00Z", ImuResult("0", 1.0001, 10.4, 2e-4)),
             Job(5, "noise", "2026-03-01T00:00:00Z", NoiseResult(9e-4, 0))};
-  d.jobs.back().state = "revoked";
+  d.jobs.back().state = ServeState::kRevoked;
   const std::string page = RenderDevicePage(d);
   EXPECT_TRUE(Has(page, "class=\"page-device"));
   EXPECT_TRUE(Has(page, "table-drift-noise"));

@@ -153,7 +153,7 @@ JobSummary Job(int64_t id, const std::string& device, const std::string& method,
   j.id = id;
   j.device = device;
   j.method = method;
-  j.status = status;
+  Parse(status, &j.status);
   j.created_at = created;
   if (status != "queued") j.started_at = created;
   if (status == "succeeded" || status == "failed") j.finished_at = created;
@@ -519,7 +519,7 @@ TEST(DevicePage, MarksRejectedAndRevokedResultsAndComparesOnlyAcceptedOnes) {
       {"reasons", {"the orientations are poorly spread: add positions with the -y axis up"}}};
   JobSummary revoked =
       Job(3, "DRONE-1", "pca", "succeeded", "2026-03-01T08:00:00Z", PcaResult("g", 0.2));
-  revoked.state = "revoked";
+  revoked.state = ServeState::kRevoked;
   revoked.events = {{"revoke", "board <dropped> on the rig", "token", "2026-03-02T08:00:00Z"}};
   d.jobs = {Job(1, "DRONE-1", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult()), rejected,
             revoked,
@@ -567,14 +567,14 @@ TEST(JobPage, ShowsTheVerdictWithReasonsAndTheDecisions) {
   EXPECT_TRUE(Has(page, "Rejected by the acceptance gate"));
   EXPECT_TRUE(Has(page, "readings look like g but magnitude is 9.81"));
   EXPECT_LT(page.find("Rejected by the acceptance gate"), page.find("Parameters"));  // prominent
-  v.job.state = "accepted";
+  v.job.state = ServeState::kAccepted;
   v.job.events = {{"accept", "checked on the rig", "token", "2026-01-02T08:00:00Z"}};
   page = RenderJobPage(v);
   EXPECT_TRUE(Has(page, "overriding the acceptance gate"));
   EXPECT_TRUE(Has(page, "class=\"table-events\""));
   EXPECT_TRUE(Has(page, "checked on the rig"));
   v.job.result.erase("verdict");  // results from before the gate count as accepted
-  v.job.state.clear();
+  v.job.state = ServeState::kNone;
   v.job.events.clear();
   EXPECT_TRUE(Has(RenderJobPage(v), "Accepted</strong> by the acceptance gate"));
 }
@@ -582,7 +582,7 @@ TEST(JobPage, ShowsTheVerdictWithReasonsAndTheDecisions) {
 TEST(HistoryPage, MarksRejectedResults) {
   HistoryView h;
   JobSummary rejected = Job(9, "D", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult());
-  rejected.state = "rejected";
+  rejected.state = ServeState::kRejected;
   rejected.result["verdict"] = {{"status", "rejected"}, {"reasons", {"too noisy"}}};
   h.jobs = {rejected, Job(8, "D", "pca", "succeeded", "2026-01-01T07:00:00Z", PcaResult())};
   const std::string page = RenderHistoryPage(h);
@@ -591,7 +591,7 @@ TEST(HistoryPage, MarksRejectedResults) {
   EXPECT_FALSE(Has(page, "<span class=\"badge badge-revoked\""));
   EXPECT_FALSE(Has(page, "<span class=\"badge badge-accepted\""));  // accepted: no mark
   // The filter form offers the gate's states and keeps the chosen one in the pager link.
-  h.filter.verdict = "rejected";
+  h.filter.verdict = ServeState::kRejected;
   h.next_before = "8";
   const std::string filtered = RenderHistoryPage(h);
   EXPECT_TRUE(Has(filtered, "<select name=\"verdict\">"));
@@ -649,7 +649,7 @@ TEST(Escaping, HostileDeviceAndSensorNamesNeverAppearUnescapedInAnyPage) {
     JobView fj;
     fj.job = Job(3, evil, evil, "failed", "2026-01-01T00:00:00Z", json());
     fj.job.error = evil;
-    JobView sj;  // hostile status and method
+    JobView sj;  // hostile method (a status that is not one of the four cannot be set)
     sj.job = Job(4, evil, evil, evil, evil, json());
 
     ExpectNoInjection(RenderJobPage(pj));
@@ -659,7 +659,7 @@ TEST(Escaping, HostileDeviceAndSensorNamesNeverAppearUnescapedInAnyPage) {
 
     HistoryView h;
     h.jobs = {pj.job, aj.job, fj.job, sj.job};
-    h.filter = {evil, evil, evil, evil};
+    h.filter = {evil, evil, std::nullopt, std::nullopt};  // status and verdict are enums
     h.devices = {evil};
     h.next_before = evil;
     const std::string hp = RenderHistoryPage(h);

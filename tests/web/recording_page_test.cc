@@ -69,7 +69,7 @@ RecordingPageView View(double seconds = 120) {
   web::JobSummary j;
   j.id = 42;
   j.method = "imu";
-  j.status = "succeeded";
+  j.status = JobStatus::kSucceeded;
   j.device = "SN 1";
   v.jobs.push_back(j);
   return v;
