@@ -173,13 +173,14 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
                        const json& acceptance_defaults, core::TaskExecutor executor) {
   CommonConfig common;
   Status s = ValidateConfig(config, &common);
-  if (!s.ok()) return s;
+  if (!s.ok()) return s.reason() == Reason::kUnspecified ? s.WithReason(Reason::kInvalidConfig) : s;
   const Method* method = FindMethod(common.method);
   const Layout layout = parser->summary().layout;
   if (!method->Reads(layout)) {
-    return Status::InvalidInput(std::string("the config says method '") + common.method +
-                                "' but the recording has the " + LayoutName(layout) +
-                                " layout, which it cannot read (SPEC §2)")
+    return Status::InvalidInput(Reason::kInvalidConfig,
+                                std::string("the config says method '") + common.method +
+                                    "' but the recording has the " + LayoutName(layout) +
+                                    " layout, which it cannot read (SPEC §2)")
         .WithFile(file_name)
         .WithField("method");
   }
