@@ -65,7 +65,15 @@ struct JobSummary {
   std::string finished_at;  //   empty when not reached yet
   int attempts = 0;         // times a worker claimed it
   std::string error;        // failure message in plain words (failed jobs), else empty
-  nlohmann::json result;    // SPEC §4 result JSON; null when none (queued/running/failed)
+  // A failed job's reason (server/failure_reasons.h): its code ("too_few_positions"), title and
+  // the generic advice (what to record or set instead), looked up by code by the server; and the
+  // partial diagnostics the method found before failing ({"method", "usable": false,
+  // "diagnostics", "warnings"}; null when none). Empty/null for other jobs.
+  std::string error_reason;
+  std::string error_title;
+  std::string error_advice;
+  nlohmann::json error_detail;
+  nlohmann::json result;  // SPEC §4 result JSON; null when none (queued/running/failed)
   // The acceptance gate (succeeded jobs): "accepted" | "rejected" | "revoked"; empty: taken from
   // result.verdict.status (no verdict: accepted). Only accepted results are served and compared.
   std::string state;
