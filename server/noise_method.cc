@@ -218,7 +218,6 @@ class Noise : public Method {
       // its status and reason (which one moved) and the Allan curve as far as it was computed.
       json partial = {{"method", "noise"}, {"usable", false}};
       partial["diagnostics"] = std::move((*result)["diagnostics"]);
-      partial["diagnostics"]["reason"] = r.reason;
       partial["warnings"] = std::move((*result)["warnings"]);
       *result = std::move(partial);
     }

@@ -214,6 +214,7 @@ Status RunPca(const PcaRecording& recording, const core::PcaOptions& options, js
     // parameters are not estimates, so they are not written.
     json partial = {{"method", "pca"}, {"usable", false}};
     partial["diagnostics"] = std::move((*result)["diagnostics"]);
+    partial["diagnostics"].erase("reason");  // the failure's message, stored beside it
     partial["warnings"] = std::move((*result)["warnings"]);
     *result = std::move(partial);
   }

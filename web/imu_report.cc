@@ -161,7 +161,7 @@ std::string ImuPartial(const JobView& view) {
     o.y.title = "duration (s)";
     o.width = 900;
     o.height = 260;
-    o.y.min = 0;
+    o.y.include_zero = true;
     Series mid;
     mid.label = "static interval";
     mid.line = false;

@@ -247,6 +247,15 @@ TEST(FailureReasons, AFailedUploadShowsReasonAdviceAndPartialDiagnosticsInTheApi
     EXPECT_NE(html.find("id=\"partial\""), std::string::npos);
     EXPECT_NE(html.find(c.page_fragment), std::string::npos) << html;
     EXPECT_NE(html.find("id=\"diagnostics\""), std::string::npos);
+    // Title, message and advice are each said once (the partial diagnostics do not repeat the
+    // message; the beginnings are compared, free of characters the page escapes).
+    const std::string message = error["message"].get<std::string>().substr(0, 30);
+    const std::string advice = std::string(reason->advice).substr(0, 30);
+    for (const std::string& once : {std::string(reason->title), message, advice}) {
+      const size_t at = html.find(once);
+      ASSERT_NE(at, std::string::npos) << once;
+      EXPECT_EQ(html.find(once, at + 1), std::string::npos) << once << " is said twice";
+    }
   }
 }
 
