@@ -4,10 +4,12 @@
 #include "server/failure_reasons.h"
 
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 
 #include <cmath>
+#include <cstdio>
+#include <fstream>
 #include <nlohmann/json.hpp>
-#include <random>
 #include <set>
 #include <string>
 
@@ -257,6 +259,34 @@ TEST(FailureReasons, AFailedUploadShowsReasonAdviceAndPartialDiagnosticsInTheApi
       EXPECT_EQ(html.find(once, at + 1), std::string::npos) << once << " is said twice";
     }
   }
+}
+
+TEST(FailureReasons, CalibrateOnTheCommandLinePrintsTheReasonAndItsAdvice) {
+  testing::TempDir dir;
+  const Failing f = FewStaticsImu();
+  const std::string csv = (dir.path() / "imu.csv").string();
+  const std::string config = (dir.path() / "config.json").string();
+  std::ofstream(csv) << f.csv;
+  std::ofstream(config) << f.config.dump();
+  FILE* pipe = ::popen((std::string(CALIBD_BINARY) + " calibrate " + csv + " --config " + config +
+                        " 2>&1 >/dev/null")
+                           .c_str(),
+                       "r");
+  ASSERT_NE(pipe, nullptr);
+  std::string err;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, pipe)) > 0) err.append(buf, n);
+  const int status = ::pclose(pipe);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 3) << err;  // not determinable
+  const FailureReason* reason = FindFailureReason("too_few_statics");
+  ASSERT_NE(reason, nullptr);
+  EXPECT_NE(err.find("found 5 static intervals"), std::string::npos) << err;
+  EXPECT_NE(err.find(std::string("calibd: reason: too_few_statics (") + reason->title + ")"),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find(std::string("calibd: advice: ") + reason->advice), std::string::npos) << err;
 }
 
 }  // namespace
