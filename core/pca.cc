@@ -1008,6 +1008,20 @@ Eigen::MatrixXd ProcrustesRotation(const Eigen::MatrixXd& from, const Eigen::Mat
 
 namespace {
 
+// The coverage of positions the fit failed on, seen through the nominal sensitivities (d×m):
+// each position's field is the least-squares v_j = (N Nᵀ)⁻¹ N m_j of its readings (biases, when
+// unknown, are ignored: a guide to which orientations are missing, not an estimate). Leaves the
+// coverage unknown without a nominal or when the nominal axes do not span d dimensions.
+void CoverageFromNominal(const MatrixXd& mm, const PcaOptions& options, PcaResult* result) {
+  if (!options.nominal || options.nominal->cols() != mm.rows() || mm.cols() < 1) return;
+  const MatrixXd& nom = *options.nominal;
+  const Eigen::LDLT<MatrixXd> gram(nom * nom.transpose());
+  if (gram.info() != Eigen::Success || !(gram.rcond() > 1e-12)) return;
+  const MatrixXd v = gram.solve(nom * mm);
+  result->coverage = Coverage(v, options.bias == BiasModel::kEstimate,
+                              "axes of the nominal frame, through the nominal sensitivities");
+}
+
 // CalibratePca on readings divided by `unit` (a power of two, so exactly): every number of the
 // result is in those units until CalibratePca multiplies it back. Messages quote readings in the
 // caller's units.
@@ -1076,6 +1090,7 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
                 result);
   }
   if (n < result->min_positions) {
+    CoverageFromNominal(mm, options, result);
     return Fail(
         Status::NotDeterminable(
             Reason::kTooFewPositions,
@@ -1132,7 +1147,10 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
   Fit fit;
   Status s = affine ? ClosedFormAffine(mm, d, c, options, result, &fit)
                     : ClosedFormBiasFree(mm, d, c, options, result, &fit);
-  if (!s.ok()) return Fail(s, result);
+  if (!s.ok()) {
+    CoverageFromNominal(mm, options, result);
+    return Fail(s, result);
+  }
   fit.v = ProjectPositions(mm, fit.a, fit.b, c);
   result->cost_closed_form = Cost(mm, fit);
   result->cost = result->cost_closed_form;

@@ -203,6 +203,12 @@ TEST(FailureReasons, EveryMethodsFailureCarriesItsReasonAndPartialDiagnostics) {
     EXPECT_EQ(result.value("usable", true), false);
     EXPECT_TRUE(result.contains(json::json_pointer(c.partial_key))) << result.dump();
     EXPECT_FALSE(result.contains("parameters")) << "a failed run has no parameters";
+    if (std::string(c.name) == "pca") {
+      // The config has a nominal: the coverage, seen through it, names the missing directions.
+      EXPECT_EQ(result["diagnostics"]["coverage"]["verdict"], "poor") << result.dump();
+      EXPECT_NE(result["diagnostics"]["coverage"]["advice"].get<std::string>().find("z"),
+                std::string::npos);
+    }
   }
 }
 
