@@ -215,6 +215,15 @@ TEST(FailureReasons, EveryMethodsFailureCarriesItsReasonAndPartialDiagnostics) {
 TEST(FailureReasons, AFailedUploadShowsReasonAdviceAndPartialDiagnosticsInTheApiAndOnThePage) {
   testing::TestServer server;
   ASSERT_EQ(server.error(), "");
+  // The OpenAPI document lists every reason code.
+  auto openapi = server.Client().Get("/api/v1/openapi.json");
+  ASSERT_TRUE(openapi);
+  const json doc = json::parse(openapi->body);
+  const json& schema = doc["components"]["schemas"]["JobFailure"];
+  EXPECT_EQ(schema["properties"]["reason"]["enum"].size(), AllFailureReasons().size());
+  for (const FailureReason& r : AllFailureReasons()) {
+    EXPECT_NE(schema.dump().find(std::string("\"") + r.code + "\""), std::string::npos) << r.code;
+  }
   for (const Case& c : kCases) {
     SCOPED_TRACE(c.name);
     const Failing f = c.make();
