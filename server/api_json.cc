@@ -24,8 +24,8 @@ json JobJson(const storage::JobInfo& job, bool with_result) {
             {"url", "/api/v1/jobs/" + std::to_string(job.id)},
             {"report_url", "/jobs/" + std::to_string(job.id)}};
   if (!job.error_code.empty() && job.status != "succeeded") {
-    // SPEC §5 extended (README, E-failure): the reason code with its title and generic advice
-    // from the catalog (server/failure_reasons.h), the method's own message, and the partial
+    // SPEC §5 extended (README, "Failure reasons"): the reason code with its title and generic
+    // advice from the catalog (server/failure_reasons.h), the method's own message, and the partial
     // diagnostics it found before failing (null when none, and in job lists).
     const FailureReason& reason = StoredFailureReason(job.error_reason, job.error_code);
     json diagnostics;

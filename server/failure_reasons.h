@@ -1,8 +1,8 @@
 // The catalog of failure reasons: for every calibd::Reason (base/status.h) its stable snake_case
-// code (stored with a failed job, answered in GET /api/v1/jobs/{id} "error.reason", SPEC
-// extension E-failure), a short title and the generic advice — what to record or set instead.
-// The one place advice comes from: the API, the CLI and the job page look it up here by code,
-// and show the method's own message (what it found) beside it.
+// code (stored with a failed job and answered in GET /api/v1/jobs/{id} "error.reason", a SPEC §5
+// extension: README "Failure reasons"), a short title and the generic advice (what to record or
+// set instead). The one place advice comes from: the API, the CLI and the job page look it up
+// here by code, and show the method's own message (what it found) beside it.
 #ifndef CALIBD_SERVER_FAILURE_REASONS_H_
 #define CALIBD_SERVER_FAILURE_REASONS_H_
 

@@ -208,7 +208,7 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
                                         options_.acceptance, options_.executor)
                       : parsed;
     } catch (const std::bad_alloc&) {
-      s = Status::IoError("out of memory while calibrating");
+      s = Status::IoError("out of memory while calibrating").WithReason(Reason::kOverMemoryBudget);
     } catch (const std::exception&) {
       // Never leak exception text to clients: the job says only that it was our fault.
       s = Status::Internal("internal error while calibrating; please report it");

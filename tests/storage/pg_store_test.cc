@@ -125,6 +125,47 @@ TEST_F(PgStoreTest, ManyProcessesOpeningAFreshDatabaseAtOnceMigrateItOnce) {
   EXPECT_EQ(rows.Int(0, 0), 1);
 }
 
+// Version 1 -> 2 (failure reasons): a failed job written by version 1 keeps its code and
+// message and has no reason; new failures keep reason and partial diagnostics.
+TEST_F(PgStoreTest, Version1FailuresMigrateAndNewOnesKeepTheirReason) {
+  {
+    auto store = Open();
+    const int64_t rec = Put(store.get(), "abc");
+    JobInfo job;
+    ASSERT_TRUE(store->EnqueueJob(rec, "pca", "", "{}", &job).ok());
+  }
+  // The database as version 1 left it: without the v2 columns, the job failed.
+  auto c = Sql();
+  ASSERT_TRUE(c->ExecScript("ALTER TABLE jobs DROP COLUMN error_reason;"
+                            "ALTER TABLE jobs DROP COLUMN error_detail_json;"
+                            "UPDATE jobs SET status = 'failed', finished_at = 5, "
+                            "error_code = 'not_determinable', error_message = 'too few';"
+                            "UPDATE calibd_schema SET version = 1")
+                  .ok());
+  auto store = Open();
+  ASSERT_NE(store, nullptr);
+  int64_t version = 0;
+  ASSERT_TRUE(PgSchemaVersion(c.get(), &version).ok());
+  EXPECT_EQ(version, 2);
+  JobInfo job;
+  ASSERT_TRUE(store->GetJob(1, &job).ok());
+  EXPECT_EQ(job.status, "failed");
+  EXPECT_EQ(job.error_code, "not_determinable");
+  EXPECT_EQ(job.error_message, "too few");
+  EXPECT_EQ(job.error_reason, "");
+  EXPECT_EQ(job.error_detail_json, "");
+  ASSERT_TRUE(store->EnqueueJob(1, "pca", "", "{}", &job).ok());
+  bool claimed = false;
+  ASSERT_TRUE(store->ClaimJob("w", 1000, &job, &claimed).ok());
+  ASSERT_TRUE(claimed);
+  ASSERT_TRUE(
+      store->FailJob(job.id, "w", {"not_determinable", "no_rank_gap", "m", "{\"a\":1}"}, false)
+          .ok());
+  ASSERT_TRUE(store->GetJob(job.id, &job).ok());
+  EXPECT_EQ(job.error_reason, "no_rank_gap");
+  EXPECT_EQ(job.error_detail_json, "{\"a\":1}");
+}
+
 TEST_F(PgStoreTest, RefusesADatabaseWithANewerSchema) {
   ASSERT_NE(Open(), nullptr);
   auto c = Sql();
