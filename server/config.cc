@@ -198,7 +198,11 @@ Status Calibrate(std::string_view recording, const std::string& file_name, const
   RecordingParser parser(file_name, /*collect=*/true);
   PrepareParser(config, &parser);
   Status s = ParseRecording(recording, &parser);
-  if (!s.ok()) return s;
+  if (!s.ok()) {
+    return s.reason() == Reason::kUnspecified && s.code() == StatusCode::kInvalidInput
+               ? s.WithReason(Reason::kRecordingUnreadable)
+               : s;
+  }
   return CalibrateParsed(&parser, file_name, config, result, cancel, acceptance_defaults);
 }
 

@@ -212,6 +212,42 @@ TEST(FailureReasons, EveryMethodsFailureCarriesItsReasonAndPartialDiagnostics) {
   }
 }
 
+// More failures driven offline, each with the reason its site names.
+TEST(FailureReasons, DrivenFailuresCarryTheReasonOfTheirSite) {
+  const json pca = {{"method", "pca"}};
+  std::string few_positions = "position,s1,s2,s3\n";
+  for (int j = 0; j < 4; ++j) few_positions += "p" + std::to_string(j) + ",1,0.5,0.25\n";
+  std::string zeros = "position,s1,s2,s3,s4\n";
+  for (int j = 0; j < 12; ++j) zeros += "p" + std::to_string(j) + ",0,0,0,0\n";
+  std::string short_noise = "t,a0_x,a0_y,a0_z\n";
+  for (int i = 0; i < 100; ++i) short_noise += std::to_string(i * 0.01) + ",0.1,0.2,9.8\n";
+  NoiseSimulationFileOptions sim;
+  sim.rate = 100;
+  sim.seconds = 60;
+  std::string unused_csv;
+  json noise, truth;
+  ASSERT_TRUE(SimulateNoiseFiles(sim, &unused_csv, &noise, &truth).ok());
+  const struct {
+    std::string csv;
+    json config;
+    const char* reason;
+  } cases[] = {
+      {few_positions, pca, "too_few_positions"},
+      {"position,s1,s2\np1,1,0\np2,0,1\np3,1,1\np4,1,2\np5,2,1\np6,3,1\np7,1,3\n", pca,
+       "too_few_sensors"},
+      {zeros, pca, "no_signal"},
+      {few_positions, {{"method", "pca"}, {"colour", "red"}}, "invalid_config"},
+      {"position,s1,s2,s3\np1,1,0\n", pca, "recording_unreadable"},
+      {short_noise, noise, "log_too_short"},
+  };
+  for (const auto& c : cases) {
+    json result;
+    const Status s = Calibrate(c.csv, "recording.csv", c.config, &result);
+    ASSERT_FALSE(s.ok()) << c.reason;
+    EXPECT_STREQ(DescribeReason(ReasonOf(s)).code, c.reason) << s.ToString();
+  }
+}
+
 TEST(FailureReasons, AFailedUploadShowsReasonAdviceAndPartialDiagnosticsInTheApiAndOnThePage) {
   testing::TestServer server;
   ASSERT_EQ(server.error(), "");

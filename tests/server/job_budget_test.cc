@@ -107,6 +107,9 @@ TEST(JobBudget, AnUploadWhoseJobWouldNotFitIsRefused422AndNothingIsStored) {
   const json error = json::parse(refused->body)["error"];
   EXPECT_EQ(error["field"], "job_memory");
   EXPECT_NE(error["message"].get<std::string>().find("1200 rows"), std::string::npos);
+  // The refusal carries its failure reason and the catalog's advice (README "Failure reasons").
+  EXPECT_EQ(error["reason"], "over_memory_budget");
+  EXPECT_FALSE(error.value("advice", "").empty());
   // Nothing of the refused upload was kept: the same bytes uploaded without a method (no job,
   // nothing to budget) are new to the store.
   auto stored_only = Upload(server, big, false);
