@@ -26,7 +26,7 @@ json JobJson(const storage::JobInfo& job, bool with_result) {
   if (!job.error_code.empty() && job.status != "succeeded") {
     // SPEC §5 extended (README, "Failure reasons"): the reason code with its title and generic
     // advice from the catalog (server/failure_reasons.h), the method's own message, and the partial
-    // diagnostics it found before failing (null when none, and in job lists).
+    // diagnostics it found before failing (null when none, and in lists without results).
     const FailureReason& reason = StoredFailureReason(job.error_reason, job.error_code);
     json diagnostics;
     if (!job.error_detail_json.empty()) {

@@ -76,7 +76,8 @@ json Build() {
             {"nullable", true},
             {"description",
              "what the method found before failing: {method, usable: false, diagnostics, "
-             "warnings}, at most 1 MiB (trimmed says what was left out); null in job lists"}}}}}};
+             "warnings}, at most 1 MiB (trimmed says what was left out); null in job lists without "
+             "include_results"}}}}}};
   }
   schemas["Error"] = {
       {"type", "object"},

@@ -146,9 +146,11 @@ std::string RenderDevicesPage(const DevicesView& view);
 // method, status badge, created time, key figures, warnings flag), "older" pagination link.
 std::string RenderHistoryPage(const HistoryView& view);
 
-// The report of one job: header (device, method, recording download, config, timings, status or
-// the method's failure message, which says what to record instead), the model equation,
-// parameters with uncertainties, downloads, plots, diagnostics and warnings.
+// The report of one job: header (device, method, recording download, config, timings, status),
+// the model equation, parameters with uncertainties, downloads, plots, diagnostics and warnings.
+// A failed job instead: the reason's title and code, the method's message and the reason's
+// advice (each once, div.callout-error), then section#partial with what the method found before
+// failing (MethodReport::Partial) and the diagnostics table of the partial result.
 std::string RenderJobPage(const JobView& view);
 
 // One device: its calibrations over time and the drift of every parameter between successive
