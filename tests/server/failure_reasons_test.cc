@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <string>
@@ -51,6 +52,19 @@ TEST(FailureReasons, EveryReasonHasOneEntryWithAUniqueSnakeCaseCodeATitleAndAdvi
   }
   EXPECT_EQ(AllFailureReasons().size(), static_cast<size_t>(count - 1));
   EXPECT_EQ(FindFailureReason("no_such_reason"), nullptr);
+}
+
+TEST(FailureReasons, TheReadmeDocumentsEveryCode) {
+  std::ifstream in(std::string(CALIBD_SOURCE_DIR) + "/README.md");
+  ASSERT_TRUE(in);
+  const std::string readme((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const size_t section = readme.find("### Failure reasons");
+  ASSERT_NE(section, std::string::npos);
+  const std::string text = readme.substr(section, readme.find("\n## ", section) - section);
+  for (const FailureReason& r : AllFailureReasons()) {
+    EXPECT_NE(text.find(std::string("`") + r.code + "`"), std::string::npos)
+        << r.code << " is not in README's Failure reasons";
+  }
 }
 
 TEST(FailureReasons, AStatusWithoutAReasonGetsOneFromItsCode) {

@@ -385,6 +385,43 @@ TEST(JobPage, FailedImuJobShowsTheStaticsFoundOnTheTimelineAndTheCoverage) {
   EXPECT_TRUE(Has(page, "Hold the device still in more orientations."));
 }
 
+TEST(JobPage, FailedNoiseAndArrayJobsShowWhatWasFound) {
+  JobView noise;
+  noise.job = Job(37, "IMU-0042", "noise", "failed", "2026-11-20T09:20:00Z", json());
+  noise.job.error = "the log is not stationary";
+  noise.job.error_detail = {{"method", "noise"},
+                            {"usable", false},
+                            {"diagnostics",
+                             {{"samples", 6000},
+                              {"rate", 100},
+                              {"duration", 60},
+                              {"channels",
+                               {{{"name", "a0_x"},
+                                 {"status", "not_stationary"},
+                                 {"reason", "the mean jumps at 30 s"}}}}}}};
+  std::string page = RenderJobPage(noise);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "table-noise-channels"));
+  EXPECT_TRUE(Has(page, "the mean jumps at 30 s"));
+  JobView array;
+  array.job = Job(38, "ARRAY-1", "array", "failed", "2026-11-20T09:20:00Z", json());
+  array.job.error = "the motion does not determine the positions";
+  array.job.error_detail = {
+      {"method", "array"},
+      {"usable", false},
+      {"diagnostics",
+       {{"samples", 900},
+        {"samples_dropped", 100},
+        {"gyro_triads", 4},
+        {"excitation",
+         {{"verdict", "insufficient"}, {"min_eigenvalue", 1e-3}, {"noise_floor", 2e-3}}}}}};
+  page = RenderJobPage(array);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "partial-array"));
+  EXPECT_TRUE(Has(page, "insufficient (smallest eigenvalue"));
+  EXPECT_TRUE(Has(page, "100 dropped for gyroscope saturation"));
+}
+
 // Partial diagnostics of an unexpected shape (another version, trimmed) never break the page.
 TEST(JobPage, FailedJobWithOddPartialDiagnosticsStillRenders) {
   for (const json& detail :
