@@ -13,6 +13,8 @@
 #include <nlohmann/json.hpp>
 #include <set>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "core/imu_simulation.h"
 #include "core/pca_simulation.h"
@@ -259,6 +261,32 @@ TEST(FailureReasons, DrivenFailuresCarryTheReasonOfTheirSite) {
     const Status s = Calibrate(c.csv, "recording.csv", c.config, &result);
     ASSERT_FALSE(s.ok()) << c.reason;
     EXPECT_STREQ(DescribeReason(ReasonOf(s)).code, c.reason) << s.ToString();
+  }
+}
+
+// array with model full, cut short: the first 199 rows hold too few statics; the first 1999
+// have them but too little rotation. The partial result says what the model found.
+TEST(FailureReasons, TheFullArrayModelCutShortFailsWithItsReasonAndPartialDiagnostics) {
+  ArraySimulationFileOptions sim;
+  sim.samples = 400;
+  sim.seed = 3;
+  std::string csv;
+  json config, truth;
+  ASSERT_TRUE(SimulateArrayFullFiles(sim, &csv, &config, &truth).ok());
+  auto head = [&](int lines) {
+    size_t at = 0;
+    for (int i = 0; i < lines && at != std::string::npos; ++i) at = csv.find('\n', at + 1);
+    return csv.substr(0, at + 1);
+  };
+  for (const auto& [lines, reason] : std::vector<std::pair<int, std::string>>{
+           {200, "too_few_statics"}, {2000, "weak_excitation"}}) {
+    json result;
+    const Status s = Calibrate(head(lines), "full.csv", config, &result);
+    ASSERT_FALSE(s.ok()) << lines;
+    EXPECT_EQ(DescribeReason(ReasonOf(s)).code, reason) << s.ToString();
+    EXPECT_EQ(result["diagnostics"]["model"], "full") << result.dump();
+    EXPECT_EQ(result["usable"], false);
+    EXPECT_TRUE(result["diagnostics"].contains("static_samples"));
   }
 }
 
