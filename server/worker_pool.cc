@@ -167,6 +167,7 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
                 << " failed: " << f.ToString() << "\n";
     }
     metrics_->ObserveJob(job.method, transient ? "retried" : "failed", seconds());
+    if (!transient) metrics_->ObserveFailure(job.method, failure.reason);
   };
 
   Status s = ParseJsonText(job.config_json, "config of job " + std::to_string(job.id), &config);

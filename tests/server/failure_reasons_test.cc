@@ -342,6 +342,13 @@ TEST(FailureReasons, AFailedUploadShowsReasonAdviceAndPartialDiagnosticsInTheApi
     EXPECT_NE(html.find("id=\"partial\""), std::string::npos);
     EXPECT_NE(html.find(c.page_fragment), std::string::npos) << html;
     EXPECT_NE(html.find("id=\"diagnostics\""), std::string::npos);
+    // The failure is counted by its reason.
+    auto metrics = server.Client().Get("/api/v1/metrics");
+    ASSERT_TRUE(metrics);
+    EXPECT_NE(metrics->body.find(std::string("calibd_job_failures_total{method=\"") + c.name +
+                                 "\",reason=\"" + c.reason + "\"} 1"),
+              std::string::npos)
+        << metrics->body;
     // Title, message and advice are each said once (the partial diagnostics do not repeat the
     // message; the beginnings are compared, free of characters the page escapes).
     const std::string message = error["message"].get<std::string>().substr(0, 30);
