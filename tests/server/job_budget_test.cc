@@ -164,6 +164,8 @@ TEST(JobBudget, AJobQueuedUnderALargerBudgetIsFailedByTheWorkerWithTheReason) {
   EXPECT_NE(job["error"]["message"].get<std::string>().find("per-job memory budget"),
             std::string::npos)
       << job.dump();
+  EXPECT_EQ(job["error"]["reason"], "over_memory_budget");
+  EXPECT_TRUE(job["error"]["diagnostics"].is_null());  // refused before any numerics
   EXPECT_EQ(job["attempts"], 1);  // not retried: the same budget would refuse it again
 }
 
