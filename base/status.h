@@ -30,6 +30,52 @@ enum class StatusCode {
 // Stable machine-readable name of a code ("invalid_input", ...), used in JSON errors.
 const char* StatusCodeName(StatusCode code);
 
+// Why a calibration failed, finer than the StatusCode: what in the data (or the set-up) made it
+// fail, so that advice can be looked up by it (server/failure_reasons.h holds the catalog: its
+// stable snake_case code, a title and the generic advice). A failing method sets it with
+// Status::WithReason at the site that decides; kUnspecified when the site has none (the server
+// then derives one from the StatusCode). Adding one: a value here and an entry in the catalog
+// (a unit test checks that every value has one).
+enum class Reason {
+  kUnspecified = 0,
+  // The input as given cannot be used.
+  kInvalidConfig,        // a config key or option is wrong
+  kInvalidRecording,     // the recording parses but holds values that cannot be used (NaN, ...)
+  kRecordingUnreadable,  // the recording does not parse (stored bytes not in a SPEC §2 layout)
+  kOverMemoryBudget,     // the job would exceed the server's memory budget per job
+  kProblemTooLarge,      // the problem exceeds the method's own size limits (pca max_flops)
+  // The data cannot determine the parameters (kNotDeterminable).
+  kNotDeterminable,          // generic: a kNotDeterminable failure without a finer reason
+  kNoSignal,                 // all readings equal or zero
+  kTooFewSensors,            // fewer sensors than the dimension
+  kTooFewPositions,          // fewer static positions than the unknowns need
+  kPoorOrientationCoverage,  // orientations too few directions / on a plane, cone or quadric
+  kNoRankGap,                // no clear gap between the singular values d and d+1 (pca)
+  kNotAnEllipsoid,           // the readings lie on no ellipsoid (biases, field changed, noise)
+  kDeadSensor,               // a sensor whose readings do not change with the orientation
+  kIllConditioned,           // computed values not finite in double precision
+  kTooFewStatics,            // too few static intervals found in a log
+  kTooFewRotations,          // too few rotations between statics for the gyroscope
+  kNoDynamicPhase,           // no motion after the statics (array full model)
+  kUnknownNoise,             // noise levels zero / unknown (noise-free readings)
+  kSingularInformation,      // the Fisher information is singular: some parameter undetermined
+  kImplausibleEstimate,      // an estimate far from the nominal (wrong unit?)
+  kLogTooShort,              // fewer samples than the method needs
+  kIrregularSampling,        // sample times jitter too much for the Allan deviation
+  kNotStationary,            // a noise log that moves
+  kNoGyroscope,              // array: no gyroscope triad
+  kTooFewTriads,             // array: fewer than 3 accelerometer triads
+  kTriadsCollinear,          // array: the triads lie on one line
+  kTooFewSamples,            // array: fewer usable samples than needed
+  kWeakExcitation,           // array: the motion does not excite every direction
+  kNumericalFailure,         // the solver found no finite step
+  // The server's side.
+  kLeaseExpired,  // the job ran out of attempts because its worker's lease lapsed
+  kStorageError,  // busy database or I/O error past the retries
+  kInternal,      // a bug: never the user's fault
+  kCount,         // sentinel: the number of values
+};
+
 class Status {
  public:
   Status() = default;  // OK
@@ -41,6 +87,13 @@ class Status {
   }
   static Status NotDeterminable(std::string msg) {
     return {StatusCode::kNotDeterminable, std::move(msg)};
+  }
+  // A failure of a calibration with its reason (see Reason).
+  static Status InvalidInput(Reason reason, std::string msg) {
+    return InvalidInput(std::move(msg)).WithReason(reason);
+  }
+  static Status NotDeterminable(Reason reason, std::string msg) {
+    return NotDeterminable(std::move(msg)).WithReason(reason);
   }
   static Status NotFound(std::string msg) { return {StatusCode::kNotFound, std::move(msg)}; }
   static Status Conflict(std::string msg) { return {StatusCode::kConflict, std::move(msg)}; }
@@ -72,6 +125,12 @@ class Status {
     field_ = std::move(field);
     return *this;
   }
+  // Why, for a failure of a calibration (see Reason); kUnspecified unless set.
+  Reason reason() const { return reason_; }
+  Status& WithReason(Reason reason) {
+    reason_ = reason;
+    return *this;
+  }
 
   // "file:line:column: message" (the parts that are known), for a terminal.
   std::string ToString() const;
@@ -86,6 +145,7 @@ class Status {
   int64_t line_ = 0;
   int64_t column_ = 0;
   std::string field_;
+  Reason reason_ = Reason::kUnspecified;
 };
 
 }  // namespace calibd

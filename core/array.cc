@@ -430,20 +430,21 @@ Status InsufficientExcitation(const ArrayExcitation& ex) {
   char dir[96];
   std::snprintf(dir, sizeof dir, "(%.2f, %.2f, %.2f)", u.x(), u.y(), u.z());
   return Status::NotDeterminable(
+      Reason::kWeakExcitation,
       "the motion does not determine the positions along the direction " + std::string(dir) +
-      ": the smallest eigenvalue of sum A_n^T A_n is " + Fmt(ex.min_eigenvalue) +
-      ", not above what noise alone gives (" + Fmt(ex.noise_floor) +
-      "); this happens when the array rotates about one fixed axis only, or too slowly. "
-      "Instead, " +
-      std::string(kRecordAdvice) + ".");
+          ": the smallest eigenvalue of sum A_n^T A_n is " + Fmt(ex.min_eigenvalue) +
+          ", not above what noise alone gives (" + Fmt(ex.noise_floor) +
+          "); this happens when the array rotates about one fixed axis only, or too slowly. "
+          "Instead, " +
+          std::string(kRecordAdvice) + ".");
 }
 
 // ----- The steps of CalibrateArray.
 
-Status NotDeterminable(const std::string& why, ArrayResult* result) {
+Status NotDeterminable(Reason reason, const std::string& why, ArrayResult* result) {
   result->usable = false;
   result->reason = why;
-  return Status::NotDeterminable(why);
+  return Status::NotDeterminable(reason, why);
 }
 
 // Shapes and values of the input; records the reference, G and the triad names.
@@ -488,11 +489,13 @@ Status CheckGeometry(const ArrayProblem& problem, int G, ArrayResult* result) {
   const int K = static_cast<int>(problem.nominal_positions.cols());
   if (G == 0)
     return NotDeterminable(
+        Reason::kNoGyroscope,
         "no gyroscope triad: the array's angular velocity cannot be separated from the positions; "
         "record with at least one gyroscope triad (columns g0_x, g0_y, g0_z)",
         result);
   if (K < 3)
-    return NotDeterminable("only " + std::to_string(K) +
+    return NotDeterminable(Reason::kTooFewTriads,
+                           "only " + std::to_string(K) +
                                " accelerometer triad(s): at least 3 triads that are not on one "
                                "line are needed to determine the motion",
                            result);
@@ -501,6 +504,7 @@ Status CheckGeometry(const ArrayProblem& problem, int G, ArrayResult* result) {
   const Eigen::Vector3d ev = es.eigenvalues();
   if (!model.ok || ev(1) <= 1e-12 * ev(2))
     return NotDeterminable(
+        Reason::kTriadsCollinear,
         "the accelerometer triads' nominal positions lie on one line: the angular acceleration "
         "about that line cannot be determined; mount at least 3 triads that span a plane",
         result);
@@ -533,6 +537,7 @@ Status CollectSamples(const ArrayProblem& problem, const ArrayOptions& options, 
       why += " (" + std::to_string(result->samples_dropped) +
              " dropped because a gyroscope reached gyro_saturation)";
     return NotDeterminable(
+        Reason::kTooFewSamples,
         why + "; at least 3 are needed: " + kRecordAdvice +
             (result->samples_dropped > 0 ? ", turning below the gyroscopes' range" : ""),
         result);
@@ -678,6 +683,7 @@ Status Diagnose(const ArrayProblem& problem, const ArrayOptions& options, const 
   }
   if (!InvertInformation(info.information, &result->position_covariance))
     return NotDeterminable(
+        Reason::kSingularInformation,
         "the Fisher information of the positions is singular at the estimate: the recording "
         "does not determine every position; " +
             std::string(kRecordAdvice),
@@ -836,6 +842,7 @@ Status CalibrateArray(const ArrayProblem& problem, const ArrayOptions& options,
                       run.termination == ArrayTermination::kNoProgress;
   if (run.termination == ArrayTermination::kNumericalFailure)
     return NotDeterminable(
+        Reason::kNumericalFailure,
         "the joint solver found no step with a finite cost (numerical failure): the recording "
         "or the noise settings are degenerate; " +
             std::string(kRecordAdvice),

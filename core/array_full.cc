@@ -524,10 +524,10 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   res.names = problem.names;
   if (res.names.empty())
     for (int k = 0; k < K; ++k) res.names.push_back(std::to_string(k));
-  auto not_determinable = [&](const std::string& m) {
+  auto not_determinable = [&](Reason reason, const std::string& m) {
     res.usable = false;
     res.reason = m;
-    return Status::NotDeterminable(m);
+    return Status::NotDeterminable(reason, m);
   };
 
   // ----- Statics.
@@ -556,10 +556,11 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   res.static_samples = det.static_samples;
   if (d.J < options.min_statics)
     return not_determinable(
+        Reason::kTooFewStatics,
         "the full array model needs at least " + std::to_string(options.min_statics) +
-        " static orientations (the accelerometers' closed form); the log has " +
-        std::to_string(d.J) +
-        ": record the board at rest in many different orientations before the dynamic phase");
+            " static orientations (the accelerometers' closed form); the log has " +
+            std::to_string(d.J) +
+            ": record the board at rest in many different orientations before the dynamic phase");
   d.static_a.resize(3 * K, d.J);
   d.static_g.resize(3 * K, d.J);
   d.static_n.resize(d.J);
@@ -586,6 +587,7 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   res.gyro_noise = res.dynamic_gyro_noise = sigma_g;
   if (!(sigma_a > 0) || !(sigma_g > 0))
     return not_determinable(
+        Reason::kUnknownNoise,
         "the noise levels are zero in the statics (noise-free readings?): configure accel_noise "
         "and gyro_noise");
   d.wa = d.wa_d = 1 / sigma_a;
@@ -604,10 +606,10 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   d.Nd = static_cast<int64_t>(d.dyn_index.size());
   res.dynamic_samples = d.Nd;
   if (d.Nd < 10)
-    return not_determinable(
-        "the full array model needs a dynamic phase (rotation) after the "
-        "statics; the log has " +
-        std::to_string(d.Nd) + " usable samples outside the statics");
+    return not_determinable(Reason::kNoDynamicPhase,
+                            "the full array model needs a dynamic phase (rotation) after the "
+                            "statics; the log has " +
+                                std::to_string(d.Nd) + " usable samples outside the statics");
   d.ya.resize(3 * K, d.Nd);
   d.yg.resize(3 * K, d.Nd);
   for (int64_t m = 0; m < d.Nd; ++m) {
@@ -621,6 +623,7 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   Vec3 b_ref;
   if (!EllipsoidFit(d.static_a.middleRows(3 * ref, 3), options.gravity, &M_ref, &b_ref))
     return not_determinable(
+        Reason::kPoorOrientationCoverage,
         "the static orientations do not determine the accelerometers (no ellipsoid through the "
         "reference triad's static means): record statics in orientations spread over the whole "
         "sphere (e.g. the six faces and the diagonals)");
@@ -634,9 +637,9 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   Aj.col(3).setOnes();
   const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Aj);
   if (qr.rank() < 4)
-    return not_determinable(
-        "the static orientations are coplanar: record statics in "
-        "orientations spread over the whole sphere");
+    return not_determinable(Reason::kPoorOrientationCoverage,
+                            "the static orientations are coplanar: record statics in "
+                            "orientations spread over the whole sphere");
   const double n_static = d.static_n.sum();
   for (int k = 0; k < K; ++k) {
     if (k == ref) {
@@ -751,11 +754,13 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   const std::string axis_text = "(" + c2(ax.x()) + ", " + c2(ax.y()) + ", " + c2(ax.z()) + ")";
   if (res.rotation_verdict == "insufficient")
     return not_determinable(
+        Reason::kWeakExcitation,
         "too little rotation about the body axis " + axis_text + " (sum of squared rates " +
-        Fmt("%.3g", res.rotation_eigenvalues(0)) + " (rad/s)^2 against the gyroscope noise floor " +
-        Fmt("%.3g", res.rotation_noise_floor) +
-        "): the gyroscope gains and misalignments along that axis (the T_g columns) are not "
-        "determined; twist the board about that axis too in the dynamic phase");
+            Fmt("%.3g", res.rotation_eigenvalues(0)) +
+            " (rad/s)^2 against the gyroscope noise floor " +
+            Fmt("%.3g", res.rotation_noise_floor) +
+            "): the gyroscope gains and misalignments along that axis (the T_g columns) are not "
+            "determined; twist the board about that axis too in the dynamic phase");
   if (res.rotation_verdict == "weak")
     res.warnings.push_back("little rotation about the body axis " + axis_text +
                            ": the gyroscope gains along it are weakly determined (see their σ)");
@@ -821,9 +826,9 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
     return Status::Internal("the full array calibration was stopped by the caller");
   }
   if (final_summary.termination == BlockLmTermination::kNumericalFailure)
-    return not_determinable(
-        "the joint solver found no step with a finite cost (numerical "
-        "failure): the recording or the noise settings are degenerate");
+    return not_determinable(Reason::kNumericalFailure,
+                            "the joint solver found no step with a finite cost (numerical "
+                            "failure): the recording or the noise settings are degenerate");
   res.theta = theta;
   const std::vector<TriadParams> ctx = Unpack(theta, K);
   res.triads.resize(K);
@@ -915,18 +920,18 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   if (!res.null_directions.empty()) {
     std::string list;
     for (const auto& t : res.null_directions) list += (list.empty() ? "" : "; ") + t;
-    return not_determinable(
-        "the recording does not determine every parameter (null directions "
-        "of the Fisher information, largest components: " +
-        list +
-        "): record statics spread over the sphere and rotate about "
-        "every axis");
+    return not_determinable(Reason::kSingularInformation,
+                            "the recording does not determine every parameter (null directions "
+                            "of the Fisher information, largest components: " +
+                                list +
+                                "): record statics spread over the sphere and rotate about "
+                                "every axis");
   }
   Eigen::MatrixXd covE;
   if (!InvertInformation(info.information, &covE))
-    return not_determinable(
-        "the Fisher information is not positive definite: the recording "
-        "does not determine the parameters");
+    return not_determinable(Reason::kSingularInformation,
+                            "the Fisher information is not positive definite: the recording "
+                            "does not determine the parameters");
   res.theta_covariance = E * covE * E.transpose();
   res.report_std.resize(K);
   for (int k = 0; k < K; ++k) {

@@ -608,10 +608,11 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
   const int needed_rotations = estimate_bias ? 6 : 5;
   if (static_cast<int>(pr.rotations.size()) < needed_rotations) {
     return Fail(
-        Status::NotDeterminable("the gyroscope needs at least " + std::to_string(needed_rotations) +
-                                " rotations between consecutive statics, " +
-                                std::to_string(pr.rotations.size()) +
-                                " are usable: record more static orientations joined by rotations"),
+        Status::NotDeterminable(
+            Reason::kTooFewRotations,
+            "the gyroscope needs at least " + std::to_string(needed_rotations) +
+                " rotations between consecutive statics, " + std::to_string(pr.rotations.size()) +
+                " are usable: record more static orientations joined by rotations"),
         ImuTermination::kTooFewRotations, res);
   }
 
@@ -665,6 +666,7 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
   if (!cov_int.allFinite() || ldlt.info() != Eigen::Success ||
       (cov_int.diagonal().array() <= 0).any()) {
     return Fail(Status::NotDeterminable(
+                    Reason::kSingularInformation,
                     "the information matrix is singular: the statics and rotations do not "
                     "determine every parameter (add orientations and turn about every axis)"),
                 ImuTermination::kDegenerate, res);
@@ -787,7 +789,8 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
         << o.max_scale_deviation << ")";
     }
     if (!m.str().empty()) {
-      return Fail(Status::NotDeterminable(m.str()), ImuTermination::kImplausible, res);
+      return Fail(Status::NotDeterminable(Reason::kImplausibleEstimate, m.str()),
+                  ImuTermination::kImplausible, res);
     }
   }
   if (!(res->gyro_direction_rms_after <= o.max_direction_error)) {
@@ -797,7 +800,8 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
       << " rad RMS per rotation (limit " << o.max_direction_error
       << "): the gyroscope does not explain the rotations: wrong gyro_unit (deg/s vs rad/s?), "
          "saturation or a wrong time column";
-    return Fail(Status::NotDeterminable(m.str()), ImuTermination::kImplausible, res);
+    return Fail(Status::NotDeterminable(Reason::kImplausibleEstimate, m.str()),
+                ImuTermination::kImplausible, res);
   }
   res->usable = true;
   res->reason.clear();
@@ -896,15 +900,18 @@ Status CalibrateImus(const Eigen::VectorXd& t, const std::vector<ImuReadings>& i
   };
   std::string error;
   if (!options.IsValid(&error)) {
-    return fail_all(Status::InvalidInput("imu options: " + error), ImuTermination::kInvalidInput);
+    return fail_all(Status::InvalidInput(Reason::kInvalidConfig, "imu options: " + error),
+                    ImuTermination::kInvalidInput);
   }
   if (imus.empty()) {
-    return fail_all(Status::InvalidInput("the log has no IMU"), ImuTermination::kInvalidInput);
+    return fail_all(Status::InvalidInput(Reason::kInvalidRecording, "the log has no IMU"),
+                    ImuTermination::kInvalidInput);
   }
   std::vector<TriadSeries> triads;
   for (const ImuReadings& imu : imus) {
     if (imu.accel == nullptr || imu.gyro == nullptr) {
-      return fail_all(Status::InvalidInput("IMU " + imu.name + " lacks accelerometer or gyroscope"),
+      return fail_all(Status::InvalidInput(Reason::kInvalidRecording,
+                                           "IMU " + imu.name + " lacks accelerometer or gyroscope"),
                       ImuTermination::kInvalidInput);
     }
     TriadSeries a{"a" + imu.name,     TriadKind::kAccelerometer,    imu.accel,
@@ -1001,18 +1008,22 @@ Status CalibrateImus(const Eigen::VectorXd& t, const std::vector<ImuReadings>& i
                 "sphere"
               : cov.verdict);
     const std::string msg = m.str();
+    // Enough statics that do not determine the ellipsoid: their orientations are the problem.
+    const Reason why =
+        n >= options.min_statics ? Reason::kPoorOrientationCoverage : Reason::kTooFewStatics;
     for (ImuResult& r : *results) {
-      Fail(Status::NotDeterminable(msg), ImuTermination::kTooFewStatics, &r);
+      Fail(Status::NotDeterminable(why, msg), ImuTermination::kTooFewStatics, &r);
       r.coverage = cov;
     }
-    return Status::NotDeterminable(msg);
+    return Status::NotDeterminable(why, msg);
   }
   Status first_failure;
   for (size_t k = 0; k < imus.size(); ++k) {
     Status st = Finish(t, imus[k], static_cast<int>(k), options,
                        cands[static_cast<size_t>(best)].fits[k], &(*results)[k]);
     if (!st.ok() && first_failure.ok()) {
-      first_failure = Status(st.code(), "IMU " + imus[k].name + ": " + st.message());
+      first_failure =
+          Status(st.code(), "IMU " + imus[k].name + ": " + st.message()).WithReason(st.reason());
     }
   }
   return first_failure;

@@ -408,8 +408,9 @@ Status AnalyseChannel(const NoiseChannelInput& in, int64_t n, double tau0,
   float lo = y[0], hi = y[0];
   for (int64_t i = 0; i < n; ++i) {
     if (!std::isfinite(y[i])) {
-      return Status::InvalidInput("channel " + in.name + ": sample " + std::to_string(i) +
-                                  " is not a finite number");
+      return Status::InvalidInput(
+          Reason::kInvalidRecording,
+          "channel " + in.name + ": sample " + std::to_string(i) + " is not a finite number");
     }
     total += y[i];
     lo = std::min(lo, y[i]);
@@ -543,25 +544,30 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
   *result = NoiseResult();
   std::string error;
   if (!options.IsValid(&error))
-    return Fail(Status::InvalidInput("noise options: " + error), result);
+    return Fail(Status::InvalidInput(Reason::kInvalidConfig, "noise options: " + error), result);
   const int64_t n = problem.samples;
   result->samples = n;
   if (problem.channels.empty()) {
-    return Fail(Status::InvalidInput("the log has no channel to analyse"), result);
+    return Fail(
+        Status::InvalidInput(Reason::kInvalidRecording, "the log has no channel to analyse"),
+        result);
   }
   for (const NoiseChannelInput& c : problem.channels) {
     if (c.data == nullptr && n > 0) {
-      return Fail(Status::InvalidInput("channel " + c.name + " has no data"), result);
+      return Fail(
+          Status::InvalidInput(Reason::kInvalidRecording, "channel " + c.name + " has no data"),
+          result);
     }
   }
   if (n < options.min_samples) {
     return Fail(Status::NotDeterminable(
+                    Reason::kLogTooShort,
                     "the log has " + std::to_string(n) +
-                    " samples; the noise method needs at "
-                    "least " +
-                    std::to_string(options.min_samples) +
-                    " (the longest cluster time is a quarter of the log): record the sensor at "
-                    "rest for an hour or more"),
+                        " samples; the noise method needs at "
+                        "least " +
+                        std::to_string(options.min_samples) +
+                        " (the longest cluster time is a quarter of the log): record the sensor at "
+                        "rest for an hour or more"),
                 result);
   }
   // Sample period: median Δt of the timestamps, or the configured period.
@@ -571,17 +577,19 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
     std::vector<double> dt(static_cast<size_t>(n - 1));
     for (int64_t i = 0; i < n; ++i) {
       if (!std::isfinite(t[i])) {
-        return Fail(Status::InvalidInput("timestamp of sample " + std::to_string(i) +
-                                         " is not a finite number"),
+        return Fail(Status::InvalidInput(
+                        Reason::kInvalidRecording,
+                        "timestamp of sample " + std::to_string(i) + " is not a finite number"),
                     result);
       }
       if (i > 0) {
         if (!(t[i] > t[i - 1])) {
-          return Fail(
-              Status::InvalidInput("timestamps must be strictly increasing: sample " +
-                                   std::to_string(i) + " (t = " + Format("%.9g", t[i]) +
-                                   " s) does not follow t = " + Format("%.9g", t[i - 1]) + " s"),
-              result);
+          return Fail(Status::InvalidInput(
+                          Reason::kInvalidRecording,
+                          "timestamps must be strictly increasing: sample " + std::to_string(i) +
+                              " (t = " + Format("%.9g", t[i]) +
+                              " s) does not follow t = " + Format("%.9g", t[i - 1]) + " s"),
+                      result);
         }
         dt[static_cast<size_t>(i - 1)] = t[i] - t[i - 1];
       }
@@ -611,10 +619,11 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
       result->sample_period = tau0;
       return Fail(
           Status::NotDeterminable(
+              Reason::kIrregularSampling,
               "irregular sample times: " + where + " (jitter " + Format("%.0f", 100 * worst) +
-              "% of the period, at most " + Format("%.0f", 100 * options.max_jitter) +
-              "% is accepted); the Allan deviation needs uniform sampling: split the log "
-              "at gaps or resample it"),
+                  "% of the period, at most " + Format("%.0f", 100 * options.max_jitter) +
+                  "% is accepted); the Allan deviation needs uniform sampling: split the log "
+                  "at gaps or resample it"),
           result);
     }
     if (worst > options.jitter_warning) {
@@ -623,7 +632,8 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
                                  "); the analysis assumes the samples are uniformly spaced");
     }
   } else if (!options.sample_period) {
-    return Fail(Status::InvalidInput("no timestamps and no sample_period: the rate is unknown"),
+    return Fail(Status::InvalidInput(Reason::kInvalidConfig,
+                                     "no timestamps and no sample_period: the rate is unknown"),
                 result);
   }
   result->sample_period = tau0;
@@ -648,8 +658,9 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
     }
   }
   if (!result->stationary) {
-    return Fail(Status::NotDeterminable("the log is not stationary (" + moved +
-                                        "); record the sensor at rest, untouched"),
+    return Fail(Status::NotDeterminable(Reason::kNotStationary,
+                                        "the log is not stationary (" + moved +
+                                            "); record the sensor at rest, untouched"),
                 result);
   }
   result->usable = true;

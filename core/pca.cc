@@ -431,9 +431,10 @@ Status CheckRank(const VectorXd& sv, int d, const PcaOptions& options, bool affi
   const std::string readings = affine ? "the readings (minus their mean)" : "the readings";
   if (!(s1 > 0)) {
     return Status::NotDeterminable(
+        Reason::kNoSignal,
         "all readings are " + std::string(affine ? "equal" : "zero") +
-        ": nothing to calibrate; check the recording (were the sensors on, was the field "
-        "applied?)");
+            ": nothing to calibrate; check the recording (were the sensors on, was the field "
+            "applied?)");
   }
   const std::string what_instead =
       " This happens when all positions lie in one plane (e.g. the device was only turned about "
@@ -443,17 +444,19 @@ Status CheckRank(const VectorXd& sv, int d, const PcaOptions& options, bool affi
       "least " +
       std::to_string(d) + " independent directions.";
   if (sv(d - 1) <= 1e-10 * s1) {
-    return Status::NotDeterminable(readings + " span fewer than d = " + std::to_string(d) +
-                                   " dimensions (singular value " + std::to_string(d) + " is " +
-                                   Num(sv(d - 1) / s1) + " of the largest)." + what_instead);
+    return Status::NotDeterminable(Reason::kPoorOrientationCoverage,
+                                   readings + " span fewer than d = " + std::to_string(d) +
+                                       " dimensions (singular value " + std::to_string(d) + " is " +
+                                       Num(sv(d - 1) / s1) + " of the largest)." + what_instead);
   }
   if (result->rank_gap < options.min_rank_gap) {
     return Status::NotDeterminable(
+        Reason::kNoRankGap,
         "no clear gap between singular values " + std::to_string(d) + " and " +
-        std::to_string(d + 1) + " of " + readings + " (ratio " + Num(result->rank_gap) +
-        ", at least " + Num(options.min_rank_gap) +
-        " needed): the field is not seen in d clearly independent directions above the noise." +
-        what_instead + " If the field is too weak for the noise, average longer per position.");
+            std::to_string(d + 1) + " of " + readings + " (ratio " + Num(result->rank_gap) +
+            ", at least " + Num(options.min_rank_gap) +
+            " needed): the field is not seen in d clearly independent directions above the noise." +
+            what_instead + " If the field is too weak for the noise, average longer per position.");
   }
   return Status::Ok();
 }
@@ -507,10 +510,11 @@ Status ClosedFormBiasFree(const MatrixXd& mm, int d, double c, const PcaOptions&
   const VectorXd dsv = svd.singularValues();
   if (dsv.size() < nq || dsv(nq - 1) <= 1e-10 * dsv(0)) {
     return Status::NotDeterminable(
+        Reason::kPoorOrientationCoverage,
         "the positions do not determine the field's quadratic form g (the " + std::to_string(nq) +
-        " equations c² = b_jᵀ g b_j are degenerate): the field directions "
-        "lie on a cone or another quadric; " +
-        kSpreadAdvice + ".");
+            " equations c² = b_jᵀ g b_j are degenerate): the field directions "
+            "lie on a cone or another quadric; " +
+            kSpreadAdvice + ".");
   }
   const VectorXd qtb = (qr.householderQ().transpose() * rhs).head(nq);
   const VectorXd x = svd.matrixV() * (svd.matrixU().transpose() * qtb).cwiseQuotient(dsv);
@@ -520,12 +524,14 @@ Status ClosedFormBiasFree(const MatrixXd& mm, int d, double c, const PcaOptions&
   result->g_eigenvalues = lambda;
   if (!(lambda(0) > 1e-12 * std::abs(lambda(d - 1)))) {
     return Status::NotDeterminable(
+        Reason::kNotAnEllipsoid,
         "g is not positive definite (eigenvalues " + Num(lambda(0)) + " ... " + Num(lambda(d - 1)) +
-        "): the readings are not those of bias-free linear sensors in a field of constant "
-        "magnitude. Likely causes: sensor biases not removed (use bias: estimate, or record the "
-        "static/moving layout), the field changed between positions, or too much noise for so "
-        "few positions; record more positions, " +
-        std::string(kSpreadAdvice) + ".");
+            "): the readings are not those of bias-free linear sensors in a field of constant "
+            "magnitude. Likely causes: sensor biases not removed (use bias: estimate, or record "
+            "the "
+            "static/moving layout), the field changed between positions, or too much noise for so "
+            "few positions; record more positions, " +
+            std::string(kSpreadAdvice) + ".");
   }
   const MatrixXd q = eig.eigenvectors().transpose();  // paper: g = qᵀ λ q
   const VectorXd sqrt_lambda = lambda.cwiseSqrt();
@@ -573,10 +579,11 @@ Status ClosedFormAffine(const MatrixXd& mm, int d, double c, const PcaOptions& o
   dsv.head(svd.singularValues().size()) = svd.singularValues();
   if (dsv(nz - 2) <= 1e-10 * dsv(0)) {
     return Status::NotDeterminable(
+        Reason::kPoorOrientationCoverage,
         "the positions do not determine the ellipsoid of the readings (its " +
-        std::to_string(nz - 1) +
-        " parameters are degenerate): the field directions lie on a cone or another quadric; " +
-        kSpreadAdvice + ".");
+            std::to_string(nz - 1) +
+            " parameters are degenerate): the field directions lie on a cone or another quadric; " +
+            kSpreadAdvice + ".");
   }
   const VectorXd z = svd.matrixV().col(nz - 1);
   MatrixXd mh = SymmetricFromVector(z.head(nq), d);
@@ -599,13 +606,15 @@ Status ClosedFormAffine(const MatrixXd& mm, int d, double c, const PcaOptions& o
       std::string(kSpreadAdvice) + ".";
   if (!(mu(0) > 1e-12 * mu(d - 1))) {
     result->g_eigenvalues = mu;
-    return Status::NotDeterminable(not_ellipsoid + ", eigenvalues " + Num(mu(0)) + " ... " +
-                                   Num(mu(d - 1)) + causes);
+    return Status::NotDeterminable(
+        Reason::kNotAnEllipsoid,
+        not_ellipsoid + ", eigenvalues " + Num(mu(0)) + " ... " + Num(mu(d - 1)) + causes);
   }
   const VectorXd y0h = mh.llt().solve(wh);
   const double rho = y0h.dot(mh * y0h) - kh;
   if (!(rho > 0)) {
-    return Status::NotDeterminable(not_ellipsoid + ": an empty ellipsoid" + causes);
+    return Status::NotDeterminable(Reason::kNotAnEllipsoid,
+                                   not_ellipsoid + ": an empty ellipsoid" + causes);
   }
   const MatrixXd shape = (c * c / (rho * scale * scale)) * mh;  // (y−y0)ᵀ shape (y−y0) = c²
   const VectorXd y0 = scale * y0h;
@@ -999,6 +1008,20 @@ Eigen::MatrixXd ProcrustesRotation(const Eigen::MatrixXd& from, const Eigen::Mat
 
 namespace {
 
+// The coverage of positions the fit failed on, seen through the nominal sensitivities (d×m):
+// each position's field is the least-squares v_j = (N Nᵀ)⁻¹ N m_j of its readings (biases, when
+// unknown, are ignored: a guide to which orientations are missing, not an estimate). Leaves the
+// coverage unknown without a nominal or when the nominal axes do not span d dimensions.
+void CoverageFromNominal(const MatrixXd& mm, const PcaOptions& options, PcaResult* result) {
+  if (!options.nominal || options.nominal->cols() != mm.rows() || mm.cols() < 1) return;
+  const MatrixXd& nom = *options.nominal;
+  const Eigen::LDLT<MatrixXd> gram(nom * nom.transpose());
+  if (gram.info() != Eigen::Success || !(gram.rcond() > 1e-12)) return;
+  const MatrixXd v = gram.solve(nom * mm);
+  result->coverage = Coverage(v, options.bias == BiasModel::kEstimate,
+                              "axes of the nominal frame, through the nominal sensitivities");
+}
+
 // CalibratePca on readings divided by `unit` (a power of two, so exactly): every number of the
 // result is in those units until CalibratePca multiplies it back. Messages quote readings in the
 // caller's units.
@@ -1020,12 +1043,14 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
   result->noise_std_given = options.noise_std.has_value();
 
   if (m < 1 || n < 1) {
-    return Fail(Status::InvalidInput("the recording has no readings (" + std::to_string(m) +
-                                     " sensors, " + std::to_string(n) + " positions)"),
+    return Fail(Status::InvalidInput(Reason::kInvalidRecording,
+                                     "the recording has no readings (" + std::to_string(m) +
+                                         " sensors, " + std::to_string(n) + " positions)"),
                 result);
   }
   if (!mm.allFinite()) {
-    return Fail(Status::InvalidInput("readings must be finite numbers"), result);
+    return Fail(Status::InvalidInput(Reason::kInvalidRecording, "readings must be finite numbers"),
+                result);
   }
   if (!problem.sensor_names.empty() && static_cast<int>(problem.sensor_names.size()) != m) {
     return Fail(
@@ -1054,24 +1079,27 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
   }
   if (m < d) {
     return Fail(Status::NotDeterminable(
+                    Reason::kTooFewSensors,
                     std::to_string(m) + " sensor" + (m == 1 ? "" : "s") + " cannot determine " +
-                    std::to_string(d) +
-                    "-dimensional sensitivity vectors: at least d = " + std::to_string(d) +
-                    " sensors are needed (the paper's inequality 17); record with at "
-                    "least " +
-                    std::to_string(d) + " sensors, or set dimension to " + std::to_string(m) +
-                    " if the field only has that many components"),
+                        std::to_string(d) +
+                        "-dimensional sensitivity vectors: at least d = " + std::to_string(d) +
+                        " sensors are needed (the paper's inequality 17); record with at "
+                        "least " +
+                        std::to_string(d) + " sensors, or set dimension to " + std::to_string(m) +
+                        " if the field only has that many components"),
                 result);
   }
   if (n < result->min_positions) {
+    CoverageFromNominal(mm, options, result);
     return Fail(
         Status::NotDeterminable(
+            Reason::kTooFewPositions,
             std::to_string(n) + " position" + (n == 1 ? "" : "s") + " recorded, but dimension " +
-            std::to_string(d) + (affine ? " with unknown biases" : "") + " needs at least " +
-            std::to_string(result->min_positions) + " (" + (affine ? "d(d+3)/2" : "d(d+1)/2") +
-            "); record at least " + std::to_string(result->min_positions) +
-            " positions with orientations spread over the sphere (more is better: the error "
-            "falls as 1/sqrt(n))"),
+                std::to_string(d) + (affine ? " with unknown biases" : "") + " needs at least " +
+                std::to_string(result->min_positions) + " (" + (affine ? "d(d+3)/2" : "d(d+1)/2") +
+                "); record at least " + std::to_string(result->min_positions) +
+                " positions with orientations spread over the sphere (more is better: the error "
+                "falls as 1/sqrt(n))"),
         result);
   }
 
@@ -1086,27 +1114,30 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
                              " positions (dimension " + std::to_string(d) +
                              (affine ? ", biases estimated" : "") + ")";
     if (options.max_memory_bytes > 0 && cost.bytes > options.max_memory_bytes) {
-      return Fail(Status::NotDeterminable(
-                      "the problem is too large: " + size + " needs about " +
-                      Num(cost.bytes / (1024.0 * 1024)) +
-                      " MiB of working memory, more than "
-                      "the limit max_memory_bytes = " +
-                      Num(options.max_memory_bytes / (1024.0 * 1024)) +
-                      " MiB; split the sensors into smaller groups (each with the same positions) "
-                      "or record fewer positions")
-                      .WithField("max_memory_bytes"),
-                  result);
+      return Fail(
+          Status::NotDeterminable(
+              Reason::kProblemTooLarge,
+              "the problem is too large: " + size + " needs about " +
+                  Num(cost.bytes / (1024.0 * 1024)) +
+                  " MiB of working memory, more than "
+                  "the limit max_memory_bytes = " +
+                  Num(options.max_memory_bytes / (1024.0 * 1024)) +
+                  " MiB; split the sensors into smaller groups (each with the same positions) "
+                  "or record fewer positions")
+              .WithField("max_memory_bytes"),
+          result);
     }
     if (options.max_flops > 0 && flops > options.max_flops) {
       return Fail(Status::NotDeterminable(
+                      Reason::kProblemTooLarge,
                       "the problem is too large: " + size + " needs about " + Num(flops) +
-                      " floating-point operations" +
-                      (options.refine ? " (with max_refine_iterations = " +
-                                            std::to_string(options.max_refine_iterations) + ")"
-                                      : std::string()) +
-                      ", more than the limit max_flops = " + Num(options.max_flops) +
-                      "; split the sensors into smaller groups (each with the same positions), "
-                      "record fewer positions, or refine with fewer iterations")
+                          " floating-point operations" +
+                          (options.refine ? " (with max_refine_iterations = " +
+                                                std::to_string(options.max_refine_iterations) + ")"
+                                          : std::string()) +
+                          ", more than the limit max_flops = " + Num(options.max_flops) +
+                          "; split the sensors into smaller groups (each with the same positions), "
+                          "record fewer positions, or refine with fewer iterations")
                       .WithField("max_flops"),
                   result);
     }
@@ -1116,7 +1147,10 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
   Fit fit;
   Status s = affine ? ClosedFormAffine(mm, d, c, options, result, &fit)
                     : ClosedFormBiasFree(mm, d, c, options, result, &fit);
-  if (!s.ok()) return Fail(s, result);
+  if (!s.ok()) {
+    CoverageFromNominal(mm, options, result);
+    return Fail(s, result);
+  }
   fit.v = ProjectPositions(mm, fit.a, fit.b, c);
   result->cost_closed_form = Cost(mm, fit);
   result->cost = result->cost_closed_form;
@@ -1346,18 +1380,20 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
       if (!(std::isfinite(se.scale) && se.scale > 0) || !se.axis.allFinite()) {
         return Fail(
             Status::NotDeterminable(
+                Reason::kDeadSensor,
                 "sensor " + se.name + "'s axis is undefined: its sensitivity is " + Num(se.scale) +
-                " (its readings do not change with the orientation: a dead or "
-                "disconnected sensor?); check it, or remove it from the recording"),
+                    " (its readings do not change with the orientation: a dead or "
+                    "disconnected sensor?); check it, or remove it from the recording"),
             result);
       }
     }
   }
   if (!non_finite.empty()) {
     return Fail(Status::NotDeterminable(
+                    Reason::kIllConditioned,
                     "the computed " + non_finite +
-                    " is not a finite number: the readings are too ill-conditioned for double "
-                    "precision (check their units and range, and that the field was applied)"),
+                        " is not a finite number: the readings are too ill-conditioned for double "
+                        "precision (check their units and range, and that the field was applied)"),
                 result);
   }
   result->usable = true;
@@ -1369,7 +1405,8 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
 Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaResult* result) {
   *result = PcaResult();
   std::string error;
-  if (!options.IsValid(&error)) return Fail(Status::InvalidInput("pca options: " + error), result);
+  if (!options.IsValid(&error))
+    return Fail(Status::InvalidInput(Reason::kInvalidConfig, "pca options: " + error), result);
   // Equilibrate the readings: divide them by the power of two nearest their largest magnitude,
   // exactly, so that neither squares nor products of readings overflow or underflow and every
   // tolerance below is relative. The result is multiplied back at the end.

@@ -191,10 +191,13 @@ struct PcaResult {
   double noise_std_estimated = std::numeric_limits<double>::quiet_NaN();  // NaN if dof <= 0
   double cost_closed_form = std::numeric_limits<double>::quiet_NaN();  // ½Σr² at the closed form
   double cost = std::numeric_limits<double>::quiet_NaN();  // ½Σr² at the reported estimate
-  bool refined = false;               // the refinement was run and its estimate is reported
-  int refine_iterations = 0;          // Gauss-Newton iterations taken (0 when not run)
-  PcaCost cost_estimate;              // EstimatePcaCost of this problem (solver resolved)
-  PcaCoverage coverage;               // how well the positions span the sphere
+  bool refined = false;       // the refinement was run and its estimate is reported
+  int refine_iterations = 0;  // Gauss-Newton iterations taken (0 when not run)
+  PcaCost cost_estimate;      // EstimatePcaCost of this problem (solver resolved)
+  // How well the positions span the sphere. When the fit fails (too few positions, or the
+  // closed form) and a nominal is given, from the fields seen through the nominal sensitivities
+  // (a guide to the orientations to add); else unknown on failure.
+  PcaCoverage coverage;
   std::vector<std::string> warnings;  // plain words, for people
 };
 

@@ -1,4 +1,5 @@
 // The API's JSON of jobs, events and recordings (server/service_impl.h).
+#include "server/failure_reasons.h"
 #include "server/service_impl.h"
 
 namespace calibd::server {
@@ -23,7 +24,18 @@ json JobJson(const storage::JobInfo& job, bool with_result) {
             {"url", "/api/v1/jobs/" + std::to_string(job.id)},
             {"report_url", "/jobs/" + std::to_string(job.id)}};
   if (!job.error_code.empty() && job.status != JobStatus::kSucceeded) {
-    j["error"] = {{"code", job.error_code}, {"message", job.error_message}};
+    // SPEC §5 extended (README, "Failure reasons"): the reason code with its title and generic
+    // advice from the catalog (server/failure_reasons.h), the method's own message, and the partial
+    // diagnostics it found before failing (null when none, and in lists without results).
+    const FailureReason& reason = StoredFailureReason(job.error_reason, job.error_code);
+    json diagnostics;
+    if (!job.error_detail_json.empty()) {
+      diagnostics = json::parse(job.error_detail_json, nullptr, /*allow_exceptions=*/false);
+      if (diagnostics.is_discarded()) diagnostics = json();
+    }
+    j["error"] = {{"code", job.error_code},  {"reason", reason.code},
+                  {"title", reason.title},   {"message", job.error_message},
+                  {"advice", reason.advice}, {"diagnostics", std::move(diagnostics)}};
   }
   json config;
   if (ParseJsonText(job.config_json, "config", &config).ok()) j["config"] = std::move(config);

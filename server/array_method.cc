@@ -528,7 +528,7 @@ Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
   core::ArrayFullOptions options;
   bool degrees = false;
   Status s = ParseArrayFullConfig(config, &problem, &options, &degrees);
-  if (!s.ok()) return s;
+  if (!s.ok()) return s.reason() == Reason::kUnspecified ? s.WithReason(Reason::kInvalidConfig) : s;
   if (executor) options.executor = std::move(executor);
   const int K = static_cast<int>(problem.nominal_positions.cols());
   const int K_rec = static_cast<int>(recording.accel_names.size());
@@ -554,7 +554,30 @@ Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
   if (cancel != nullptr) options.callback = [cancel](int) { return !cancel->load(); };
   core::ArrayFullResult r;
   s = core::CalibrateArrayFull(problem, options, &r);
-  if (!s.ok()) return s;
+  if (!s.ok()) {
+    // The partial diagnostics kept with the failed job: what the run found before failing.
+    json nulls = json::array();
+    for (const auto& t : r.null_directions) nulls.push_back(t);
+    json warnings = json::array();
+    for (const auto& w : r.warnings) warnings.push_back(w);
+    *result = {{"method", "array"},
+               {"usable", false},
+               {"diagnostics",
+                {{"model", "full"},
+                 {"termination", core::BlockLmTerminationName(r.termination)},
+                 {"iterations", r.iterations},
+                 {"statics", r.statics},
+                 {"static_samples", r.static_samples},
+                 {"dynamic_samples", r.dynamic_samples},
+                 {"rotation",
+                  {{"eigenvalues", Vec(r.rotation_eigenvalues)},
+                   {"noise_floor", Num(r.rotation_noise_floor)},
+                   {"weakest_axis", Vec(r.weakest_rotation_axis)},
+                   {"verdict", r.rotation_verdict}}},
+                 {"null_directions", nulls}}},
+               {"warnings", warnings}};
+    return s;
+  }
 
   const double gyro_unit = degrees ? core::kDegree : 1.0;  // rad/s per reading unit
   json imus = json::array(), stds = json::array(), positions = json::array(),
@@ -700,14 +723,15 @@ Status RunArray(ArrayRecording recording, const json& config, json* result,
   bool degrees = false;
   ArrayAccelerometerCalibration calibration;
   Status s = ParseArrayConfig(config, &problem, &options, &degrees, &calibration);
-  if (!s.ok()) return s;
+  if (!s.ok()) return s.reason() == Reason::kUnspecified ? s.WithReason(Reason::kInvalidConfig) : s;
   if (executor) options.executor = std::move(executor);
   const int K = static_cast<int>(problem.nominal_positions.cols());
   const int K_rec = static_cast<int>(recording.accel_names.size());
   if (K_rec != K)
-    return Status::InvalidInput("the recording has " + std::to_string(K_rec) +
-                                " accelerometer triads but geometry.positions has " +
-                                std::to_string(K) + " positions")
+    return Status::InvalidInput(Reason::kInvalidRecording,
+                                "the recording has " + std::to_string(K_rec) +
+                                    " accelerometer triads but geometry.positions has " +
+                                    std::to_string(K) + " positions")
         .WithField("geometry.positions");
   // Moved, not copied: a job holds one copy of the samples (the parser's).
   problem.accel = std::move(recording.accel);
@@ -724,7 +748,30 @@ Status RunArray(ArrayRecording recording, const json& config, json* result,
   }
   core::ArrayResult r;
   s = core::CalibrateArray(problem, options, &r);
-  if (!s.ok()) return s;
+  if (!s.ok()) {
+    // The partial diagnostics kept with the failed job: the samples used and dropped, the
+    // excitation when the solver got that far (verdict "" before), the termination.
+    json warnings = json::array();
+    for (const auto& w : r.warnings) warnings.push_back(w);
+    *result = {{"method", "array"},
+               {"usable", false},
+               {"diagnostics",
+                {{"solver", core::ArraySolverName(r.solver)},
+                 {"termination", core::ArrayTerminationName(r.termination)},
+                 {"iterations", r.iterations},
+                 {"samples", r.samples},
+                 {"samples_dropped", r.samples_dropped},
+                 {"gyro_triads", r.gyro_triads},
+                 {"gyro_unit", degrees ? "deg/s" : "rad/s"},
+                 {"excitation",
+                  {{"min_eigenvalue", Num(r.excitation.min_eigenvalue)},
+                   {"max_eigenvalue", Num(r.excitation.max_eigenvalue)},
+                   {"noise_floor", Num(r.excitation.noise_floor)},
+                   {"weakest_direction", Vec(r.excitation.weakest_direction)},
+                   {"verdict", r.excitation.verdict}}}}},
+               {"warnings", warnings}};
+    return s;
+  }
 
   const double gyro_out = degrees ? 1 / core::kDegree : 1.0;
   json positions = json::array(), stds = json::array();

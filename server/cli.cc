@@ -10,6 +10,7 @@
 
 #include "server/acceptance.h"
 #include "server/config.h"
+#include "server/failure_reasons.h"
 #include "server/method.h"
 #include "server/serve.h"
 
@@ -35,6 +36,16 @@ int ExitCodeFor(const Status& s) {
 
 int Report(const Status& s) {
   std::cerr << "calibd: " << s.ToString() << "\n";
+  return ExitCodeFor(s);
+}
+
+// A failed calibration: the message, then its reason code and the catalog's advice (the same
+// as GET /api/v1/jobs/{id} "error.reason" and "error.advice").
+int ReportFailure(const Status& s) {
+  const FailureReason& reason = DescribeReason(ReasonOf(s));
+  std::cerr << "calibd: " << s.ToString() << "\n"
+            << "calibd: reason: " << reason.code << " (" << reason.title << ")\n"
+            << "calibd: advice: " << reason.advice << "\n";
   return ExitCodeFor(s);
 }
 
@@ -102,10 +113,14 @@ int Calibrate(const std::string& recording_path, const std::string& config_path,
   RecordingParser parser(recording_path, /*collect=*/true);
   PrepareParser(config, &parser);
   s = ParseRecordingFile(recording_path, &parser);
-  if (!s.ok()) return Report(s);
+  if (!s.ok()) {
+    return ReportFailure(s.reason() == Reason::kUnspecified && s.code() == StatusCode::kInvalidInput
+                             ? s.WithReason(Reason::kRecordingUnreadable)
+                             : s);
+  }
   json result;
   s = CalibrateParsed(&parser, recording_path, config, &result, nullptr, acceptance);
-  if (!s.ok()) return Report(s);
+  if (!s.ok()) return ReportFailure(s);
   std::cout << (compact ? result.dump() : result.dump(2)) << "\n";
   // The verdict for people too (the exit code stays 0: a result was computed; a rejected one is
   // what a server would not serve).

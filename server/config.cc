@@ -173,13 +173,14 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
                        const json& acceptance_defaults, core::TaskExecutor executor) {
   CommonConfig common;
   Status s = ValidateConfig(config, &common);
-  if (!s.ok()) return s;
+  if (!s.ok()) return s.reason() == Reason::kUnspecified ? s.WithReason(Reason::kInvalidConfig) : s;
   const Method* method = FindMethod(common.method);
   const Layout layout = parser->summary().layout;
   if (!method->Reads(layout)) {
-    return Status::InvalidInput(std::string("the config says method '") + common.method +
-                                "' but the recording has the " + LayoutName(layout) +
-                                " layout, which it cannot read (SPEC §2)")
+    return Status::InvalidInput(Reason::kInvalidConfig,
+                                std::string("the config says method '") + common.method +
+                                    "' but the recording has the " + LayoutName(layout) +
+                                    " layout, which it cannot read (SPEC §2)")
         .WithFile(file_name)
         .WithField("method");
   }
@@ -197,7 +198,11 @@ Status Calibrate(std::string_view recording, const std::string& file_name, const
   RecordingParser parser(file_name, /*collect=*/true);
   PrepareParser(config, &parser);
   Status s = ParseRecording(recording, &parser);
-  if (!s.ok()) return s;
+  if (!s.ok()) {
+    return s.reason() == Reason::kUnspecified && s.code() == StatusCode::kInvalidInput
+               ? s.WithReason(Reason::kRecordingUnreadable)
+               : s;
+  }
   return CalibrateParsed(&parser, file_name, config, result, cancel, acceptance_defaults);
 }
 

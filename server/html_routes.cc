@@ -4,6 +4,7 @@
 
 #include "server/config.h"
 #include "server/device_lookup.h"
+#include "server/failure_reasons.h"
 #include "server/http_util.h"
 #include "server/method.h"
 #include "storage/store.h"
@@ -26,6 +27,16 @@ web::JobSummary Summarize(const storage::JobInfo& job) {
   s.finished_at = job.finished_at;
   s.attempts = static_cast<int>(job.attempts);
   if (job.status != JobStatus::kSucceeded) s.error = job.error_message;
+  if (job.status == JobStatus::kFailed) {
+    const FailureReason& reason = StoredFailureReason(job.error_reason, job.error_code);
+    s.error_reason = reason.code;
+    s.error_title = reason.title;
+    s.error_advice = reason.advice;
+    if (!job.error_detail_json.empty()) {
+      s.error_detail = json::parse(job.error_detail_json, nullptr, /*allow_exceptions=*/false);
+      if (s.error_detail.is_discarded()) s.error_detail = json();
+    }
+  }
   if (!job.result_json.empty()) {
     json result;
     if (ParseJsonText(job.result_json, "result", &result).ok()) s.result = std::move(result);

@@ -3,6 +3,8 @@
 #include <regex>
 #include <vector>
 
+#include "server/failure_reasons.h"
+
 namespace calibd::server {
 
 using nlohmann::json;
@@ -37,15 +39,28 @@ std::string JsonBody(const json& value) {
   return value.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
 }
 
-void SendError(httplib::Response& res, int status, const std::string& code,
-               const std::string& message, int64_t line, int64_t column, const std::string& field) {
+namespace {
+
+json ErrorObject(const std::string& code, const std::string& message, int64_t line, int64_t column,
+                 const std::string& field) {
   json error = {{"code", code}, {"message", message}};
   if (line > 0) error["line"] = line;
   if (column > 0) error["column"] = column;
   if (!field.empty()) error["field"] = field;
+  return error;
+}
+
+void SendErrorObject(httplib::Response& res, int status, const json& error) {
   res.status = status;
   // dump with replacement: user text in messages may hold invalid UTF-8.
   res.set_content(JsonBody(json{{"error", error}}), "application/json");
+}
+
+}  // namespace
+
+void SendError(httplib::Response& res, int status, const std::string& code,
+               const std::string& message, int64_t line, int64_t column, const std::string& field) {
+  SendErrorObject(res, status, ErrorObject(code, message, line, column, field));
 }
 
 int SendStatus(httplib::Response& res, const Status& s) {
@@ -88,7 +103,15 @@ int SendStatus(httplib::Response& res, const Status& s) {
   std::string message = s.message();
   if (status == 500) message = "internal server error";  // no internals to clients
   if (status == 503) res.set_header("Retry-After", "1");
-  SendError(res, status, StatusCodeName(s.code()), message, s.line(), s.column(), s.field());
+  json error = ErrorObject(StatusCodeName(s.code()), message, s.line(), s.column(), s.field());
+  if (s.reason() != Reason::kUnspecified && status != 500) {
+    // A refusal with a failure reason (e.g. over_memory_budget, invalid_config): its code and
+    // advice as in a failed job's error (README "Failure reasons").
+    const FailureReason& reason = DescribeReason(s.reason());
+    error["reason"] = reason.code;
+    error["advice"] = reason.advice;
+  }
+  SendErrorObject(res, status, error);
   return status;
 }
 

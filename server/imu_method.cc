@@ -417,7 +417,8 @@ class Imu : public Method {
              json* result) const override {
     core::ImuOptions options;
     Status s = ParseImuConfig(config, &options);
-    if (!s.ok()) return s;
+    if (!s.ok())
+      return s.reason() == Reason::kUnspecified ? s.WithReason(Reason::kInvalidConfig) : s;
     ArrayRecording log;
     s = parser->TakeArray(&log);
     if (!s.ok()) return s;
@@ -448,7 +449,7 @@ class Imu : public Method {
     log.gyro.resize(0, 0);
     std::vector<core::ImuResult> results;
     s = core::CalibrateImus(log.t, readings, options, &results);
-    if (!s.ok()) return s;
+    if (results.empty()) return s.ok() ? Status::Internal("imu: no result") : s;
     json params = json::array(), stds = json::array(), diagnostics = json::array(),
          warnings = json::array();
     for (const core::ImuResult& r : results) {
@@ -479,6 +480,25 @@ class Imu : public Method {
     for (const auto& iv : d.intervals) {
       statics.push_back({{"start", Num(iv.start)}, {"end", Num(iv.end)}, {"samples", iv.samples}});
     }
+    json diagnostics_block = {{"statics", statics},
+                              {"rate", Num(rate)},
+                              {"gaps", gaps},
+                              {"noise_jobs", NoiseJobsJson(config)},
+                              {"noise_model", NoiseModelJson(config)},
+                              {"saturated_samples", d.saturated_samples},
+                              {"static_window", Num(options.detection.static_window)},
+                              {"min_static", Num(options.detection.min_static)},
+                              {"threshold_choice", results.front().threshold_choice},
+                              {"imus", diagnostics}};
+    if (!s.ok()) {
+      // What was found before failing: the statics on the timeline, per IMU its coverage,
+      // rotations and termination (the partial diagnostics kept with the failed job).
+      *result = {{"method", "imu"},
+                 {"usable", false},
+                 {"diagnostics", std::move(diagnostics_block)},
+                 {"warnings", warnings}};
+      return s;
+    }
     *result = {
         {"method", "imu"},
         {"model",
@@ -494,17 +514,7 @@ class Imu : public Method {
           {"gyro_unit", Num(options.gyro_unit)},
           {"imus", params}}},
         {"uncertainty", {{"imus", stds}}},
-        {"diagnostics",
-         {{"statics", statics},
-          {"rate", Num(rate)},
-          {"gaps", gaps},
-          {"noise_jobs", NoiseJobsJson(config)},
-          {"noise_model", NoiseModelJson(config)},
-          {"saturated_samples", d.saturated_samples},
-          {"static_window", Num(options.detection.static_window)},
-          {"min_static", Num(options.detection.min_static)},
-          {"threshold_choice", results.front().threshold_choice},
-          {"imus", diagnostics}}},
+        {"diagnostics", std::move(diagnostics_block)},
         {"warnings", warnings}};
     return Status::Ok();
   }

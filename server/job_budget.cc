@@ -33,12 +33,14 @@ Status CheckJobBudget(const Method& method, const RecordingShape& shape,
   const int64_t need = EstimateJobBytes(method, shape, config);
   if (need <= budget_bytes) return Status::Ok();
   return Status::NotDeterminable(
+             Reason::kOverMemoryBudget,
              std::string("a ") + method.name() + " job on this recording (" +
-             std::to_string(shape.rows) + " rows x " + std::to_string(shape.columns) +
-             " columns) needs about " + MiB(static_cast<double>(need)) +
-             ", more than the per-job memory budget of " + MiB(static_cast<double>(budget_bytes)) +
-             ": split the log into shorter recordings, or start the server with a larger "
-             "--job-memory-bytes")
+                 std::to_string(shape.rows) + " rows x " + std::to_string(shape.columns) +
+                 " columns) needs about " + MiB(static_cast<double>(need)) +
+                 ", more than the per-job memory budget of " +
+                 MiB(static_cast<double>(budget_bytes)) +
+                 ": split the log into shorter recordings, or start the server with a larger "
+                 "--job-memory-bytes")
       .WithField("job_memory");
 }
 

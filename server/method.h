@@ -67,6 +67,11 @@ class Method {
   // Takes the recording from a finished, collecting parser of a layout it Reads(), and writes the
   // SPEC §4 result. kInvalidInput (config or data that cannot be used as given),
   // kNotDeterminable (the data cannot determine the parameters; the message says what to record).
+  // A failure carries its Reason (Status::reason(), catalog in server/failure_reasons.h:
+  // kInvalidConfig for a config key) and, once the numerics have run, leaves the partial
+  // diagnostics in `result`: {"method", "usable": false, "diagnostics": {what was found before
+  // failing}, "warnings"}, which the worker keeps with the failed job and the method's report
+  // renders (web::MethodReport::Partial). A failure before the numerics leaves `result` as is.
   virtual Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
                      nlohmann::json* result) const = 0;
   // Called before the recording is fed to the collecting parser that Run will take it from

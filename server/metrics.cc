@@ -71,6 +71,12 @@ void Metrics::ObserveVerdict(const std::string& method, const std::string& verdi
               "\""];
 }
 
+void Metrics::ObserveFailure(const std::string& method, const std::string& reason) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++failures_["method=\"" + EscapeLabelValue(method) + "\",reason=\"" + EscapeLabelValue(reason) +
+              "\""];
+}
+
 void Metrics::ObserveUpload(int64_t bytes, int status) {
   std::lock_guard<std::mutex> lock(mu_);
   upload_bytes_ += static_cast<uint64_t>(std::max<int64_t>(bytes, 0));
@@ -108,6 +114,9 @@ std::string Metrics::Render(const std::map<std::string, std::map<std::string, do
            "Results judged by the acceptance gate, by method and verdict (rejected results are "
            "never served).",
            verdicts_);
+  counters("calibd_job_failures_total",
+           "Jobs that failed for good, by method and failure reason (README \"Failure reasons\").",
+           failures_);
   histograms("calibd_job_duration_seconds", "Calibration job run time by method.", job_bounds_,
              job_duration_);
   counters("calibd_uploads_total", "Recording uploads by HTTP status.", uploads_);

@@ -24,6 +24,8 @@ class Metrics {
   void ObserveJob(const std::string& method, const std::string& outcome, double seconds);
   // The acceptance gate judged a stored result: verdict "accepted" | "rejected".
   void ObserveVerdict(const std::string& method, const std::string& verdict);
+  // A job failed for good with this reason code (server/failure_reasons.h).
+  void ObserveFailure(const std::string& method, const std::string& reason);
   // Bytes of an upload body received (whether or not it was accepted), and its outcome.
   void ObserveUpload(int64_t bytes, int status);
 
@@ -45,6 +47,7 @@ class Metrics {
   std::map<std::string, Histogram> job_duration_;
   std::map<std::string, uint64_t> jobs_;
   std::map<std::string, uint64_t> verdicts_;
+  std::map<std::string, uint64_t> failures_;  // method, reason -> count
   std::map<std::string, uint64_t> uploads_;
   uint64_t upload_bytes_ = 0;
 };

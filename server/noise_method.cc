@@ -184,7 +184,8 @@ class Noise : public Method {
     core::NoiseOptions options;
     InertialUnits units;
     Status s = ParseNoiseConfig(config, &options, &units);
-    if (!s.ok()) return s;
+    if (!s.ok())
+      return s.reason() == Reason::kUnspecified ? s.WithReason(Reason::kInvalidConfig) : s;
     options.executor = context.executor;
     // The samples as floats in SI, one column per channel (the analysis reads them in place).
     // A prepared parser (PrepareParser) collected them so: held once, 4 bytes a value. Otherwise
@@ -224,11 +225,18 @@ class Noise : public Method {
     }
     core::NoiseResult r;
     s = core::EstimateNoise(problem, options, &r);
-    if (!s.ok()) return s;
     *result = NoiseResultToJson(r, options.taus_per_decade);
     (*result)["diagnostics"]["units"] = {{"accel_unit", units.accel_text},
                                          {"gyro_unit", units.gyro_text}};
-    return Status::Ok();
+    if (!s.ok()) {
+      // The partial diagnostics kept with the failed job: rate, duration, jitter, per channel
+      // its status and reason (which one moved) and the Allan curve as far as it was computed.
+      json partial = {{"method", "noise"}, {"usable", false}};
+      partial["diagnostics"] = std::move((*result)["diagnostics"]);
+      partial["warnings"] = std::move((*result)["warnings"]);
+      *result = std::move(partial);
+    }
+    return s;
   }
 };
 

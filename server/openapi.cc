@@ -1,5 +1,6 @@
 // The OpenAPI 3 description of the HTTP API (GET /api/v1/openapi.json). Kept true by
 // tests/server/http_api_test.cc, which checks every documented path against the running server.
+#include "server/failure_reasons.h"
 #include "server/http_util.h"
 #include "server/method.h"
 
@@ -49,6 +50,35 @@ json Build() {
   doc["servers"] = json::array({{{"url", "/api/v1"}}});
   doc["components"]["securitySchemes"]["bearer"] = {{"type", "http"}, {"scheme", "bearer"}};
   auto& schemas = doc["components"]["schemas"];
+  {
+    // A job's last failure (SPEC §5 extended: reason, title, advice, diagnostics).
+    json reasons = json::array();
+    for (const FailureReason& r : AllFailureReasons()) reasons.push_back(r.code);
+    schemas["JobFailure"] = {
+        {"type", "object"},
+        {"required", {"code", "reason", "message", "advice"}},
+        {"properties",
+         {{"code",
+           {{"type", "string"},
+            {"description",
+             "the kind of failure: invalid_input, not_determinable, lease_expired, ..."}}},
+          {"reason",
+           {{"type", "string"},
+            {"enum", reasons},
+            {"description", "why, as a stable snake_case code (README, Failure reasons)"}}},
+          {"title", {{"type", "string"}, {"description", "the reason in a few words"}}},
+          {"message", {{"type", "string"}, {"description", "the method's own account"}}},
+          {"advice",
+           {{"type", "string"},
+            {"description", "what to record or set instead (looked up by reason)"}}},
+          {"diagnostics",
+           {{"type", "object"},
+            {"nullable", true},
+            {"description",
+             "what the method found before failing: {method, usable: false, diagnostics, "
+             "warnings}, at most 1 MiB (trimmed says what was left out); null in job lists without "
+             "include_results"}}}}}};
+  }
   schemas["Error"] = {
       {"type", "object"},
       {"required", {"error"}},
@@ -88,7 +118,7 @@ json Build() {
         {"started_at", {{"type", "string"}, {"nullable", true}}},
         {"finished_at", {{"type", "string"}, {"nullable", true}}},
         {"attempts", {{"type", "integer"}}},
-        {"error", {{"type", "object"}, {"nullable", true}}},
+        {"error", {{"allOf", json::array({Ref("JobFailure")})}, {"nullable", true}}},
         {"result", {{"allOf", json::array({Ref("Result")})}, {"nullable", true}}},
         {"config", {{"type", "object"}}},
         {"verdict",

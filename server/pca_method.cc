@@ -202,14 +202,23 @@ Status RunPca(const PcaRecording& recording, const core::PcaOptions& options, js
     }
   }
   core::PcaResult r;
-  Status s = core::CalibratePca(problem, options, &r);
-  if (!s.ok()) return s;
+  const Status s = core::CalibratePca(problem, options, &r);
   *result = PcaResultToJson(r);
   (*result)["diagnostics"]["position_labels"] = recording.position_labels;
   if (recording.raw) {
     (*result)["diagnostics"]["removed_bias"] = Vec(problem.removed_bias);
   }
-  return Status::Ok();
+  if (!s.ok()) {
+    // The partial diagnostics kept with the failed job (diagnostics.usable = false, the
+    // positions, singular values and rank gap, coverage when the fit got that far); the
+    // parameters are not estimates, so they are not written.
+    json partial = {{"method", "pca"}, {"usable", false}};
+    partial["diagnostics"] = std::move((*result)["diagnostics"]);
+    partial["diagnostics"].erase("reason");  // the failure's message, stored beside it
+    partial["warnings"] = std::move((*result)["warnings"]);
+    *result = std::move(partial);
+  }
+  return s;
 }
 
 Status SimulatePcaFiles(const core::PcaSimulationOptions& options, std::string* csv, json* config,
@@ -484,7 +493,8 @@ class Pca : public Method {
     if (!s.ok()) return s;
     core::PcaOptions options;
     s = ParsePcaConfig(config, &options);
-    if (!s.ok()) return s;
+    if (!s.ok())
+      return s.reason() == Reason::kUnspecified ? s.WithReason(Reason::kInvalidConfig) : s;
     return RunPca(recording, options, result);
   }
 };

@@ -30,7 +30,9 @@ Status ParsePcaConfig(const nlohmann::json& config, core::PcaOptions* options);
 // means, with the standard error of that mean as bias_std. Values that are undefined (e.g. an
 // uncertainty without a noise estimate, the rank gap when there is no σ_{d+1}) are written as
 // null, never NaN. Deterministic. Errors as core::CalibratePca (the message of a
-// kNotDeterminable says what to record instead).
+// kNotDeterminable says what to record instead, Status::reason() why); on an error from the
+// numerics `result` holds the partial diagnostics {"method": "pca", "usable": false,
+// "diagnostics", "warnings"} (no parameters).
 Status RunPca(const PcaRecording& recording, const core::PcaOptions& options,
               nlohmann::json* result);
 

@@ -4,6 +4,7 @@
 #include <nlohmann/json.hpp>
 
 #include "server/config.h"
+#include "server/failure_reasons.h"
 #include "server/job_budget.h"
 #include "server/method.h"
 #include "server/recording.h"
@@ -151,18 +152,26 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
   auto seconds = [&] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   };
+  nlohmann::json config, result;
+  // The failure with its reason code and, when the method got as far as its numerics, the
+  // partial diagnostics it left in `result` (capped: kMaxPartialDiagnosticsBytes).
   auto fail = [&](const Status& s, bool transient) {
-    Status f =
-        store_->FailJob(job.id, worker_id, StatusCodeName(s.code()), s.ToString(), transient);
+    storage::JobFailure failure;
+    failure.code = StatusCodeName(s.code());
+    failure.reason = DescribeReason(ReasonOf(s)).code;
+    failure.message = s.ToString();
+    failure.detail_json = PartialDiagnosticsText(result, kMaxPartialDiagnosticsBytes);
+    Status f = store_->FailJob(job.id, worker_id, failure, transient);
     if (!f.ok()) {
       std::cerr << "calibd: " << worker_id << ": recording the failure of job " << job.id
                 << " failed: " << f.ToString() << "\n";
     }
     metrics_->ObserveJob(job.method, transient ? "retried" : "failed", seconds());
+    if (!transient) metrics_->ObserveFailure(job.method, failure.reason);
   };
 
-  nlohmann::json config, result;
   Status s = ParseJsonText(job.config_json, "config of job " + std::to_string(job.id), &config);
+  if (!s.ok()) s.WithReason(Reason::kInvalidConfig);
   if (s.ok()) {
     try {
       // The stored bytes stream through the collecting parser in the store's 1 MiB pieces, so
@@ -193,11 +202,14 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       });
       if (!s.ok()) return fail(s, s.IsTransient());
       if (parsed.ok() && !cancel.load()) parsed = parser.Finish();
+      if (!parsed.ok() && parsed.reason() == Reason::kUnspecified) {
+        parsed.WithReason(Reason::kRecordingUnreadable);
+      }
       s = parsed.ok() ? CalibrateParsed(&parser, file_name, config, &result, &cancel,
                                         options_.acceptance, options_.executor)
                       : parsed;
     } catch (const std::bad_alloc&) {
-      s = Status::IoError("out of memory while calibrating");
+      s = Status::IoError("out of memory while calibrating").WithReason(Reason::kOverMemoryBudget);
     } catch (const std::exception&) {
       // Never leak exception text to clients: the job says only that it was our fault.
       s = Status::Internal("internal error while calibrating; please report it");

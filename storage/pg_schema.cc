@@ -5,6 +5,8 @@
 //      at most 1 MiB (recording_chunks), jobs with leases and back-off, results with their sha256,
 //      verdict and decision, devices, device_calibrations (the latest served result per device
 //      and method), job_events.
+//   2  what SQLite schema version 4 adds: jobs.error_reason (a failure's reason code) and
+//      jobs.error_detail_json (the partial diagnostics of a failed calibration).
 #include <string>
 #include <vector>
 
@@ -92,8 +94,13 @@ CREATE TABLE job_events (
 CREATE INDEX job_events_by_job ON job_events(job_id, id);
 )sql";
 
+constexpr const char* kPgV2 = R"sql(
+ALTER TABLE jobs ADD COLUMN error_reason TEXT;
+ALTER TABLE jobs ADD COLUMN error_detail_json TEXT;
+)sql";
+
 const std::vector<const char*>& PgSteps() {
-  static const std::vector<const char*> steps = {kPgV1};
+  static const std::vector<const char*> steps = {kPgV1, kPgV2};
   return steps;
 }
 

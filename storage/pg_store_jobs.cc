@@ -73,7 +73,8 @@ Status PgStore::RecoverLocked(PgConn* c, int64_t now, int64_t* recovered) {
   // holder completing it, another host recovering it) is left to that transaction.
   Status s = c->Exec(
       "UPDATE jobs SET status = 'failed', finished_at = $1, lease_owner = NULL, "
-      "lease_expires_at = NULL, error_code = 'lease_expired', "
+      "lease_expires_at = NULL, error_code = 'lease_expired', error_reason = NULL, "
+      "error_detail_json = NULL, "
       "error_message = 'the lease of ' || COALESCE(lease_owner, '?') || "
       "' expired on attempt ' || attempts::text || ' of ' || $2::bigint::text || '; giving up' "
       "WHERE id IN (SELECT id FROM jobs WHERE status = 'running' AND lease_expires_at <= $1 "
@@ -83,7 +84,8 @@ Status PgStore::RecoverLocked(PgConn* c, int64_t now, int64_t* recovered) {
   total += res.Affected();
   s = c->Exec(
       "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_expires_at = NULL, "
-      "started_at = NULL, not_before = $1, error_code = 'lease_expired', "
+      "started_at = NULL, not_before = $1, error_code = 'lease_expired', error_reason = NULL, "
+      "error_detail_json = NULL, "
       "error_message = 'the lease of ' || COALESCE(lease_owner, '?') || ' expired' "
       "WHERE id IN (SELECT id FROM jobs WHERE status = 'running' AND lease_expires_at <= $1 "
       "FOR UPDATE SKIP LOCKED)",
@@ -223,7 +225,8 @@ Status PgStore::CompleteJob(int64_t job_id, const std::string& worker_id,
     if (!s.ok()) return s;
     s = c->Exec(
         "UPDATE jobs SET status = 'succeeded', finished_at = $2, lease_owner = NULL, "
-        "lease_expires_at = NULL, error_code = NULL, error_message = NULL WHERE id = $1",
+        "lease_expires_at = NULL, error_code = NULL, error_message = NULL, error_reason = NULL, "
+        "error_detail_json = NULL WHERE id = $1",
         {PgInt(job_id), PgInt(now)});
     if (!s.ok()) return s;
     if (!job.device.empty()) {
@@ -236,29 +239,34 @@ Status PgStore::CompleteJob(int64_t job_id, const std::string& worker_id,
   });
 }
 
-Status PgStore::FailJob(int64_t job_id, const std::string& worker_id, const std::string& code,
-                        const std::string& message, bool transient) {
+Status PgStore::FailJob(int64_t job_id, const std::string& worker_id, const JobFailure& failure,
+                        bool transient) {
   return Txn([&](PgConn* c) {
     JobInfo job;
     Status s = RequireHolder(c, job_id, worker_id, "fail", &job);
     if (!s.ok()) return s;
     const int64_t now = Now();
-    const std::string error_code = code.empty() ? std::string("error") : code;
+    const std::string error_code = failure.code.empty() ? std::string("error") : failure.code;
+    const PgParam reason = PgTextOrNull(failure.reason);
+    const PgParam detail = PgTextOrNull(failure.detail_json);
     if (transient && job.attempts < options_.max_attempts) {
       return c->Exec(
           "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_expires_at = NULL, "
-          "started_at = NULL, not_before = $2, error_code = $3, error_message = $4 WHERE id = $1",
+          "started_at = NULL, not_before = $2, error_code = $3, error_message = $4, "
+          "error_reason = $5, error_detail_json = $6 WHERE id = $1",
           {PgInt(job_id), PgInt(now + internal::Backoff(options_, job.attempts)),
-           PgText(error_code), PgText(message)});
+           PgText(error_code), PgText(failure.message), reason, detail});
     }
-    std::string final_message = message;
+    std::string final_message = failure.message;
     if (transient) {
-      final_message = "gave up after " + std::to_string(job.attempts) + " attempts: " + message;
+      final_message =
+          "gave up after " + std::to_string(job.attempts) + " attempts: " + failure.message;
     }
     return c->Exec(
         "UPDATE jobs SET status = 'failed', finished_at = $2, lease_owner = NULL, "
-        "lease_expires_at = NULL, error_code = $3, error_message = $4 WHERE id = $1",
-        {PgInt(job_id), PgInt(now), PgText(error_code), PgText(final_message)});
+        "lease_expires_at = NULL, error_code = $3, error_message = $4, error_reason = $5, "
+        "error_detail_json = $6 WHERE id = $1",
+        {PgInt(job_id), PgInt(now), PgText(error_code), PgText(final_message), reason, detail});
   });
 }
 

@@ -127,6 +127,15 @@ INSERT INTO device_calibrations (device, method, job_id, calibrated_at)
     ORDER BY COALESCE(k.finished_at, k.created_at) DESC, k.id DESC LIMIT 1);
 )sql";
 
+// Version 4: failure reasons (issue #14). jobs.error_reason is the failure's reason code
+// (server/failure_reasons.h, e.g. "too_few_positions"; NULL: none recorded, as for every
+// failure before v4) and jobs.error_detail_json the partial diagnostics the method found
+// before failing (a JSON object's text, capped by the worker; NULL: none).
+constexpr const char* kV4 = R"sql(
+ALTER TABLE jobs ADD COLUMN error_reason TEXT;
+ALTER TABLE jobs ADD COLUMN error_detail_json TEXT;
+)sql";
+
 // The hashes of results carried over from v1 are computed here (SQLite has no sha256()).
 Status HashCarriedOverResults(Db* db) {
   Stmt select;
@@ -162,6 +171,7 @@ const std::vector<Step>& Steps() {
       {kV1, nullptr},
       {kV2, &HashCarriedOverResults},
       {kV3, nullptr},
+      {kV4, nullptr},
   };
   return steps;
 }

@@ -9,6 +9,8 @@
 //   3  the acceptance gate: results.verdict (the gate's, from the result JSON), results.decision
 //      (a person's revoke/accept), job_events (who/when/why); device_calibrations holds the
 //      latest served (accepted, not revoked) result
+//   4  failure reasons: jobs.error_reason (the reason code of a failure) and
+//      jobs.error_detail_json (the partial diagnostics of a failed calibration)
 //
 // Thread-safety: functions take a Db the caller owns (one thread at a time).
 #ifndef CALIBD_STORAGE_SCHEMA_H_
@@ -21,7 +23,7 @@
 
 namespace calibd::storage {
 
-inline constexpr int kSchemaVersion = 3;
+inline constexpr int kSchemaVersion = 4;
 
 // Reads PRAGMA user_version.
 Status SchemaVersion(Db* db, int64_t* version);

@@ -49,8 +49,8 @@ class SqliteStore final : public Store {
   Status RenewLease(int64_t job_id, const std::string& worker_id, int64_t lease_ms) override;
   Status CompleteJob(int64_t job_id, const std::string& worker_id,
                      const std::string& result_json) override;
-  Status FailJob(int64_t job_id, const std::string& worker_id, const std::string& code,
-                 const std::string& message, bool transient) override;
+  Status FailJob(int64_t job_id, const std::string& worker_id, const JobFailure& failure,
+                 bool transient) override;
   Status ReleaseJob(int64_t job_id, const std::string& worker_id) override;
   Status RecoverExpiredLeases(int64_t* recovered) override;
   Status ExpireLeasesOf(const std::string& owner_prefix, int64_t* taken_back) override;

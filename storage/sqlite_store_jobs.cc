@@ -72,7 +72,8 @@ Status SqliteStore::RecoverLocked(Db* db, int64_t now, int64_t* recovered) {
   // Out of attempts: failed for good.
   Status s = db->Prepare(
       "UPDATE jobs SET status = 'failed', finished_at = ?1, lease_owner = NULL, "
-      "lease_expires_at = NULL, error_code = 'lease_expired', "
+      "lease_expires_at = NULL, error_code = 'lease_expired', error_reason = NULL, "
+      "error_detail_json = NULL, "
       "error_message = 'the lease of ' || COALESCE(lease_owner, '?') || "
       "' expired on attempt ' || attempts || ' of ' || ?2 || '; giving up' "
       "WHERE status = 'running' AND lease_expires_at <= ?1 AND attempts >= ?2",
@@ -85,7 +86,8 @@ Status SqliteStore::RecoverLocked(Db* db, int64_t now, int64_t* recovered) {
   // Otherwise: back in the queue, claimable at once.
   s = db->Prepare(
       "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_expires_at = NULL, "
-      "started_at = NULL, not_before = ?1, error_code = 'lease_expired', "
+      "started_at = NULL, not_before = ?1, error_code = 'lease_expired', error_reason = NULL, "
+      "error_detail_json = NULL, "
       "error_message = 'the lease of ' || COALESCE(lease_owner, '?') || ' expired' "
       "WHERE status = 'running' AND lease_expires_at <= ?1",
       &st);
@@ -247,7 +249,8 @@ Status SqliteStore::CompleteJob(int64_t job_id, const std::string& worker_id,
     if (!s.ok()) return s;
     s = db->Prepare(
         "UPDATE jobs SET status = 'succeeded', finished_at = ?2, lease_owner = NULL, "
-        "lease_expires_at = NULL, error_code = NULL, error_message = NULL WHERE id = ?1",
+        "lease_expires_at = NULL, error_code = NULL, error_message = NULL, error_reason = NULL, "
+        "error_detail_json = NULL WHERE id = ?1",
         &st);
     if (!s.ok()) return s;
     st.BindInt(1, job_id).BindInt(2, now);
@@ -263,37 +266,52 @@ Status SqliteStore::CompleteJob(int64_t job_id, const std::string& worker_id,
   });
 }
 
-Status SqliteStore::FailJob(int64_t job_id, const std::string& worker_id, const std::string& code,
-                            const std::string& message, bool transient) {
+Status SqliteStore::FailJob(int64_t job_id, const std::string& worker_id, const JobFailure& failure,
+                            bool transient) {
   return Write([&](Db* db) {
     Status s;
     JobInfo job;
     s = RequireHolder(db, job_id, worker_id, "fail", &job);
     if (!s.ok()) return s;
     const int64_t now = Now();
-    const std::string error_code = code.empty() ? std::string("error") : code;
+    const std::string error_code = failure.code.empty() ? std::string("error") : failure.code;
+    auto bind_failure = [&](Stmt* st, const std::string& message) {
+      st->BindText(3, error_code).BindText(4, message);
+      if (failure.reason.empty()) {
+        st->BindNull(5);
+      } else {
+        st->BindText(5, failure.reason);
+      }
+      if (failure.detail_json.empty()) {
+        st->BindNull(6);
+      } else {
+        st->BindText(6, failure.detail_json);
+      }
+    };
     Stmt st;
     if (transient && job.attempts < options_.max_attempts) {
       s = db->Prepare(
           "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_expires_at = NULL, "
-          "started_at = NULL, not_before = ?2, error_code = ?3, error_message = ?4 WHERE id = ?1",
+          "started_at = NULL, not_before = ?2, error_code = ?3, error_message = ?4, "
+          "error_reason = ?5, error_detail_json = ?6 WHERE id = ?1",
           &st);
       if (!s.ok()) return s;
-      st.BindInt(1, job_id)
-          .BindInt(2, now + Backoff(options_, job.attempts))
-          .BindText(3, error_code)
-          .BindText(4, message);
+      st.BindInt(1, job_id).BindInt(2, now + Backoff(options_, job.attempts));
+      bind_failure(&st, failure.message);
     } else {
-      std::string final_message = message;
+      std::string final_message = failure.message;
       if (transient) {
-        final_message = "gave up after " + std::to_string(job.attempts) + " attempts: " + message;
+        final_message =
+            "gave up after " + std::to_string(job.attempts) + " attempts: " + failure.message;
       }
       s = db->Prepare(
           "UPDATE jobs SET status = 'failed', finished_at = ?2, lease_owner = NULL, "
-          "lease_expires_at = NULL, error_code = ?3, error_message = ?4 WHERE id = ?1",
+          "lease_expires_at = NULL, error_code = ?3, error_message = ?4, error_reason = ?5, "
+          "error_detail_json = ?6 WHERE id = ?1",
           &st);
       if (!s.ok()) return s;
-      st.BindInt(1, job_id).BindInt(2, now).BindText(3, error_code).BindText(4, final_message);
+      st.BindInt(1, job_id).BindInt(2, now);
+      bind_failure(&st, final_message);
     }
     s = st.Run();
     if (!s.ok()) return s;

@@ -76,7 +76,8 @@ Status ValidateClaim(const std::string& worker_id, int64_t lease_ms) {
 // ---- rows ---------------------------------------------------------------------------------------
 
 std::string JobSelect(bool with_result) {
-  return std::string(kJobColumns) + (with_result ? "r.result_json" : "NULL") + kJobFrom;
+  return std::string(kJobColumns) + (with_result ? "r.result_json" : "NULL") +
+         ", j.error_reason, " + (with_result ? "j.error_detail_json" : "NULL") + kJobFrom;
 }
 
 void ReadJob(const Row& row, JobInfo* job) {
@@ -113,6 +114,8 @@ void ReadJob(const Row& row, JobInfo* job) {
     }
     job->result_json = row.Text(18);
   }
+  job->error_reason = row.Text(19);
+  job->error_detail_json = row.Text(20);
 }
 
 void ReadRecording(const Row& row, RecordingInfo* out) {

@@ -127,6 +127,14 @@ struct NewRecording {
   std::optional<NewJob> job;        // enqueued in the same transaction when set
 };
 
+// A failed run as the worker records it (Store::FailJob).
+struct JobFailure {
+  std::string code;         // the StatusCode's name ("not_determinable", ...); "" is "error"
+  std::string reason;       // the reason code (server/failure_reasons.h); "" none
+  std::string message;      // the method's own words: what it needed and what it found
+  std::string detail_json;  // the partial diagnostics, a JSON object's text; "" none
+};
+
 struct JobInfo {
   int64_t id = 0;
   int64_t recording_id = 0;
@@ -142,6 +150,12 @@ struct JobInfo {
   int64_t not_before_ms = 0;  // a queued job is not claimable before this time (back-off)
   std::string error_code;  // last failure ("" if none), e.g. "lease_expired" or the worker's code
   std::string error_message;
+  // The last failure's reason code (server/failure_reasons.h, e.g. "too_few_positions"; "" none
+  // recorded: a failure of the store itself such as lease_expired, or one before schema v4).
+  std::string error_reason;
+  // The partial diagnostics of a failed calibration: a JSON object's text ("" none). Read by
+  // GetJob and by ListJobs with include_results only.
+  std::string error_detail_json;
   std::string result_json;    // "" unless succeeded (and, for ListJobs, include_results)
   std::string result_sha256;  // hex SHA-256 of result_json, for an ETag
   // The acceptance gate (succeeded jobs only, else kNone): the gate's verdict of the result
@@ -302,10 +316,12 @@ class Store {
 
   // Records a failure of the holder's run. transient = true (I/O error, busy database): back to
   // queued, not claimable before now + back-off, unless attempts >= max_attempts, then failed.
-  // transient = false (the input cannot be calibrated): failed at once. error_code/message are
-  // kept on the job. kConflict if `worker_id` does not hold the job; kNotFound.
-  virtual Status FailJob(int64_t job_id, const std::string& worker_id, const std::string& code,
-                         const std::string& message, bool transient) = 0;
+  // transient = false (the input cannot be calibrated): failed at once. The failure's fields are
+  // kept on the job (error_code, error_reason, error_message, error_detail_json), stored as
+  // given (the caller caps detail_json). kConflict if `worker_id` does not hold the job;
+  // kNotFound.
+  virtual Status FailJob(int64_t job_id, const std::string& worker_id, const JobFailure& failure,
+                         bool transient) = 0;
 
   // Graceful shutdown: gives the job back (queued, claimable at once) without counting the
   // attempt. kConflict if not the holder; kNotFound.

@@ -49,14 +49,14 @@ class Row {
 };
 
 // The columns of a job row joined with its result (jobs j LEFT JOIN results r), in the order
-// ReadJob reads them; the last one is r.result_json or NULL (JobSelect). Plain column names,
-// the same in both backends' dialects.
+// ReadJob reads them; JobSelect appends r.result_json, j.error_reason and j.error_detail_json
+// (the two large ones NULL without results). Plain column names, the same in both dialects.
 inline constexpr const char* kJobColumns =
     "SELECT j.id, j.recording_id, j.method, j.device, j.config_json, j.status, j.attempts, "
     "j.lease_owner, j.lease_expires_at, j.created_at, j.started_at, j.finished_at, "
     "j.error_code, j.error_message, j.not_before, r.sha256, r.verdict, r.decision, ";
 inline constexpr const char* kJobFrom = " FROM jobs j LEFT JOIN results r ON r.job_id = j.id ";
-// kJobColumns + (with_result ? "r.result_json" : "NULL") + kJobFrom.
+// kJobColumns + result_json|NULL, error_reason, error_detail_json|NULL + kJobFrom.
 std::string JobSelect(bool with_result);
 // A job from a row of JobSelect: timestamps formatted ("" when NULL); result, verdict, decision
 // and state only for a succeeded job (state = the decision, else the verdict).

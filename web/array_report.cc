@@ -478,10 +478,38 @@ std::string ArrayDrift(const std::vector<const JobSummary*>& jobs) {
 
 namespace {
 
+// A failed array job: the samples used and dropped, and the excitation when the solver got
+// that far (the full model: statics, dynamic samples and the rotation excitation).
+std::string ArrayPartialReport(const JobView& view) {
+  const json* diag = Get(view.job.error_detail, "diagnostics");
+  std::string s = "<dl class=\"kv partial-array\">";
+  if (Str(Get(diag, "model")) == "full") {
+    const json* rot = Get(diag, "rotation");
+    s += "<dt>statics</dt><dd>" + E(ScalarText(Get(diag, "statics"))) + " (" +
+         E(ScalarText(Get(diag, "static_samples"))) + " samples)</dd><dt>dynamic samples</dt><dd>" +
+         E(ScalarText(Get(diag, "dynamic_samples"))) + "</dd><dt>rotation excitation</dt><dd>" +
+         E(Str(Get(rot, "verdict"))) + "</dd>";
+  } else {
+    const json* ex = Get(diag, "excitation");
+    const std::string verdict = Str(Get(ex, "verdict"));
+    s += "<dt>usable samples</dt><dd>" + E(ScalarText(Get(diag, "samples"))) + " (" +
+         E(ScalarText(Get(diag, "samples_dropped"))) +
+         " dropped for gyroscope saturation)</dd><dt>gyroscope triads</dt><dd>" +
+         E(ScalarText(Get(diag, "gyro_triads"))) + "</dd><dt>excitation</dt><dd>" +
+         (verdict.empty() ? std::string("not reached")
+                          : E(verdict) + " (smallest eigenvalue " +
+                                E(ScalarText(Get(ex, "min_eigenvalue"), 3)) + ", noise floor " +
+                                E(ScalarText(Get(ex, "noise_floor"), 3)) + ")") +
+         "</dd>";
+  }
+  return s + "</dl>";
+}
+
 class ArrayReportImpl : public MethodReport {
  public:
   const char* method() const override { return "array"; }
   std::string Section(const JobView& view) const override { return ArrayReport(view); }
+  std::string Partial(const JobView& view) const override { return ArrayPartialReport(view); }
   std::string KeyFigures(const json& result) const override {
     const ArrayFigures f = ComputeArrayFigures(result);
     if (!std::isfinite(f.rms_offset) && !std::isfinite(f.worst_sigma)) return "";

@@ -144,12 +144,77 @@ std::string ImuReport(const JobView& view) {
   return out;
 }
 
+// A failed imu job: the statics found on the timeline, and per IMU its coverage and rotations.
+std::string ImuPartial(const JobView& view) {
+  const json* diag = Get(view.job.error_detail, "diagnostics");
+  const json* statics = Array(Get(diag, "statics"));
+  const size_t n = statics != nullptr ? statics->size() : 0;
+  std::string s = "<dl class=\"kv partial-imu\"><dt>static intervals found</dt><dd>" +
+                  std::to_string(n) + "</dd><dt>sample rate</dt><dd>" +
+                  FormatSI(Num(Get(diag, "rate")), "Hz") + "</dd><dt>threshold</dt><dd>" +
+                  E(Str(Get(diag, "threshold_choice"))) + "</dd></dl>";
+  if (n > 0) {
+    PlotOptions o;
+    o.name = "imu-statics-found";
+    o.title = "Static intervals found";
+    o.x.title = "time t (s)";
+    o.y.title = "duration (s)";
+    o.width = 900;
+    o.height = 260;
+    o.y.include_zero = true;
+    Series mid;
+    mid.label = "static interval";
+    mid.line = false;
+    mid.marker = Marker::kCircle;
+    size_t k = 0;
+    for (const json& iv : *statics) {
+      const double a = Num(Get(&iv, "start")), b = Num(Get(&iv, "end"));
+      ++k;
+      if (!std::isfinite(a) || !std::isfinite(b)) continue;
+      o.bands.push_back({a, b, std::to_string(k)});
+      mid.x.push_back(0.5 * (a + b));
+      mid.y.push_back(b - a);
+    }
+    s += Figure(RenderXYPlot(o, {mid}),
+                "Shaded and numbered: the static intervals the detector found on the log's "
+                "timeline (marker: each one's duration).");
+  }
+  const json* imus = Array(Get(diag, "imus"));
+  if (imus != nullptr) {
+    for (const json& imu : *imus) {
+      const json* cov = Get(&imu, "coverage");
+      const json* missing = Array(Get(cov, "missing_up"));
+      std::string missing_text;
+      if (missing != nullptr) {
+        for (const json& m : *missing) {
+          if (m.is_string())
+            missing_text += (missing_text.empty() ? "" : ", ") + m.get<std::string>();
+        }
+      }
+      const json* rotations = Array(Get(&imu, "rotations"));
+      s += "<h3>IMU " + E(Str(Get(&imu, "name"))) + "</h3><dl class=\"kv\">";
+      s += "<dt>termination</dt><dd>" + E(Str(Get(&imu, "termination"))) + "</dd>";
+      s += "<dt>rotations between statics</dt><dd>" +
+           std::to_string(rotations != nullptr ? rotations->size() : 0) + "</dd>";
+      s += "<dt>orientation coverage</dt><dd class=\"coverage-verdict\">" +
+           E(Str(Get(cov, "verdict")).empty() ? std::string(kDash) : Str(Get(cov, "verdict"))) +
+           "</dd>";
+      if (!missing_text.empty()) {
+        s += "<dt>orientations missing (up)</dt><dd>" + E(missing_text) + "</dd>";
+      }
+      s += "</dl>";
+    }
+  }
+  return s;
+}
+
 namespace {
 
 class ImuReportImpl : public MethodReport {
  public:
   const char* method() const override { return "imu"; }
   std::string Section(const JobView& view) const override { return ImuReport(view); }
+  std::string Partial(const JobView& view) const override { return ImuPartial(view); }
   std::string Drift(const std::vector<const JobSummary*>& jobs) const override {
     return ImuDriftHtml(jobs);  // web/device_drift.h
   }

@@ -28,6 +28,15 @@ class MethodReport {
   // plots); the page adds the header, downloads and the diagnostics table. Never throws for a
   // result of an unexpected shape: says "not available" for what it cannot read.
   virtual std::string Section(const JobView& view) const = 0;
+  // The method's part of a failed job's page: what its partial diagnostics
+  // (view.job.error_detail: {"method", "usable": false, "diagnostics", "warnings"}) show, e.g.
+  // the statics found on a timeline; the page adds the reason, message, advice and the
+  // diagnostics table. "" when the method has nothing to draw. Never throws for a detail of an
+  // unexpected shape.
+  virtual std::string Partial(const JobView& view) const {
+    (void)view;
+    return "";
+  }
   // Key figures for the history and device tables, plain text (escaped by the caller); "" when
   // not available (the tables show a dash).
   virtual std::string KeyFigures(const nlohmann::json& result) const {

@@ -137,10 +137,34 @@ std::string NoiseReport(const JobView& view) {
 
 namespace {
 
+// A failed noise job: what was found (rate, duration, per channel its status and reason) and
+// the Allan curves as far as they were computed.
+std::string NoisePartialReport(const JobView& view) {
+  const json* diag = Get(view.job.error_detail, "diagnostics");
+  std::string s = "<dl class=\"kv partial-noise\"><dt>samples</dt><dd>" +
+                  E(ScalarText(Get(diag, "samples"))) + "</dd><dt>rate</dt><dd>" +
+                  FormatSI(Num(Get(diag, "rate")), "Hz") + "</dd><dt>duration</dt><dd>" +
+                  FormatSI(Num(Get(diag, "duration")), "s") + "</dd></dl>";
+  const json* channels = Array(Get(diag, "channels"));
+  if (channels != nullptr && !channels->empty()) {
+    s += "<div class=\"table-wrap\"><table class=\"table-noise-channels\"><thead><tr>"
+         "<th>channel</th><th>status</th><th>reason</th></tr></thead><tbody>";
+    for (const json& c : *channels) {
+      s += "<tr><td>" + E(Str(Get(&c, "name"))) + "</td><td>" + E(Str(Get(&c, "status"))) +
+           "</td><td>" + E(Str(Get(&c, "reason"))) + "</td></tr>";
+    }
+    s += "</tbody></table></div>";
+  }
+  const std::string figs = AllanPlot(diag, 'a', "m/s\xC2\xB2") + AllanPlot(diag, 'g', "rad/s");
+  if (!figs.empty()) s += "<div class=\"plots\">" + figs + "</div>";
+  return s;
+}
+
 class NoiseReportImpl : public MethodReport {
  public:
   const char* method() const override { return "noise"; }
   std::string Section(const JobView& view) const override { return NoiseReport(view); }
+  std::string Partial(const JobView& view) const override { return NoisePartialReport(view); }
   std::string Drift(const std::vector<const JobSummary*>& jobs) const override {
     return NoiseDriftHtml(jobs);  // web/device_drift.h
   }

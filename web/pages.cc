@@ -54,17 +54,24 @@ std::string DownloadsHtml(const JobView& view) {
 std::string StatusCallout(const JobView& view) {
   const JobSummary& job = view.job;
   if (job.status == JobStatus::kFailed) {
+    // The reason's title (looked up by code), the method's own message (what it needed and
+    // found), and the catalog's advice for the reason: each said once.
     std::string out =
-        "<div class=\"callout callout-error\"><p><strong>The calibration failed."
-        "</strong></p><p class=\"failure-reason\">" +
+        "<div class=\"callout callout-error\"><p><strong>The calibration failed" +
+        (job.error_title.empty() ? std::string(".") : ": " + E(job.error_title)) + "</strong>" +
+        (job.error_reason.empty()
+             ? std::string()
+             : " <span class=\"mono small failure-code\">" + E(job.error_reason) + "</span>") +
+        "</p><p class=\"failure-reason\">" +
         (job.error.empty() ? std::string("No reason was recorded.") : E(job.error)) + "</p>";
-    // The method's message is the one source of what was wrong and what to record or set
-    // instead (it knows the configuration it ran with); the page adds nothing that could repeat
-    // or contradict it.
-    if (!job.error.empty()) {
+    if (!job.error_advice.empty()) {
+      out += "<p class=\"failure-advice\"><strong>What to do:</strong> " + E(job.error_advice) +
+             "</p>";
+    }
+    if (job.error_detail.is_object()) {
       out +=
-          "<p class=\"muted small\">This is the method's own account: what it needed, what it "
-          "found, and what to record or change instead.</p>";
+          "<p class=\"muted small\">What the method found before failing is shown under <a "
+          "href=\"#partial\">Before the failure</a>.</p>";
     }
     return out + "</div>";
   }
@@ -73,15 +80,6 @@ std::string StatusCallout(const JobView& view) {
            ". Reload the page to see the result when it has finished.</p></div>";
   }
   if (job.status == JobStatus::kSucceeded) {
-    // A pca result whose preconditions failed (diagnostics.usable == false) says why.
-    const json* usable = Get(Get(job.result, "diagnostics"), "usable");
-    if (usable != nullptr && usable->is_boolean() && !usable->get<bool>()) {
-      const std::string reason = Str(Get(Get(job.result, "diagnostics"), "reason"));
-      return "<div class=\"callout callout-error\"><p><strong>The result is not usable.</strong>"
-             "</p><p class=\"failure-reason\">" +
-             E(reason.empty() ? std::string("The method's preconditions do not hold.") : reason) +
-             "</p></div>";
-    }
     const size_t w = WarningCount(job.result);
     if (w > 0) {
       return "<div class=\"callout callout-warn\"><p><strong>Succeeded with " + std::to_string(w) +
@@ -230,6 +228,24 @@ std::string JobBody(const JobView& view) {
     out += Guard("Diagnostics", [&] { return DiagnosticsSection(job.result); });
   } else if (job.status == JobStatus::kSucceeded) {
     out += NotAvailable("The result");
+  }
+  if (job.status == JobStatus::kFailed && job.error_detail.is_object() &&
+      !job.error_detail.empty()) {
+    // The partial diagnostics (diagnostics.usable == false): the method's report draws what it
+    // can, then the table of every key.
+    std::string method = Str(Get(job.error_detail, "method"));
+    if (method.empty()) method = job.method;
+    std::string body;
+    if (const MethodReport* report = FindMethodReport(method)) {
+      body = Guard("The partial report", [&] { return report->Partial(view); });
+    }
+    const json* trimmed = Get(job.error_detail, "trimmed");
+    if (trimmed != nullptr) {
+      body += "<p class=\"muted small\">" + E(Str(Get(trimmed, "note"))) + "</p>";
+    }
+    out += Section("partial", "Before the failure",
+                   "<p>What the method found before it stopped.</p>" + body);
+    out += Guard("Diagnostics", [&] { return DiagnosticsSection(job.error_detail); });
   }
   return out;
 }

@@ -68,7 +68,15 @@ struct JobSummary {
   std::string finished_at;  //   empty when not reached yet
   int attempts = 0;         // times a worker claimed it
   std::string error;        // failure message in plain words (failed jobs), else empty
-  nlohmann::json result;    // SPEC §4 result JSON; null when none (queued/running/failed)
+  // A failed job's reason (server/failure_reasons.h): its code ("too_few_positions"), title and
+  // the generic advice (what to record or set instead), looked up by code by the server; and the
+  // partial diagnostics the method found before failing ({"method", "usable": false,
+  // "diagnostics", "warnings"}; null when none). Empty/null for other jobs.
+  std::string error_reason;
+  std::string error_title;
+  std::string error_advice;
+  nlohmann::json error_detail;
+  nlohmann::json result;  // SPEC §4 result JSON; null when none (queued/running/failed)
   // The acceptance gate (succeeded jobs): accepted | rejected | revoked; kNone: taken from
   // result.verdict.status (no verdict: accepted). Only accepted results are served and compared.
   ServeState state = ServeState::kNone;
@@ -141,9 +149,11 @@ std::string RenderDevicesPage(const DevicesView& view);
 // method, status badge, created time, key figures, warnings flag), "older" pagination link.
 std::string RenderHistoryPage(const HistoryView& view);
 
-// The report of one job: header (device, method, recording download, config, timings, status or
-// the method's failure message, which says what to record instead), the model equation,
-// parameters with uncertainties, downloads, plots, diagnostics and warnings.
+// The report of one job: header (device, method, recording download, config, timings, status),
+// the model equation, parameters with uncertainties, downloads, plots, diagnostics and warnings.
+// A failed job instead: the reason's title and code, the method's message and the reason's
+// advice (each once, div.callout-error), then section#partial with what the method found before
+// failing (MethodReport::Partial) and the diagnostics table of the partial result.
 std::string RenderJobPage(const JobView& view);
 
 // One device: its calibrations over time and the drift of every parameter between successive

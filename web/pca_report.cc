@@ -369,6 +369,35 @@ std::string PcaReport(const JobView& view) {
   return out;
 }
 
+// A failed pca job: positions against the minimum, the singular values and rank gap, and the
+// coverage with its advice when the fit got that far.
+std::string PcaPartial(const JobView& view) {
+  const json* diag = Get(view.job.error_detail, "diagnostics");
+  double dd = Num(Get(view.config, "dimension"));
+  const size_t d = std::isfinite(dd) && dd >= 1 && dd <= 10 ? static_cast<size_t>(dd) : 3;
+  const double gap = Num(Get(diag, "rank_gap"));
+  std::string s = "<dl class=\"kv partial-pca\"><dt>positions n</dt><dd>" +
+                  E(ScalarText(Get(diag, "positions"))) + " (minimum " +
+                  E(ScalarText(Get(diag, "min_positions"))) + ")</dd><dt>rank gap " + kSigma +
+                  std::to_string(d) + "/" + kSigma + std::to_string(d + 1) + "</dt><dd>" +
+                  (std::isfinite(gap) ? E(FormatSig(gap, 3)) : std::string(kDash)) + "</dd>";
+  const json* cov = Get(diag, "coverage");
+  const std::string verdict = Str(Get(cov, "verdict"));
+  const std::string advice = Str(Get(cov, "advice"));
+  if (!verdict.empty() && verdict != "unknown") {
+    s += "<dt>orientation coverage</dt><dd class=\"coverage-verdict\">" + E(verdict) +
+         (advice.empty() ? std::string() : ": " + E(advice)) + "</dd>";
+  }
+  s += "</dl>";
+  const auto sv = NumArray(Get(diag, "singular_values"));
+  if (!sv.empty()) {
+    s += Figure(SingularValuePlot(*diag, d),
+                "The singular values of the readings: without a clear drop after index d the "
+                "readings do not determine d-dimensional sensitivities.");
+  }
+  return s;
+}
+
 std::string PcaDrift(const std::vector<const JobSummary*>& jobs) {
   std::vector<std::vector<PcaSensor>> sensors;
   for (const auto* j : jobs) sensors.push_back(ReadPcaSensors(j->result, json(), 3));
@@ -515,6 +544,7 @@ class PcaReportImpl : public MethodReport {
  public:
   const char* method() const override { return "pca"; }
   std::string Section(const JobView& view) const override { return PcaReport(view); }
+  std::string Partial(const JobView& view) const override { return PcaPartial(view); }
   std::string KeyFigures(const json& result) const override {
     const PcaFigures f = ComputePcaFigures(result);
     if (!std::isfinite(f.worst_rel_scale_std) && !std::isfinite(f.rank_gap)) return "";

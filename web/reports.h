@@ -36,6 +36,12 @@ std::string ArrayDrift(const std::vector<const JobSummary*>& jobs);
 std::string NoiseReport(const JobView& view);
 std::string ImuReport(const JobView& view);
 
+// The partial reports of failed jobs (MethodReport::Partial), one per method's file.
+std::string PcaPartial(const JobView& view);
+std::string ImuPartial(const JobView& view);
+std::string NoisePartialReport(const JobView& view);
+std::string ArrayPartialReport(const JobView& view);
+
 // The registry entries (web/method_reports.cc).
 const MethodReport& PcaMethodReport();
 const MethodReport& ArrayMethodReport();

@@ -107,6 +107,9 @@ TEST(JobBudget, AnUploadWhoseJobWouldNotFitIsRefused422AndNothingIsStored) {
   const json error = json::parse(refused->body)["error"];
   EXPECT_EQ(error["field"], "job_memory");
   EXPECT_NE(error["message"].get<std::string>().find("1200 rows"), std::string::npos);
+  // The refusal carries its failure reason and the catalog's advice (README "Failure reasons").
+  EXPECT_EQ(error["reason"], "over_memory_budget");
+  EXPECT_FALSE(error.value("advice", "").empty());
   // Nothing of the refused upload was kept: the same bytes uploaded without a method (no job,
   // nothing to budget) are new to the store.
   auto stored_only = Upload(server, big, false);
@@ -161,6 +164,8 @@ TEST(JobBudget, AJobQueuedUnderALargerBudgetIsFailedByTheWorkerWithTheReason) {
   EXPECT_NE(job["error"]["message"].get<std::string>().find("per-job memory budget"),
             std::string::npos)
       << job.dump();
+  EXPECT_EQ(job["error"]["reason"], "over_memory_budget");
+  EXPECT_TRUE(job["error"]["diagnostics"].is_null());  // refused before any numerics
   EXPECT_EQ(job["attempts"], 1);  // not retried: the same budget would refuse it again
 }
 

@@ -234,6 +234,51 @@ TEST(Schema, Version2ResultsGetTheirVerdictAndTheLatestBecomesTheLatestAccepted)
   EXPECT_EQ(check, "ok");
 }
 
+TEST(Schema, Version3FailuresKeepTheirCodeAndMessageWithoutAReason) {
+  TempDir dir;
+  const std::string path = dir.File("v3.db");
+  {
+    auto db = OpenDb(path);
+    ASSERT_TRUE(MigrateSchema(db.get(), 3).ok());
+    // What calibd with schema v3 wrote: a failed job with its code and message only.
+    ASSERT_TRUE(db->Exec("INSERT INTO recordings (id, sha256, bytes, device, layout, rows, "
+                         "created_at) VALUES (1, 'h', 3, 'SN1', 'pca_averaged', 1, 1000);"
+                         "INSERT INTO recording_data VALUES (1, X'616263');"
+                         "INSERT INTO jobs (id, recording_id, method, device, config_json, "
+                         "status, attempts, created_at, finished_at, error_code, error_message) "
+                         "VALUES (1, 1, 'pca', 'SN1', '{}', 'failed', 1, 1100, 2000, "
+                         "'not_determinable', '4 positions recorded');")
+                    .ok());
+  }
+  std::unique_ptr<Store> store;
+  StoreOptions o;
+  o.now_ms = [] { return int64_t{10000}; };
+  Status s = Store::Open(path, o, &store);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  {
+    auto db = OpenDb(path);
+    EXPECT_EQ(Version(db.get()), 4);
+  }
+  JobInfo job;
+  ASSERT_TRUE(store->GetJob(1, &job).ok());
+  EXPECT_EQ(job.status, JobStatus::kFailed);
+  EXPECT_EQ(job.error_code, "not_determinable");
+  EXPECT_EQ(job.error_message, "4 positions recorded");
+  EXPECT_EQ(job.error_reason, "");
+  EXPECT_EQ(job.error_detail_json, "");
+  // New failures on the migrated file keep both.
+  ASSERT_TRUE(store->EnqueueJob(1, "pca", "", "{}", &job).ok());
+  bool claimed = false;
+  ASSERT_TRUE(store->ClaimJob("w", 1000, &job, &claimed).ok());
+  ASSERT_TRUE(claimed);
+  ASSERT_TRUE(
+      store->FailJob(job.id, "w", {"not_determinable", "no_rank_gap", "m", "{\"a\":1}"}, false)
+          .ok());
+  ASSERT_TRUE(store->GetJob(job.id, &job).ok());
+  EXPECT_EQ(job.error_reason, "no_rank_gap");
+  EXPECT_EQ(job.error_detail_json, "{\"a\":1}");
+}
+
 TEST(Schema, NewerSchemaThanThisBuildIsRefused) {
   TempDir dir;
   {

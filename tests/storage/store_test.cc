@@ -485,7 +485,7 @@ TEST_P(StoreTest, QueueDepthCountsEveryState) {
   for (int i = 0; i < 5; ++i) Enqueue(rec);
   JobInfo a = Claim("w"), b = Claim("w"), c = Claim("w");
   ASSERT_TRUE(store_->CompleteJob(a.id, "w", "{}").ok());
-  ASSERT_TRUE(store_->FailJob(b.id, "w", "singular", "rank gap too small", false).ok());
+  ASSERT_TRUE(store_->FailJob(b.id, "w", {"singular", "", "rank gap too small", ""}, false).ok());
   QueueCounts q;
   ASSERT_TRUE(store_->QueueDepth(&q).ok());
   EXPECT_EQ(q.queued, 2);
@@ -543,7 +543,7 @@ TEST_P(StoreTest, RenewingALeaseTakenByAnotherWorkerIsAConflict) {
   EXPECT_NE(s.message().find("leased by w2"), std::string::npos) << s.message();
   // ... and so is completing, failing or releasing it.
   EXPECT_EQ(store_->CompleteJob(id, "w1", "{}").code(), StatusCode::kConflict);
-  EXPECT_EQ(store_->FailJob(id, "w1", "x", "y", true).code(), StatusCode::kConflict);
+  EXPECT_EQ(store_->FailJob(id, "w1", {"x", "", "y", ""}, true).code(), StatusCode::kConflict);
   EXPECT_EQ(store_->ReleaseJob(id, "w1").code(), StatusCode::kConflict);
   EXPECT_EQ(Get(id).lease_owner, "w2");
   EXPECT_TRUE(store_->CompleteJob(id, "w2", "{}").ok());
@@ -602,7 +602,7 @@ TEST_P(StoreTest, ClaimRejectsBadArguments) {
 TEST_P(StoreTest, TransientFailureRequeuesWithExponentialBackoff) {
   int64_t id = Enqueue(Put("x"));
   Claim("w1");
-  ASSERT_TRUE(store_->FailJob(id, "w1", "io_error", "disk hiccup", true).ok());
+  ASSERT_TRUE(store_->FailJob(id, "w1", {"io_error", "", "disk hiccup", ""}, true).ok());
   JobInfo job = Get(id);
   EXPECT_EQ(job.status, JobStatus::kQueued);
   EXPECT_EQ(job.attempts, 1);
@@ -617,7 +617,7 @@ TEST_P(StoreTest, TransientFailureRequeuesWithExponentialBackoff) {
   EXPECT_FALSE(claimed);  // backing off
   clock_.Advance(1);
   EXPECT_EQ(Claim("w2").id, id);
-  ASSERT_TRUE(store_->FailJob(id, "w2", "busy", "locked", true).ok());
+  ASSERT_TRUE(store_->FailJob(id, "w2", {"busy", "", "locked", ""}, true).ok());
   EXPECT_EQ(Get(id).not_before_ms, clock_.Now() + 2000);  // doubled
 }
 
@@ -631,7 +631,7 @@ TEST_P(StoreTest, BackoffIsCappedAtTheMaximum) {
   for (int i = 0; i < 6; ++i) {
     clock_.Advance(10000);
     Claim("w");
-    ASSERT_TRUE(store_->FailJob(id, "w", "io", "again", true).ok());
+    ASSERT_TRUE(store_->FailJob(id, "w", {"io", "", "again", ""}, true).ok());
   }
   EXPECT_EQ(Get(id).not_before_ms, clock_.Now() + 5000);
 }
@@ -645,7 +645,7 @@ TEST_P(StoreTest, TransientFailuresStopAtMaxAttempts) {
     clock_.Advance(1'000'000);
     JobInfo job = Claim("w");
     EXPECT_EQ(job.attempts, attempt);
-    ASSERT_TRUE(store_->FailJob(id, "w", "io_error", "disk", true).ok());
+    ASSERT_TRUE(store_->FailJob(id, "w", {"io_error", "", "disk", ""}, true).ok());
   }
   JobInfo job = Get(id);
   EXPECT_EQ(job.status, JobStatus::kFailed);
@@ -663,7 +663,8 @@ TEST_P(StoreTest, PermanentFailureFailsAtOnceWithTheReason) {
   int64_t id = Enqueue(Put("x"));
   Claim("w1");
   ASSERT_TRUE(
-      store_->FailJob(id, "w1", "not_determinable", "g is not positive definite", false).ok());
+      store_->FailJob(id, "w1", {"not_determinable", "", "g is not positive definite", ""}, false)
+          .ok());
   JobInfo job = Get(id);
   EXPECT_EQ(job.status, JobStatus::kFailed);
   EXPECT_EQ(job.attempts, 1);
@@ -671,6 +672,64 @@ TEST_P(StoreTest, PermanentFailureFailsAtOnceWithTheReason) {
   EXPECT_EQ(job.error_message, "g is not positive definite");
   EXPECT_EQ(job.finished_at_ms, clock_.Now());
   EXPECT_EQ(job.result_json, "");
+}
+
+TEST_P(StoreTest, AFailureKeepsItsReasonAndPartialDiagnostics) {
+  const int64_t id = Enqueue(Put("x"));
+  Claim("w1");
+  const std::string detail = R"({"method":"pca","usable":false,"diagnostics":{"positions":4}})";
+  ASSERT_TRUE(
+      store_
+          ->FailJob(id, "w1",
+                    {"not_determinable", "too_few_positions", "4 positions recorded", detail},
+                    false)
+          .ok());
+  JobInfo job = Get(id);
+  EXPECT_EQ(job.status, JobStatus::kFailed);
+  EXPECT_EQ(job.error_code, "not_determinable");
+  EXPECT_EQ(job.error_reason, "too_few_positions");
+  EXPECT_EQ(job.error_message, "4 positions recorded");
+  EXPECT_EQ(job.error_detail_json, detail);
+  // Lists carry the reason; the diagnostics only with include_results.
+  JobFilter f;
+  std::vector<JobInfo> page;
+  ASSERT_TRUE(store_->ListJobs(f, &page).ok());
+  ASSERT_EQ(page.size(), 1u);
+  EXPECT_EQ(page[0].error_reason, "too_few_positions");
+  EXPECT_EQ(page[0].error_detail_json, "");
+  f.include_results = true;
+  ASSERT_TRUE(store_->ListJobs(f, &page).ok());
+  ASSERT_EQ(page.size(), 1u);
+  EXPECT_EQ(page[0].error_detail_json, detail);
+}
+
+TEST_P(StoreTest, ARetriedFailureLeavesNoStaleReasonOnSuccessOrLeaseExpiry) {
+  const int64_t a = Enqueue(Put("x"));
+  Claim("w1");
+  ASSERT_TRUE(
+      store_->FailJob(a, "w1", {"io_error", "storage_error", "disk", "{\"x\":1}"}, true).ok());
+  JobInfo job = Get(a);
+  EXPECT_EQ(job.status, JobStatus::kQueued);
+  EXPECT_EQ(job.error_reason, "storage_error");
+  EXPECT_EQ(job.error_detail_json, "{\"x\":1}");
+  clock_.Advance(1'000'000);
+  Claim("w2", 1000);
+  clock_.Advance(2000);
+  int64_t n = 0;
+  ASSERT_TRUE(store_->RecoverExpiredLeases(&n).ok());
+  job = Get(a);
+  EXPECT_EQ(job.error_code, "lease_expired");
+  EXPECT_EQ(job.error_reason, "");
+  EXPECT_EQ(job.error_detail_json, "");
+  Claim("w3");
+  ASSERT_TRUE(store_->FailJob(a, "w3", {"io_error", "storage_error", "disk", "{}"}, true).ok());
+  clock_.Advance(1'000'000);
+  Claim("w4");
+  ASSERT_TRUE(store_->CompleteJob(a, "w4", "{}").ok());
+  job = Get(a);
+  EXPECT_EQ(job.error_code, "");
+  EXPECT_EQ(job.error_reason, "");
+  EXPECT_EQ(job.error_detail_json, "");
 }
 
 TEST_P(StoreTest, ReleaseRequeuesWithoutCountingTheAttempt) {
@@ -704,13 +763,13 @@ TEST_P(StoreTest, FailingOrReleasingAFinishedJobIsAConflict) {
   Claim("w");
   Claim("w");
   ASSERT_TRUE(store_->CompleteJob(ok, "w", "{}").ok());
-  ASSERT_TRUE(store_->FailJob(bad, "w", "bad", "bad input", false).ok());
-  EXPECT_EQ(store_->FailJob(ok, "w", "x", "y", false).code(), StatusCode::kConflict);
-  EXPECT_EQ(store_->FailJob(ok, "w", "x", "y", true).code(), StatusCode::kConflict);
+  ASSERT_TRUE(store_->FailJob(bad, "w", {"bad", "", "bad input", ""}, false).ok());
+  EXPECT_EQ(store_->FailJob(ok, "w", {"x", "", "y", ""}, false).code(), StatusCode::kConflict);
+  EXPECT_EQ(store_->FailJob(ok, "w", {"x", "", "y", ""}, true).code(), StatusCode::kConflict);
   EXPECT_EQ(store_->ReleaseJob(ok, "w").code(), StatusCode::kConflict);
   EXPECT_EQ(store_->RenewLease(ok, "w", 1000).code(), StatusCode::kConflict);
   EXPECT_EQ(store_->CompleteJob(bad, "w", "{}").code(), StatusCode::kConflict);
-  EXPECT_EQ(store_->FailJob(bad, "w", "x", "y", true).code(), StatusCode::kConflict);
+  EXPECT_EQ(store_->FailJob(bad, "w", {"x", "", "y", ""}, true).code(), StatusCode::kConflict);
   EXPECT_EQ(Get(ok).status, JobStatus::kSucceeded);
   EXPECT_EQ(Get(bad).status, JobStatus::kFailed);
   EXPECT_EQ(Get(bad).error_code, "bad");
@@ -721,7 +780,7 @@ TEST_P(StoreTest, OperationsOnUnknownJobsAreNotFound) {
   EXPECT_EQ(store_->GetJob(99, &job).code(), StatusCode::kNotFound);
   EXPECT_EQ(store_->RenewLease(99, "w", 1000).code(), StatusCode::kNotFound);
   EXPECT_EQ(store_->CompleteJob(99, "w", "{}").code(), StatusCode::kNotFound);
-  EXPECT_EQ(store_->FailJob(99, "w", "x", "y", false).code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->FailJob(99, "w", {"x", "", "y", ""}, false).code(), StatusCode::kNotFound);
   EXPECT_EQ(store_->ReleaseJob(99, "w").code(), StatusCode::kNotFound);
 }
 

@@ -69,6 +69,10 @@ j4=$(curl -sf -H 'Content-Type: text/csv' --data-binary @"$tmp/bad.csv" \
   "$base/api/v1/recordings?method=pca&device=%22%3E%3Cimg%20src%3Dx%20onerror%3Dalert(1)%3E" |
   job_id)
 wait_job "$j4"
+# A failed imu job: 5 statics where 9 are needed; its page shows the statics found.
+"$bin" simulate imu --out "$tmp/imu-few" --seed 3 --statics 5 2>/dev/null
+j9=$(upload "$tmp/imu-few" 'IMU-FEW')
+wait_job "$j9"
 # An inertial log: its recording page has the timeline with the statics.
 "$bin" simulate imu --out "$tmp/imu" --seed 3 --statics 12 2>/dev/null
 j7=$(upload "$tmp/imu" 'IMU-1')
@@ -115,6 +119,7 @@ render history /
 render pca "/jobs/$j2"
 render array "/jobs/$j3"
 render failed "/jobs/$j4"
+render failed-imu "/jobs/$j9"
 render device "/devices/$hostile"
 render revoked "/jobs/$j2"
 render rejected "/jobs/$j5"
@@ -129,6 +134,11 @@ expect pca 'class="page-job' 'table-pca-parameters' 'plot-singular-values' 'plot
   'plot-residual-rms' 'plot-axes-xy' 'plot-axes-xz' 'table-diagnostics'
 expect array 'table-array-parameters' 'plot-cost' 'plot-positions-xy' 'plot-positions-xz'
 expect failed 'callout-error' 'badge-failed'
+# The reason, its advice once, and what the method found before failing (issue #14).
+expect failed 'failure-code' 'too_few_positions' 'failure-advice' 'id="partial"' \
+  '2 (minimum 6)' 'table-diagnostics'
+expect failed-imu 'badge-failed' 'too_few_statics' 'failure-advice' 'id="partial"' \
+  'plot-imu-statics-found' 'coverage-verdict' 'table-diagnostics'
 expect full 'badge-succeeded' 'table-array-full-accelerometer' 'table-array-full-gyroscope' \
   'table-array-full-misalignment' 'table-array-full-change' \
   'plot-array-full-residuals-accelerometer' 'plot-array-full-residuals-gyroscope' \
@@ -154,7 +164,7 @@ expect recording 'class="page-recording' 'plot-timeline-accel' 'plot-timeline-gy
 expect device-drift 'imu (2 accepted calibrations' 'noise (2 accepted calibrations' \
   'table-drift-imu' 'table-drift-noise' 'data-sensor="accelerometer"' 'data-sensor="gyroscope"' \
   'plot-drift-imu-scale' 'plot-drift-noise-accel' 'plot-drift-noise-gyro'
-for page in history pca array failed device devices revoked rejected recording full device-drift; do
+for page in history pca array failed failed-imu device devices revoked rejected recording full device-drift; do
   reject "$page" '<script' '<img'
   if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"

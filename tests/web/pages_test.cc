@@ -312,17 +312,132 @@ TEST(JobPage, PcaReflectionIsExplainedWhereShown) {
   EXPECT_TRUE(Has(page, "either value is normal"));
 }
 
-TEST(JobPage, UnusablePcaResultSaysWhy) {
+// A failed job: the reason's title, the method's message and the catalog's advice, each once,
+// then what the method found before failing drawn by its report (pca: the singular values; the
+// partial result has diagnostics.usable == false) and the diagnostics table. No parameters.
+TEST(JobPage, FailedPcaJobShowsReasonMessageAdviceOnceAndThePartialDiagnostics) {
   JobView v;
-  json r = PcaResult();
-  r["diagnostics"]["usable"] = false;
-  r["diagnostics"]["reason"] = "g is not positive definite";
-  v.job = Job(32, "IMU-0042", "pca", "succeeded", "2026-11-20T09:20:00Z", r);
+  v.job = Job(34, "IMU-0042", "pca", "failed", "2026-11-20T09:20:00Z", json());
+  v.job.error = "no clear gap between singular values 3 and 4 (ratio 1.01)";
+  v.job.error_reason = "no_rank_gap";
+  v.job.error_title = "No clear rank gap";
+  v.job.error_advice = "Record positions whose field directions differ more.";
+  v.job.error_detail = {
+      {"method", "pca"},
+      {"usable", false},
+      {"diagnostics",
+       {{"usable", false},
+        {"reason", "no clear gap"},
+        {"singular_values", {9.1, 8.7, 0.0102, 0.0101, 0.0099, 0.0098}},
+        {"rank_gap", 1.01},
+        {"positions", 12},
+        {"min_positions", 6},
+        {"coverage", {{"verdict", "poor"}, {"advice", "add positions with z up"}}}}},
+      {"warnings", json::array()}};
+  v.config = PcaConfig();
   const std::string page = RenderJobPage(v);
   ExpectDocument(page, "page-job");
-  EXPECT_TRUE(Has(page, "The result is not usable."));
-  EXPECT_TRUE(Has(page, "g is not positive definite"));
-  EXPECT_TRUE(Has(page, "noise \xCF\x83 = 0.0100"));
+  for (const std::string& once :
+       {std::string("No clear rank gap"), std::string("no clear gap between singular values 3"),
+        std::string("Record positions whose field directions differ more.")}) {
+    const size_t at = page.find(once);
+    ASSERT_NE(at, std::string::npos) << once;
+    EXPECT_EQ(page.find(once, at + 1), std::string::npos) << once << " is shown once";
+  }
+  EXPECT_TRUE(Has(page, "failure-code"));
+  EXPECT_TRUE(Has(page, "id=\"partial\""));
+  EXPECT_TRUE(Has(page, "plot-singular-values"));
+  EXPECT_TRUE(Has(page, "12 (minimum 6)"));
+  EXPECT_TRUE(Has(page, "add positions with z up"));
+  EXPECT_TRUE(Has(page, "table-diagnostics"));
+  EXPECT_FALSE(Has(page, "id=\"parameters\""));
+}
+
+TEST(JobPage, FailedImuJobShowsTheStaticsFoundOnTheTimelineAndTheCoverage) {
+  JobView v;
+  v.job = Job(35, "IMU-0042", "imu", "failed", "2026-11-20T09:20:00Z", json());
+  v.job.error = "found 3 static intervals, at least 9 are needed";
+  v.job.error_reason = "too_few_statics";
+  v.job.error_title = "Too few static intervals";
+  v.job.error_advice = "Hold the device still in more orientations.";
+  json statics = json::array();
+  for (int i = 0; i < 3; ++i) {
+    statics.push_back({{"start", 10.0 * i}, {"end", 10.0 * i + 4}, {"samples", 400}});
+  }
+  v.job.error_detail = {
+      {"method", "imu"},
+      {"usable", false},
+      {"diagnostics",
+       {{"statics", statics},
+        {"rate", 100},
+        {"threshold_choice", "single multiplier given"},
+        {"imus",
+         {{{"name", "0"},
+           {"usable", false},
+           {"termination", "too_few_statics"},
+           {"rotations", json::array()},
+           {"coverage", {{"verdict", "missing: z up, z down"}, {"missing_up", {"+z", "-z"}}}}}}}}}};
+  const std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "plot-imu-statics-found"));
+  EXPECT_TRUE(Has(page, "missing: z up, z down"));
+  EXPECT_TRUE(Has(page, "+z, -z"));
+  EXPECT_TRUE(Has(page, "Hold the device still in more orientations."));
+}
+
+TEST(JobPage, FailedNoiseAndArrayJobsShowWhatWasFound) {
+  JobView noise;
+  noise.job = Job(37, "IMU-0042", "noise", "failed", "2026-11-20T09:20:00Z", json());
+  noise.job.error = "the log is not stationary";
+  noise.job.error_detail = {{"method", "noise"},
+                            {"usable", false},
+                            {"diagnostics",
+                             {{"samples", 6000},
+                              {"rate", 100},
+                              {"duration", 60},
+                              {"channels",
+                               {{{"name", "a0_x"},
+                                 {"status", "not_stationary"},
+                                 {"reason", "the mean jumps at 30 s"}}}}}}};
+  std::string page = RenderJobPage(noise);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "table-noise-channels"));
+  EXPECT_TRUE(Has(page, "the mean jumps at 30 s"));
+  JobView array;
+  array.job = Job(38, "ARRAY-1", "array", "failed", "2026-11-20T09:20:00Z", json());
+  array.job.error = "the motion does not determine the positions";
+  array.job.error_detail = {
+      {"method", "array"},
+      {"usable", false},
+      {"diagnostics",
+       {{"samples", 900},
+        {"samples_dropped", 100},
+        {"gyro_triads", 4},
+        {"excitation",
+         {{"verdict", "insufficient"}, {"min_eigenvalue", 1e-3}, {"noise_floor", 2e-3}}}}}};
+  page = RenderJobPage(array);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "partial-array"));
+  EXPECT_TRUE(Has(page, "insufficient (smallest eigenvalue"));
+  EXPECT_TRUE(Has(page, "100 dropped for gyroscope saturation"));
+}
+
+// Partial diagnostics of an unexpected shape (another version, trimmed) never break the page.
+TEST(JobPage, FailedJobWithOddPartialDiagnosticsStillRenders) {
+  for (const json& detail :
+       {json{{"method", "pca"}, {"diagnostics", "garbage"}},
+        json{{"method", "imu"}, {"diagnostics", {{"statics", 3}, {"imus", {1, 2}}}}},
+        json{{"method", "noise"}, {"diagnostics", {{"channels", {{{"name", 1}}}}}}},
+        json{{"method", "array"}, {"usable", false}, {"trimmed", {{"note", "left out"}}}},
+        json{{"method", "nope"}}}) {
+    JobView v;
+    v.job = Job(36, "", detail.value("method", ""), "failed", "2026-11-20T09:20:00Z", json());
+    v.job.error = "failed";
+    v.job.error_detail = detail;
+    const std::string page = RenderJobPage(v);
+    ExpectDocument(page, "page-job");
+    EXPECT_TRUE(Has(page, "id=\"partial\"")) << detail.dump();
+  }
 }
 
 TEST(JobPage, QueuedJobRendersWithoutResult) {
