@@ -190,27 +190,11 @@ std::string UnitMixupHint(double ratio, const std::string& quantity) {
   return "";
 }
 
-namespace {
+namespace {}  // namespace
 
-// A 3-vector or 3x3 matrix (rows) at j as numbers; non-numbers become NaN.
-std::vector<double> Flat(const json& j) {
-  std::vector<double> out;
-  if (!j.is_array()) return out;
-  for (const json& x : j) {
-    if (x.is_array()) {
-      for (const json& y : x) out.push_back(Number(y).value_or(NAN));
-    } else {
-      out.push_back(Number(x).value_or(NAN));
-    }
-  }
-  return out;
-}
-
-}  // namespace
-
-void JudgeImuTriads(const json& imus, const json& imus_std, const TriadNominal& nominal,
+void JudgeImuTriads(const std::vector<results::ImuTriads>& imus,
+                    const std::vector<results::ImuTriadsStd>& imus_std, const TriadNominal& nominal,
                     const AcceptanceLimits& limits, const std::string& label, Verdict* verdict) {
-  if (!imus.is_array()) return;
   const auto scale_std_max = limits.Get("max_scale_std");
   const auto axis_std_max = limits.Get("max_axis_std");
   const auto range = limits.Get("scale_range");
@@ -218,21 +202,17 @@ void JudgeImuTriads(const json& imus, const json& imus_std, const TriadNominal& 
   Offenders undefined, scale_std, axis_std, out_of_range, bias_std, bias;
   static const char* const kAxes[] = {"x", "y", "z"};
   for (size_t i = 0; i < imus.size(); ++i) {
-    const json& imu = imus[i];
-    const std::string name = label + " " + imu.value("name", std::to_string(i));
-    const json* stds = nullptr;
-    if (imus_std.is_array() && i < imus_std.size()) stds = &imus_std[i];
-    for (const char* quantity : {"accelerometer", "gyroscope"}) {
-      if (!imu.contains(quantity)) continue;
-      const bool accel = std::string(quantity) == "accelerometer";
+    const results::ImuTriads& imu = imus[i];
+    const std::string name = label + " " + (imu.name.empty() ? std::to_string(i) : imu.name);
+    const results::ImuTriadsStd* stds = i < imus_std.size() ? &imus_std[i] : nullptr;
+    for (const bool accel : {true, false}) {
+      const char* quantity = accel ? "accelerometer" : "gyroscope";
       const std::string who = name + " " + quantity;
-      const json& t = imu[quantity];
+      const results::SensorTriad& t = accel ? imu.accelerometer : imu.gyroscope;
       const double unit = accel ? nominal.accel_unit : nominal.gyro_unit;
-      const std::vector<double> scale = Flat(t.value("scale", json()));
-      const std::vector<double> b = Flat(t.value("bias", json()));
       // Scale factors against the nominal unit conversion.
-      for (size_t k = 0; k < scale.size() && k < 3; ++k) {
-        const double ratio = scale[k] / unit;
+      for (int k = 0; k < 3; ++k) {
+        const double ratio = t.scale(k) / unit;
         const std::string axis = who + " " + kAxes[k];
         if (!std::isfinite(ratio)) {
           undefined.Add(axis + " scale");
@@ -243,7 +223,7 @@ void JudgeImuTriads(const json& imus, const json& imus_std, const TriadNominal& 
           if (hint.empty())
             hint = "units, or a wrong " + std::string(accel ? "accel_unit" : "gyro_unit") + "?";
           verdict->Reject(
-              axis + ": scale " + Fmt(scale[k]) + " is " + Fmt(ratio) + " times the nominal " +
+              axis + ": scale " + Fmt(t.scale(k)) + " is " + Fmt(ratio) + " times the nominal " +
               Fmt(unit) + " (" +
               (accel ? "accel_unit " + nominal.accel_text : "gyro_unit " + nominal.gyro_text) +
               "), physically implausible: " + hint);
@@ -251,51 +231,51 @@ void JudgeImuTriads(const json& imus, const json& imus_std, const TriadNominal& 
           out_of_range.Add(axis + " " + Fmt((ratio - 1) * 100) + " %");
         }
       }
-      if (stds == nullptr || !stds->contains(quantity)) {
+      if (stds == nullptr) {
         undefined.Add(who + " uncertainty");
         continue;
       }
-      const json& s = (*stds)[quantity];
-      const std::vector<double> sstd = Flat(s.value("scale_std", json()));
-      for (size_t k = 0; k < sstd.size() && k < scale.size(); ++k) {
-        const double rel = sstd[k] / std::abs(scale[k]);
+      const results::SensorTriadStd& s = accel ? stds->accelerometer : stds->gyroscope;
+      for (int k = 0; k < 3; ++k) {
+        const double rel = s.scale_std(k) / std::abs(t.scale(k));
         if (!std::isfinite(rel)) {
           undefined.Add(who + " " + kAxes[k] + " scale");
         } else if (scale_std_max && rel > *scale_std_max) {
           scale_std.Add(who + " " + kAxes[k] + " " + Fmt(rel * 100) + " %");
         }
       }
-      const std::vector<double> mstd = Flat(s.value("misalignment_std", json()));
       double worst = 0;
       bool misalignment_undefined = false;
-      for (size_t k = 0; k < mstd.size(); ++k) {
-        if (k % 4 == 0) continue;  // the unit diagonal is fixed, its std 0
-        if (!std::isfinite(mstd[k])) {
-          // T_a's lower triangle is fixed (the frame's gauge): written as 0, not null.
-          misalignment_undefined = true;
-        } else {
-          worst = std::max(worst, mstd[k]);
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) {
+          if (r == c) continue;  // the unit diagonal is fixed, its std 0
+          const double m = s.misalignment_std(r, c);
+          if (!std::isfinite(m)) {
+            // T_a's lower triangle is fixed (the frame's gauge): written as 0, not null.
+            misalignment_undefined = true;
+          } else {
+            worst = std::max(worst, m);
+          }
         }
       }
       if (misalignment_undefined) undefined.Add(who + " misalignment");
       if (axis_std_max && worst > *axis_std_max) {
         axis_std.Add(who + " " + Fmt(worst * 1e3) + " mrad");
       }
-      const std::vector<double> bstd = Flat(s.value("bias_std", json()));
       const auto bias_std_max = limits.Get(accel ? "max_accel_bias_std" : "max_gyro_bias_std");
       const auto bias_max = limits.Get(accel ? "max_accel_bias" : "max_gyro_bias");
       const double nominal_bias = accel ? nominal.accel_bias : nominal.gyro_bias;
       const char* si = accel ? "m/s^2" : "rad/s";
-      for (size_t k = 0; k < bstd.size() && k < 3; ++k) {
-        const double sigma = bstd[k] * unit;
+      for (int k = 0; k < 3; ++k) {
+        const double sigma = s.bias_std(k) * unit;
         if (!std::isfinite(sigma)) {
           undefined.Add(who + " " + kAxes[k] + " bias");
         } else if (bias_std_max && sigma > *bias_std_max) {
           bias_std.Add(who + " " + kAxes[k] + " " + Fmt(sigma) + " " + si);
         }
       }
-      for (size_t k = 0; k < b.size() && k < 3; ++k) {
-        const double value = (b[k] - nominal_bias) * unit;
+      for (int k = 0; k < 3; ++k) {
+        const double value = (t.bias(k) - nominal_bias) * unit;
         if (std::isfinite(value) && bias_max && std::abs(value) > *bias_max) {
           bias.Add(who + " " + kAxes[k] + " " + Fmt(value) + " " + si);
         }

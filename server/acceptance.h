@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "base/status.h"
+#include "results/triad.h"
 
 namespace calibd::server {
 
@@ -158,9 +159,10 @@ struct TriadNominal {
   double accel_bias = 0;             // nominal bias, reading units
   double gyro_bias = 0;
 };
-void JudgeImuTriads(const nlohmann::json& imus, const nlohmann::json& imus_std,
-                    const TriadNominal& nominal, const AcceptanceLimits& limits,
-                    const std::string& label, Verdict* verdict);
+// imus_std[i] belongs to imus[i]; an IMU without one is judged undefined.
+void JudgeImuTriads(const std::vector<results::ImuTriads>& imus,
+                    const std::vector<results::ImuTriadsStd>& imus_std, const TriadNominal& nominal,
+                    const AcceptanceLimits& limits, const std::string& label, Verdict* verdict);
 
 }  // namespace calibd::server
 

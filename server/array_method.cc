@@ -1088,8 +1088,22 @@ void JudgeArray(const json& result, const json& config, const AcceptanceLimits& 
       nominal.accel_text = units.accel_text;
       nominal.gyro_text = units.gyro_text;
     }
-    JudgeImuTriads(params["imus"], uncertainty.value("imus", json()), nominal, limits, "IMU",
-                   verdict);
+    results::JsonReader r(result, "array result");
+    std::vector<results::ImuTriads> imus;
+    std::vector<results::ImuTriadsStd> stds;
+    r.Object("parameters")
+        .ReadArray("imus", &imus, [](const results::JsonReader& e, results::ImuTriads* t) {
+          results::ReadImuTriads(e, t);
+        });
+    r.Object("uncertainty")
+        .ReadArray("imus", &stds, [](const results::JsonReader& e, results::ImuTriadsStd* t) {
+          results::ReadImuTriads(e, t);
+        });
+    if (!r.ok()) {
+      verdict->Reject("the result cannot be judged: " + r.status().message());
+      return;
+    }
+    JudgeImuTriads(imus, stds, nominal, limits, "IMU", verdict);
   }
 }
 

@@ -374,9 +374,22 @@ class Imu : public Method {
     }
     nominal.accel_bias = Number(config.value("nominal_accel_bias", json())).value_or(0);
     nominal.gyro_bias = Number(config.value("nominal_gyro_bias", json())).value_or(0);
-    const json params = result.value("parameters", json::object());
-    const json stds = result.value("uncertainty", json::object()).value("imus", json());
-    JudgeImuTriads(params.value("imus", json()), stds, nominal, limits, "IMU", verdict);
+    results::JsonReader r(result, "imu result");
+    std::vector<results::ImuTriads> imus;
+    std::vector<results::ImuTriadsStd> stds;
+    r.Object("parameters")
+        .ReadArray("imus", &imus, [](const results::JsonReader& e, results::ImuTriads* t) {
+          results::ReadImuTriads(e, t);
+        });
+    r.Object("uncertainty")
+        .ReadArray("imus", &stds, [](const results::JsonReader& e, results::ImuTriadsStd* t) {
+          results::ReadImuTriads(e, t);
+        });
+    if (!r.ok()) {
+      verdict->Reject("the result cannot be judged: " + r.status().message());
+      return;
+    }
+    JudgeImuTriads(imus, stds, nominal, limits, "IMU", verdict);
     const json diags = result.value("diagnostics", json::object()).value("imus", json());
     if (!diags.is_array()) return;
     const auto chi2_max = limits.Get("max_chi2");

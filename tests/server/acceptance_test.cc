@@ -250,7 +250,8 @@ json ImuResult(double accel_scale, double scale_std, double misalignment_std, do
   auto triad = [](double scale) {
     return json{{"bias", {0.01, -0.02, 0.03}},
                 {"scale", {scale, scale, scale}},
-                {"misalignment", {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}}};
+                {"misalignment", {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}},
+                {"matrix", {{scale, 0, 0}, {0, scale, 0}, {0, 0, scale}}}};
   };
   auto triad_std = [&](double scale) {
     return json{{"bias_std", {bias_std, bias_std, bias_std}},
