@@ -98,6 +98,12 @@ json Build() {
       {"required", {"method", "parameters", "uncertainty", "diagnostics", "warnings"}},
       {"properties",
        {{"method", {{"type", "string"}, {"enum", method_names}}},
+        {"schema_version",
+         {{"type", "integer"},
+          {"minimum", 1},
+          {"description",
+           "version of the method's typed result schema (results/<method>_result.h); absent in "
+           "results stored before it existed, which are version 1"}}},
         {"model",
          {{"type", "string"},
           {"description", "the equation that maps a raw reading to the calibrated quantity"}}},
