@@ -68,7 +68,7 @@ struct PcaSensor {
 };
 
 struct PcaParameters {
-  int dimension = 3;             // d, the field's components (1..10)
+  int dimension = 3;             // d, the field's components (>= 1)
   double magnitude = kPcaNaN;    // c = |v| used, field units (1 when unknown)
   bool magnitude_known = false;  // false: scale factors and the field are relative
   PcaFrame frame = PcaFrame::kCanonical;
