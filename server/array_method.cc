@@ -10,6 +10,7 @@
 #include "core/array_full.h"
 #include "core/array_full_simulation.h"
 #include "core/array_simulation.h"
+#include "results/pca_result.h"
 #include "server/inertial_log.h"
 #include "server/noise_reference.h"
 
@@ -160,71 +161,49 @@ Status ParseAccelerometerCalibration(const json& value, int triads,
   if (!result->is_object())
     return CalibrationError("the calibration result must be a JSON object, not " +
                             std::string(result->type_name()));
-  auto method = result->find("method");
-  if (method == result->end() || !method->is_string() || *method != "pca")
-    return CalibrationError("is not a pca result (expected \"method\": \"pca\"" +
-                            (method == result->end()
-                                 ? std::string(", the key is missing)")
-                                 : ", found " + method->dump().substr(0, 40) + ")") +
-                            "; give the result of a pca calibration of the accelerometers");
-  if (auto d = result->find("diagnostics"); d != result->end() && d->is_object() &&
-                                            d->contains("usable") && (*d)["usable"].is_boolean() &&
-                                            !(*d)["usable"].get<bool>())
+  // The pca result, read once through its typed schema (results/pca_result.h); a problem is
+  // named by its path in the result ("parameters.sensors[7].bias: expected a number, ...").
+  results::PcaResult pca;
+  if (const Status read = results::FromJson(*result, &pca); !read.ok())
+    return CalibrationError(
+        "is not a pca result calibd can read (" + read.message() +
+        "); give the result of a pca calibration of the accelerometers, as calibd wrote it");
+  if (!pca.envelope.usable || !pca.diagnostics.usable || !pca.parameters)
     return CalibrationError("the pca result is marked not usable (diagnostics.usable false)");
-  auto params_it = result->find("parameters");
-  if (params_it == result->end() || !params_it->is_object())
-    return CalibrationError("the pca result has no \"parameters\" object");
-  const json& params = *params_it;
-  auto dim = params.find("dimension");
-  if (dim == params.end() || !dim->is_number())
-    return CalibrationError("the pca result has no parameters.dimension");
-  if (dim->get<double>() != 3)
-    return CalibrationError("the pca result has dimension " + dim->dump() +
-                            "; accelerometer triads need dimension 3");
-  auto frame = params.find("frame");
-  if (frame == params.end() || !frame->is_string())
-    return CalibrationError("the pca result has no parameters.frame");
-  out->frame = frame->get<std::string>();
-  if (out->frame != "nominal")
+  const results::PcaParameters& params = *pca.parameters;
+  if (params.dimension != 3)
+    return CalibrationError("the pca result has dimension " + std::to_string(params.dimension) +
+                            " (parameters.dimension); accelerometer triads need dimension 3");
+  out->frame = results::Name(params.frame);
+  if (params.frame != results::PcaFrame::kNominal)
     return CalibrationError(
         "the pca result is in the \"" + out->frame +
         "\" frame: its axes would not line up with the gyroscopes. Calibrate with \"nominal\" "
         "(one row per accelerometer axis, e.g. [1,0,0],[0,1,0],[0,0,1] per triad) so the result "
         "is in the array's body frame");
-  auto known = params.find("magnitude_known");
-  if (known != params.end() && known->is_boolean() && !known->get<bool>())
+  if (!params.magnitude_known)
     return CalibrationError(
         "the pca result was computed without a known magnitude: its scale factors are only "
         "relative. Calibrate with \"magnitude\": 9.80665 (local gravity, m/s^2)");
-  auto magnitude = params.find("magnitude");
-  if (magnitude == params.end() || !magnitude->is_number() ||
-      !std::isfinite(magnitude->get<double>()) || !(magnitude->get<double>() > 0))
+  if (!std::isfinite(params.magnitude) || !(params.magnitude > 0))
     return CalibrationError("the pca result has no parameters.magnitude > 0");
-  out->magnitude = magnitude->get<double>();
+  out->magnitude = params.magnitude;
   if (std::abs(out->magnitude - 9.80665) > 0.1)
     out->warnings.push_back(
         "accelerometer_calibration: the pca field magnitude is " + FormatG(out->magnitude) +
         ", not gravity in m/s^2 (~9.81): the corrected accelerations are in the magnitude's "
         "units while the array expects m/s^2");
-  if (auto b = params.find("bias"); b != params.end() && b->is_string()) {
-    out->bias = b->get<std::string>();
-    if (out->bias == "none")
-      out->warnings.push_back(
-          "accelerometer_calibration: the pca result assumed bias-free readings (bias: none): "
-          "accelerometer biases are not corrected; calibrate with \"bias\": \"estimate\"");
-  }
-  auto sensors = params.find("sensors");
-  if (sensors == params.end() || !sensors->is_array())
-    return CalibrationError("the pca result has no parameters.sensors array");
+  out->bias = results::Name(params.bias);
+  if (params.bias == results::PcaBias::kNone)
+    out->warnings.push_back(
+        "accelerometer_calibration: the pca result assumed bias-free readings (bias: none): "
+        "accelerometer biases are not corrected; calibrate with \"bias\": \"estimate\"");
+  const std::vector<results::PcaSensor>& sensors = params.sensors;
   std::map<std::string, int> index;
-  for (size_t i = 0; i < sensors->size(); ++i) {
-    const json& sensor = (*sensors)[i];
-    const std::string where = "parameters.sensors[" + std::to_string(i) + "]";
-    if (!sensor.is_object() || !sensor.contains("name") || !sensor["name"].is_string())
-      return CalibrationError(where + " has no \"name\" string");
-    const std::string name = sensor["name"].get<std::string>();
-    if (!index.emplace(name, static_cast<int>(i)).second)
-      return CalibrationError("the pca result names sensor '" + name + "' twice");
+  for (size_t i = 0; i < sensors.size(); ++i) {
+    if (!index.emplace(sensors[i].name, static_cast<int>(i)).second)
+      return CalibrationError("the pca result names sensor '" + sensors[i].name +
+                              "' twice (parameters.sensors[" + std::to_string(i) + "].name)");
   }
   std::vector<std::string> missing;
   int used = 0;
@@ -239,23 +218,19 @@ Status ParseAccelerometerCalibration(const json& value, int triads,
         continue;
       }
       ++used;
-      const json& sensor = (*sensors)[it->second];
-      const json* a = sensor.contains("sensitivity") ? &sensor["sensitivity"] : nullptr;
-      if (a == nullptr || !a->is_array() || a->size() != 3)
-        return CalibrationError("sensor '" + name + "' has no sensitivity of 3 numbers");
+      const results::PcaSensor& sensor = sensors[it->second];
+      const std::string where = "parameters.sensors[" + std::to_string(it->second) + "]";
+      // FromJson checked: 3 components (dimension 3), null read as NaN.
       for (int j = 0; j < 3; ++j) {
-        const json& v = (*a)[j];
-        if (!v.is_number() || !std::isfinite(v.get<double>()))
+        if (!std::isfinite(sensor.sensitivity[j]))
           return CalibrationError("sensor '" + name + "' has a sensitivity that is not 3 finite " +
-                                  "numbers (" + a->dump().substr(0, 80) + ")");
-        out->triads[k].sensitivity(j, i) = v.get<double>();  // column i = a_i
+                                  "numbers (" + where + ".sensitivity)");
+        out->triads[k].sensitivity(j, i) = sensor.sensitivity[j];  // column i = a_i
       }
-      auto b = sensor.find("bias");
-      if (b != sensor.end() && !b->is_null()) {
-        if (!b->is_number() || !std::isfinite(b->get<double>()))
-          return CalibrationError("sensor '" + name + "' has a bias that is not a finite number");
-        out->triads[k].bias(i) = b->get<double>();
-      }
+      if (!std::isfinite(sensor.bias))
+        return CalibrationError("sensor '" + name + "' has a bias that is not a finite number (" +
+                                where + ".bias)");
+      out->triads[k].bias(i) = sensor.bias;
     }
   if (!missing.empty()) {
     std::string list;
@@ -281,7 +256,7 @@ Status ParseAccelerometerCalibration(const json& value, int triads,
                               "; the readings cannot be corrected");
     out->max_condition_number = std::max(out->max_condition_number, cond);
   }
-  const int ignored = static_cast<int>(sensors->size()) - used;
+  const int ignored = static_cast<int>(sensors.size()) - used;
   if (ignored > 0)
     out->warnings.push_back("accelerometer_calibration: " + std::to_string(ignored) +
                             " sensor(s) of the pca result are not accelerometer columns of this "

@@ -1,8 +1,10 @@
 // Exports of a pca result (server/pca_method.h): CSV and the C header.
 #include <Eigen/Dense>
+#include <cmath>
 #include <sstream>
 #include <string>
 
+#include "results/pca_result.h"
 #include "server/export_util.h"
 #include "server/pca_method.h"
 
@@ -19,33 +21,64 @@ constexpr const char* kPcaModel =
     " * squares inverse v = (A^T A)^-1 A^T (r - b), A the SENSORS x DIMENSION matrix of\n"
     " * rows a_i: INVERSE below, applied by *_pca_apply().\n";
 
-Status PcaHeader(const json& params, const json& unc, HeaderWriter* w) {
-  const json& sensors = JsonAt(params, "sensors");
-  if (!sensors.is_array() || sensors.empty()) {
-    return Status::Internal("stored pca result has no parameters.sensors");
+// The typed result of an export, or kInternal with the reader's message (a stored result that
+// does not read, or a failed run's partial document without parameters).
+Status ReadForExport(const json& result, results::PcaResult* out) {
+  const Status s = results::FromJson(result, out);
+  if (!s.ok()) return Status::Internal("stored " + s.message());
+  if (!out->parameters || !out->uncertainty) {
+    return Status::Internal("stored pca result has no parameters (a failed run's diagnostics)");
   }
+  return Status::Ok();
+}
+
+// Per-sensor standard deviations (as StdArray1 of server/export_util.h): the array when every
+// entry is defined, else a comment naming the sensors whose σ is undefined (never a made-up 0).
+void StdArray(HeaderWriter* w, const std::string& name, const std::vector<double>& values,
+              const char* key, const std::vector<std::string>& names, const std::string& comment) {
+  std::string undefined;
+  for (size_t i = 0; i < names.size(); ++i) {
+    if (!std::isfinite(values[i])) undefined += (undefined.empty() ? "" : ", ") + names[i];
+  }
+  if (undefined.empty()) {
+    w->Array1(name, values, comment);
+  } else {
+    w->out() << "/* " << w->macro() << name << " is not written: " << CComment(key)
+             << " is undefined for " << CComment(undefined) << " (see format=json). */\n";
+  }
+}
+
+Status PcaHeader(const results::PcaResult& result, HeaderWriter* w) {
+  const results::PcaParameters& params = *result.parameters;
+  const std::vector<results::PcaSensor>& sensors = params.sensors;
+  if (sensors.empty()) return Status::Internal("stored pca result has no parameters.sensors");
   const size_t m = sensors.size();
-  const json& dim = JsonAt(params, "dimension");
-  const int64_t d_json = dim.is_number_integer() ? dim.get<int64_t>() : 3;
-  if (d_json < 1 || d_json > static_cast<int64_t>(m)) {
+  // FromJson checked dimension >= 1 and that every sensitivity and axis has d components.
+  if (static_cast<size_t>(params.dimension) > m) {
     return Status::Internal("stored pca result has a bad dimension");
   }
-  const size_t d = static_cast<size_t>(d_json);
+  const size_t d = static_cast<size_t>(params.dimension);
   std::vector<std::string> names;
   std::vector<std::vector<double>> sensitivity(m), axis(m);
   std::vector<double> bias(m, 0.0), scale(m);
   Eigen::MatrixXd a(m, d);
+  auto all_finite = [](const std::vector<double>& v) {
+    for (double x : v) {
+      if (!std::isfinite(x)) return false;
+    }
+    return true;
+  };
   for (size_t i = 0; i < m; ++i) {
-    const json& s = sensors[i];
-    names.push_back(JsonAt(s, "name").is_string() ? s["name"].get<std::string>() : "");
-    std::vector<double> b;
-    if (!Numbers(JsonAt(s, "sensitivity"), d, &sensitivity[i]) ||
-        !Numbers(JsonAt(s, "axis"), d, &axis[i]) || !JsonAt(s, "scale").is_number()) {
+    const results::PcaSensor& s = sensors[i];
+    names.push_back(s.name);
+    if (!all_finite(s.sensitivity) || !all_finite(s.axis) || !std::isfinite(s.scale)) {
       return Status::NotDeterminable("the pca result of sensor '" + names.back() +
                                      "' has undefined parameters: no C header can be written");
     }
-    scale[i] = s["scale"].get<double>();
-    if (JsonAt(s, "bias").is_number()) bias[i] = s["bias"].get<double>();
+    sensitivity[i] = s.sensitivity;
+    axis[i] = s.axis;
+    scale[i] = s.scale;
+    if (std::isfinite(s.bias)) bias[i] = s.bias;
     for (size_t k = 0; k < d; ++k) a(i, k) = sensitivity[i][k];
   }
   // The least-squares inverse of reading = A v + b: v = (AᵀA)⁻¹Aᵀ (reading − b).
@@ -61,10 +94,8 @@ Status PcaHeader(const json& params, const json& unc, HeaderWriter* w) {
   for (size_t k = 0; k < d; ++k)
     for (size_t i = 0; i < m; ++i)
       inverse[k][i] = pinv(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(i));
-  const bool known =
-      JsonAt(params, "magnitude_known").is_boolean() && params["magnitude_known"].get<bool>();
-  const std::string frame =
-      JsonAt(params, "frame").is_string() ? params["frame"].get<std::string>() : "";
+  const bool known = params.magnitude_known;
+  const std::string frame = results::Name(params.frame);
   w->Define("SENSORS", std::to_string(m), "m single-axis sensors");
   w->Define("DIMENSION", std::to_string(d), "d components of the field v");
   w->Define("MAGNITUDE_KNOWN", known ? "1" : "0",
@@ -78,10 +109,16 @@ Status PcaHeader(const json& params, const json& unc, HeaderWriter* w) {
   w->Array1("BIAS", bias, "b_i, reading units (0: none estimated or removed)");
   w->Array2("INVERSE", inverse, m,
             "(A^T A)^-1 A^T, d x m: the least-squares field from the m bias-free readings");
-  const json& usens = JsonAt(unc, "sensors");
-  StdArray1(w, "SCALE_STD", usens, "scale_std", names, "1 sigma of SCALE");
-  StdArray1(w, "AXIS_STD_RAD", usens, "axis_std_rad", names, "1 sigma of the axis angle, rad");
-  StdArray1(w, "BIAS_STD", usens, "bias_std", names, "1 sigma of BIAS, reading units");
+  // FromJson checked: one uncertainty entry per sensor, in the same order.
+  std::vector<double> scale_std, axis_std, bias_std;
+  for (const results::PcaSensorStd& u : result.uncertainty->sensors) {
+    scale_std.push_back(u.scale_std);
+    axis_std.push_back(u.axis_std_rad);
+    bias_std.push_back(u.bias_std);
+  }
+  StdArray(w, "SCALE_STD", scale_std, "scale_std", names, "1 sigma of SCALE");
+  StdArray(w, "AXIS_STD_RAD", axis_std, "axis_std_rad", names, "1 sigma of the axis angle, rad");
+  StdArray(w, "BIAS_STD", bias_std, "bias_std", names, "1 sigma of BIAS, reading units");
   std::ostringstream& h = w->out();
   const std::string& M = w->macro();
   h << "\n/* The field v (DIMENSION components) from one raw reading of each of the SENSORS\n"
@@ -102,35 +139,28 @@ Status PcaHeader(const json& params, const json& unc, HeaderWriter* w) {
 }  // namespace
 
 Status PcaResultToCsv(const json& result, std::string* out) {
+  results::PcaResult typed;
+  Status s = ReadForExport(result, &typed);
+  if (!s.ok()) return s;
+  const results::PcaParameters& params = *typed.parameters;
+  const std::vector<results::PcaSensorStd>& stds = typed.uncertainty->sensors;
   std::ostringstream csv;
-  const json& params = JsonAt(result, "parameters");
-  const json& unc = JsonAt(result, "uncertainty");
-  const json& sensors = JsonAt(params, "sensors");
-  if (!sensors.is_array()) return Status::Internal("stored pca result has no parameters.sensors");
-  const size_t d = JsonAt(params, "dimension").is_number() ? params["dimension"].get<size_t>() : 3;
+  const size_t d = static_cast<size_t>(params.dimension);
   const auto axes = AxisNames(d);
   csv << "name,scale,scale_std";
   for (const auto& a : axes) csv << ",axis_" << a;
   csv << ",axis_std_rad,bias,bias_std";
   for (const auto& a : axes) csv << ",sensitivity_" << a;
   csv << "\n";
-  const json& usens = JsonAt(unc, "sensors");
-  for (size_t i = 0; i < sensors.size(); ++i) {
-    const json& s = sensors[i];
-    const json& u = usens.is_array() && i < usens.size() ? usens[i] : json();
-    const json& name = JsonAt(s, "name");
-    csv << CsvField(name.is_string() ? name.get<std::string>() : "") << ","
-        << CsvNumber(JsonAt(s, "scale")) << "," << CsvNumber(JsonAt(u, "scale_std"));
-    for (size_t k = 0; k < d; ++k) {
-      const json& axis = JsonAt(s, "axis");
-      csv << "," << (axis.is_array() && k < axis.size() ? CsvNumber(axis[k]) : "");
-    }
-    csv << "," << CsvNumber(JsonAt(u, "axis_std_rad")) << "," << CsvNumber(JsonAt(s, "bias")) << ","
-        << CsvNumber(JsonAt(u, "bias_std"));
-    for (size_t k = 0; k < d; ++k) {
-      const json& sens = JsonAt(s, "sensitivity");
-      csv << "," << (sens.is_array() && k < sens.size() ? CsvNumber(sens[k]) : "");
-    }
+  // Numbers as the JSON holds them (an undefined value, null there, is an empty cell).
+  auto number = [](double x) { return CsvNumber(results::Num(x)); };
+  for (size_t i = 0; i < params.sensors.size(); ++i) {
+    const results::PcaSensor& p = params.sensors[i];
+    const results::PcaSensorStd& u = stds[i];  // FromJson checked: one per sensor, same order
+    csv << CsvField(p.name) << "," << number(p.scale) << "," << number(u.scale_std);
+    for (size_t k = 0; k < d; ++k) csv << "," << number(p.axis[k]);
+    csv << "," << number(u.axis_std_rad) << "," << number(p.bias) << "," << number(u.bias_std);
+    for (size_t k = 0; k < d; ++k) csv << "," << number(p.sensitivity[k]);
     csv << "\n";
   }
   *out = csv.str();
@@ -138,12 +168,14 @@ Status PcaResultToCsv(const json& result, std::string* out) {
 }
 
 Status PcaResultToHeader(const json& result, const ExportContext& context, std::string* out) {
+  results::PcaResult typed;
+  Status s = ReadForExport(result, &typed);
+  if (!s.ok()) return s;
+  // WriteCHeader writes the frame; the body comes from the typed result (its JSON arguments,
+  // the untyped parameters and uncertainty, are not read).
   return WriteCHeader(
       result, context, "pca", kPcaModel,
-      [&](const json& params, const json& unc, HeaderWriter* w) {
-        return PcaHeader(params, unc, w);
-      },
-      out);
+      [&](const json&, const json&, HeaderWriter* w) { return PcaHeader(typed, w); }, out);
 }
 
 }  // namespace calibd::server

@@ -12,13 +12,8 @@ namespace {
 
 using nlohmann::json;
 
-// A number, or null when it is undefined (NaN/Inf never reach JSON).
-json Num(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
-
-json Vec(const Eigen::VectorXd& x) {
-  json out = json::array();
-  for (Eigen::Index i = 0; i < x.size(); ++i) out.push_back(Num(x(i)));
-  return out;
+std::vector<double> StdVector(const Eigen::VectorXd& x) {
+  return std::vector<double>(x.data(), x.data() + x.size());
 }
 
 Status KeyError(const std::string& key, const std::string& message) {
@@ -109,81 +104,90 @@ Status ParsePcaConfig(const json& config, core::PcaOptions* options) {
   return Status::Ok();
 }
 
-json PcaResultToJson(const core::PcaResult& r) {
-  json params;
-  params["dimension"] = r.dimension;
-  params["magnitude"] = Num(r.magnitude);
-  params["magnitude_known"] = r.magnitude_known;
-  params["frame"] = r.frame;
-  params["bias"] = core::BiasModelName(r.bias_model);
-  json sensors = json::array(), sensor_std = json::array();
-  for (const core::PcaSensorEstimate& s : r.sensors) {
-    sensors.push_back({{"name", s.name},
-                       {"sensitivity", Vec(s.sensitivity)},
-                       {"scale", Num(s.scale)},
-                       {"axis", Vec(s.axis)},
-                       {"bias", Num(s.bias)}});
-    sensor_std.push_back({{"name", s.name},
-                          {"scale_std", Num(s.scale_std)},
-                          {"axis_std_rad", Num(s.axis_std_rad)},
-                          {"bias_std", Num(s.bias_std)}});
-  }
-  params["sensors"] = std::move(sensors);
-
-  json uncertainty;
-  uncertainty["sensors"] = std::move(sensor_std);
-  uncertainty["noise_std"] = Num(r.noise_std);
-
-  json diag;
-  diag["usable"] = r.usable;
-  if (!r.usable) diag["reason"] = r.reason;
-  diag["singular_values"] = Vec(r.singular_values);
-  diag["rank_gap"] = Num(r.rank_gap);  // null when there is no σ_{d+1} (e.g. m = d)
-  diag["positions"] = r.positions;
-  diag["min_positions"] = r.min_positions;
-  diag["g_eigenvalues"] = Vec(r.g_eigenvalues);
-  diag["residual_rms"] = Vec(r.residual_rms);
-  diag["magnitude_error"] = Vec(r.magnitude_error);
-  diag["degrees_of_freedom"] = r.degrees_of_freedom;
-  {
-    // How well the positions span the sphere (frame-free numbers; directions in the result's
-    // frame), so a poor calibration names its real cause.
-    const core::PcaCoverage& c = r.coverage;
-    json caps = json::object();
-    for (size_t i = 0; i < c.cap_names.size() && i < c.cap_positions.size(); ++i) {
-      caps[c.cap_names[i]] = c.cap_positions[i];
-    }
-    diag["coverage"] = {{"verdict", core::PcaCoverageVerdictName(c.verdict)},
-                        {"scatter_eigenvalues", Vec(c.scatter_eigenvalues)},
-                        {"scatter_min", Num(c.scatter_min)},
-                        {"design_min", Num(c.design_min)},
-                        {"positions_per_direction", caps},
-                        {"advice", c.advice}};
-  }
-  diag["noise_std"] = Num(r.noise_std);
-  diag["noise_std_given"] = r.noise_std_given;
-  diag["noise_std_estimated"] = Num(r.noise_std_estimated);
-  diag["cost_closed_form"] = Num(r.cost_closed_form);
-  diag["cost"] = Num(r.cost);
-  diag["refined"] = r.refined;
-  diag["refine_iterations"] = r.refine_iterations;
-  diag["reflection"] = r.reflection;
-
-  json out;
-  out["method"] = "pca";
-  out["model"] =
+results::PcaResult MakePcaResult(const core::PcaResult& r) {
+  results::PcaResult out;
+  out.envelope.method = "pca";
+  out.envelope.model =
       "r_i = a_i^T v + b_i: r_i the raw reading of sensor i, v the field (d components, |v| = "
       "magnitude), a_i = scale_i axis_i its sensitivity vector, b_i its bias (reading units; 0 "
       "unless estimated or removed); the calibrated field from one reading r of all m sensors is "
       "the least-squares inverse v = (A^T A)^-1 A^T (r - b), A the m x d matrix of rows a_i^T";
-  out["parameters"] = std::move(params);
-  out["uncertainty"] = std::move(uncertainty);
-  out["diagnostics"] = std::move(diag);
-  out["warnings"] = r.warnings;
+  out.envelope.warnings = r.warnings;
+
+  results::PcaParameters& params = out.parameters.emplace();
+  params.dimension = r.dimension;
+  params.magnitude = r.magnitude;
+  params.magnitude_known = r.magnitude_known;
+  if (!results::Parse(r.frame, &params.frame)) {
+    // core writes "canonical" or "nominal" (before the fit: empty; such a result is not usable
+    // and its parameters are not written).
+    params.frame = results::PcaFrame::kCanonical;
+  }
+  params.bias = r.bias_model == core::BiasModel::kEstimate ? results::PcaBias::kEstimate
+                                                           : results::PcaBias::kNone;
+  results::PcaUncertainty& uncertainty = out.uncertainty.emplace();
+  for (const core::PcaSensorEstimate& s : r.sensors) {
+    params.sensors.push_back(
+        {s.name, StdVector(s.sensitivity), s.scale, StdVector(s.axis), s.bias});
+    uncertainty.sensors.push_back({s.name, s.scale_std, s.axis_std_rad, s.bias_std});
+  }
+  uncertainty.noise_std = r.noise_std;
+
+  results::PcaDiagnostics& diag = out.diagnostics;
+  diag.usable = r.usable;
+  if (!r.usable) diag.reason = r.reason;
+  diag.singular_values = StdVector(r.singular_values);
+  diag.rank_gap = r.rank_gap;  // +inf when there is no σ_{d+1} (e.g. m = d): written as null
+  diag.positions = r.positions;
+  diag.min_positions = r.min_positions;
+  diag.g_eigenvalues = StdVector(r.g_eigenvalues);
+  diag.residual_rms = StdVector(r.residual_rms);
+  diag.magnitude_error = StdVector(r.magnitude_error);
+  diag.degrees_of_freedom = r.degrees_of_freedom;
+  {
+    // How well the positions span the sphere (frame-free numbers; directions in the result's
+    // frame), so a poor calibration names its real cause.
+    const core::PcaCoverage& c = r.coverage;
+    results::PcaCoverage& coverage = diag.coverage;
+    switch (c.verdict) {
+      case core::PcaCoverageVerdict::kGood:
+        coverage.verdict = results::PcaCoverageVerdict::kGood;
+        break;
+      case core::PcaCoverageVerdict::kPoor:
+        coverage.verdict = results::PcaCoverageVerdict::kPoor;
+        break;
+      case core::PcaCoverageVerdict::kUnknown:
+        coverage.verdict = results::PcaCoverageVerdict::kUnknown;
+        break;
+    }
+    coverage.scatter_eigenvalues = StdVector(c.scatter_eigenvalues);
+    coverage.scatter_min = c.scatter_min;
+    coverage.design_min = c.design_min;
+    for (size_t i = 0; i < c.cap_names.size() && i < c.cap_positions.size(); ++i) {
+      coverage.positions_per_direction[c.cap_names[i]] = c.cap_positions[i];
+    }
+    coverage.advice = c.advice;
+  }
+  diag.noise_std = r.noise_std;
+  diag.noise_std_given = r.noise_std_given;
+  diag.noise_std_estimated = r.noise_std_estimated;
+  diag.cost_closed_form = r.cost_closed_form;
+  diag.cost = r.cost;
+  diag.refined = r.refined;
+  diag.refine_iterations = r.refine_iterations;
+  diag.reflection = r.reflection;
   return out;
 }
 
 Status RunPca(const PcaRecording& recording, const core::PcaOptions& options, json* result) {
+  results::PcaResult typed;
+  const Status s = RunPca(recording, options, &typed);
+  *result = results::ToJson(typed);
+  return s;
+}
+
+Status RunPca(const PcaRecording& recording, const core::PcaOptions& options,
+              results::PcaResult* result) {
   core::PcaProblem problem;
   problem.m = recording.readings;
   problem.sensor_names = recording.sensor_names;
@@ -203,20 +207,19 @@ Status RunPca(const PcaRecording& recording, const core::PcaOptions& options, js
   }
   core::PcaResult r;
   const Status s = core::CalibratePca(problem, options, &r);
-  *result = PcaResultToJson(r);
-  (*result)["diagnostics"]["position_labels"] = recording.position_labels;
-  if (recording.raw) {
-    (*result)["diagnostics"]["removed_bias"] = Vec(problem.removed_bias);
-  }
+  *result = MakePcaResult(r);
+  result->diagnostics.position_labels = recording.position_labels;
+  if (recording.raw) result->diagnostics.removed_bias = StdVector(problem.removed_bias);
   if (!s.ok()) {
     // The partial diagnostics kept with the failed job (diagnostics.usable = false, the
     // positions, singular values and rank gap, coverage when the fit got that far); the
-    // parameters are not estimates, so they are not written.
-    json partial = {{"method", "pca"}, {"usable", false}};
-    partial["diagnostics"] = std::move((*result)["diagnostics"]);
-    partial["diagnostics"].erase("reason");  // the failure's message, stored beside it
-    partial["warnings"] = std::move((*result)["warnings"]);
-    *result = std::move(partial);
+    // parameters are not estimates, so they are not written, nor is the model.
+    result->envelope.usable = false;
+    result->envelope.model.clear();
+    result->parameters.reset();
+    result->uncertainty.reset();
+    result->diagnostics.usable = false;
+    result->diagnostics.reason.reset();  // the failure's message, stored beside it
   }
   return s;
 }
@@ -243,17 +246,18 @@ Status SimulatePcaFiles(const core::PcaSimulationOptions& options, std::string* 
     *csv += "\n";
   }
   json nominal = json::array();
-  for (Eigen::Index i = 0; i < m; ++i) nominal.push_back(Vec(sim.a_model.col(i)));
+  for (Eigen::Index i = 0; i < m; ++i)
+    nominal.push_back(results::Nums(StdVector(sim.a_model.col(i))));
   *config = {{"method", "pca"}, {"magnitude", options.magnitude}, {"nominal", nominal}};
   if (options.bias_std > 0) (*config)["bias"] = "estimate";
   json sensors = json::array();
   for (Eigen::Index i = 0; i < m; ++i) {
     sensors.push_back({{"name", sim.sensor_names[i]},
-                       {"sensitivity", Vec(sim.a_true.col(i))},
+                       {"sensitivity", results::Nums(StdVector(sim.a_true.col(i)))},
                        {"bias", sim.b(i)}});
   }
   json v = json::array();
-  for (Eigen::Index j = 0; j < n; ++j) v.push_back(Vec(sim.v.col(j)));
+  for (Eigen::Index j = 0; j < n; ++j) v.push_back(results::Nums(StdVector(sim.v.col(j))));
   *truth = {{"method", "pca"},
             {"seed", options.seed},
             {"sensors", sensors},
@@ -269,22 +273,48 @@ Status SimulatePcaFiles(const core::PcaSimulationOptions& options, std::string* 
 
 void JudgePca(const json& result, const json& config, const AcceptanceLimits& limits,
               Verdict* verdict) {
-  const json params = result.value("parameters", json::object());
-  const json diag = result.value("diagnostics", json::object());
-  const json sensors = params.value("sensors", json::array());
-  const json stds = result.value("uncertainty", json::object()).value("sensors", json::array());
-  const bool magnitude_known = params.value("magnitude_known", false);
-  const double magnitude = Number(params.value("magnitude", json())).value_or(NAN);
+  results::PcaResult typed;
+  const Status read = results::FromJson(result, &typed);
+  if (!read.ok()) {
+    verdict->Reject("the result cannot be judged: " + read.message());
+    return;
+  }
+  core::PcaOptions options;
+  const Status parsed = ParsePcaConfig(config, &options);
+  if (!parsed.ok()) {
+    verdict->Reject("the result cannot be judged: " + parsed.message());
+    return;
+  }
+  JudgePca(typed, options, limits, verdict);
+}
+
+void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
+              const AcceptanceLimits& limits, Verdict* verdict) {
+  if (!result.parameters || !result.uncertainty) {
+    verdict->Reject(
+        "the result cannot be judged: it is a failed run's partial diagnostics (no parameters)");
+    return;
+  }
+  const results::PcaParameters& params = *result.parameters;
+  const results::PcaDiagnostics& diag = result.diagnostics;
+  const std::vector<results::PcaSensor>& sensors = params.sensors;
+  // FromJson checked: one entry per sensor, in the same order.
+  const std::vector<results::PcaSensorStd>& stds = result.uncertainty->sensors;
+  const bool magnitude_known = params.magnitude_known;
+  const double magnitude = params.magnitude;
+  auto defined = [](double x) {
+    return std::isfinite(x) ? std::optional<double>(x) : std::nullopt;
+  };
 
   // Orientation coverage first: it is the real cause of most of the other failures.
-  const json coverage = diag.value("coverage", json::object());
-  const auto scatter = Number(coverage.value("scatter_min", json()));
-  const auto design = Number(coverage.value("design_min", json()));
+  const results::PcaCoverage& coverage = diag.coverage;
+  const auto scatter = defined(coverage.scatter_min);
+  const auto design = defined(coverage.design_min);
   const auto min_scatter = limits.Get("min_scatter");
   const auto min_design = limits.Get("min_design");
   if ((min_scatter && (!scatter || *scatter < *min_scatter)) ||
       (min_design && (!design || *design < *min_design))) {
-    std::string advice = coverage.value("advice", std::string());
+    const std::string& advice = coverage.advice;
     verdict->Reject(
         "the orientations are poorly spread (spread " +
         (scatter ? Fmt(*scatter) : std::string("unknown")) + ", minimum " +
@@ -297,13 +327,11 @@ void JudgePca(const json& result, const json& config, const AcceptanceLimits& li
   // Nominal scale per sensor: |nominal_i| when given, else 1 when the magnitude is known (readings
   // in the field's unit); nothing to compare with when the magnitude is unknown (relative scales).
   std::vector<double> nominal_scale(sensors.size(), magnitude_known ? 1.0 : NAN);
-  const bool has_nominal = config.contains("nominal") && config["nominal"].is_array();
+  const bool has_nominal = options.nominal.has_value();
   if (has_nominal) {
-    const json& rows = config["nominal"];
-    for (size_t i = 0; i < sensors.size() && i < rows.size(); ++i) {
-      double sq = 0;
-      for (const json& x : rows[i]) sq += Number(x).value_or(0) * Number(x).value_or(0);
-      nominal_scale[i] = std::sqrt(sq);
+    for (size_t i = 0; i < sensors.size() && static_cast<Eigen::Index>(i) < options.nominal->cols();
+         ++i) {
+      nominal_scale[i] = options.nominal->col(static_cast<Eigen::Index>(i)).norm();
     }
   }
   const auto range = limits.Get("scale_range");
@@ -314,9 +342,9 @@ void JudgePca(const json& result, const json& config, const AcceptanceLimits& li
   Offenders out_of_range, absurd, scale_std, axis_std, bias_std, undefined;
   double absurd_ratio = NAN;
   for (size_t i = 0; i < sensors.size(); ++i) {
-    const json& sensor = sensors[i];
-    const std::string name = sensor.value("name", "s" + std::to_string(i));
-    const double scale = Number(sensor.value("scale", json())).value_or(NAN);
+    const results::PcaSensor& sensor = sensors[i];
+    const std::string& name = sensor.name;
+    const double scale = sensor.scale;
     const double ratio = scale / nominal_scale[i];
     if (std::isfinite(ratio)) {
       if (implausible && (ratio > *implausible || ratio < 1 / *implausible)) {
@@ -326,9 +354,9 @@ void JudgePca(const json& result, const json& config, const AcceptanceLimits& li
         out_of_range.Add(name + " (" + Fmt(scale) + " against " + Fmt(nominal_scale[i]) + ")");
       }
     }
-    const json sd = i < stds.size() ? stds[i] : json::object();
-    const double rel = Number(sd.value("scale_std", json())).value_or(NAN) / std::abs(scale);
-    const double axis = Number(sd.value("axis_std_rad", json())).value_or(NAN);
+    const results::PcaSensorStd& sd = stds[i];
+    const double rel = sd.scale_std / std::abs(scale);
+    const double axis = sd.axis_std_rad;
     if (!std::isfinite(rel) || !std::isfinite(axis)) {
       undefined.Add(name);
     } else {
@@ -337,8 +365,8 @@ void JudgePca(const json& result, const json& config, const AcceptanceLimits& li
         axis_std.Add(name + " " + Fmt(axis * 1e3) + " mrad");
     }
     // Biases: estimated (or removed from a raw log) ones have a std; relative to the magnitude.
-    const auto b_std = Number(sd.value("bias_std", json()));
-    if (params.value("bias", std::string()) == "estimate" && !b_std) {
+    const auto b_std = defined(sd.bias_std);
+    if (params.bias == results::PcaBias::kEstimate && !b_std) {
       undefined.Add(name + " bias");
     } else if (b_std && bias_std_max && std::isfinite(magnitude) && magnitude > 0 &&
                std::isfinite(scale) && scale > 0) {
@@ -391,10 +419,10 @@ void JudgePca(const json& result, const json& config, const AcceptanceLimits& li
   // Residual against the noise: only meaningful when sigma was given (an estimated sigma is the
   // residual itself).
   const auto chi2_max = limits.Get("max_chi2");
-  const auto cost = Number(diag.value("cost", json()));
-  const int dof = diag.value("degrees_of_freedom", 0);
-  const auto sigma = Number(diag.value("noise_std", json()));
-  if (chi2_max && diag.value("noise_std_given", false) && cost && sigma && *sigma > 0 && dof > 0) {
+  const auto cost = defined(diag.cost);
+  const int dof = diag.degrees_of_freedom;
+  const auto sigma = defined(diag.noise_std);
+  if (chi2_max && diag.noise_std_given && cost && sigma && *sigma > 0 && dof > 0) {
     const double chi2 = 2 * *cost / dof / (*sigma * *sigma);
     if (chi2 > *chi2_max) {
       verdict->Reject("the residuals are " + Fmt(std::sqrt(chi2)) + " times the given noise_std " +

@@ -9,6 +9,7 @@
 #include "base/status.h"
 #include "core/pca.h"
 #include "core/pca_simulation.h"
+#include "results/pca_result.h"
 #include "server/method.h"
 #include "server/recording.h"
 
@@ -24,8 +25,10 @@ const Method& PcaMethod();
 // column count is checked against d, its row count in RunPca.
 Status ParsePcaConfig(const nlohmann::json& config, core::PcaOptions* options);
 
-// Runs the calibration on a parsed recording and writes the SPEC §4 result:
-//   {"method":"pca","parameters":{...},"uncertainty":{...},"diagnostics":{...},"warnings":[...]}
+// Runs the calibration on a parsed recording and writes the SPEC §4 result, the typed
+// results::PcaResult (results/pca_result.h) as JSON through results::ToJson:
+//   {"method":"pca","schema_version":1,"parameters":{...},"uncertainty":{...},
+//    "diagnostics":{...},"warnings":[...]}
 // For the raw layout the reported bias of each sensor is the mean over positions of its static
 // means, with the standard error of that mean as bias_std. Values that are undefined (e.g. an
 // uncertainty without a noise estimate, the rank gap when there is no σ_{d+1}) are written as
@@ -35,9 +38,13 @@ Status ParsePcaConfig(const nlohmann::json& config, core::PcaOptions* options);
 // "diagnostics", "warnings"} (no parameters).
 Status RunPca(const PcaRecording& recording, const core::PcaOptions& options,
               nlohmann::json* result);
+// The same, typed (on an error: envelope.usable false, no parameters or uncertainty).
+Status RunPca(const PcaRecording& recording, const core::PcaOptions& options,
+              results::PcaResult* result);
 
-// The result JSON of an already computed core result (used by RunPca).
-nlohmann::json PcaResultToJson(const core::PcaResult& result);
+// The typed result of an already computed core result (used by RunPca; without the recording's
+// diagnostics position_labels and removed_bias).
+results::PcaResult MakePcaResult(const core::PcaResult& result);
 
 // The acceptance gate of a pca result (Method::Judge): orientation coverage (min_scatter,
 // min_design; the reason carries diagnostics.coverage.advice, naming the missing orientations),
@@ -45,7 +52,12 @@ nlohmann::json PcaResultToJson(const core::PcaResult& result);
 // magnitude is known: readings in the field's unit; not judged for an unknown magnitude) with
 // scale_range and implausible_factor (a unit mix-up between readings and magnitude is named),
 // 1 sigma of scale, axis and bias, and the residual against a given noise_std (max_chi2).
+// A result that does not read (results::FromJson) is rejected naming the reader's message; so is
+// a failed run's partial document (nothing to judge).
 void JudgePca(const nlohmann::json& result, const nlohmann::json& config,
+              const AcceptanceLimits& limits, Verdict* verdict);
+// The same on the typed result and the parsed config (nominal is options.nominal).
+void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
               const AcceptanceLimits& limits, Verdict* verdict);
 
 // For `calibd simulate pca`: the averaged-layout CSV (`position,g0_x,...,g3_z`, %.17g), the

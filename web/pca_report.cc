@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "results/pca_result.h"
 #include "web/html.h"
 #include "web/report_common.h"
 #include "web/reports.h"
@@ -18,34 +19,38 @@
 
 namespace calibd::web::internal {
 
-PcaFigures ComputePcaFigures(const json& result) {
+namespace {
+
+// What a report shows for a result that does not read (results::FromJson's message).
+std::string Unreadable(const std::string& what, const Status& s) {
+  return NotAvailable(what) + "<p class=\"muted small unreadable\">" + E(s.message()) + "</p>";
+}
+
+PcaFigures ComputeFigures(const results::PcaResult& result) {
   PcaFigures f;
-  std::map<std::string, double> scale_by_name;
-  std::vector<double> scales;
-  if (const json* sensors = Array(Get(Get(result, "parameters"), "sensors"))) {
-    for (const auto& s : *sensors) {
-      scales.push_back(Num(Get(s, "scale")));
-      scale_by_name[Str(Get(s, "name"))] = scales.back();
+  f.rank_gap = result.diagnostics.rank_gap;
+  if (!result.parameters || !result.uncertainty) return f;
+  const auto& sensors = result.parameters->sensors;
+  const auto& stds = result.uncertainty->sensors;  // FromJson: one per sensor, same order
+  for (size_t i = 0; i < stds.size() && i < sensors.size(); ++i) {
+    const double sd = stds[i].scale_std;
+    const double scale = sensors[i].scale;
+    if (!std::isfinite(sd)) continue;
+    if (!(f.worst_scale_std >= sd)) f.worst_scale_std = sd;
+    if (std::isfinite(scale) && scale != 0) {
+      const double rel = sd / std::fabs(scale);
+      if (!(f.worst_rel_scale_std >= rel)) f.worst_rel_scale_std = rel;
     }
   }
-  if (const json* us = Array(Get(Get(result, "uncertainty"), "sensors"))) {
-    size_t i = 0;
-    for (const auto& u : *us) {
-      const double sd = Num(Get(u, "scale_std"));
-      double scale = i < scales.size() ? scales[i] : kNaN;
-      const auto it = scale_by_name.find(Str(Get(u, "name")));
-      if (it != scale_by_name.end()) scale = it->second;
-      ++i;
-      if (!std::isfinite(sd)) continue;
-      if (!(f.worst_scale_std >= sd)) f.worst_scale_std = sd;
-      if (std::isfinite(scale) && scale != 0) {
-        const double rel = sd / std::fabs(scale);
-        if (!(f.worst_rel_scale_std >= rel)) f.worst_rel_scale_std = rel;
-      }
-    }
-  }
-  f.rank_gap = Num(Get(Get(result, "diagnostics"), "rank_gap"));
   return f;
+}
+
+}  // namespace
+
+PcaFigures ComputePcaFigures(const json& result) {
+  results::PcaResult typed;
+  if (!results::FromJson(result, &typed).ok()) return PcaFigures();
+  return ComputeFigures(typed);
 }
 
 struct PcaSensor {
@@ -56,43 +61,36 @@ struct PcaSensor {
   std::vector<double> nominal;  // unit nominal axis, d components (empty when none)
 };
 
-std::vector<PcaSensor> ReadPcaSensors(const json& result, const json& config, size_t d) {
+// The sensors of a usable result (none for a partial document), with the nominal axes of the
+// config (its "nominal", m rows of d numbers, matched by index; absent or of another shape: none).
+std::vector<PcaSensor> ReadPcaSensors(const results::PcaResult& result, const json& config,
+                                      size_t d) {
   std::vector<PcaSensor> out;
-  const json* sensors = Array(Get(Get(result, "parameters"), "sensors"));
-  if (sensors == nullptr) return out;
-  for (const auto& s : *sensors) {
+  if (!result.parameters || !result.uncertainty) return out;
+  const auto& stds = result.uncertainty->sensors;  // FromJson: one per sensor, same order
+  const auto& rms = result.diagnostics.residual_rms;
+  for (size_t i = 0; i < result.parameters->sensors.size(); ++i) {
+    const results::PcaSensor& s = result.parameters->sensors[i];
     PcaSensor p;
-    p.name = Str(Get(s, "name"));
-    p.scale = Num(Get(s, "scale"));
-    p.bias = Num(Get(s, "bias"));
-    p.axis = NumArray(Get(s, "axis"));
-    if (p.axis.empty() || !HasNumbers(p.axis)) p.axis = Unit(NumArray(Get(s, "sensitivity")));
-    if (!std::isfinite(p.scale)) {
-      const auto sens = NumArray(Get(s, "sensitivity"));
-      if (HasNumbers(sens)) {
-        double n = 0;
-        for (double x : sens) n += x * x;
-        p.scale = std::sqrt(n);
-      }
+    p.name = s.name;
+    p.scale = s.scale;
+    p.bias = s.bias;
+    p.axis = s.axis;
+    if (!HasNumbers(p.axis)) p.axis = Unit(s.sensitivity);
+    if (!std::isfinite(p.scale) && HasNumbers(s.sensitivity)) {
+      double n = 0;
+      for (double x : s.sensitivity) n += x * x;
+      p.scale = std::sqrt(n);
     }
+    if (i < stds.size()) {
+      p.scale_std = stds[i].scale_std;
+      p.axis_std = stds[i].axis_std_rad;
+      p.bias_std = stds[i].bias_std;
+    }
+    if (i < rms.size()) p.residual_rms = rms[i];
     out.push_back(std::move(p));
   }
-  std::map<std::string, size_t> by_name;
-  for (size_t i = 0; i < out.size(); ++i) by_name[out[i].name] = i;
-  if (const json* us = Array(Get(Get(result, "uncertainty"), "sensors"))) {
-    for (size_t i = 0; i < us->size(); ++i) {
-      const json& u = (*us)[i];
-      const auto it = by_name.find(Str(Get(u, "name")));
-      const size_t k = it != by_name.end() ? it->second : i;
-      if (k >= out.size()) continue;
-      out[k].scale_std = Num(Get(u, "scale_std"));
-      out[k].axis_std = Num(Get(u, "axis_std_rad"));
-      out[k].bias_std = Num(Get(u, "bias_std"));
-    }
-  }
-  const auto rms = NumArray(Array(Get(Get(result, "diagnostics"), "residual_rms")));
-  for (size_t i = 0; i < out.size() && i < rms.size(); ++i) out[i].residual_rms = rms[i];
-  // Nominal axes: config.nominal, m rows of d numbers, matched by index.
+  // Nominal axes: the config's (not the result's) nominal.
   if (const json* nominal = Array(Get(config, "nominal"))) {
     for (size_t i = 0; i < out.size() && i < nominal->size(); ++i) {
       auto row = NumArray(&(*nominal)[i]);
@@ -148,9 +146,9 @@ std::string PcaParametersTable(const std::vector<PcaSensor>& sensors, size_t d, 
          "</thead><tbody>" + rows + "</tbody></table></div>";
 }
 
-std::string SingularValuePlot(const json& diag, size_t d) {
-  const auto sv = NumArray(Get(diag, "singular_values"));
-  const double gap = Num(Get(diag, "rank_gap"));
+std::string SingularValuePlot(const results::PcaDiagnostics& diag, size_t d) {
+  const std::vector<double>& sv = diag.singular_values;
+  const double gap = diag.rank_gap;
   Series signal, noise, all;
   all.line = true;
   all.color = 6;
@@ -189,8 +187,8 @@ std::string SingularValuePlot(const json& diag, size_t d) {
   return RenderXYPlot(o, {all, signal, noise});
 }
 
-std::string MagnitudeErrorPlot(const json& diag, bool magnitude_known) {
-  const auto me = NumArray(Get(diag, "magnitude_error"));
+std::string MagnitudeErrorPlot(const results::PcaDiagnostics& diag, bool magnitude_known) {
+  const std::vector<double>& me = diag.magnitude_error;
   Series s;
   s.label = "";
   s.line = me.size() > 150;
@@ -290,35 +288,42 @@ std::string AxesPlot(const std::vector<PcaSensor>& sensors, int a, int b, double
   return RenderXYPlot(o, series);
 }
 
+// A count of the diagnostics (-1: not computed).
+std::string CountText(int n) { return n >= 0 ? std::to_string(n) : std::string(kDash); }
+
 std::string PcaReport(const JobView& view) {
-  const json& result = view.job.result;
-  const json* params = Get(result, "parameters");
-  const json* diag = Get(result, "diagnostics");
-  double dd = Num(Get(params, "dimension"));
-  if (!std::isfinite(dd)) dd = Num(Get(view.config, "dimension"));
-  const size_t d = std::isfinite(dd) && dd >= 1 && dd <= 10 ? static_cast<size_t>(dd) : 3;
+  results::PcaResult result;
+  const Status read = results::FromJson(view.job.result, &result);
+  if (!read.ok()) {
+    return Section("parameters", "Parameters", Unreadable("The pca report", read));
+  }
+  if (!result.parameters) {
+    return Section("parameters", "Parameters",
+                   NotAvailable("The parameters (the result holds a failed run's diagnostics)"));
+  }
+  const results::PcaParameters& params = *result.parameters;
+  const results::PcaDiagnostics& diag = result.diagnostics;
+  const size_t d = static_cast<size_t>(params.dimension);  // FromJson: >= 1
   const auto sensors = ReadPcaSensors(result, view.config, d);
   std::string out;
 
   out += Guard("Parameters", [&] {
     std::string s;
-    const json* mk = Get(params, "magnitude_known");
-    const bool known = mk != nullptr && mk->is_boolean() && mk->get<bool>();
+    const bool known = params.magnitude_known;
     s += "<dl class=\"kv\"><dt>dimension d</dt><dd>" + std::to_string(d) + "</dd>";
+    const json magnitude = results::Num(params.magnitude);
     s += "<dt>field magnitude c</dt><dd>" +
-         (known ? E(ScalarText(Get(params, "magnitude"))) + " (known)"
+         (known ? E(ScalarText(&magnitude)) + " (known)"
                 : std::string("unknown: scale factors are relative (the paper's Remark 2)")) +
          "</dd>";
-    const std::string frame = Str(Get(params, "frame"));
     s += "<dt>frame</dt><dd>" +
-         (frame == "nominal"     ? std::string("nominal body frame (orthogonal Procrustes fit)")
-          : frame == "canonical" ? std::string("canonical frame of the paper's Eq. 19")
-          : frame.empty()        ? std::string(kDash)
-                                 : E(frame)) +
+         std::string(params.frame == results::PcaFrame::kNominal
+                         ? "nominal body frame (orthogonal Procrustes fit)"
+                         : "canonical frame of the paper's Eq. 19") +
          "</dd>";
     s += "<dt>sensors m</dt><dd>" + std::to_string(sensors.size()) + "</dd>";
-    s += "<dt>positions n</dt><dd>" + E(ScalarText(Get(diag, "positions"))) + " (minimum " +
-         E(ScalarText(Get(diag, "min_positions"))) + ")</dd></dl>";
+    s += "<dt>positions n</dt><dd>" + CountText(diag.positions) + " (minimum " +
+         CountText(diag.min_positions) + ")</dd></dl>";
     bool has_bias = false;
     for (const auto& p : sensors) {
       has_bias = has_bias || (std::isfinite(p.bias) && p.bias != 0) ||
@@ -336,14 +341,12 @@ std::string PcaReport(const JobView& view) {
 
   out += Guard("Plots", [&] {
     std::string figs;
-    figs += Figure(SingularValuePlot(diag ? *diag : json(), d),
+    figs += Figure(SingularValuePlot(diag, d),
                    "A clear drop after index d means the readings determine the d-dimensional "
                    "sensitivities.");
-    const json* mk = Get(params, "magnitude_known");
-    figs += Figure(MagnitudeErrorPlot(diag ? *diag : json(),
-                                      mk != nullptr && mk->is_boolean() && mk->get<bool>()),
+    figs += Figure(MagnitudeErrorPlot(diag, params.magnitude_known),
                    "Should scatter around zero at the noise level; outliers are bad positions.");
-    figs += Figure(ResidualRmsPlot(sensors, Num(Get(diag, "noise_std"))),
+    figs += Figure(ResidualRmsPlot(sensors, diag.noise_std),
                    "Should be near each sensor's noise level.");
     bool have_nominal = false;
     double max_dev = 0;
@@ -372,26 +375,28 @@ std::string PcaReport(const JobView& view) {
 // A failed pca job: positions against the minimum, the singular values and rank gap, and the
 // coverage with its advice when the fit got that far.
 std::string PcaPartial(const JobView& view) {
-  const json* diag = Get(view.job.error_detail, "diagnostics");
-  double dd = Num(Get(view.config, "dimension"));
-  const size_t d = std::isfinite(dd) && dd >= 1 && dd <= 10 ? static_cast<size_t>(dd) : 3;
-  const double gap = Num(Get(diag, "rank_gap"));
+  results::PcaResult result;
+  const Status read = results::FromJson(view.job.error_detail, &result);
+  if (!read.ok()) return Unreadable("The partial pca diagnostics", read);
+  const results::PcaDiagnostics& diag = result.diagnostics;
+  // d: the result's (a partial document has no parameters), else the config's, else 3.
+  double dd = result.parameters ? result.parameters->dimension : Num(Get(view.config, "dimension"));
+  const size_t d = std::isfinite(dd) && dd >= 1 && dd <= 32 ? static_cast<size_t>(dd) : 3;
+  const double gap = diag.rank_gap;
   std::string s = "<dl class=\"kv partial-pca\"><dt>positions n</dt><dd>" +
-                  E(ScalarText(Get(diag, "positions"))) + " (minimum " +
-                  E(ScalarText(Get(diag, "min_positions"))) + ")</dd><dt>rank gap " + kSigma +
-                  std::to_string(d) + "/" + kSigma + std::to_string(d + 1) + "</dt><dd>" +
+                  CountText(diag.positions) + " (minimum " + CountText(diag.min_positions) +
+                  ")</dd><dt>rank gap " + kSigma + std::to_string(d) + "/" + kSigma +
+                  std::to_string(d + 1) + "</dt><dd>" +
                   (std::isfinite(gap) ? E(FormatSig(gap, 3)) : std::string(kDash)) + "</dd>";
-  const json* cov = Get(diag, "coverage");
-  const std::string verdict = Str(Get(cov, "verdict"));
-  const std::string advice = Str(Get(cov, "advice"));
-  if (!verdict.empty() && verdict != "unknown") {
-    s += "<dt>orientation coverage</dt><dd class=\"coverage-verdict\">" + E(verdict) +
-         (advice.empty() ? std::string() : ": " + E(advice)) + "</dd>";
+  const results::PcaCoverage& cov = diag.coverage;
+  if (cov.verdict != results::PcaCoverageVerdict::kUnknown) {
+    s += "<dt>orientation coverage</dt><dd class=\"coverage-verdict\">" +
+         E(results::Name(cov.verdict)) +
+         (cov.advice.empty() ? std::string() : ": " + E(cov.advice)) + "</dd>";
   }
   s += "</dl>";
-  const auto sv = NumArray(Get(diag, "singular_values"));
-  if (!sv.empty()) {
-    s += Figure(SingularValuePlot(*diag, d),
+  if (!diag.singular_values.empty()) {
+    s += Figure(SingularValuePlot(diag, d),
                 "The singular values of the readings: without a clear drop after index d the "
                 "readings do not determine d-dimensional sensitivities.");
   }
@@ -399,8 +404,24 @@ std::string PcaPartial(const JobView& view) {
 }
 
 std::string PcaDrift(const std::vector<const JobSummary*>& jobs) {
+  // Each result read once; one that does not read has no sensors here (and is named below).
   std::vector<std::vector<PcaSensor>> sensors;
-  for (const auto* j : jobs) sensors.push_back(ReadPcaSensors(j->result, json(), 3));
+  std::vector<std::string> frames;
+  std::string unreadable;
+  for (const auto* j : jobs) {
+    results::PcaResult typed;
+    const Status read = results::FromJson(j->result, &typed);
+    if (!read.ok()) {
+      unreadable += Unreadable("Calibration " + std::to_string(j->id), read);
+      sensors.emplace_back();
+      frames.push_back("unknown");
+      continue;
+    }
+    sensors.push_back(ReadPcaSensors(typed, json(), 3));
+    std::string f = typed.parameters ? results::Name(typed.parameters->frame) : "unknown";
+    if (typed.parameters && typed.diagnostics.reflection) f += " (reflected)";
+    frames.push_back(f);
+  }
   // Sensor names in the order of the first calibration that has them.
   std::vector<std::string> names;
   for (const auto& ss : sensors) {
@@ -414,14 +435,7 @@ std::string PcaDrift(const std::vector<const JobSummary*>& jobs) {
     }
     return nullptr;
   };
-  auto frame_of = [&](size_t k) {
-    std::string f = Str(Get(Get(jobs[k]->result, "parameters"), "frame"));
-    const json* reflection = Get(Get(jobs[k]->result, "diagnostics"), "reflection");
-    if (reflection != nullptr && reflection->is_boolean() && reflection->get<bool>()) {
-      f += " (reflected)";
-    }
-    return f.empty() ? std::string("unknown") : f;
-  };
+  auto frame_of = [&](size_t k) { return frames[k]; };
   // Frame-free: the largest change of an angle between two sensors' axes (what a change of frame
   // cannot move), named by the pair.
   auto axis_pair_change = [&](size_t k, std::string* pair) {
@@ -498,7 +512,7 @@ std::string PcaDrift(const std::vector<const JobSummary*>& jobs) {
       "bias (reading units)</th>"
       "<th>per sensor (axis change: same frame only)</th></tr>"
       "</thead><tbody>" +
-      rows + "</tbody></table></div>" + OmittedPairsNote(jobs.size()) +
+      rows + "</tbody></table></div>" + unreadable + OmittedPairsNote(jobs.size()) +
       "<p class=\"muted small\">Scale factors, biases and the angles between axes do not depend "
       "on the frame; an axis direction does, so it is compared only between results in the same "
       "frame.</p>";
@@ -546,7 +560,10 @@ class PcaReportImpl : public MethodReport {
   std::string Section(const JobView& view) const override { return PcaReport(view); }
   std::string Partial(const JobView& view) const override { return PcaPartial(view); }
   std::string KeyFigures(const json& result) const override {
-    const PcaFigures f = ComputePcaFigures(result);
+    results::PcaResult typed;
+    const Status read = results::FromJson(result, &typed);
+    if (!read.ok()) return "not available: " + read.message();
+    const PcaFigures f = ComputeFigures(typed);
     if (!std::isfinite(f.worst_rel_scale_std) && !std::isfinite(f.rank_gap)) return "";
     return std::string(kSigma) + "(scale) \xE2\x89\xA4 " + Percent(f.worst_rel_scale_std) +
            " \xC2\xB7 gap " + FormatSig(f.rank_gap, 3);

@@ -372,12 +372,13 @@ TEST(Gate, ArrayModelFullTriadsAreJudgedLikeImu) {
 }
 
 TEST(Gate, AResultThatCannotBeJudgedIsRejected) {
-  // A damaged result (a string where a count belongs) fails closed instead of throwing.
+  // A damaged result (a string where a count belongs) fails closed instead of throwing, naming
+  // the first problem the typed reader (results/pca_result.h) met.
   const json v =
       JudgeWith("pca", {{"method", "pca"}, {"diagnostics", {{"degrees_of_freedom", "x"}}}},
                 {{"method", "pca"}});
   EXPECT_EQ(v["status"], "rejected");
-  EXPECT_TRUE(HasReason(v, "could not be judged")) << v.dump();
+  EXPECT_TRUE(HasReason(v, "the result cannot be judged: pca result: model: missing")) << v.dump();
 }
 
 // ---- noise ----

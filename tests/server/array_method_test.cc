@@ -277,7 +277,9 @@ json PcaResult(const std::vector<core::AccelerometerTriadModel>& models) {
       stds.push_back(
           {{"name", name}, {"scale_std", 1e-4}, {"axis_std_rad", 1e-4}, {"bias_std", 1e-4}});
     }
+  // Every key of the typed pca result (results/pca_result.h), which the chain reads.
   return {{"method", "pca"},
+          {"model", "r_i = a_i^T v + b_i"},
           {"parameters",
            {{"dimension", 3},
             {"magnitude", 9.80665},
@@ -285,8 +287,32 @@ json PcaResult(const std::vector<core::AccelerometerTriadModel>& models) {
             {"frame", "nominal"},
             {"bias", "estimate"},
             {"sensors", sensors}}},
-          {"uncertainty", {{"sensors", stds}}},
-          {"diagnostics", {{"usable", true}}},
+          {"uncertainty", {{"sensors", stds}, {"noise_std", 0.001}}},
+          {"diagnostics",
+           {{"usable", true},
+            {"singular_values", json::array()},
+            {"rank_gap", nullptr},
+            {"positions", 30},
+            {"min_positions", 9},
+            {"g_eigenvalues", json::array()},
+            {"residual_rms", json::array()},
+            {"magnitude_error", json::array()},
+            {"degrees_of_freedom", 100},
+            {"coverage",
+             {{"verdict", "good"},
+              {"scatter_eigenvalues", json::array()},
+              {"scatter_min", 1.0},
+              {"design_min", 1.0},
+              {"positions_per_direction", json::object()},
+              {"advice", ""}}},
+            {"noise_std", 0.001},
+            {"noise_std_given", false},
+            {"noise_std_estimated", 0.001},
+            {"cost_closed_form", 0.1},
+            {"cost", 0.1},
+            {"refined", false},
+            {"refine_iterations", 0},
+            {"reflection", false}}},
           {"warnings", json::array()}};
 }
 
@@ -300,6 +326,18 @@ json& Sensor(json& pca, const std::string& name) {
     if (s["name"] == name) return s;
   ADD_FAILURE() << name;
   return pca;
+}
+
+// Renames sensor i (its parameters and its uncertainty, which are read in step).
+void RenameSensor(json& pca, size_t i, const std::string& name) {
+  pca["parameters"]["sensors"][i]["name"] = name;
+  pca["uncertainty"]["sensors"][i]["name"] = name;
+}
+
+// Removes sensor i (parameters and uncertainty).
+void EraseSensor(json& pca, size_t i) {
+  pca["parameters"]["sensors"].erase(i);
+  pca["uncertainty"]["sensors"].erase(i);
 }
 
 void ExpectCalibrationError(const json& calibration, const std::string& phrase) {
@@ -369,9 +407,16 @@ TEST(AccelerometerCalibration, ErrorsSayWhatIsWrong) {
   ExpectCalibrationError(pca, "is not a pca result");
   pca = IdealPcaResult();
   pca.erase("parameters");
-  ExpectCalibrationError(pca, "no \"parameters\"");
+  ExpectCalibrationError(pca, "pca result: parameters: missing");
   pca = IdealPcaResult();
   pca["parameters"]["dimension"] = 2;
+  ExpectCalibrationError(pca, "parameters.sensors[0].sensitivity: expected 2 numbers");
+  pca = IdealPcaResult();
+  pca["parameters"]["dimension"] = 2;
+  for (json& s : pca["parameters"]["sensors"]) {
+    s["sensitivity"].erase(2);
+    s["axis"].erase(2);
+  }
   ExpectCalibrationError(pca, "dimension 2");
   pca = IdealPcaResult();
   pca["parameters"]["frame"] = "canonical";
@@ -385,24 +430,33 @@ TEST(AccelerometerCalibration, ErrorsSayWhatIsWrong) {
 
   // Names: the missing ones are listed.
   pca = IdealPcaResult();
-  json& sensors = pca["parameters"]["sensors"];
-  sensors.erase(95);  // a31_z
-  sensors.erase(16);  // a5_y
+  EraseSensor(pca, 95);  // a31_z
+  EraseSensor(pca, 16);  // a5_y
   ExpectCalibrationError(pca, "missing a5_y, a31_z");
   pca = IdealPcaResult();
-  for (json& s : pca["parameters"]["sensors"])
-    s["name"] = "acc" + s["name"].get<std::string>().substr(1);
+  for (size_t i = 0; i < 96; ++i)
+    RenameSensor(pca, i,
+                 "acc" + pca["parameters"]["sensors"][i]["name"].get<std::string>().substr(1));
   ExpectCalibrationError(pca, "no sensor for 96 of the 96 accelerometer columns: missing a0_x");
   ExpectCalibrationError(pca, "and 84 more");
   pca = IdealPcaResult();
-  Sensor(pca, "a7_x")["name"] = "a7_y";
+  RenameSensor(pca, 21, "a7_y");  // a7_x
   ExpectCalibrationError(pca, "names sensor 'a7_y' twice");
+  // Uncertainty out of step with the parameters: named by the reader.
+  pca = IdealPcaResult();
+  Sensor(pca, "a7_x")["name"] = "a7_q";
+  ExpectCalibrationError(pca, "uncertainty.sensors[21].name");
   pca = IdealPcaResult();
   Sensor(pca, "a2_y")["sensitivity"] = {1, 0};
-  ExpectCalibrationError(pca, "sensor 'a2_y' has no sensitivity of 3 numbers");
+  ExpectCalibrationError(pca, "parameters.sensors[7].sensitivity: expected 3 numbers");
   pca = IdealPcaResult();
   Sensor(pca, "a2_y")["bias"] = "0.1";
-  ExpectCalibrationError(pca, "sensor 'a2_y' has a bias that is not a finite number");
+  ExpectCalibrationError(pca, "parameters.sensors[7].bias: expected a number, found a string");
+  pca = IdealPcaResult();
+  Sensor(pca, "a2_y")["bias"] = nullptr;
+  ExpectCalibrationError(pca,
+                         "sensor 'a2_y' has a bias that is not a finite number "
+                         "(parameters.sensors[7].bias)");
   // A geometry with fewer triads than the result: extra sensors are ignored.
   ArrayAccelerometerCalibration cal;
   ASSERT_TRUE(ParseAccelerometerCalibration(IdealPcaResult(), 31, &cal).ok());

@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "results/pca_result.h"
 #include "server/array_method.h"
 #include "server/exports.h"
 #include "server/imu_method.h"
@@ -273,19 +274,27 @@ int main(void) {
 
 // Two jobs of the same device and method are different calibrations: including both is a
 // compile error, never one silently shadowing the other.
+
+// A pca result (results/pca_result.h, every key) of one sensor in a 1-d field: sensitivity 2,
+// the given bias, an undefined σ(scale).
+json OneSensorPcaResult(const std::string& name, bool magnitude_known, double bias) {
+  results::PcaResult r;
+  r.envelope.method = "pca";
+  r.envelope.model = "r = a v + b";
+  results::PcaParameters p;
+  p.dimension = 1;
+  p.magnitude = 1.0;
+  p.magnitude_known = magnitude_known;
+  p.frame = results::PcaFrame::kCanonical;
+  p.sensors = {{name, {2.0}, 2.0, {1.0}, bias}};
+  r.parameters = p;
+  r.uncertainty = results::PcaUncertainty{{{name, results::kPcaNaN, 1e-3, 0.0}}, 0.01};
+  r.diagnostics.usable = true;
+  return results::ToJson(r);
+}
+
 TEST(CHeader, TwoCalibrationsOfOneDeviceAndMethodCollideLoudly) {
-  json result = {{"method", "pca"},
-                 {"parameters",
-                  {{"dimension", 1},
-                   {"magnitude_known", true},
-                   {"frame", "canonical"},
-                   {"sensors",
-                    {{{"name", "s1"},
-                      {"sensitivity", {2.0}},
-                      {"axis", {1.0}},
-                      {"scale", 2.0},
-                      {"bias", 0.5}}}}}},
-                 {"uncertainty", {{"sensors", {{{"name", "s1"}, {"scale_std", nullptr}}}}}}};
+  const json result = OneSensorPcaResult("s1", true, 0.5);
   std::string h1, h2;
   ASSERT_TRUE(ResultToHeader(result, {1, "SN-1", "pca", "2026-01-01T00:00:00Z"}, &h1).ok());
   ASSERT_TRUE(ResultToHeader(result, {2, "SN-1", "pca", "2026-01-02T00:00:00Z"}, &h2).ok());
@@ -319,18 +328,9 @@ TEST(CHeader, TwoCalibrationsOfOneDeviceAndMethodCollideLoudly) {
 TEST(CHeader, HostileSerialAndSensorNamesCannotBreakTheHeader) {
   const std::string serial = "x*/ int evil; /*?\?/\"\\";
   const std::string sensor = "s?\?=1*/\"";
-  json result = {{"method", "pca"},
-                 {"parameters",
-                  {{"dimension", 1},
-                   {"magnitude_known", false},
-                   {"frame", "canonical */ int frame; /*"},
-                   {"sensors",
-                    {{{"name", sensor},
-                      {"sensitivity", {2.0}},
-                      {"axis", {1.0}},
-                      {"scale", 2.0},
-                      {"bias", 0.0}}}}}},
-                 {"uncertainty", {{"sensors", {{{"name", sensor}, {"scale_std", nullptr}}}}}}};
+  // (The frame, once a string a hostile result could fill, is an enum of the typed result: a
+  // result with another frame does not read, so it never reaches the header.)
+  const json result = OneSensorPcaResult(sensor, false, 0.0);
   std::string h;
   ASSERT_TRUE(ResultToHeader(result, {7, serial, "pca", "2026-01-01T00:00:00Z"}, &h).ok());
   TempDir dir;

@@ -106,8 +106,8 @@ TEST(PcaResultJson, HasExactlyTheSpecKeysAndNoNonFiniteNumbers) {
   ASSERT_TRUE(ParsePcaConfig(config, &o).ok());
   json result;
   ASSERT_TRUE(RunPca(rec, o, &result).ok());
-  EXPECT_EQ(Keys(result), (std::set<std::string>{"method", "model", "parameters", "uncertainty",
-                                                 "diagnostics", "warnings"}));
+  EXPECT_EQ(Keys(result), (std::set<std::string>{"method", "schema_version", "model", "parameters",
+                                                 "uncertainty", "diagnostics", "warnings"}));
   EXPECT_EQ(result["method"], "pca");
   const json& p = result["parameters"];
   for (const char* key : {"dimension", "magnitude", "magnitude_known", "frame", "sensors"}) {

@@ -23,6 +23,16 @@ const char kImg[] = "\"><img src=x onerror=alert(1)>";
 // Deterministic small "noise" for fixtures.
 double Wiggle(int i, double scale) { return scale * std::sin(1.7 * i + 0.3 * i * i); }
 
+// diagnostics.coverage of a pca result.
+json PcaCoverage(const std::string& verdict, const std::string& advice) {
+  return {{"verdict", verdict},
+          {"scatter_eigenvalues", {0.3, 0.33, 0.37}},
+          {"scatter_min", 0.9},
+          {"design_min", 0.8},
+          {"positions_per_direction", {{"+x", 2}, {"-x", 2}}},
+          {"advice", advice}};
+}
+
 // A pca result as calibd would store it: 4 gyroscope triads (12 sensors), d = 3, n = 24,
 // nominal frame, known magnitude.
 json PcaResult(const std::string& sensor_prefix = "g", double scale_shift = 0) {
@@ -52,14 +62,18 @@ json PcaResult(const std::string& sensor_prefix = "g", double scale_shift = 0) {
   for (int i = 0; i < 9; ++i) sv.push_back(0.052 - 0.003 * i);
   json mag = json::array();
   for (int j = 0; j < 24; ++j) mag.push_back(Wiggle(j, 0.012));
+  // Every key of the typed result (results/pca_result.h): the report reads it through FromJson.
   return {{"method", "pca"},
+          {"schema_version", 1},
+          {"model", "r_i = a_i^T v + b_i"},
           {"parameters",
            {{"dimension", 3},
             {"magnitude", 1.0},
             {"magnitude_known", true},
             {"frame", "nominal"},
+            {"bias", "none"},
             {"sensors", sensors}}},
-          {"uncertainty", {{"sensors", unc}}},
+          {"uncertainty", {{"sensors", unc}, {"noise_std", 0.01}}},
           {"diagnostics",
            {{"singular_values", sv},
             {"rank_gap", 8.07 / 0.052},
@@ -68,8 +82,17 @@ json PcaResult(const std::string& sensor_prefix = "g", double scale_shift = 0) {
             {"g_eigenvalues", {0.0151, 0.0137, 0.0126}},
             {"residual_rms", rms},
             {"magnitude_error", mag},
+            {"degrees_of_freedom", 222},
+            {"coverage", PcaCoverage("good", "")},
             {"usable", true},
-            {"noise_std", 0.01}}},
+            {"noise_std", 0.01},
+            {"noise_std_given", false},
+            {"noise_std_estimated", 0.01},
+            {"cost_closed_form", 0.0112},
+            {"cost", 0.0111},
+            {"refined", false},
+            {"refine_iterations", 0},
+            {"reflection", false}}},
           {"warnings", json::array()}};
 }
 
@@ -312,6 +335,36 @@ TEST(JobPage, PcaReflectionIsExplainedWhereShown) {
   EXPECT_TRUE(Has(page, "either value is normal"));
 }
 
+// A stored pca result the typed reader (results/pca_result.h) refuses: the report says "not
+// available" with the reader's message naming the path; the key figures say so too.
+TEST(JobPage, PcaResultThatDoesNotReadShowsNotAvailableNamingThePath) {
+  JobView v;
+  json r = PcaResult();
+  r["parameters"]["sensors"][1]["scale"] = "big";
+  v.job = Job(37, "IMU-0042", "pca", "succeeded", "2026-11-20T09:20:00Z", r);
+  v.config = PcaConfig();
+  const std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "The pca report: not available.")) << page;
+  EXPECT_TRUE(Has(page,
+                  "pca result: parameters.sensors[1].scale: expected a number, found a "
+                  "string"));
+  EXPECT_FALSE(Has(page, "table-pca-parameters"));
+  EXPECT_EQ(KeyFigures("pca", r).rfind("not available: pca result: parameters.sensors[1].scale", 0),
+            0u)
+      << KeyFigures("pca", r);
+  // The drift table names the calibration it could not read and compares the others.
+  DeviceView d;
+  d.serial = "IMU-0042";
+  d.jobs = {Job(1, "IMU-0042", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult()),
+            Job(2, "IMU-0042", "pca", "succeeded", "2026-02-01T08:00:00Z", r),
+            Job(3, "IMU-0042", "pca", "succeeded", "2026-03-01T08:00:00Z", PcaResult("g", 2e-4))};
+  const std::string device = RenderDevicePage(d);
+  ExpectDocument(device, "page-device");
+  EXPECT_TRUE(Has(device, "Calibration 2: not available.")) << device;
+  EXPECT_TRUE(Has(device, "class=\"table-drift-pca\""));
+}
+
 // A failed job: the reason's title, the method's message and the catalog's advice, each once,
 // then what the method found before failing drawn by its report (pca: the singular values; the
 // partial result has diagnostics.usable == false) and the diagnostics table. No parameters.
@@ -322,18 +375,29 @@ TEST(JobPage, FailedPcaJobShowsReasonMessageAdviceOnceAndThePartialDiagnostics) 
   v.job.error_reason = "no_rank_gap";
   v.job.error_title = "No clear rank gap";
   v.job.error_advice = "Record positions whose field directions differ more.";
-  v.job.error_detail = {
-      {"method", "pca"},
-      {"usable", false},
-      {"diagnostics",
-       {{"usable", false},
-        {"reason", "no clear gap"},
-        {"singular_values", {9.1, 8.7, 0.0102, 0.0101, 0.0099, 0.0098}},
-        {"rank_gap", 1.01},
-        {"positions", 12},
-        {"min_positions", 6},
-        {"coverage", {{"verdict", "poor"}, {"advice", "add positions with z up"}}}}},
-      {"warnings", json::array()}};
+  v.job.error_detail = {{"method", "pca"},
+                        {"usable", false},
+                        {"diagnostics",
+                         {{"usable", false},
+                          {"reason", "no clear gap"},
+                          {"singular_values", {9.1, 8.7, 0.0102, 0.0101, 0.0099, 0.0098}},
+                          {"rank_gap", 1.01},
+                          {"positions", 12},
+                          {"min_positions", 6},
+                          {"g_eigenvalues", json::array()},
+                          {"residual_rms", json::array()},
+                          {"magnitude_error", json::array()},
+                          {"degrees_of_freedom", -1},
+                          {"coverage", PcaCoverage("poor", "add positions with z up")},
+                          {"noise_std", nullptr},
+                          {"noise_std_given", false},
+                          {"noise_std_estimated", nullptr},
+                          {"cost_closed_form", nullptr},
+                          {"cost", nullptr},
+                          {"refined", false},
+                          {"refine_iterations", 0},
+                          {"reflection", false}}},
+                        {"warnings", json::array()}};
   v.config = PcaConfig();
   const std::string page = RenderJobPage(v);
   ExpectDocument(page, "page-job");
