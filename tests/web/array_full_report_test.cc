@@ -304,5 +304,56 @@ TEST(ArrayFullReport, TheJobPageOfAFullResultCarriesTheSections) {
   EXPECT_FALSE(Has(page, "plot-residual-rms"));
 }
 
+// The array report reads the result typed: a result that does not read shows the "not available"
+// line with the reader's message (the path of the problem) instead of tables of dashes, on the job
+// page, in a failed job's partial diagnostics and in the device page's drift.
+TEST(ArrayReport, AResultThatDoesNotReadSaysWhereOnEveryPage) {
+  json bad = FullResult(4);
+  bad["parameters"]["positions"][2]["offset"] = {1, 2};
+  JobView v;
+  v.job.id = 42;
+  v.job.status = JobStatus::kSucceeded;
+  v.job.method = "array";
+  v.job.device = "BOARD-1";
+  v.job.result = bad;
+  std::string page = RenderJobPage(v);
+  EXPECT_TRUE(Has(page, "parameters.positions[2].offset")) << page;
+  EXPECT_TRUE(Has(page, "not available"));
+  EXPECT_FALSE(Has(page, "table-array-parameters"));
+  v.job.result = FullResult(4);
+  EXPECT_TRUE(Has(RenderJobPage(v), "table-array-parameters"));
+
+  JobView failed = v;
+  failed.job.status = JobStatus::kFailed;
+  failed.job.result = json();
+  failed.job.error = "the motion does not determine the positions";
+  results::ArrayResult partial;  // a failed full-model run's partial diagnostics, damaged
+  partial.envelope.method = "array";
+  partial.envelope.usable = false;
+  partial.full = true;
+  failed.job.error_detail = results::ToJson(partial);
+  failed.job.error_detail["diagnostics"]["statics"] = "two";
+  page = RenderJobPage(failed);
+  EXPECT_TRUE(Has(page, "diagnostics.statics")) << page;
+  EXPECT_FALSE(Has(page, "partial-array"));
+
+  DeviceView d;
+  d.serial = "BOARD-1";
+  JobSummary a = v.job, b = v.job, c = v.job;
+  a.id = 1;
+  a.created_at = a.finished_at = "2026-01-01T00:00:00Z";
+  b.id = 2;
+  b.created_at = b.finished_at = "2026-02-01T00:00:00Z";
+  b.result = bad;
+  c.id = 3;
+  c.created_at = c.finished_at = "2026-03-01T00:00:00Z";
+  d.jobs = {a, b, c};
+  page = RenderDevicePage(d);
+  EXPECT_TRUE(Has(page, "table-drift-array"));
+  EXPECT_TRUE(Has(page, "Job #2&#39;s result (array result: parameters.positions[2].offset") ||
+              Has(page, "Job #2's result (array result: parameters.positions[2].offset"))
+      << page;
+}
+
 }  // namespace
 }  // namespace calibd::web
