@@ -3,6 +3,7 @@
 #include <sstream>
 #include <string>
 
+#include "results/array_result.h"
 #include "server/array_method.h"
 #include "server/export_util.h"
 #include "server/imu_method.h"
@@ -20,38 +21,46 @@ constexpr const char* kArrayModel =
     " * With model full, per IMU a = ACCEL_MATRIX (y_a - ACCEL_BIAS),\n"
     " * omega = GYRO_MATRIX (y_g - GYRO_BIAS), applied by *_array_apply().\n";
 
-Status ArrayHeader(const json& params, const json& unc, HeaderWriter* w) {
-  const json& positions = JsonAt(params, "positions");
-  if (!positions.is_array() || positions.empty()) {
+// An array result read typed; kInternal with the reader's message when it does not read (a stored
+// result is the server's own writing) or is a failed run's partial diagnostics.
+Status ReadArrayResult(const json& result, results::ArrayResult* out) {
+  Status s = results::FromJson(result, out);
+  if (!s.ok()) return Status::Internal(s.message());
+  if (!out->parameters || !out->uncertainty)
+    return Status::Internal("stored array result has no parameters (a failed run)");
+  return Status::Ok();
+}
+
+std::vector<double> Values(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+
+Status ArrayHeader(const results::ArrayResult& r, HeaderWriter* w) {
+  const results::ArrayParameters& params = *r.parameters;
+  const std::vector<results::ArrayPositionStd>& upos = r.uncertainty->positions;
+  if (params.positions.empty()) {
     return Status::Internal("stored array result has no parameters.positions");
   }
-  const size_t k = positions.size();
+  const size_t k = params.positions.size();
   std::vector<std::string> names;
-  std::vector<std::vector<double>> position(k), offset(k), stds;
-  for (size_t i = 0; i < k; ++i) {
-    const json& p = positions[i];
-    names.push_back(JsonAt(p, "name").is_string() ? p["name"].get<std::string>() : "");
-    if (!Numbers(JsonAt(p, "position"), 3, &position[i]) ||
-        !Numbers(JsonAt(p, "offset"), 3, &offset[i])) {
-      return Status::NotDeterminable("the array result of triad '" + names.back() +
+  std::vector<std::vector<double>> position, offset, stds;
+  for (const results::ArrayPosition& p : params.positions) {
+    names.push_back(p.name);
+    if (!p.position.allFinite() || !p.offset.allFinite()) {
+      return Status::NotDeterminable("the array result of triad '" + p.name +
                                      "' has an undefined position: no C header can be written");
     }
+    position.push_back(Values(p.position));
+    offset.push_back(Values(p.offset));
   }
   w->Define("TRIADS", std::to_string(k), "accelerometer triads K");
-  w->Define("REFERENCE",
-            std::to_string(JsonAt(params, "reference").is_number_integer()
-                               ? params["reference"].get<int>()
-                               : 0),
+  w->Define("REFERENCE", std::to_string(params.reference),
             "index of the reference triad, held at its nominal position");
   w->Names("NAMES", names);
   w->Array2("POSITION", position, 3, "r_k: triad positions, metres, nominal geometry frame");
   w->Array2("OFFSET", offset, 3, "offset from the nominal position, metres");
-  const json& upos = JsonAt(unc, "positions");
-  bool all = upos.is_array() && upos.size() == k;
+  bool all = upos.size() == k;
   for (size_t i = 0; all && i < k; ++i) {
-    std::vector<double> s;
-    all = Numbers(JsonAt(upos[i], "std"), 3, &s);
-    stds.push_back(s);
+    all = upos[i].std.allFinite();
+    stds.push_back(Values(upos[i].std));
   }
   if (all) {
     w->Array2("POSITION_STD", stds, 3, "1 sigma (Cramer-Rao bound), metres");
@@ -65,28 +74,18 @@ Status ArrayHeader(const json& params, const json& unc, HeaderWriter* w) {
 }  // namespace
 
 Status ArrayResultToCsv(const json& result, std::string* out) {
+  results::ArrayResult r;
+  if (Status s = ReadArrayResult(result, &r); !s.ok()) return s;
+  const std::vector<results::ArrayPositionStd>& upos = r.uncertainty->positions;
   std::ostringstream csv;
-  const json& params = JsonAt(result, "parameters");
-  const json& unc = JsonAt(result, "uncertainty");
-  const json& positions = JsonAt(params, "positions");
-  if (!positions.is_array()) {
-    return Status::Internal("stored array result has no parameters.positions");
-  }
-  const json& upos = JsonAt(unc, "positions");
   csv << "name,x,y,z,offset_x,offset_y,offset_z,std_x,std_y,std_z\n";
-  for (size_t i = 0; i < positions.size(); ++i) {
-    const json& p = positions[i];
-    const json& u = upos.is_array() && i < upos.size() ? upos[i] : json();
-    const json& name = JsonAt(p, "name");
-    csv << CsvField(name.is_string() ? name.get<std::string>() : "");
-    for (const char* key : {"position", "offset"}) {
-      const json& v = JsonAt(p, key);
-      for (size_t k = 0; k < 3; ++k)
-        csv << "," << (v.is_array() && k < v.size() ? CsvNumber(v[k]) : "");
-    }
-    const json& std = JsonAt(u, "std");
-    for (size_t k = 0; k < 3; ++k)
-      csv << "," << (std.is_array() && k < std.size() ? CsvNumber(std[k]) : "");
+  for (size_t i = 0; i < r.parameters->positions.size(); ++i) {
+    const results::ArrayPosition& p = r.parameters->positions[i];
+    csv << CsvField(p.name);
+    for (const Eigen::Vector3d* v : {&p.position, &p.offset})
+      for (int k = 0; k < 3; ++k) csv << "," << CsvNumber(results::Num((*v)(k)));
+    for (int k = 0; k < 3; ++k)
+      csv << "," << (i < upos.size() ? CsvNumber(results::Num(upos[i].std(k))) : "");
     csv << "\n";
   }
   *out = csv.str();
@@ -94,14 +93,15 @@ Status ArrayResultToCsv(const json& result, std::string* out) {
 }
 
 Status ArrayResultToHeader(const json& result, const ExportContext& context, std::string* out) {
+  results::ArrayResult r;
+  if (Status s = ReadArrayResult(result, &r); !s.ok()) return s;
   return WriteCHeader(
       result, context, "array", kArrayModel,
       [&](const json& params, const json& unc, HeaderWriter* w) {
-        Status s = ArrayHeader(params, unc, w);
-        // An array result of the full model carries per-IMU intrinsics as well.
-        if (s.ok() && JsonAt(params, "imus").is_array()) {
-          s = ImuHeader(params, unc, "IMU_", w);
-        }
+        Status s = ArrayHeader(r, w);
+        // An array result of the full model carries per-IMU intrinsics as well: written by the
+        // imu method's writer (server/imu_exports.cc), which reads the same per-IMU blocks.
+        if (s.ok() && r.full) s = ImuHeader(params, unc, "IMU_", w);
         return s;
       },
       out);

@@ -4,12 +4,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <map>
 #include <memory>
 
 #include "core/array_full.h"
 #include "core/array_full_simulation.h"
 #include "core/array_simulation.h"
+#include "results/array_result.h"
 #include "results/pca_result.h"
 #include "server/inertial_log.h"
 #include "server/noise_reference.h"
@@ -94,9 +96,9 @@ Status ParseGeometry(const json& g, core::ArrayProblem* problem) {
   return Status::Ok();
 }
 
-json Num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
-
-json Vec(const Eigen::Vector3d& v) { return json::array({Num(v.x()), Num(v.y()), Num(v.z())}); }
+// The result documents' writing conventions (NaN as null): results/json_reader.h.
+using results::Num;
+using results::Nums;
 
 std::string FormatG17(double v) {
   char buf[32];
@@ -475,27 +477,40 @@ Status ParseArrayFullConfig(const json& config, core::ArrayFullProblem* geometry
 
 namespace {
 
-json Mat(const Eigen::Matrix3d& m) {
-  json rows = json::array();
-  for (int i = 0; i < 3; ++i) rows.push_back(Vec(m.row(i).transpose()));
-  return rows;
-}
-
 // A sensor in reading units: the core saw readings times `unit` (SI per reading unit); the
 // reported matrix maps a bias-free reading to SI, so it is multiplied by unit and the bias
 // divided by it.
-json SensorJson(const core::ArrayFullSensorReport& r, double unit) {
-  return {{"bias", Vec(r.bias / unit)},
-          {"scale", Vec(r.scale * unit)},
-          {"misalignment", Mat(r.misalignment)},
-          {"matrix", Mat(r.matrix * unit)}};
+results::SensorTriad SensorTriadOf(const core::ArrayFullSensorReport& r, double unit) {
+  results::SensorTriad t;
+  t.bias = r.bias / unit;
+  t.scale = r.scale * unit;
+  t.misalignment = r.misalignment;
+  t.matrix = r.matrix * unit;
+  return t;
 }
 
-json SensorStdJson(const core::ArrayFullSensorStd& r, double unit) {
-  return {{"bias_std", Vec(r.bias_std / unit)},
-          {"scale_std", Vec(r.scale_std * unit)},
-          {"misalignment_std", Mat(r.misalignment_std)}};
+results::SensorTriadStd SensorTriadStdOf(const core::ArrayFullSensorStd& r, double unit) {
+  results::SensorTriadStd t;
+  t.bias_std = r.bias_std / unit;
+  t.scale_std = r.scale_std * unit;
+  t.misalignment_std = r.misalignment_std;
+  return t;
 }
+
+constexpr const char* kFullModelEquation =
+    "a_k = M_a,k (y_a,k - b_a,k), omega = M_g,k (y_g,k - b_g,k) for IMU k: y raw readings, b "
+    "biases (reading units), M = matrix (SI per reading unit; scale = its diagonal, "
+    "misalignment = M diag(scale)^-1), in the body frame of the reference accelerometer; a_k "
+    "= s + (Omega(omega)^2 + Omega(omega_dot)) r_k with r_k the accelerometer's position "
+    "(metres, nominal geometry frame, the reference held at its nominal position), s the "
+    "specific force at the origin, Omega(x) the cross-product matrix";
+
+constexpr const char* kPositionsModelEquation =
+    "y_a,k = s + (Omega(omega)^2 + Omega(omega_dot)) r_k for accelerometer triad k at "
+    "position r_k (metres, nominal geometry frame, the reference triad held at its "
+    "nominal position), y_g = omega for every gyroscope triad: s the specific force at "
+    "the origin, omega the angular rate, Omega(x) the cross-product matrix; the "
+    "parameters are the positions r_k";
 
 Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
                     const std::atomic<bool>* cancel, core::TaskExecutor executor) {
@@ -529,161 +544,111 @@ Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
   if (cancel != nullptr) options.callback = [cancel](int) { return !cancel->load(); };
   core::ArrayFullResult r;
   s = core::CalibrateArrayFull(problem, options, &r);
+  results::ArrayResult out;
+  out.envelope.method = "array";
+  out.envelope.warnings = r.warnings;
+  out.full = true;
+  results::ArrayFullDiagnostics& d = out.full_diagnostics;
+  d.termination = core::BlockLmTerminationName(r.termination);
+  d.iterations = r.iterations;
+  d.statics = r.statics;
+  d.static_samples = r.static_samples;
+  d.dynamic_samples = r.dynamic_samples;
+  d.rotation_excitation.eigenvalues = r.rotation_eigenvalues;
+  d.rotation_excitation.noise_floor = r.rotation_noise_floor;
+  d.rotation_excitation.weakest_axis = r.weakest_rotation_axis;
+  d.rotation_excitation.verdict = r.rotation_verdict;
+  d.null_directions = r.null_directions;
   if (!s.ok()) {
     // The partial diagnostics kept with the failed job: what the run found before failing.
-    json nulls = json::array();
-    for (const auto& t : r.null_directions) nulls.push_back(t);
-    json warnings = json::array();
-    for (const auto& w : r.warnings) warnings.push_back(w);
-    *result = {{"method", "array"},
-               {"usable", false},
-               {"diagnostics",
-                {{"model", "full"},
-                 {"termination", core::BlockLmTerminationName(r.termination)},
-                 {"iterations", r.iterations},
-                 {"statics", r.statics},
-                 {"static_samples", r.static_samples},
-                 {"dynamic_samples", r.dynamic_samples},
-                 {"rotation",
-                  {{"eigenvalues", Vec(r.rotation_eigenvalues)},
-                   {"noise_floor", Num(r.rotation_noise_floor)},
-                   {"weakest_axis", Vec(r.weakest_rotation_axis)},
-                   {"verdict", r.rotation_verdict}}},
-                 {"null_directions", nulls}}},
-               {"warnings", warnings}};
+    out.envelope.usable = false;
+    *result = results::ToJson(out);
     return s;
   }
 
   const double gyro_unit = degrees ? core::kDegree : 1.0;  // rad/s per reading unit
-  json imus = json::array(), stds = json::array(), positions = json::array(),
-       position_stds = json::array(), residuals = json::array(), changed = json::array();
+  out.envelope.model = kFullModelEquation;
+  results::ArrayParameters params;
+  results::ArrayUncertainty unc;
+  params.reference = r.reference;
   for (int k = 0; k < K; ++k) {
     const core::ArrayFullTriadReport& p = r.report[k];
-    imus.push_back({{"name", p.name},
-                    {"accelerometer", SensorJson(p.accelerometer, 1)},
-                    {"gyroscope", SensorJson(p.gyroscope, gyro_unit)},
-                    {"position", Vec(p.position)}});
-    json u = {{"name", p.name},
-              {"accelerometer", SensorStdJson(r.report_std[k].accelerometer, 1)},
-              {"gyroscope", SensorStdJson(r.report_std[k].gyroscope, gyro_unit)},
-              {"position_std", Vec(r.report_std[k].position_std)}};
-    if (r.robust)
-      u["robust"] = {{"accelerometer", SensorStdJson(r.report_std_robust[k].accelerometer, 1)},
-                     {"gyroscope", SensorStdJson(r.report_std_robust[k].gyroscope, gyro_unit)},
-                     {"position_std", Vec(r.report_std_robust[k].position_std)}};
-    stds.push_back(std::move(u));
-    positions.push_back({{"name", p.name},
-                         {"position", Vec(p.position)},
-                         {"offset", Vec(p.position - problem.nominal_positions.col(k))}});
-    position_stds.push_back({{"name", p.name}, {"std", Vec(r.report_std[k].position_std)}});
+    const core::ArrayFullTriadStd& sd = r.report_std[k];
+    results::ArrayImu imu;
+    imu.triads.name = p.name;
+    imu.triads.accelerometer = SensorTriadOf(p.accelerometer, 1);
+    imu.triads.gyroscope = SensorTriadOf(p.gyroscope, gyro_unit);
+    imu.position = p.position;
+    params.imus.push_back(std::move(imu));
+    results::ArrayImuStd u;
+    u.triads.name = p.name;
+    u.triads.accelerometer = SensorTriadStdOf(sd.accelerometer, 1);
+    u.triads.gyroscope = SensorTriadStdOf(sd.gyroscope, gyro_unit);
+    u.position_std = sd.position_std;
+    if (r.robust) {
+      results::ArrayImuRobustStd robust;
+      robust.accelerometer = SensorTriadStdOf(r.report_std_robust[k].accelerometer, 1);
+      robust.gyroscope = SensorTriadStdOf(r.report_std_robust[k].gyroscope, gyro_unit);
+      robust.position_std = r.report_std_robust[k].position_std;
+      u.robust = std::move(robust);
+    }
+    unc.imus.push_back(std::move(u));
+    params.positions.push_back({p.name, p.position, p.position - problem.nominal_positions.col(k)});
+    unc.positions.push_back({p.name, sd.position_std});
     const core::ArrayFullResidualStats& rs = r.residuals[k];
-    residuals.push_back({{"name", p.name},
-                         {"static",
-                          {{"accelerometer", Num(rs.static_accel)},
-                           {"gyroscope", Num(rs.static_gyro / gyro_unit)}}},
-                         {"dynamic",
-                          {{"accelerometer", Num(rs.dynamic_accel)},
-                           {"gyroscope", Num(rs.dynamic_gyro / gyro_unit)}}}});
+    d.residual_rms_imus.push_back({p.name,
+                                   {rs.static_accel, rs.static_gyro / gyro_unit},
+                                   {rs.dynamic_accel, rs.dynamic_gyro / gyro_unit}});
     // What the full model changed against the positions-only fit it starts from (the same
     // log's dynamic samples, accelerometers corrected by the statics' closed form, gyroscope
     // biases removed): the shift, and the shift in units of the full model's 1 sigma per axis
     // (null where sigma is 0: the reference, held by the gauge).
-    const Eigen::Vector3d shift = p.position - r.initial[k].position;
-    json in_sigma = json::array();
+    results::ArrayPositionChange change;
+    change.name = p.name;
+    change.positions_only = r.initial[k].position;
+    change.position_change = p.position - r.initial[k].position;
+    change.position_change_norm = change.position_change.norm();
     for (int c = 0; c < 3; ++c) {
-      const double sd = r.report_std[k].position_std(c);
-      in_sigma.push_back(sd > 0 ? Num(shift(c) / sd) : json(nullptr));
+      const double sigma = sd.position_std(c);
+      change.position_change_sigma(c) =
+          sigma > 0 ? change.position_change(c) / sigma : std::numeric_limits<double>::quiet_NaN();
     }
-    json entry = {{"name", p.name},
-                  {"positions_only", Vec(r.initial[k].position)},
-                  {"position_change", Vec(shift)},
-                  {"position_change_norm", Num(shift.norm())},
-                  {"position_change_sigma", std::move(in_sigma)}};
     if (r.initial_position_std.cols() == K)
-      entry["positions_only_std"] = Vec(r.initial_position_std.col(k));
-    changed.push_back(std::move(entry));
+      change.positions_only_std = Eigen::Vector3d(r.initial_position_std.col(k));
+    d.changed_from_positions_only.push_back(std::move(change));
   }
-  json cost = json::array();
-  for (double c : r.cost) cost.push_back(Num(c));
-  json warnings = json::array();
-  for (const auto& w : r.warnings) warnings.push_back(w);
-  json offsets = json::array();
+  out.parameters = std::move(params);
+  out.uncertainty = std::move(unc);
+  d.gauge = {r.gauge, r.reference, r.gauge_description};
+  d.solver = "joint";
+  d.converged = r.converged;
+  d.cost = r.cost;
+  d.samples_dropped = r.samples_dropped;
+  d.dof = r.dof;
+  d.chi2_per_dof = r.chi2_per_dof;
+  d.gyro_unit = degrees ? "deg/s" : "rad/s";
+  d.noise.accelerometer = r.accel_noise;
+  d.noise.gyroscope = r.gyro_noise / gyro_unit;
+  d.noise.source = r.noise_estimated ? "statics" : "configured";
+  d.noise.dynamic_weighting =
+      options.dynamic_weighting == core::ArrayFullDynamicWeighting::kResidual ? "residual"
+                                                                              : "noise";
+  d.noise.dynamic_accelerometer = r.dynamic_accel_noise;
+  d.noise.dynamic_gyroscope = r.dynamic_gyro_noise / gyro_unit;
+  d.static_noise = {r.static_noise_accel, r.static_noise_gyro / gyro_unit};
+  d.residual_rms_dynamic = {r.dynamic_rms_accel, r.dynamic_rms_gyro / gyro_unit};
   for (int k = 0; k < K; ++k)
-    offsets.push_back({{"name", r.names[k]}, {"offset", Num(1e3 * r.time_offsets(k))}});
-  json nulls = json::array();
-  for (const auto& n : r.null_directions) nulls.push_back(n);
-  *result = {
-      {"method", "array"},
-      {"model",
-       "a_k = M_a,k (y_a,k - b_a,k), omega = M_g,k (y_g,k - b_g,k) for IMU k: y raw readings, b "
-       "biases (reading units), M = matrix (SI per reading unit; scale = its diagonal, "
-       "misalignment = M diag(scale)^-1), in the body frame of the reference accelerometer; a_k "
-       "= s + (Omega(omega)^2 + Omega(omega_dot)) r_k with r_k the accelerometer's position "
-       "(metres, nominal geometry frame, the reference held at its nominal position), s the "
-       "specific force at the origin, Omega(x) the cross-product matrix"},
-      {"parameters",
-       {{"model", "full"},
-        {"reference", r.reference},
-        {"imus", std::move(imus)},
-        {"positions", std::move(positions)}}},
-      {"uncertainty", {{"imus", std::move(stds)}, {"positions", std::move(position_stds)}}},
-      {"diagnostics",
-       {{"model", "full"},
-        {"gauge",
-         {{"scale", r.gauge}, {"reference", r.reference}, {"description", r.gauge_description}}},
-        {"solver", "joint"},
-        {"iterations", r.iterations},
-        {"converged", r.converged},
-        {"termination", core::BlockLmTerminationName(r.termination)},
-        {"cost", cost},
-        {"statics", r.statics},
-        {"static_samples", r.static_samples},
-        {"dynamic_samples", r.dynamic_samples},
-        {"samples_dropped", r.samples_dropped},
-        {"dof", r.dof},
-        {"chi2_per_dof", Num(r.chi2_per_dof)},
-        {"gyro_unit", degrees ? "deg/s" : "rad/s"},
-        {"noise",
-         {{"accelerometer", Num(r.accel_noise)},
-          {"gyroscope", Num(r.gyro_noise / gyro_unit)},
-          {"source", r.noise_estimated ? "statics" : "configured"},
-          {"dynamic_weighting",
-           options.dynamic_weighting == core::ArrayFullDynamicWeighting::kResidual ? "residual"
-                                                                                   : "noise"},
-          {"dynamic_accelerometer", Num(r.dynamic_accel_noise)},
-          {"dynamic_gyroscope", Num(r.dynamic_gyro_noise / gyro_unit)}}},
-        {"static_noise",
-         {{"accelerometer", Num(r.static_noise_accel)},
-          {"gyroscope", Num(r.static_noise_gyro / gyro_unit)}}},
-        {"residual_rms",
-         {{"dynamic",
-           {{"accelerometer", Num(r.dynamic_rms_accel)},
-            {"gyroscope", Num(r.dynamic_rms_gyro / gyro_unit)}}},
-          {"imus", std::move(residuals)}}},
-        {"rotation_excitation",
-         {{"eigenvalues", Vec(r.rotation_eigenvalues)},
-          {"noise_floor", Num(r.rotation_noise_floor)},
-          {"weakest_axis", Vec(r.weakest_rotation_axis)},
-          {"verdict", r.rotation_verdict},
-          {"units", "(rad/s)^2"}}},
-        {"null_directions", std::move(nulls)},
-        {"time_offsets",
-         {{"offsets_ms", offsets},
-          {"explained_fraction", Num(r.time_offset_explained)},
-          {"per_sample_rms_ms", Num(1e3 * r.jitter_rms)},
-          {"per_sample_explained_fraction", Num(r.jitter_explained)},
-          {"note",
-           "diagnostic, not part of the model: per IMU the constant sampling-time offset "
-           "(relative to their mean) that best explains its gyroscope residual by omega_dot, "
-           "and the same free per sample (jitter)"}}},
-        {"robust",
-         {{"used", r.robust},
-          {"batches", r.robust_batches},
-          {"batch_seconds", options.robust_batch},
-          {"ratio", options.robust_ratio}}},
-        {"positions_only_start", r.initial_positions_from_array},
-        {"changed_from_positions_only", std::move(changed)}}},
-      {"warnings", std::move(warnings)}};
+    d.time_offsets.offsets_ms.push_back({r.names[k], 1e3 * r.time_offsets(k)});
+  d.time_offsets.explained_fraction = r.time_offset_explained;
+  d.time_offsets.per_sample_rms_ms = 1e3 * r.jitter_rms;
+  d.time_offsets.per_sample_explained_fraction = r.jitter_explained;
+  d.time_offsets.note =
+      "diagnostic, not part of the model: per IMU the constant sampling-time offset "
+      "(relative to their mean) that best explains its gyroscope residual by omega_dot, "
+      "and the same free per sample (jitter)";
+  d.robust = {r.robust, r.robust_batches, options.robust_batch, options.robust_ratio};
+  d.positions_only_start = r.initial_positions_from_array;
+  *result = results::ToJson(out);
   return Status::Ok();
 }
 
@@ -723,97 +688,70 @@ Status RunArray(ArrayRecording recording, const json& config, json* result,
   }
   core::ArrayResult r;
   s = core::CalibrateArray(problem, options, &r);
+  results::ArrayResult out;
+  out.envelope.method = "array";
+  out.envelope.warnings = r.warnings;
+  results::ArrayPositionsDiagnostics& d = out.diagnostics;
+  d.solver = core::ArraySolverName(r.solver);
+  d.termination = core::ArrayTerminationName(r.termination);
+  d.iterations = r.iterations;
+  d.samples = r.samples;
+  d.samples_dropped = r.samples_dropped;
+  d.gyro_triads = r.gyro_triads;
+  d.gyro_unit = degrees ? "deg/s" : "rad/s";
+  d.excitation = {r.excitation.min_eigenvalue, r.excitation.max_eigenvalue,
+                  r.excitation.noise_floor, r.excitation.weakest_direction, r.excitation.verdict};
   if (!s.ok()) {
     // The partial diagnostics kept with the failed job: the samples used and dropped, the
     // excitation when the solver got that far (verdict "" before), the termination.
-    json warnings = json::array();
-    for (const auto& w : r.warnings) warnings.push_back(w);
-    *result = {{"method", "array"},
-               {"usable", false},
-               {"diagnostics",
-                {{"solver", core::ArraySolverName(r.solver)},
-                 {"termination", core::ArrayTerminationName(r.termination)},
-                 {"iterations", r.iterations},
-                 {"samples", r.samples},
-                 {"samples_dropped", r.samples_dropped},
-                 {"gyro_triads", r.gyro_triads},
-                 {"gyro_unit", degrees ? "deg/s" : "rad/s"},
-                 {"excitation",
-                  {{"min_eigenvalue", Num(r.excitation.min_eigenvalue)},
-                   {"max_eigenvalue", Num(r.excitation.max_eigenvalue)},
-                   {"noise_floor", Num(r.excitation.noise_floor)},
-                   {"weakest_direction", Vec(r.excitation.weakest_direction)},
-                   {"verdict", r.excitation.verdict}}}}},
-               {"warnings", warnings}};
+    out.envelope.usable = false;
+    *result = results::ToJson(out);
     return s;
   }
 
   const double gyro_out = degrees ? 1 / core::kDegree : 1.0;
-  json positions = json::array(), stds = json::array();
+  out.envelope.model = kPositionsModelEquation;
+  for (const auto& w : calibration.warnings) out.envelope.warnings.push_back(w);
+  results::ArrayParameters params;
+  results::ArrayUncertainty unc;
+  params.reference = r.reference;
   for (int k = 0; k < K; ++k) {
-    positions.push_back({{"name", r.names[k]},
-                         {"position", Vec(r.positions.col(k))},
-                         {"offset", Vec(r.offsets.col(k))}});
-    stds.push_back({{"name", r.names[k]}, {"std", Vec(r.position_std.col(k))}});
+    params.positions.push_back({r.names[k], r.positions.col(k), r.offsets.col(k)});
+    unc.positions.push_back({r.names[k], r.position_std.col(k)});
   }
-  const double std_rms = K > 1 ? std::sqrt(r.position_std.squaredNorm() / (3.0 * (K - 1))) : 0.0;
+  unc.std_rms = K > 1 ? std::sqrt(r.position_std.squaredNorm() / (3.0 * (K - 1))) : 0.0;
+  out.parameters = std::move(params);
+  out.uncertainty = std::move(unc);
 
-  json cost = json::array();
-  for (double c : r.cost) cost.push_back(Num(c));
+  d.converged = r.converged;
+  d.cost = r.cost;
   const int64_t N = r.samples;
-  const int64_t stride = std::max<int64_t>(1, (N + 1999) / 2000);
-  json omega = json::array(), omega_dot = json::array();
-  for (int64_t n = 0; n < N; n += stride) {
-    omega.push_back(Num(r.omega_norm(n)));
-    omega_dot.push_back(Num(r.omega_dot_norm(n)));
+  d.motion.stride = std::max<int64_t>(1, (N + 1999) / 2000);
+  for (int64_t n = 0; n < N; n += d.motion.stride) {
+    d.motion.omega_norm.push_back(r.omega_norm(n));
+    d.motion.omega_dot_norm.push_back(r.omega_dot_norm(n));
   }
-  json warnings = json::array();
-  for (const auto& w : r.warnings) warnings.push_back(w);
-  for (const auto& w : calibration.warnings) warnings.push_back(w);
-
-  *result = {{"method", "array"},
-             {"model",
-              "y_a,k = s + (Omega(omega)^2 + Omega(omega_dot)) r_k for accelerometer triad k at "
-              "position r_k (metres, nominal geometry frame, the reference triad held at its "
-              "nominal position), y_g = omega for every gyroscope triad: s the specific force at "
-              "the origin, omega the angular rate, Omega(x) the cross-product matrix; the "
-              "parameters are the positions r_k"},
-             {"parameters", {{"reference", r.reference}, {"positions", positions}}},
-             {"uncertainty", {{"positions", stds}, {"std_rms", Num(std_rms)}}},
-             {"diagnostics",
-              {{"solver", core::ArraySolverName(r.solver)},
-               {"iterations", r.iterations},
-               {"converged", r.converged},
-               {"termination", core::ArrayTerminationName(r.termination)},
-               {"cost", cost},
-               {"samples", r.samples},
-               {"samples_dropped", r.samples_dropped},
-               {"gyro_triads", r.gyro_triads},
-               {"gyro_unit", degrees ? "deg/s" : "rad/s"},
-               {"residual_rms",
-                {{"accelerometer", Num(r.residual_rms_accel)},
-                 {"gyroscope", Num(r.residual_rms_gyro * gyro_out)}}},
-               {"noise_estimate",
-                {{"accelerometer", Num(r.noise_estimate_accel)},
-                 {"gyroscope", Num(r.noise_estimate_gyro * gyro_out)}}},
-               {"noise_jobs", NoiseJobsJson(config)},
-               {"noise_configured",
-                {{"accelerometer", Num(options.accel_noise)},
-                 {"gyroscope", Num(options.gyro_noise * gyro_out)}}},
-               {"excitation",
-                {{"min_eigenvalue", Num(r.excitation.min_eigenvalue)},
-                 {"max_eigenvalue", Num(r.excitation.max_eigenvalue)},
-                 {"noise_floor", Num(r.excitation.noise_floor)},
-                 {"weakest_direction", Vec(r.excitation.weakest_direction)},
-                 {"verdict", r.excitation.verdict}}},
-               {"parallel_fraction", Num(r.parallel_fraction)},
-               {"motion",
-                {{"stride", stride},
-                 {"omega_norm", omega},
-                 {"omega_dot_norm", omega_dot},
-                 {"units", {{"omega_norm", "rad/s"}, {"omega_dot_norm", "rad/s^2"}}}}},
-               {"accelerometer_calibration", calibration.ToJson()}}},
-             {"warnings", warnings}};
+  d.residual_rms = {r.residual_rms_accel, r.residual_rms_gyro * gyro_out};
+  d.noise_estimate = {r.noise_estimate_accel, r.noise_estimate_gyro * gyro_out};
+  // {"accelerometer": ID or null, "gyroscope": ...} (server/noise_reference.h).
+  const json noise_jobs = NoiseJobsJson(config);
+  results::JsonReader jobs(noise_jobs, "noise_jobs");
+  jobs.Read("accelerometer", &d.noise_jobs.accelerometer);
+  jobs.Read("gyroscope", &d.noise_jobs.gyroscope);
+  if (!jobs.ok()) return Status::Internal(jobs.status().message());
+  d.noise_configured = {options.accel_noise, options.gyro_noise * gyro_out};
+  d.parallel_fraction = r.parallel_fraction;
+  if (calibration.present) {
+    results::ArrayCalibrationUsed used;
+    if (calibration.job.is_number_integer()) used.job = calibration.job.get<int64_t>();
+    used.sensors = calibration.sensors;
+    used.frame = calibration.frame;
+    if (!calibration.bias.empty()) used.bias = calibration.bias;
+    used.magnitude = calibration.magnitude;
+    used.max_condition_number = calibration.max_condition_number;
+    d.accelerometer_calibration = std::move(used);
+  }
+  *result = results::ToJson(out);
   return Status::Ok();
 }
 
@@ -878,9 +816,9 @@ Status SimulateArrayFiles(const ArraySimulationFileOptions& options, std::string
 
   json nominal = json::array(), true_positions = json::array();
   for (int k = 0; k < K; ++k) {
-    nominal.push_back(Vec(sim.problem.nominal_positions.col(k)));
+    nominal.push_back(Nums(sim.problem.nominal_positions.col(k)));
     true_positions.push_back(
-        {{"name", sim.problem.accel_names[k]}, {"position", Vec(sim.true_positions.col(k))}});
+        {{"name", sim.problem.accel_names[k]}, {"position", Nums(sim.true_positions.col(k))}});
   }
   *config = {
       {"method", "array"},
@@ -909,7 +847,7 @@ Status SimulateArrayFiles(const ArraySimulationFileOptions& options, std::string
     for (int k = 0; k < K; ++k)
       for (int i = 0; i < 3; ++i)
         sensors.push_back({{"name", sim.problem.accel_names[k] + "_" + "xyz"[i]},
-                           {"sensitivity", Vec(sim.accel_models[k].sensitivity.col(i))},
+                           {"sensitivity", Nums(sim.accel_models[k].sensitivity.col(i))},
                            {"bias", sim.accel_models[k].bias(i)}});
     (*truth)["accelerometer_sensors"] = std::move(sensors);
   }
@@ -956,64 +894,34 @@ Status SimulateArrayStaticFiles(const ArraySimulationFileOptions& options, int p
 
 void JudgeArray(const json& result, const json& config, const AcceptanceLimits& limits,
                 Verdict* verdict) {
-  const json params = result.value("parameters", json::object());
-  const json uncertainty = result.value("uncertainty", json::object());
-  const json diag = result.value("diagnostics", json::object());
-  const int reference = params.value("reference", -1);
-  // Positions: parameters.positions (SPEC §4), or per IMU (model full: parameters.imus[].position
-  // with uncertainty.imus[].position_std), against the nominal geometry.
-  struct Position {
-    std::string name;
-    Eigen::Vector3d offset = Eigen::Vector3d::Constant(NAN);
-    Eigen::Vector3d std = Eigen::Vector3d::Constant(NAN);
-  };
-  auto vec3 = [](const json& j) {
-    Eigen::Vector3d v = Eigen::Vector3d::Constant(NAN);
-    if (j.is_array() && j.size() == 3) {
-      for (int k = 0; k < 3; ++k) v[k] = Number(j[k]).value_or(NAN);
-    }
-    return v;
-  };
-  std::vector<Position> positions;
-  if (params.contains("positions") && params["positions"].is_array()) {
-    const json stds = uncertainty.value("positions", json::array());
-    for (size_t i = 0; i < params["positions"].size(); ++i) {
-      const json& p = params["positions"][i];
-      Position q;
-      q.name = p.value("name", "a" + std::to_string(i));
-      q.offset = vec3(p.value("offset", json()));
-      if (i < stds.size()) q.std = vec3(stds[i].value("std", json()));
-      positions.push_back(q);
-    }
-  } else if (params.contains("imus") && params["imus"].is_array()) {
-    const json nominal = config.value("geometry", json::object()).value("positions", json());
-    const json stds = uncertainty.value("imus", json::array());
-    for (size_t i = 0; i < params["imus"].size(); ++i) {
-      const json& p = params["imus"][i];
-      if (!p.contains("position")) continue;
-      Position q;
-      q.name = "IMU " + p.value("name", std::to_string(i));
-      if (nominal.is_array() && i < nominal.size()) {
-        q.offset = vec3(p["position"]) - vec3(nominal[i]);
-      }
-      if (i < stds.size()) q.std = vec3(stds[i].value("position_std", json()));
-      positions.push_back(q);
-    }
+  results::ArrayResult r;
+  if (Status s = results::FromJson(result, &r); !s.ok()) {
+    verdict->Reject("the result cannot be judged: " + s.message());
+    return;
   }
+  if (!r.parameters || !r.uncertainty) {
+    verdict->Reject("the result cannot be judged: it is a failed run's partial diagnostics");
+    return;
+  }
+  const results::ArrayParameters& params = *r.parameters;
+  const results::ArrayUncertainty& uncertainty = *r.uncertainty;
+  // Positions (both models: parameters.positions, SPEC §4 and §7) against the nominal geometry.
   const auto offset_max = limits.Get("max_offset");
   const auto std_max = limits.Get("max_position_std");
   Offenders far, uncertain, undefined;
-  for (size_t i = 0; i < positions.size(); ++i) {
-    const Position& q = positions[i];
-    if (static_cast<int>(i) == reference) continue;  // held at its nominal position
+  for (size_t i = 0; i < params.positions.size(); ++i) {
+    if (static_cast<int>(i) == params.reference) continue;  // held at its nominal position
+    const results::ArrayPosition& q = params.positions[i];
+    const Eigen::Vector3d std = i < uncertainty.positions.size() ? uncertainty.positions[i].std
+                                                                 : Eigen::Vector3d::Constant(NAN);
     const double offset = q.offset.norm();
     if (offset_max && std::isfinite(offset) && offset > *offset_max) {
       far.Add(q.name + " " + Fmt(offset * 1e3) + " mm");
     }
-    if (!q.std.allFinite()) {
+    if (!std.allFinite()) {
       undefined.Add(q.name);
-    } else if (std_max && q.std.maxCoeff() > *std_max) {
-      uncertain.Add(q.name + " " + Fmt(q.std.maxCoeff() * 1e6) + " um");
+    } else if (std_max && std.maxCoeff() > *std_max) {
+      uncertain.Add(q.name + " " + Fmt(std.maxCoeff() * 1e6) + " um");
     }
   }
   if (offset_max) {
@@ -1028,33 +936,33 @@ void JudgeArray(const json& result, const json& config, const AcceptanceLimits& 
     uncertain.RejectInto(verdict, "position too uncertain (1 sigma above " + Fmt(*std_max * 1e6) +
                                       " um): rotate faster and about every axis, for longer");
   }
-  if (diag.contains("converged") && !diag.value("converged", true)) {
+  if (!(r.full ? r.full_diagnostics.converged : r.diagnostics.converged)) {
     verdict->Reject(
         "the solver did not converge: the positions are not the best fit; raise "
         "max_iterations or record a more exciting motion");
   }
-  // Residuals against the configured noise.
+  // Positions model: the residuals against the configured noise.
   const auto chi2_max = limits.Get("max_chi2");
-  const json rms = diag.value("residual_rms", json::object());
-  const json noise = diag.value("noise_configured", json::object());
-  if (chi2_max) {
-    for (const char* sensor : {"accelerometer", "gyroscope"}) {
-      const auto r = Number(rms.value(sensor, json()));
-      const auto n = Number(noise.value(sensor, json()));
-      if (!r || !n || *n <= 0) continue;
-      const double chi2 = (*r / *n) * (*r / *n);
+  if (chi2_max && !r.full) {
+    const results::SensorFigures& rms = r.diagnostics.residual_rms;
+    const results::SensorFigures& noise = r.diagnostics.noise_configured;
+    for (const bool accel : {true, false}) {
+      const double res = accel ? rms.accelerometer : rms.gyroscope;
+      const double n = accel ? noise.accelerometer : noise.gyroscope;
+      if (!std::isfinite(res) || !std::isfinite(n) || n <= 0) continue;
+      const double chi2 = (res / n) * (res / n);
       if (chi2 > *chi2_max) {
-        verdict->Reject(std::string("the ") + sensor + " residuals are " + Fmt(*r / *n) +
-                        " times the configured noise (" +
-                        (std::string(sensor) == "accelerometer" ? "accel_noise " : "gyro_noise ") +
-                        Fmt(*n) + ", ratio squared " + Fmt(chi2) + " above " + Fmt(*chi2_max) +
+        verdict->Reject(std::string("the ") + (accel ? "accelerometer" : "gyroscope") +
+                        " residuals are " + Fmt(res / n) + " times the configured noise (" +
+                        (accel ? "accel_noise " : "gyro_noise ") + Fmt(n) + ", ratio squared " +
+                        Fmt(chi2) + " above " + Fmt(*chi2_max) +
                         "): the noise figure is wrong, the sensors saturated, or the model does "
                         "not fit (a sensor's gain or bias: calibrate the accelerometers first)");
       }
     }
   }
   // Model full: every triad's gains, misalignments and biases, as for imu.
-  if (params.contains("imus")) {
+  if (r.full) {
     TriadNominal nominal;
     InertialUnits units;
     if (ParseInertialUnits(config, &units).ok()) {
@@ -1063,21 +971,10 @@ void JudgeArray(const json& result, const json& config, const AcceptanceLimits& 
       nominal.accel_text = units.accel_text;
       nominal.gyro_text = units.gyro_text;
     }
-    results::JsonReader r(result, "array result");
     std::vector<results::ImuTriads> imus;
     std::vector<results::ImuTriadsStd> stds;
-    r.Object("parameters")
-        .ReadArray("imus", &imus, [](const results::JsonReader& e, results::ImuTriads* t) {
-          results::ReadImuTriads(e, t);
-        });
-    r.Object("uncertainty")
-        .ReadArray("imus", &stds, [](const results::JsonReader& e, results::ImuTriadsStd* t) {
-          results::ReadImuTriads(e, t);
-        });
-    if (!r.ok()) {
-      verdict->Reject("the result cannot be judged: " + r.status().message());
-      return;
-    }
+    for (const auto& imu : params.imus) imus.push_back(imu.triads);
+    for (const auto& s : uncertainty.imus) stds.push_back(s.triads);
     JudgeImuTriads(imus, stds, nominal, limits, "IMU", verdict);
   }
 }
@@ -1121,12 +1018,12 @@ Status SimulateArrayFullFiles(const ArraySimulationFileOptions& options, std::st
   *csv = std::move(out);
   json nominal = json::array(), imus = json::array();
   for (int k = 0; k < K; ++k) {
-    nominal.push_back(Vec(so.nominal_positions.col(k)));
+    nominal.push_back(Nums(so.nominal_positions.col(k)));
     const core::ArrayFullTriadReport p = core::ReportArrayFullTriad(sim.truth[k]);
     imus.push_back({{"name", std::to_string(k)},
-                    {"accelerometer", SensorJson(p.accelerometer, 1)},
-                    {"gyroscope", SensorJson(p.gyroscope, unit)},
-                    {"position", Vec(p.position)}});
+                    {"accelerometer", results::ToJson(SensorTriadOf(p.accelerometer, 1))},
+                    {"gyroscope", results::ToJson(SensorTriadOf(p.gyroscope, unit))},
+                    {"position", Nums(p.position)}});
   }
   *config = {{"method", "array"},
              {"model", "full"},

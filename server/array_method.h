@@ -74,7 +74,9 @@ Status ParseArrayConfig(const nlohmann::json& config, core::ArrayProblem* geomet
                         ArrayAccelerometerCalibration* calibration = nullptr);
 
 // Runs the calibration on a parsed recording (gyro columns converted from deg/s when configured)
-// and writes the SPEC §4 result:
+// and writes the SPEC §4 result, built as a results::ArrayResult (results/array_result.h, the
+// typed schema every reader of the result uses) and written with its ToJson (so it also carries
+// "schema_version"; the failed run's partial document too):
 //   {"method":"array",
 //    "parameters":{"reference", "positions":[{"name","position":[x,y,z],"offset":[dx,dy,dz]}]},
 //    "uncertainty":{"positions":[{"name","std":[sx,sy,sz]}]},
@@ -105,12 +107,13 @@ Status ParseArrayConfig(const nlohmann::json& config, core::ArrayProblem* geomet
 Status RunArray(ArrayRecording recording, const nlohmann::json& config, nlohmann::json* result,
                 const std::atomic<bool>* cancel = nullptr, core::TaskExecutor executor = {});
 
-// The acceptance gate of an array result (Method::Judge): every triad but the reference within
-// max_offset of its nominal position and its 1 sigma within max_position_std (positions from
-// parameters.positions, or parameters.imus[].position against config geometry for model full),
-// the solver converged, the residual RMS against the configured accel_noise / gyro_noise
-// (max_chi2 on the squared ratio), and with parameters.imus (model full) each triad's gains,
-// misalignments and biases as for imu (JudgeImuTriads; nominal units from accel_unit, gyro_unit).
+// The acceptance gate of an array result (Method::Judge), read typed (results::FromJson; a result
+// that does not read is rejected with the reader's message): every triad but the reference within
+// max_offset of its nominal position and its 1 sigma within max_position_std
+// (parameters.positions and uncertainty.positions, both models), the solver converged, for the
+// positions model the residual RMS against the configured accel_noise / gyro_noise (max_chi2 on
+// the squared ratio), and for model full each triad's gains, misalignments and biases as for imu
+// (JudgeImuTriads; nominal units from accel_unit, gyro_unit).
 void JudgeArray(const nlohmann::json& result, const nlohmann::json& config,
                 const AcceptanceLimits& limits, Verdict* verdict);
 
@@ -195,7 +198,8 @@ Status SimulateArrayStaticFiles(const ArraySimulationFileOptions& options, int p
 Status SimulateArrayFullFiles(const ArraySimulationFileOptions& options, std::string* csv,
                               nlohmann::json* config, nlohmann::json* truth);
 
-// Exports of a array result (server/array_exports.cc; formats in server/exports.h).
+// Exports of a array result (server/array_exports.cc; formats in server/exports.h), read typed
+// (results::FromJson): a result that does not read is kInternal with the reader's message.
 Status ArrayResultToCsv(const nlohmann::json& result, std::string* out);
 Status ArrayResultToHeader(const nlohmann::json& result, const ExportContext& context,
                            std::string* out);

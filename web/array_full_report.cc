@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "results/array_result.h"
 #include "web/html.h"
 #include "web/svg_plot.h"
 
@@ -19,23 +20,6 @@ constexpr double kPi = 3.14159265358979323846;
 constexpr const char* kDash = "\xE2\x80\x93";  // –
 constexpr const char* kPm = "\xC2\xB1";        // ±
 constexpr const char* kAxes[] = {"x", "y", "z"};
-
-const json* Get(const json* j, const char* key) {
-  if (j == nullptr || !j->is_object()) return nullptr;
-  auto it = j->find(key);
-  return it == j->end() ? nullptr : &*it;
-}
-const json* At(const json* j, size_t i) {
-  return j != nullptr && j->is_array() && i < j->size() ? &(*j)[i] : nullptr;
-}
-double Num(const json* j) { return j != nullptr && j->is_number() ? j->get<double>() : kNaN; }
-std::string Str(const json* j) {
-  return j != nullptr && j->is_string() ? j->get<std::string>() : std::string();
-}
-size_t Size(const json* j) { return j != nullptr && j->is_array() ? j->size() : 0; }
-// Component c of a 3-vector, or entry (r, c) of a 3x3 matrix given as rows.
-double V(const json* v, size_t c) { return Num(At(v, c)); }
-double M(const json* m, size_t r, size_t c) { return Num(At(At(m, r), c)); }
 
 std::string E(const std::string& s) { return EscapeText(s); }
 std::string A(const std::string& s) { return EscapeAttr(s); }
@@ -64,15 +48,26 @@ double Median(std::vector<double> v) {
 
 // The σ the tables show of one entry of uncertainty.imus: the residual-aware one (`robust`) when
 // the result has it (the residuals exceed the noise: the Cramér–Rao bound is then too small),
-// else the Cramér–Rao bound.
-const json* ShownSigma(const json* uimu) {
-  const json* robust = Get(uimu, "robust");
-  return robust != nullptr && robust->is_object() ? robust : uimu;
+// else the Cramér–Rao bound. `k` beyond the entries: every σ undefined.
+struct Shown {
+  const results::SensorTriadStd* accelerometer;
+  const results::SensorTriadStd* gyroscope;
+  const Eigen::Vector3d* position_std;
+  const results::SensorTriadStd& Of(bool accel) const {
+    return accel ? *accelerometer : *gyroscope;
+  }
+};
+Shown ShownSigma(const results::ArrayUncertainty& u, size_t k) {
+  static const results::SensorTriadStd kUndefined;
+  static const Eigen::Vector3d kUndefined3 = Eigen::Vector3d::Constant(kNaN);
+  if (k >= u.imus.size()) return {&kUndefined, &kUndefined, &kUndefined3};
+  const results::ArrayImuStd& s = u.imus[k];
+  if (s.robust) return {&s.robust->accelerometer, &s.robust->gyroscope, &s.robust->position_std};
+  return {&s.triads.accelerometer, &s.triads.gyroscope, &s.position_std};
 }
-bool HasRobustSigma(const json& result) {
-  const json* stds = Get(Get(&result, "uncertainty"), "imus");
-  for (size_t k = 0; k < Size(stds); ++k)
-    if (ShownSigma(At(stds, k)) != At(stds, k)) return true;
+bool HasRobustSigma(const results::ArrayUncertainty& u) {
+  for (const auto& s : u.imus)
+    if (s.robust) return true;
   return false;
 }
 
@@ -96,22 +91,28 @@ struct Limits {
   double scale_range = kNaN, scale_std = kNaN, implausible = kNaN, axis_std = kNaN;
   double accel_bias = kNaN, accel_bias_std = kNaN, gyro_bias = kNaN, gyro_bias_std = kNaN;
 };
-Limits ReadLimits(const json& result) {
-  const json* l = Get(Get(&result, "verdict"), "limits");
+Limits ReadLimits(const results::ArrayResult& result) {
   Limits o;
-  o.scale_range = Num(Get(l, "scale_range"));
-  o.scale_std = Num(Get(l, "max_scale_std"));
-  o.implausible = Num(Get(l, "implausible_factor"));
-  o.axis_std = Num(Get(l, "max_axis_std"));
-  o.accel_bias = Num(Get(l, "max_accel_bias"));
-  o.accel_bias_std = Num(Get(l, "max_accel_bias_std"));
-  o.gyro_bias = Num(Get(l, "max_gyro_bias"));
-  o.gyro_bias_std = Num(Get(l, "max_gyro_bias_std"));
+  if (!result.envelope.verdict) return o;
+  const auto& l = result.envelope.verdict->limits;
+  auto get = [&](const char* key) {
+    const auto it = l.find(key);
+    return it != l.end() && it->second ? *it->second : kNaN;
+  };
+  o.scale_range = get("scale_range");
+  o.scale_std = get("max_scale_std");
+  o.implausible = get("implausible_factor");
+  o.axis_std = get("max_axis_std");
+  o.accel_bias = get("max_accel_bias");
+  o.accel_bias_std = get("max_accel_bias_std");
+  o.gyro_bias = get("max_gyro_bias");
+  o.gyro_bias_std = get("max_gyro_bias_std");
   return o;
 }
 
 struct Kind {
   const char* key;        // "accelerometer" | "gyroscope"
+  bool accel;             // the accelerometers
   std::string bias_unit;  // reading units, for headers
   double unit = 1;        // SI per reading unit (the nominal: 1 for m/s^2, pi/180 for deg/s)
   double bias_limit = kNaN, bias_std_limit = kNaN;  // SI
@@ -120,41 +121,47 @@ struct Kind {
 // The per-axis misalignment angle of axis j: the angle between the sensor's axis j (column j of
 // the unit-diagonal misalignment matrix) and the body axis j, and its σ to first order from the
 // entries' σ (entries taken as uncorrelated; for an angle near 0 the entries' rms σ).
-void AxisAngle(const json* m, const json* m_std, size_t j, double* angle, double* sd) {
+void AxisAngle(const Eigen::Matrix3d& m, const Eigen::Matrix3d& m_std, int j, double* angle,
+               double* sd) {
   double off2 = 0, var = 0, s2 = 0;
   int n = 0;
-  for (size_t i = 0; i < 3; ++i) {
+  for (int i = 0; i < 3; ++i) {
     if (i == j) continue;
-    off2 += M(m, i, j) * M(m, i, j);
-    s2 += M(m_std, i, j) * M(m_std, i, j);
+    off2 += m(i, j) * m(i, j);
+    s2 += m_std(i, j) * m_std(i, j);
     ++n;
   }
   const double r = std::sqrt(off2);
-  *angle = std::atan2(r, M(m, j, j));
-  for (size_t i = 0; i < 3; ++i) {
+  *angle = std::atan2(r, m(j, j));
+  for (int i = 0; i < 3; ++i) {
     if (i == j) continue;
-    const double w = r > 0 ? M(m, i, j) / r : 1 / std::sqrt(static_cast<double>(n));
-    var += w * w * M(m_std, i, j) * M(m_std, i, j);
+    const double w = r > 0 ? m(i, j) / r : 1 / std::sqrt(static_cast<double>(n));
+    var += w * w * m_std(i, j) * m_std(i, j);
   }
   *sd = std::sqrt(r > 0 ? var : s2 / n);
 }
 
-std::string SensorTable(const json& result, const Kind& kind, const Limits& lim) {
-  const json* imus = Get(Get(&result, "parameters"), "imus");
-  const json* stds = Get(Get(&result, "uncertainty"), "imus");
-  const double ref = Num(Get(Get(&result, "parameters"), "reference"));
-  const size_t K = Size(imus);
+// The triad of IMU k of the kind's sensor type.
+const results::SensorTriad& TriadOf(const results::ArrayImu& imu, const Kind& kind) {
+  return kind.accel ? imu.triads.accelerometer : imu.triads.gyroscope;
+}
+
+std::string SensorTable(const results::ArrayResult& result, const Kind& kind, const Limits& lim) {
+  const std::vector<results::ArrayImu>& imus = result.parameters->imus;
+  const results::ArrayUncertainty& stds = *result.uncertainty;
+  const int ref = result.parameters->reference;
+  const size_t K = imus.size();
   // Precision per column group from the median σ.
   std::vector<double> g_sd, a_sd, b_sd;
   for (size_t k = 0; k < K; ++k) {
-    const json* p = Get(At(imus, k), kind.key);
-    const json* s = Get(ShownSigma(At(stds, k)), kind.key);
-    for (size_t c = 0; c < 3; ++c) {
-      g_sd.push_back(100 * V(Get(s, "scale_std"), c) / std::abs(V(Get(p, "scale"), c)));
+    const results::SensorTriad& p = TriadOf(imus[k], kind);
+    const results::SensorTriadStd& s = ShownSigma(stds, k).Of(kind.accel);
+    for (int c = 0; c < 3; ++c) {
+      g_sd.push_back(100 * s.scale_std(c) / std::abs(p.scale(c)));
       double ang, sd;
-      AxisAngle(Get(p, "misalignment"), Get(s, "misalignment_std"), c, &ang, &sd);
+      AxisAngle(p.misalignment, s.misalignment_std, c, &ang, &sd);
       a_sd.push_back(1e3 * sd);
-      b_sd.push_back(V(Get(s, "bias_std"), c));
+      b_sd.push_back(s.bias_std(c));
     }
   }
   const int gd = Decimals(Median(g_sd)), ad = Decimals(Median(a_sd)), bd = Decimals(Median(b_sd));
@@ -168,18 +175,17 @@ std::string SensorTable(const json& result, const Kind& kind, const Limits& lim)
   std::string rows;
   int marked = 0;
   for (size_t k = 0; k < K; ++k) {
-    const json* imu = At(imus, k);
-    const json* p = Get(imu, kind.key);
-    const json* s = Get(ShownSigma(At(stds, k)), kind.key);
-    std::string name = Str(Get(imu, "name"));
+    const results::SensorTriad& p = TriadOf(imus[k], kind);
+    const results::SensorTriadStd& s = ShownSigma(stds, k).Of(kind.accel);
+    std::string name = imus[k].triads.name;
     if (name.empty()) name = std::to_string(k);
-    const bool is_ref = std::isfinite(ref) && static_cast<double>(k) == ref;
+    const bool is_ref = static_cast<int>(k) == ref;
     std::string row = "<tr><td class=\"name\">" + E(name) +
                       (is_ref ? " <span class=\"muted small\">(ref.)</span>" : "") + "</td>";
-    for (size_t c = 0; c < 3; ++c) {
-      const double scale = V(Get(p, "scale"), c);
+    for (int c = 0; c < 3; ++c) {
+      const double scale = p.scale(c);
       const double ratio = scale / kind.unit;
-      const double rel_sd = V(Get(s, "scale_std"), c) / std::abs(scale);
+      const double rel_sd = s.scale_std(c) / std::abs(scale);
       std::string why;
       if (std::isfinite(lim.implausible) && std::isfinite(ratio) &&
           (ratio > lim.implausible || ratio < 1 / lim.implausible)) {
@@ -192,12 +198,12 @@ std::string SensorTable(const json& result, const Kind& kind, const Limits& lim)
       marked += !why.empty();
       row += ValueCell(100 * (ratio - 1), gd, 100 * rel_sd, why, c == 0);
     }
-    for (size_t c = 0; c < 3; ++c) {
+    for (int c = 0; c < 3; ++c) {
       double ang, sd;
-      AxisAngle(Get(p, "misalignment"), Get(s, "misalignment_std"), c, &ang, &sd);
+      AxisAngle(p.misalignment, s.misalignment_std, c, &ang, &sd);
       double worst = 0;
-      for (size_t i = 0; i < 3; ++i)
-        if (i != c) worst = std::max(worst, M(Get(s, "misalignment_std"), i, c));
+      for (int i = 0; i < 3; ++i)
+        if (i != c) worst = std::max(worst, s.misalignment_std(i, c));
       std::string why;
       if (std::isfinite(lim.axis_std) && worst > lim.axis_std)
         why =
@@ -205,8 +211,8 @@ std::string SensorTable(const json& result, const Kind& kind, const Limits& lim)
       marked += !why.empty();
       row += ValueCell(1e3 * ang, ad, 1e3 * sd, why, c == 0, false);
     }
-    for (size_t c = 0; c < 3; ++c) {
-      const double b = V(Get(p, "bias"), c), sd = V(Get(s, "bias_std"), c);
+    for (int c = 0; c < 3; ++c) {
+      const double b = p.bias(c), sd = s.bias_std(c);
       std::string why;
       if (std::isfinite(kind.bias_limit) && std::abs(b * kind.unit) > kind.bias_limit) {
         why = "beyond the bias limit " + FormatSig(kind.bias_limit / kind.unit, 3) + " " +
@@ -235,28 +241,29 @@ std::string SensorTable(const json& result, const Kind& kind, const Limits& lim)
 }
 
 // The off-diagonal misalignment entries of every triad and sensor, in mrad, with σ.
-std::string MisalignmentTable(const json& result, double axis_std_limit) {
-  const json* imus = Get(Get(&result, "parameters"), "imus");
-  const json* stds = Get(Get(&result, "uncertainty"), "imus");
-  static const size_t kEntries[6][2] = {{0, 1}, {0, 2}, {1, 0}, {1, 2}, {2, 0}, {2, 1}};
+std::string MisalignmentTable(const results::ArrayResult& result, double axis_std_limit) {
+  const std::vector<results::ArrayImu>& imus = result.parameters->imus;
+  static const int kEntries[6][2] = {{0, 1}, {0, 2}, {1, 0}, {1, 2}, {2, 0}, {2, 1}};
   std::string head = "<tr><th>triad</th><th>sensor</th>";
   for (const auto& e : kEntries)
     head += "<th class=\"num\">T[" + std::to_string(e[0]) + "][" + std::to_string(e[1]) + "]</th>";
   head += "</tr>";
   std::string rows;
-  for (size_t k = 0; k < Size(imus); ++k) {
-    std::string name = Str(Get(At(imus, k), "name"));
+  for (size_t k = 0; k < imus.size(); ++k) {
+    std::string name = imus[k].triads.name;
     if (name.empty()) name = std::to_string(k);
-    for (const char* sensor : {"accelerometer", "gyroscope"}) {
-      const json* m = Get(Get(At(imus, k), sensor), "misalignment");
-      const json* ms = Get(Get(ShownSigma(At(stds, k)), sensor), "misalignment_std");
+    for (const bool accel : {true, false}) {
+      const char* sensor = accel ? "accelerometer" : "gyroscope";
+      const Eigen::Matrix3d& m =
+          (accel ? imus[k].triads.accelerometer : imus[k].triads.gyroscope).misalignment;
+      const Eigen::Matrix3d& ms = ShownSigma(*result.uncertainty, k).Of(accel).misalignment_std;
       rows += "<tr><td class=\"name\">" + E(name) + "</td><td>" + sensor + "</td>";
       for (const auto& e : kEntries) {
-        const double sd = M(ms, e[0], e[1]);
+        const double sd = ms(e[0], e[1]);
         const std::string why = std::isfinite(axis_std_limit) && sd > axis_std_limit
                                     ? "\xCF\x83 beyond max_axis_std"
                                     : std::string();
-        rows += ValueCell(1e3 * M(m, e[0], e[1]), 3, 1e3 * sd, why);
+        rows += ValueCell(1e3 * m(e[0], e[1]), 3, 1e3 * sd, why);
       }
       rows += "</tr>";
     }
@@ -270,32 +277,31 @@ std::string MisalignmentTable(const json& result, double axis_std_limit) {
          "triangle).</p></details>";
 }
 
-std::string TriadsSection(const json& result) {
-  const json* diag = Get(&result, "diagnostics");
+std::string TriadsSection(const results::ArrayResult& result) {
+  const results::ArrayFullDiagnostics& diag = result.full_diagnostics;
   const Limits lim = ReadLimits(result);
-  const bool deg = Str(Get(diag, "gyro_unit")) == "deg/s";
-  Kind accel{"accelerometer", "m/s\xC2\xB2", 1, lim.accel_bias, lim.accel_bias_std};
-  Kind gyro{"gyroscope", deg ? "\xC2\xB0/s" : "rad/s", deg ? kPi / 180 : 1, lim.gyro_bias,
-            lim.gyro_bias_std};
-  const json* noise = Get(diag, "noise");
+  const bool deg = diag.gyro_unit == "deg/s";
+  Kind accel{"accelerometer", true, "m/s\xC2\xB2", 1, lim.accel_bias, lim.accel_bias_std};
+  Kind gyro{"gyroscope",         false,         deg ? "\xC2\xB0/s" : "rad/s",
+            deg ? kPi / 180 : 1, lim.gyro_bias, lim.gyro_bias_std};
+  const results::ArrayFullNoise& noise = diag.noise;
   std::string s = "<dl class=\"kv\">";
-  s += "<dt>gauge</dt><dd>" + E(Str(Get(Get(diag, "gauge"), "description"))) + "</dd>";
-  s += "<dt>statics</dt><dd>" + FormatFixed(Num(Get(diag, "statics")), 0) + " (" +
-       FormatFixed(Num(Get(diag, "static_samples")), 0) + " samples), motion " +
-       FormatFixed(Num(Get(diag, "dynamic_samples")), 0) + " samples</dd>";
-  s += "<dt>noise \xCF\x83 used</dt><dd>" + FormatSig(Num(Get(noise, "accelerometer")), 3) +
-       " m/s\xC2\xB2, " + FormatSig(Num(Get(noise, "gyroscope")), 3) + " " + E(gyro.bias_unit) +
-       " (" + E(Str(Get(noise, "source"))) + ")</dd>";
-  s += "<dt>\xCF\x87\xC2\xB2 / degrees of freedom</dt><dd>" +
-       FormatSig(Num(Get(diag, "chi2_per_dof")), 3) + "</dd>";
+  s += "<dt>gauge</dt><dd>" + E(diag.gauge.description) + "</dd>";
+  s += "<dt>statics</dt><dd>" + FormatFixed(static_cast<double>(diag.statics), 0) + " (" +
+       FormatFixed(static_cast<double>(diag.static_samples), 0) + " samples), motion " +
+       FormatFixed(static_cast<double>(diag.dynamic_samples), 0) + " samples</dd>";
+  s += "<dt>noise \xCF\x83 used</dt><dd>" + FormatSig(noise.accelerometer, 3) + " m/s\xC2\xB2, " +
+       FormatSig(noise.gyroscope, 3) + " " + E(gyro.bias_unit) + " (" + E(noise.source) + ")</dd>";
+  s += "<dt>\xCF\x87\xC2\xB2 / degrees of freedom</dt><dd>" + FormatSig(diag.chi2_per_dof, 3) +
+       "</dd>";
   s += "<dt>\xCF\x83 shown</dt><dd class=\"sigma-shown\">" +
-       std::string(HasRobustSigma(result)
+       std::string(HasRobustSigma(*result.uncertainty)
                        ? "residual-aware (the residuals exceed the noise, so the "
                          "Cram\xC3\xA9r\xE2\x80\x93Rao bound, in uncertainty.imus[] of the JSON, "
                          "is too small); the limits are marked against it"
                        : "Cram\xC3\xA9r\xE2\x80\x93Rao bound at the estimate") +
        "</dd></dl>";
-  if (Size(Get(Get(&result, "parameters"), "imus")) == 0)
+  if (result.parameters->imus.empty())
     return Section("triads", "Triads (model full)",
                    s + "<p class=\"muted\">Not available: the result has no triads.</p>");
   s += SensorTable(result, accel, lim);
@@ -308,11 +314,11 @@ std::string TriadsSection(const json& result) {
   return Section("triads", "Triads (model full)", s);
 }
 
-std::string ResidualsSection(const json& result) {
-  const json* diag = Get(&result, "diagnostics");
-  const json* per = Get(Get(diag, "residual_rms"), "imus");
-  if (Size(per) == 0) return "";
-  const bool deg = Str(Get(diag, "gyro_unit")) == "deg/s";
+std::string ResidualsSection(const results::ArrayResult& result) {
+  const results::ArrayFullDiagnostics& diag = result.full_diagnostics;
+  const std::vector<results::ArrayImuResiduals>& per = diag.residual_rms_imus;
+  if (per.empty()) return "";
+  const bool deg = diag.gyro_unit == "deg/s";
   const std::string gu = deg ? "\xC2\xB0/s" : "rad/s";
   std::string figs, words;
   for (const char* kind : {"accelerometer", "gyroscope"}) {
@@ -320,14 +326,13 @@ std::string ResidualsSection(const json& result) {
     const std::string unit = a ? "m/s\xC2\xB2" : gu;
     std::vector<std::string> names;
     BarSeries st{"statics", {}, {}, 0}, dy{"motion", {}, {}, 1};
-    for (size_t k = 0; k < Size(per); ++k) {
-      const json* r = At(per, k);
-      std::string name = Str(Get(r, "name"));
+    for (size_t k = 0; k < per.size(); ++k) {
+      const std::string& name = per[k].name;
       names.push_back(name.empty() ? std::to_string(k) : name);
-      st.values.push_back(Num(Get(Get(r, "static"), kind)));
-      dy.values.push_back(Num(Get(Get(r, "dynamic"), kind)));
+      st.values.push_back(a ? per[k].static_rms.accelerometer : per[k].static_rms.gyroscope);
+      dy.values.push_back(a ? per[k].dynamic_rms.accelerometer : per[k].dynamic_rms.gyroscope);
     }
-    const double noise = Num(Get(Get(diag, "static_noise"), kind));
+    const double noise = a ? diag.static_noise.accelerometer : diag.static_noise.gyroscope;
     PlotOptions o;
     o.name = std::string("array-full-residuals-") + kind;
     o.title = std::string("Residual RMS per triad, ") + (a ? "accelerometers" : "gyroscopes");
@@ -368,50 +373,43 @@ std::string ResidualsSection(const json& result) {
   return Section("triad-residuals", "Residuals per triad", body);
 }
 
-std::string ChangeSection(const json& result) {
-  const json* diag = Get(&result, "diagnostics");
-  const json* ch = Get(diag, "changed_from_positions_only");
-  if (Size(ch) == 0) return "";
-  const json* pstd = Get(Get(&result, "uncertainty"), "positions");
-  const bool robust = HasRobustSigma(result);
+std::string ChangeSection(const results::ArrayResult& result) {
+  const results::ArrayFullDiagnostics& diag = result.full_diagnostics;
+  const std::vector<results::ArrayPositionChange>& ch = diag.changed_from_positions_only;
+  if (ch.empty()) return "";
+  const bool robust = HasRobustSigma(*result.uncertainty);
   std::vector<std::string> names;
   BarSeries sx{"\xCE\x94x / \xCF\x83x", {}, {}, 0}, sy{"\xCE\x94y / \xCF\x83y", {}, {}, 1},
       sz{"\xCE\x94z / \xCF\x83z", {}, {}, 2};
   std::string rows;
   double worst = 0;
   std::string worst_name;
-  for (size_t k = 0; k < Size(ch); ++k) {
-    const json* c = At(ch, k);
-    std::string name = Str(Get(c, "name"));
+  for (size_t k = 0; k < ch.size(); ++k) {
+    const results::ArrayPositionChange& c = ch[k];
+    std::string name = c.name;
     if (name.empty()) name = std::to_string(k);
     names.push_back(name);
-    const json* d = Get(c, "position_change");
-    const json* po = Get(c, "positions_only");
-    const json* in_sigma = Get(c, "position_change_sigma");
-    // Older results carry only the change: σ from uncertainty.positions. With a residual-aware
-    // σ, the shift is measured against it (as the tables above).
-    const json* sd = nullptr;
-    for (size_t i = 0; i < Size(pstd); ++i)
-      if (Str(Get(At(pstd, i), "name")) == Str(Get(c, "name"))) sd = Get(At(pstd, i), "std");
-    const json* uimu = At(Get(Get(&result, "uncertainty"), "imus"), k);
-    if (robust && ShownSigma(uimu) != uimu) {
-      sd = Get(ShownSigma(uimu), "position_std");
-      in_sigma = nullptr;
-    }
+    const Eigen::Vector3d& d = c.position_change;
+    const Eigen::Vector3d& po = c.positions_only;
+    // The shift in σ: the result's (the full model's Cramér–Rao bound), or with a residual-aware
+    // σ the shift against it (as the tables above).
+    const bool by_robust =
+        robust && k < result.uncertainty->imus.size() && result.uncertainty->imus[k].robust;
+    const Eigen::Vector3d* robust_sd =
+        by_robust ? &result.uncertainty->imus[k].robust->position_std : nullptr;
     double ratio[3];
     std::string row = "<tr><td class=\"name\">" + E(name) + "</td>";
-    for (size_t a = 0; a < 3; ++a)
-      row += "<td class=\"num\">" + FormatFixed(1e3 * V(po, a), 4) + "</td>";
+    for (int a = 0; a < 3; ++a) row += "<td class=\"num\">" + FormatFixed(1e3 * po(a), 4) + "</td>";
     double n2 = 0;
-    for (size_t a = 0; a < 3; ++a) {
-      ratio[a] = in_sigma != nullptr ? V(in_sigma, a) : V(d, a) / V(sd, a);
+    for (int a = 0; a < 3; ++a) {
+      ratio[a] = robust_sd == nullptr ? c.position_change_sigma(a) : d(a) / (*robust_sd)(a);
       if (!std::isfinite(ratio[a])) ratio[a] = kNaN;
-      n2 += V(d, a) * V(d, a);
+      n2 += d(a) * d(a);
       row += std::string("<td class=\"num") + (a == 0 ? " gs" : "") + "\">" +
-             FormatFixed(1e6 * V(d, a), 2) + "</td>";
+             FormatFixed(1e6 * d(a), 2) + "</td>";
     }
     row += "<td class=\"num\">" + FormatFixed(1e6 * std::sqrt(n2), 2) + "</td>";
-    for (size_t a = 0; a < 3; ++a) {
+    for (int a = 0; a < 3; ++a) {
       const bool big = std::isfinite(ratio[a]) && std::abs(ratio[a]) > 3;
       row += std::string("<td class=\"num") + (a == 0 ? " gs" : "") + (big ? " beyond" : "") +
              "\"" + (big ? " title=\"more than 3\xCF\x83\"" : "") + ">" + FormatFixed(ratio[a], 2) +
@@ -435,8 +433,7 @@ std::string ChangeSection(const json& result) {
       "class=\"num\">y</th><th class=\"num\">z</th><th class=\"num gs\">x</th><th "
       "class=\"num\">y</th><th class=\"num\">z</th><th class=\"num\">|\xCE\x94|</th>" +
       sub + "</tr>";
-  const json* from_fit = Get(diag, "positions_only_start");
-  const bool fitted = from_fit == nullptr || !from_fit->is_boolean() || from_fit->get<bool>();
+  const bool fitted = diag.positions_only_start;
   std::string s =
       "<p>" +
       std::string(fitted ? "The full model starts from the positions-only fit of the same log "
@@ -472,17 +469,13 @@ std::string ChangeSection(const json& result) {
 
 }  // namespace
 
-bool IsArrayFullResult(const json& result) {
-  const json* p = Get(&result, "parameters");
-  return Str(Get(p, "model")) == "full" ||
-         Str(Get(Get(&result, "diagnostics"), "model")) == "full" || Size(Get(p, "imus")) > 0;
-}
-
-std::string ArrayFullSections(const json& result) {
+std::string ArrayFullSections(const results::ArrayResult& result) {
+  if (!result.full || !result.parameters || !result.uncertainty)
+    return "<p class=\"muted\">The triads: not available (not a usable result of model full).</p>";
   std::string out;
   struct Part {
     const char* what;
-    std::string (*build)(const json&);
+    std::string (*build)(const results::ArrayResult&);
   };
   for (const Part& part : {Part{"The triads' parameters", &TriadsSection},
                            Part{"The residuals per triad", &ResidualsSection},
@@ -490,11 +483,19 @@ std::string ArrayFullSections(const json& result) {
     try {
       out += part.build(result);
     } catch (const std::exception&) {
-      out += "<p class=\"muted\">" + std::string(part.what) +
-             ": not available (unexpected result shape).</p>";
+      out += "<p class=\"muted\">" + std::string(part.what) + ": not available.</p>";
     }
   }
   return out;
+}
+
+std::string ArrayFullSections(const json& result) {
+  results::ArrayResult r;
+  const Status s = results::FromJson(result, &r);
+  if (!s.ok())
+    return "<p class=\"muted not-available\">" + EscapeText("The triads (" + s.message() + ")") +
+           ": not available.</p>";
+  return ArrayFullSections(r);
 }
 
 }  // namespace calibd::web

@@ -3,13 +3,11 @@
 // residuals per triad in the statics and in motion against the static noise, and what the full
 // model changed compared with the positions-only fit it starts from.
 //
-// Input: the result JSON as server/array_method.cc writes it (parameters.imus,
-// uncertainty.imus, diagnostics.residual_rms.imus, diagnostics.static_noise,
-// diagnostics.changed_from_positions_only, diagnostics.gyro_unit) and its verdict.limits (the
-// acceptance limits it was judged against; values beyond them are marked, class "beyond", with
-// the limit in the cell's title). Results of older versions (no positions_only, no limits) and
-// results of any shape render: missing numbers show as "–", a section that cannot be built says
-// so. Every name from the result is escaped.
+// Input: the typed result (results/array_result.h: parameters.imus, uncertainty.imus,
+// diagnostics.residual_rms.imus, diagnostics.static_noise, diagnostics.changed_from_positions_only,
+// diagnostics.gyro_unit) and its verdict.limits (the acceptance limits it was judged against;
+// values beyond them are marked, class "beyond", with the limit in the cell's title; a result not
+// yet judged marks nothing). Undefined numbers (null) show as "–". Every name is escaped.
 //
 // σ shown: the residual-aware one (uncertainty.imus[].robust) when the result has it (real
 // hardware, residuals above the noise), else the Cramér–Rao bound; limits and the shift in σ are
@@ -29,16 +27,18 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-namespace calibd::web {
+#include "results/array_result.h"
 
-// True for an `array` result of the full model (parameters.model or diagnostics.model "full",
-// or parameters.imus present).
-bool IsArrayFullResult(const nlohmann::json& result);
+namespace calibd::web {
 
 // The sections (HTML, safe): section#triads (table.table-array-full-accelerometer,
 // table.table-array-full-gyroscope, table.table-array-full-misalignment), section#triad-residuals
 // (svg.plot-array-full-residuals-accelerometer / -gyroscope), section#full-vs-positions
-// (table.table-array-full-change, svg.plot-array-full-position-change). Never throws.
+// (table.table-array-full-change, svg.plot-array-full-position-change). Never throws. A result
+// that is not a usable one of model full gets a "not available" line.
+std::string ArrayFullSections(const results::ArrayResult& result);
+// The same of a result document (results::FromJson once; a document that does not read gets the
+// "not available" line with the reader's message).
 std::string ArrayFullSections(const nlohmann::json& result);
 
 }  // namespace calibd::web

@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "results/array_result.h"
 #include "web/array_full_report.h"
 #include "web/html.h"
 #include "web/report_common.h"
@@ -19,32 +20,56 @@
 
 namespace calibd::web::internal {
 
-ArrayFigures ComputeArrayFigures(const json& result) {
+namespace {
+
+// Reads an array result typed (results/array_result.h); false with *message when it does not read.
+bool ReadResult(const json& doc, results::ArrayResult* r, std::string* message) {
+  const Status s = results::FromJson(doc, r);
+  if (!s.ok()) *message = s.message();
+  return s.ok();
+}
+
+// A value as the generic tables show it (web/report_common.h ScalarText): NaN as a dash.
+std::string Text(double v, int sig = 6) {
+  const json j = results::Num(v);
+  return ScalarText(&j, sig);
+}
+template <typename T>
+std::string Text(const T& v) {
+  const json j = v;
+  return ScalarText(&j);
+}
+
+ArrayFigures Figures(const results::ArrayResult& r) {
   ArrayFigures f;
-  const json* params = Get(result, "parameters");
-  const double ref = Num(Get(params, "reference"));
-  if (const json* pos = Array(Get(params, "positions"))) {
-    double sum = 0;
-    size_t n = 0;
-    for (size_t i = 0; i < pos->size(); ++i) {
-      if (std::isfinite(ref) && static_cast<double>(i) == ref) continue;
-      const auto off = NumArray(Get((*pos)[i], "offset"));
-      if (off.size() < 3 || !HasNumbers(off)) continue;
-      double s2 = 0;
-      for (size_t k = 0; k < 3; ++k) s2 += std::isfinite(off[k]) ? off[k] * off[k] : 0;
-      sum += s2;
-      ++n;
-    }
-    if (n > 0) f.rms_offset = std::sqrt(sum / static_cast<double>(n));
+  if (!r.parameters || !r.uncertainty) return f;
+  double sum = 0;
+  size_t n = 0;
+  for (size_t i = 0; i < r.parameters->positions.size(); ++i) {
+    if (static_cast<int>(i) == r.parameters->reference) continue;
+    const Eigen::Vector3d& off = r.parameters->positions[i].offset;
+    if (!off.array().isFinite().any()) continue;
+    double s2 = 0;
+    for (int k = 0; k < 3; ++k) s2 += std::isfinite(off(k)) ? off(k) * off(k) : 0;
+    sum += s2;
+    ++n;
   }
-  if (const json* us = Array(Get(Get(result, "uncertainty"), "positions"))) {
-    for (const auto& u : *us) {
-      for (double s : NumArray(Get(u, "std"))) {
-        if (std::isfinite(s) && !(f.worst_sigma >= s)) f.worst_sigma = s;
-      }
+  if (n > 0) f.rms_offset = std::sqrt(sum / static_cast<double>(n));
+  for (const auto& u : r.uncertainty->positions) {
+    for (int k = 0; k < 3; ++k) {
+      const double s = u.std(k);
+      if (std::isfinite(s) && !(f.worst_sigma >= s)) f.worst_sigma = s;
     }
   }
   return f;
+}
+
+}  // namespace
+
+ArrayFigures ComputeArrayFigures(const json& result) {
+  results::ArrayResult r;
+  std::string message;
+  return ReadResult(result, &r, &message) ? Figures(r) : ArrayFigures();
 }
 
 struct Triad {
@@ -56,41 +81,39 @@ struct Triad {
   bool reference = false;
 };
 
-std::vector<Triad> ReadTriads(const json& result, const json& config) {
+// The triads of a result; the nominal positions from the config's geometry (when given), else
+// position − offset.
+std::vector<Triad> ReadTriads(const results::ArrayResult& result, const json& config) {
   std::vector<Triad> out;
-  const json* params = Get(result, "parameters");
-  const double ref = Num(Get(params, "reference"));
-  const json* pos = Array(Get(params, "positions"));
+  if (!result.parameters) return out;
+  const results::ArrayParameters& params = *result.parameters;
   const json* cfg_pos = Array(Get(Get(config, "geometry"), "positions"));
-  if (pos == nullptr) return out;
-  for (size_t i = 0; i < pos->size(); ++i) {
-    const json& t = (*pos)[i];
+  for (size_t i = 0; i < params.positions.size(); ++i) {
+    const results::ArrayPosition& t = params.positions[i];
     Triad tr;
-    tr.name = Str(Get(t, "name"));
+    tr.name = t.name;
     if (tr.name.empty()) tr.name = "a" + std::to_string(i);
-    const auto p = NumArray(Get(t, "position"));
-    const auto o = NumArray(Get(t, "offset"));
     std::vector<double> nom;
     if (cfg_pos != nullptr && i < cfg_pos->size()) nom = NumArray(&(*cfg_pos)[i]);
     for (size_t k = 0; k < 3; ++k) {
-      if (k < p.size()) tr.p[k] = p[k];
-      if (k < o.size()) tr.off[k] = o[k];
+      tr.p[k] = t.position(k);
+      tr.off[k] = t.offset(k);
       if (k < nom.size()) tr.nom[k] = nom[k];
       if (!std::isfinite(tr.nom[k])) tr.nom[k] = tr.p[k] - tr.off[k];
       if (!std::isfinite(tr.off[k])) tr.off[k] = tr.p[k] - tr.nom[k];
     }
-    tr.reference = std::isfinite(ref) && static_cast<double>(i) == ref;
+    tr.reference = static_cast<int>(i) == params.reference;
     out.push_back(tr);
   }
   std::map<std::string, size_t> by_name;
   for (size_t i = 0; i < out.size(); ++i) by_name[out[i].name] = i;
-  if (const json* us = Array(Get(Get(result, "uncertainty"), "positions"))) {
-    for (size_t i = 0; i < us->size(); ++i) {
-      const auto it = by_name.find(Str(Get((*us)[i], "name")));
+  if (result.uncertainty) {
+    const auto& us = result.uncertainty->positions;
+    for (size_t i = 0; i < us.size(); ++i) {
+      const auto it = by_name.find(us[i].name);
       const size_t k = it != by_name.end() ? it->second : i;
       if (k >= out.size()) continue;
-      const auto sd = NumArray(Get((*us)[i], "std"));
-      for (size_t c = 0; c < 3 && c < sd.size(); ++c) out[k].sd[c] = sd[c];
+      for (int c = 0; c < 3; ++c) out[k].sd[c] = us[i].std(c);
     }
   }
   return out;
@@ -120,8 +143,7 @@ std::string ArrayParametersTable(const std::vector<Triad>& triads) {
          "</thead><tbody>" + rows + "</tbody></table></div>";
 }
 
-std::string CostPlot(const json& diag) {
-  const auto cost = NumArray(Get(diag, "cost"));
+std::string CostPlot(const std::vector<double>& cost) {
   Series s;
   s.marker = cost.size() <= 60 ? Marker::kCircle : Marker::kNone;
   for (size_t i = 0; i < cost.size(); ++i) {
@@ -215,29 +237,19 @@ std::string PositionSigmaPlot(const std::vector<Triad>& triads) {
   return RenderBarChart(o, names, {sx, sy, sz});
 }
 
-// Unit of the gyroscope figures of an array result: diagnostics.gyro_unit, else the config's.
-std::string GyroUnit(const json& diag, const json& config) {
-  std::string u = Str(Get(diag, "gyro_unit"));
-  if (u.empty()) u = Str(Get(config, "gyro_unit"));
-  return u == "deg/s" ? "\xC2\xB0/s" : "rad/s";
+// Unit of the gyroscope figures of an array result: diagnostics.gyro_unit.
+std::string GyroUnit(const std::string& gyro_unit) {
+  return gyro_unit == "deg/s" ? "\xC2\xB0/s" : "rad/s";
 }
 
-std::string ArrayResidualPlot(const json& diag, const json& config) {
-  const json* rms = Get(diag, "residual_rms");
-  const json* noise = Get(diag, "noise_estimate");
-  const json* configured = Get(diag, "noise_configured");
-  // Configured σ: from the result (in the gyro unit), else from the config (same unit).
-  double cfg_a = Num(Get(configured, "accelerometer"));
-  double cfg_g = Num(Get(configured, "gyroscope"));
-  if (configured == nullptr) {
-    cfg_a = Num(Get(config, "accel_noise"));
-    cfg_g = Num(Get(config, "gyro_noise"));
-  }
-  const std::string gu = GyroUnit(diag, config);
-  BarSeries r{"residual RMS", {Num(Get(rms, "accelerometer")), Num(Get(rms, "gyroscope"))}, {}, 0};
+// The positions model's residual RMS against the noise estimate and the configured σ.
+std::string ArrayResidualPlot(const results::ArrayPositionsDiagnostics& d) {
+  const std::string gu = GyroUnit(d.gyro_unit);
+  BarSeries r{"residual RMS", {d.residual_rms.accelerometer, d.residual_rms.gyroscope}, {}, 0};
   BarSeries n{
-      "noise estimate", {Num(Get(noise, "accelerometer")), Num(Get(noise, "gyroscope"))}, {}, 1};
+      "noise estimate", {d.noise_estimate.accelerometer, d.noise_estimate.gyroscope}, {}, 1};
   std::vector<BarSeries> series{r, n};
+  const double cfg_a = d.noise_configured.accelerometer, cfg_g = d.noise_configured.gyroscope;
   if (std::isfinite(cfg_a) || std::isfinite(cfg_g)) {
     series.push_back({"configured \xCF\x83", {cfg_a, cfg_g}, {}, 2});
   }
@@ -249,80 +261,33 @@ std::string ArrayResidualPlot(const json& diag, const json& config) {
   return RenderBarChart(o, {"accelerometer (m/s\xC2\xB2)", "gyroscope (" + gu + ")"}, series);
 }
 
-// Residual histograms, when the result carries them: diagnostics.residual_histogram.TYPE as
-// {"edges": [...], "counts": [...]} (or "bin_edges"), or raw diagnostics.residuals.TYPE arrays.
-std::string ResidualHistograms(const json& diag) {
-  std::string out;
-  for (const char* type : {"accelerometer", "gyroscope"}) {
-    Histogram h;
-    const json* hj = Get(Get(diag, "residual_histogram"), type);
-    if (hj != nullptr) {
-      h.edges = NumArray(Get(hj, "edges"));
-      if (h.edges.empty()) h.edges = NumArray(Get(hj, "bin_edges"));
-      h.counts = NumArray(Get(hj, "counts"));
-    } else if (const json* raw = Array(Get(Get(diag, "residuals"), type))) {
-      h = MakeHistogram(NumArray(raw), 40);
-    } else {
-      continue;
-    }
-    if (h.edges.size() != h.counts.size() + 1) continue;
-    h.color = std::string(type) == "accelerometer" ? 0 : 1;
-    PlotOptions o;
-    o.name = std::string("residual-histogram-") + type;
-    o.title = std::string("Residual histogram, ") + type;
-    o.x.title = std::string("residual (") +
-                (std::string(type) == "accelerometer" ? "m/s\xC2\xB2" : "rad/s") + ")";
-    o.y.title = "count";
-    o.legend = false;
-    out += Figure(RenderHistogram(o, {h}), "Should look Gaussian and centred on zero.");
-  }
-  return out;
-}
-
-std::string ExcitationPlots(const json& diag) {
+// |ω| and |ω̇| of the positions model's usable samples (diagnostics.motion, every stride-th).
+std::string ExcitationPlots(const results::ArrayMotion& motion) {
   std::string out;
   struct Item {
-    const char* key;
+    const std::vector<double>* y;
     const char* name;
     const char* title;
     const char* unit;
   };
-  const Item items[] = {
-      {"omega_norm", "excitation-omega", "Angular rate \xE2\x80\x96\xCF\x89\xE2\x80\x96 per sample",
-       "\xE2\x80\x96\xCF\x89\xE2\x80\x96 (rad/s)"},
-      {"omega_dot_norm", "excitation-omega-dot",
-       "Angular acceleration \xE2\x80\x96\xCF\x89\xCC\x87\xE2\x80\x96 per sample",
-       "\xE2\x80\x96\xCF\x89\xCC\x87\xE2\x80\x96 (rad/s\xC2\xB2)"}};
-  const json* exc = Get(diag, "excitation");
-  const json* motion = Get(diag, "motion");
+  const Item items[] = {{&motion.omega_norm, "excitation-omega",
+                         "Angular rate \xE2\x80\x96\xCF\x89\xE2\x80\x96 per sample",
+                         "\xE2\x80\x96\xCF\x89\xE2\x80\x96 (rad/s)"},
+                        {&motion.omega_dot_norm, "excitation-omega-dot",
+                         "Angular acceleration \xE2\x80\x96\xCF\x89\xCC\x87\xE2\x80\x96 per sample",
+                         "\xE2\x80\x96\xCF\x89\xCC\x87\xE2\x80\x96 (rad/s\xC2\xB2)"}};
+  const double stride = motion.stride >= 1 ? static_cast<double>(motion.stride) : 1;
   for (const auto& it : items) {
-    // diagnostics.motion.KEY (every stride-th sample), or diagnostics.KEY / excitation.KEY.
-    double stride = 1;
-    const json* arr = Array(Get(motion, it.key));
-    if (arr != nullptr) {
-      const double st = Num(Get(motion, "stride"));
-      if (std::isfinite(st) && st >= 1) stride = st;
-    }
-    if (arr == nullptr) arr = Array(Get(diag, it.key));
-    if (arr == nullptr) arr = Array(Get(exc, it.key));
-    if (arr == nullptr) continue;
-    const auto y = NumArray(arr);
-    std::vector<double> t = NumArray(Get(diag, "t"));
-    if (t.size() != y.size()) t = NumArray(Get(diag, "time"));
-    const bool have_t = t.size() == y.size() && HasNumbers(t);
+    if (it.y->empty()) continue;
     Series s;
-    s.y = y;
+    s.y = *it.y;
     s.line_width = 1;
-    if (have_t) {
-      s.x = t;
-    } else {
-      s.x.resize(y.size());
-      for (size_t i = 0; i < y.size(); ++i) s.x[i] = static_cast<double>(i) * stride;
-    }
+    s.x.resize(s.y.size());
+    for (size_t i = 0; i < s.y.size(); ++i) s.x[i] = static_cast<double>(i) * stride;
     PlotOptions o;
     o.name = it.name;
     o.title = it.title;
-    o.x.title = have_t ? "time (s)" : "sample";
+    o.x.title = "sample";
     o.y.title = it.unit;
     o.y.include_zero = true;
     o.legend = false;
@@ -333,9 +298,16 @@ std::string ExcitationPlots(const json& diag) {
 }
 
 std::string ArrayReport(const JobView& view) {
-  const json& result = view.job.result;
-  const json* diag = Get(result, "diagnostics");
+  results::ArrayResult result;
+  std::string message;
+  if (!ReadResult(view.job.result, &result, &message))
+    return Section("parameters", "Parameters", NotAvailable("The array result (" + message + ")"));
+  if (!result.parameters)
+    return Section("parameters", "Parameters",
+                   NotAvailable("The array result (a failed run's partial diagnostics)"));
   const auto triads = ReadTriads(result, view.config);
+  const results::ArrayPositionsDiagnostics& d = result.diagnostics;
+  const results::ArrayFullDiagnostics& fd = result.full_diagnostics;
   std::string out;
   out += Guard("Parameters", [&] {
     std::string s = "<dl class=\"kv\">";
@@ -345,22 +317,28 @@ std::string ArrayReport(const JobView& view) {
     }
     s += "<dt>triads K</dt><dd>" + std::to_string(triads.size()) + "</dd>";
     s += "<dt>reference triad</dt><dd>" + E(ref_name) + " (held at its nominal position)</dd>";
-    s += "<dt>solver</dt><dd>" + E(ScalarText(Get(diag, "solver"))) + ", " +
-         E(ScalarText(Get(diag, "iterations"))) +
-         " iterations, converged: " + E(ScalarText(Get(diag, "converged"))) +
-         (Get(diag, "termination") != nullptr ? " (" + E(ScalarText(Get(diag, "termination"))) + ")"
-                                              : std::string()) +
-         "</dd>";
-    s += "<dt>samples</dt><dd>" + E(ScalarText(Get(diag, "samples"))) + " used, " +
-         E(ScalarText(Get(diag, "samples_dropped"))) + " dropped</dd>";
-    const json* exc = Get(diag, "excitation");
-    s += "<dt>excitation</dt><dd>" + E(ScalarText(Get(exc, "verdict"))) + " (smallest eigenvalue " +
-         E(ScalarText(Get(exc, "min_eigenvalue"), 4)) +
-         (Get(exc, "noise_floor") != nullptr
-              ? ", noise floor " + E(ScalarText(Get(exc, "noise_floor"), 4))
-              : std::string()) +
-         ")</dd>";
-    const ArrayFigures f = ComputeArrayFigures(result);
+    const std::string solver = result.full ? fd.solver : d.solver;
+    const int iterations = result.full ? fd.iterations : d.iterations;
+    const bool converged = result.full ? fd.converged : d.converged;
+    const std::string termination = result.full ? fd.termination : d.termination;
+    s += "<dt>solver</dt><dd>" + E(solver) + ", " + Text(iterations) +
+         " iterations, converged: " + Text(converged) + " (" + E(termination) + ")</dd>";
+    if (result.full) {
+      // The full model: the motion's samples, and the rotation excitation of the whole log.
+      const results::ArrayRotationExcitation& x = fd.rotation_excitation;
+      s += "<dt>samples</dt><dd>" + Text(fd.dynamic_samples) + " used in motion, " +
+           Text(fd.samples_dropped) + " dropped</dd>";
+      s += "<dt>rotation excitation</dt><dd>" + E(x.verdict) + " (smallest eigenvalue " +
+           E(Text(x.eigenvalues.minCoeff(), 4)) + ", noise floor " + E(Text(x.noise_floor, 4)) +
+           ")</dd>";
+    } else {
+      s += "<dt>samples</dt><dd>" + Text(d.samples) + " used, " + Text(d.samples_dropped) +
+           " dropped</dd>";
+      s += "<dt>excitation</dt><dd>" + E(d.excitation.verdict) + " (smallest eigenvalue " +
+           E(Text(d.excitation.min_eigenvalue, 4)) + ", noise floor " +
+           E(Text(d.excitation.noise_floor, 4)) + ")</dd>";
+    }
+    const ArrayFigures f = Figures(result);
     s += "<dt>RMS offset from nominal</dt><dd>" + FormatMicrometres(f.rms_offset) + "</dd>";
     s += "<dt>worst position " + std::string(kSigma) + "</dt><dd>" +
          FormatMicrometres(f.worst_sigma) + "</dd></dl>";
@@ -374,11 +352,10 @@ std::string ArrayReport(const JobView& view) {
     }
     return Section("parameters", "Parameters", s);
   });
-  if (IsArrayFullResult(result)) out += ArrayFullSections(result);  // web/array_full_report.h
+  if (result.full) out += ArrayFullSections(result);  // web/array_full_report.h
   out += Guard("Plots", [&] {
-    const json dj = diag ? *diag : json();
     std::string figs;
-    figs += Figure(CostPlot(dj),
+    figs += Figure(CostPlot(result.full ? fd.cost : d.cost),
                    "Joint Gauss-Newton converges in a handful of iterations; "
                    "block coordinate descent needs hundreds.");
     if (!triads.empty()) {
@@ -386,11 +363,11 @@ std::string ArrayReport(const JobView& view) {
       figs += Figure(PositionsPlot(triads, 0, 2), "");
       figs += Figure(PositionSigmaPlot(triads), "");
     }
-    if (!IsArrayFullResult(result))  // model full: per triad in ArrayFullSections
-      figs += Figure(ArrayResidualPlot(dj, view.config),
+    if (!result.full) {  // model full: per triad in ArrayFullSections
+      figs += Figure(ArrayResidualPlot(d),
                      "Residual RMS close to the noise level means the model fits.");
-    figs += ResidualHistograms(dj);
-    figs += ExcitationPlots(dj);
+      figs += ExcitationPlots(d.motion);
+    }
     return Section("plots", "Plots", "<div class=\"plots\">" + figs + "</div>");
   });
   return out;
@@ -398,7 +375,17 @@ std::string ArrayReport(const JobView& view) {
 
 std::string ArrayDrift(const std::vector<const JobSummary*>& jobs) {
   std::vector<std::vector<Triad>> triads;
-  for (const auto* j : jobs) triads.push_back(ReadTriads(j->result, json()));
+  std::string unread;  // the jobs whose result does not read, with the reader's message
+  for (const auto* j : jobs) {
+    results::ArrayResult r;
+    std::string message;
+    if (ReadResult(j->result, &r, &message)) {
+      triads.push_back(ReadTriads(r, json()));
+    } else {
+      triads.emplace_back();
+      unread += NotAvailable("Job #" + std::to_string(j->id) + "'s result (" + message + ")");
+    }
+  }
   std::vector<std::string> names;
   for (const auto& ts : triads) {
     for (const auto& t : ts) {
@@ -449,7 +436,7 @@ std::string ArrayDrift(const std::vector<const JobSummary*>& jobs) {
       "</th><th>when</th><th class=\"num\">RMS |\xCE\x94position| (\xC2\xB5m)</th>"
       "<th class=\"num\">largest |\xCE\x94position| (\xC2\xB5m)</th><th>triad</th>"
       "<th>per triad</th></tr></thead><tbody>" +
-      rows + "</tbody></table></div>" + OmittedPairsNote(jobs.size());
+      rows + "</tbody></table></div>" + OmittedPairsNote(jobs.size()) + unread;
   const TimeAxis ax = MakeTimeAxis(jobs);
   std::vector<Series> series;
   for (const auto& n : names) {
@@ -481,25 +468,26 @@ namespace {
 // A failed array job: the samples used and dropped, and the excitation when the solver got
 // that far (the full model: statics, dynamic samples and the rotation excitation).
 std::string ArrayPartialReport(const JobView& view) {
-  const json* diag = Get(view.job.error_detail, "diagnostics");
+  results::ArrayResult r;
+  std::string message;
+  if (!ReadResult(view.job.error_detail, &r, &message))
+    return NotAvailable("The partial diagnostics (" + message + ")");
   std::string s = "<dl class=\"kv partial-array\">";
-  if (Str(Get(diag, "model")) == "full") {
-    const json* rot = Get(diag, "rotation");
-    s += "<dt>statics</dt><dd>" + E(ScalarText(Get(diag, "statics"))) + " (" +
-         E(ScalarText(Get(diag, "static_samples"))) + " samples)</dd><dt>dynamic samples</dt><dd>" +
-         E(ScalarText(Get(diag, "dynamic_samples"))) + "</dd><dt>rotation excitation</dt><dd>" +
-         E(Str(Get(rot, "verdict"))) + "</dd>";
+  if (r.full) {
+    const results::ArrayFullDiagnostics& d = r.full_diagnostics;
+    s += "<dt>statics</dt><dd>" + Text(d.statics) + " (" + Text(d.static_samples) +
+         " samples)</dd><dt>dynamic samples</dt><dd>" + Text(d.dynamic_samples) +
+         "</dd><dt>rotation excitation</dt><dd>" + E(d.rotation_excitation.verdict) + "</dd>";
   } else {
-    const json* ex = Get(diag, "excitation");
-    const std::string verdict = Str(Get(ex, "verdict"));
-    s += "<dt>usable samples</dt><dd>" + E(ScalarText(Get(diag, "samples"))) + " (" +
-         E(ScalarText(Get(diag, "samples_dropped"))) +
+    const results::ArrayPositionsDiagnostics& d = r.diagnostics;
+    const std::string& verdict = d.excitation.verdict;
+    s += "<dt>usable samples</dt><dd>" + Text(d.samples) + " (" + Text(d.samples_dropped) +
          " dropped for gyroscope saturation)</dd><dt>gyroscope triads</dt><dd>" +
-         E(ScalarText(Get(diag, "gyro_triads"))) + "</dd><dt>excitation</dt><dd>" +
-         (verdict.empty() ? std::string("not reached")
-                          : E(verdict) + " (smallest eigenvalue " +
-                                E(ScalarText(Get(ex, "min_eigenvalue"), 3)) + ", noise floor " +
-                                E(ScalarText(Get(ex, "noise_floor"), 3)) + ")") +
+         Text(d.gyro_triads) + "</dd><dt>excitation</dt><dd>" +
+         (verdict.empty()
+              ? std::string("not reached")
+              : E(verdict) + " (smallest eigenvalue " + E(Text(d.excitation.min_eigenvalue, 3)) +
+                    ", noise floor " + E(Text(d.excitation.noise_floor, 3)) + ")") +
          "</dd>";
   }
   return s + "</dl>";

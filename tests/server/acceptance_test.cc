@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "core/pca_simulation.h"
+#include "results/array_result.h"
 #include "server/config.h"
 #include "server/method.h"
 
@@ -332,21 +333,31 @@ TEST(Gate, ImuUnitMixUpsNameTheProbableCause) {
 
 // ---- array ----
 
-json ArrayResult(double offset, double std, double accel_rms) {
-  json positions = json::array(), stds = json::array();
+// A positions-model array result (results/array_result.h, every key the adapter writes): triads
+// a1, a2 at `offset` from their nominal positions with 1 sigma `std`, the accelerometer residual
+// RMS `accel_rms` against a configured noise of 0.04 m/s^2.
+results::ArrayResult TypedArrayResult(double offset, double std, double accel_rms) {
+  results::ArrayResult r;
+  r.envelope.method = "array";
+  r.envelope.model = "positions";
+  results::ArrayParameters params;
+  results::ArrayUncertainty unc;
   for (int k = 0; k < 3; ++k) {
     const double o = k == 0 ? 0.0 : offset;  // the reference stays at its nominal position
-    positions.push_back(
-        {{"name", "a" + std::to_string(k)}, {"position", {o, 0, 0}}, {"offset", {o, 0, 0}}});
-    stds.push_back({{"name", "a" + std::to_string(k)}, {"std", {k == 0 ? 0.0 : std, std / 2, 0}}});
+    const std::string name = "a" + std::to_string(k);
+    params.positions.push_back({name, {o, 0, 0}, {o, 0, 0}});
+    unc.positions.push_back({name, {k == 0 ? 0.0 : std, std / 2, 0}});
   }
-  return {{"method", "array"},
-          {"parameters", {{"reference", 0}, {"positions", positions}}},
-          {"uncertainty", {{"positions", stds}}},
-          {"diagnostics",
-           {{"converged", true},
-            {"residual_rms", {{"accelerometer", accel_rms}, {"gyroscope", 0.001}}},
-            {"noise_configured", {{"accelerometer", 0.04}, {"gyroscope", 0.001}}}}}};
+  r.parameters = params;
+  r.uncertainty = unc;
+  r.diagnostics.converged = true;
+  r.diagnostics.residual_rms = {accel_rms, 0.001};
+  r.diagnostics.noise_configured = {0.04, 0.001};
+  return r;
+}
+
+json ArrayResult(double offset, double std, double accel_rms) {
+  return results::ToJson(TypedArrayResult(offset, std, accel_rms));
 }
 
 TEST(Gate, ArrayLimitsHoldJustInsideAndFailJustOutside) {
@@ -361,14 +372,35 @@ TEST(Gate, ArrayLimitsHoldJustInsideAndFailJustOutside) {
 }
 
 TEST(Gate, ArrayModelFullTriadsAreJudgedLikeImu) {
-  json r = ArrayResult(0.001, 1e-5, 0.04);
+  // The positions of a positions-model result, with the triads of an imu result.
+  results::ArrayResult typed = TypedArrayResult(0.001, 1e-5, 0.04);
+  typed.full = true;
+  typed.full_diagnostics.converged = true;
   const json imu = ImuResult(1.0, 0.001, 0.001, 0.001, 1);
-  r["parameters"]["imus"] = imu["parameters"]["imus"];
-  r["uncertainty"]["imus"] = imu["uncertainty"]["imus"];
+  for (size_t k = 0; k < imu["parameters"]["imus"].size(); ++k) {
+    results::ArrayImu triads;
+    results::ArrayImuStd stds;
+    results::ReadImuTriads(results::JsonReader(imu["parameters"]["imus"][k], "imu"),
+                           &triads.triads);
+    results::ReadImuTriads(results::JsonReader(imu["uncertainty"]["imus"][k], "imu"), &stds.triads);
+    typed.parameters->imus.push_back(triads);
+    typed.uncertainty->imus.push_back(stds);
+  }
+  const json r = results::ToJson(typed);
+  ASSERT_EQ(r["parameters"]["imus"].size(), imu["parameters"]["imus"].size());
   EXPECT_EQ(JudgeWith("array", r, {{"method", "array"}})["status"], "accepted");
   // Gyroscope readings in rad/s with gyro_unit deg/s: K ≈ 1 rad/s per reading, 57 × the nominal.
   const json w = JudgeWith("array", r, {{"method", "array"}, {"gyro_unit", "deg/s"}});
   EXPECT_TRUE(HasReason(w, "look like rad/s but are taken as deg/s")) << w.dump();
+}
+
+TEST(Gate, AnArrayResultThatDoesNotReadIsRejectedNamingThePath) {
+  json r = ArrayResult(0.001, 1e-5, 0.04);
+  r["uncertainty"]["positions"][2]["std"] = "small";
+  const json v = JudgeWith("array", r, {{"method", "array"}});
+  EXPECT_EQ(v["status"], "rejected");
+  EXPECT_TRUE(HasReason(v, "cannot be judged: array result: uncertainty.positions[2].std"))
+      << v.dump();
 }
 
 TEST(Gate, AResultThatCannotBeJudgedIsRejected) {

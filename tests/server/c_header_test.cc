@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "results/array_result.h"
 #include "results/pca_result.h"
 #include "server/array_method.h"
 #include "server/exports.h"
@@ -357,19 +358,32 @@ TEST(CHeader, HostileSerialAndSensorNamesCannotBreakTheHeader) {
 // An array result of the full model (per-IMU intrinsics beside the positions, SPEC §7) gets the
 // imu apply function too, without clashing with the positions' names.
 TEST(CHeader, ArrayResultWithIntrinsicsAppliesThemToAReading) {
-  const json triad = {{"bias", {0.1, -0.2, 0.3}},
-                      {"matrix", {{2.0, 0.0, 0.0}, {0.0, 3.0, 0.0}, {0.0, 0.5, 4.0}}}};
-  json result = {
-      {"method", "array"},
-      {"parameters",
-       {{"reference", 0},
-        {"positions",
-         {{{"name", "a0"}, {"position", {0.0, 0.0, 0.0}}, {"offset", {0.0, 0.0, 0.0}}},
-          {{"name", "a1"}, {"position", {0.01, 0.0, 0.0}}, {"offset", {0.001, 0.0, 0.0}}}}},
-        {"imus",
-         {{{"name", "0"}, {"accelerometer", triad}, {"gyroscope", triad}},
-          {{"name", "1"}, {"accelerometer", triad}, {"gyroscope", triad}}}}}},
-      {"uncertainty", json::object()}};
+  // A full-model result (results/array_result.h) whose two triads read y -> matrix (y - bias),
+  // the position sigma undefined.
+  results::SensorTriad triad;
+  triad.bias = {0.1, -0.2, 0.3};
+  triad.matrix << 2.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.5, 4.0;
+  results::ArrayResult typed;
+  typed.envelope.method = "array";
+  typed.envelope.model = "full";
+  typed.full = true;
+  results::ArrayParameters params;
+  results::ArrayUncertainty unc;
+  params.positions = {{"a0", {0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}},
+                      {"a1", {0.01, 0.0, 0.0}, {0.001, 0.0, 0.0}}};
+  for (const char* name : {"0", "1"}) {
+    results::ArrayImu imu;
+    imu.triads = {name, triad, triad};
+    imu.position = Eigen::Vector3d::Zero();
+    params.imus.push_back(imu);
+    results::ArrayImuStd s;
+    s.triads.name = name;
+    unc.imus.push_back(s);
+    unc.positions.push_back({name, Eigen::Vector3d::Constant(NAN)});
+  }
+  typed.parameters = params;
+  typed.uncertainty = unc;
+  const json result = results::ToJson(typed);
   std::string h;
   ASSERT_TRUE(ResultToHeader(result, {3, "B-1", "array", "2026-01-01T00:00:00Z"}, &h).ok());
   EXPECT_NE(h.find("POSITION_STD is not written"), std::string::npos) << h;

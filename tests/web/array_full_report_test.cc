@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "results/array_result.h"
 #include "web/html.h"
 #include "web/pages.h"
 
@@ -20,92 +21,92 @@ using json = nlohmann::json;
 constexpr double kDeg = 3.14159265358979323846 / 180;
 
 json Vec(double x, double y, double z) { return json::array({x, y, z}); }
-json Mat(double off, double diag = 1) {
-  return json::array({Vec(diag, off, -off), Vec(2 * off, diag, off), Vec(-off, 3 * off, diag)});
+Eigen::Matrix3d Mat(double off, double diag = 1) {
+  Eigen::Matrix3d m;
+  m << diag, off, -off, 2 * off, diag, off, -off, 3 * off, diag;
+  return m;
 }
 
-// A model-full result as server/array_method.cc writes it: K triads named `prefix`K, the
-// gyroscopes in deg/s, gains 1 + 0.0123 (accelerometers) and 1 + 0.01 (gyroscopes), biases
-// 0.0217 m/s^2 and -0.5 deg/s, misalignment entries of 2 mrad, position shift (10, 0, -4) µm at
-// σ 2 µm, residuals at the noise.
+// A model-full result (results/array_result.h, every key server/array_method.cc writes): K triads
+// named `prefix`K, the gyroscopes in deg/s, gains 1 + 0.0123 (accelerometers) and 1 + 0.01
+// (gyroscopes), biases 0.0217 m/s^2 and -0.5 deg/s, misalignment entries of 2 mrad, position
+// shift (10, 0, -4) µm at σ 2 µm, residuals at the noise.
 json FullResult(int K, const std::string& prefix = "", bool with_limits = true) {
-  json imus = json::array(), stds = json::array(), positions = json::array(),
-       position_stds = json::array(), residuals = json::array(), changed = json::array();
+  results::ArrayResult r;
+  r.envelope.method = "array";
+  r.envelope.model = "a_k = M_a,k (y_a,k - b_a,k), ...";
+  r.full = true;
+  results::ArrayParameters params;
+  results::ArrayUncertainty unc;
+  results::ArrayFullDiagnostics& d = r.full_diagnostics;
   for (int k = 0; k < K; ++k) {
     const std::string name = prefix + std::to_string(k);
     const double gu = 1.01 * kDeg;
-    imus.push_back({{"name", name},
-                    {"accelerometer",
-                     {{"bias", Vec(0.0217, -0.0301, 0.0042)},
-                      {"scale", Vec(1.0123, 1.0123, 1.0123)},
-                      {"misalignment", Mat(0.002)},
-                      {"matrix", Mat(0.002, 1.0123)}}},
-                    {"gyroscope",
-                     {{"bias", Vec(-0.5, 0.25, 0.125)},
-                      {"scale", Vec(gu, gu, gu)},
-                      {"misalignment", Mat(0.002)},
-                      {"matrix", Mat(0.002 * gu, gu)}}},
-                    {"position", Vec(0.01 * k, 0.02, 0.001)}});
+    results::ArrayImu imu;
+    imu.triads.name = name;
+    imu.triads.accelerometer.bias = {0.0217, -0.0301, 0.0042};
+    imu.triads.accelerometer.scale = Eigen::Vector3d::Constant(1.0123);
+    imu.triads.accelerometer.misalignment = Mat(0.002);
+    imu.triads.accelerometer.matrix = Mat(0.002, 1.0123);
+    imu.triads.gyroscope.bias = {-0.5, 0.25, 0.125};
+    imu.triads.gyroscope.scale = Eigen::Vector3d::Constant(gu);
+    imu.triads.gyroscope.misalignment = Mat(0.002);
+    imu.triads.gyroscope.matrix = Mat(0.002 * gu, gu);
+    imu.position = {0.01 * k, 0.02, 0.001};
+    params.imus.push_back(imu);
     const double sa = 1e-4 * 1.0123;  // relative σ 0.01 %
-    json sensor_std = {{"bias_std", Vec(0.001, 0.001, 0.001)},
-                       {"scale_std", Vec(sa, sa, sa)},
-                       {"misalignment_std", Mat(2e-4, 0)}};
-    json gyro_std = sensor_std;
-    gyro_std["bias_std"] = Vec(0.01, 0.01, 0.01);
-    gyro_std["scale_std"] = Vec(1e-4 * gu, 1e-4 * gu, 1e-4 * gu);
-    stds.push_back({{"name", name},
-                    {"accelerometer", sensor_std},
-                    {"gyroscope", gyro_std},
-                    {"position_std", Vec(2e-6, 2e-6, 2e-6)}});
-    positions.push_back(
-        {{"name", name}, {"position", Vec(0.01 * k, 0.02, 0.001)}, {"offset", Vec(0, 0, 0)}});
-    position_stds.push_back({{"name", name}, {"std", Vec(2e-6, 2e-6, 2e-6)}});
-    residuals.push_back({{"name", name},
-                         {"static", {{"accelerometer", 0.04}, {"gyroscope", 0.06}}},
-                         {"dynamic", {{"accelerometer", 0.041}, {"gyroscope", 0.061}}}});
-    changed.push_back({{"name", name},
-                       {"positions_only", Vec(0.01 * k - 1e-5, 0.02, 0.001 + 4e-6)},
-                       {"position_change", Vec(1e-5, 0, -4e-6)},
-                       {"position_change_norm", std::hypot(1e-5, 4e-6)},
-                       {"position_change_sigma", Vec(5, 0, -2)}});
+    results::ArrayImuStd u;
+    u.triads.name = name;
+    u.triads.accelerometer.bias_std = Eigen::Vector3d::Constant(0.001);
+    u.triads.accelerometer.scale_std = Eigen::Vector3d::Constant(sa);
+    u.triads.accelerometer.misalignment_std = Mat(2e-4, 0);
+    u.triads.gyroscope = u.triads.accelerometer;
+    u.triads.gyroscope.bias_std = Eigen::Vector3d::Constant(0.01);
+    u.triads.gyroscope.scale_std = Eigen::Vector3d::Constant(1e-4 * gu);
+    u.position_std = Eigen::Vector3d::Constant(2e-6);
+    unc.imus.push_back(u);
+    params.positions.push_back({name, imu.position, Eigen::Vector3d::Zero()});
+    unc.positions.push_back({name, Eigen::Vector3d::Constant(2e-6)});
+    d.residual_rms_imus.push_back({name, {0.04, 0.06}, {0.041, 0.061}});
+    results::ArrayPositionChange c;
+    c.name = name;
+    c.positions_only = {0.01 * k - 1e-5, 0.02, 0.001 + 4e-6};
+    c.position_change = {1e-5, 0, -4e-6};
+    c.position_change_norm = std::hypot(1e-5, 4e-6);
+    c.position_change_sigma = {5, 0, -2};
+    d.changed_from_positions_only.push_back(c);
+    d.time_offsets.offsets_ms.push_back({name, 0.0});
   }
-  json result = {
-      {"method", "array"},
-      {"parameters",
-       {{"model", "full"}, {"reference", 0}, {"imus", imus}, {"positions", positions}}},
-      {"uncertainty", {{"imus", stds}, {"positions", position_stds}}},
-      {"diagnostics",
-       {{"model", "full"},
-        {"gauge", {{"description", "sum of the gyroscope traces is 3K"}}},
-        {"solver", "joint"},
-        {"iterations", 6},
-        {"converged", true},
-        {"cost", {100.0, 10.0, 9.0}},
-        {"statics", 20},
-        {"static_samples", 2000},
-        {"dynamic_samples", 400},
-        {"chi2_per_dof", 1.01},
-        {"gyro_unit", "deg/s"},
-        {"noise", {{"accelerometer", 0.04}, {"gyroscope", 0.06}, {"source", "configured"}}},
-        {"static_noise", {{"accelerometer", 0.04}, {"gyroscope", 0.06}}},
-        {"residual_rms", {{"imus", residuals}}},
-        {"robust", {{"used", false}}},
-        {"positions_only_start", true},
-        {"changed_from_positions_only", changed}}},
-      {"warnings", json::array()}};
-  if (with_limits)
-    result["verdict"] = {{"status", "accepted"},
-                         {"reasons", json::array()},
-                         {"limits",
-                          {{"scale_range", 0.1},
-                           {"max_scale_std", 0.01},
-                           {"implausible_factor", 3.0},
-                           {"max_axis_std", 0.01},
-                           {"max_accel_bias", 2.0},
-                           {"max_accel_bias_std", 0.05},
-                           {"max_gyro_bias", 0.2},
-                           {"max_gyro_bias_std", 0.005}}}};
-  return result;
+  r.parameters = params;
+  r.uncertainty = unc;
+  d.termination = "converged";
+  d.iterations = 6;
+  d.statics = 20;
+  d.static_samples = 2000;
+  d.dynamic_samples = 400;
+  d.rotation_excitation = {{5, 6, 7}, 0.1, {1, 0, 0}, "good", "(rad/s)^2"};
+  d.gauge = {"sum_trace_gyroscope", 0, "sum of the gyroscope traces is 3K"};
+  d.solver = "joint";
+  d.converged = true;
+  d.cost = {100.0, 10.0, 9.0};
+  d.dof = 1000;
+  d.chi2_per_dof = 1.01;
+  d.gyro_unit = "deg/s";
+  d.noise = {0.04, 0.06, "configured", "noise", 0.04, 0.06};
+  d.static_noise = {0.04, 0.06};
+  d.residual_rms_dynamic = {0.041, 0.061};
+  d.time_offsets.note = "diagnostic";
+  d.robust = {false, 0, 2.0, 1.5};
+  d.positions_only_start = true;
+  if (with_limits) {
+    results::StoredVerdict v;
+    v.status = GateVerdict::kAccepted;
+    v.limits = {{"scale_range", 0.1},   {"max_scale_std", 0.01},     {"implausible_factor", 3.0},
+                {"max_axis_std", 0.01}, {"max_accel_bias", 2.0},     {"max_accel_bias_std", 0.05},
+                {"max_gyro_bias", 0.2}, {"max_gyro_bias_std", 0.005}};
+    r.envelope.verdict = v;
+  }
+  return results::ToJson(r);
 }
 
 bool Has(const std::string& s, const std::string& what) {
@@ -232,14 +233,14 @@ TEST(ArrayFullReport, ChangeFromThePositionsOnlyFitInMicrometresAndSigma) {
   EXPECT_TRUE(Has(t, "beyond\" title=\"more than 3\xCF\x83\">5.00<"));  // 5σ marked
   EXPECT_TRUE(Has(t, ">9.9900<"));  // positions-only x of triad 1, mm
   EXPECT_TRUE(Has(html, "Largest: triad 0, 5.0\xCF\x83"));
-  // An older result without positions_only / position_change_sigma: σ from
-  // uncertainty.positions.
-  json old = FullResult(8);
-  for (auto& c : old["diagnostics"]["changed_from_positions_only"]) {
-    c.erase("positions_only");
-    c.erase("position_change_sigma");
-  }
-  EXPECT_TRUE(Has(Table(ArrayFullSections(old), "array-full-change"), ">5.00<"));
+  // A damaged result (a shift that is not three numbers): the sections say what does not read.
+  json bad = FullResult(8);
+  bad["diagnostics"]["changed_from_positions_only"][2]["position_change"] = "?";
+  const std::string damaged = ArrayFullSections(bad);
+  EXPECT_FALSE(Has(damaged, "table-array-full-change"));
+  EXPECT_TRUE(Has(damaged, "diagnostics.changed_from_positions_only[2].position_change"))
+      << damaged;
+  EXPECT_TRUE(Has(damaged, "not available"));
 }
 
 // Real hardware: the residuals exceed the noise and the result carries the residual-aware σ
@@ -270,8 +271,10 @@ TEST(ArrayFullReport, ShowsTheResidualAwareSigmaWhenTheResultHasIt) {
 }
 
 TEST(ArrayFullReport, ResultsOfAnyShapeRenderAndOnlyFullResultsGetTheSections) {
-  EXPECT_TRUE(IsArrayFullResult(FullResult(3)));
-  EXPECT_FALSE(IsArrayFullResult(json{{"method", "array"}, {"parameters", {{"positions", {}}}}}));
+  // A positions-model result has no triads to show.
+  json positions = FullResult(3);
+  positions["diagnostics"].erase("model");
+  EXPECT_FALSE(Has(ArrayFullSections(positions), "id=\"triads\""));
   for (const json& odd :
        {json(), json::array(), json{{"parameters", 3}},
         json{{"parameters", {{"model", "full"}, {"imus", {1, "x", nullptr}}}}},
@@ -279,7 +282,10 @@ TEST(ArrayFullReport, ResultsOfAnyShapeRenderAndOnlyFullResultsGetTheSections) {
              {"diagnostics",
               {{"residual_rms", {{"imus", {{{"static", 1}}}}}},
                {"changed_from_positions_only", {{{"position_change", "?"}}}}}}}}) {
-    EXPECT_NO_THROW(ArrayFullSections(odd)) << odd;
+    std::string html;
+    EXPECT_NO_THROW(html = ArrayFullSections(odd)) << odd;
+    EXPECT_TRUE(Has(html, "not available")) << odd;
+    EXPECT_FALSE(Has(html, "id=\"triads\"")) << odd;
   }
 }
 
@@ -296,6 +302,57 @@ TEST(ArrayFullReport, TheJobPageOfAFullResultCarriesTheSections) {
     EXPECT_TRUE(Has(page, id)) << id;
   // The positions model's residual-per-sensor-type plot is replaced by the per-triad ones.
   EXPECT_FALSE(Has(page, "plot-residual-rms"));
+}
+
+// The array report reads the result typed: a result that does not read shows the "not available"
+// line with the reader's message (the path of the problem) instead of tables of dashes, on the job
+// page, in a failed job's partial diagnostics and in the device page's drift.
+TEST(ArrayReport, AResultThatDoesNotReadSaysWhereOnEveryPage) {
+  json bad = FullResult(4);
+  bad["parameters"]["positions"][2]["offset"] = {1, 2};
+  JobView v;
+  v.job.id = 42;
+  v.job.status = JobStatus::kSucceeded;
+  v.job.method = "array";
+  v.job.device = "BOARD-1";
+  v.job.result = bad;
+  std::string page = RenderJobPage(v);
+  EXPECT_TRUE(Has(page, "parameters.positions[2].offset")) << page;
+  EXPECT_TRUE(Has(page, "not available"));
+  EXPECT_FALSE(Has(page, "table-array-parameters"));
+  v.job.result = FullResult(4);
+  EXPECT_TRUE(Has(RenderJobPage(v), "table-array-parameters"));
+
+  JobView failed = v;
+  failed.job.status = JobStatus::kFailed;
+  failed.job.result = json();
+  failed.job.error = "the motion does not determine the positions";
+  results::ArrayResult partial;  // a failed full-model run's partial diagnostics, damaged
+  partial.envelope.method = "array";
+  partial.envelope.usable = false;
+  partial.full = true;
+  failed.job.error_detail = results::ToJson(partial);
+  failed.job.error_detail["diagnostics"]["statics"] = "two";
+  page = RenderJobPage(failed);
+  EXPECT_TRUE(Has(page, "diagnostics.statics")) << page;
+  EXPECT_FALSE(Has(page, "partial-array"));
+
+  DeviceView d;
+  d.serial = "BOARD-1";
+  JobSummary a = v.job, b = v.job, c = v.job;
+  a.id = 1;
+  a.created_at = a.finished_at = "2026-01-01T00:00:00Z";
+  b.id = 2;
+  b.created_at = b.finished_at = "2026-02-01T00:00:00Z";
+  b.result = bad;
+  c.id = 3;
+  c.created_at = c.finished_at = "2026-03-01T00:00:00Z";
+  d.jobs = {a, b, c};
+  page = RenderDevicePage(d);
+  EXPECT_TRUE(Has(page, "table-drift-array"));
+  EXPECT_TRUE(Has(page, "Job #2&#39;s result (array result: parameters.positions[2].offset") ||
+              Has(page, "Job #2's result (array result: parameters.positions[2].offset"))
+      << page;
 }
 
 }  // namespace

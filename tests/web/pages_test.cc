@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -11,6 +12,8 @@
 #include <random>
 #include <string>
 #include <vector>
+
+#include "results/array_result.h"
 
 namespace calibd::web {
 namespace {
@@ -106,55 +109,54 @@ json PcaConfig() {
   return {{"method", "pca"}, {"device", "IMU-0042"}, {"magnitude", 1.0}, {"nominal", nominal}};
 }
 
-// An array result: 32 triads on a 4x4 grid, top and underside, 6.3 mm pitch, 2 mm apart.
+// An array result (results/array_result.h, every key the server writes): 32 triads on a 4x4 grid,
+// top and underside, 6.3 mm pitch, 2 mm apart; |omega| and |omega_dot| of `excitation_samples`
+// samples, kept as the server does (at most 2000 points, every stride-th sample).
 json ArrayResult(size_t excitation_samples = 1000, double shift = 0) {
-  json positions = json::array(), unc = json::array();
+  results::ArrayResult r;
+  r.envelope.method = "array";
+  r.envelope.model = "y_a,k = s + (Omega(omega)^2 + Omega(omega_dot)) r_k";
+  r.envelope.warnings = {"3 samples dropped at gyroscope saturation"};
+  results::ArrayParameters params;
+  results::ArrayUncertainty unc;
   for (int k = 0; k < 32; ++k) {
     const double x = 6.3e-3 * (k % 4), y = 6.3e-3 * ((k / 4) % 4), z = k < 16 ? 0 : -2e-3;
     const double o[3] = {k == 0 ? 0 : Wiggle(k, 1e-3) + shift, k == 0 ? 0 : Wiggle(k + 7, 1e-3),
                          k == 0 ? 0 : Wiggle(k + 13, 1e-3)};
-    positions.push_back({{"name", "a" + std::to_string(k)},
-                         {"position", {x + o[0], y + o[1], z + o[2]}},
-                         {"offset", {o[0], o[1], o[2]}}});
+    const std::string name = "a" + std::to_string(k);
+    params.positions.push_back({name, {x + o[0], y + o[1], z + o[2]}, {o[0], o[1], o[2]}});
     const double s = k == 0 ? 0 : 2.0e-6 + Wiggle(k, 0.3e-6);
-    unc.push_back({{"name", "a" + std::to_string(k)}, {"std", {s, s * 1.1, s * 0.9}}});
+    unc.positions.push_back({name, {s, s * 1.1, s * 0.9}});
   }
-  json omega = json::array(), omega_dot = json::array();
-  for (size_t n = 0; n < excitation_samples; ++n) {
-    omega.push_back(30 + 5 * std::sin(n * 0.01) + Wiggle(static_cast<int>(n % 1000), 1));
-    omega_dot.push_back(35 + 8 * std::cos(n * 0.013));
+  unc.std_rms = 2e-6;
+  r.parameters = params;
+  r.uncertainty = unc;
+  results::ArrayPositionsDiagnostics& d = r.diagnostics;
+  d.solver = "joint";
+  d.termination = "converged";
+  d.iterations = 5;
+  d.samples = static_cast<int64_t>(excitation_samples);
+  d.samples_dropped = 3;
+  d.gyro_triads = 32;
+  d.gyro_unit = "deg/s";
+  d.excitation.min_eigenvalue = 1.7e5;
+  d.excitation.max_eigenvalue = 3e5;
+  d.excitation.noise_floor = 10;
+  d.excitation.weakest_direction = {0, 0, 1};
+  d.excitation.verdict = "good";
+  d.converged = true;
+  d.cost = {5.2e7, 3.1e4, 2.9e3, 2.87e3, 2.869e3};
+  d.residual_rms = {0.0401, 0.0597};
+  d.noise_estimate = {0.0399, 0.0602};
+  d.noise_configured = {0.04, 0.06};
+  d.parallel_fraction = 0.9;
+  d.motion.stride = std::max<int64_t>(1, (static_cast<int64_t>(excitation_samples) + 1999) / 2000);
+  for (size_t n = 0; n < excitation_samples; n += static_cast<size_t>(d.motion.stride)) {
+    d.motion.omega_norm.push_back(30 + 5 * std::sin(n * 0.01) +
+                                  Wiggle(static_cast<int>(n % 1000), 1));
+    d.motion.omega_dot_norm.push_back(35 + 8 * std::cos(n * 0.013));
   }
-  json r = {{"method", "array"},
-            {"parameters", {{"reference", 0}, {"positions", positions}}},
-            {"uncertainty", {{"positions", unc}}},
-            {"diagnostics",
-             {{"solver", "joint"},
-              {"iterations", 5},
-              {"converged", true},
-              {"cost", {5.2e7, 3.1e4, 2.9e3, 2.87e3, 2.869e3}},
-              {"samples", 1000},
-              {"samples_dropped", 3},
-              {"residual_rms", {{"accelerometer", 0.0401}, {"gyroscope", 0.0597}}},
-              {"noise_estimate", {{"accelerometer", 0.0399}, {"gyroscope", 0.0602}}},
-              {"excitation", {{"min_eigenvalue", 1.7e5}, {"verdict", "good"}}},
-              {"termination", "converged"},
-              {"gyro_unit", "deg/s"},
-              {"noise_configured", {{"accelerometer", 0.04}, {"gyroscope", 0.06}}},
-              {"residual_histogram",
-               {{"accelerometer",
-                 {{"edges", {-0.12, -0.08, -0.04, 0, 0.04, 0.08, 0.12}},
-                  {"counts", {210, 2600, 9400, 9300, 2700, 190}}}}}}}},
-            {"warnings", json::array({"3 samples dropped at gyroscope saturation"})}};
-  // As the server stores it: at most 2000 points, every stride-th sample, under "motion"; older
-  // results had the full arrays directly in diagnostics.
-  if (excitation_samples <= 2000) {
-    r["diagnostics"]["motion"] = {
-        {"stride", 1}, {"omega_norm", omega}, {"omega_dot_norm", omega_dot}};
-  } else {
-    r["diagnostics"]["omega_norm"] = omega;
-    r["diagnostics"]["omega_dot_norm"] = omega_dot;
-  }
-  return r;
+  return results::ToJson(r);
 }
 
 json ArrayConfig() {
@@ -254,12 +256,10 @@ TEST(JobPage, ArrayReportHasPositionsCostResidualsAndExcitation) {
   ExpectDocument(page, "page-job");
   EXPECT_TRUE(Has(page, "class=\"table-array-parameters\""));
   EXPECT_TRUE(Has(page, "(reference, fixed)"));
-  for (const char* plot :
-       {"cost", "positions-xy", "positions-xz", "position-sigma", "residual-rms",
-        "residual-histogram-accelerometer", "excitation-omega", "excitation-omega-dot"}) {
+  for (const char* plot : {"cost", "positions-xy", "positions-xz", "position-sigma", "residual-rms",
+                           "excitation-omega", "excitation-omega-dot"}) {
     EXPECT_TRUE(Has(page, std::string("class=\"plot plot-") + plot + "\"")) << plot;
   }
-  EXPECT_FALSE(Has(page, "plot-residual-histogram-gyroscope"));  // not in the result: skipped
   EXPECT_TRUE(Has(page, "Offsets from nominal magnified \xC3\x97"));
   EXPECT_TRUE(Has(page, "class=\"ellipses\""));
   EXPECT_TRUE(Has(page, "gyroscope (\xC2\xB0/s)"));
@@ -272,7 +272,8 @@ TEST(JobPage, ArrayReportLinksTheAccelerometerCalibrationItUsed) {
   JobView v;
   json result = ArrayResult();
   result["diagnostics"]["accelerometer_calibration"] = {
-      {"job", 17}, {"sensors", 96}, {"frame", "nominal"}};
+      {"job", 17},       {"sensors", 96},    {"frame", "nominal"},
+      {"bias", nullptr}, {"magnitude", 9.8}, {"max_condition_number", 1.01}};
   v.job = Job(23, "ARRAY-7", "array", "succeeded", "2026-11-21 10:00:00", result);
   const std::string page = RenderJobPage(v);
   EXPECT_TRUE(Has(page, "<a href=\"/jobs/17\">job #17</a>")) << page.substr(0, 3000);
@@ -470,15 +471,19 @@ TEST(JobPage, FailedNoiseAndArrayJobsShowWhatWasFound) {
   JobView array;
   array.job = Job(38, "ARRAY-1", "array", "failed", "2026-11-20T09:20:00Z", json());
   array.job.error = "the motion does not determine the positions";
-  array.job.error_detail = {
-      {"method", "array"},
-      {"usable", false},
-      {"diagnostics",
-       {{"samples", 900},
-        {"samples_dropped", 100},
-        {"gyro_triads", 4},
-        {"excitation",
-         {{"verdict", "insufficient"}, {"min_eigenvalue", 1e-3}, {"noise_floor", 2e-3}}}}}};
+  results::ArrayResult partial;  // as the server keeps it (results/array_result.h)
+  partial.envelope.method = "array";
+  partial.envelope.usable = false;
+  partial.diagnostics.solver = "joint";
+  partial.diagnostics.termination = "not_determinable";
+  partial.diagnostics.samples = 900;
+  partial.diagnostics.samples_dropped = 100;
+  partial.diagnostics.gyro_triads = 4;
+  partial.diagnostics.gyro_unit = "rad/s";
+  partial.diagnostics.excitation.verdict = "insufficient";
+  partial.diagnostics.excitation.min_eigenvalue = 1e-3;
+  partial.diagnostics.excitation.noise_floor = 2e-3;
+  array.job.error_detail = results::ToJson(partial);
   page = RenderJobPage(array);
   ExpectDocument(page, "page-job");
   EXPECT_TRUE(Has(page, "partial-array"));
