@@ -80,6 +80,10 @@ bool JsonReader::Has(std::string_view key) const {
   return it != node_->end() && !it->is_null();
 }
 
+bool JsonReader::Present(std::string_view key) const {
+  return node_ != nullptr && node_->is_object() && node_->find(key) != node_->end();
+}
+
 const json* JsonReader::Child(std::string_view key, const char* type,
                               bool (json::*is)() const noexcept) const {
   if (!ok() || node_ == nullptr) return nullptr;

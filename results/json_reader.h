@@ -80,6 +80,21 @@ class JsonReader {
     if (was_ok && ok()) *out = std::move(value);
   }
 
+  // Members a result has but SPEC §4/§7 does not require (our extensions, added over time):
+  // read like Read when present (null included), and when absent *out keeps the value it has
+  // (the struct's default), so a result stored by an earlier calibd, before the member existed,
+  // still reads. Writers always write them.
+  template <class T>
+  void ReadExtension(std::string_view key, T* out) const {
+    if (Present(key)) Read(key, out);
+  }
+  template <class T, class F>
+  void ReadArrayExtension(std::string_view key, std::vector<T>* out, F read_one) const {
+    if (Present(key)) ReadArray(key, out, read_one);
+  }
+  // Whether member `key` exists (null included).
+  bool Present(std::string_view key) const;
+
   // An array of objects: `read_one(element_reader, &element)` for each, in order. Requires the
   // array (an empty one is fine).
   template <class T, class F>

@@ -121,6 +121,23 @@ TEST(JsonReader, OptionalMembersAreNulloptWhenAbsentOrNull) {
   EXPECT_FALSE(r.Has("nothing"));
 }
 
+TEST(JsonReader, AnAbsentExtensionKeepsItsDefaultAndAPresentOneIsReadAndChecked) {
+  JsonReader r(kDoc, "doc");
+  int absent = 42;
+  int count = 0;
+  std::vector<Sensor> none = {{"default", 1}};
+  r.Object("parameters").ReadExtension("added_later", &absent);
+  r.Object("parameters").ReadExtension("count", &count);
+  r.Object("parameters").ReadArrayExtension("also_later", &none, [](const JsonReader&, Sensor*) {});
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(absent, 42);
+  EXPECT_EQ(count, 3);
+  EXPECT_EQ(none.size(), 1u);
+  bool wrong = false;
+  r.Object("parameters").ReadExtension("count", &wrong);
+  EXPECT_EQ(r.status().field(), "parameters.count") << "present but of the wrong type";
+}
+
 TEST(JsonReader, NumWritesUndefinedNumbersAsNullSoTheyReadBackAsNaN) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const json j = {{"x", Num(nan)},
