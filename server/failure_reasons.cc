@@ -187,7 +187,7 @@ std::string PartialDiagnosticsText(const nlohmann::json& result, size_t max_byte
     }
     std::sort(sizes.rbegin(), sizes.rend());
     for (const auto& [size, key] : sizes) {
-      (*diagnostics)[key] = nullptr;
+      diagnostics->erase(key);  // absent, as the typed readers take a partial member they lack
       dropped.push_back(key);
       note();
       text = dump(trimmed);

@@ -47,7 +47,7 @@ const FailureReason& StoredFailureReason(std::string_view reason_code, std::stri
 
 // The partial diagnostics a failed Method::Run left in `result`, as stored with the job: the
 // JSON text of the object ("" when `result` is not a non-empty object). Over `max_bytes`, the
-// largest members of result.diagnostics are replaced by null, largest first, until it fits,
+// largest members of result.diagnostics are left out, largest first, until it fits,
 // and result.trimmed says so: {"bytes": the full size, "dropped": [their names], "note"}; when
 // even that does not fit, only {"method", "usable", "trimmed"} is kept.
 std::string PartialDiagnosticsText(const nlohmann::json& result, size_t max_bytes);

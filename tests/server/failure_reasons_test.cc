@@ -95,7 +95,7 @@ TEST(PartialDiagnostics, OverTheCapTheLargestAreLeftOutAndNamed) {
   ASSERT_LE(text.size(), 3000u);
   const json kept = json::parse(text);
   EXPECT_EQ(kept["diagnostics"]["rate"], 100);
-  EXPECT_TRUE(kept["diagnostics"]["allan"].is_null());
+  EXPECT_FALSE(kept["diagnostics"].contains("allan"));
   EXPECT_EQ(kept["diagnostics"]["channels"], std::string(2000, 'y'));
   EXPECT_EQ(kept["trimmed"]["dropped"], json::array({"allan"}));
   EXPECT_EQ(kept["trimmed"]["bytes"], result.dump().size());
