@@ -1,5 +1,6 @@
 // JSON glue of the `noise` method (SPEC §7): an inertial log (array layout with `t`) to
-// core::EstimateNoise, and its result to the SPEC §4 / §7 result JSON:
+// core::EstimateNoise, and its result to the typed results::NoiseResult
+// (results/noise_result.h), written as the SPEC §4 / §7 result JSON:
 //   {"method":"noise","model":...,
 //    "parameters":{"channels":[{"name","unit","white_noise","bias_instability",
 //                               "bias_instability_tau","random_walk"}]},
@@ -22,6 +23,7 @@
 
 #include "core/noise.h"
 #include "core/noise_simulation.h"
+#include "results/noise_result.h"
 #include "server/method.h"
 
 namespace calibd::server {
@@ -45,7 +47,9 @@ struct NoiseSimulationFileOptions {
 Status SimulateNoiseFiles(const NoiseSimulationFileOptions& options, std::string* csv,
                           nlohmann::json* config, nlohmann::json* truth);
 
-// The result JSON of a core result (used by the method; exposed for tests).
+// The typed result (results/noise_result.h) of a core result, and its JSON (used by the method;
+// exposed for tests). The adapter adds diagnostics.units.
+results::NoiseResult NoiseResultOf(const core::NoiseResult& result, int taus_per_decade);
 nlohmann::json NoiseResultToJson(const core::NoiseResult& result, int taus_per_decade);
 
 // Exports of a noise result (server/noise_exports.cc; formats in server/exports.h).

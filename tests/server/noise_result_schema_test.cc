@@ -1,0 +1,105 @@
+// The typed noise result (results/noise_result.h) holds every key the real adapter writes:
+// results of `noise` runs on small simulated logs (several option combinations, and a failed
+// run's partial diagnostics) read with FromJson and write back with ToJson to the same document.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "results/noise_result.h"
+#include "server/config.h"
+#include "server/noise_method.h"
+
+namespace calibd::server {
+namespace {
+
+using nlohmann::json;
+
+// The stored form of a result: its JSON text parsed back (NaN as null, as the store keeps it).
+json Stored(const json& result) { return json::parse(result.dump()); }
+
+void ExpectRoundTrip(const json& stored) {
+  results::NoiseResult typed;
+  const Status s = results::FromJson(stored, &typed);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  EXPECT_EQ(results::ToJson(typed), stored)
+      << "ToJson: " << results::ToJson(typed).dump() << "\nstored: " << stored.dump();
+}
+
+std::string Log(const NoiseSimulationFileOptions& sim, json* config) {
+  std::string csv;
+  json truth;
+  EXPECT_TRUE(SimulateNoiseFiles(sim, &csv, config, &truth).ok());
+  return csv;
+}
+
+TEST(NoiseResultSchema, AdapterResultsRoundTripExactly) {
+  struct Case {
+    const char* what;
+    double seconds;
+    double bias_instability;
+    json extra;  // config keys
+  } cases[] = {
+      {"two minutes, octaves", 120, 0, json::object()},
+      {"decades, bias instability", 300, 0.5, {{"taus_per_decade", 10}}},
+      {"reading units", 120, 0, {{"accel_unit", "g"}, {"gyro_unit", "deg/s"}}},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    NoiseSimulationFileOptions sim;
+    sim.rate = 50;
+    sim.seconds = c.seconds;
+    sim.bias_instability = c.bias_instability;
+    sim.seed = 3;
+    json config;
+    const std::string csv = Log(sim, &config);
+    config.update(c.extra);
+    json result;
+    const Status s = Calibrate(csv, "noise.csv", config, &result);
+    ASSERT_TRUE(s.ok()) << s.ToString();
+    ASSERT_TRUE(result.contains("verdict"));
+    EXPECT_EQ(result["schema_version"], results::kNoiseSchemaVersion);
+    // Two minutes cannot show the random walk: nulls are part of the document.
+    if (c.seconds == 120) {
+      EXPECT_TRUE(result["parameters"]["channels"][0]["random_walk"].is_null()) << result.dump();
+    }
+    ExpectRoundTrip(Stored(result));
+  }
+}
+
+TEST(NoiseResultSchema, FailedRunsPartialDiagnosticsRoundTripExactly) {
+  // A minute at rest whose a0_x jumps by 1 m/s² halfway: not stationary.
+  NoiseSimulationFileOptions sim;
+  sim.rate = 100;
+  sim.seconds = 60;
+  json config;
+  std::string csv = Log(sim, &config), moved;
+  size_t pos = 0, row = 0;
+  while (pos < csv.size()) {
+    const size_t end = csv.find('\n', pos);
+    std::string line = csv.substr(pos, end - pos);
+    pos = end + 1;
+    if (line[0] != 't' && row++ >= 3000) {
+      const size_t c1 = line.find(','), c2 = line.find(',', c1 + 1);
+      line = line.substr(0, c1 + 1) +
+             std::to_string(std::stod(line.substr(c1 + 1, c2 - c1 - 1)) + 1.0) + line.substr(c2);
+    }
+    moved += line + "\n";
+  }
+  json result;
+  const Status s = Calibrate(moved, "noise.csv", config, &result);
+  ASSERT_FALSE(s.ok());
+  ASSERT_EQ(result.value("usable", true), false) << result.dump();
+  const json stored = Stored(result);
+  ExpectRoundTrip(stored);
+  results::NoiseResult typed;
+  ASSERT_TRUE(results::FromJson(stored, &typed).ok());
+  EXPECT_FALSE(typed.envelope.usable);
+  EXPECT_TRUE(typed.channels.empty());
+  EXPECT_FALSE(typed.diagnostics.stationary);
+  ASSERT_FALSE(typed.diagnostics.channels.empty());
+  EXPECT_EQ(typed.diagnostics.channels[0].status, "not_stationary");
+}
+
+}  // namespace
+}  // namespace calibd::server
