@@ -122,34 +122,33 @@ class Noise : public Method {
   }
   void Judge(const json& result, const json&, const AcceptanceLimits& limits,
              Verdict* verdict) const override {
-    const json diag = result.value("diagnostics", json::object());
-    if (!diag.value("stationary", true)) {
+    results::NoiseResult r;
+    if (Status s = results::FromJson(result, &r); !s.ok()) {
+      verdict->Reject("the result cannot be judged: " + s.message());
+      return;
+    }
+    if (!r.diagnostics.stationary) {
       verdict->Reject(
           "the log is not stationary (the device moved or was touched): noise figures of a moving "
           "device are not the sensor's; record again with the device at rest");
     }
-    const json params = result.value("parameters", json::object()).value("channels", json());
-    const json stds = result.value("uncertainty", json::object()).value("channels", json());
-    if (!params.is_array()) return;
     const auto rel_max = limits.Get("max_white_noise_std");
     Offenders missing, uncertain, too_high;
-    for (size_t i = 0; i < params.size(); ++i) {
-      const json& c = params[i];
-      const std::string name = c.value("name", std::to_string(i));
-      const std::string unit = c.value("unit", std::string());
-      const auto n = Number(c.value("white_noise", json()));
-      if (!n) {
-        missing.Add(name);
+    for (size_t i = 0; i < r.channels.size(); ++i) {
+      const results::NoiseChannelParameters& c = r.channels[i];
+      const double n = c.white_noise;
+      if (!std::isfinite(n)) {
+        missing.Add(c.name);
         continue;
       }
-      const json sd = stds.is_array() && i < stds.size() ? stds[i] : json::object();
-      const auto n_std = Number(sd.value("white_noise_std", json()));
-      if (rel_max && (!n_std || *n_std / *n > *rel_max)) {
-        uncertain.Add(name + " " + (n_std ? Fmt(*n_std / *n * 100) + " %" : "undefined"));
+      const double n_std = r.channel_stds[i].white_noise_std;
+      if (rel_max && (!std::isfinite(n_std) || n_std / n > *rel_max)) {
+        uncertain.Add(c.name + " " +
+                      (std::isfinite(n_std) ? Fmt(n_std / n * 100) + " %" : "undefined"));
       }
       const auto max =
-          limits.Get(unit == "m/s^2" ? "max_accel_white_noise" : "max_gyro_white_noise");
-      if (max && *n > *max) too_high.Add(name + " " + Fmt(*n) + " " + unit + "/sqrt(Hz)");
+          limits.Get(c.unit == "m/s^2" ? "max_accel_white_noise" : "max_gyro_white_noise");
+      if (max && n > *max) too_high.Add(c.name + " " + Fmt(n) + " " + c.unit + "/sqrt(Hz)");
     }
     missing.RejectInto(verdict,
                        "no white-noise density could be read (log too short or too few "

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "core/pca_simulation.h"
+#include "results/noise_result.h"
 #include "server/config.h"
 #include "server/method.h"
 
@@ -383,13 +384,15 @@ TEST(Gate, AResultThatCannotBeJudgedIsRejected) {
 // ---- noise ----
 
 TEST(Gate, NoiseNeedsAStationaryLogAndAPreciseWhiteNoise) {
+  // A complete noise result (results/noise_result.h) of one channel.
   auto result = [](bool stationary, double rel_std, double density) {
-    return json{{"method", "noise"},
-                {"parameters",
-                 {{"channels", {{{"name", "a0_x"}, {"unit", "m/s^2"}, {"white_noise", density}}}}}},
-                {"uncertainty",
-                 {{"channels", {{{"name", "a0_x"}, {"white_noise_std", rel_std * density}}}}}},
-                {"diagnostics", {{"stationary", stationary}}}};
+    results::NoiseResult r;
+    r.envelope.method = "noise";
+    r.envelope.model = "the Allan variance";
+    r.channels = {{"a0_x", "m/s^2", density, NAN, NAN, NAN}};
+    r.channel_stds = {{"a0_x", rel_std * density, NAN, NAN}};
+    r.diagnostics.stationary = stationary;
+    return results::ToJson(r);
   };
   const json config = {{"method", "noise"}};
   EXPECT_EQ(JudgeWith("noise", result(true, 0.19, 0.002), config)["status"], "accepted");

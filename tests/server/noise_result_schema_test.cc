@@ -1,6 +1,7 @@
 // The typed noise result (results/noise_result.h) holds every key the real adapter writes:
 // results of `noise` runs on small simulated logs (several option combinations, and a failed
-// run's partial diagnostics) read with FromJson and write back with ToJson to the same document.
+// run's partial diagnostics) read with FromJson and write back with ToJson to the same document;
+// Judge and the exports refuse a result that does not read, naming the path.
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
@@ -8,6 +9,7 @@
 
 #include "results/noise_result.h"
 #include "server/config.h"
+#include "server/method.h"
 #include "server/noise_method.h"
 
 namespace calibd::server {
@@ -99,6 +101,35 @@ TEST(NoiseResultSchema, FailedRunsPartialDiagnosticsRoundTripExactly) {
   EXPECT_FALSE(typed.diagnostics.stationary);
   ASSERT_FALSE(typed.diagnostics.channels.empty());
   EXPECT_EQ(typed.diagnostics.channels[0].status, "not_stationary");
+}
+
+TEST(NoiseResultSchema, ConsumersRefuseAResultThatDoesNotReadNamingThePath) {
+  NoiseSimulationFileOptions sim;
+  sim.rate = 50;
+  sim.seconds = 120;
+  std::string csv;
+  json config, truth, r;
+  ASSERT_TRUE(SimulateNoiseFiles(sim, &csv, &config, &truth).ok());
+  ASSERT_TRUE(Calibrate(csv, "noise.csv", config, &r).ok());
+  r = Stored(r);
+  ASSERT_EQ(r["uncertainty"]["channels"].size(), 6u);
+  r.erase("verdict");
+  r["uncertainty"]["channels"][2]["white_noise_std"] = true;
+  json judged = r;
+  JudgeResult(*FindMethod("noise"), {{"method", "noise"}}, json(), &judged);
+  EXPECT_EQ(judged["verdict"]["status"], "rejected");
+  EXPECT_NE(judged["verdict"]["reasons"][0].get<std::string>().find(
+                "the result cannot be judged: noise result: "
+                "uncertainty.channels[2].white_noise_std"),
+            std::string::npos)
+      << judged["verdict"].dump();
+  for (const char* format : {"csv", "h", "yaml"}) {
+    std::string out;
+    const Status e = FindMethod("noise")->Export(format, r, {1, "D", "noise", "now"}, &out);
+    EXPECT_EQ(e.code(), StatusCode::kInternal) << format;
+    EXPECT_NE(e.message().find("uncertainty.channels[2].white_noise_std"), std::string::npos)
+        << e.message();
+  }
 }
 
 }  // namespace
