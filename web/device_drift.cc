@@ -6,6 +6,7 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 
+#include "results/noise_result.h"
 #include "web/html.h"
 #include "web/svg_plot.h"
 
@@ -184,25 +185,41 @@ struct NoiseChannel {
   double b_tau = kNaN;
 };
 
-std::vector<NoiseChannel> ReadNoise(const json& result) {
+// The channels of a noise result (results::NoiseResult); a result that does not read has none and
+// `*problem` says why.
+std::vector<NoiseChannel> ReadNoise(const json& result, std::string* problem) {
   std::vector<NoiseChannel> out;
-  const json* channels = Get(Get(&result, "parameters"), "channels");
-  const json* stds = Get(Get(&result, "uncertainty"), "channels");
-  if (channels == nullptr || !channels->is_array()) return out;
-  for (size_t i = 0; i < channels->size(); ++i) {
-    const json* c = &(*channels)[i];
+  results::NoiseResult r;
+  const Status s = results::FromJson(result, &r);
+  if (!s.ok()) {
+    *problem = s.message();
+    return out;
+  }
+  for (size_t i = 0; i < r.channels.size(); ++i) {
+    const results::NoiseChannelParameters& c = r.channels[i];
+    const results::NoiseChannelUncertainty& u = r.channel_stds[i];
+    if (c.name.empty()) continue;
     NoiseChannel ch;
-    ch.name = Str(Get(c, "name"));
-    if (ch.name.empty()) continue;
-    ch.unit = Str(Get(c, "unit"));
-    const json* u = Named(stds, ch.name, i);
-    ch.n = {Num(Get(c, "white_noise")), Num(Get(u, "white_noise_std"))};
-    ch.b = {Num(Get(c, "bias_instability")), Num(Get(u, "bias_instability_std"))};
-    ch.k = {Num(Get(c, "random_walk")), Num(Get(u, "random_walk_std"))};
-    ch.b_tau = Num(Get(c, "bias_instability_tau"));
+    ch.name = c.name;
+    ch.unit = c.unit;
+    ch.n = {c.white_noise, u.white_noise_std};
+    ch.b = {c.bias_instability, u.bias_instability_std};
+    ch.k = {c.random_walk, u.random_walk_std};
+    ch.b_tau = c.bias_instability_tau;
     out.push_back(std::move(ch));
   }
   return out;
+}
+
+// The calibrations whose result does not read, one line each ("" when every one reads).
+std::string UnreadableNote(const std::vector<const JobSummary*>& jobs,
+                           const std::vector<std::string>& problems) {
+  std::string lines;
+  for (size_t k = 0; k < jobs.size(); ++k) {
+    if (problems[k].empty()) continue;
+    lines += "<li>" + JobLink(jobs[k]->id) + ": not available (" + E(problems[k]) + ")</li>";
+  }
+  return lines.empty() ? "" : "<ul class=\"muted small drift-unreadable\">" + lines + "</ul>";
 }
 
 const NoiseChannel* FindChannel(const std::vector<NoiseChannel>& list, const std::string& name) {
@@ -474,12 +491,16 @@ std::string ImuScalePlot(const TimeAxis& ax, const std::vector<std::vector<ImuEn
 std::string NoiseDriftHtml(const std::vector<const JobSummary*>& jobs) {
   if (jobs.empty()) return "";
   std::vector<std::vector<NoiseChannel>> data;
-  for (const JobSummary* j : jobs) data.push_back(ReadNoise(j->result));
+  std::vector<std::string> problems(jobs.size());
+  for (size_t k = 0; k < jobs.size(); ++k) data.push_back(ReadNoise(jobs[k]->result, &problems[k]));
+  const std::string unreadable = UnreadableNote(jobs, problems);
   const TimeAxis ax = MakeTimeAxis(jobs);
   std::string tables = NoiseTable(jobs, data, 'a') + NoiseTable(jobs, data, 'g');
-  if (tables.empty()) return "<p class=\"muted\">No noise terms in these results.</p>";
+  if (tables.empty()) {
+    return "<p class=\"muted\">No noise terms in these results.</p>" + unreadable;
+  }
   const std::string figs = NoisePlot(ax, data, 'a') + NoisePlot(ax, data, 'g');
-  return tables + OmittedNote(jobs.size()) +
+  return tables + OmittedNote(jobs.size()) + unreadable +
          "<p class=\"muted small\">\xC2\xB1 is one standard deviation. A change is given "
          "relative to the previous calibration and in standard deviations of the difference, "
          "\xE2\x88\x9A(\xCF\x83\xE2\x82\x81\xC2\xB2 + \xCF\x83\xE2\x82\x82\xC2\xB2); from 3 on "

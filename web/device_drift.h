@@ -4,7 +4,10 @@
 // return them. The pca and array drift live in their own reports.
 //
 // Input: one method's accepted, not revoked jobs of one device, oldest first, with their SPEC §7
-// result JSON (missing or mistyped keys render as "–", never throw). Output: an HTML fragment;
+// result JSON. noise results are read once as results::NoiseResult (results/noise_result.h;
+// undefined terms render as "not visible"): one that does not read adds no rows and is listed
+// under the tables (ul.drift-unreadable: its job and the reader's message naming the path). imu
+// results: missing or mistyped keys render as "–". Nothing throws. Output: an HTML fragment;
 // every user-controlled string (channel and IMU names) is escaped. Pure and thread-safe.
 //
 // What is shown:

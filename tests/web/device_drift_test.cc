@@ -5,9 +5,12 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
+
+#include "results/noise_result.h"
 
 namespace calibd::web {
 namespace {
@@ -24,30 +27,24 @@ size_t Count(const std::string& page, const std::string& needle) {
   return n;
 }
 
-// A noise result (SPEC §7) of one IMU: white noise `n_gyro` on the gyroscopes (1σ 1 %), K visible
-// on the gyroscopes only when `gyro_k` > 0, B visible everywhere.
+// A noise result (SPEC §7, results/noise_result.h) of one IMU: white noise `n_gyro` on the
+// gyroscopes (1σ 1 %), K visible on the gyroscopes only when `gyro_k` > 0, B visible everywhere.
 json NoiseResult(double n_gyro, double gyro_k, const std::string& extra_channel = "") {
-  json params = json::array(), unc = json::array();
+  results::NoiseResult r;
+  r.envelope.method = "noise";
+  r.envelope.model = "the Allan variance";
+  r.envelope.verdict = results::StoredVerdict{GateVerdict::kAccepted, {}, {}};
   std::vector<std::string> names = {"a0_x", "a0_y", "a0_z", "g0_x", "g0_y", "g0_z"};
   if (!extra_channel.empty()) names.push_back(extra_channel);
+  const double kNaN = std::numeric_limits<double>::quiet_NaN();
   for (const std::string& name : names) {
     const bool gyro = name[0] == 'g';
     const double n = gyro ? n_gyro : 2e-3;
-    params.push_back({{"name", name},
-                      {"unit", gyro ? "rad/s" : "m/s^2"},
-                      {"white_noise", n},
-                      {"bias_instability", 0.5 * n},
-                      {"bias_instability_tau", 120.0},
-                      {"random_walk", gyro && gyro_k > 0 ? json(gyro_k) : json(nullptr)}});
-    unc.push_back({{"name", name},
-                   {"white_noise_std", 0.01 * n},
-                   {"bias_instability_std", 0.1 * n},
-                   {"random_walk_std", gyro && gyro_k > 0 ? json(0.2 * gyro_k) : json(nullptr)}});
+    const double k = gyro && gyro_k > 0 ? gyro_k : kNaN;
+    r.channels.push_back({name, gyro ? "rad/s" : "m/s^2", n, 0.5 * n, 120.0, k});
+    r.channel_stds.push_back({name, 0.01 * n, 0.1 * n, 0.2 * k});
   }
-  return {{"method", "noise"},
-          {"parameters", {{"channels", params}}},
-          {"uncertainty", {{"channels", unc}}},
-          {"verdict", {{"status", "accepted"}}}};
+  return results::ToJson(r);
 }
 
 // An imu result (SPEC §7) of IMU `name`: accelerometer x scale `ax_scale` (1σ 1e-6), bias x
@@ -159,6 +156,17 @@ TEST(ImuDrift, MalformedResultsRenderWithoutThrowing) {
   EXPECT_NO_THROW(NoiseDriftHtml({&a, &c}));
   EXPECT_TRUE(Has(NoiseDriftHtml({&a, &c}), "No noise terms"));
   EXPECT_EQ(NoiseDriftHtml({}), "");
+}
+
+TEST(NoiseDrift, AResultThatDoesNotReadIsListedWithThePathOfItsProblem) {
+  const JobSummary n = Job(7, "noise", "2026-01-01T00:00:00Z", NoiseResult(1e-4, 0));
+  json newer = NoiseResult(1e-4, 0);
+  newer["schema_version"] = 99;
+  const JobSummary m = Job(8, "noise", "2026-01-02T00:00:00Z", newer);
+  const std::string noise = NoiseDriftHtml({&n, &m});
+  EXPECT_TRUE(Has(noise, "table-drift-noise"));
+  EXPECT_TRUE(Has(noise, "href=\"/jobs/8\">#8</a>: not available")) << noise;
+  EXPECT_TRUE(Has(noise, "schema_version")) << noise;
 }
 
 TEST(DevicePage, ShowsNoiseAndImuDriftOfAcceptedCalibrationsOnly) {

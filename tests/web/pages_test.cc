@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "results/noise_result.h"
+
 namespace calibd::web {
 namespace {
 
@@ -389,16 +391,16 @@ TEST(JobPage, FailedNoiseAndArrayJobsShowWhatWasFound) {
   JobView noise;
   noise.job = Job(37, "IMU-0042", "noise", "failed", "2026-11-20T09:20:00Z", json());
   noise.job.error = "the log is not stationary";
-  noise.job.error_detail = {{"method", "noise"},
-                            {"usable", false},
-                            {"diagnostics",
-                             {{"samples", 6000},
-                              {"rate", 100},
-                              {"duration", 60},
-                              {"channels",
-                               {{{"name", "a0_x"},
-                                 {"status", "not_stationary"},
-                                 {"reason", "the mean jumps at 30 s"}}}}}}};
+  // The partial diagnostics as the noise adapter writes them (results/noise_result.h).
+  results::NoiseResult partial;
+  partial.envelope.method = "noise";
+  partial.envelope.usable = false;
+  partial.diagnostics.samples = 6000;
+  partial.diagnostics.rate = 100;
+  partial.diagnostics.duration = 60;
+  partial.diagnostics.stationary = false;
+  partial.diagnostics.channels = {{"a0_x", "not_stationary", "the mean jumps at 30 s", 0, NAN, 0}};
+  noise.job.error_detail = results::ToJson(partial);
   std::string page = RenderJobPage(noise);
   ExpectDocument(page, "page-job");
   EXPECT_TRUE(Has(page, "table-noise-channels"));
