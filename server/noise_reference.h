@@ -26,8 +26,10 @@
 
 namespace calibd::server {
 
-// kInvalidInput naming the key: not an integer id, no such job, not a succeeded noise job, or a
-// job whose log does not show the white noise of that sensor type; storage errors as they are.
+// kInvalidInput naming the key: not an integer id, no such job, not a succeeded noise job, a job
+// whose stored result does not read as results::NoiseResult (results/noise_result.h: the message
+// names the path of the problem, e.g. a newer schema_version), or a job whose log does not show
+// the white noise of that sensor type; storage errors as they are.
 // Leaves numbers and already-resolved references alone. Only for methods imu and array.
 Status ResolveNoiseReferences(storage::Store* store, nlohmann::json* config);
 
