@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "results/noise_result.h"
@@ -12,6 +13,8 @@ namespace calibd::server {
 using nlohmann::json;
 
 namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 Status KeyError(const std::string& key, const std::string& message) {
   return Status::InvalidInput("config key '" + key + "': " + message).WithField(key);
@@ -123,15 +126,30 @@ Status ReadNoiseLevel(const json& config, const char* key, std::optional<NoiseLe
   return Status::Ok();
 }
 
+std::optional<NoiseFigures> ReadNoiseFigures(const json& config, const char* key) {
+  auto it = config.find(key);
+  if (it == config.end() || !it->is_object() || !it->contains("sigma")) return std::nullopt;
+  auto number = [&](const char* member) {
+    auto m = it->find(member);
+    return m != it->end() && m->is_number() ? m->get<double>() : kNaN;
+  };
+  NoiseFigures f;
+  if (auto job = it->find("job"); job != it->end() && job->is_number_integer()) {
+    f.job = job->get<int64_t>();
+  }
+  f.white_noise = number("white_noise");
+  f.random_walk = number("random_walk");
+  return f;
+}
+
 json NoiseModelJson(const json& config) {
   json out = {{"accelerometer", nullptr}, {"gyroscope", nullptr}};
   for (auto [key, sensor] : {std::pair<const char*, const char*>{"accel_noise", "accelerometer"},
                              {"gyro_noise", "gyroscope"}}) {
-    auto it = config.find(key);
-    if (it != config.end() && it->is_object() && it->contains("sigma")) {
-      out[sensor] = {{"job", it->value("job", json())},
-                     {"white_noise", it->value("white_noise", json())},
-                     {"random_walk", it->value("random_walk", json())}};
+    if (std::optional<NoiseFigures> f = ReadNoiseFigures(config, key)) {
+      out[sensor] = {{"job", f->job ? json(*f->job) : json()},
+                     {"white_noise", results::Num(f->white_noise)},
+                     {"random_walk", results::Num(f->random_walk)}};
     }
   }
   return out;

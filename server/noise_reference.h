@@ -44,6 +44,15 @@ struct NoiseLevel {
 Status ReadNoiseLevel(const nlohmann::json& config, const char* key,
                       std::optional<NoiseLevel>* out);
 
+// Kalibr's figures of config[key] when it is a resolved reference (SI; the largest axis; NaN for
+// a figure the noise job did not show); nullopt for a number, nothing, or an unresolved reference.
+struct NoiseFigures {
+  std::optional<int64_t> job;
+  double white_noise = 0;  // unit/√Hz
+  double random_walk = 0;  // unit/s/√Hz
+};
+std::optional<NoiseFigures> ReadNoiseFigures(const nlohmann::json& config, const char* key);
+
 // {"accelerometer": ID or null, "gyroscope": ID or null}: the noise jobs a config's resolved
 // references came from, for the result's diagnostics.noise_jobs.
 nlohmann::json NoiseJobsJson(const nlohmann::json& config);
