@@ -361,53 +361,40 @@ class Imu : public Method {
     }
     nominal.accel_bias = Number(config.value("nominal_accel_bias", json())).value_or(0);
     nominal.gyro_bias = Number(config.value("nominal_gyro_bias", json())).value_or(0);
-    results::JsonReader r(result, "imu result");
-    std::vector<results::ImuTriads> imus;
-    std::vector<results::ImuTriadsStd> stds;
-    r.Object("parameters")
-        .ReadArray("imus", &imus, [](const results::JsonReader& e, results::ImuTriads* t) {
-          results::ReadImuTriads(e, t);
-        });
-    r.Object("uncertainty")
-        .ReadArray("imus", &stds, [](const results::JsonReader& e, results::ImuTriadsStd* t) {
-          results::ReadImuTriads(e, t);
-        });
-    if (!r.ok()) {
-      verdict->Reject("the result cannot be judged: " + r.status().message());
+    results::ImuResult r;
+    if (Status s = results::FromJson(result, &r); !s.ok() || !r.parameters) {
+      verdict->Reject("the result cannot be judged: " +
+                      (s.ok() ? std::string("it has no parameters (a failed run)") : s.message()));
       return;
     }
-    JudgeImuTriads(imus, stds, nominal, limits, "IMU", verdict);
-    const json diags = result.value("diagnostics", json::object()).value("imus", json());
-    if (!diags.is_array()) return;
+    JudgeImuTriads(r.parameters->imus, r.uncertainty->imus, nominal, limits, "IMU", verdict);
     const auto chi2_max = limits.Get("max_chi2");
-    for (const json& d : diags) {
-      const std::string name = "IMU " + d.value("name", std::string("?"));
-      const json coverage = d.value("coverage", json::object());
-      if (!coverage.value("sufficient", true)) {
-        verdict->Reject(name + ": the orientations do not determine every parameter: " +
-                        coverage.value("verdict", std::string("add orientations")));
+    const auto accel_max = limits.Get("max_accel_residual");
+    const auto gyro_max = limits.Get("max_gyro_residual");
+    for (const results::ImuFitDiagnostics& d : r.diagnostics.imus) {
+      const std::string name = "IMU " + d.name;
+      if (!d.coverage.sufficient) {
+        verdict->Reject(
+            name + ": the orientations do not determine every parameter: " + d.coverage.verdict);
       }
-      const auto chi2 = Number(d.value("chi2_per_dof", json()));
-      if (chi2_max && chi2 && *chi2 > *chi2_max) {
-        verdict->Reject(name + ": the residuals are " + Fmt(std::sqrt(*chi2)) +
-                        " times the noise (chi2/dof " + Fmt(*chi2) + " above " + Fmt(*chi2_max) +
+      const double chi2 = d.chi2_per_dof;
+      if (chi2_max && std::isfinite(chi2) && chi2 > *chi2_max) {
+        verdict->Reject(name + ": the residuals are " + Fmt(std::sqrt(chi2)) +
+                        " times the noise (chi2/dof " + Fmt(chi2) + " above " + Fmt(*chi2_max) +
                         "): the device moved during a static, or the statics are too short");
       }
-      const json residuals = d.value("residuals", json::object());
-      const auto accel = Number(residuals.value("accel_norm_rms_after", json()));
-      const auto accel_max = limits.Get("max_accel_residual");
-      if (accel_max && accel && *accel > *accel_max) {
+      const double accel = d.accel_norm_rms_after;
+      if (accel_max && std::isfinite(accel) && accel > *accel_max) {
         verdict->Reject(name + ": after calibration |a| still differs from gravity by " +
-                        Fmt(*accel) + " m/s^2 RMS over the statics (above " + Fmt(*accel_max) +
+                        Fmt(accel) + " m/s^2 RMS over the statics (above " + Fmt(*accel_max) +
                         "): the board moved during a static, or gravity is wrong for this place");
       }
-      const auto gyro = Number(residuals.value("gyro_direction_rms_after", json()));
-      const auto gyro_max = limits.Get("max_gyro_residual");
-      if (gyro_max && gyro && *gyro > *gyro_max) {
+      const double gyro = d.gyro_direction_rms_after;
+      if (gyro_max && std::isfinite(gyro) && gyro > *gyro_max) {
         verdict->Reject(name +
                         ": after calibration the integrated rotations still miss the "
                         "measured gravity direction by " +
-                        Fmt(*gyro) + " rad RMS (above " + Fmt(*gyro_max) +
+                        Fmt(gyro) + " rad RMS (above " + Fmt(*gyro_max) +
                         "): rotate more slowly (the gyroscope saturated?) or "
                         "hold each static longer");
       }

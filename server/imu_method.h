@@ -28,9 +28,11 @@
 
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "core/imu.h"
 #include "core/imu_simulation.h"
+#include "results/triad.h"
 #include "server/method.h"
 
 namespace calibd::server {
@@ -56,7 +58,13 @@ Status ImuResultToHeader(const nlohmann::json& result, const ExportContext& cont
                          std::string* out);
 // The per-IMU part of the C header (macros prefixed `sub`): per IMU a = MATRIX (y - BIAS) for
 // both triads; also written for an array result of the full model (sub "IMU_").
+// The json form (for an array full result) reads name, bias and matrix of parameters.imus[] and
+// bias_std, scale_std of uncertainty.imus[] (uncertainties that do not read are left out, as
+// undefined ones are); kInternal naming the path when the IMUs do not read.
 Status ImuHeader(const nlohmann::json& params, const nlohmann::json& unc, const std::string& sub,
+                 HeaderWriter* w);
+Status ImuHeader(const std::vector<results::ImuTriads>& imus,
+                 const std::vector<results::ImuTriadsStd>& stds, const std::string& sub,
                  HeaderWriter* w);
 
 }  // namespace calibd::server

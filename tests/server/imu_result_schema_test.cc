@@ -1,7 +1,8 @@
 // The typed imu result (results/imu_result.h) holds every key the real adapter writes: results of
 // `imu` runs on small simulated logs (gyro_bias statics and estimate, counts with nominal biases,
 // a gap in t, resolved noise-job references, and a failed run's partial diagnostics) read with
-// FromJson and write back with ToJson to the same document.
+// FromJson and write back with ToJson to the same document; the consumers refuse a result that
+// does not read, naming the path.
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
@@ -133,6 +134,34 @@ TEST(ImuResultSchema, FailedRunsPartialDiagnosticsRoundTripExactly) {
   // A partial document is not a calibration: the exports refuse it.
   std::string out;
   EXPECT_EQ(FindMethod("imu")->Export("csv", stored, {}, &out).code(), StatusCode::kInternal);
+}
+
+TEST(ImuResultSchema, ConsumersRefuseAResultThatDoesNotReadNamingThePath) {
+  core::ImuSimulationOptions small;
+  small.statics = 12;
+  small.static_duration = 2;
+  small.rotation_duration = 1.5;
+  Status s;
+  json r = Stored(RunImu(small, json::object(), &s));
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  r.erase("verdict");
+  r["diagnostics"]["imus"][0]["residuals"]["accel_norm_rms_after"] = "small";
+  json judged = r;
+  JudgeResult(*FindMethod("imu"), {{"method", "imu"}}, json(), &judged);
+  EXPECT_EQ(judged["verdict"]["status"], "rejected");
+  EXPECT_NE(judged["verdict"]["reasons"][0].get<std::string>().find(
+                "the result cannot be judged: imu result: "
+                "diagnostics.imus[0].residuals.accel_norm_rms_after"),
+            std::string::npos)
+      << judged["verdict"].dump();
+  for (const char* format : {"csv", "h", "yaml"}) {
+    std::string out;
+    const Status e = FindMethod("imu")->Export(format, r, {1, "D", "imu", "now"}, &out);
+    EXPECT_EQ(e.code(), StatusCode::kInternal) << format;
+    EXPECT_NE(e.message().find("diagnostics.imus[0].residuals.accel_norm_rms_after"),
+              std::string::npos)
+        << e.message();
+  }
 }
 
 }  // namespace
