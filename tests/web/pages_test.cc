@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "results/imu_result.h"
 #include "results/noise_result.h"
 
 namespace calibd::web {
@@ -362,23 +363,20 @@ TEST(JobPage, FailedImuJobShowsTheStaticsFoundOnTheTimelineAndTheCoverage) {
   v.job.error_reason = "too_few_statics";
   v.job.error_title = "Too few static intervals";
   v.job.error_advice = "Hold the device still in more orientations.";
-  json statics = json::array();
-  for (int i = 0; i < 3; ++i) {
-    statics.push_back({{"start", 10.0 * i}, {"end", 10.0 * i + 4}, {"samples", 400}});
-  }
-  v.job.error_detail = {
-      {"method", "imu"},
-      {"usable", false},
-      {"diagnostics",
-       {{"statics", statics},
-        {"rate", 100},
-        {"threshold_choice", "single multiplier given"},
-        {"imus",
-         {{{"name", "0"},
-           {"usable", false},
-           {"termination", "too_few_statics"},
-           {"rotations", json::array()},
-           {"coverage", {{"verdict", "missing: z up, z down"}, {"missing_up", {"+z", "-z"}}}}}}}}}};
+  // The partial diagnostics as the imu adapter writes them (results/imu_result.h).
+  results::ImuResult partial;
+  partial.envelope.method = "imu";
+  partial.envelope.usable = false;
+  for (int i = 0; i < 3; ++i) partial.diagnostics.statics.push_back({10.0 * i, 10.0 * i + 4, 400});
+  partial.diagnostics.rate = 100;
+  partial.diagnostics.threshold_choice = "single multiplier given";
+  results::ImuFitDiagnostics imu;
+  imu.name = "0";
+  imu.termination = "too_few_statics";
+  imu.coverage.verdict = "missing: z up, z down";
+  imu.coverage.missing_up = {"+z", "-z"};
+  partial.diagnostics.imus = {imu};
+  v.job.error_detail = results::ToJson(partial);
   const std::string page = RenderJobPage(v);
   ExpectDocument(page, "page-job");
   EXPECT_TRUE(Has(page, "plot-imu-statics-found"));
