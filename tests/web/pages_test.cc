@@ -422,6 +422,38 @@ TEST(JobPage, FailedNoiseAndArrayJobsShowWhatWasFound) {
   EXPECT_TRUE(Has(page, "100 dropped for gyroscope saturation"));
 }
 
+// An imu or noise result that does not read as its typed result (results/imu_result.h,
+// results/noise_result.h) shows "not available" with the reader's message naming the path.
+TEST(JobPage, AnImuOrNoiseResultThatDoesNotReadSaysWhereItIsDamaged) {
+  results::NoiseResult noise;
+  noise.envelope.method = "noise";
+  noise.envelope.model = "the Allan variance";
+  noise.channels = {{"a0_x", "m/s^2", 2e-3, NAN, NAN, NAN}};
+  noise.channel_stds = {{"a0_x", 1e-5, NAN, NAN}};
+  json damaged = results::ToJson(noise);
+  damaged["diagnostics"]["stationary"] = "yes";
+  JobView v;
+  v.job = Job(41, "IMU-0042", "noise", "succeeded", "2026-11-20T09:20:00Z", damaged);
+  std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "The noise result: not available.")) << page;
+  EXPECT_TRUE(Has(page, "noise result: diagnostics.stationary: expected a boolean")) << page;
+  EXPECT_FALSE(Has(page, "table-noise-parameters"));
+  results::ImuResult imu;
+  imu.envelope.method = "imu";
+  imu.envelope.model = "a = T_a K_a (y_a - b_a)";
+  imu.parameters = results::ImuParameters{9.8, "statics", 1.0, 1.0, {{"0", {}, {}}}};
+  imu.uncertainty = results::ImuUncertainty{{{"0", {}, {}}}};
+  damaged = results::ToJson(imu);
+  damaged["schema_version"] = 7;
+  v.job = Job(42, "IMU-0042", "imu", "succeeded", "2026-11-20T09:20:00Z", damaged);
+  page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "The imu result: not available.")) << page;
+  EXPECT_TRUE(Has(page, "imu result: schema_version: version 7 is newer")) << page;
+  EXPECT_FALSE(Has(page, "table-imu-parameters"));
+}
+
 // Partial diagnostics of an unexpected shape (another version, trimmed) never break the page.
 TEST(JobPage, FailedJobWithOddPartialDiagnosticsStillRenders) {
   for (const json& detail :
