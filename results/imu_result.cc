@@ -1,5 +1,6 @@
 #include "results/imu_result.h"
 
+#include <algorithm>
 #include <utility>
 
 namespace calibd::results {
@@ -7,6 +8,30 @@ namespace calibd::results {
 using nlohmann::json;
 
 namespace {
+
+// The "trimmed" note of a trimmed partial document and the members it dropped.
+void ReadTrimmed(const JsonReader& r, std::optional<json>* trimmed,
+                 std::vector<std::string>* dropped) {
+  std::optional<JsonReader> t = r.OptionalObject("trimmed");
+  if (!t) return;
+  json raw;
+  r.ReadRaw("trimmed", &raw);
+  *trimmed = std::move(raw);
+  std::optional<std::vector<std::string>> keys;
+  t->Read("dropped", &keys);
+  *dropped = keys.value_or(std::vector<std::string>());
+}
+
+bool Contains(const std::vector<std::string>& v, const char* key) {
+  return std::find(v.begin(), v.end(), key) != v.end();
+}
+
+// Whether diagnostics member `key` of `d` is one the trimming dropped (null, and listed).
+bool DroppedMember(const JsonReader& d, const std::vector<std::string>& dropped, const char* key) {
+  if (!Contains(dropped, key) || !d.node().is_object()) return false;
+  auto it = d.node().find(key);
+  return it != d.node().end() && it->is_null();
+}
 
 json Ids(const std::optional<int64_t>& id) { return id ? json(*id) : json(nullptr); }
 
@@ -220,7 +245,9 @@ json ToJson(const ImuResult& r) {
                            {"gyroscope", NoiseModelJson(d.noise_model->gyroscope)}};
   }
   if (d.saturated_samples) diag["saturated_samples"] = *d.saturated_samples;
-  out["diagnostics"] = std::move(diag);
+  for (const std::string& key : r.dropped) diag[key] = nullptr;
+  if (!Contains(r.dropped, "diagnostics")) out["diagnostics"] = std::move(diag);
+  if (r.trimmed) out["trimmed"] = *r.trimmed;
   return out;
 }
 
@@ -253,40 +280,48 @@ Status FromJson(const json& doc, ImuResult* out) {
     }
     v.uncertainty = std::move(unc);
   }
-  const JsonReader d = r.Object("diagnostics");
-  ImuDiagnostics& g = v.diagnostics;
-  d.ReadArray("statics", &g.statics, [](const JsonReader& s, ImuInterval* x) {
-    s.Read("start", &x->start);
-    s.Read("end", &x->end);
-    s.Read("samples", &x->samples);
-  });
-  ReadPresent(d, "rate", &g.rate);
-  if (d.Has("gaps")) {
-    std::vector<ImuGap> gaps;
-    d.ReadArray("gaps", &gaps, [](const JsonReader& e, ImuGap* x) {
-      e.Read("index", &x->index);
-      e.Read("start", &x->start);
-      e.Read("end", &x->end);
-    });
-    g.gaps = std::move(gaps);
+  if (r.ok() && !v.envelope.usable) ReadTrimmed(r, &v.trimmed, &v.dropped);
+  if (Contains(v.dropped, "diagnostics") && !r.Has("diagnostics")) {
+    // Trimmed to the bare envelope: no diagnostics to read.
+  } else {
+    const JsonReader d = r.Object("diagnostics");
+    ImuDiagnostics& g = v.diagnostics;
+    auto keep = [&](const char* key) { return !DroppedMember(d, v.dropped, key); };
+    if (keep("statics")) {
+      d.ReadArray("statics", &g.statics, [](const JsonReader& s, ImuInterval* x) {
+        s.Read("start", &x->start);
+        s.Read("end", &x->end);
+        s.Read("samples", &x->samples);
+      });
+    }
+    if (keep("rate")) ReadPresent(d, "rate", &g.rate);
+    if (keep("gaps") && d.Has("gaps")) {
+      std::vector<ImuGap> gaps;
+      d.ReadArray("gaps", &gaps, [](const JsonReader& e, ImuGap* x) {
+        e.Read("index", &x->index);
+        e.Read("start", &x->start);
+        e.Read("end", &x->end);
+      });
+      g.gaps = std::move(gaps);
+    }
+    if (std::optional<JsonReader> jobs = d.OptionalObject("noise_jobs")) {
+      ImuDiagnostics::NoiseJobs n;
+      jobs->Read("accelerometer", &n.accelerometer);
+      jobs->Read("gyroscope", &n.gyroscope);
+      g.noise_jobs = n;
+    }
+    if (std::optional<JsonReader> model = d.OptionalObject("noise_model")) {
+      ImuDiagnostics::NoiseModels n;
+      ReadNoiseModel(*model, "accelerometer", &n.accelerometer);
+      ReadNoiseModel(*model, "gyroscope", &n.gyroscope);
+      g.noise_model = n;
+    }
+    d.Read("saturated_samples", &g.saturated_samples);
+    if (keep("static_window")) d.Read("static_window", &g.static_window);
+    if (keep("min_static")) d.Read("min_static", &g.min_static);
+    if (keep("threshold_choice")) d.Read("threshold_choice", &g.threshold_choice);
+    if (keep("imus")) d.ReadArray("imus", &g.imus, ReadFit);
   }
-  if (std::optional<JsonReader> jobs = d.OptionalObject("noise_jobs")) {
-    ImuDiagnostics::NoiseJobs n;
-    jobs->Read("accelerometer", &n.accelerometer);
-    jobs->Read("gyroscope", &n.gyroscope);
-    g.noise_jobs = n;
-  }
-  if (std::optional<JsonReader> model = d.OptionalObject("noise_model")) {
-    ImuDiagnostics::NoiseModels n;
-    ReadNoiseModel(*model, "accelerometer", &n.accelerometer);
-    ReadNoiseModel(*model, "gyroscope", &n.gyroscope);
-    g.noise_model = n;
-  }
-  d.Read("saturated_samples", &g.saturated_samples);
-  d.Read("static_window", &g.static_window);
-  d.Read("min_static", &g.min_static);
-  d.Read("threshold_choice", &g.threshold_choice);
-  d.ReadArray("imus", &g.imus, ReadFit);
   if (!r.ok()) return r.status();
   *out = std::move(v);
   return Status::Ok();

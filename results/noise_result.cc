@@ -1,10 +1,39 @@
 #include "results/noise_result.h"
 
+#include <algorithm>
 #include <utility>
 
 namespace calibd::results {
 
 using nlohmann::json;
+
+namespace {
+
+// The "trimmed" note of a trimmed partial document and the members it dropped.
+void ReadTrimmed(const JsonReader& r, std::optional<json>* trimmed,
+                 std::vector<std::string>* dropped) {
+  std::optional<JsonReader> t = r.OptionalObject("trimmed");
+  if (!t) return;
+  json raw;
+  r.ReadRaw("trimmed", &raw);
+  *trimmed = std::move(raw);
+  std::optional<std::vector<std::string>> keys;
+  t->Read("dropped", &keys);
+  *dropped = keys.value_or(std::vector<std::string>());
+}
+
+bool Contains(const std::vector<std::string>& v, const char* key) {
+  return std::find(v.begin(), v.end(), key) != v.end();
+}
+
+// Whether diagnostics member `key` of `d` is one the trimming dropped (null, and listed).
+bool DroppedMember(const JsonReader& d, const std::vector<std::string>& dropped, const char* key) {
+  if (!Contains(dropped, key) || !d.node().is_object()) return false;
+  auto it = d.node().find(key);
+  return it != d.node().end() && it->is_null();
+}
+
+}  // namespace
 
 json ToJson(const NoiseResult& r) {
   json out = json::object();
@@ -58,7 +87,9 @@ json ToJson(const NoiseResult& r) {
   if (d.units) {
     diag["units"] = {{"accel_unit", d.units->accel_unit}, {"gyro_unit", d.units->gyro_unit}};
   }
-  out["diagnostics"] = std::move(diag);
+  for (const std::string& key : r.dropped) diag[key] = nullptr;
+  if (!Contains(r.dropped, "diagnostics")) out["diagnostics"] = std::move(diag);
+  if (r.trimmed) out["trimmed"] = *r.trimmed;
   return out;
 }
 
@@ -93,36 +124,46 @@ Status FromJson(const json& doc, NoiseResult* out) {
                "channels");
     }
   }
-  JsonReader d = r.Object("diagnostics");
-  NoiseDiagnostics& g = v.diagnostics;
-  d.Read("rate", &g.rate);
-  d.Read("samples", &g.samples);
-  d.Read("duration", &g.duration);
-  d.Read("jitter", &g.jitter);
-  d.Read("stationary", &g.stationary);
-  d.Read("taus_per_decade", &g.taus_per_decade);
-  d.Read("confidence", &g.confidence);
-  d.ReadArray("channels", &g.channels, [](const JsonReader& e, NoiseChannelDiagnostics* c) {
-    e.Read("name", &c->name);
-    e.Read("status", &c->status);
-    e.Read("reason", &c->reason);
-    e.Read("fit_points", &c->fit_points);
-    e.Read("fit_chi2", &c->fit_chi2);
-    e.Read("mean", &c->mean);
-  });
-  d.ReadArray("allan", &g.allan, [](const JsonReader& e, NoiseAllanCurve* c) {
-    e.Read("name", &c->name);
-    e.Read("tau", &c->tau);
-    e.Read("adev", &c->adev);
-    e.Read("adev_lower", &c->adev_lower);
-    e.Read("adev_upper", &c->adev_upper);
-    e.Read("fitted_adev", &c->fitted_adev);
-  });
-  if (std::optional<JsonReader> u = d.OptionalObject("units")) {
-    NoiseUnits units;
-    u->Read("accel_unit", &units.accel_unit);
-    u->Read("gyro_unit", &units.gyro_unit);
-    g.units = std::move(units);
+  if (r.ok() && !v.envelope.usable) ReadTrimmed(r, &v.trimmed, &v.dropped);
+  if (Contains(v.dropped, "diagnostics") && !r.Has("diagnostics")) {
+    // Trimmed to the bare envelope: no diagnostics to read.
+  } else {
+    JsonReader d = r.Object("diagnostics");
+    NoiseDiagnostics& g = v.diagnostics;
+    auto keep = [&](const char* key) { return !DroppedMember(d, v.dropped, key); };
+    if (keep("rate")) d.Read("rate", &g.rate);
+    if (keep("samples")) d.Read("samples", &g.samples);
+    if (keep("duration")) d.Read("duration", &g.duration);
+    if (keep("jitter")) d.Read("jitter", &g.jitter);
+    if (keep("stationary")) d.Read("stationary", &g.stationary);
+    if (keep("taus_per_decade")) d.Read("taus_per_decade", &g.taus_per_decade);
+    if (keep("confidence")) d.Read("confidence", &g.confidence);
+    if (keep("channels")) {
+      d.ReadArray("channels", &g.channels, [](const JsonReader& e, NoiseChannelDiagnostics* c) {
+        e.Read("name", &c->name);
+        e.Read("status", &c->status);
+        e.Read("reason", &c->reason);
+        e.Read("fit_points", &c->fit_points);
+        e.Read("fit_chi2", &c->fit_chi2);
+        e.Read("mean", &c->mean);
+      });
+    }
+    if (keep("allan")) {
+      d.ReadArray("allan", &g.allan, [](const JsonReader& e, NoiseAllanCurve* c) {
+        e.Read("name", &c->name);
+        e.Read("tau", &c->tau);
+        e.Read("adev", &c->adev);
+        e.Read("adev_lower", &c->adev_lower);
+        e.Read("adev_upper", &c->adev_upper);
+        e.Read("fitted_adev", &c->fitted_adev);
+      });
+    }
+    if (std::optional<JsonReader> u = d.OptionalObject("units")) {
+      NoiseUnits units;
+      u->Read("accel_unit", &units.accel_unit);
+      u->Read("gyro_unit", &units.gyro_unit);
+      g.units = std::move(units);
+    }
   }
   if (!r.ok()) return r.status();
   *out = std::move(v);

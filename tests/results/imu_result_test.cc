@@ -204,5 +204,30 @@ TEST(ImuResult, PartialDocumentReadsWithoutParameters) {
   EXPECT_EQ(ToJson(back), j);
 }
 
+// A partial document the server trimmed to fit the store still reads and writes back.
+TEST(ImuResult, TrimmedPartialDocumentsRead) {
+  ImuResult partial = HandBuilt();
+  partial.envelope.usable = false;
+  partial.envelope.model.clear();
+  partial.parameters.reset();
+  partial.uncertainty.reset();
+  json j = ToJson(partial);
+  j["diagnostics"]["imus"] = nullptr;
+  j["trimmed"] = {{"bytes", 2000000}, {"dropped", {"imus"}}, {"note", "left out"}};
+  ImuResult back;
+  Status s = FromJson(j, &back);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  EXPECT_TRUE(back.diagnostics.imus.empty());
+  EXPECT_EQ(back.diagnostics.statics.size(), 2u);
+  EXPECT_EQ(ToJson(back), j);
+  const json bare = {
+      {"method", "imu"},
+      {"usable", false},
+      {"trimmed", {{"bytes", 9000000}, {"dropped", {"diagnostics"}}, {"note", "x"}}}};
+  s = FromJson(bare, &back);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  EXPECT_TRUE(back.diagnostics.statics.empty());
+}
+
 }  // namespace
 }  // namespace calibd::results

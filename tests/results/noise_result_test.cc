@@ -123,6 +123,36 @@ TEST(NoiseResult, PartialDocumentReadsWithoutParameters) {
   EXPECT_EQ(ToJson(back), j);
 }
 
+// A partial document the server trimmed to fit the store (largest diagnostics set to null and
+// listed under "trimmed", or cut to the bare envelope) still reads and writes back.
+TEST(NoiseResult, TrimmedPartialDocumentsRead) {
+  NoiseResult partial = HandBuilt();
+  partial.envelope.usable = false;
+  partial.envelope.model.clear();
+  json j = ToJson(partial);
+  j["diagnostics"]["allan"] = nullptr;
+  j["diagnostics"]["channels"] = nullptr;
+  j["trimmed"] = {{"bytes", 5000000}, {"dropped", {"allan", "channels"}}, {"note", "left out"}};
+  NoiseResult back;
+  Status s = FromJson(j, &back);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  EXPECT_TRUE(back.diagnostics.allan.empty());
+  EXPECT_EQ(back.diagnostics.samples, 180000);
+  EXPECT_EQ(back.dropped, (std::vector<std::string>{"allan", "channels"}));
+  EXPECT_EQ(ToJson(back), j);
+  // A null that the note does not list is still an error.
+  j["diagnostics"]["samples"] = nullptr;
+  EXPECT_EQ(FromJson(j, &back).field(), "diagnostics.samples");
+  // Cut to the bare envelope.
+  const json bare = {
+      {"method", "noise"},
+      {"usable", false},
+      {"trimmed", {{"bytes", 9000000}, {"dropped", {"diagnostics"}}, {"note", "x"}}}};
+  s = FromJson(bare, &back);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  EXPECT_TRUE(back.diagnostics.channels.empty());
+}
+
 TEST(NoiseResult, ADocumentThatIsNotAnObjectIsRefused) {
   NoiseResult r;
   const Status s = FromJson(json::array(), &r);

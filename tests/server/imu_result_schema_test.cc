@@ -10,6 +10,7 @@
 
 #include "results/imu_result.h"
 #include "server/config.h"
+#include "server/failure_reasons.h"
 #include "server/imu_method.h"
 #include "server/method.h"
 
@@ -131,6 +132,15 @@ TEST(ImuResultSchema, FailedRunsPartialDiagnosticsRoundTripExactly) {
   ASSERT_EQ(typed.diagnostics.imus.size(), 1u);
   EXPECT_EQ(typed.diagnostics.imus[0].termination, "too_few_statics");
   EXPECT_EQ(typed.diagnostics.statics.size(), 5u);
+  // Trimmed to fit the store (one byte under the document): the largest diagnostics member is
+  // dropped, the statics still read, and the document writes back.
+  const json trimmed = json::parse(PartialDiagnosticsText(stored, stored.dump().size() - 1));
+  ASSERT_TRUE(trimmed.contains("trimmed")) << trimmed.dump();
+  ExpectRoundTrip(trimmed);
+  results::ImuResult cut;
+  ASSERT_TRUE(results::FromJson(trimmed, &cut).ok());
+  EXPECT_EQ(cut.dropped, std::vector<std::string>{"imus"});
+  EXPECT_EQ(cut.diagnostics.statics.size(), 5u);
   // A partial document is not a calibration: the exports refuse it.
   std::string out;
   EXPECT_EQ(FindMethod("imu")->Export("csv", stored, {}, &out).code(), StatusCode::kInternal);

@@ -9,6 +9,7 @@
 
 #include "results/noise_result.h"
 #include "server/config.h"
+#include "server/failure_reasons.h"
 #include "server/method.h"
 #include "server/noise_method.h"
 
@@ -101,6 +102,17 @@ TEST(NoiseResultSchema, FailedRunsPartialDiagnosticsRoundTripExactly) {
   EXPECT_FALSE(typed.diagnostics.stationary);
   ASSERT_FALSE(typed.diagnostics.channels.empty());
   EXPECT_EQ(typed.diagnostics.channels[0].status, "not_stationary");
+  // Trimmed to fit the store (the worker's cap, here one byte under the document): the largest
+  // diagnostics member is dropped, the rest still reads, and the document writes back.
+  const json trimmed = json::parse(PartialDiagnosticsText(stored, stored.dump().size() - 1));
+  ASSERT_TRUE(trimmed.contains("trimmed")) << trimmed.dump();
+  ExpectRoundTrip(trimmed);
+  ASSERT_TRUE(results::FromJson(trimmed, &typed).ok());
+  EXPECT_FALSE(typed.dropped.empty());
+  EXPECT_TRUE(typed.diagnostics.allan.empty()) << "the Allan curves are the largest member";
+  EXPECT_EQ(typed.diagnostics.channels[0].status, "not_stationary");
+  const json bare = json::parse(PartialDiagnosticsText(stored, 10));
+  EXPECT_TRUE(results::FromJson(bare, &typed).ok()) << bare.dump();
 }
 
 TEST(NoiseResultSchema, ConsumersRefuseAResultThatDoesNotReadNamingThePath) {
