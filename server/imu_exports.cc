@@ -1,9 +1,13 @@
 // Exports of an imu result (server/imu_method.h): CSV, the C header (ImuHeader also writes
-// the per-IMU intrinsics of a full array result); the YAML is server/openvins_yaml.cc.
+// the per-IMU intrinsics of a full array result); the YAML is server/openvins_yaml.cc. Each reads
+// the stored result once into results::ImuResult; one that does not read is kInternal with the
+// reader's message.
 #include <Eigen/Dense>
 #include <sstream>
 #include <string>
+#include <utility>
 
+#include "results/imu_result.h"
 #include "server/export_util.h"
 #include "server/imu_method.h"
 
@@ -19,15 +23,56 @@ constexpr const char* kImuModel =
     " * accelerometer's), T_g the gyroscope's misalignment to it. MATRIX = T K, applied by\n"
     " * *_imu_apply().\n";
 
+// A stored imu result, typed; kInternal naming the first problem when it does not read.
+Status ReadResult(const json& result, results::ImuResult* out) {
+  Status s = results::FromJson(result, out);
+  if (!s.ok()) return Status::Internal("stored imu result: " + s.message());
+  if (!out->parameters) {
+    return Status::Internal("stored imu result is the partial diagnostics of a failed run");
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
-// imu (and any result with parameters.imus): per IMU a = MATRIX (y - BIAS) for both triads.
-// `sub` prefixes the names that the array header has too (NAMES, and IMUS for symmetry).
+// The per-IMU part of another method's result (array full): reads what the header needs of
+// parameters.imus[] (name, bias, matrix) and uncertainty.imus[] (bias_std, scale_std).
 Status ImuHeader(const json& params, const json& unc, const std::string& sub, HeaderWriter* w) {
-  const json& imus = JsonAt(params, "imus");
-  if (!imus.is_array() || imus.empty()) {
-    return Status::Internal("stored result has no parameters.imus");
-  }
+  std::vector<results::ImuTriads> imus;
+  std::vector<results::ImuTriadsStd> stds;
+  results::JsonReader p(params, "stored result's parameters");
+  p.ReadArray("imus", &imus, [](const results::JsonReader& e, results::ImuTriads* t) {
+    e.Read("name", &t->name);
+    for (auto [key, triad] :
+         {std::pair<const char*, results::SensorTriad*>{"accelerometer", &t->accelerometer},
+          {"gyroscope", &t->gyroscope}}) {
+      const results::JsonReader r = e.Object(key);
+      r.Read("bias", &triad->bias);
+      r.Read("matrix", &triad->matrix);
+    }
+  });
+  if (!p.ok()) return Status::Internal(p.status().message());
+  // Uncertainties that do not read are left out of the header (as undefined ones are).
+  results::JsonReader u(unc, "stored result's uncertainty");
+  u.ReadArray("imus", &stds, [](const results::JsonReader& e, results::ImuTriadsStd* t) {
+    for (auto [key, triad] :
+         {std::pair<const char*, results::SensorTriadStd*>{"accelerometer", &t->accelerometer},
+          {"gyroscope", &t->gyroscope}}) {
+      const results::JsonReader r = e.Object(key);
+      r.Read("bias_std", &triad->bias_std);
+      r.Read("scale_std", &triad->scale_std);
+    }
+  });
+  if (!u.ok()) stds.clear();
+  return ImuHeader(imus, stds, sub, w);
+}
+
+// imu (and any result with per-IMU triads): per IMU a = MATRIX (y - BIAS) for both triads.
+// `sub` prefixes the names that the array header has too (NAMES, and IMUS for symmetry).
+Status ImuHeader(const std::vector<results::ImuTriads>& imus,
+                 const std::vector<results::ImuTriadsStd>& stds, const std::string& sub,
+                 HeaderWriter* w) {
+  if (imus.empty()) return Status::Internal("stored result has no parameters.imus");
   const size_t n = imus.size();
   std::vector<std::string> names;
   struct Triad {
@@ -35,24 +80,18 @@ Status ImuHeader(const json& params, const json& unc, const std::string& sub, He
   } triads[2];
   const char* sensors[2] = {"accelerometer", "gyroscope"};
   for (size_t i = 0; i < n; ++i) {
-    names.push_back(JsonAt(imus[i], "name").is_string() ? imus[i]["name"].get<std::string>() : "");
+    names.push_back(imus[i].name);
     for (int t = 0; t < 2; ++t) {
-      const json& p = JsonAt(imus[i], sensors[t]);
-      std::vector<double> b, row;
-      std::vector<std::vector<double>> m;
-      bool ok = Numbers(JsonAt(p, "bias"), 3, &b) && JsonAt(p, "matrix").is_array() &&
-                p["matrix"].size() == 3;
-      for (size_t r = 0; ok && r < 3; ++r) {
-        ok = Numbers(p["matrix"][r], 3, &row);
-        m.push_back(row);
-      }
-      if (!ok) {
+      const results::SensorTriad& p = t == 0 ? imus[i].accelerometer : imus[i].gyroscope;
+      if (!p.bias.allFinite() || !p.matrix.allFinite()) {
         return Status::NotDeterminable("the " + std::string(sensors[t]) + " of IMU '" +
                                        names.back() +
                                        "' has undefined parameters: no C header can be written");
       }
-      triads[t].bias.push_back(b);
-      for (auto& r : m) triads[t].matrix.push_back(r);
+      triads[t].bias.push_back({p.bias(0), p.bias(1), p.bias(2)});
+      for (int r = 0; r < 3; ++r) {
+        triads[t].matrix.push_back({p.matrix(r, 0), p.matrix(r, 1), p.matrix(r, 2)});
+      }
     }
   }
   w->Define(sub + "IMUS", std::to_string(n), "IMUs in the log");
@@ -79,15 +118,15 @@ Status ImuHeader(const json& params, const json& unc, const std::string& sub, He
     w->out() << "};\n";
   }
   // 1σ of the biases and scales per IMU, when every one is defined.
-  const json& uimus = JsonAt(unc, "imus");
   for (int t = 0; t < 2; ++t) {
     for (const char* key : {"bias_std", "scale_std"}) {
       std::vector<std::vector<double>> rows;
-      bool all = uimus.is_array() && uimus.size() == n;
+      bool all = stds.size() == n;
       for (size_t i = 0; all && i < n; ++i) {
-        std::vector<double> v;
-        all = Numbers(JsonAt(JsonAt(uimus[i], sensors[t]), key), 3, &v);
-        rows.push_back(v);
+        const results::SensorTriadStd& sd = t == 0 ? stds[i].accelerometer : stds[i].gyroscope;
+        const Eigen::Vector3d& v = key[0] == 'b' ? sd.bias_std : sd.scale_std;
+        all = v.allFinite();
+        rows.push_back({v(0), v(1), v(2)});
       }
       const std::string name =
           std::string(t == 0 ? "ACCEL_" : "GYRO_") + (key[0] == 'b' ? "BIAS_STD" : "SCALE_STD");
@@ -126,12 +165,10 @@ Status ImuHeader(const json& params, const json& unc, const std::string& sub, He
 }
 
 Status ImuResultToCsv(const json& result, std::string* out) {
+  results::ImuResult r;
+  Status s = ReadResult(result, &r);
+  if (!s.ok()) return s;
   std::ostringstream csv;
-  const json& params = JsonAt(result, "parameters");
-  const json& unc = JsonAt(result, "uncertainty");
-  const json& imus = JsonAt(params, "imus");
-  if (!imus.is_array()) return Status::Internal("stored imu result has no parameters.imus");
-  const json& uimus = JsonAt(unc, "imus");
   // One row per triad: value = matrix (reading - bias).
   csv << "imu,sensor,bias_x,bias_y,bias_z,scale_x,scale_y,scale_z";
   for (int r = 0; r < 3; ++r)
@@ -140,26 +177,26 @@ Status ImuResultToCsv(const json& result, std::string* out) {
   for (int r = 0; r < 3; ++r)
     for (int c = 0; c < 3; ++c) csv << ",misalignment_std_" << r << c;
   csv << "\n";
+  // An undefined value (null in JSON) is an empty cell, never 0.
+  auto vec = [&](const Eigen::Vector3d& v) {
+    for (int k = 0; k < 3; ++k) csv << "," << CsvNumber(results::Num(v(k)));
+  };
+  auto mat = [&](const Eigen::Matrix3d& m) {
+    for (int row = 0; row < 3; ++row) vec(m.row(row).transpose());
+  };
+  const std::vector<results::ImuTriads>& imus = r.parameters->imus;
   for (size_t i = 0; i < imus.size(); ++i) {
-    const json& u = uimus.is_array() && i < uimus.size() ? uimus[i] : json();
-    const json& name = JsonAt(imus[i], "name");
-    for (const char* sensor : {"accelerometer", "gyroscope"}) {
-      const json& p = JsonAt(imus[i], sensor);
-      const json& ps = JsonAt(u, sensor);
-      csv << CsvField(name.is_string() ? name.get<std::string>() : "") << "," << sensor;
-      auto vec = [&](const json& v) {
-        for (size_t k = 0; k < 3; ++k)
-          csv << "," << (v.is_array() && k < v.size() ? CsvNumber(v[k]) : "");
-      };
-      auto mat = [&](const json& m) {
-        for (size_t r = 0; r < 3; ++r) vec(m.is_array() && r < m.size() ? m[r] : json());
-      };
-      vec(JsonAt(p, "bias"));
-      vec(JsonAt(p, "scale"));
-      mat(JsonAt(p, "matrix"));
-      vec(JsonAt(ps, "bias_std"));
-      vec(JsonAt(ps, "scale_std"));
-      mat(JsonAt(ps, "misalignment_std"));
+    const results::ImuTriadsStd& u = r.uncertainty->imus[i];
+    for (int t = 0; t < 2; ++t) {
+      const results::SensorTriad& p = t == 0 ? imus[i].accelerometer : imus[i].gyroscope;
+      const results::SensorTriadStd& ps = t == 0 ? u.accelerometer : u.gyroscope;
+      csv << CsvField(imus[i].name) << "," << (t == 0 ? "accelerometer" : "gyroscope");
+      vec(p.bias);
+      vec(p.scale);
+      mat(p.matrix);
+      vec(ps.bias_std);
+      vec(ps.scale_std);
+      mat(ps.misalignment_std);
       csv << "\n";
     }
   }
@@ -168,10 +205,13 @@ Status ImuResultToCsv(const json& result, std::string* out) {
 }
 
 Status ImuResultToHeader(const json& result, const ExportContext& context, std::string* out) {
+  results::ImuResult r;
+  Status s = ReadResult(result, &r);
+  if (!s.ok()) return s;
   return WriteCHeader(
       result, context, "imu", kImuModel,
-      [&](const json& params, const json& unc, HeaderWriter* w) {
-        return ImuHeader(params, unc, "", w);
+      [&](const json&, const json&, HeaderWriter* w) {
+        return ImuHeader(r.parameters->imus, r.uncertainty->imus, "", w);
       },
       out);
 }

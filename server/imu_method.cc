@@ -7,6 +7,7 @@
 #include <set>
 #include <tuple>
 
+#include "results/imu_result.h"
 #include "server/inertial_log.h"
 #include "server/noise_reference.h"
 #include "server/openvins_yaml.h"
@@ -16,14 +17,6 @@ namespace calibd::server {
 using nlohmann::json;
 
 namespace {
-
-json Num(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
-json Vec(const Eigen::Vector3d& v) { return json::array({Num(v[0]), Num(v[1]), Num(v[2])}); }
-json Mat(const Eigen::Matrix3d& m) {
-  json rows = json::array();
-  for (int r = 0; r < 3; ++r) rows.push_back(Vec(m.row(r).transpose()));
-  return rows;
-}
 
 Status KeyError(const std::string& key, const std::string& message) {
   return Status::InvalidInput("config key '" + key + "': " + message).WithField(key);
@@ -187,81 +180,75 @@ std::string GapList(const std::vector<core::TimeGap>& gaps, size_t max = 10) {
   return out;
 }
 
-json TriadJson(const core::TriadCalibration& c) {
-  return {{"bias", Vec(c.bias)},
-          {"scale", Vec(c.scale)},
-          {"misalignment", Mat(c.misalignment)},
-          {"matrix", Mat(c.matrix)}};
+results::SensorTriad Triad(const core::TriadCalibration& c) {
+  return {c.bias, c.scale, c.misalignment, c.matrix};
 }
 
-json TriadStdJson(const core::TriadCalibration& c) {
-  return {{"bias_std", Vec(c.bias_std)},
-          {"scale_std", Vec(c.scale_std)},
-          {"misalignment_std", Mat(c.misalignment_std)}};
+results::SensorTriadStd TriadStd(const core::TriadCalibration& c) {
+  return {c.bias_std, c.scale_std, c.misalignment_std};
 }
 
-json DiagnosticsJson(const core::ImuResult& r) {
-  json statics = json::array(), rotations = json::array(), trials = json::array();
+results::ImuFitDiagnostics FitDiagnostics(const core::ImuResult& r) {
+  results::ImuFitDiagnostics f;
   for (const auto& s : r.statics) {
-    statics.push_back({{"start", Num(s.start)},
-                       {"end", Num(s.end)},
-                       {"samples", s.samples},
-                       {"accel_mean", Vec(s.accel_mean)},
-                       {"accel_std", Vec(s.accel_std)},
-                       {"gyro_mean", Vec(s.gyro_mean)},
-                       {"gyro_std", Vec(s.gyro_std)},
-                       {"gravity_direction", Vec(s.gravity_direction)},
-                       {"norm_residual_before", Num(s.norm_residual_before)},
-                       {"norm_residual_after", Num(s.norm_residual_after)}});
+    f.statics.push_back({s.start, s.end, s.samples, s.accel_mean, s.accel_std, s.gyro_mean,
+                         s.gyro_std, s.gravity_direction, s.norm_residual_before,
+                         s.norm_residual_after});
   }
   for (const auto& q : r.rotations) {
-    rotations.push_back({{"from", q.from},
-                         {"to", q.to},
-                         {"start", Num(q.start)},
-                         {"end", Num(q.end)},
-                         {"angle", Num(q.angle)},
-                         {"direction_error_before", Num(q.direction_error_before)},
-                         {"direction_error_after", Num(q.direction_error_after)},
-                         {"used", q.used},
-                         {"excluded", q.excluded}});
+    f.rotations.push_back({q.from, q.to, q.start, q.end, q.angle, q.direction_error_before,
+                           q.direction_error_after, q.used, q.excluded});
   }
   for (const auto& t : r.threshold_trials) {
-    trials.push_back({{"multiplier", Num(t.multiplier)},
-                      {"statics", t.statics},
-                      {"accel_chi2_per_dof", Num(t.accel_chi2_per_dof)},
-                      {"chosen", t.chosen}});
+    f.threshold_trials.push_back({t.multiplier, t.statics, t.accel_chi2_per_dof, t.chosen});
   }
   const core::ImuCoverage& c = r.coverage;
-  return {{"name", r.name},
-          {"usable", r.usable},
-          {"termination", core::ImuTerminationName(r.termination)},
-          {"reason", r.reason},
-          {"chi2_per_dof", Num(r.chi2_per_dof)},
-          {"degrees_of_freedom", r.degrees_of_freedom},
-          {"iterations",
-           {{"accelerometer", r.accel_iterations},
-            {"gyroscope", r.gyro_iterations},
-            {"joint", r.joint_iterations}}},
-          {"noise", {{"accelerometer", Vec(r.accel_noise)}, {"gyroscope", Vec(r.gyro_noise)}}},
-          {"residuals",
-           {{"accel_norm_rms_before", Num(r.accel_norm_rms_before)},
-            {"accel_norm_rms_after", Num(r.accel_norm_rms_after)},
-            {"gyro_direction_rms_before", Num(r.gyro_direction_rms_before)},
-            {"gyro_direction_rms_after", Num(r.gyro_direction_rms_after)}}},
-          {"statics", statics},
-          {"rotations", rotations},
-          {"coverage",
-           {{"gravity_eigenvalues", Vec(c.gravity_eigenvalues)},
-            {"min_eigenvalue", Num(c.min_eigenvalue)},
-            {"least_covered_direction", Vec(c.least_covered_direction)},
-            {"missing_up", c.missing_up},
-            {"rotation_per_axis", Vec(c.rotation_per_axis)},
-            {"weak_axes", c.weak_axes},
-            {"sufficient", c.sufficient},
-            {"verdict", c.verdict}}},
-          {"threshold_trials", trials},
-          {"threshold_choice", r.threshold_choice},
-          {"cost", r.cost}};
+  f.coverage = {c.gravity_eigenvalues,
+                c.min_eigenvalue,
+                c.least_covered_direction,
+                c.missing_up,
+                c.rotation_per_axis,
+                c.weak_axes,
+                c.sufficient,
+                c.verdict};
+  f.name = r.name;
+  f.usable = r.usable;
+  f.termination = core::ImuTerminationName(r.termination);
+  f.reason = r.reason;
+  f.chi2_per_dof = r.chi2_per_dof;
+  f.degrees_of_freedom = r.degrees_of_freedom;
+  f.accel_iterations = r.accel_iterations;
+  f.gyro_iterations = r.gyro_iterations;
+  f.joint_iterations = r.joint_iterations;
+  f.accel_noise = r.accel_noise;
+  f.gyro_noise = r.gyro_noise;
+  f.accel_norm_rms_before = r.accel_norm_rms_before;
+  f.accel_norm_rms_after = r.accel_norm_rms_after;
+  f.gyro_direction_rms_before = r.gyro_direction_rms_before;
+  f.gyro_direction_rms_after = r.gyro_direction_rms_after;
+  f.threshold_choice = r.threshold_choice;
+  f.cost = r.cost;
+  return f;
+}
+
+// diagnostics.noise_jobs and noise_model of a config's resolved noise references
+// (server/noise_reference.h).
+void NoiseReferences(const json& config, results::ImuDiagnostics* d) {
+  results::ImuDiagnostics::NoiseJobs jobs;
+  results::ImuDiagnostics::NoiseModels models;
+  for (auto [key, job, model] :
+       {std::tuple<const char*, std::optional<int64_t>*, std::optional<results::ImuNoiseModel>*>{
+            "accel_noise", &jobs.accelerometer, &models.accelerometer},
+        std::tuple<const char*, std::optional<int64_t>*, std::optional<results::ImuNoiseModel>*>{
+            "gyro_noise", &jobs.gyroscope, &models.gyroscope}}) {
+    std::optional<NoiseLevel> level;
+    if (ReadNoiseLevel(config, key, &level).ok() && level && level->job) *job = level->job;
+    if (std::optional<NoiseFigures> figures = ReadNoiseFigures(config, key)) {
+      *model = results::ImuNoiseModel{figures->job, figures->white_noise, figures->random_walk};
+    }
+  }
+  d->noise_jobs = jobs;
+  d->noise_model = models;
 }
 
 class Imu : public Method {
@@ -374,53 +361,40 @@ class Imu : public Method {
     }
     nominal.accel_bias = Number(config.value("nominal_accel_bias", json())).value_or(0);
     nominal.gyro_bias = Number(config.value("nominal_gyro_bias", json())).value_or(0);
-    results::JsonReader r(result, "imu result");
-    std::vector<results::ImuTriads> imus;
-    std::vector<results::ImuTriadsStd> stds;
-    r.Object("parameters")
-        .ReadArray("imus", &imus, [](const results::JsonReader& e, results::ImuTriads* t) {
-          results::ReadImuTriads(e, t);
-        });
-    r.Object("uncertainty")
-        .ReadArray("imus", &stds, [](const results::JsonReader& e, results::ImuTriadsStd* t) {
-          results::ReadImuTriads(e, t);
-        });
-    if (!r.ok()) {
-      verdict->Reject("the result cannot be judged: " + r.status().message());
+    results::ImuResult r;
+    if (Status s = results::FromJson(result, &r); !s.ok() || !r.parameters) {
+      verdict->Reject("the result cannot be judged: " +
+                      (s.ok() ? std::string("it has no parameters (a failed run)") : s.message()));
       return;
     }
-    JudgeImuTriads(imus, stds, nominal, limits, "IMU", verdict);
-    const json diags = result.value("diagnostics", json::object()).value("imus", json());
-    if (!diags.is_array()) return;
+    JudgeImuTriads(r.parameters->imus, r.uncertainty->imus, nominal, limits, "IMU", verdict);
     const auto chi2_max = limits.Get("max_chi2");
-    for (const json& d : diags) {
-      const std::string name = "IMU " + d.value("name", std::string("?"));
-      const json coverage = d.value("coverage", json::object());
-      if (!coverage.value("sufficient", true)) {
-        verdict->Reject(name + ": the orientations do not determine every parameter: " +
-                        coverage.value("verdict", std::string("add orientations")));
+    const auto accel_max = limits.Get("max_accel_residual");
+    const auto gyro_max = limits.Get("max_gyro_residual");
+    for (const results::ImuFitDiagnostics& d : r.diagnostics.imus) {
+      const std::string name = "IMU " + d.name;
+      if (!d.coverage.sufficient) {
+        verdict->Reject(
+            name + ": the orientations do not determine every parameter: " + d.coverage.verdict);
       }
-      const auto chi2 = Number(d.value("chi2_per_dof", json()));
-      if (chi2_max && chi2 && *chi2 > *chi2_max) {
-        verdict->Reject(name + ": the residuals are " + Fmt(std::sqrt(*chi2)) +
-                        " times the noise (chi2/dof " + Fmt(*chi2) + " above " + Fmt(*chi2_max) +
+      const double chi2 = d.chi2_per_dof;
+      if (chi2_max && std::isfinite(chi2) && chi2 > *chi2_max) {
+        verdict->Reject(name + ": the residuals are " + Fmt(std::sqrt(chi2)) +
+                        " times the noise (chi2/dof " + Fmt(chi2) + " above " + Fmt(*chi2_max) +
                         "): the device moved during a static, or the statics are too short");
       }
-      const json residuals = d.value("residuals", json::object());
-      const auto accel = Number(residuals.value("accel_norm_rms_after", json()));
-      const auto accel_max = limits.Get("max_accel_residual");
-      if (accel_max && accel && *accel > *accel_max) {
+      const double accel = d.accel_norm_rms_after;
+      if (accel_max && std::isfinite(accel) && accel > *accel_max) {
         verdict->Reject(name + ": after calibration |a| still differs from gravity by " +
-                        Fmt(*accel) + " m/s^2 RMS over the statics (above " + Fmt(*accel_max) +
+                        Fmt(accel) + " m/s^2 RMS over the statics (above " + Fmt(*accel_max) +
                         "): the board moved during a static, or gravity is wrong for this place");
       }
-      const auto gyro = Number(residuals.value("gyro_direction_rms_after", json()));
-      const auto gyro_max = limits.Get("max_gyro_residual");
-      if (gyro_max && gyro && *gyro > *gyro_max) {
+      const double gyro = d.gyro_direction_rms_after;
+      if (gyro_max && std::isfinite(gyro) && gyro > *gyro_max) {
         verdict->Reject(name +
                         ": after calibration the integrated rotations still miss the "
                         "measured gravity direction by " +
-                        Fmt(*gyro) + " rad RMS (above " + Fmt(*gyro_max) +
+                        Fmt(gyro) + " rad RMS (above " + Fmt(*gyro_max) +
                         "): rotate more slowly (the gyroscope saturated?) or "
                         "hold each static longer");
       }
@@ -463,24 +437,21 @@ class Imu : public Method {
     std::vector<core::ImuResult> results;
     s = core::CalibrateImus(log.t, readings, options, &results);
     if (results.empty()) return s.ok() ? Status::Internal("imu: no result") : s;
-    json params = json::array(), stds = json::array(), diagnostics = json::array(),
-         warnings = json::array();
+    results::ImuResult typed;
+    typed.envelope.method = "imu";
+    results::ImuParameters params;
+    results::ImuUncertainty stds;
+    results::ImuDiagnostics& diag = typed.diagnostics;
+    std::vector<std::string>& warnings = typed.envelope.warnings;
     for (const core::ImuResult& r : results) {
-      params.push_back({{"name", r.name},
-                        {"accelerometer", TriadJson(r.accelerometer)},
-                        {"gyroscope", TriadJson(r.gyroscope)}});
-      stds.push_back({{"name", r.name},
-                      {"accelerometer", TriadStdJson(r.accelerometer)},
-                      {"gyroscope", TriadStdJson(r.gyroscope)}});
-      diagnostics.push_back(DiagnosticsJson(r));
+      params.imus.push_back({r.name, Triad(r.accelerometer), Triad(r.gyroscope)});
+      stds.imus.push_back({r.name, TriadStd(r.accelerometer), TriadStd(r.gyroscope)});
+      diag.imus.push_back(FitDiagnostics(r));
       for (const std::string& w : r.warnings) warnings.push_back("IMU " + r.name + ": " + w);
     }
-    json statics = json::array();
     const core::StaticDetection& d = results.front().detection;
-    json gaps = json::array();
-    for (const auto& g : d.gaps) {
-      gaps.push_back({{"index", g.index}, {"start", Num(g.start)}, {"end", Num(g.end)}});
-    }
+    diag.gaps.emplace();
+    for (const auto& g : d.gaps) diag.gaps->push_back({g.index, g.start, g.end});
     if (!d.gaps.empty()) {
       warnings.push_back(std::to_string(d.gaps.size()) + " gap(s) in t (" + GapList(d.gaps) +
                          "): no static interval spans one, and rotations across one are not "
@@ -490,45 +461,34 @@ class Imu : public Method {
       warnings.push_back(std::to_string(d.saturated_samples) +
                          " saturated sample(s) dropped from the static intervals");
     }
-    for (const auto& iv : d.intervals) {
-      statics.push_back({{"start", Num(iv.start)}, {"end", Num(iv.end)}, {"samples", iv.samples}});
-    }
-    json diagnostics_block = {{"statics", statics},
-                              {"rate", Num(rate)},
-                              {"gaps", gaps},
-                              {"noise_jobs", NoiseJobsJson(config)},
-                              {"noise_model", NoiseModelJson(config)},
-                              {"saturated_samples", d.saturated_samples},
-                              {"static_window", Num(options.detection.static_window)},
-                              {"min_static", Num(options.detection.min_static)},
-                              {"threshold_choice", results.front().threshold_choice},
-                              {"imus", diagnostics}};
+    for (const auto& iv : d.intervals) diag.statics.push_back({iv.start, iv.end, iv.samples});
+    diag.rate = rate;
+    NoiseReferences(config, &diag);
+    diag.saturated_samples = d.saturated_samples;
+    diag.static_window = options.detection.static_window;
+    diag.min_static = options.detection.min_static;
+    diag.threshold_choice = results.front().threshold_choice;
     if (!s.ok()) {
       // What was found before failing: the statics on the timeline, per IMU its coverage,
-      // rotations and termination (the partial diagnostics kept with the failed job).
-      *result = {{"method", "imu"},
-                 {"usable", false},
-                 {"diagnostics", std::move(diagnostics_block)},
-                 {"warnings", warnings}};
+      // rotations and termination (the partial diagnostics kept with the failed job; no model,
+      // parameters or uncertainty).
+      typed.envelope.usable = false;
+      *result = results::ToJson(typed);
       return s;
     }
-    *result = {
-        {"method", "imu"},
-        {"model",
-         "a = T_a K_a (y_a - b_a), omega = T_g K_g (y_g - b_g): y raw readings, b biases "
-         "(reading units), K diagonal scales (SI per reading unit), T_a upper triangular with "
-         "unit diagonal (the body frame is the accelerometer's: x along its x axis, y in its x-y "
-         "plane), T_g the gyroscope's misalignment to that frame (unit diagonal); matrix = T K"},
-        {"parameters",
-         {{"gravity", Num(options.gravity)},
-          {"gyro_bias", core::GyroBiasModelName(options.gyro_bias)},
-          // The nominal SI per reading unit the log was read with (exports to SI readings).
-          {"accel_unit", Num(options.accel_unit)},
-          {"gyro_unit", Num(options.gyro_unit)},
-          {"imus", params}}},
-        {"uncertainty", {{"imus", stds}}},
-        {"diagnostics", std::move(diagnostics_block)},
-        {"warnings", warnings}};
+    typed.envelope.model =
+        "a = T_a K_a (y_a - b_a), omega = T_g K_g (y_g - b_g): y raw readings, b biases "
+        "(reading units), K diagonal scales (SI per reading unit), T_a upper triangular with "
+        "unit diagonal (the body frame is the accelerometer's: x along its x axis, y in its x-y "
+        "plane), T_g the gyroscope's misalignment to that frame (unit diagonal); matrix = T K";
+    params.gravity = options.gravity;
+    params.gyro_bias = core::GyroBiasModelName(options.gyro_bias);
+    // The nominal SI per reading unit the log was read with (exports to SI readings).
+    params.accel_unit = options.accel_unit;
+    params.gyro_unit = options.gyro_unit;
+    typed.parameters = std::move(params);
+    typed.uncertainty = std::move(stds);
+    *result = results::ToJson(typed);
     return Status::Ok();
   }
 };
@@ -557,10 +517,7 @@ Status SimulateImuFiles(const core::ImuSimulationOptions& options, std::string* 
   if (options.accel_offset != 0) (*config)["nominal_accel_bias"] = options.accel_offset;
   if (options.gyro_offset != 0) (*config)["nominal_gyro_bias"] = options.gyro_offset;
   auto triad = [](const core::ImuTriadTruth& t) {
-    return json{{"bias", Vec(t.bias)},
-                {"scale", Vec(t.scale)},
-                {"misalignment", Mat(t.misalignment)},
-                {"matrix", Mat(t.matrix)}};
+    return results::ToJson(results::SensorTriad{t.bias, t.scale, t.misalignment, t.matrix});
   };
   *truth = {{"method", "imu"},
             {"seed", options.seed},

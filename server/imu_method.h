@@ -1,19 +1,23 @@
 // JSON glue of the `imu` method (SPEC §7): an inertial log (array layout with `t`; triad K of the
 // accelerometers and of the gyroscopes belong to IMU K) to core::CalibrateImus, and its results to
-// the SPEC §4 / §7 result JSON:
-//   {"method":"imu","model":...,
-//    "parameters":{"gravity","gyro_bias","imus":[{"name",
+// the typed results::ImuResult (results/imu_result.h, every key typed there), written as the
+// SPEC §4 / §7 result JSON:
+//   {"method":"imu","schema_version":1,"model":...,
+//    "parameters":{"gravity","gyro_bias","accel_unit","gyro_unit","imus":[{"name",
 //        "accelerometer":{"bias":[3],"scale":[3],"misalignment":[[3]x3],"matrix":[[3]x3]},
 //        "gyroscope":{same}}]},
 //    "uncertainty":{"imus":[{"name","accelerometer":{"bias_std","scale_std","misalignment_std"},
 //                            "gyroscope":{same}}]},
-//    "diagnostics":{"statics":[{"start","end","samples"}],"threshold":{...},
-//        "imus":[{"name","termination","chi2_per_dof","degrees_of_freedom","noise",
+//    "diagnostics":{"statics":[{"start","end","samples"}],"rate","gaps","noise_jobs",
+//        "noise_model","saturated_samples","static_window","min_static","threshold_choice",
+//        "imus":[{"name","usable","termination","reason","chi2_per_dof","degrees_of_freedom",
+//                 "iterations","noise",
 //                 "residuals":{"accel_norm_rms_before","accel_norm_rms_after",
 //                              "gyro_direction_rms_before","gyro_direction_rms_after"},
 //                 "statics":[...],"rotations":[...],"coverage":{...},
-//                 "threshold_trials":[...],"threshold_choice"}]},
+//                 "threshold_trials":[...],"threshold_choice","cost"}]},
 //    "warnings":[...]}
+// Judge, the exports, the web report and the drift read it back with results::FromJson.
 // Biases in reading units, scales in SI per reading unit, misalignment angles in radians. No
 // NaN/Inf (null instead). Deterministic.
 // Config keys: method, device, accel_unit, gyro_unit (server/inertial_log.h), gravity (m/s²) or
@@ -28,9 +32,11 @@
 
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "core/imu.h"
 #include "core/imu_simulation.h"
+#include "results/triad.h"
 #include "server/method.h"
 
 namespace calibd::server {
@@ -56,7 +62,13 @@ Status ImuResultToHeader(const nlohmann::json& result, const ExportContext& cont
                          std::string* out);
 // The per-IMU part of the C header (macros prefixed `sub`): per IMU a = MATRIX (y - BIAS) for
 // both triads; also written for an array result of the full model (sub "IMU_").
+// The json form (for an array full result) reads name, bias and matrix of parameters.imus[] and
+// bias_std, scale_std of uncertainty.imus[] (uncertainties that do not read are left out, as
+// undefined ones are); kInternal naming the path when the IMUs do not read.
 Status ImuHeader(const nlohmann::json& params, const nlohmann::json& unc, const std::string& sub,
+                 HeaderWriter* w);
+Status ImuHeader(const std::vector<results::ImuTriads>& imus,
+                 const std::vector<results::ImuTriadsStd>& stds, const std::string& sub,
                  HeaderWriter* w);
 
 }  // namespace calibd::server

@@ -1,7 +1,11 @@
 // Exports of a noise result (server/noise_method.h): CSV, Kalibr's imu.yaml and the C header.
+// Each reads the stored result once into results::NoiseResult; a result that does not read is
+// kInternal with the reader's message.
+#include <cmath>
 #include <sstream>
 #include <string>
 
+#include "results/noise_result.h"
 #include "server/export_util.h"
 #include "server/noise_method.h"
 
@@ -16,46 +20,49 @@ constexpr const char* kNoiseModel =
     " * Kalibr's noise_density), B = BIAS_INSTABILITY, K = RANDOM_WALK (Kalibr's\n"
     " * random_walk). Figures as data; nothing to apply per reading.\n";
 
+// The stored result, typed; kInternal naming the first problem when it does not read.
+Status ReadResult(const json& result, results::NoiseResult* out) {
+  Status s = results::FromJson(result, out);
+  if (!s.ok()) return Status::Internal("stored noise result: " + s.message());
+  if (!out->envelope.usable) {
+    return Status::Internal("stored noise result is the partial diagnostics of a failed run");
+  }
+  return Status::Ok();
+}
+
+// A CSV cell: "" for an undefined value (null in JSON), never 0.
+std::string Cell(double v) { return CsvNumber(results::Num(v)); }
+
 // noise: per channel one macro per figure; a figure the log could not show is not defined (a
 // comment says so), never 0.
-Status NoiseHeader(const json& params, const json& unc, HeaderWriter* w) {
-  const json& channels = JsonAt(params, "channels");
-  if (!channels.is_array() || channels.empty()) {
-    return Status::Internal("stored noise result has no channels");
-  }
-  const json& uch = JsonAt(unc, "channels");
+Status NoiseHeader(const results::NoiseResult& r, HeaderWriter* w) {
+  if (r.channels.empty()) return Status::Internal("stored noise result has no channels");
   std::vector<std::string> names;
-  for (const json& c : channels) {
-    names.push_back(JsonAt(c, "name").is_string() ? c["name"].get<std::string>() : "");
-  }
+  for (const auto& c : r.channels) names.push_back(c.name);
   w->Define("CHANNELS", std::to_string(names.size()), "");
   w->Names("NAMES", names);
-  for (size_t i = 0; i < channels.size(); ++i) {
-    const json& c = channels[i];
-    const json& u = uch.is_array() && i < uch.size() ? uch[i] : json();
-    const std::string unit = JsonAt(c, "unit").is_string() ? c["unit"].get<std::string>() : "unit";
-    const std::string id = IdentifierStem(names[i]) + "_";
+  for (size_t i = 0; i < r.channels.size(); ++i) {
+    const results::NoiseChannelParameters& c = r.channels[i];
+    const results::NoiseChannelUncertainty& u = r.channel_stds[i];
+    const std::string id = IdentifierStem(c.name) + "_";
     struct Term {
-      const char* key;
-      const char* std_key;
+      double value;
+      double std;  // NaN: no _STD macro (undefined, or the term has none)
       const char* name;
       std::string unit;
-    } terms[] = {{"white_noise", "white_noise_std", "WHITE_NOISE", unit + "/sqrt(Hz)"},
-                 {"bias_instability", "bias_instability_std", "BIAS_INSTABILITY", unit},
-                 {"bias_instability_tau", nullptr, "BIAS_INSTABILITY_TAU", "s"},
-                 {"random_walk", "random_walk_std", "RANDOM_WALK", unit + "/s/sqrt(Hz)"}};
-    w->out() << "/* channel " << CComment(names[i]) << " (" << CComment(unit) << ") */\n";
+    } terms[] = {{c.white_noise, u.white_noise_std, "WHITE_NOISE", c.unit + "/sqrt(Hz)"},
+                 {c.bias_instability, u.bias_instability_std, "BIAS_INSTABILITY", c.unit},
+                 {c.bias_instability_tau, std::nan(""), "BIAS_INSTABILITY_TAU", "s"},
+                 {c.random_walk, u.random_walk_std, "RANDOM_WALK", c.unit + "/s/sqrt(Hz)"}};
+    w->out() << "/* channel " << CComment(c.name) << " (" << CComment(c.unit) << ") */\n";
     for (const Term& t : terms) {
-      const json& v = JsonAt(c, t.key);
-      if (!v.is_number()) {
+      if (!std::isfinite(t.value)) {
         w->out() << "/* " << w->macro() << id << t.name
                  << " is not defined: the log is too short to show it */\n";
         continue;
       }
-      w->Define(id + t.name, CDouble(v.get<double>()), t.unit);
-      if (t.std_key != nullptr && JsonAt(u, t.std_key).is_number()) {
-        w->Define(id + t.name + "_STD", CDouble(u[t.std_key].get<double>()), "1 sigma");
-      }
+      w->Define(id + t.name, CDouble(t.value), t.unit);
+      if (std::isfinite(t.std)) w->Define(id + t.name + "_STD", CDouble(t.std), "1 sigma");
     }
   }
   return Status::Ok();
@@ -64,36 +71,29 @@ Status NoiseHeader(const json& params, const json& unc, HeaderWriter* w) {
 }  // namespace
 
 Status NoiseResultToCsv(const json& result, std::string* out) {
+  results::NoiseResult r;
+  Status s = ReadResult(result, &r);
+  if (!s.ok()) return s;
   std::ostringstream csv;
-  const json& params = JsonAt(result, "parameters");
-  const json& unc = JsonAt(result, "uncertainty");
-  const json& channels = JsonAt(params, "channels");
-  if (!channels.is_array()) return Status::Internal("stored noise result has no channels");
-  const json& uch = JsonAt(unc, "channels");
   csv << "name,unit,white_noise,white_noise_std,bias_instability,bias_instability_std,"
          "bias_instability_tau,random_walk,random_walk_std\n";
-  for (size_t i = 0; i < channels.size(); ++i) {
-    const json& c = channels[i];
-    const json& u = uch.is_array() && i < uch.size() ? uch[i] : json();
-    const json& name = JsonAt(c, "name");
-    const json& unit = JsonAt(c, "unit");
+  for (size_t i = 0; i < r.channels.size(); ++i) {
+    const results::NoiseChannelParameters& c = r.channels[i];
+    const results::NoiseChannelUncertainty& u = r.channel_stds[i];
     // A term the log could not show stays empty (null in JSON), never 0.
-    csv << CsvField(name.is_string() ? name.get<std::string>() : "") << ","
-        << CsvField(unit.is_string() ? unit.get<std::string>() : "") << ","
-        << CsvNumber(JsonAt(c, "white_noise")) << "," << CsvNumber(JsonAt(u, "white_noise_std"))
-        << "," << CsvNumber(JsonAt(c, "bias_instability")) << ","
-        << CsvNumber(JsonAt(u, "bias_instability_std")) << ","
-        << CsvNumber(JsonAt(c, "bias_instability_tau")) << ","
-        << CsvNumber(JsonAt(c, "random_walk")) << "," << CsvNumber(JsonAt(u, "random_walk_std"))
-        << "\n";
+    csv << CsvField(c.name) << "," << CsvField(c.unit) << "," << Cell(c.white_noise) << ","
+        << Cell(u.white_noise_std) << "," << Cell(c.bias_instability) << ","
+        << Cell(u.bias_instability_std) << "," << Cell(c.bias_instability_tau) << ","
+        << Cell(c.random_walk) << "," << Cell(u.random_walk_std) << "\n";
   }
   *out = csv.str();
   return Status::Ok();
 }
 
 Status NoiseResultToKalibrYaml(const json& result, const ExportContext& context, std::string* out) {
-  const json& channels = JsonAt(JsonAt(result, "parameters"), "channels");
-  if (!channels.is_array()) return Status::Internal("stored noise result has no channels");
+  results::NoiseResult r;
+  Status s = ReadResult(result, &r);
+  if (!s.ok()) return s;
   // Per sensor type the largest of its axes (Kalibr takes one figure for all three; the largest
   // keeps a filter from trusting the sensor more than its worst axis allows).
   struct Worst {
@@ -103,19 +103,17 @@ Status NoiseResultToKalibrYaml(const json& result, const ExportContext& context,
   };
   Worst worst[2][2];  // [accelerometer, gyroscope][white_noise, random_walk]
   bool seen[2] = {false, false};
-  for (const json& c : channels) {
-    const std::string name = JsonAt(c, "name").is_string() ? c["name"].get<std::string>() : "";
-    if (name.empty() || (name[0] != 'a' && name[0] != 'g')) continue;
-    const int type = name[0] == 'a' ? 0 : 1;
+  for (const results::NoiseChannelParameters& c : r.channels) {
+    if (c.name.empty() || (c.name[0] != 'a' && c.name[0] != 'g')) continue;
+    const int type = c.name[0] == 'a' ? 0 : 1;
     seen[type] = true;
-    const char* keys[2] = {"white_noise", "random_walk"};
+    const double values[2] = {c.white_noise, c.random_walk};
     for (int k = 0; k < 2; ++k) {
-      const json& v = JsonAt(c, keys[k]);
-      if (!v.is_number()) {
-        worst[type][k].missing.push_back(name);
-      } else if (v.get<double>() > worst[type][k].value) {
-        worst[type][k].value = v.get<double>();
-        worst[type][k].axis = name;
+      if (!std::isfinite(values[k])) {
+        worst[type][k].missing.push_back(c.name);
+      } else if (values[k] > worst[type][k].value) {
+        worst[type][k].value = values[k];
+        worst[type][k].axis = c.name;
       }
     }
   }
@@ -141,25 +139,28 @@ Status NoiseResultToKalibrYaml(const json& result, const ExportContext& context,
             " of " + list + " (see the result's warnings for how long a log would): Kalibr's " +
             type_names[type] + "_" + keys[k] + " cannot be written");
       }
-      y << type_names[type] << "_" << keys[k] << ": " << CsvNumber(json(w.value)) << "  # "
-        << units[type][k] << ", " << w.axis << "\n";
+      y << type_names[type] << "_" << keys[k] << ": " << Cell(w.value) << "  # " << units[type][k]
+        << ", " << w.axis << "\n";
     }
   }
-  const json& rate = JsonAt(JsonAt(result, "diagnostics"), "rate");
   y << "rostopic: /imu0\n"
-    << "update_rate: " << CsvNumber(rate) << "  # Hz\n";
+    << "update_rate: " << Cell(r.diagnostics.rate) << "  # Hz\n";
   *out = y.str();
   return Status::Ok();
 }
 
 Status NoiseResultToHeader(const json& result, const ExportContext& context, std::string* out) {
+  results::NoiseResult r;
+  Status s = ReadResult(result, &r);
+  if (!s.ok()) return s;
   return WriteCHeader(
       result, context, "noise", kNoiseModel,
-      [&](const json& params, const json& unc, HeaderWriter* w) {
-        Status s = NoiseHeader(params, unc, w);
-        const json& rate = JsonAt(JsonAt(result, "diagnostics"), "rate");
-        if (s.ok() && rate.is_number()) w->Define("RATE", CDouble(rate.get<double>()), "Hz");
-        return s;
+      [&](const json&, const json&, HeaderWriter* w) {
+        Status body = NoiseHeader(r, w);
+        if (body.ok() && std::isfinite(r.diagnostics.rate)) {
+          w->Define("RATE", CDouble(r.diagnostics.rate), "Hz");
+        }
+        return body;
       },
       out);
 }

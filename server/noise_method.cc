@@ -3,9 +3,11 @@
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <memory>
 #include <set>
 
+#include "results/noise_result.h"
 #include "server/inertial_log.h"
 
 namespace calibd::server {
@@ -14,13 +16,7 @@ using nlohmann::json;
 
 namespace {
 
-json Num(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
-json Opt(const std::optional<double>& x) { return x ? Num(*x) : json(nullptr); }
-json Nums(const std::vector<double>& v) {
-  json out = json::array();
-  for (double x : v) out.push_back(Num(x));
-  return out;
-}
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 Status ParseNoiseConfig(const json& config, core::NoiseOptions* options, InertialUnits* units) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
@@ -126,34 +122,33 @@ class Noise : public Method {
   }
   void Judge(const json& result, const json&, const AcceptanceLimits& limits,
              Verdict* verdict) const override {
-    const json diag = result.value("diagnostics", json::object());
-    if (!diag.value("stationary", true)) {
+    results::NoiseResult r;
+    if (Status s = results::FromJson(result, &r); !s.ok()) {
+      verdict->Reject("the result cannot be judged: " + s.message());
+      return;
+    }
+    if (!r.diagnostics.stationary) {
       verdict->Reject(
           "the log is not stationary (the device moved or was touched): noise figures of a moving "
           "device are not the sensor's; record again with the device at rest");
     }
-    const json params = result.value("parameters", json::object()).value("channels", json());
-    const json stds = result.value("uncertainty", json::object()).value("channels", json());
-    if (!params.is_array()) return;
     const auto rel_max = limits.Get("max_white_noise_std");
     Offenders missing, uncertain, too_high;
-    for (size_t i = 0; i < params.size(); ++i) {
-      const json& c = params[i];
-      const std::string name = c.value("name", std::to_string(i));
-      const std::string unit = c.value("unit", std::string());
-      const auto n = Number(c.value("white_noise", json()));
-      if (!n) {
-        missing.Add(name);
+    for (size_t i = 0; i < r.channels.size(); ++i) {
+      const results::NoiseChannelParameters& c = r.channels[i];
+      const double n = c.white_noise;
+      if (!std::isfinite(n)) {
+        missing.Add(c.name);
         continue;
       }
-      const json sd = stds.is_array() && i < stds.size() ? stds[i] : json::object();
-      const auto n_std = Number(sd.value("white_noise_std", json()));
-      if (rel_max && (!n_std || *n_std / *n > *rel_max)) {
-        uncertain.Add(name + " " + (n_std ? Fmt(*n_std / *n * 100) + " %" : "undefined"));
+      const double n_std = r.channel_stds[i].white_noise_std;
+      if (rel_max && (!std::isfinite(n_std) || n_std / n > *rel_max)) {
+        uncertain.Add(c.name + " " +
+                      (std::isfinite(n_std) ? Fmt(n_std / n * 100) + " %" : "undefined"));
       }
       const auto max =
-          limits.Get(unit == "m/s^2" ? "max_accel_white_noise" : "max_gyro_white_noise");
-      if (max && *n > *max) too_high.Add(name + " " + Fmt(*n) + " " + unit + "/sqrt(Hz)");
+          limits.Get(c.unit == "m/s^2" ? "max_accel_white_noise" : "max_gyro_white_noise");
+      if (max && n > *max) too_high.Add(c.name + " " + Fmt(n) + " " + c.unit + "/sqrt(Hz)");
     }
     missing.RejectInto(verdict,
                        "no white-noise density could be read (log too short or too few "
@@ -225,71 +220,57 @@ class Noise : public Method {
     }
     core::NoiseResult r;
     s = core::EstimateNoise(problem, options, &r);
-    *result = NoiseResultToJson(r, options.taus_per_decade);
-    (*result)["diagnostics"]["units"] = {{"accel_unit", units.accel_text},
-                                         {"gyro_unit", units.gyro_text}};
+    results::NoiseResult typed = NoiseResultOf(r, options.taus_per_decade);
+    typed.diagnostics.units = results::NoiseUnits{units.accel_text, units.gyro_text};
     if (!s.ok()) {
       // The partial diagnostics kept with the failed job: rate, duration, jitter, per channel
-      // its status and reason (which one moved) and the Allan curve as far as it was computed.
-      json partial = {{"method", "noise"}, {"usable", false}};
-      partial["diagnostics"] = std::move((*result)["diagnostics"]);
-      partial["warnings"] = std::move((*result)["warnings"]);
-      *result = std::move(partial);
+      // its status and reason (which one moved) and the Allan curve as far as it was computed
+      // (results::NoiseResult with usable false: no model, parameters or uncertainty).
+      typed.envelope.usable = false;
+      typed.envelope.model.clear();
+      typed.channels.clear();
+      typed.channel_stds.clear();
     }
+    *result = results::ToJson(typed);
     return s;
   }
 };
 
 }  // namespace
 
-json NoiseResultToJson(const core::NoiseResult& r, int taus_per_decade) {
-  json params = json::array(), stds = json::array(), allan = json::array(),
-       channels = json::array();
+results::NoiseResult NoiseResultOf(const core::NoiseResult& r, int taus_per_decade) {
+  results::NoiseResult out;
+  out.envelope.method = "noise";
+  out.envelope.model =
+      "per channel, the Allan variance sigma^2(tau) = N^2/tau + (0.664 B)^2 + K^2 tau/3 "
+      "(IEEE Std 952): N white noise density (unit/sqrt(Hz)), B bias instability (unit), K "
+      "random walk (unit/s/sqrt(Hz)); Kalibr's noise_density = N, random_walk = K";
+  out.envelope.warnings = r.warnings;
+  const auto value = [](const std::optional<double>& x) { return x.value_or(kNaN); };
+  results::NoiseDiagnostics& d = out.diagnostics;
   for (const core::NoiseChannelResult& c : r.channels) {
-    params.push_back({{"name", c.name},
-                      {"unit", c.unit},
-                      {"white_noise", Opt(c.white_noise.value)},
-                      {"bias_instability", Opt(c.bias_instability.value)},
-                      {"bias_instability_tau", Opt(c.bias_instability_tau)},
-                      {"random_walk", Opt(c.random_walk.value)}});
-    stds.push_back({{"name", c.name},
-                    {"white_noise_std", Opt(c.white_noise.std)},
-                    {"bias_instability_std", Opt(c.bias_instability.std)},
-                    {"random_walk_std", Opt(c.random_walk.std)}});
-    allan.push_back({{"name", c.name},
-                     {"tau", Nums(c.allan.tau)},
-                     {"adev", Nums(c.allan.adev)},
-                     {"adev_lower", Nums(c.allan.adev_lower)},
-                     {"adev_upper", Nums(c.allan.adev_upper)},
-                     {"fitted_adev", Nums(c.fitted_adev)}});
-    channels.push_back({{"name", c.name},
-                        {"status", core::NoiseChannelStatusName(c.status)},
-                        {"reason", c.reason},
-                        {"fit_points", c.fit_points},
-                        {"fit_chi2", Num(c.fit_chi2)},
-                        {"mean", Num(c.mean)}});
+    out.channels.push_back({c.name, c.unit, value(c.white_noise.value),
+                            value(c.bias_instability.value), value(c.bias_instability_tau),
+                            value(c.random_walk.value)});
+    out.channel_stds.push_back({c.name, value(c.white_noise.std), value(c.bias_instability.std),
+                                value(c.random_walk.std)});
+    d.allan.push_back(
+        {c.name, c.allan.tau, c.allan.adev, c.allan.adev_lower, c.allan.adev_upper, c.fitted_adev});
+    d.channels.push_back({c.name, core::NoiseChannelStatusName(c.status), c.reason, c.fit_points,
+                          c.fit_chi2, c.mean});
   }
-  json warnings = json::array();
-  for (const std::string& w : r.warnings) warnings.push_back(w);
-  return {
-      {"method", "noise"},
-      {"model",
-       "per channel, the Allan variance sigma^2(tau) = N^2/tau + (0.664 B)^2 + K^2 tau/3 "
-       "(IEEE Std 952): N white noise density (unit/sqrt(Hz)), B bias instability (unit), K "
-       "random walk (unit/s/sqrt(Hz)); Kalibr's noise_density = N, random_walk = K"},
-      {"parameters", {{"channels", params}}},
-      {"uncertainty", {{"channels", stds}}},
-      {"diagnostics",
-       {{"rate", Num(r.rate)},
-        {"samples", r.samples},
-        {"duration", Num(r.duration)},
-        {"jitter", Num(r.jitter)},
-        {"stationary", r.stationary},
-        {"taus_per_decade", taus_per_decade},
-        {"confidence", r.channels.empty() ? json(nullptr) : Num(r.channels[0].allan.confidence)},
-        {"channels", channels},
-        {"allan", allan}}},
-      {"warnings", warnings}};
+  d.rate = r.rate;
+  d.samples = r.samples;
+  d.duration = r.duration;
+  d.jitter = r.jitter;
+  d.stationary = r.stationary;
+  d.taus_per_decade = taus_per_decade;
+  d.confidence = r.channels.empty() ? kNaN : r.channels[0].allan.confidence;
+  return out;
+}
+
+json NoiseResultToJson(const core::NoiseResult& r, int taus_per_decade) {
+  return results::ToJson(NoiseResultOf(r, taus_per_decade));
 }
 
 Status SimulateNoiseFiles(const NoiseSimulationFileOptions& o, std::string* csv, json* config,

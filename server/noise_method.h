@@ -1,18 +1,21 @@
 // JSON glue of the `noise` method (SPEC §7): an inertial log (array layout with `t`) to
-// core::EstimateNoise, and its result to the SPEC §4 / §7 result JSON:
-//   {"method":"noise","model":...,
+// core::EstimateNoise, and its result to the typed results::NoiseResult
+// (results/noise_result.h), written as the SPEC §4 / §7 result JSON:
+//   {"method":"noise","schema_version":1,"model":...,
 //    "parameters":{"channels":[{"name","unit","white_noise","bias_instability",
 //                               "bias_instability_tau","random_walk"}]},
 //    "uncertainty":{"channels":[{"name","white_noise_std","bias_instability_std",
 //                                "random_walk_std"}]},
 //    "diagnostics":{"rate","samples","duration","jitter","stationary","taus_per_decade",
+//                   "confidence","units":{"accel_unit","gyro_unit"},
 //                   "channels":[{"name","status","reason","fit_points","fit_chi2","mean"}],
 //                   "allan":[{"name","tau","adev","adev_lower","adev_upper","fitted_adev"}]},
 //    "warnings":[...]}
 // Channels are in SI after the unit conversion: accelerometers m/s² (N in m/s²/√Hz, K in
 // m/s³/√Hz), gyroscopes rad/s (N in rad/s/√Hz, K in rad/s²/√Hz) — Kalibr's units. A term the log
 // is too short (or too noisy) to show is null, with a warning saying how long a log would show
-// it. No NaN/Inf (null instead). Deterministic.
+// it. No NaN/Inf (null instead). Deterministic. Judge, the exports, the web report, the drift and
+// the noise chain (server/noise_reference.h) read it back with results::FromJson.
 // Config keys: method, device, accel_unit, gyro_unit (server/inertial_log.h), taus_per_decade
 // (0 = octaves, default; else 1..100).
 #ifndef CALIBD_SERVER_NOISE_METHOD_H_
@@ -22,6 +25,7 @@
 
 #include "core/noise.h"
 #include "core/noise_simulation.h"
+#include "results/noise_result.h"
 #include "server/method.h"
 
 namespace calibd::server {
@@ -45,7 +49,9 @@ struct NoiseSimulationFileOptions {
 Status SimulateNoiseFiles(const NoiseSimulationFileOptions& options, std::string* csv,
                           nlohmann::json* config, nlohmann::json* truth);
 
-// The result JSON of a core result (used by the method; exposed for tests).
+// The typed result (results/noise_result.h) of a core result, and its JSON (used by the method;
+// exposed for tests). The adapter adds diagnostics.units.
+results::NoiseResult NoiseResultOf(const core::NoiseResult& result, int taus_per_decade);
 nlohmann::json NoiseResultToJson(const core::NoiseResult& result, int taus_per_decade);
 
 // Exports of a noise result (server/noise_exports.cc; formats in server/exports.h).

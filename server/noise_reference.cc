@@ -1,8 +1,11 @@
 #include "server/noise_reference.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
+#include "results/noise_result.h"
 #include "server/config.h"
 
 namespace calibd::server {
@@ -10,6 +13,8 @@ namespace calibd::server {
 using nlohmann::json;
 
 namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 Status KeyError(const std::string& key, const std::string& message) {
   return Status::InvalidInput("config key '" + key + "': " + message).WithField(key);
@@ -30,38 +35,44 @@ Status Resolve(storage::Store* store, const std::string& key, json* value) {
     return KeyError(key, "job " + std::to_string(id) + " is a " + Name(job.status) + " " +
                              job.method + " job; it must be a succeeded noise job");
   }
-  json result;
-  if (!ParseJsonText(job.result_json, "result", &result).ok()) {
+  json doc;
+  if (!ParseJsonText(job.result_json, "result", &doc).ok()) {
     return Status::Internal("stored result is not JSON");
   }
+  // The noise job's result, typed: a result this calibd cannot read (e.g. a newer schema) is the
+  // user's reference that does not work, named with the path of the problem.
+  results::NoiseResult result;
+  s = results::FromJson(doc, &result);
+  if (!s.ok()) {
+    return KeyError(key, "noise job " + std::to_string(id) + " cannot be used: " + s.message());
+  }
   const char prefix = key == "accel_noise" ? 'a' : 'g';
-  const json rate = result["diagnostics"].value("rate", json());
+  const double rate = result.diagnostics.rate;
   double worst = -1, worst_walk = -1;
   bool walk_seen = true;  // every channel of the type shows its random walk
   json channels = json::array();
-  for (const json& c : result["parameters"].value("channels", json::array())) {
-    const std::string name = c.value("name", "");
-    if (name.empty() || name[0] != prefix) continue;
-    const json& n = c.value("white_noise", json());
-    if (!n.is_number()) {
+  for (const results::NoiseChannelParameters& c : result.channels) {
+    if (c.name.empty() || c.name[0] != prefix) continue;
+    if (!std::isfinite(c.white_noise)) {
       return KeyError(
-          key, "noise job " + std::to_string(id) + " does not show the white noise of " + name);
+          key, "noise job " + std::to_string(id) + " does not show the white noise of " + c.name);
     }
-    const json& k = c.value("random_walk", json());
-    channels.push_back({{"name", name}, {"white_noise", n}, {"random_walk", k}});
-    worst = std::max(worst, n.get<double>());
-    if (k.is_number()) {
-      worst_walk = std::max(worst_walk, k.get<double>());
+    channels.push_back({{"name", c.name},
+                        {"white_noise", c.white_noise},
+                        {"random_walk", results::Num(c.random_walk)}});
+    worst = std::max(worst, c.white_noise);
+    if (std::isfinite(c.random_walk)) {
+      worst_walk = std::max(worst_walk, c.random_walk);
     } else {
       walk_seen = false;
     }
   }
-  if (worst <= 0 || !rate.is_number() || !(rate.get<double>() > 0)) {
+  if (worst <= 0 || !(rate > 0) || !std::isfinite(rate)) {
     return KeyError(key, std::string("noise job ") + std::to_string(id) + " has no " +
                              (prefix == 'a' ? "accelerometer" : "gyroscope") + " channels");
   }
   *value = {{"job", id},
-            {"sigma", worst * std::sqrt(rate.get<double>())},
+            {"sigma", worst * std::sqrt(rate)},
             {"white_noise", worst},
             {"random_walk", walk_seen && worst_walk > 0 ? json(worst_walk) : json()},
             {"rate", rate},
@@ -115,15 +126,30 @@ Status ReadNoiseLevel(const json& config, const char* key, std::optional<NoiseLe
   return Status::Ok();
 }
 
+std::optional<NoiseFigures> ReadNoiseFigures(const json& config, const char* key) {
+  auto it = config.find(key);
+  if (it == config.end() || !it->is_object() || !it->contains("sigma")) return std::nullopt;
+  auto number = [&](const char* member) {
+    auto m = it->find(member);
+    return m != it->end() && m->is_number() ? m->get<double>() : kNaN;
+  };
+  NoiseFigures f;
+  if (auto job = it->find("job"); job != it->end() && job->is_number_integer()) {
+    f.job = job->get<int64_t>();
+  }
+  f.white_noise = number("white_noise");
+  f.random_walk = number("random_walk");
+  return f;
+}
+
 json NoiseModelJson(const json& config) {
   json out = {{"accelerometer", nullptr}, {"gyroscope", nullptr}};
   for (auto [key, sensor] : {std::pair<const char*, const char*>{"accel_noise", "accelerometer"},
                              {"gyro_noise", "gyroscope"}}) {
-    auto it = config.find(key);
-    if (it != config.end() && it->is_object() && it->contains("sigma")) {
-      out[sensor] = {{"job", it->value("job", json())},
-                     {"white_noise", it->value("white_noise", json())},
-                     {"random_walk", it->value("random_walk", json())}};
+    if (std::optional<NoiseFigures> f = ReadNoiseFigures(config, key)) {
+      out[sensor] = {{"job", f->job ? json(*f->job) : json()},
+                     {"white_noise", results::Num(f->white_noise)},
+                     {"random_walk", results::Num(f->random_walk)}};
     }
   }
   return out;

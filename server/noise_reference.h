@@ -26,8 +26,10 @@
 
 namespace calibd::server {
 
-// kInvalidInput naming the key: not an integer id, no such job, not a succeeded noise job, or a
-// job whose log does not show the white noise of that sensor type; storage errors as they are.
+// kInvalidInput naming the key: not an integer id, no such job, not a succeeded noise job, a job
+// whose stored result does not read as results::NoiseResult (results/noise_result.h: the message
+// names the path of the problem, e.g. a newer schema_version), or a job whose log does not show
+// the white noise of that sensor type; storage errors as they are.
 // Leaves numbers and already-resolved references alone. Only for methods imu and array.
 Status ResolveNoiseReferences(storage::Store* store, nlohmann::json* config);
 
@@ -41,6 +43,15 @@ struct NoiseLevel {
 // resolved reference. kInvalidInput naming the key otherwise.
 Status ReadNoiseLevel(const nlohmann::json& config, const char* key,
                       std::optional<NoiseLevel>* out);
+
+// Kalibr's figures of config[key] when it is a resolved reference (SI; the largest axis; NaN for
+// a figure the noise job did not show); nullopt for a number, nothing, or an unresolved reference.
+struct NoiseFigures {
+  std::optional<int64_t> job;
+  double white_noise = 0;  // unit/√Hz
+  double random_walk = 0;  // unit/s/√Hz
+};
+std::optional<NoiseFigures> ReadNoiseFigures(const nlohmann::json& config, const char* key);
 
 // {"accelerometer": ID or null, "gyroscope": ID or null}: the noise jobs a config's resolved
 // references came from, for the result's diagnostics.noise_jobs.

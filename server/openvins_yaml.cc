@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <sstream>
 
+#include "results/imu_result.h"
+
 namespace calibd::server {
 
 using nlohmann::json;
@@ -23,27 +25,6 @@ std::string CommentSafe(const std::string& s) {
   std::string out;
   for (unsigned char c : s) out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
   return out;
-}
-
-bool ReadMatrix(const json& j, Eigen::Matrix3d* m) {
-  if (!j.is_array() || j.size() != 3) return false;
-  for (int r = 0; r < 3; ++r) {
-    if (!j[r].is_array() || j[r].size() != 3) return false;
-    for (int c = 0; c < 3; ++c) {
-      if (!j[r][c].is_number()) return false;
-      (*m)(r, c) = j[r][c].get<double>();
-    }
-  }
-  return true;
-}
-
-bool ReadVector(const json& j, Eigen::Vector3d* v) {
-  if (!j.is_array() || j.size() != 3) return false;
-  for (int i = 0; i < 3; ++i) {
-    if (!j[i].is_number()) return false;
-    (*v)(i) = j[i].get<double>();
-  }
-  return true;
 }
 
 // M = Q L with Q a rotation and L lower triangular with a positive diagonal (QL decomposition,
@@ -77,21 +58,25 @@ void WriteMatrix(std::ostringstream& y, const char* key, const Eigen::Matrix3d& 
 }  // namespace
 
 Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context, std::string* out) {
-  const json& params = result.value("parameters", json::object());
-  const json& imus = params.value("imus", json::array());
-  const json& diagnostics = result.value("diagnostics", json::object());
-  if (!imus.is_array() || imus.empty()) return Status::Internal("stored imu result has no imus");
-  if (!params.contains("accel_unit") || !params["accel_unit"].is_number() ||
-      !params.contains("gyro_unit") || !params["gyro_unit"].is_number() ||
-      !diagnostics.contains("rate") || !diagnostics["rate"].is_number()) {
+  results::ImuResult typed;
+  if (Status s = results::FromJson(result, &typed); !s.ok()) {
+    return Status::Internal("stored imu result: " + s.message());
+  }
+  if (!typed.parameters || typed.parameters->imus.empty()) {
+    return Status::Internal("stored imu result has no imus");
+  }
+  const results::ImuParameters& params = *typed.parameters;
+  const results::ImuDiagnostics& diagnostics = typed.diagnostics;
+  if (!params.accel_unit || !std::isfinite(*params.accel_unit) || !params.gyro_unit ||
+      !std::isfinite(*params.gyro_unit) || !diagnostics.rate || !std::isfinite(*diagnostics.rate)) {
     return Status::NotDeterminable(
         "this imu result predates the reading units and rate being stored with it; run the job "
         "again (POST /api/v1/jobs with its recording) to export it for OpenVINS");
   }
-  const double accel_unit = params["accel_unit"].get<double>();
-  const double gyro_unit = params["gyro_unit"].get<double>();
-  const double rate = diagnostics["rate"].get<double>();
-  const json& per_imu_diagnostics = diagnostics.value("imus", json::array());
+  const double accel_unit = *params.accel_unit;
+  const double gyro_unit = *params.gyro_unit;
+  const double rate = *diagnostics.rate;
+  const std::vector<results::ImuTriads>& imus = params.imus;
 
   std::ostringstream y;
   y << "%YAML:1.0\n"
@@ -107,16 +92,13 @@ Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context,
     << "# intervals' per-sample spread / sqrt(update_rate), and no random walks (a hand-held log\n"
     << "# cannot show them: run a calibd noise job on a long stationary log).\n";
   for (size_t k = 0; k < imus.size(); ++k) {
-    const json& imu = imus[k];
-    Eigen::Matrix3d ma, mg;
-    Eigen::Vector3d ba, bg;
-    if (!ReadMatrix(imu["accelerometer"].value("matrix", json()), &ma) ||
-        !ReadMatrix(imu["gyroscope"].value("matrix", json()), &mg) ||
-        !ReadVector(imu["accelerometer"].value("bias", json()), &ba) ||
-        !ReadVector(imu["gyroscope"].value("bias", json()), &bg)) {
+    const results::ImuTriads& imu = imus[k];
+    Eigen::Matrix3d ma = imu.accelerometer.matrix, mg = imu.gyroscope.matrix;
+    const Eigen::Vector3d ba = imu.accelerometer.bias, bg = imu.gyroscope.bias;
+    if (!ma.allFinite() || !mg.allFinite() || !ba.allFinite() || !bg.allFinite()) {
       return Status::Internal("stored imu result lacks a matrix or bias");
     }
-    const std::string name = imu.value("name", std::to_string(k));
+    const std::string& name = imu.name;
     ma /= accel_unit;  // per SI reading
     mg /= gyro_unit;
     Eigen::Matrix3d r, la, q, lg;
@@ -131,11 +113,10 @@ Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context,
                                      "has no OpenVINS form");
     }
     double accel_sigma = 0, gyro_sigma = 0;
-    if (k < per_imu_diagnostics.size()) {
-      const json& noise = per_imu_diagnostics[k].value("noise", json::object());
-      Eigen::Vector3d sa, sg;
-      if (ReadVector(noise.value("accelerometer", json()), &sa)) accel_sigma = sa.maxCoeff();
-      if (ReadVector(noise.value("gyroscope", json()), &sg)) gyro_sigma = sg.maxCoeff();
+    if (k < diagnostics.imus.size()) {
+      const results::ImuFitDiagnostics& d = diagnostics.imus[k];
+      if (d.accel_noise.allFinite()) accel_sigma = d.accel_noise.maxCoeff();
+      if (d.gyro_noise.allFinite()) gyro_sigma = d.gyro_noise.maxCoeff();
     }
     const Eigen::Vector3d ba_si = ba * accel_unit, bg_si = bg * gyro_unit;
     y << "imu" << k << ":  # calibd IMU " << CommentSafe(name) << "\n"
@@ -146,27 +127,28 @@ Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context,
       << "    - [0.0, 0.0, 0.0, 1.0]\n";
     // Kalibr's noise figures: from the noise job the calibration used (accel_noise/gyro_noise
     // {"job": ID}), else the densities from the statics' spread; random walks only from a job.
-    const json& noise_model = diagnostics.value("noise_model", json::object());
     for (int type = 0; type < 2; ++type) {
       const char* sensor = type == 0 ? "accelerometer" : "gyroscope";
       const char* units[2][2] = {{"m/s^2/sqrt(Hz)", "m/s^3/sqrt(Hz)"},
                                  {"rad/s/sqrt(Hz)", "rad/s^2/sqrt(Hz)"}};
-      const json& from_job = noise_model.is_object() ? noise_model.value(sensor, json()) : json();
-      const std::string job =
-          from_job.is_object() && from_job.value("job", json()).is_number_integer()
-              ? std::to_string(from_job["job"].get<int64_t>())
-              : "";
+      const std::optional<results::ImuNoiseModel>* from_job =
+          diagnostics.noise_model ? (type == 0 ? &diagnostics.noise_model->accelerometer
+                                               : &diagnostics.noise_model->gyroscope)
+                                  : nullptr;
+      const results::ImuNoiseModel* model =
+          from_job != nullptr && from_job->has_value() && (*from_job)->job ? &**from_job : nullptr;
+      const std::string job = model != nullptr ? std::to_string(*model->job) : "";
       const double sigma = type == 0 ? accel_sigma : gyro_sigma;
-      if (!job.empty() && from_job.value("white_noise", json()).is_number()) {
-        y << "  " << sensor << "_noise_density: " << Num(from_job["white_noise"].get<double>())
-          << "  # " << units[type][0] << ", largest axis, calibd noise job " << job << "\n";
+      if (model != nullptr && std::isfinite(model->white_noise)) {
+        y << "  " << sensor << "_noise_density: " << Num(model->white_noise) << "  # "
+          << units[type][0] << ", largest axis, calibd noise job " << job << "\n";
       } else if (sigma > 0 && rate > 0) {
         y << "  " << sensor << "_noise_density: " << Num(sigma / std::sqrt(rate)) << "  # "
           << units[type][0] << ", largest axis, from the static intervals\n";
       }
-      if (!job.empty() && from_job.value("random_walk", json()).is_number()) {
-        y << "  " << sensor << "_random_walk: " << Num(from_job["random_walk"].get<double>())
-          << "  # " << units[type][1] << ", largest axis, calibd noise job " << job << "\n";
+      if (model != nullptr && std::isfinite(model->random_walk)) {
+        y << "  " << sensor << "_random_walk: " << Num(model->random_walk) << "  # "
+          << units[type][1] << ", largest axis, calibd noise job " << job << "\n";
       } else {
         y << "  # " << sensor << "_random_walk: not known; run a calibd noise job and give it as "
           << (type == 0 ? "accel_noise" : "gyro_noise") << ": {\"job\": ID}\n";

@@ -6,6 +6,8 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 
+#include "results/imu_result.h"
+#include "results/noise_result.h"
 #include "web/html.h"
 #include "web/svg_plot.h"
 
@@ -19,31 +21,6 @@ const char kDash[] = "\xE2\x80\x93";
 const char kPlusMinus[] = " \xC2\xB1 ";
 const char kSigma[] = "\xCF\x83";
 constexpr double kSignificant = 3;  // a change of this many σ of the difference is marked
-
-// ----- Reading results (any key may be missing or of the wrong type).
-
-const json* Get(const json* j, const char* key) {
-  if (j == nullptr || !j->is_object()) return nullptr;
-  const auto it = j->find(key);
-  return it == j->end() ? nullptr : &*it;
-}
-const json* At(const json* j, size_t i) {
-  return j != nullptr && j->is_array() && i < j->size() ? &(*j)[i] : nullptr;
-}
-double Num(const json* j) { return j != nullptr && j->is_number() ? j->get<double>() : kNaN; }
-std::string Str(const json* j) {
-  return j != nullptr && j->is_string() ? j->get<std::string>() : "";
-}
-
-// The entry of `list` named `name`, else the one at `index` when it has no name.
-const json* Named(const json* list, const std::string& name, size_t index) {
-  if (list == nullptr || !list->is_array()) return nullptr;
-  for (const json& e : *list) {
-    if (Str(Get(&e, "name")) == name) return &e;
-  }
-  const json* e = At(list, index);
-  return e != nullptr && Str(Get(e, "name")).empty() ? e : nullptr;
-}
 
 // ----- Formatting.
 
@@ -184,25 +161,41 @@ struct NoiseChannel {
   double b_tau = kNaN;
 };
 
-std::vector<NoiseChannel> ReadNoise(const json& result) {
+// The channels of a noise result (results::NoiseResult); a result that does not read has none and
+// `*problem` says why.
+std::vector<NoiseChannel> ReadNoise(const json& result, std::string* problem) {
   std::vector<NoiseChannel> out;
-  const json* channels = Get(Get(&result, "parameters"), "channels");
-  const json* stds = Get(Get(&result, "uncertainty"), "channels");
-  if (channels == nullptr || !channels->is_array()) return out;
-  for (size_t i = 0; i < channels->size(); ++i) {
-    const json* c = &(*channels)[i];
+  results::NoiseResult r;
+  const Status s = results::FromJson(result, &r);
+  if (!s.ok()) {
+    *problem = s.message();
+    return out;
+  }
+  for (size_t i = 0; i < r.channels.size(); ++i) {
+    const results::NoiseChannelParameters& c = r.channels[i];
+    const results::NoiseChannelUncertainty& u = r.channel_stds[i];
+    if (c.name.empty()) continue;
     NoiseChannel ch;
-    ch.name = Str(Get(c, "name"));
-    if (ch.name.empty()) continue;
-    ch.unit = Str(Get(c, "unit"));
-    const json* u = Named(stds, ch.name, i);
-    ch.n = {Num(Get(c, "white_noise")), Num(Get(u, "white_noise_std"))};
-    ch.b = {Num(Get(c, "bias_instability")), Num(Get(u, "bias_instability_std"))};
-    ch.k = {Num(Get(c, "random_walk")), Num(Get(u, "random_walk_std"))};
-    ch.b_tau = Num(Get(c, "bias_instability_tau"));
+    ch.name = c.name;
+    ch.unit = c.unit;
+    ch.n = {c.white_noise, u.white_noise_std};
+    ch.b = {c.bias_instability, u.bias_instability_std};
+    ch.k = {c.random_walk, u.random_walk_std};
+    ch.b_tau = c.bias_instability_tau;
     out.push_back(std::move(ch));
   }
   return out;
+}
+
+// The calibrations whose result does not read, one line each ("" when every one reads).
+std::string UnreadableNote(const std::vector<const JobSummary*>& jobs,
+                           const std::vector<std::string>& problems) {
+  std::string lines;
+  for (size_t k = 0; k < jobs.size(); ++k) {
+    if (problems[k].empty()) continue;
+    lines += "<li>" + JobLink(jobs[k]->id) + ": not available (" + E(problems[k]) + ")</li>";
+  }
+  return lines.empty() ? "" : "<ul class=\"muted small drift-unreadable\">" + lines + "</ul>";
 }
 
 const NoiseChannel* FindChannel(const std::vector<NoiseChannel>& list, const std::string& name) {
@@ -316,34 +309,40 @@ struct ImuEntry {
 
 const char* const kSensors[2] = {"accelerometer", "gyroscope"};
 
-void ReadVec(const json* v, double* out, size_t n) {
-  for (size_t i = 0; i < n; ++i) out[i] = Num(At(v, i));
+void CopyVec(const Eigen::Vector3d& v, double* out) {
+  for (int i = 0; i < 3; ++i) out[i] = v(i);
 }
-void ReadMat(const json* m, double* out) {
-  for (size_t r = 0; r < 3; ++r) ReadVec(At(m, r), out + 3 * r, 3);
+void CopyMat(const Eigen::Matrix3d& m, double* out) {
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) out[3 * r + c] = m(r, c);
 }
 
-std::vector<ImuEntry> ReadImus(const json& result) {
+// The IMUs of an imu result (results::ImuResult); a result that does not read has none and
+// `*problem` says why.
+std::vector<ImuEntry> ReadImus(const json& result, std::string* problem) {
   std::vector<ImuEntry> out;
-  const json* imus = Get(Get(&result, "parameters"), "imus");
-  const json* stds = Get(Get(&result, "uncertainty"), "imus");
-  if (imus == nullptr || !imus->is_array()) return out;
-  for (size_t i = 0; i < imus->size(); ++i) {
-    const json* p = &(*imus)[i];
+  results::ImuResult r;
+  const Status s = results::FromJson(result, &r);
+  if (!s.ok()) {
+    *problem = s.message();
+    return out;
+  }
+  if (!r.parameters) return out;
+  for (size_t i = 0; i < r.parameters->imus.size(); ++i) {
+    const results::ImuTriads& p = r.parameters->imus[i];
+    const results::ImuTriadsStd& u = r.uncertainty->imus[i];
     ImuEntry e;
-    e.name = Str(Get(p, "name"));
-    if (e.name.empty()) e.name = std::to_string(i);
-    const json* u = Named(stds, e.name, i);
-    for (int s = 0; s < 2; ++s) {
-      const json* ps = Get(p, kSensors[s]);
-      const json* us = Get(u, kSensors[s]);
-      ImuSensor& x = e.sensor[s];
-      ReadVec(Get(ps, "scale"), x.scale, 3);
-      ReadVec(Get(us, "scale_std"), x.scale_std, 3);
-      ReadVec(Get(ps, "bias"), x.bias, 3);
-      ReadVec(Get(us, "bias_std"), x.bias_std, 3);
-      ReadMat(Get(ps, "misalignment"), x.t);
-      ReadMat(Get(us, "misalignment_std"), x.t_std);
+    e.name = p.name.empty() ? std::to_string(i) : p.name;
+    for (int k = 0; k < 2; ++k) {
+      const results::SensorTriad& ps = k == 0 ? p.accelerometer : p.gyroscope;
+      const results::SensorTriadStd& us = k == 0 ? u.accelerometer : u.gyroscope;
+      ImuSensor& x = e.sensor[k];
+      CopyVec(ps.scale, x.scale);
+      CopyVec(us.scale_std, x.scale_std);
+      CopyVec(ps.bias, x.bias);
+      CopyVec(us.bias_std, x.bias_std);
+      CopyMat(ps.misalignment, x.t);
+      CopyMat(us.misalignment_std, x.t_std);
     }
     out.push_back(std::move(e));
   }
@@ -474,12 +473,16 @@ std::string ImuScalePlot(const TimeAxis& ax, const std::vector<std::vector<ImuEn
 std::string NoiseDriftHtml(const std::vector<const JobSummary*>& jobs) {
   if (jobs.empty()) return "";
   std::vector<std::vector<NoiseChannel>> data;
-  for (const JobSummary* j : jobs) data.push_back(ReadNoise(j->result));
+  std::vector<std::string> problems(jobs.size());
+  for (size_t k = 0; k < jobs.size(); ++k) data.push_back(ReadNoise(jobs[k]->result, &problems[k]));
+  const std::string unreadable = UnreadableNote(jobs, problems);
   const TimeAxis ax = MakeTimeAxis(jobs);
   std::string tables = NoiseTable(jobs, data, 'a') + NoiseTable(jobs, data, 'g');
-  if (tables.empty()) return "<p class=\"muted\">No noise terms in these results.</p>";
+  if (tables.empty()) {
+    return "<p class=\"muted\">No noise terms in these results.</p>" + unreadable;
+  }
   const std::string figs = NoisePlot(ax, data, 'a') + NoisePlot(ax, data, 'g');
-  return tables + OmittedNote(jobs.size()) +
+  return tables + OmittedNote(jobs.size()) + unreadable +
          "<p class=\"muted small\">\xC2\xB1 is one standard deviation. A change is given "
          "relative to the previous calibration and in standard deviations of the difference, "
          "\xE2\x88\x9A(\xCF\x83\xE2\x82\x81\xC2\xB2 + \xCF\x83\xE2\x82\x82\xC2\xB2); from 3 on "
@@ -491,7 +494,9 @@ std::string NoiseDriftHtml(const std::vector<const JobSummary*>& jobs) {
 std::string ImuDriftHtml(const std::vector<const JobSummary*>& jobs) {
   if (jobs.empty()) return "";
   std::vector<std::vector<ImuEntry>> data;
-  for (const JobSummary* j : jobs) data.push_back(ReadImus(j->result));
+  std::vector<std::string> problems(jobs.size());
+  for (size_t k = 0; k < jobs.size(); ++k) data.push_back(ReadImus(jobs[k]->result, &problems[k]));
+  const std::string unreadable = UnreadableNote(jobs, problems);
   std::string rows;
   const size_t first =
       jobs.size() > kMaxDriftCalibrations ? jobs.size() - kMaxDriftCalibrations : 0;
@@ -503,7 +508,9 @@ std::string ImuDriftHtml(const std::vector<const JobSummary*>& jobs) {
       rows += ImuRows(*jobs[k], e, prev, i == 0, 2 * data[k].size());
     }
   }
-  if (rows.empty()) return "<p class=\"muted\">No IMU parameters in these results.</p>";
+  if (rows.empty()) {
+    return "<p class=\"muted\">No IMU parameters in these results.</p>" + unreadable;
+  }
   const std::string change = kChangeHeading;
   const std::string figs = ImuScalePlot(MakeTimeAxis(jobs), data);
   return "<div class=\"table-wrap\"><table class=\"table-drift-imu\"><thead><tr>"
@@ -514,7 +521,7 @@ std::string ImuDriftHtml(const std::vector<const JobSummary*>& jobs) {
          "<th class=\"num\">largest \xCE\x94T (mrad)</th>"
          "<th class=\"num\">bias b, x y z (reading units)</th>" +
          change + "</tr></thead><tbody>" + rows + "</tbody></table></div>" +
-         OmittedNote(jobs.size()) +
+         OmittedNote(jobs.size()) + unreadable +
          "<p class=\"muted small\">\xC2\xB1 is one standard deviation. Changes are against the "
          "previous calibration of the same IMU, with their size in standard deviations of the "
          "difference; from 3 on they are marked. The misalignment column shows the largest "

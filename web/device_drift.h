@@ -4,8 +4,11 @@
 // return them. The pca and array drift live in their own reports.
 //
 // Input: one method's accepted, not revoked jobs of one device, oldest first, with their SPEC §7
-// result JSON (missing or mistyped keys render as "–", never throw). Output: an HTML fragment;
-// every user-controlled string (channel and IMU names) is escaped. Pure and thread-safe.
+// result JSON, each read once as its typed result (results/noise_result.h, results/imu_result.h;
+// undefined values render as "–" or "not visible"). A result that does not read adds no rows and
+// is listed under the table (ul.drift-unreadable: its job and the reader's message naming the
+// path); nothing throws. Output: an HTML fragment; every user-controlled string (channel and IMU
+// names) is escaped. Pure and thread-safe.
 //
 // What is shown:
 //   noise  one table per sensor type (accelerometers: channels a*, gyroscopes: g*), a row per

@@ -1,4 +1,5 @@
-// The imu report section (web/reports.h).
+// The imu report section (web/reports.h): reads the result once as results::ImuResult
+// (results/imu_result.h); a result that does not read shows "not available" with the reason.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -11,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "results/imu_result.h"
 #include "web/device_drift.h"
 #include "web/html.h"
 #include "web/report_common.h"
@@ -19,52 +21,67 @@
 
 namespace calibd::web::internal {
 
-std::string Vec3Cell(const json* v, int sig = 6) {
+namespace {
+
+// A result that does not read as results::ImuResult: the "not available" text with the reader's
+// message (which names the path of the problem).
+std::string Unreadable(const std::string& what, const Status& s) {
+  return NotAvailable(what) + "<p class=\"muted small\">" + E(s.message()) + "</p>";
+}
+
+// A number as the diagnostics table shows it (integral values without decimals; NaN a dash).
+std::string Scalar(double v, int sig) {
+  const json j = results::Num(v);
+  return ScalarText(&j, sig);
+}
+
+std::string Vec3Cell(const Eigen::Vector3d& v, int sig = 6) {
   std::string text;
-  for (size_t k = 0; k < 3; ++k) {
-    const json* x = v != nullptr && v->is_array() && k < v->size() ? &(*v)[k] : nullptr;
-    text += (k ? "<br>" : "") + FormatSig(Num(x), sig);  // x, y, z stacked: fits 1280 px
+  for (int k = 0; k < 3; ++k) {
+    text += (k ? "<br>" : "") + FormatSig(v(k), sig);  // x, y, z stacked: fits 1280 px
   }
   return NumCell(text);
 }
 
-// One figure per item of `items` (1-based index on x): `before` and `after` (keys of each item)
-// as open and filled circles; "" when there are no items.
-std::string BeforeAfterPlot(const json* items, const char* before_key, const char* after_key,
+// One figure per item of `items` (1-based index on x): `before(item)` and `after(item)` as open
+// and filled circles; "" when there are no items.
+template <class T, class Before, class After>
+std::string BeforeAfterPlot(const std::vector<T>& items, Before before_of, After after_of,
                             PlotOptions options, const std::string& caption) {
-  if (items == nullptr || !items->is_array() || items->empty()) return "";
+  if (items.empty()) return "";
   Series before, after;
   before.label = "nominal conversion";
   after.label = "calibrated";
   before.marker = Marker::kOpenCircle;
   after.marker = Marker::kCircle;
   before.line = after.line = false;
-  for (size_t j = 0; j < items->size(); ++j) {
+  for (size_t j = 0; j < items.size(); ++j) {
     before.x.push_back(static_cast<double>(j + 1));
     after.x.push_back(static_cast<double>(j + 1));
-    before.y.push_back(Num(Get((*items)[j], before_key)));
-    after.y.push_back(Num(Get((*items)[j], after_key)));
+    before.y.push_back(before_of(items[j]));
+    after.y.push_back(after_of(items[j]));
   }
   options.y.include_zero = true;
   return Figure(RenderXYPlot(options, {before, after}), caption);
 }
 
+}  // namespace
+
 std::string ImuReport(const JobView& view) {
-  const json& result = view.job.result;
-  const json* params = Get(result, "parameters");
-  const json* unc = Get(result, "uncertainty");
-  const json* diag = Get(result, "diagnostics");
-  const json* imus = Get(params, "imus");
+  results::ImuResult r;
+  if (Status st = results::FromJson(view.job.result, &r); !st.ok()) {
+    return Unreadable("The imu result", st);
+  }
+  const results::ImuDiagnostics& diag = r.diagnostics;
   std::string out;
   out += Guard("Parameters", [&] {
-    std::string s = "<dl class=\"kv\"><dt>gravity</dt><dd>" +
-                    E(ScalarText(Get(params, "gravity"), 7)) +
-                    " m/s\xC2\xB2</dd><dt>gyroscope bias</dt><dd>" +
-                    E(ScalarText(Get(params, "gyro_bias"))) + "</dd><dt>static intervals</dt><dd>";
-    const json* statics = Get(diag, "statics");
-    s += std::to_string(statics != nullptr && statics->is_array() ? statics->size() : 0) + " (" +
-         E(Str(Get(diag, "threshold_choice"))) + ")</dd></dl>";
-    if (imus == nullptr || !imus->is_array() || imus->empty()) {
+    if (!r.parameters) return NotAvailable("Parameters");
+    const results::ImuParameters& params = *r.parameters;
+    std::string s = "<dl class=\"kv\"><dt>gravity</dt><dd>" + E(Scalar(params.gravity, 7)) +
+                    " m/s\xC2\xB2</dd><dt>gyroscope bias</dt><dd>" + E(params.gyro_bias) +
+                    "</dd><dt>static intervals</dt><dd>";
+    s += std::to_string(diag.statics.size()) + " (" + E(diag.threshold_choice) + ")</dd></dl>";
+    if (params.imus.empty()) {
       return Section("parameters", "Parameters", s + NotAvailable("IMUs"));
     }
     s += "<div class=\"table-wrap\"><table class=\"table-imu-parameters\"><thead><tr>"
@@ -72,30 +89,22 @@ std::string ImuReport(const JobView& view) {
          "<th>\xCF\x83(b)<br>(reading units)</th><th>scale K, x y z<br>(SI per reading unit)</th>"
          "<th>\xCF\x83(K)<br>(SI per reading unit)</th><th>misalignment T<br>(3 rows, unitless)"
          "</th></tr></thead><tbody>";
-    const json* uimus = Get(unc, "imus");
-    for (size_t i = 0; i < imus->size(); ++i) {
-      const json& imu = (*imus)[i];
-      const json* u =
-          uimus != nullptr && uimus->is_array() && i < uimus->size() ? &(*uimus)[i] : nullptr;
-      for (const char* sensor : {"accelerometer", "gyroscope"}) {
-        const json* p = Get(imu, sensor);
-        const json* ps = Get(u, sensor);
-        const json* t = Get(p, "misalignment");
+    for (size_t i = 0; i < params.imus.size(); ++i) {
+      const results::ImuTriads& imu = params.imus[i];
+      const results::ImuTriadsStd& u = r.uncertainty->imus[i];
+      for (int t = 0; t < 2; ++t) {
+        const results::SensorTriad& p = t == 0 ? imu.accelerometer : imu.gyroscope;
+        const results::SensorTriadStd& ps = t == 0 ? u.accelerometer : u.gyroscope;
         std::string rows;
-        for (size_t r = 0; r < 3; ++r) {
-          const json* row = t != nullptr && t->is_array() && r < t->size() ? &(*t)[r] : nullptr;
+        for (int row = 0; row < 3; ++row) {
           std::string cells;
-          for (size_t k = 0; k < 3; ++k) {
-            const json* x =
-                row != nullptr && row->is_array() && k < row->size() ? &(*row)[k] : nullptr;
-            cells += (k ? " " : "") + FormatFixed(Num(x), 5);
-          }
-          rows += (r ? "<br>" : "") + cells;
+          for (int k = 0; k < 3; ++k)
+            cells += (k ? " " : "") + FormatFixed(p.misalignment(row, k), 5);
+          rows += (row ? "<br>" : "") + cells;
         }
-        s += "<tr><td>" + E(Str(Get(imu, "name"))) + "</td><td>" + sensor + "</td>" +
-             Vec3Cell(Get(p, "bias")) + Vec3Cell(Get(ps, "bias_std"), 2) +
-             Vec3Cell(Get(p, "scale")) + Vec3Cell(Get(ps, "scale_std"), 2) +
-             "<td class=\"num small\">" + rows + "</td></tr>";
+        s += "<tr><td>" + E(imu.name) + "</td><td>" + (t == 0 ? "accelerometer" : "gyroscope") +
+             "</td>" + Vec3Cell(p.bias) + Vec3Cell(ps.bias_std, 2) + Vec3Cell(p.scale) +
+             Vec3Cell(ps.scale_std, 2) + "<td class=\"num small\">" + rows + "</td></tr>";
       }
     }
     s += "</tbody></table></div><p class=\"muted small\">The parameters of the model above. T_a "
@@ -105,39 +114,38 @@ std::string ImuReport(const JobView& view) {
     return Section("parameters", "Parameters", s);
   });
   out += Guard("Fit", [&] {
-    const json* d = Get(diag, "imus");
-    if (d == nullptr || !d->is_array()) return std::string();
+    if (diag.imus.empty()) return std::string();
     std::string s, figs;
-    for (const json& imu : *d) {
-      const json* res = Get(imu, "residuals");
-      const json* cov = Get(imu, "coverage");
-      s += "<h3>IMU " + E(Str(Get(imu, "name"))) + "</h3><dl class=\"kv\">";
+    for (const results::ImuFitDiagnostics& imu : diag.imus) {
+      s += "<h3>IMU " + E(imu.name) + "</h3><dl class=\"kv\">";
       s += "<dt>|a| \xE2\x88\x92 g over the statics (RMS)</dt><dd>" +
-           FormatSI(Num(Get(res, "accel_norm_rms_before")), "m/s\xC2\xB2") + " before, " +
-           FormatSI(Num(Get(res, "accel_norm_rms_after")), "m/s\xC2\xB2") + " after</dd>";
+           FormatSI(imu.accel_norm_rms_before, "m/s\xC2\xB2") + " before, " +
+           FormatSI(imu.accel_norm_rms_after, "m/s\xC2\xB2") + " after</dd>";
       s += "<dt>gravity direction after each rotation (RMS)</dt><dd>" +
-           FormatSI(Num(Get(res, "gyro_direction_rms_before")), "rad") + " before, " +
-           FormatSI(Num(Get(res, "gyro_direction_rms_after")), "rad") + " after</dd>";
-      s += "<dt>\xCF\x87\xC2\xB2 / degrees of freedom</dt><dd>" +
-           E(ScalarText(Get(imu, "chi2_per_dof"), 3)) + "</dd>";
-      s += "<dt>orientation coverage</dt><dd>" + E(Str(Get(cov, "verdict"))) +
-           " (smallest eigenvalue " + E(ScalarText(Get(cov, "min_eigenvalue"), 3)) +
+           FormatSI(imu.gyro_direction_rms_before, "rad") + " before, " +
+           FormatSI(imu.gyro_direction_rms_after, "rad") + " after</dd>";
+      s += "<dt>\xCF\x87\xC2\xB2 / degrees of freedom</dt><dd>" + E(Scalar(imu.chi2_per_dof, 3)) +
+           "</dd>";
+      s += "<dt>orientation coverage</dt><dd>" + E(imu.coverage.verdict) +
+           " (smallest eigenvalue " + E(Scalar(imu.coverage.min_eigenvalue, 3)) +
            ", 1 = evenly spread)</dd></dl>";
       PlotOptions o;
       o.name = "imu-gravity-norm";
       o.title = "|a| \xE2\x88\x92 g per static interval";
       o.x.title = "static interval";
       o.y.title = "|a| \xE2\x88\x92 g (m/s\xC2\xB2)";
-      figs += BeforeAfterPlot(Get(imu, "statics"), "norm_residual_before", "norm_residual_after", o,
-                              "Each static's specific force should have the magnitude of gravity.");
+      figs += BeforeAfterPlot(
+          imu.statics, [](const results::ImuStatic& x) { return x.norm_residual_before; },
+          [](const results::ImuStatic& x) { return x.norm_residual_after; }, o,
+          "Each static's specific force should have the magnitude of gravity.");
       o.name = "imu-rotation-error";
       o.title = "Gravity direction error after each rotation";
       o.x.title = "rotation (between statics j and j+1)";
       o.y.title = "angle (rad)";
-      figs += BeforeAfterPlot(Get(imu, "rotations"), "direction_error_before",
-                              "direction_error_after", o,
-                              "The integrated gyroscope must carry gravity's direction from one "
-                              "static to the next.");
+      figs += BeforeAfterPlot(
+          imu.rotations, [](const results::ImuRotation& x) { return x.direction_error_before; },
+          [](const results::ImuRotation& x) { return x.direction_error_after; }, o,
+          "The integrated gyroscope must carry gravity's direction from one static to the next.");
     }
     return Section("fit", "Fit", s + "<div class=\"plots\">" + figs + "</div>");
   });
@@ -146,13 +154,16 @@ std::string ImuReport(const JobView& view) {
 
 // A failed imu job: the statics found on the timeline, and per IMU its coverage and rotations.
 std::string ImuPartial(const JobView& view) {
-  const json* diag = Get(view.job.error_detail, "diagnostics");
-  const json* statics = Array(Get(diag, "statics"));
-  const size_t n = statics != nullptr ? statics->size() : 0;
+  results::ImuResult r;
+  if (Status st = results::FromJson(view.job.error_detail, &r); !st.ok()) {
+    return Unreadable("The partial diagnostics", st);
+  }
+  const results::ImuDiagnostics& diag = r.diagnostics;
+  const size_t n = diag.statics.size();
   std::string s = "<dl class=\"kv partial-imu\"><dt>static intervals found</dt><dd>" +
                   std::to_string(n) + "</dd><dt>sample rate</dt><dd>" +
-                  FormatSI(Num(Get(diag, "rate")), "Hz") + "</dd><dt>threshold</dt><dd>" +
-                  E(Str(Get(diag, "threshold_choice"))) + "</dd></dl>";
+                  FormatSI(diag.rate.value_or(kNaN), "Hz") + "</dd><dt>threshold</dt><dd>" +
+                  E(diag.threshold_choice) + "</dd></dl>";
   if (n > 0) {
     PlotOptions o;
     o.name = "imu-statics-found";
@@ -167,8 +178,8 @@ std::string ImuPartial(const JobView& view) {
     mid.line = false;
     mid.marker = Marker::kCircle;
     size_t k = 0;
-    for (const json& iv : *statics) {
-      const double a = Num(Get(&iv, "start")), b = Num(Get(&iv, "end"));
+    for (const results::ImuInterval& iv : diag.statics) {
+      const double a = iv.start, b = iv.end;
       ++k;
       if (!std::isfinite(a) || !std::isfinite(b)) continue;
       o.bands.push_back({a, b, std::to_string(k)});
@@ -179,31 +190,20 @@ std::string ImuPartial(const JobView& view) {
                 "Shaded and numbered: the static intervals the detector found on the log's "
                 "timeline (marker: each one's duration).");
   }
-  const json* imus = Array(Get(diag, "imus"));
-  if (imus != nullptr) {
-    for (const json& imu : *imus) {
-      const json* cov = Get(&imu, "coverage");
-      const json* missing = Array(Get(cov, "missing_up"));
-      std::string missing_text;
-      if (missing != nullptr) {
-        for (const json& m : *missing) {
-          if (m.is_string())
-            missing_text += (missing_text.empty() ? "" : ", ") + m.get<std::string>();
-        }
-      }
-      const json* rotations = Array(Get(&imu, "rotations"));
-      s += "<h3>IMU " + E(Str(Get(&imu, "name"))) + "</h3><dl class=\"kv\">";
-      s += "<dt>termination</dt><dd>" + E(Str(Get(&imu, "termination"))) + "</dd>";
-      s += "<dt>rotations between statics</dt><dd>" +
-           std::to_string(rotations != nullptr ? rotations->size() : 0) + "</dd>";
-      s += "<dt>orientation coverage</dt><dd class=\"coverage-verdict\">" +
-           E(Str(Get(cov, "verdict")).empty() ? std::string(kDash) : Str(Get(cov, "verdict"))) +
-           "</dd>";
-      if (!missing_text.empty()) {
-        s += "<dt>orientations missing (up)</dt><dd>" + E(missing_text) + "</dd>";
-      }
-      s += "</dl>";
+  for (const results::ImuFitDiagnostics& imu : diag.imus) {
+    std::string missing_text;
+    for (const std::string& m : imu.coverage.missing_up) {
+      missing_text += (missing_text.empty() ? "" : ", ") + m;
     }
+    s += "<h3>IMU " + E(imu.name) + "</h3><dl class=\"kv\">";
+    s += "<dt>termination</dt><dd>" + E(imu.termination) + "</dd>";
+    s += "<dt>rotations between statics</dt><dd>" + std::to_string(imu.rotations.size()) + "</dd>";
+    s += "<dt>orientation coverage</dt><dd class=\"coverage-verdict\">" +
+         E(imu.coverage.verdict.empty() ? std::string(kDash) : imu.coverage.verdict) + "</dd>";
+    if (!missing_text.empty()) {
+      s += "<dt>orientations missing (up)</dt><dd>" + E(missing_text) + "</dd>";
+    }
+    s += "</dl>";
   }
   return s;
 }

@@ -1,4 +1,5 @@
-// The noise report section (web/reports.h).
+// The noise report section (web/reports.h): reads the result once as results::NoiseResult
+// (results/noise_result.h); a result that does not read shows "not available" with the reason.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -11,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "results/noise_result.h"
 #include "web/device_drift.h"
 #include "web/html.h"
 #include "web/report_common.h"
@@ -19,40 +21,44 @@
 
 namespace calibd::web::internal {
 
-std::vector<double> Doubles(const json* j) {
-  std::vector<double> out;
-  if (j == nullptr || !j->is_array()) return out;
-  for (const json& v : *j) out.push_back(v.is_number() ? v.get<double>() : kNaN);
-  return out;
+namespace {
+
+// A result that does not read as results::NoiseResult: the "not available" text with the reader's
+// message (which names the path of the problem).
+std::string Unreadable(const std::string& what, const Status& s) {
+  return NotAvailable(what) + "<p class=\"muted small\">" + E(s.message()) + "</p>";
 }
 
-// "1.23e-4 ± 2.1e-6" or "not visible" for a null term.
-std::string TermCell(const json* value, const json* std) {
-  const double v = Num(value), s = Num(std);
+// A number as the diagnostics table shows it (integral values without decimals; NaN a dash).
+std::string Scalar(double v, int sig = 6) {
+  const json j = results::Num(v);
+  return ScalarText(&j, sig);
+}
+
+// "1.23e-4 ± 2.1e-6" or "not visible" for a term the log does not show (NaN).
+std::string TermCell(double v, double s) {
   if (!std::isfinite(v)) return "<td class=\"num muted\">not visible</td>";
   return NumCell(FormatSig(v, 4) + (std::isfinite(s) ? " \xC2\xB1 " + FormatSig(s, 2) : ""));
 }
 
 // Log-log Allan deviation of the channels of one sensor type, with their confidence bands and
 // the fitted model.
-std::string AllanPlot(const json* diag, char kind, const std::string& unit) {
-  const json* allan = Get(diag, "allan");
-  if (allan == nullptr || !allan->is_array()) return "";
+std::string AllanPlot(const std::vector<results::NoiseAllanCurve>& allan, char kind,
+                      const std::string& unit) {
   std::vector<Series> series;
   int color = 0;
-  for (const json& c : *allan) {
-    const std::string name = Str(Get(c, "name"));
-    if (name.empty() || name[0] != kind) continue;
+  for (const results::NoiseAllanCurve& c : allan) {
+    if (c.name.empty() || c.name[0] != kind) continue;
     Series data;
-    data.label = name;
-    data.x = Doubles(Get(c, "tau"));
-    data.y = Doubles(Get(c, "adev"));
+    data.label = c.name;
+    data.x = c.tau;
+    data.y = c.adev;
     data.marker = Marker::kCircle;
     data.color = color;
-    for (const char* bound : {"adev_lower", "adev_upper"}) {
+    for (const std::vector<double>* bound : {&c.adev_lower, &c.adev_upper}) {
       Series b;
       b.x = data.x;
-      b.y = Doubles(Get(c, bound));
+      b.y = *bound;
       b.color = color;
       b.dashed = true;
       b.line_width = 0.8;
@@ -60,7 +66,7 @@ std::string AllanPlot(const json* diag, char kind, const std::string& unit) {
     }
     Series fit;
     fit.x = data.x;
-    fit.y = Doubles(Get(c, "fitted_adev"));
+    fit.y = c.fitted_adev;
     fit.color = color;
     fit.line_width = 2.4;
     series.push_back(std::move(data));
@@ -84,40 +90,38 @@ std::string AllanPlot(const json* diag, char kind, const std::string& unit) {
                 "+\xC2\xBD: random walk (read at 3 s).");
 }
 
+}  // namespace
+
 std::string NoiseReport(const JobView& view) {
-  const json& result = view.job.result;
-  const json* params = Get(result, "parameters");
-  const json* unc = Get(result, "uncertainty");
-  const json* diag = Get(result, "diagnostics");
+  results::NoiseResult r;
+  if (Status st = results::FromJson(view.job.result, &r); !st.ok()) {
+    return Unreadable("The noise result", st);
+  }
+  const results::NoiseDiagnostics& d = r.diagnostics;
   std::string out;
   out += Guard("Parameters", [&] {
     std::string s = "<dl class=\"kv\">";
-    s += "<dt>sample rate</dt><dd>" + E(ScalarText(Get(diag, "rate"), 6)) + " Hz</dd>";
-    s += "<dt>samples</dt><dd>" + E(ScalarText(Get(diag, "samples"))) + " (" +
-         FormatDuration(Num(Get(diag, "duration"))) + ")</dd>";
-    const json* st = Get(diag, "stationary");
-    s += "<dt>stationary</dt><dd>" +
-         std::string(st != nullptr && st->is_boolean() && st->get<bool>()
-                         ? "yes"
-                         : "no: the sensor moved, the Allan curve is meaningless") +
-         "</dd></dl>";
-    const json* channels = Get(params, "channels");
-    const json* uch = Get(unc, "channels");
-    if (channels == nullptr || !channels->is_array() || channels->empty()) {
+    s += "<dt>sample rate</dt><dd>" + E(Scalar(d.rate)) + " Hz</dd>";
+    s += "<dt>samples</dt><dd>" + E(std::to_string(d.samples)) + " (" + FormatDuration(d.duration) +
+         ")</dd>";
+    s +=
+        "<dt>stationary</dt><dd>" +
+        std::string(d.stationary ? "yes" : "no: the sensor moved, the Allan curve is meaningless") +
+        "</dd></dl>";
+    if (r.channels.empty())
       return Section("parameters", "Parameters", s + NotAvailable("Channels"));
-    }
     s += "<div class=\"table-wrap\"><table class=\"table-noise-parameters\"><thead><tr>"
          "<th>channel</th><th>unit</th><th>white noise N (unit/\xE2\x88\x9AHz)</th>"
          "<th>bias instability B (unit)</th><th>at \xCF\x84 (s)</th>"
          "<th>random walk K (unit/s/\xE2\x88\x9AHz)</th></tr></thead><tbody>";
-    for (size_t i = 0; i < channels->size(); ++i) {
-      const json& c = (*channels)[i];
-      const json* u = uch != nullptr && uch->is_array() && i < uch->size() ? &(*uch)[i] : nullptr;
-      s += "<tr><td>" + E(Str(Get(c, "name"))) + "</td><td>" + E(Str(Get(c, "unit"))) + "</td>" +
-           TermCell(Get(c, "white_noise"), Get(u, "white_noise_std")) +
-           TermCell(Get(c, "bias_instability"), Get(u, "bias_instability_std")) +
-           NumCell(Num(Get(c, "bias_instability_tau")), 3) +
-           TermCell(Get(c, "random_walk"), Get(u, "random_walk_std")) + "</tr>";
+    for (size_t i = 0; i < r.channels.size(); ++i) {
+      const results::NoiseChannelParameters& c = r.channels[i];
+      const results::NoiseChannelUncertainty& u = r.channel_stds[i];
+      s += "<tr><td>" + E(c.name) + "</td><td>" + E(c.unit) + "</td>" +
+           TermCell(c.white_noise, u.white_noise_std) +
+           TermCell(c.bias_instability, u.bias_instability_std) +
+           NumCell(c.bias_instability_tau, 3) + TermCell(c.random_walk, u.random_walk_std) +
+           "</tr>";
     }
     s += "</tbody></table></div><p class=\"muted small\">\xC2\xB1 is one standard deviation. "
          "N and K are Kalibr's noise_density and random_walk "
@@ -128,7 +132,7 @@ std::string NoiseReport(const JobView& view) {
     return Section("parameters", "Parameters", s);
   });
   out += Guard("Plots", [&] {
-    std::string figs = AllanPlot(diag, 'a', "m/s\xC2\xB2") + AllanPlot(diag, 'g', "rad/s");
+    std::string figs = AllanPlot(d.allan, 'a', "m/s\xC2\xB2") + AllanPlot(d.allan, 'g', "rad/s");
     if (figs.empty()) return NotAvailable("The Allan deviation plots");
     return Section("plots", "Plots", "<div class=\"plots\">" + figs + "</div>");
   });
@@ -140,22 +144,25 @@ namespace {
 // A failed noise job: what was found (rate, duration, per channel its status and reason) and
 // the Allan curves as far as they were computed.
 std::string NoisePartialReport(const JobView& view) {
-  const json* diag = Get(view.job.error_detail, "diagnostics");
+  results::NoiseResult r;
+  if (Status st = results::FromJson(view.job.error_detail, &r); !st.ok()) {
+    return Unreadable("The partial diagnostics", st);
+  }
+  const results::NoiseDiagnostics& d = r.diagnostics;
   std::string s = "<dl class=\"kv partial-noise\"><dt>samples</dt><dd>" +
-                  E(ScalarText(Get(diag, "samples"))) + "</dd><dt>rate</dt><dd>" +
-                  FormatSI(Num(Get(diag, "rate")), "Hz") + "</dd><dt>duration</dt><dd>" +
-                  FormatSI(Num(Get(diag, "duration")), "s") + "</dd></dl>";
-  const json* channels = Array(Get(diag, "channels"));
-  if (channels != nullptr && !channels->empty()) {
+                  E(std::to_string(d.samples)) + "</dd><dt>rate</dt><dd>" + FormatSI(d.rate, "Hz") +
+                  "</dd><dt>duration</dt><dd>" + FormatSI(d.duration, "s") + "</dd></dl>";
+  if (!d.channels.empty()) {
     s += "<div class=\"table-wrap\"><table class=\"table-noise-channels\"><thead><tr>"
          "<th>channel</th><th>status</th><th>reason</th></tr></thead><tbody>";
-    for (const json& c : *channels) {
-      s += "<tr><td>" + E(Str(Get(&c, "name"))) + "</td><td>" + E(Str(Get(&c, "status"))) +
-           "</td><td>" + E(Str(Get(&c, "reason"))) + "</td></tr>";
+    for (const results::NoiseChannelDiagnostics& c : d.channels) {
+      s += "<tr><td>" + E(c.name) + "</td><td>" + E(c.status) + "</td><td>" + E(c.reason) +
+           "</td></tr>";
     }
     s += "</tbody></table></div>";
   }
-  const std::string figs = AllanPlot(diag, 'a', "m/s\xC2\xB2") + AllanPlot(diag, 'g', "rad/s");
+  const std::string figs =
+      AllanPlot(d.allan, 'a', "m/s\xC2\xB2") + AllanPlot(d.allan, 'g', "rad/s");
   if (!figs.empty()) s += "<div class=\"plots\">" + figs + "</div>";
   return s;
 }

@@ -14,6 +14,8 @@
 
 #include "core/pca_simulation.h"
 #include "results/array_result.h"
+#include "results/imu_result.h"
+#include "results/noise_result.h"
 #include "server/config.h"
 #include "server/method.h"
 
@@ -246,37 +248,39 @@ TEST(Gate, UnknownLimitKeysAreRefusedNamingTheKeyForEveryMethod) {
 
 // ---- imu: results built by hand around the limits ----
 
+// A complete imu result (results/imu_result.h) of IMU "0": both triads with these scales, the
+// 1σ given, and the fit's chi2 and residuals.
 json ImuResult(double accel_scale, double scale_std, double misalignment_std, double bias_std,
                double chi2, double accel_residual = 0.001, double gyro_residual = 0.005) {
   auto triad = [](double scale) {
-    return json{{"bias", {0.01, -0.02, 0.03}},
-                {"scale", {scale, scale, scale}},
-                {"misalignment", {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}},
-                {"matrix", {{scale, 0, 0}, {0, scale, 0}, {0, 0, scale}}}};
+    results::SensorTriad t;
+    t.bias = Eigen::Vector3d(0.01, -0.02, 0.03);
+    t.scale = Eigen::Vector3d::Constant(scale);
+    t.matrix = scale * Eigen::Matrix3d::Identity();
+    return t;
   };
   auto triad_std = [&](double scale) {
-    return json{{"bias_std", {bias_std, bias_std, bias_std}},
-                {"scale_std", {scale_std * scale, scale_std * scale, scale_std * scale}},
-                {"misalignment_std",
-                 {{0, misalignment_std, misalignment_std}, {0, 0, misalignment_std}, {0, 0, 0}}}};
+    results::SensorTriadStd t;
+    t.bias_std = Eigen::Vector3d::Constant(bias_std);
+    t.scale_std = Eigen::Vector3d::Constant(scale_std * scale);
+    t.misalignment_std << 0, misalignment_std, misalignment_std, 0, 0, misalignment_std, 0, 0, 0;
+    return t;
   };
-  return {{"method", "imu"},
-          {"parameters",
-           {{"imus",
-             {{{"name", "0"}, {"accelerometer", triad(accel_scale)}, {"gyroscope", triad(1.0)}}}}}},
-          {"uncertainty",
-           {{"imus",
-             {{{"name", "0"},
-               {"accelerometer", triad_std(accel_scale)},
-               {"gyroscope", triad_std(1.0)}}}}}},
-          {"diagnostics",
-           {{"imus",
-             {{{"name", "0"},
-               {"chi2_per_dof", chi2},
-               {"residuals",
-                {{"accel_norm_rms_after", accel_residual},
-                 {"gyro_direction_rms_after", gyro_residual}}},
-               {"coverage", {{"sufficient", true}}}}}}}}};
+  results::ImuResult r;
+  r.envelope.method = "imu";
+  r.envelope.model = "a = T_a K_a (y_a - b_a), omega = T_g K_g (y_g - b_g)";
+  r.parameters =
+      results::ImuParameters{9.80665, "statics", 1.0, 1.0, {{"0", triad(accel_scale), triad(1.0)}}};
+  r.uncertainty = results::ImuUncertainty{{{"0", triad_std(accel_scale), triad_std(1.0)}}};
+  results::ImuFitDiagnostics fit;
+  fit.name = "0";
+  fit.usable = true;
+  fit.chi2_per_dof = chi2;
+  fit.accel_norm_rms_after = accel_residual;
+  fit.gyro_direction_rms_after = gyro_residual;
+  fit.coverage.sufficient = true;
+  r.diagnostics.imus = {fit};
+  return results::ToJson(r);
 }
 
 json JudgeWith(const char* method, const json& result, const json& config) {
@@ -416,13 +420,15 @@ TEST(Gate, AResultThatCannotBeJudgedIsRejected) {
 // ---- noise ----
 
 TEST(Gate, NoiseNeedsAStationaryLogAndAPreciseWhiteNoise) {
+  // A complete noise result (results/noise_result.h) of one channel.
   auto result = [](bool stationary, double rel_std, double density) {
-    return json{{"method", "noise"},
-                {"parameters",
-                 {{"channels", {{{"name", "a0_x"}, {"unit", "m/s^2"}, {"white_noise", density}}}}}},
-                {"uncertainty",
-                 {{"channels", {{{"name", "a0_x"}, {"white_noise_std", rel_std * density}}}}}},
-                {"diagnostics", {{"stationary", stationary}}}};
+    results::NoiseResult r;
+    r.envelope.method = "noise";
+    r.envelope.model = "the Allan variance";
+    r.channels = {{"a0_x", "m/s^2", density, NAN, NAN, NAN}};
+    r.channel_stds = {{"a0_x", rel_std * density, NAN, NAN}};
+    r.diagnostics.stationary = stationary;
+    return results::ToJson(r);
   };
   const json config = {{"method", "noise"}};
   EXPECT_EQ(JudgeWith("noise", result(true, 0.19, 0.002), config)["status"], "accepted");

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
 #include <nlohmann/json.hpp>
 
 #include "server/array_method.h"
@@ -171,6 +172,70 @@ TEST_F(NoiseReference, BadReferencesAreRefusedNamingTheKeyAndOfflineSaysItNeedsT
   EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
   EXPECT_EQ(s.field(), "accel_noise");
   EXPECT_NE(s.message().find("resolved by the server"), std::string::npos) << s.message();
+}
+
+}  // namespace
+}  // namespace calibd::server
+
+namespace calibd::server {
+namespace {
+
+// A succeeded noise job whose stored result this calibd cannot read (a newer schema, a damaged
+// figure) is refused at enqueue naming the config key and the path of the problem.
+TEST(NoiseReferenceChain, AStoredNoiseResultThatDoesNotReadIsRefusedNamingTheKeyAndThePath) {
+  testing::TempDir dir;
+  std::unique_ptr<storage::Store> store;
+  ASSERT_TRUE(
+      storage::Store::Open((dir.path() / "calibd.db").string(), storage::StoreOptions(), &store)
+          .ok());
+  NoiseSimulationFileOptions sim;
+  sim.rate = 50;
+  sim.seconds = 120;
+  std::string csv;
+  json config, truth, result;
+  ASSERT_TRUE(SimulateNoiseFiles(sim, &csv, &config, &truth).ok());
+  ASSERT_TRUE(Calibrate(csv, "noise.csv", config, &result).ok());
+  int uploads = 0;  // each recording's bytes differ (identical bytes are stored once)
+  auto stored_job = [&](const json& stored) {
+    storage::NewRecording rec;
+    const std::string data = csv + "#" + std::to_string(++uploads) + "\n";
+    rec.data = data;
+    rec.layout = "array";
+    storage::RecordingInfo info;
+    EXPECT_TRUE(store->PutRecording(rec, &info, nullptr).ok());
+    storage::JobInfo job;
+    EXPECT_TRUE(store->EnqueueJob(info.id, "noise", "IMU-N", config.dump(), &job).ok());
+    bool claimed = false;
+    EXPECT_TRUE(store->ClaimJob("test:1:1", 60000, &job, &claimed).ok());
+    EXPECT_TRUE(claimed);
+    EXPECT_TRUE(store->CompleteJob(job.id, "test:1:1", stored.dump()).ok());
+    return job.id;
+  };
+  json newer = result;
+  newer["schema_version"] = 99;
+  const int64_t newer_job = stored_job(newer);
+  json imu_config = {{"method", "imu"}, {"gyro_noise", {{"job", newer_job}}}};
+  Status s = ResolveNoiseReferences(store.get(), &imu_config);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+  EXPECT_EQ(s.field(), "gyro_noise");
+  EXPECT_NE(s.message().find("config key 'gyro_noise': noise job " + std::to_string(newer_job) +
+                             " cannot be used: noise result: schema_version"),
+            std::string::npos)
+      << s.message();
+  json damaged = result;
+  damaged["parameters"]["channels"][4]["white_noise"] = "2e-4";
+  const int64_t damaged_job = stored_job(damaged);
+  imu_config = {{"method", "array"}, {"accel_noise", {{"job", damaged_job}}}};
+  s = ResolveNoiseReferences(store.get(), &imu_config);
+  EXPECT_EQ(s.field(), "accel_noise");
+  EXPECT_NE(s.message().find("parameters.channels[4].white_noise"), std::string::npos)
+      << s.message();
+  // The undamaged result resolves (the typed read is not stricter than the document).
+  const int64_t good_job = stored_job(result);
+  imu_config = {{"method", "imu"}, {"accel_noise", {{"job", good_job}}}};
+  ASSERT_TRUE(ResolveNoiseReferences(store.get(), &imu_config).ok());
+  EXPECT_EQ(imu_config["accel_noise"]["job"], good_job);
+  EXPECT_GT(imu_config["accel_noise"]["sigma"].get<double>(), 0);
 }
 
 }  // namespace

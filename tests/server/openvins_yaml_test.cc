@@ -13,6 +13,7 @@
 #include <random>
 #include <sstream>
 
+#include "results/imu_result.h"
 #include "server/imu_method.h"
 #include "tests/server/http_test_util.h"
 
@@ -22,10 +23,37 @@ namespace {
 using nlohmann::json;
 using testing::TestServer;
 
-json Mat(const Eigen::Matrix3d& m) {
-  json j = json::array();
-  for (int r = 0; r < 3; ++r) j.push_back({m(r, 0), m(r, 1), m(r, 2)});
-  return j;
+// A stored imu result (results/imu_result.h) of one IMU with these matrices, biases, reading
+// units, rate and per-sample noise of the statics; the rest as a run would leave it by default.
+json ImuResult(const Eigen::Matrix3d& ma, const Eigen::Vector3d& ba, const Eigen::Matrix3d& mg,
+               const Eigen::Vector3d& bg, double ua, double ug, double rate,
+               const Eigen::Vector3d& sa, const Eigen::Vector3d& sg) {
+  results::ImuResult r;
+  r.envelope.method = "imu";
+  r.envelope.model = "a = T_a K_a (y_a - b_a), omega = T_g K_g (y_g - b_g)";
+  results::ImuParameters p;
+  p.gravity = 9.80665;
+  p.gyro_bias = "statics";
+  p.accel_unit = ua;
+  p.gyro_unit = ug;
+  results::ImuTriads t;
+  t.name = "0";
+  t.accelerometer.matrix = ma;
+  t.accelerometer.bias = ba;
+  t.gyroscope.matrix = mg;
+  t.gyroscope.bias = bg;
+  p.imus = {t};
+  r.parameters = p;
+  results::ImuTriadsStd sd;
+  sd.name = "0";
+  r.uncertainty = results::ImuUncertainty{{sd}};
+  r.diagnostics.rate = rate;
+  results::ImuFitDiagnostics fit;
+  fit.name = "0";
+  fit.accel_noise = sa;
+  fit.gyro_noise = sg;
+  r.diagnostics.imus = {fit};
+  return results::ToJson(r);
 }
 
 // The 3x3 matrix under `  key:` of block `imuN:` in the YAML text.
@@ -76,17 +104,7 @@ TEST(OpenVinsYaml, IntrinsicsPredictCalibdsModelUpToOneRotationInTheCalibratedFo
     }
     const Eigen::Matrix3d ma = ta * ka.asDiagonal(), mg = tg * kg.asDiagonal();
     const double rate = 200;
-    json imu = {{"name", "0"},
-                {"accelerometer", {{"matrix", Mat(ma)}, {"bias", {ba(0), ba(1), ba(2)}}}},
-                {"gyroscope", {{"matrix", Mat(mg)}, {"bias", {bg(0), bg(1), bg(2)}}}}};
-    json result = {{"method", "imu"},
-                   {"parameters", {{"accel_unit", ua}, {"gyro_unit", ug}, {"imus", {imu}}}},
-                   {"diagnostics",
-                    {{"rate", rate},
-                     {"imus",
-                      {{{"noise",
-                         {{"accelerometer", {sa(0), sa(1), sa(2)}},
-                          {"gyroscope", {sg(0), sg(1), sg(2)}}}}}}}}}};
+    json result = ImuResult(ma, ba, mg, bg, ua, ug, rate, sa, sg);
     std::string yaml;
     ASSERT_TRUE(ImuResultToOpenVinsYaml(result, {7, "SN-1", "imu", "2026-01-01"}, &yaml).ok());
     ASSERT_EQ(yaml.rfind("%YAML:1.0\n", 0), 0u);
@@ -131,13 +149,9 @@ TEST(OpenVinsYaml, IntrinsicsPredictCalibdsModelUpToOneRotationInTheCalibratedFo
 }
 
 TEST(OpenVinsYaml, AMirroringMatrixOrAnOldResultIsRefusedSayingWhy) {
-  json imu = {
-      {"name", "0"},
-      {"accelerometer", {{"matrix", Mat(-Eigen::Matrix3d::Identity())}, {"bias", {0, 0, 0}}}},
-      {"gyroscope", {{"matrix", Mat(Eigen::Matrix3d::Identity())}, {"bias", {0, 0, 0}}}}};
-  json result = {{"method", "imu"},
-                 {"parameters", {{"accel_unit", 1}, {"gyro_unit", 1}, {"imus", {imu}}}},
-                 {"diagnostics", {{"rate", 100}}}};
+  const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
+  json result = ImuResult(-Eigen::Matrix3d::Identity(), zero, Eigen::Matrix3d::Identity(), zero, 1,
+                          1, 100, zero, zero);
   std::string yaml;
   Status s = ImuResultToOpenVinsYaml(result, {}, &yaml);
   EXPECT_EQ(s.code(), StatusCode::kNotDeterminable);

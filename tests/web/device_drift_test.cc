@@ -5,9 +5,14 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Core>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
+
+#include "results/imu_result.h"
+#include "results/noise_result.h"
 
 namespace calibd::web {
 namespace {
@@ -24,52 +29,45 @@ size_t Count(const std::string& page, const std::string& needle) {
   return n;
 }
 
-// A noise result (SPEC §7) of one IMU: white noise `n_gyro` on the gyroscopes (1σ 1 %), K visible
-// on the gyroscopes only when `gyro_k` > 0, B visible everywhere.
+// A noise result (SPEC §7, results/noise_result.h) of one IMU: white noise `n_gyro` on the
+// gyroscopes (1σ 1 %), K visible on the gyroscopes only when `gyro_k` > 0, B visible everywhere.
 json NoiseResult(double n_gyro, double gyro_k, const std::string& extra_channel = "") {
-  json params = json::array(), unc = json::array();
+  results::NoiseResult r;
+  r.envelope.method = "noise";
+  r.envelope.model = "the Allan variance";
+  r.envelope.verdict = results::StoredVerdict{GateVerdict::kAccepted, {}, {}};
   std::vector<std::string> names = {"a0_x", "a0_y", "a0_z", "g0_x", "g0_y", "g0_z"};
   if (!extra_channel.empty()) names.push_back(extra_channel);
+  const double kNaN = std::numeric_limits<double>::quiet_NaN();
   for (const std::string& name : names) {
     const bool gyro = name[0] == 'g';
     const double n = gyro ? n_gyro : 2e-3;
-    params.push_back({{"name", name},
-                      {"unit", gyro ? "rad/s" : "m/s^2"},
-                      {"white_noise", n},
-                      {"bias_instability", 0.5 * n},
-                      {"bias_instability_tau", 120.0},
-                      {"random_walk", gyro && gyro_k > 0 ? json(gyro_k) : json(nullptr)}});
-    unc.push_back({{"name", name},
-                   {"white_noise_std", 0.01 * n},
-                   {"bias_instability_std", 0.1 * n},
-                   {"random_walk_std", gyro && gyro_k > 0 ? json(0.2 * gyro_k) : json(nullptr)}});
+    const double k = gyro && gyro_k > 0 ? gyro_k : kNaN;
+    r.channels.push_back({name, gyro ? "rad/s" : "m/s^2", n, 0.5 * n, 120.0, k});
+    r.channel_stds.push_back({name, 0.01 * n, 0.1 * n, 0.2 * k});
   }
-  return {{"method", "noise"},
-          {"parameters", {{"channels", params}}},
-          {"uncertainty", {{"channels", unc}}},
-          {"verdict", {{"status", "accepted"}}}};
+  return results::ToJson(r);
 }
 
-// An imu result (SPEC §7) of IMU `name`: accelerometer x scale `ax_scale` (1σ 1e-6), bias x
-// `bias_x` (1σ 0.5), misalignment T_a(0,1) = `t01`.
+// An imu result (SPEC §7, results/imu_result.h) of IMU `name`: accelerometer x scale `ax_scale`
+// (1σ 1e-6), bias x `bias_x` (1σ 0.5), misalignment T_a(0,1) = `t01`.
 json ImuResult(const std::string& name, double ax_scale, double bias_x, double t01) {
-  const json eye = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
-  json accel = {{"scale", {ax_scale, 1.0, 1.0}},
-                {"bias", {bias_x, 0.0, 0.0}},
-                {"misalignment", {{1, t01, 0}, {0, 1, 0}, {0, 0, 1}}},
-                {"matrix", eye}};
-  json gyro = {{"scale", {1.0, 1.0, 1.0}},
-               {"bias", {0.01, 0.02, 0.03}},
-               {"misalignment", eye},
-               {"matrix", eye}};
-  json sd = {{"scale_std", {1e-6, 1e-6, 1e-6}},
-             {"bias_std", {0.5, 0.5, 0.5}},
-             {"misalignment_std", {{0, 1e-4, 1e-4}, {0, 0, 1e-4}, {0, 0, 0}}}};
-  return {
-      {"method", "imu"},
-      {"parameters", {{"imus", {{{"name", name}, {"accelerometer", accel}, {"gyroscope", gyro}}}}}},
-      {"uncertainty", {{"imus", {{{"name", name}, {"accelerometer", sd}, {"gyroscope", sd}}}}}},
-      {"verdict", {{"status", "accepted"}}}};
+  results::ImuResult r;
+  r.envelope.method = "imu";
+  r.envelope.model = "a = T_a K_a (y_a - b_a)";
+  r.envelope.verdict = results::StoredVerdict{GateVerdict::kAccepted, {}, {}};
+  results::SensorTriad accel, gyro;
+  accel.scale = Eigen::Vector3d(ax_scale, 1.0, 1.0);
+  accel.bias = Eigen::Vector3d(bias_x, 0.0, 0.0);
+  accel.misalignment(0, 1) = t01;
+  gyro.bias = Eigen::Vector3d(0.01, 0.02, 0.03);
+  results::SensorTriadStd sd;
+  sd.scale_std = Eigen::Vector3d::Constant(1e-6);
+  sd.bias_std = Eigen::Vector3d::Constant(0.5);
+  sd.misalignment_std << 0, 1e-4, 1e-4, 0, 0, 1e-4, 0, 0, 0;
+  r.parameters = results::ImuParameters{9.80665, "statics", 1.0, 1.0, {{name, accel, gyro}}};
+  r.uncertainty = results::ImuUncertainty{{{name, sd, sd}}};
+  return results::ToJson(r);
 }
 
 JobSummary Job(int64_t id, const std::string& method, const std::string& created, json result) {
@@ -159,6 +157,29 @@ TEST(ImuDrift, MalformedResultsRenderWithoutThrowing) {
   EXPECT_NO_THROW(NoiseDriftHtml({&a, &c}));
   EXPECT_TRUE(Has(NoiseDriftHtml({&a, &c}), "No noise terms"));
   EXPECT_EQ(NoiseDriftHtml({}), "");
+}
+
+TEST(ImuDrift, AResultThatDoesNotReadIsListedWithThePathOfItsProblem) {
+  const JobSummary a = Job(5, "imu", "2026-01-01T00:00:00Z", ImuResult("0", 1.0, 10.0, 0.0));
+  json damaged = ImuResult("0", 1.0001, 10.4, 2e-4);
+  damaged["parameters"]["imus"][0]["accelerometer"]["scale"] = "1.0001";
+  const JobSummary b = Job(6, "imu", "2026-01-05T00:00:00Z", damaged);
+  const std::string html = ImuDriftHtml({&a, &b});
+  // Job 5 is shown; job 6 is listed as not available, naming the path.
+  EXPECT_EQ(Count(html, "<td>accelerometer</td>"), 1u);
+  EXPECT_TRUE(Has(html, "drift-unreadable")) << html;
+  EXPECT_TRUE(Has(html, "parameters.imus[0].accelerometer.scale")) << html;
+}
+
+TEST(NoiseDrift, AResultThatDoesNotReadIsListedWithThePathOfItsProblem) {
+  const JobSummary n = Job(7, "noise", "2026-01-01T00:00:00Z", NoiseResult(1e-4, 0));
+  json newer = NoiseResult(1e-4, 0);
+  newer["schema_version"] = 99;
+  const JobSummary m = Job(8, "noise", "2026-01-02T00:00:00Z", newer);
+  const std::string noise = NoiseDriftHtml({&n, &m});
+  EXPECT_TRUE(Has(noise, "table-drift-noise"));
+  EXPECT_TRUE(Has(noise, "href=\"/jobs/8\">#8</a>: not available")) << noise;
+  EXPECT_TRUE(Has(noise, "schema_version")) << noise;
 }
 
 TEST(DevicePage, ShowsNoiseAndImuDriftOfAcceptedCalibrationsOnly) {

@@ -14,6 +14,8 @@
 #include <vector>
 
 #include "results/array_result.h"
+#include "results/imu_result.h"
+#include "results/noise_result.h"
 
 namespace calibd::web {
 namespace {
@@ -425,23 +427,20 @@ TEST(JobPage, FailedImuJobShowsTheStaticsFoundOnTheTimelineAndTheCoverage) {
   v.job.error_reason = "too_few_statics";
   v.job.error_title = "Too few static intervals";
   v.job.error_advice = "Hold the device still in more orientations.";
-  json statics = json::array();
-  for (int i = 0; i < 3; ++i) {
-    statics.push_back({{"start", 10.0 * i}, {"end", 10.0 * i + 4}, {"samples", 400}});
-  }
-  v.job.error_detail = {
-      {"method", "imu"},
-      {"usable", false},
-      {"diagnostics",
-       {{"statics", statics},
-        {"rate", 100},
-        {"threshold_choice", "single multiplier given"},
-        {"imus",
-         {{{"name", "0"},
-           {"usable", false},
-           {"termination", "too_few_statics"},
-           {"rotations", json::array()},
-           {"coverage", {{"verdict", "missing: z up, z down"}, {"missing_up", {"+z", "-z"}}}}}}}}}};
+  // The partial diagnostics as the imu adapter writes them (results/imu_result.h).
+  results::ImuResult partial;
+  partial.envelope.method = "imu";
+  partial.envelope.usable = false;
+  for (int i = 0; i < 3; ++i) partial.diagnostics.statics.push_back({10.0 * i, 10.0 * i + 4, 400});
+  partial.diagnostics.rate = 100;
+  partial.diagnostics.threshold_choice = "single multiplier given";
+  results::ImuFitDiagnostics imu;
+  imu.name = "0";
+  imu.termination = "too_few_statics";
+  imu.coverage.verdict = "missing: z up, z down";
+  imu.coverage.missing_up = {"+z", "-z"};
+  partial.diagnostics.imus = {imu};
+  v.job.error_detail = results::ToJson(partial);
   const std::string page = RenderJobPage(v);
   ExpectDocument(page, "page-job");
   EXPECT_TRUE(Has(page, "plot-imu-statics-found"));
@@ -454,16 +453,16 @@ TEST(JobPage, FailedNoiseAndArrayJobsShowWhatWasFound) {
   JobView noise;
   noise.job = Job(37, "IMU-0042", "noise", "failed", "2026-11-20T09:20:00Z", json());
   noise.job.error = "the log is not stationary";
-  noise.job.error_detail = {{"method", "noise"},
-                            {"usable", false},
-                            {"diagnostics",
-                             {{"samples", 6000},
-                              {"rate", 100},
-                              {"duration", 60},
-                              {"channels",
-                               {{{"name", "a0_x"},
-                                 {"status", "not_stationary"},
-                                 {"reason", "the mean jumps at 30 s"}}}}}}};
+  // The partial diagnostics as the noise adapter writes them (results/noise_result.h).
+  results::NoiseResult partial;
+  partial.envelope.method = "noise";
+  partial.envelope.usable = false;
+  partial.diagnostics.samples = 6000;
+  partial.diagnostics.rate = 100;
+  partial.diagnostics.duration = 60;
+  partial.diagnostics.stationary = false;
+  partial.diagnostics.channels = {{"a0_x", "not_stationary", "the mean jumps at 30 s", 0, NAN, 0}};
+  noise.job.error_detail = results::ToJson(partial);
   std::string page = RenderJobPage(noise);
   ExpectDocument(page, "page-job");
   EXPECT_TRUE(Has(page, "table-noise-channels"));
@@ -489,6 +488,38 @@ TEST(JobPage, FailedNoiseAndArrayJobsShowWhatWasFound) {
   EXPECT_TRUE(Has(page, "partial-array"));
   EXPECT_TRUE(Has(page, "insufficient (smallest eigenvalue"));
   EXPECT_TRUE(Has(page, "100 dropped for gyroscope saturation"));
+}
+
+// An imu or noise result that does not read as its typed result (results/imu_result.h,
+// results/noise_result.h) shows "not available" with the reader's message naming the path.
+TEST(JobPage, AnImuOrNoiseResultThatDoesNotReadSaysWhereItIsDamaged) {
+  results::NoiseResult noise;
+  noise.envelope.method = "noise";
+  noise.envelope.model = "the Allan variance";
+  noise.channels = {{"a0_x", "m/s^2", 2e-3, NAN, NAN, NAN}};
+  noise.channel_stds = {{"a0_x", 1e-5, NAN, NAN}};
+  json damaged = results::ToJson(noise);
+  damaged["diagnostics"]["stationary"] = "yes";
+  JobView v;
+  v.job = Job(41, "IMU-0042", "noise", "succeeded", "2026-11-20T09:20:00Z", damaged);
+  std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "The noise result: not available.")) << page;
+  EXPECT_TRUE(Has(page, "noise result: diagnostics.stationary: expected a boolean")) << page;
+  EXPECT_FALSE(Has(page, "table-noise-parameters"));
+  results::ImuResult imu;
+  imu.envelope.method = "imu";
+  imu.envelope.model = "a = T_a K_a (y_a - b_a)";
+  imu.parameters = results::ImuParameters{9.8, "statics", 1.0, 1.0, {{"0", {}, {}}}};
+  imu.uncertainty = results::ImuUncertainty{{{"0", {}, {}}}};
+  damaged = results::ToJson(imu);
+  damaged["schema_version"] = 7;
+  v.job = Job(42, "IMU-0042", "imu", "succeeded", "2026-11-20T09:20:00Z", damaged);
+  page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "The imu result: not available.")) << page;
+  EXPECT_TRUE(Has(page, "imu result: schema_version: version 7 is newer")) << page;
+  EXPECT_FALSE(Has(page, "table-imu-parameters"));
 }
 
 // Partial diagnostics of an unexpected shape (another version, trimmed) never break the page.
