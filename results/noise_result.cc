@@ -26,11 +26,12 @@ bool Contains(const std::vector<std::string>& v, const char* key) {
   return std::find(v.begin(), v.end(), key) != v.end();
 }
 
-// Whether diagnostics member `key` of `d` is one the trimming dropped (null, and listed).
+// Whether diagnostics member `key` of `d` is one the trimming dropped (listed, and absent; null
+// in documents trimmed before the members were left out).
 bool DroppedMember(const JsonReader& d, const std::vector<std::string>& dropped, const char* key) {
   if (!Contains(dropped, key) || !d.node().is_object()) return false;
   auto it = d.node().find(key);
-  return it != d.node().end() && it->is_null();
+  return it == d.node().end() || it->is_null();
 }
 
 }  // namespace
@@ -87,7 +88,7 @@ json ToJson(const NoiseResult& r) {
   if (d.units) {
     diag["units"] = {{"accel_unit", d.units->accel_unit}, {"gyro_unit", d.units->gyro_unit}};
   }
-  for (const std::string& key : r.dropped) diag[key] = nullptr;
+  for (const std::string& key : r.dropped) diag.erase(key);  // left out by the trimming
   if (!Contains(r.dropped, "diagnostics")) out["diagnostics"] = std::move(diag);
   if (r.trimmed) out["trimmed"] = *r.trimmed;
   return out;

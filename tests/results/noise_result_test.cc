@@ -123,15 +123,15 @@ TEST(NoiseResult, PartialDocumentReadsWithoutParameters) {
   EXPECT_EQ(ToJson(back), j);
 }
 
-// A partial document the server trimmed to fit the store (largest diagnostics set to null and
+// A partial document the server trimmed to fit the store (largest diagnostics left out and
 // listed under "trimmed", or cut to the bare envelope) still reads and writes back.
 TEST(NoiseResult, TrimmedPartialDocumentsRead) {
   NoiseResult partial = HandBuilt();
   partial.envelope.usable = false;
   partial.envelope.model.clear();
   json j = ToJson(partial);
-  j["diagnostics"]["allan"] = nullptr;
-  j["diagnostics"]["channels"] = nullptr;
+  j["diagnostics"].erase("allan");
+  j["diagnostics"].erase("channels");
   j["trimmed"] = {{"bytes", 5000000}, {"dropped", {"allan", "channels"}}, {"note", "left out"}};
   NoiseResult back;
   Status s = FromJson(j, &back);
@@ -140,6 +140,12 @@ TEST(NoiseResult, TrimmedPartialDocumentsRead) {
   EXPECT_EQ(back.diagnostics.samples, 180000);
   EXPECT_EQ(back.dropped, (std::vector<std::string>{"allan", "channels"}));
   EXPECT_EQ(ToJson(back), j);
+  // Trimmed by an earlier calibd, which set the dropped members to null.
+  json legacy = j;
+  legacy["diagnostics"]["allan"] = nullptr;
+  legacy["diagnostics"]["channels"] = nullptr;
+  ASSERT_TRUE(FromJson(legacy, &back).ok());
+  EXPECT_TRUE(back.diagnostics.channels.empty());
   // A null that the note does not list is still an error.
   j["diagnostics"]["samples"] = nullptr;
   EXPECT_EQ(FromJson(j, &back).field(), "diagnostics.samples");

@@ -470,19 +470,19 @@ TEST(JobPage, FailedNoiseAndArrayJobsShowWhatWasFound) {
   JobView array;
   array.job = Job(38, "ARRAY-1", "array", "failed", "2026-11-20T09:20:00Z", json());
   array.job.error = "the motion does not determine the positions";
-  results::ArrayResult partial;  // as the server keeps it (results/array_result.h)
-  partial.envelope.method = "array";
-  partial.envelope.usable = false;
-  partial.diagnostics.solver = "joint";
-  partial.diagnostics.termination = "not_determinable";
-  partial.diagnostics.samples = 900;
-  partial.diagnostics.samples_dropped = 100;
-  partial.diagnostics.gyro_triads = 4;
-  partial.diagnostics.gyro_unit = "rad/s";
-  partial.diagnostics.excitation.verdict = "insufficient";
-  partial.diagnostics.excitation.min_eigenvalue = 1e-3;
-  partial.diagnostics.excitation.noise_floor = 2e-3;
-  array.job.error_detail = results::ToJson(partial);
+  results::ArrayResult array_partial;  // as the server keeps it (results/array_result.h)
+  array_partial.envelope.method = "array";
+  array_partial.envelope.usable = false;
+  array_partial.diagnostics.solver = "joint";
+  array_partial.diagnostics.termination = "not_determinable";
+  array_partial.diagnostics.samples = 900;
+  array_partial.diagnostics.samples_dropped = 100;
+  array_partial.diagnostics.gyro_triads = 4;
+  array_partial.diagnostics.gyro_unit = "rad/s";
+  array_partial.diagnostics.excitation.verdict = "insufficient";
+  array_partial.diagnostics.excitation.min_eigenvalue = 1e-3;
+  array_partial.diagnostics.excitation.noise_floor = 2e-3;
+  array.job.error_detail = results::ToJson(array_partial);
   page = RenderJobPage(array);
   ExpectDocument(page, "page-job");
   EXPECT_TRUE(Has(page, "partial-array"));
