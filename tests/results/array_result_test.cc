@@ -390,6 +390,20 @@ TEST(ArrayResult, PartialDocumentWithoutDiagnosticsReads) {
   EXPECT_FALSE(r.diagnostics.iterations.has_value());
 }
 
+// The worker used to write the members it left out of over-sized partial diagnostics as null.
+TEST(ArrayResult, PartialDocumentWithAnyMemberNullReads) {
+  for (const json& doc : {PositionsPartial(), FullPartial()}) {
+    for (const auto& item : doc["diagnostics"].items()) {
+      if (item.key() == "model") continue;
+      json j = doc;
+      j["diagnostics"][item.key()] = nullptr;
+      ArrayResult r;
+      const Status s = FromJson(j, &r);
+      EXPECT_TRUE(s.ok()) << item.key() << ": " << s.message();
+    }
+  }
+}
+
 TEST(ArrayResult, PartialDocumentLackingAnyOneMemberReads) {
   for (const json& doc : {PositionsPartial(), FullPartial()}) {
     for (const auto& item : doc["diagnostics"].items()) {

@@ -336,6 +336,33 @@ TEST(ArrayResultSchema, FullModelResultWithOnlyTheSpecsKeysStillReadsExportsAndR
   ExpectSpecOnlyResultServes(result, config);
 }
 
+// The gate judges the offsets of a full-model result stored without parameters.positions (an
+// extension) against the config's geometry: the same triads are too far as in the whole result.
+TEST(ArrayResultSchema, GateJudgesTheOffsetsOfAFullResultWithoutPositionsAgainstTheGeometry) {
+  ArraySimulationFileOptions so;
+  so.samples = 400;
+  so.seed = 8;
+  std::string csv;
+  json config, truth, result;
+  ASSERT_TRUE(SimulateArrayFullFiles(so, &csv, &config, &truth).ok());
+  ASSERT_TRUE(RunArray(RecordingFromCsv(csv), config, &result).ok());
+  config["acceptance"] = {{"max_offset", 1e-9}};  // m: every free triad is farther
+  const AcceptanceLimits limits = EffectiveAcceptance("array", json(), config);
+  auto far_reason = [&](const json& doc) {
+    Verdict verdict;
+    JudgeArray(doc, config, limits, &verdict);
+    for (const std::string& reason : verdict.reasons())
+      if (Contains(reason, "from its nominal position")) return reason;
+    return std::string();
+  };
+  const std::string whole = far_reason(result);
+  ASSERT_NE(whole, "");
+  json stripped = result;
+  stripped["parameters"].erase("positions");
+  stripped["uncertainty"].erase("positions");
+  EXPECT_EQ(far_reason(stripped), whole);
+}
+
 // A failed run's partial document: every diagnostics member may be missing (the worker leaves
 // out the largest over the size cap, or the whole object).
 void ExpectPartialReadsAndRenders(const json& partial) {
