@@ -323,6 +323,12 @@ std::string ArrayReport(const JobView& view) {
     if (configured != nullptr && configured->is_string()) unit = configured->get<std::string>();
   }
   const auto triads = ReadTriads(result, view.config);
+  // Offsets the result does not give (a full-model result stored without parameters.positions)
+  // as the table shows them: against the config's geometry.
+  for (size_t i = 0; i < triads.size(); ++i) {
+    Eigen::Vector3d& offset = result.parameters->positions[i].offset;
+    if (!offset.allFinite()) offset = {triads[i].off[0], triads[i].off[1], triads[i].off[2]};
+  }
   const results::ArrayPositionsDiagnostics& d = result.diagnostics;
   const results::ArrayFullDiagnostics& fd = result.full_diagnostics;
   std::string out;
