@@ -9,14 +9,62 @@ using nlohmann::json;
 
 json OptionalInt(const std::optional<int64_t>& v) { return v ? json(*v) : json(nullptr); }
 
+// Member `key` of *out when the count is known (an absent count is left out).
+template <class T>
+void PutCount(json* out, const char* key, const std::optional<T>& v) {
+  if (v) (*out)[key] = *v;
+}
+
+// An extension member (JsonReader::ReadExtension): absent, *out keeps its default. Null too:
+// every default is what null reads as (NaN, an empty string or list, nullopt), and the worker
+// used to write the partial diagnostics' members it left out as null.
+template <class T>
+void Ext(const JsonReader& r, std::string_view key, T* out) {
+  if (r.Has(key)) r.ReadExtension(key, out);
+}
+template <class T, class F>
+void ExtArray(const JsonReader& r, std::string_view key, std::vector<T>* out, F read_one) {
+  if (r.Has(key)) r.ReadArrayExtension(key, out, read_one);
+}
+
+// A member SPEC requires when `required` (a usable result), else an extension (kept at its
+// default when absent: results of an earlier calibd, partial documents).
+template <class T>
+void ReadMember(const JsonReader& r, bool required, std::string_view key, T* out) {
+  if (required)
+    r.Read(key, out);
+  else
+    Ext(r, key, out);
+}
+// The same into a std::optional: required, the member must be there (not null); else nullopt
+// stays when it is absent.
+template <class T>
+void ReadMember(const JsonReader& r, bool required, std::string_view key, std::optional<T>* out) {
+  if (!required && !r.Has(key)) return;
+  T value{};
+  const bool was_ok = r.ok();
+  r.Read(key, &value);
+  if (was_ok && r.ok()) *out = std::move(value);
+}
+
+// A reader of member `key` when it must be an object (required), else when it is present
+// (nullopt when an extension object is absent or null: its members keep their defaults).
+std::optional<JsonReader> MemberObject(const JsonReader& r, bool required, std::string_view key) {
+  if (required || r.Has(key)) return r.Object(key);
+  return std::nullopt;
+}
+
 json Figures(const SensorFigures& f) {
   return {{"accelerometer", Num(f.accelerometer)}, {"gyroscope", Num(f.gyroscope)}};
 }
 
-void ReadFigures(const JsonReader& r, const char* key, SensorFigures* out) {
-  JsonReader f = r.Object(key);
-  f.Read("accelerometer", &out->accelerometer);
-  f.Read("gyroscope", &out->gyroscope);
+// {"accelerometer", "gyroscope"} at `key`: required (both members) or an extension (each member
+// NaN when absent).
+void ReadFigures(const JsonReader& r, const char* key, SensorFigures* out, bool required = true) {
+  const std::optional<JsonReader> f = MemberObject(r, required, key);
+  if (!f) return;
+  ReadMember(*f, required, "accelerometer", &out->accelerometer);
+  ReadMember(*f, required, "gyroscope", &out->gyroscope);
 }
 
 // ---- parameters / uncertainty ----
@@ -72,30 +120,43 @@ json UncertaintyJson(const ArrayUncertainty& u, bool full) {
   return out;
 }
 
+// parameters.positions (SPEC for the positions model; for the full model an extension, derived
+// from parameters.imus when absent).
 void ReadParameters(const JsonReader& r, bool full, ArrayParameters* out) {
   r.Read("reference", &out->reference);
-  r.ReadArray("positions", &out->positions, [](const JsonReader& e, ArrayPosition* p) {
+  auto read_position = [](const JsonReader& e, ArrayPosition* p) {
     e.Read("name", &p->name);
     e.Read("position", &p->position);
     e.Read("offset", &p->offset);
-  });
-  if (!full) return;
-  std::string model;
-  r.Read("model", &model);
-  if (r.ok() && model != "full") r.Fail("expected \"full\", found \"" + model + "\"", "model");
+  };
+  if (!full) {
+    r.ReadArray("positions", &out->positions, read_position);
+    return;
+  }
+  std::optional<std::string> model;
+  Ext(r, "model", &model);
+  if (r.ok() && model && *model != "full")
+    r.Fail("expected \"full\", found \"" + *model + "\"", "model");
   r.ReadArray("imus", &out->imus, [](const JsonReader& e, ArrayImu* imu) {
     ReadImuTriads(e, &imu->triads);
     e.Read("position", &imu->position);
   });
+  if (r.Has("positions")) {
+    r.ReadArray("positions", &out->positions, read_position);
+  } else {
+    for (const ArrayImu& imu : out->imus)
+      out->positions.push_back({imu.triads.name, imu.position, array_internal::kNaN3});
+  }
 }
 
 void ReadUncertainty(const JsonReader& r, bool full, ArrayUncertainty* out) {
-  r.ReadArray("positions", &out->positions, [](const JsonReader& e, ArrayPositionStd* s) {
+  auto read_std = [](const JsonReader& e, ArrayPositionStd* s) {
     e.Read("name", &s->name);
     e.Read("std", &s->std);
-  });
+  };
   if (!full) {
-    r.Read("std_rms", &out->std_rms);
+    r.ReadArray("positions", &out->positions, read_std);
+    Ext(r, "std_rms", &out->std_rms);
     return;
   }
   r.ReadArray("imus", &out->imus, [](const JsonReader& e, ArrayImuStd* s) {
@@ -109,6 +170,12 @@ void ReadUncertainty(const JsonReader& r, bool full, ArrayUncertainty* out) {
       if (robust->ok()) s->robust = std::move(v);
     }
   });
+  if (r.Has("positions")) {
+    r.ReadArray("positions", &out->positions, read_std);
+  } else {
+    for (const ArrayImuStd& s : out->imus)
+      out->positions.push_back({s.triads.name, s.position_std});
+  }
 }
 
 // ---- diagnostics, positions model ----
@@ -124,12 +191,18 @@ json ExcitationJson(const ArrayExcitation& e) {
 json PositionsDiagnosticsJson(const ArrayPositionsDiagnostics& d, bool usable) {
   json out = {{"solver", d.solver},
               {"termination", d.termination},
-              {"iterations", d.iterations},
-              {"samples", d.samples},
-              {"samples_dropped", d.samples_dropped},
-              {"gyro_triads", d.gyro_triads},
               {"gyro_unit", d.gyro_unit},
               {"excitation", ExcitationJson(d.excitation)}};
+  if (usable) {  // SPEC's: always there
+    out["iterations"] = d.iterations.value_or(0);
+    out["samples"] = d.samples.value_or(0);
+    out["samples_dropped"] = d.samples_dropped.value_or(0);
+  } else {
+    PutCount(&out, "iterations", d.iterations);
+    PutCount(&out, "samples", d.samples);
+    PutCount(&out, "samples_dropped", d.samples_dropped);
+  }
+  PutCount(&out, "gyro_triads", d.gyro_triads);
   if (!usable) return out;
   out["converged"] = d.converged;
   out["cost"] = Nums(d.cost);
@@ -159,48 +232,55 @@ json PositionsDiagnosticsJson(const ArrayPositionsDiagnostics& d, bool usable) {
   return out;
 }
 
+// SPEC §4 requires of a usable result solver, iterations, converged, cost, samples,
+// samples_dropped, residual_rms and noise_estimate (accelerometer, gyroscope) and the excitation's
+// smallest eigenvalue and verdict; the rest are extensions, and every member of a partial
+// document is optional.
 void ReadPositionsDiagnostics(const JsonReader& r, bool usable, ArrayPositionsDiagnostics* d) {
-  r.Read("solver", &d->solver);
-  r.Read("termination", &d->termination);
-  r.Read("iterations", &d->iterations);
-  r.Read("samples", &d->samples);
-  r.Read("samples_dropped", &d->samples_dropped);
-  r.Read("gyro_triads", &d->gyro_triads);
-  r.Read("gyro_unit", &d->gyro_unit);
-  JsonReader e = r.Object("excitation");
-  e.Read("min_eigenvalue", &d->excitation.min_eigenvalue);
-  e.Read("max_eigenvalue", &d->excitation.max_eigenvalue);
-  e.Read("noise_floor", &d->excitation.noise_floor);
-  e.Read("weakest_direction", &d->excitation.weakest_direction);
-  e.Read("verdict", &d->excitation.verdict);
+  const bool spec = usable;
+  ReadMember(r, spec, "solver", &d->solver);
+  Ext(r, "termination", &d->termination);
+  ReadMember(r, spec, "iterations", &d->iterations);
+  ReadMember(r, spec, "samples", &d->samples);
+  ReadMember(r, spec, "samples_dropped", &d->samples_dropped);
+  ReadMember(r, false, "gyro_triads", &d->gyro_triads);
+  Ext(r, "gyro_unit", &d->gyro_unit);
+  if (const std::optional<JsonReader> e = MemberObject(r, spec, "excitation")) {
+    ReadMember(*e, spec, "min_eigenvalue", &d->excitation.min_eigenvalue);
+    Ext(*e, "max_eigenvalue", &d->excitation.max_eigenvalue);
+    Ext(*e, "noise_floor", &d->excitation.noise_floor);
+    Ext(*e, "weakest_direction", &d->excitation.weakest_direction);
+    ReadMember(*e, spec, "verdict", &d->excitation.verdict);
+  }
   if (!usable) return;
   r.Read("converged", &d->converged);
   r.Read("cost", &d->cost);
   ReadFigures(r, "residual_rms", &d->residual_rms);
   ReadFigures(r, "noise_estimate", &d->noise_estimate);
-  JsonReader jobs = r.Object("noise_jobs");
-  jobs.Read("accelerometer", &d->noise_jobs.accelerometer);
-  jobs.Read("gyroscope", &d->noise_jobs.gyroscope);
-  ReadFigures(r, "noise_configured", &d->noise_configured);
-  r.Read("parallel_fraction", &d->parallel_fraction);
-  JsonReader m = r.Object("motion");
-  m.Read("stride", &d->motion.stride);
-  m.Read("omega_norm", &d->motion.omega_norm);
-  m.Read("omega_dot_norm", &d->motion.omega_dot_norm);
-  JsonReader units = m.Object("units");
-  units.Read("omega_norm", &d->motion.omega_norm_unit);
-  units.Read("omega_dot_norm", &d->motion.omega_dot_norm_unit);
-  // Required, null when the config had no accelerometer_calibration.
-  if (r.ok() && !r.node().contains("accelerometer_calibration"))
-    r.Fail("missing", "accelerometer_calibration");
+  if (const std::optional<JsonReader> jobs = MemberObject(r, false, "noise_jobs")) {
+    Ext(*jobs, "accelerometer", &d->noise_jobs.accelerometer);
+    Ext(*jobs, "gyroscope", &d->noise_jobs.gyroscope);
+  }
+  ReadFigures(r, "noise_configured", &d->noise_configured, false);
+  Ext(r, "parallel_fraction", &d->parallel_fraction);
+  if (const std::optional<JsonReader> m = MemberObject(r, false, "motion")) {
+    Ext(*m, "stride", &d->motion.stride);
+    Ext(*m, "omega_norm", &d->motion.omega_norm);
+    Ext(*m, "omega_dot_norm", &d->motion.omega_dot_norm);
+    if (const std::optional<JsonReader> units = MemberObject(*m, false, "units")) {
+      Ext(*units, "omega_norm", &d->motion.omega_norm_unit);
+      Ext(*units, "omega_dot_norm", &d->motion.omega_dot_norm_unit);
+    }
+  }
+  // Null (or absent: before it existed) when the config had no accelerometer_calibration.
   if (std::optional<JsonReader> c = r.OptionalObject("accelerometer_calibration")) {
     ArrayCalibrationUsed v;
-    c->Read("job", &v.job);
-    c->Read("sensors", &v.sensors);
-    c->Read("frame", &v.frame);
-    c->Read("bias", &v.bias);
-    c->Read("magnitude", &v.magnitude);
-    c->Read("max_condition_number", &v.max_condition_number);
+    Ext(*c, "job", &v.job);
+    Ext(*c, "sensors", &v.sensors);
+    Ext(*c, "frame", &v.frame);
+    Ext(*c, "bias", &v.bias);
+    Ext(*c, "magnitude", &v.magnitude);
+    Ext(*c, "max_condition_number", &v.max_condition_number);
     if (c->ok()) d->accelerometer_calibration = std::move(v);
   }
 }
@@ -217,13 +297,15 @@ json RotationJson(const ArrayRotationExcitation& e, bool usable) {
 }
 
 json FullDiagnosticsJson(const ArrayFullDiagnostics& d, bool usable) {
-  json out = {{"model", "full"},
-              {"termination", d.termination},
-              {"iterations", d.iterations},
-              {"statics", d.statics},
-              {"static_samples", d.static_samples},
-              {"dynamic_samples", d.dynamic_samples},
-              {"null_directions", d.null_directions}};
+  json out = {
+      {"model", "full"}, {"termination", d.termination}, {"null_directions", d.null_directions}};
+  if (usable)
+    out["iterations"] = d.iterations.value_or(0);  // SPEC's: always there
+  else
+    PutCount(&out, "iterations", d.iterations);
+  PutCount(&out, "statics", d.statics);
+  PutCount(&out, "static_samples", d.static_samples);
+  PutCount(&out, "dynamic_samples", d.dynamic_samples);
   if (!usable) {
     out["rotation"] = RotationJson(d.rotation_excitation, false);
     return out;
@@ -236,7 +318,7 @@ json FullDiagnosticsJson(const ArrayFullDiagnostics& d, bool usable) {
   out["converged"] = d.converged;
   out["cost"] = Nums(d.cost);
   out["samples_dropped"] = d.samples_dropped;
-  out["dof"] = d.dof;
+  PutCount(&out, "dof", d.dof);
   out["chi2_per_dof"] = Num(d.chi2_per_dof);
   out["gyro_unit"] = d.gyro_unit;
   out["noise"] = {{"accelerometer", Num(d.noise.accelerometer)},
@@ -264,7 +346,7 @@ json FullDiagnosticsJson(const ArrayFullDiagnostics& d, bool usable) {
                    {"batches", d.robust.batches},
                    {"batch_seconds", Num(d.robust.batch_seconds)},
                    {"ratio", Num(d.robust.ratio)}};
-  out["positions_only_start"] = d.positions_only_start;
+  PutCount(&out, "positions_only_start", d.positions_only_start);
   json changed = json::array();
   for (const auto& c : d.changed_from_positions_only) {
     json e = {{"name", c.name},
@@ -279,22 +361,27 @@ json FullDiagnosticsJson(const ArrayFullDiagnostics& d, bool usable) {
   return out;
 }
 
+// The rotation excitation (an extension: absent, NaN and an empty verdict).
 void ReadRotation(const JsonReader& r, const char* key, bool usable, ArrayRotationExcitation* e) {
-  JsonReader x = r.Object(key);
-  x.Read("eigenvalues", &e->eigenvalues);
-  x.Read("noise_floor", &e->noise_floor);
-  x.Read("weakest_axis", &e->weakest_axis);
-  x.Read("verdict", &e->verdict);
-  if (usable) x.Read("units", &e->units);
+  const std::optional<JsonReader> x = MemberObject(r, false, key);
+  if (!x) return;
+  Ext(*x, "eigenvalues", &e->eigenvalues);
+  Ext(*x, "noise_floor", &e->noise_floor);
+  Ext(*x, "weakest_axis", &e->weakest_axis);
+  Ext(*x, "verdict", &e->verdict);
+  if (usable) Ext(*x, "units", &e->units);
 }
 
+// SPEC requires of a usable full-model result the §4 members it has (solver, iterations,
+// converged, cost, samples_dropped) and §7's gauge (its scale); the rest are extensions (README
+// Changelog), and every member of a partial document is optional.
 void ReadFullDiagnostics(const JsonReader& r, bool usable, ArrayFullDiagnostics* d) {
-  r.Read("termination", &d->termination);
-  r.Read("iterations", &d->iterations);
-  r.Read("statics", &d->statics);
-  r.Read("static_samples", &d->static_samples);
-  r.Read("dynamic_samples", &d->dynamic_samples);
-  r.Read("null_directions", &d->null_directions);
+  Ext(r, "termination", &d->termination);
+  ReadMember(r, usable, "iterations", &d->iterations);
+  ReadMember(r, false, "statics", &d->statics);
+  ReadMember(r, false, "static_samples", &d->static_samples);
+  ReadMember(r, false, "dynamic_samples", &d->dynamic_samples);
+  Ext(r, "null_directions", &d->null_directions);
   if (!usable) {
     ReadRotation(r, "rotation", false, &d->rotation_excitation);
     return;
@@ -302,55 +389,59 @@ void ReadFullDiagnostics(const JsonReader& r, bool usable, ArrayFullDiagnostics*
   ReadRotation(r, "rotation_excitation", true, &d->rotation_excitation);
   JsonReader g = r.Object("gauge");
   g.Read("scale", &d->gauge.scale);
-  g.Read("reference", &d->gauge.reference);
-  g.Read("description", &d->gauge.description);
+  Ext(g, "reference", &d->gauge.reference);
+  Ext(g, "description", &d->gauge.description);
   r.Read("solver", &d->solver);
   r.Read("converged", &d->converged);
   r.Read("cost", &d->cost);
   r.Read("samples_dropped", &d->samples_dropped);
-  r.Read("dof", &d->dof);
-  r.Read("chi2_per_dof", &d->chi2_per_dof);
-  r.Read("gyro_unit", &d->gyro_unit);
-  JsonReader n = r.Object("noise");
-  n.Read("accelerometer", &d->noise.accelerometer);
-  n.Read("gyroscope", &d->noise.gyroscope);
-  n.Read("source", &d->noise.source);
-  n.Read("dynamic_weighting", &d->noise.dynamic_weighting);
-  n.Read("dynamic_accelerometer", &d->noise.dynamic_accelerometer);
-  n.Read("dynamic_gyroscope", &d->noise.dynamic_gyroscope);
-  ReadFigures(r, "static_noise", &d->static_noise);
-  JsonReader rms = r.Object("residual_rms");
-  ReadFigures(rms, "dynamic", &d->residual_rms_dynamic);
-  rms.ReadArray("imus", &d->residual_rms_imus, [](const JsonReader& e, ArrayImuResiduals* i) {
-    e.Read("name", &i->name);
-    ReadFigures(e, "static", &i->static_rms);
-    ReadFigures(e, "dynamic", &i->dynamic_rms);
-  });
-  JsonReader t = r.Object("time_offsets");
-  t.ReadArray("offsets_ms", &d->time_offsets.offsets_ms,
-              [](const JsonReader& e, ArrayTimeOffset* o) {
-                e.Read("name", &o->name);
-                e.Read("offset", &o->offset);
-              });
-  t.Read("explained_fraction", &d->time_offsets.explained_fraction);
-  t.Read("per_sample_rms_ms", &d->time_offsets.per_sample_rms_ms);
-  t.Read("per_sample_explained_fraction", &d->time_offsets.per_sample_explained_fraction);
-  t.Read("note", &d->time_offsets.note);
-  JsonReader b = r.Object("robust");
-  b.Read("used", &d->robust.used);
-  b.Read("batches", &d->robust.batches);
-  b.Read("batch_seconds", &d->robust.batch_seconds);
-  b.Read("ratio", &d->robust.ratio);
-  r.Read("positions_only_start", &d->positions_only_start);
-  r.ReadArray("changed_from_positions_only", &d->changed_from_positions_only,
-              [](const JsonReader& e, ArrayPositionChange* c) {
-                e.Read("name", &c->name);
-                e.Read("positions_only", &c->positions_only);
-                e.Read("positions_only_std", &c->positions_only_std);
-                e.Read("position_change", &c->position_change);
-                e.Read("position_change_norm", &c->position_change_norm);
-                e.Read("position_change_sigma", &c->position_change_sigma);
-              });
+  ReadMember(r, false, "dof", &d->dof);
+  Ext(r, "chi2_per_dof", &d->chi2_per_dof);
+  Ext(r, "gyro_unit", &d->gyro_unit);
+  if (const std::optional<JsonReader> n = MemberObject(r, false, "noise")) {
+    Ext(*n, "accelerometer", &d->noise.accelerometer);
+    Ext(*n, "gyroscope", &d->noise.gyroscope);
+    Ext(*n, "source", &d->noise.source);
+    Ext(*n, "dynamic_weighting", &d->noise.dynamic_weighting);
+    Ext(*n, "dynamic_accelerometer", &d->noise.dynamic_accelerometer);
+    Ext(*n, "dynamic_gyroscope", &d->noise.dynamic_gyroscope);
+  }
+  ReadFigures(r, "static_noise", &d->static_noise, false);
+  if (const std::optional<JsonReader> rms = MemberObject(r, false, "residual_rms")) {
+    ReadFigures(*rms, "dynamic", &d->residual_rms_dynamic, false);
+    ExtArray(*rms, "imus", &d->residual_rms_imus, [](const JsonReader& e, ArrayImuResiduals* i) {
+      Ext(e, "name", &i->name);
+      ReadFigures(e, "static", &i->static_rms, false);
+      ReadFigures(e, "dynamic", &i->dynamic_rms, false);
+    });
+  }
+  if (const std::optional<JsonReader> t = MemberObject(r, false, "time_offsets")) {
+    ExtArray(*t, "offsets_ms", &d->time_offsets.offsets_ms,
+             [](const JsonReader& e, ArrayTimeOffset* o) {
+               Ext(e, "name", &o->name);
+               Ext(e, "offset", &o->offset);
+             });
+    Ext(*t, "explained_fraction", &d->time_offsets.explained_fraction);
+    Ext(*t, "per_sample_rms_ms", &d->time_offsets.per_sample_rms_ms);
+    Ext(*t, "per_sample_explained_fraction", &d->time_offsets.per_sample_explained_fraction);
+    Ext(*t, "note", &d->time_offsets.note);
+  }
+  if (const std::optional<JsonReader> b = MemberObject(r, false, "robust")) {
+    Ext(*b, "used", &d->robust.used);
+    Ext(*b, "batches", &d->robust.batches);
+    Ext(*b, "batch_seconds", &d->robust.batch_seconds);
+    Ext(*b, "ratio", &d->robust.ratio);
+  }
+  ReadMember(r, false, "positions_only_start", &d->positions_only_start);
+  ExtArray(r, "changed_from_positions_only", &d->changed_from_positions_only,
+           [](const JsonReader& e, ArrayPositionChange* c) {
+             Ext(e, "name", &c->name);
+             Ext(e, "positions_only", &c->positions_only);
+             e.Read("positions_only_std", &c->positions_only_std);
+             Ext(e, "position_change", &c->position_change);
+             Ext(e, "position_change_norm", &c->position_change_norm);
+             Ext(e, "position_change_sigma", &c->position_change_sigma);
+           });
 }
 
 }  // namespace
@@ -374,13 +465,17 @@ Status FromJson(const json& doc, ArrayResult* out) {
   ArrayResult v;
   ReadEnvelope(r, "array", kArraySchemaVersion, &v.envelope);
   const bool usable = v.envelope.usable;
-  JsonReader diag = r.Object("diagnostics");
+  // A partial document may lack its diagnostics altogether (left out over the size cap).
+  const std::optional<JsonReader> diag = MemberObject(r, usable, "diagnostics");
   std::optional<std::string> model;
-  diag.Read("model", &model);
+  if (diag) diag->Read("model", &model);
   if (model && *model != "full")
-    diag.Fail("expected \"full\" or no model (the positions model), found \"" + *model + "\"",
-              "model");
-  v.full = model.has_value();
+    diag->Fail("expected \"full\" or no model (the positions model), found \"" + *model + "\"",
+               "model");
+  // Without diagnostics.model (a result stripped to SPEC's keys): the full model has
+  // parameters.imus (SPEC §7).
+  v.full = model.has_value() ||
+           (usable && r.Has("parameters") && r.Object("parameters").Present("imus"));
   if (usable) {
     ArrayParameters p;
     ReadParameters(r.Object("parameters"), v.full, &p);
@@ -389,10 +484,10 @@ Status FromJson(const json& doc, ArrayResult* out) {
     v.parameters = std::move(p);
     v.uncertainty = std::move(u);
   }
-  if (v.full)
-    ReadFullDiagnostics(diag, usable, &v.full_diagnostics);
-  else
-    ReadPositionsDiagnostics(diag, usable, &v.diagnostics);
+  if (diag && v.full)
+    ReadFullDiagnostics(*diag, usable, &v.full_diagnostics);
+  else if (diag)
+    ReadPositionsDiagnostics(*diag, usable, &v.diagnostics);
   if (!r.ok()) return r.status();
   *out = std::move(v);
   return Status::Ok();

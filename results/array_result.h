@@ -11,9 +11,24 @@
 // "[partial]" are present (the others keep their defaults and are not written).
 //
 // The JSON is exactly what server/array_method.cc has always written (plus "schema_version"):
-// ToJson(FromJson(j)) == j for every document the adapter writes. Units: metres, m/s², rad/s for
-// the positions-only model's rates; gyroscope figures in diagnostics.gyro_unit (the configured
-// unit: biases in it, scales in rad/s per unit); undefined numbers are null (NaN here).
+// ToJson(FromJson(j)) == j for every document the adapter writes.
+//
+// Results stored by an earlier calibd lack members added since. FromJson requires only what
+// SPEC §4/§7 requires (commented "SPEC"); every other member (our extensions) keeps its default
+// when absent: NaN for a number (shown as a dash, exported as an empty field, never as 0), an
+// empty list or string, nullopt for a count or a flag whose absence must show as "unknown". A
+// partial document's diagnostics members are all optional (the worker leaves out the largest
+// ones over 1 MiB, or the whole diagnostics object: server/failure_reasons.h). The model is
+// diagnostics.model ("full"), or, when that is absent, the presence of parameters.imus (SPEC §7).
+// For the full model parameters.positions and uncertainty.positions are extensions (README
+// Changelog): when absent they are derived from parameters.imus[].position and
+// uncertainty.imus[].position_std, the offset from the nominal then unknown (NaN).
+// ToJson writes every member it holds; an absent optional count (nullopt) is left out, except
+// the SPEC's, which a usable result always has (written as 0 if a hand-built struct lacks them).
+//
+// Units: metres, m/s², rad/s for the positions-only model's rates; gyroscope figures in
+// diagnostics.gyro_unit (the configured unit: biases in it, scales in rad/s per unit); undefined
+// numbers are null (NaN here).
 #ifndef CALIBD_RESULTS_ARRAY_RESULT_H_
 #define CALIBD_RESULTS_ARRAY_RESULT_H_
 
@@ -75,15 +90,15 @@ struct ArrayImuStd {
 };
 
 struct ArrayParameters {
-  int reference = 0;  // index of the reference triad, held at its nominal position
-  std::vector<ArrayPosition> positions;
-  std::vector<ArrayImu> imus;  // (full)
+  int reference = 0;  // SPEC index of the reference triad, held at its nominal position
+  std::vector<ArrayPosition> positions;  // SPEC (positions); (full) derived when absent, see above
+  std::vector<ArrayImu> imus;            // SPEC (full)
 };
 
 struct ArrayUncertainty {
-  std::vector<ArrayPositionStd> positions;
-  double std_rms = array_internal::kNaN;  // (positions) RMS of the K−1 free triads' σ, metres
-  std::vector<ArrayImuStd> imus;          // (full)
+  std::vector<ArrayPositionStd> positions;  // SPEC (positions); (full) as parameters.positions
+  double std_rms = array_internal::kNaN;    // (positions) RMS of the K−1 free triads' σ, metres
+  std::vector<ArrayImuStd> imus;            // SPEC (full)
 };
 
 // ---- diagnostics ----
@@ -131,28 +146,29 @@ struct ArrayCalibrationUsed {
 
 // The diagnostics of the positions model.
 struct ArrayPositionsDiagnostics {
-  std::string solver;           // [partial] "joint" | "bcd"
-  std::string termination;      // [partial]
-  int iterations = 0;           // [partial] LM iterations / BCD sweeps
-  int64_t samples = 0;          // [partial] usable samples N
-  int64_t samples_dropped = 0;  // [partial] dropped for gyroscope saturation
-  int gyro_triads = 0;          // [partial] G
-  std::string gyro_unit;        // [partial] "rad/s" | "deg/s"
-  ArrayExcitation excitation;   // [partial]
-  bool converged = false;
-  std::vector<double> cost;      // before the first and after every iteration
-  SensorFigures residual_rms;    // m/s², gyro_unit
-  SensorFigures noise_estimate;  // from the residuals, m/s², gyro_unit
-  ArrayNoiseJobs noise_jobs;
+  std::string solver;                      // [partial] SPEC "joint" | "bcd"
+  std::string termination;                 // [partial] "" when absent
+  std::optional<int> iterations;           // [partial] SPEC LM iterations / BCD sweeps
+  std::optional<int64_t> samples;          // [partial] SPEC usable samples N
+  std::optional<int64_t> samples_dropped;  // [partial] SPEC dropped for gyroscope saturation
+  std::optional<int> gyro_triads;          // [partial] G
+  std::string gyro_unit;                   // [partial] "rad/s" | "deg/s"; "" when absent
+  // [partial] SPEC: min_eigenvalue and verdict (the others are extensions).
+  ArrayExcitation excitation;
+  bool converged = false;          // SPEC
+  std::vector<double> cost;        // SPEC before the first and after every iteration
+  SensorFigures residual_rms;      // SPEC m/s², gyro_unit
+  SensorFigures noise_estimate;    // SPEC from the residuals, m/s², gyro_unit
+  ArrayNoiseJobs noise_jobs;       // both nullopt when absent
   SensorFigures noise_configured;  // accel_noise, gyro_noise (m/s², gyro_unit)
   double parallel_fraction = array_internal::kNaN;
-  ArrayMotion motion;
-  std::optional<ArrayCalibrationUsed> accelerometer_calibration;  // null without one
+  ArrayMotion motion;                                             // no points when absent
+  std::optional<ArrayCalibrationUsed> accelerometer_calibration;  // null without one (or absent)
 };
 
 // diagnostics.gauge (full).
 struct ArrayGauge {
-  std::string scale;  // the scale gauge ("sum_trace_gyroscope")
+  std::string scale;  // SPEC §7 (which gauge was used): "sum_trace_gyroscope"
   int reference = 0;  // the triad whose position and lower-triangle misalignment are held
   std::string description;
 };
@@ -217,18 +233,18 @@ struct ArrayPositionChange {
 // The diagnostics of the full model.
 struct ArrayFullDiagnostics {
   std::string termination;                      // [partial]
-  int iterations = 0;                           // [partial]
-  int64_t statics = 0;                          // [partial]
-  int64_t static_samples = 0;                   // [partial]
-  int64_t dynamic_samples = 0;                  // [partial]
+  std::optional<int> iterations;                // [partial] SPEC (§4)
+  std::optional<int64_t> statics;               // [partial]
+  std::optional<int64_t> static_samples;        // [partial]
+  std::optional<int64_t> dynamic_samples;       // [partial]
   ArrayRotationExcitation rotation_excitation;  // [partial] (as "rotation")
   std::vector<std::string> null_directions;     // [partial]
-  ArrayGauge gauge;
-  std::string solver;  // "joint"
-  bool converged = false;
-  std::vector<double> cost;
-  int64_t samples_dropped = 0;
-  int64_t dof = 0;
+  ArrayGauge gauge;                             // SPEC §7 (gauge.scale)
+  std::string solver;                           // SPEC (§4) "joint"
+  bool converged = false;                       // SPEC (§4)
+  std::vector<double> cost;                     // SPEC (§4)
+  int64_t samples_dropped = 0;                  // SPEC (§4)
+  std::optional<int64_t> dof;
   double chi2_per_dof = array_internal::kNaN;
   std::string gyro_unit;
   ArrayFullNoise noise;
@@ -237,7 +253,9 @@ struct ArrayFullDiagnostics {
   std::vector<ArrayImuResiduals> residual_rms_imus;  // residual_rms.imus
   ArrayTimeOffsets time_offsets;
   ArrayRobust robust;
-  bool positions_only_start = false;  // the start came from a positions-only fit
+  // The start came from a positions-only fit (false: from the nominal geometry); nullopt when
+  // absent.
+  std::optional<bool> positions_only_start;
   std::vector<ArrayPositionChange> changed_from_positions_only;
 };
 

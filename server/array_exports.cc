@@ -42,12 +42,15 @@ Status ArrayHeader(const results::ArrayResult& r, HeaderWriter* w) {
   const size_t k = params.positions.size();
   std::vector<std::string> names;
   std::vector<std::vector<double>> position, offset, stds;
+  bool offsets = true;  // false: some offset is unknown (a full-model result without
+                        // parameters.positions, stored by an earlier calibd)
   for (const results::ArrayPosition& p : params.positions) {
     names.push_back(p.name);
-    if (!p.position.allFinite() || !p.offset.allFinite()) {
+    if (!p.position.allFinite()) {
       return Status::NotDeterminable("the array result of triad '" + p.name +
                                      "' has an undefined position: no C header can be written");
     }
+    offsets = offsets && p.offset.allFinite();
     position.push_back(Values(p.position));
     offset.push_back(Values(p.offset));
   }
@@ -56,7 +59,13 @@ Status ArrayHeader(const results::ArrayResult& r, HeaderWriter* w) {
             "index of the reference triad, held at its nominal position");
   w->Names("NAMES", names);
   w->Array2("POSITION", position, 3, "r_k: triad positions, metres, nominal geometry frame");
-  w->Array2("OFFSET", offset, 3, "offset from the nominal position, metres");
+  if (offsets) {
+    w->Array2("OFFSET", offset, 3, "offset from the nominal position, metres");
+  } else {
+    w->out() << "/* " << w->macro()
+             << "OFFSET is not written: the result does not give every offset from the nominal "
+                "position. */\n";
+  }
   bool all = upos.size() == k;
   for (size_t i = 0; all && i < k; ++i) {
     all = upos[i].std.allFinite();

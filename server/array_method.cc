@@ -892,6 +892,23 @@ Status SimulateArrayStaticFiles(const ArraySimulationFileOptions& options, int p
   return Status::Ok();
 }
 
+namespace {
+// The nominal position of triad i in the config's geometry; NaN when it does not give it.
+Eigen::Vector3d NominalPosition(const json& config, size_t i) {
+  Eigen::Vector3d p = Eigen::Vector3d::Constant(NAN);
+  if (!config.is_object() || !config.contains("geometry")) return p;
+  const json& geometry = config["geometry"];
+  if (!geometry.is_object() || !geometry.contains("positions")) return p;
+  const json& positions = geometry["positions"];
+  if (!positions.is_array() || i >= positions.size() || !positions[i].is_array() ||
+      positions[i].size() != 3)
+    return p;
+  for (int k = 0; k < 3; ++k)
+    if (positions[i][k].is_number()) p(k) = positions[i][k].get<double>();
+  return p;
+}
+}  // namespace
+
 void JudgeArray(const json& result, const json& config, const AcceptanceLimits& limits,
                 Verdict* verdict) {
   results::ArrayResult r;
@@ -914,7 +931,10 @@ void JudgeArray(const json& result, const json& config, const AcceptanceLimits& 
     const results::ArrayPosition& q = params.positions[i];
     const Eigen::Vector3d std = i < uncertainty.positions.size() ? uncertainty.positions[i].std
                                                                  : Eigen::Vector3d::Constant(NAN);
-    const double offset = q.offset.norm();
+    // The offset from the nominal position; a result that does not give it (a full-model result
+    // without parameters.positions, stored by an earlier calibd) against the config's geometry.
+    double offset = q.offset.norm();
+    if (!std::isfinite(offset)) offset = (q.position - NominalPosition(config, i)).norm();
     if (offset_max && std::isfinite(offset) && offset > *offset_max) {
       far.Add(q.name + " " + Fmt(offset * 1e3) + " mm");
     }

@@ -110,10 +110,12 @@ Status RunArray(ArrayRecording recording, const nlohmann::json& config, nlohmann
 // The acceptance gate of an array result (Method::Judge), read typed (results::FromJson; a result
 // that does not read is rejected with the reader's message): every triad but the reference within
 // max_offset of its nominal position and its 1 sigma within max_position_std
-// (parameters.positions and uncertainty.positions, both models), the solver converged, for the
-// positions model the residual RMS against the configured accel_noise / gyro_noise (max_chi2 on
-// the squared ratio), and for model full each triad's gains, misalignments and biases as for imu
-// (JudgeImuTriads; nominal units from accel_unit, gyro_unit).
+// (parameters.positions and uncertainty.positions, both models; an offset the result does not
+// give, as a full-model result stored without parameters.positions, is taken against the config's
+// geometry), the solver converged, for the positions model the residual RMS against the
+// configured accel_noise / gyro_noise (max_chi2 on the squared ratio), and for model full each
+// triad's gains, misalignments and biases as for imu (JudgeImuTriads; nominal units from
+// accel_unit, gyro_unit).
 void JudgeArray(const nlohmann::json& result, const nlohmann::json& config,
                 const AcceptanceLimits& limits, Verdict* verdict);
 
@@ -199,7 +201,9 @@ Status SimulateArrayFullFiles(const ArraySimulationFileOptions& options, std::st
                               nlohmann::json* config, nlohmann::json* truth);
 
 // Exports of a array result (server/array_exports.cc; formats in server/exports.h), read typed
-// (results::FromJson): a result that does not read is kInternal with the reader's message.
+// (results::FromJson): a result that does not read is kInternal with the reader's message. An
+// offset the result does not give (a full-model result stored without parameters.positions) is
+// an empty CSV field, and the header leaves OFFSET out saying so.
 Status ArrayResultToCsv(const nlohmann::json& result, std::string* out);
 Status ArrayResultToHeader(const nlohmann::json& result, const ExportContext& context,
                            std::string* out);

@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -37,6 +39,11 @@ std::string Figure(const std::string& svg, const std::string& caption) {
 int Decimals(double typical_sigma) {
   if (!(typical_sigma > 0) || !std::isfinite(typical_sigma)) return 3;
   return std::clamp(static_cast<int>(std::ceil(-std::log10(typical_sigma))) + 1, 0, 6);
+}
+
+// A count a result may lack (one stored by an earlier calibd): a dash when absent.
+std::string Count(const std::optional<int64_t>& n) {
+  return FormatFixed(n ? static_cast<double>(*n) : kNaN, 0);
 }
 
 double Median(std::vector<double> v) {
@@ -286,12 +293,14 @@ std::string TriadsSection(const results::ArrayResult& result) {
             deg ? kPi / 180 : 1, lim.gyro_bias, lim.gyro_bias_std};
   const results::ArrayFullNoise& noise = diag.noise;
   std::string s = "<dl class=\"kv\">";
-  s += "<dt>gauge</dt><dd>" + E(diag.gauge.description) + "</dd>";
-  s += "<dt>statics</dt><dd>" + FormatFixed(static_cast<double>(diag.statics), 0) + " (" +
-       FormatFixed(static_cast<double>(diag.static_samples), 0) + " samples), motion " +
-       FormatFixed(static_cast<double>(diag.dynamic_samples), 0) + " samples</dd>";
+  // The description, or the gauge's name when the result has none (an earlier calibd's).
+  s += "<dt>gauge</dt><dd>" +
+       E(diag.gauge.description.empty() ? diag.gauge.scale : diag.gauge.description) + "</dd>";
+  s += "<dt>statics</dt><dd>" + Count(diag.statics) + " (" + Count(diag.static_samples) +
+       " samples), motion " + Count(diag.dynamic_samples) + " samples</dd>";
   s += "<dt>noise \xCF\x83 used</dt><dd>" + FormatSig(noise.accelerometer, 3) + " m/s\xC2\xB2, " +
-       FormatSig(noise.gyroscope, 3) + " " + E(gyro.bias_unit) + " (" + E(noise.source) + ")</dd>";
+       FormatSig(noise.gyroscope, 3) + " " + E(gyro.bias_unit) +
+       (noise.source.empty() ? std::string() : " (" + E(noise.source) + ")") + "</dd>";
   s += "<dt>\xCF\x87\xC2\xB2 / degrees of freedom</dt><dd>" + FormatSig(diag.chi2_per_dof, 3) +
        "</dd>";
   s += "<dt>\xCF\x83 shown</dt><dd class=\"sigma-shown\">" +
@@ -433,14 +442,16 @@ std::string ChangeSection(const results::ArrayResult& result) {
       "class=\"num\">y</th><th class=\"num\">z</th><th class=\"num gs\">x</th><th "
       "class=\"num\">y</th><th class=\"num\">z</th><th class=\"num\">|\xCE\x94|</th>" +
       sub + "</tr>";
-  const bool fitted = diag.positions_only_start;
+  // Absent (a result of an earlier calibd): the start is not known, so neither sentence.
+  const std::optional<bool> fitted = diag.positions_only_start;
   std::string s =
       "<p>" +
-      std::string(fitted ? "The full model starts from the positions-only fit of the same log "
-                           "(its dynamic samples, the accelerometers corrected by the statics' "
-                           "closed form, the gyroscope biases removed, ideal gyroscopes). "
-                         : "The positions-only fit for the start failed: the full model started "
-                           "from the nominal geometry, so the shift below is from it. ") +
+      std::string(!fitted   ? "The full model's shift from the start of its fit. "
+                  : *fitted ? "The full model starts from the positions-only fit of the same log "
+                              "(its dynamic samples, the accelerometers corrected by the statics' "
+                              "closed form, the gyroscope biases removed, ideal gyroscopes). "
+                            : "The positions-only fit for the start failed: the full model started "
+                              "from the nominal geometry, so the shift below is from it. ") +
       "\xCF\x83 is the full model's 1\xCF\x83 of the position" +
       std::string(robust ? " (residual-aware)" : "") + "; shifts beyond 3\xCF\x83 are marked." +
       (worst > 0 ? " Largest: triad " + E(worst_name) + ", " + FormatSig(worst, 2) + "\xCF\x83."

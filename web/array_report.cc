@@ -7,6 +7,7 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -38,6 +39,15 @@ template <typename T>
 std::string Text(const T& v) {
   const json j = v;
   return ScalarText(&j);
+}
+// A count a result may lack (a partial document, a result of an earlier calibd): a dash then.
+template <typename T>
+std::string Text(const std::optional<T>& v) {
+  return v ? Text(*v) : std::string(kDash);
+}
+// A verdict a result may lack: a dash then.
+std::string VerdictText(const std::string& verdict) {
+  return verdict.empty() ? std::string(kDash) : E(verdict);
 }
 
 ArrayFigures Figures(const results::ArrayResult& r) {
@@ -305,7 +315,20 @@ std::string ArrayReport(const JobView& view) {
   if (!result.parameters)
     return Section("parameters", "Parameters",
                    NotAvailable("The array result (a failed run's partial diagnostics)"));
+  // A result without diagnostics.gyro_unit (one stored by an earlier calibd): the config's.
+  std::string& unit =
+      result.full ? result.full_diagnostics.gyro_unit : result.diagnostics.gyro_unit;
+  if (unit.empty()) {
+    const json* configured = Get(view.config, "gyro_unit");
+    if (configured != nullptr && configured->is_string()) unit = configured->get<std::string>();
+  }
   const auto triads = ReadTriads(result, view.config);
+  // Offsets the result does not give (a full-model result stored without parameters.positions)
+  // as the table shows them: against the config's geometry.
+  for (size_t i = 0; i < triads.size(); ++i) {
+    Eigen::Vector3d& offset = result.parameters->positions[i].offset;
+    if (!offset.allFinite()) offset = {triads[i].off[0], triads[i].off[1], triads[i].off[2]};
+  }
   const results::ArrayPositionsDiagnostics& d = result.diagnostics;
   const results::ArrayFullDiagnostics& fd = result.full_diagnostics;
   std::string out;
@@ -318,24 +341,25 @@ std::string ArrayReport(const JobView& view) {
     s += "<dt>triads K</dt><dd>" + std::to_string(triads.size()) + "</dd>";
     s += "<dt>reference triad</dt><dd>" + E(ref_name) + " (held at its nominal position)</dd>";
     const std::string solver = result.full ? fd.solver : d.solver;
-    const int iterations = result.full ? fd.iterations : d.iterations;
+    const std::optional<int> iterations = result.full ? fd.iterations : d.iterations;
     const bool converged = result.full ? fd.converged : d.converged;
     const std::string termination = result.full ? fd.termination : d.termination;
     s += "<dt>solver</dt><dd>" + E(solver) + ", " + Text(iterations) +
-         " iterations, converged: " + Text(converged) + " (" + E(termination) + ")</dd>";
+         " iterations, converged: " + Text(converged) +
+         (termination.empty() ? std::string() : " (" + E(termination) + ")") + "</dd>";
     if (result.full) {
       // The full model: the motion's samples, and the rotation excitation of the whole log.
       const results::ArrayRotationExcitation& x = fd.rotation_excitation;
       s += "<dt>samples</dt><dd>" + Text(fd.dynamic_samples) + " used in motion, " +
            Text(fd.samples_dropped) + " dropped</dd>";
-      s += "<dt>rotation excitation</dt><dd>" + E(x.verdict) + " (smallest eigenvalue " +
+      s += "<dt>rotation excitation</dt><dd>" + VerdictText(x.verdict) + " (smallest eigenvalue " +
            E(Text(x.eigenvalues.minCoeff(), 4)) + ", noise floor " + E(Text(x.noise_floor, 4)) +
            ")</dd>";
     } else {
       s += "<dt>samples</dt><dd>" + Text(d.samples) + " used, " + Text(d.samples_dropped) +
            " dropped</dd>";
-      s += "<dt>excitation</dt><dd>" + E(d.excitation.verdict) + " (smallest eigenvalue " +
-           E(Text(d.excitation.min_eigenvalue, 4)) + ", noise floor " +
+      s += "<dt>excitation</dt><dd>" + VerdictText(d.excitation.verdict) +
+           " (smallest eigenvalue " + E(Text(d.excitation.min_eigenvalue, 4)) + ", noise floor " +
            E(Text(d.excitation.noise_floor, 4)) + ")</dd>";
     }
     const ArrayFigures f = Figures(result);
@@ -477,7 +501,8 @@ std::string ArrayPartialReport(const JobView& view) {
     const results::ArrayFullDiagnostics& d = r.full_diagnostics;
     s += "<dt>statics</dt><dd>" + Text(d.statics) + " (" + Text(d.static_samples) +
          " samples)</dd><dt>dynamic samples</dt><dd>" + Text(d.dynamic_samples) +
-         "</dd><dt>rotation excitation</dt><dd>" + E(d.rotation_excitation.verdict) + "</dd>";
+         "</dd><dt>rotation excitation</dt><dd>" + VerdictText(d.rotation_excitation.verdict) +
+         "</dd>";
   } else {
     const results::ArrayPositionsDiagnostics& d = r.diagnostics;
     const std::string& verdict = d.excitation.verdict;

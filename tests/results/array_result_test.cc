@@ -148,6 +148,26 @@ json PositionsPartial() {
           {"warnings", {"too few samples"}}};
 }
 
+json FullPartial() {
+  return {{"method", "array"},
+          {"usable", false},
+          {"schema_version", 1},
+          {"diagnostics",
+           {{"model", "full"},
+            {"termination", "not_run"},
+            {"iterations", 0},
+            {"statics", 2},
+            {"static_samples", 300},
+            {"dynamic_samples", 0},
+            {"rotation",
+             {{"eigenvalues", {0, 0, 0}},
+              {"noise_floor", 0.5},
+              {"weakest_axis", {1, 0, 0}},
+              {"verdict", "insufficient"}}},
+            {"null_directions", json::array()}}},
+          {"warnings", json::array()}};
+}
+
 TEST(ArrayResult, PositionsModelRoundTripsWithEveryField) {
   const json j = ToJson(PositionsResult());
   EXPECT_EQ(j["schema_version"], kArraySchemaVersion);
@@ -225,23 +245,7 @@ TEST(ArrayResult, PositionsPartialDocumentReadsWithoutParameters) {
 }
 
 TEST(ArrayResult, FullPartialDocumentReadsItsRotation) {
-  const json j = {{"method", "array"},
-                  {"usable", false},
-                  {"schema_version", 1},
-                  {"diagnostics",
-                   {{"model", "full"},
-                    {"termination", "not_run"},
-                    {"iterations", 0},
-                    {"statics", 2},
-                    {"static_samples", 300},
-                    {"dynamic_samples", 0},
-                    {"rotation",
-                     {{"eigenvalues", {0, 0, 0}},
-                      {"noise_floor", 0.5},
-                      {"weakest_axis", {1, 0, 0}},
-                      {"verdict", "insufficient"}}},
-                    {"null_directions", json::array()}}},
-                  {"warnings", json::array()}};
+  const json j = FullPartial();
   ArrayResult r;
   const Status s = FromJson(j, &r);
   ASSERT_TRUE(s.ok()) << s.message();
@@ -269,28 +273,149 @@ TEST(ArrayResult, WrongTypeIsRefusedNamingThePath) {
       << sf.message();
 }
 
-TEST(ArrayResult, MissingKeyIsRefusedNamingThePath) {
+TEST(ArrayResult, MissingSpecKeyIsRefusedNamingThePath) {
+  // Keys SPEC §4 (positions model) and §7 (full model) require.
   json j = ToJson(PositionsResult());
-  j["diagnostics"]["motion"].erase("stride");
+  j["diagnostics"]["noise_estimate"].erase("gyroscope");
   ArrayResult r;
   Status s = FromJson(j, &r);
   ASSERT_FALSE(s.ok());
-  EXPECT_NE(s.message().find("diagnostics.motion.stride"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("diagnostics.noise_estimate.gyroscope"), std::string::npos)
+      << s.message();
 
   j = ToJson(PositionsResult());
-  j["diagnostics"].erase("accelerometer_calibration");
+  j["diagnostics"]["excitation"].erase("verdict");
   s = FromJson(j, &r);
   ASSERT_FALSE(s.ok());
-  EXPECT_NE(s.message().find("diagnostics.accelerometer_calibration"), std::string::npos)
-      << s.message();
+  EXPECT_NE(s.message().find("diagnostics.excitation.verdict"), std::string::npos) << s.message();
+
+  j = ToJson(PositionsResult());
+  j["diagnostics"].erase("samples");
+  s = FromJson(j, &r);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("diagnostics.samples"), std::string::npos) << s.message();
 
   json f = ToJson(FullResult());
-  f["diagnostics"]["changed_from_positions_only"][1].erase("position_change_sigma");
+  f["diagnostics"]["gauge"].erase("scale");
   s = FromJson(f, &r);
   ASSERT_FALSE(s.ok());
-  EXPECT_NE(s.message().find("diagnostics.changed_from_positions_only[1].position_change_sigma"),
-            std::string::npos)
-      << s.message();
+  EXPECT_NE(s.message().find("diagnostics.gauge.scale"), std::string::npos) << s.message();
+
+  f = ToJson(FullResult());
+  f["uncertainty"]["imus"][1].erase("position_std");
+  s = FromJson(f, &r);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("uncertainty.imus[1].position_std"), std::string::npos) << s.message();
+}
+
+// Results stored by an earlier calibd lack our extensions: they read, the members at their
+// defaults (NaN, empty, nullopt).
+TEST(ArrayResult, PositionsResultWithoutExtensionsReadsWithDefaults) {
+  json j = ToJson(PositionsResult());
+  for (const char* key :
+       {"termination", "gyro_triads", "gyro_unit", "noise_jobs", "noise_configured",
+        "parallel_fraction", "motion", "accelerometer_calibration"})
+    j["diagnostics"].erase(key);
+  for (const char* key : {"max_eigenvalue", "noise_floor", "weakest_direction"})
+    j["diagnostics"]["excitation"].erase(key);
+  j["uncertainty"].erase("std_rms");
+  j.erase("schema_version");
+  ArrayResult r;
+  const Status s = FromJson(j, &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  const ArrayPositionsDiagnostics& d = r.diagnostics;
+  EXPECT_EQ(d.samples, 12345);
+  EXPECT_EQ(d.termination, "");
+  EXPECT_FALSE(d.gyro_triads.has_value());
+  EXPECT_FALSE(d.noise_jobs.accelerometer.has_value());
+  EXPECT_FALSE(d.noise_jobs.gyroscope.has_value());
+  EXPECT_TRUE(std::isnan(d.noise_configured.accelerometer));
+  EXPECT_TRUE(std::isnan(d.parallel_fraction));
+  EXPECT_TRUE(d.motion.omega_norm.empty());
+  EXPECT_FALSE(d.accelerometer_calibration.has_value());
+  EXPECT_TRUE(std::isnan(d.excitation.noise_floor));
+  EXPECT_DOUBLE_EQ(d.excitation.min_eigenvalue, 10.5);
+  EXPECT_TRUE(std::isnan(r.uncertainty->std_rms));
+}
+
+TEST(ArrayResult, FullResultWithoutPositionsDerivesThemFromTheImus) {
+  json j = ToJson(FullResult());
+  j["parameters"].erase("positions");
+  j["parameters"].erase("model");
+  j["uncertainty"].erase("positions");
+  j["diagnostics"].erase("model");  // the model is then told by parameters.imus
+  for (const char* key :
+       {"time_offsets", "dof", "chi2_per_dof", "noise", "robust", "changed_from_positions_only",
+        "positions_only_start", "statics", "rotation_excitation", "residual_rms", "static_noise"})
+    j["diagnostics"].erase(key);
+  ArrayResult r;
+  const Status s = FromJson(j, &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_TRUE(r.full);
+  ASSERT_EQ(r.parameters->positions.size(), r.parameters->imus.size());
+  EXPECT_EQ(r.parameters->positions[1].name, r.parameters->imus[1].triads.name);
+  EXPECT_EQ(r.parameters->positions[1].position, r.parameters->imus[1].position);
+  EXPECT_TRUE(r.parameters->positions[1].offset.array().isNaN().all());
+  ASSERT_EQ(r.uncertainty->positions.size(), r.uncertainty->imus.size());
+  EXPECT_EQ(r.uncertainty->positions[0].std, r.uncertainty->imus[0].position_std);
+  const ArrayFullDiagnostics& d = r.full_diagnostics;
+  EXPECT_FALSE(d.dof.has_value());
+  EXPECT_FALSE(d.statics.has_value());
+  EXPECT_FALSE(d.positions_only_start.has_value());
+  EXPECT_TRUE(d.changed_from_positions_only.empty());
+  EXPECT_TRUE(d.time_offsets.offsets_ms.empty());
+  EXPECT_TRUE(std::isnan(d.noise.accelerometer));
+  EXPECT_EQ(d.noise.source, "");
+  EXPECT_TRUE(d.residual_rms_imus.empty());
+  EXPECT_EQ(d.rotation_excitation.verdict, "");
+  EXPECT_EQ(d.gauge.scale, "sum_trace_gyroscope");
+}
+
+TEST(ArrayResult, PartialDocumentWithoutDiagnosticsReads) {
+  // What the worker keeps when even the trimmed partial diagnostics are over the cap.
+  const json bare = {{"method", "array"},
+                     {"usable", false},
+                     {"trimmed", {{"bytes", 2000000}, {"dropped", {"diagnostics"}}}}};
+  ArrayResult r;
+  Status s = FromJson(bare, &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_FALSE(r.envelope.usable);
+  EXPECT_FALSE(r.diagnostics.samples.has_value());
+  EXPECT_EQ(r.diagnostics.excitation.verdict, "");
+
+  json empty = PositionsPartial();
+  empty["diagnostics"] = json::object();
+  s = FromJson(empty, &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_FALSE(r.diagnostics.iterations.has_value());
+}
+
+// The worker used to write the members it left out of over-sized partial diagnostics as null.
+TEST(ArrayResult, PartialDocumentWithAnyMemberNullReads) {
+  for (const json& doc : {PositionsPartial(), FullPartial()}) {
+    for (const auto& item : doc["diagnostics"].items()) {
+      if (item.key() == "model") continue;
+      json j = doc;
+      j["diagnostics"][item.key()] = nullptr;
+      ArrayResult r;
+      const Status s = FromJson(j, &r);
+      EXPECT_TRUE(s.ok()) << item.key() << ": " << s.message();
+    }
+  }
+}
+
+TEST(ArrayResult, PartialDocumentLackingAnyOneMemberReads) {
+  for (const json& doc : {PositionsPartial(), FullPartial()}) {
+    for (const auto& item : doc["diagnostics"].items()) {
+      if (item.key() == "model") continue;  // says which model: never left out alone (tiny)
+      json j = doc;
+      j["diagnostics"].erase(item.key());
+      ArrayResult r;
+      const Status s = FromJson(j, &r);
+      EXPECT_TRUE(s.ok()) << item.key() << ": " << s.message();
+      EXPECT_EQ(r.full, doc["diagnostics"].contains("model")) << item.key();
+    }
+  }
 }
 
 TEST(ArrayResult, UnknownModelIsRefused) {

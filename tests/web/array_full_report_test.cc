@@ -271,10 +271,19 @@ TEST(ArrayFullReport, ShowsTheResidualAwareSigmaWhenTheResultHasIt) {
 }
 
 TEST(ArrayFullReport, ResultsOfAnyShapeRenderAndOnlyFullResultsGetTheSections) {
-  // A positions-model result has no triads to show.
-  json positions = FullResult(3);
-  positions["diagnostics"].erase("model");
+  // A positions-model result has no triads to show. (A full result without diagnostics.model is
+  // still one: its parameters.imus say so, SPEC §7.)
+  results::ArrayResult typed;
+  typed.envelope.method = "array";
+  typed.envelope.model = "y_a,k = s + (Omega(omega)^2 + Omega(omega_dot)) r_k";
+  typed.parameters = results::ArrayParameters{0, {{"a0", {0, 0, 0}, {0, 0, 0}}}, {}};
+  typed.uncertainty = results::ArrayUncertainty{{{"a0", {0, 0, 0}}}, 0, {}};
+  const json positions = results::ToJson(typed);
+  ASSERT_TRUE(results::FromJson(positions, &typed).ok());
   EXPECT_FALSE(Has(ArrayFullSections(positions), "id=\"triads\""));
+  json unlabelled = FullResult(3);
+  unlabelled["diagnostics"].erase("model");
+  EXPECT_TRUE(Has(ArrayFullSections(unlabelled), "id=\"triads\""));
   for (const json& odd :
        {json(), json::array(), json{{"parameters", 3}},
         json{{"parameters", {{"model", "full"}, {"imus", {1, "x", nullptr}}}}},
