@@ -131,7 +131,8 @@ TEST(PcaResultSchema, TooFewPositionsWithNominalKeepsTheCoverageInThePartialDocu
   const json j = ExpectRoundTrip(Recording(sim), o, false, &t);
   EXPECT_FALSE(t.envelope.usable);
   EXPECT_EQ(t.diagnostics.min_positions, 6);
-  EXPECT_NE(t.diagnostics.coverage.verdict, results::PcaCoverageVerdict::kUnknown) << j.dump();
+  ASSERT_TRUE(t.diagnostics.coverage.has_value());
+  EXPECT_NE(t.diagnostics.coverage->verdict, results::PcaCoverageVerdict::kUnknown) << j.dump();
 }
 
 // A real usable result of 30 random orientations (canonical frame).
