@@ -126,13 +126,11 @@ void ReadCoverage(const JsonReader& c, PcaCoverage* out) {
 void ReadDiagnostics(const JsonReader& g, bool partial, bool usable, PcaDiagnostics* out) {
   PcaDiagnostics v;
   v.usable = usable;
+  // SPEC's keys: required (partial: read when present and not null).
   auto spec = [&](const char* key, auto* value) {
-    if (!partial) {
-      g.Read(key, value);
-    } else if (g.Has(key)) {
-      g.Read(key, value);
-    }
+    if (!partial || g.Has(key)) g.Read(key, value);
   };
+  // Extensions: JsonReader::ReadExtension (partial: read when present and not null).
   auto extension = [&](const char* key, auto* value) {
     if (partial ? g.Has(key) : g.Present(key)) g.Read(key, value);
   };
