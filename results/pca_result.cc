@@ -79,7 +79,8 @@ void ReadParameters(const JsonReader& p, PcaParameters* out) {
   p.Read("magnitude", &v.magnitude);
   p.Read("magnitude_known", &v.magnitude_known);
   ReadEnum(p, "frame", kFrames, &v.frame);
-  ReadEnum(p, "bias", kBiases, &v.bias);
+  // Not in SPEC §4 (added with bias estimation): absent, the struct's kNone.
+  if (p.Present("bias")) ReadEnum(p, "bias", kBiases, &v.bias);
   if (!p.ok()) return;
   const int d = v.dimension;
   p.ReadArray("sensors", &v.sensors,
@@ -90,50 +91,72 @@ void ReadParameters(const JsonReader& p, PcaParameters* out) {
 void ReadUncertainty(const JsonReader& u, PcaUncertainty* out) {
   PcaUncertainty v;
   u.ReadArray("sensors", &v.sensors, ReadSensorStd);
-  u.Read("noise_std", &v.noise_std);
+  u.ReadExtension("noise_std", &v.noise_std);  // not in SPEC §4: absent, NaN
   if (u.ok()) *out = std::move(v);
 }
 
+// diagnostics.coverage (an extension, added after the first results were stored): every member
+// keeps its default when absent.
 void ReadCoverage(const JsonReader& c, PcaCoverage* out) {
   PcaCoverage v;
-  ReadEnum(c, "verdict", kVerdicts, &v.verdict);
-  c.Read("scatter_eigenvalues", &v.scatter_eigenvalues);
-  c.Read("scatter_min", &v.scatter_min);
-  c.Read("design_min", &v.design_min);
-  JsonReader caps = c.Object("positions_per_direction");
-  if (caps.ok()) {
-    for (const auto& [key, value] : caps.node().items()) {
-      int count = 0;
-      caps.Read(key, &count);
-      if (!caps.ok()) return;
-      v.positions_per_direction[key] = count;
+  if (c.Present("verdict")) ReadEnum(c, "verdict", kVerdicts, &v.verdict);
+  c.ReadExtension("scatter_eigenvalues", &v.scatter_eigenvalues);
+  c.ReadExtension("scatter_min", &v.scatter_min);
+  c.ReadExtension("design_min", &v.design_min);
+  if (c.Present("positions_per_direction")) {
+    JsonReader caps = c.Object("positions_per_direction");
+    if (caps.ok()) {
+      for (const auto& [key, value] : caps.node().items()) {
+        int count = 0;
+        caps.Read(key, &count);
+        if (!caps.ok()) return;
+        v.positions_per_direction[key] = count;
+      }
     }
   }
-  c.Read("advice", &v.advice);
+  c.ReadExtension("advice", &v.advice);
   if (c.ok()) *out = std::move(v);
 }
 
-void ReadDiagnostics(const JsonReader& g, PcaDiagnostics* out) {
+// `partial`: a failed run's document, whose diagnostics may lack any member (the worker leaves
+// out the largest ones over the cap, server/failure_reasons.h) and, from before that rule, may
+// hold null for one: every member is then read only when present and not null. Otherwise SPEC
+// §4's "at least" keys are required and the others (our extensions) keep their defaults when
+// absent. `usable` is the envelope's, the default of diagnostics.usable.
+void ReadDiagnostics(const JsonReader& g, bool partial, bool usable, PcaDiagnostics* out) {
   PcaDiagnostics v;
-  g.Read("usable", &v.usable);
+  v.usable = usable;
+  // SPEC's keys: required (partial: read when present and not null).
+  auto spec = [&](const char* key, auto* value) {
+    if (!partial || g.Has(key)) g.Read(key, value);
+  };
+  // Extensions: JsonReader::ReadExtension (partial: read when present and not null).
+  auto extension = [&](const char* key, auto* value) {
+    if (partial ? g.Has(key) : g.Present(key)) g.Read(key, value);
+  };
+  extension("usable", &v.usable);
   g.Read("reason", &v.reason);
-  g.Read("singular_values", &v.singular_values);
-  g.Read("rank_gap", &v.rank_gap);
-  g.Read("positions", &v.positions);
-  g.Read("min_positions", &v.min_positions);
-  g.Read("g_eigenvalues", &v.g_eigenvalues);
-  g.Read("residual_rms", &v.residual_rms);
-  g.Read("magnitude_error", &v.magnitude_error);
-  g.Read("degrees_of_freedom", &v.degrees_of_freedom);
-  ReadCoverage(g.Object("coverage"), &v.coverage);
-  g.Read("noise_std", &v.noise_std);
-  g.Read("noise_std_given", &v.noise_std_given);
-  g.Read("noise_std_estimated", &v.noise_std_estimated);
-  g.Read("cost_closed_form", &v.cost_closed_form);
-  g.Read("cost", &v.cost);
-  g.Read("refined", &v.refined);
-  g.Read("refine_iterations", &v.refine_iterations);
-  g.Read("reflection", &v.reflection);
+  spec("singular_values", &v.singular_values);
+  spec("rank_gap", &v.rank_gap);
+  spec("positions", &v.positions);
+  spec("min_positions", &v.min_positions);
+  spec("g_eigenvalues", &v.g_eigenvalues);
+  spec("residual_rms", &v.residual_rms);
+  spec("magnitude_error", &v.magnitude_error);
+  extension("degrees_of_freedom", &v.degrees_of_freedom);
+  if (partial ? g.Has("coverage") : g.Present("coverage")) {
+    PcaCoverage coverage;
+    ReadCoverage(g.Object("coverage"), &coverage);
+    if (g.ok()) v.coverage = std::move(coverage);
+  }
+  extension("noise_std", &v.noise_std);
+  extension("noise_std_given", &v.noise_std_given);
+  extension("noise_std_estimated", &v.noise_std_estimated);
+  extension("cost_closed_form", &v.cost_closed_form);
+  extension("cost", &v.cost);
+  extension("refined", &v.refined);
+  extension("refine_iterations", &v.refine_iterations);
+  extension("reflection", &v.reflection);
   g.Read("position_labels", &v.position_labels);
   g.Read("removed_bias", &v.removed_bias);
   if (g.ok()) *out = std::move(v);
@@ -206,15 +229,17 @@ json ToJson(const PcaResult& r) {
   diag["residual_rms"] = Nums(g.residual_rms);
   diag["magnitude_error"] = Nums(g.magnitude_error);
   diag["degrees_of_freedom"] = g.degrees_of_freedom;
-  const PcaCoverage& c = g.coverage;
-  json caps = json::object();
-  for (const auto& [name, count] : c.positions_per_direction) caps[name] = count;
-  diag["coverage"] = {{"verdict", Name(c.verdict)},
-                      {"scatter_eigenvalues", Nums(c.scatter_eigenvalues)},
-                      {"scatter_min", Num(c.scatter_min)},
-                      {"design_min", Num(c.design_min)},
-                      {"positions_per_direction", std::move(caps)},
-                      {"advice", c.advice}};
+  if (g.coverage) {
+    const PcaCoverage& c = *g.coverage;
+    json caps = json::object();
+    for (const auto& [name, count] : c.positions_per_direction) caps[name] = count;
+    diag["coverage"] = {{"verdict", Name(c.verdict)},
+                        {"scatter_eigenvalues", Nums(c.scatter_eigenvalues)},
+                        {"scatter_min", Num(c.scatter_min)},
+                        {"design_min", Num(c.design_min)},
+                        {"positions_per_direction", std::move(caps)},
+                        {"advice", c.advice}};
+  }
   diag["noise_std"] = Num(g.noise_std);
   diag["noise_std_given"] = g.noise_std_given;
   diag["noise_std_estimated"] = Num(g.noise_std_estimated);
@@ -249,7 +274,13 @@ Status FromJson(const json& doc, PcaResult* out) {
     ReadUncertainty(r.Object("uncertainty"), &u);
     if (r.ok()) v.uncertainty = std::move(u);
   }
-  ReadDiagnostics(r.Object("diagnostics"), &v.diagnostics);
+  if (v.envelope.usable) {
+    ReadDiagnostics(r.Object("diagnostics"), false, true, &v.diagnostics);
+  } else if (r.Has("diagnostics")) {
+    ReadDiagnostics(r.Object("diagnostics"), true, false, &v.diagnostics);
+  } else {
+    v.diagnostics.usable = false;  // a partial document without diagnostics: all defaults
+  }
   if (!r.ok()) return r.status();
   if (v.parameters && v.uncertainty) {
     const auto& sensors = v.parameters->sensors;

@@ -14,6 +14,14 @@
 // a partial document has them anyway, and ToJson writes them back only when present).
 // Undefined numbers (an uncertainty the data cannot give, a rank gap without σ_{d+1}) are NaN in
 // the struct and null in the JSON.
+//
+// Results stored by an earlier calibd must still read: FromJson requires only the keys SPEC
+// §4 requires (the envelope; parameters dimension, magnitude, magnitude_known, frame, sensors
+// [name, sensitivity, scale, axis, bias]; uncertainty.sensors [name, scale_std, axis_std_rad,
+// bias_std]; diagnostics singular_values, rank_gap, positions, min_positions, g_eigenvalues,
+// residual_rms, magnitude_error). Every other key (marked "extension" below) keeps the struct's
+// default when absent; a partial document's diagnostics may lack any member, or be absent. ToJson
+// always writes every key (a current result round-trips exactly).
 #ifndef CALIBD_RESULTS_PCA_RESULT_H_
 #define CALIBD_RESULTS_PCA_RESULT_H_
 
@@ -72,7 +80,7 @@ struct PcaParameters {
   double magnitude = kPcaNaN;    // c = |v| used, field units (1 when unknown)
   bool magnitude_known = false;  // false: scale factors and the field are relative
   PcaFrame frame = PcaFrame::kCanonical;
-  PcaBias bias = PcaBias::kNone;
+  PcaBias bias = PcaBias::kNone;   // extension; absent: kNone (the config's default)
   std::vector<PcaSensor> sensors;  // m, in the recording's column order
 };
 
@@ -86,10 +94,11 @@ struct PcaSensorStd {
 
 struct PcaUncertainty {
   std::vector<PcaSensorStd> sensors;  // m, in the order of parameters.sensors
-  double noise_std = kPcaNaN;         // σ used (given or estimated), reading units
+  double noise_std = kPcaNaN;         // σ used (given or estimated), reading units; extension
 };
 
 // diagnostics.coverage: how well the positions span the sphere (directions in the result's frame).
+// Every member is an extension (absent: the default here).
 struct PcaCoverage {
   PcaCoverageVerdict verdict = PcaCoverageVerdict::kUnknown;
   std::vector<double> scatter_eigenvalues;  // d, ascending, sum 1 (uniform: 1/d each)
@@ -101,9 +110,12 @@ struct PcaCoverage {
 };
 
 // diagnostics: SPEC §4's numbers of the fit (the same keys in a usable result and a failed run's
-// partial document; there the values are as far as the computation got: NaN, empty or -1).
+// partial document; there the values are as far as the computation got: NaN, empty or -1, which
+// are also the defaults of members a partial document lacks). The members after magnitude_error
+// are extensions: absent, they keep the defaults below (NaN: unknown, shown as "—").
 struct PcaDiagnostics {
-  bool usable = false;                  // the run's outcome (true in a usable result)
+  bool usable = false;  // the run's outcome (true in a usable result); extension, absent: the
+                        // envelope's usable
   std::optional<std::string> reason;    // why not usable; never in stored documents (the failure's
                                         // message is stored beside the partial document)
   std::vector<double> singular_values;  // all min(m, n) of the readings, reading units
@@ -113,10 +125,13 @@ struct PcaDiagnostics {
   std::vector<double> g_eigenvalues;    // ascending; all > 0 for a usable result
   std::vector<double> residual_rms;     // m: RMS over positions, reading units
   std::vector<double> magnitude_error;  // n: |v_j| - c, field units
-  int degrees_of_freedom = -1;
-  PcaCoverage coverage;
-  double noise_std = kPcaNaN;  // σ used, reading units (the same value as uncertainty.noise_std)
-  bool noise_std_given = false;
+  int degrees_of_freedom = -1;          // -1: unknown (the gate then skips its residual rule)
+  // nullopt only in results stored before calibd measured the coverage (the adapter always
+  // writes it, verdict "unknown" when the fit failed before): the gate then has no coverage
+  // rule to apply, the report shows none.
+  std::optional<PcaCoverage> coverage;
+  double noise_std = kPcaNaN;    // σ used, reading units (the same value as uncertainty.noise_std)
+  bool noise_std_given = false;  // absent: false (the gate's residual rule then does not apply)
   double noise_std_estimated = kPcaNaN;  // from the residual; NaN when dof <= 0
   double cost_closed_form = kPcaNaN;     // ½Σr² at the closed form, reading units²
   double cost = kPcaNaN;                 // ½Σr² at the reported estimate, reading units²

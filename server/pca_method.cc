@@ -148,7 +148,7 @@ results::PcaResult MakePcaResult(const core::PcaResult& r) {
     // How well the positions span the sphere (frame-free numbers; directions in the result's
     // frame), so a poor calibration names its real cause.
     const core::PcaCoverage& c = r.coverage;
-    results::PcaCoverage& coverage = diag.coverage;
+    results::PcaCoverage& coverage = diag.coverage.emplace();
     switch (c.verdict) {
       case core::PcaCoverageVerdict::kGood:
         coverage.verdict = results::PcaCoverageVerdict::kGood;
@@ -306,14 +306,18 @@ void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
     return std::isfinite(x) ? std::optional<double>(x) : std::nullopt;
   };
 
-  // Orientation coverage first: it is the real cause of most of the other failures.
-  const results::PcaCoverage& coverage = diag.coverage;
+  // Orientation coverage first: it is the real cause of most of the other failures. A result
+  // stored before calibd measured the coverage has none: this rule does not apply to it (the
+  // precision the spread gives is still judged below, by the uncertainty limits).
+  const results::PcaCoverage no_coverage;
+  const bool has_coverage = diag.coverage.has_value();
+  const results::PcaCoverage& coverage = has_coverage ? *diag.coverage : no_coverage;
   const auto scatter = defined(coverage.scatter_min);
   const auto design = defined(coverage.design_min);
   const auto min_scatter = limits.Get("min_scatter");
   const auto min_design = limits.Get("min_design");
-  if ((min_scatter && (!scatter || *scatter < *min_scatter)) ||
-      (min_design && (!design || *design < *min_design))) {
+  if (has_coverage && ((min_scatter && (!scatter || *scatter < *min_scatter)) ||
+                       (min_design && (!design || *design < *min_design)))) {
     const std::string& advice = coverage.advice;
     verdict->Reject(
         "the orientations are poorly spread (spread " +

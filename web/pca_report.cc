@@ -388,8 +388,9 @@ std::string PcaPartial(const JobView& view) {
                   ")</dd><dt>rank gap " + kSigma + std::to_string(d) + "/" + kSigma +
                   std::to_string(d + 1) + "</dt><dd>" +
                   (std::isfinite(gap) ? E(FormatSig(gap, 3)) : std::string(kDash)) + "</dd>";
-  const results::PcaCoverage& cov = diag.coverage;
-  if (cov.verdict != results::PcaCoverageVerdict::kUnknown) {
+  // Absent (an earlier calibd's document, or left out over the size cap) or not computed: no row.
+  if (diag.coverage && diag.coverage->verdict != results::PcaCoverageVerdict::kUnknown) {
+    const results::PcaCoverage& cov = *diag.coverage;
     s += "<dt>orientation coverage</dt><dd class=\"coverage-verdict\">" +
          E(results::Name(cov.verdict)) +
          (cov.advice.empty() ? std::string() : ": " + E(cov.advice)) + "</dd>";

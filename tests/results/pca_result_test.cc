@@ -40,12 +40,13 @@ PcaResult HandBuilt() {
   g.residual_rms = {0.001, 0.0012};
   g.magnitude_error = {0.1, -0.1, kPcaNaN};
   g.degrees_of_freedom = 3;
-  g.coverage.verdict = PcaCoverageVerdict::kPoor;
-  g.coverage.scatter_eigenvalues = {0.1, 0.9};
-  g.coverage.scatter_min = 0.2;
-  g.coverage.design_min = 0.04;
-  g.coverage.positions_per_direction = {{"+x", 3}, {"-x", 0}, {"+x+y", 4}};
-  g.coverage.advice = "add positions with the -x axis up";
+  PcaCoverage& c = g.coverage.emplace();
+  c.verdict = PcaCoverageVerdict::kPoor;
+  c.scatter_eigenvalues = {0.1, 0.9};
+  c.scatter_min = 0.2;
+  c.design_min = 0.04;
+  c.positions_per_direction = {{"+x", 3}, {"-x", 0}, {"+x+y", 4}};
+  c.advice = "add positions with the -x axis up";
   g.noise_std = 0.001;
   g.noise_std_given = true;
   g.noise_std_estimated = 0.0011;
@@ -74,7 +75,8 @@ TEST(PcaResult, HandBuiltRoundTripsExactly) {
   EXPECT_EQ(back.parameters->frame, PcaFrame::kNominal);
   EXPECT_EQ(back.parameters->sensors[1].sensitivity, (std::vector<double>{-0.5, 2.0}));
   EXPECT_TRUE(std::isnan(back.uncertainty->sensors[1].scale_std));
-  EXPECT_EQ(back.diagnostics.coverage.verdict, PcaCoverageVerdict::kPoor);
+  ASSERT_TRUE(back.diagnostics.coverage.has_value());
+  EXPECT_EQ(back.diagnostics.coverage->verdict, PcaCoverageVerdict::kPoor);
   EXPECT_EQ(back.diagnostics.refine_iterations, 4);
   EXPECT_EQ(*back.diagnostics.position_labels, (std::vector<std::string>{"p1", "p2", "p3"}));
   EXPECT_EQ(ToJson(back), j);
@@ -109,13 +111,63 @@ TEST(PcaResult, WrongTypeNamesThePath) {
       << s.message();
 }
 
-TEST(PcaResult, MissingKeyNamesThePath) {
-  const Status s =
-      ReadModified([](json* j) { (*j)["diagnostics"]["coverage"].erase("design_min"); });
-  EXPECT_EQ(s.field(), "diagnostics.coverage.design_min") << s.message();
+TEST(PcaResult, MissingSpecKeyNamesThePath) {
+  const Status s = ReadModified([](json* j) { (*j)["diagnostics"].erase("magnitude_error"); });
+  EXPECT_EQ(s.field(), "diagnostics.magnitude_error") << s.message();
   const Status t =
       ReadModified([](json* j) { (*j)["uncertainty"]["sensors"][0].erase("bias_std"); });
   EXPECT_EQ(t.field(), "uncertainty.sensors[0].bias_std") << t.message();
+}
+
+// Results stored by an earlier calibd lack the keys added since: they keep the struct's defaults.
+TEST(PcaResult, AbsentExtensionsKeepTheirDefaults) {
+  json j = ToJson(HandBuilt());
+  j["parameters"].erase("bias");
+  j["uncertainty"].erase("noise_std");
+  for (const char* key :
+       {"usable", "degrees_of_freedom", "coverage", "noise_std", "noise_std_given",
+        "noise_std_estimated", "cost_closed_form", "cost", "refined", "refine_iterations",
+        "reflection", "position_labels", "removed_bias"}) {
+    j["diagnostics"].erase(key);
+  }
+  PcaResult out;
+  const Status s = FromJson(j, &out);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(out.parameters->bias, PcaBias::kNone);
+  EXPECT_EQ(out.parameters->sensors[1].bias, -0.02);  // the SPEC keys are read
+  EXPECT_TRUE(std::isnan(out.uncertainty->noise_std));
+  const PcaDiagnostics& g = out.diagnostics;
+  EXPECT_TRUE(g.usable) << "absent: the envelope's usable";
+  EXPECT_EQ(g.degrees_of_freedom, -1);
+  EXPECT_FALSE(g.coverage.has_value());
+  EXPECT_TRUE(std::isnan(g.noise_std));
+  EXPECT_FALSE(g.noise_std_given);
+  EXPECT_TRUE(std::isnan(g.noise_std_estimated));
+  EXPECT_TRUE(std::isnan(g.cost_closed_form));
+  EXPECT_TRUE(std::isnan(g.cost));
+  EXPECT_FALSE(g.refined);
+  EXPECT_EQ(g.refine_iterations, 0);
+  EXPECT_FALSE(g.reflection);
+  EXPECT_FALSE(g.position_labels.has_value());
+  EXPECT_EQ(g.positions, 7);
+  EXPECT_EQ(g.rank_gap, 500);
+  // A coverage object of an earlier shape: its absent members keep their defaults too.
+  json k = ToJson(HandBuilt());
+  k["diagnostics"]["coverage"] = {{"verdict", "good"}};
+  ASSERT_TRUE(FromJson(k, &out).ok()) << FromJson(k, &out).message();
+  ASSERT_TRUE(out.diagnostics.coverage.has_value());
+  EXPECT_EQ(out.diagnostics.coverage->verdict, PcaCoverageVerdict::kGood);
+  EXPECT_TRUE(std::isnan(out.diagnostics.coverage->design_min));
+  EXPECT_TRUE(out.diagnostics.coverage->positions_per_direction.empty());
+}
+
+TEST(PcaResult, PresentExtensionOfTheWrongTypeIsRefusedNamingThePath) {
+  Status s = ReadModified([](json* j) { (*j)["diagnostics"]["coverage"]["design_min"] = "x"; });
+  EXPECT_EQ(s.field(), "diagnostics.coverage.design_min") << s.message();
+  s = ReadModified([](json* j) { (*j)["parameters"]["bias"] = "guess"; });
+  EXPECT_EQ(s.field(), "parameters.bias") << s.message();
+  s = ReadModified([](json* j) { (*j)["diagnostics"]["refined"] = 1; });
+  EXPECT_EQ(s.field(), "diagnostics.refined") << s.message();
 }
 
 TEST(PcaResult, UnknownFrameIsRefusedNamingTheValues) {
@@ -185,6 +237,52 @@ TEST(PcaResult, PartialDocumentReadsWithoutParameters) {
   EXPECT_FALSE(back.uncertainty.has_value());
   EXPECT_EQ(back.diagnostics.positions, 7);
   EXPECT_EQ(ToJson(back), j);
+}
+
+json PartialDocument() {
+  PcaResult r = HandBuilt();
+  r.envelope.usable = false;
+  r.envelope.model.clear();
+  r.parameters.reset();
+  r.uncertainty.reset();
+  r.diagnostics.usable = false;
+  return ToJson(r);
+}
+
+// The worker leaves out the largest members over the size cap (and wrote null for them before):
+// a partial document's diagnostics may lack any member, even SPEC's, or be absent altogether.
+TEST(PcaResult, PartialDocumentWithoutAnyDiagnosticsMemberReads) {
+  for (const auto& [key, value] : PartialDocument()["diagnostics"].items()) {
+    json absent = PartialDocument();
+    absent["diagnostics"].erase(key);
+    json null = PartialDocument();
+    null["diagnostics"][key] = nullptr;
+    for (const json& j : {absent, null}) {
+      PcaResult out;
+      const Status s = FromJson(j, &out);
+      EXPECT_TRUE(s.ok()) << key << ": " << s.message();
+      EXPECT_FALSE(out.diagnostics.usable) << key;
+    }
+  }
+  json empty = PartialDocument();
+  empty["diagnostics"] = json::object();
+  json none = PartialDocument();
+  none.erase("diagnostics");
+  for (const json& j : {empty, none}) {
+    PcaResult out;
+    const Status s = FromJson(j, &out);
+    ASSERT_TRUE(s.ok()) << s.message();
+    EXPECT_FALSE(out.diagnostics.usable);
+    EXPECT_EQ(out.diagnostics.positions, -1);
+    EXPECT_TRUE(out.diagnostics.singular_values.empty());
+    EXPECT_TRUE(std::isnan(out.diagnostics.rank_gap));
+    EXPECT_FALSE(out.diagnostics.coverage.has_value());
+  }
+  // What is present must still be of its type.
+  json wrong = PartialDocument();
+  wrong["diagnostics"]["positions"] = "seven";
+  PcaResult out;
+  EXPECT_EQ(FromJson(wrong, &out).field(), "diagnostics.positions");
 }
 
 TEST(PcaResult, NonObjectIsRefused) {
