@@ -47,7 +47,8 @@ Status RunPca(const PcaRecording& recording, const core::PcaOptions& options,
 results::PcaResult MakePcaResult(const core::PcaResult& result);
 
 // The acceptance gate of a pca result (Method::Judge): orientation coverage (min_scatter,
-// min_design; the reason carries diagnostics.coverage.advice, naming the missing orientations),
+// min_design; the reason carries diagnostics.coverage.advice, naming the missing orientations;
+// skipped for a result stored before coverage existed, which the other rules still judge),
 // scale factors against the nominal (|nominal_i| when `nominal` is given, else 1 when the
 // magnitude is known: readings in the field's unit; not judged for an unknown magnitude) with
 // scale_range and implausible_factor (a unit mix-up between readings and magnitude is named),
