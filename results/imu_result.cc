@@ -107,20 +107,29 @@ json FitJson(const ImuFitDiagnostics& f) {
           {"cost", Nums(f.cost)}};
 }
 
-void ReadFit(const JsonReader& e, ImuFitDiagnostics* f) {
-  e.Read("name", &f->name);
-  e.Read("usable", &f->usable);
-  e.Read("termination", &f->termination);
-  e.Read("reason", &f->reason);
-  e.Read("chi2_per_dof", &f->chi2_per_dof);
-  e.Read("degrees_of_freedom", &f->degrees_of_freedom);
-  const JsonReader it = e.Object("iterations");
-  it.Read("accelerometer", &f->accel_iterations);
-  it.Read("gyroscope", &f->gyro_iterations);
-  it.Read("joint", &f->joint_iterations);
-  const JsonReader noise = e.Object("noise");
-  noise.Read("accelerometer", &f->accel_noise);
-  noise.Read("gyroscope", &f->gyro_noise);
+// One IMU's fit diagnostics. SPEC §7 requires its statics (start, end, samples, per-channel mean
+// and std), rotations (angle, direction error before and after), coverage (the verdict) and
+// residuals; every other member is an extension (absent in a result of an earlier calibd: the
+// struct's default). `usable` absent: the document's own usable.
+void ReadFit(const JsonReader& e, bool document_usable, ImuFitDiagnostics* f) {
+  f->usable = document_usable;
+  e.ReadExtension("name", &f->name);
+  e.ReadExtension("usable", &f->usable);
+  e.ReadExtension("termination", &f->termination);
+  e.ReadExtension("reason", &f->reason);
+  e.ReadExtension("chi2_per_dof", &f->chi2_per_dof);
+  e.ReadExtension("degrees_of_freedom", &f->degrees_of_freedom);
+  if (e.Present("iterations")) {
+    const JsonReader it = e.Object("iterations");
+    it.ReadExtension("accelerometer", &f->accel_iterations);
+    it.ReadExtension("gyroscope", &f->gyro_iterations);
+    it.ReadExtension("joint", &f->joint_iterations);
+  }
+  if (e.Present("noise")) {
+    const JsonReader noise = e.Object("noise");
+    noise.ReadExtension("accelerometer", &f->accel_noise);
+    noise.ReadExtension("gyroscope", &f->gyro_noise);
+  }
   const JsonReader res = e.Object("residuals");
   res.Read("accel_norm_rms_before", &f->accel_norm_rms_before);
   res.Read("accel_norm_rms_after", &f->accel_norm_rms_after);
@@ -134,39 +143,39 @@ void ReadFit(const JsonReader& e, ImuFitDiagnostics* f) {
     s.Read("accel_std", &x->accel_std);
     s.Read("gyro_mean", &x->gyro_mean);
     s.Read("gyro_std", &x->gyro_std);
-    s.Read("gravity_direction", &x->gravity_direction);
-    s.Read("norm_residual_before", &x->norm_residual_before);
-    s.Read("norm_residual_after", &x->norm_residual_after);
+    s.ReadExtension("gravity_direction", &x->gravity_direction);
+    s.ReadExtension("norm_residual_before", &x->norm_residual_before);
+    s.ReadExtension("norm_residual_after", &x->norm_residual_after);
   });
   e.ReadArray("rotations", &f->rotations, [](const JsonReader& q, ImuRotation* x) {
-    q.Read("from", &x->from);
-    q.Read("to", &x->to);
-    q.Read("start", &x->start);
-    q.Read("end", &x->end);
+    q.ReadExtension("from", &x->from);
+    q.ReadExtension("to", &x->to);
+    q.ReadExtension("start", &x->start);
+    q.ReadExtension("end", &x->end);
     q.Read("angle", &x->angle);
     q.Read("direction_error_before", &x->direction_error_before);
     q.Read("direction_error_after", &x->direction_error_after);
-    q.Read("used", &x->used);
-    q.Read("excluded", &x->excluded);
+    q.ReadExtension("used", &x->used);
+    q.ReadExtension("excluded", &x->excluded);
   });
   const JsonReader c = e.Object("coverage");
-  c.Read("gravity_eigenvalues", &f->coverage.gravity_eigenvalues);
-  c.Read("min_eigenvalue", &f->coverage.min_eigenvalue);
-  c.Read("least_covered_direction", &f->coverage.least_covered_direction);
-  c.Read("missing_up", &f->coverage.missing_up);
-  c.Read("rotation_per_axis", &f->coverage.rotation_per_axis);
-  c.Read("weak_axes", &f->coverage.weak_axes);
-  c.Read("sufficient", &f->coverage.sufficient);
+  c.ReadExtension("gravity_eigenvalues", &f->coverage.gravity_eigenvalues);
+  c.ReadExtension("min_eigenvalue", &f->coverage.min_eigenvalue);
+  c.ReadExtension("least_covered_direction", &f->coverage.least_covered_direction);
+  c.ReadExtension("missing_up", &f->coverage.missing_up);
+  c.ReadExtension("rotation_per_axis", &f->coverage.rotation_per_axis);
+  c.ReadExtension("weak_axes", &f->coverage.weak_axes);
+  c.ReadExtension("sufficient", &f->coverage.sufficient);
   c.Read("verdict", &f->coverage.verdict);
-  e.ReadArray("threshold_trials", &f->threshold_trials,
-              [](const JsonReader& t, ImuThresholdTrial* x) {
-                t.Read("multiplier", &x->multiplier);
-                t.Read("statics", &x->statics);
-                t.Read("accel_chi2_per_dof", &x->accel_chi2_per_dof);
-                t.Read("chosen", &x->chosen);
-              });
-  e.Read("threshold_choice", &f->threshold_choice);
-  e.Read("cost", &f->cost);
+  e.ReadArrayExtension("threshold_trials", &f->threshold_trials,
+                       [](const JsonReader& t, ImuThresholdTrial* x) {
+                         t.ReadExtension("multiplier", &x->multiplier);
+                         t.ReadExtension("statics", &x->statics);
+                         t.ReadExtension("accel_chi2_per_dof", &x->accel_chi2_per_dof);
+                         t.ReadExtension("chosen", &x->chosen);
+                       });
+  e.ReadExtension("threshold_choice", &f->threshold_choice);
+  e.ReadExtension("cost", &f->cost);
 }
 
 // An optional noise-model entry: null or absent is nullopt.
@@ -175,8 +184,8 @@ void ReadNoiseModel(const JsonReader& r, const char* key, std::optional<ImuNoise
   if (std::optional<JsonReader> m = r.OptionalObject(key)) {
     ImuNoiseModel v;
     m->Read("job", &v.job);
-    m->Read("white_noise", &v.white_noise);
-    m->Read("random_walk", &v.random_walk);
+    m->ReadExtension("white_noise", &v.white_noise);
+    m->ReadExtension("random_walk", &v.random_walk);
     *out = v;
   }
 }
@@ -263,8 +272,8 @@ Status FromJson(const json& doc, ImuResult* out) {
   if (r.ok() && v.envelope.usable) {
     const JsonReader p = r.Object("parameters");
     ImuParameters params;
-    p.Read("gravity", &params.gravity);
-    p.Read("gyro_bias", &params.gyro_bias);
+    p.ReadExtension("gravity", &params.gravity);
+    p.ReadExtension("gyro_bias", &params.gyro_bias);
     ReadPresent(p, "accel_unit", &params.accel_unit);
     ReadPresent(p, "gyro_unit", &params.gyro_unit);
     p.ReadArray("imus", &params.imus,
@@ -282,26 +291,39 @@ Status FromJson(const json& doc, ImuResult* out) {
     v.uncertainty = std::move(unc);
   }
   if (r.ok() && !v.envelope.usable) ReadTrimmed(r, &v.trimmed, &v.dropped);
-  if (Contains(v.dropped, "diagnostics") && !r.Has("diagnostics")) {
-    // Trimmed to the bare envelope: no diagnostics to read.
+  // A partial document (usable false) may lack the diagnostics or any member of them (the
+  // worker leaves out the largest when over its cap): all optional there.
+  const bool partial = !v.envelope.usable;
+  if (partial && !r.Has("diagnostics")) {
+    // Trimmed to the bare envelope (or written without diagnostics): none to read.
   } else {
     const JsonReader d = r.Object("diagnostics");
     ImuDiagnostics& g = v.diagnostics;
-    auto keep = [&](const char* key) { return !DroppedMember(d, v.dropped, key); };
-    if (keep("statics")) {
-      d.ReadArray("statics", &g.statics, [](const JsonReader& s, ImuInterval* x) {
-        s.Read("start", &x->start);
-        s.Read("end", &x->end);
-        s.Read("samples", &x->samples);
+    // SPEC's members: required in a result, optional in a partial document; members the
+    // trimming set to null (documents trimmed before they were left out) are skipped.
+    auto keep = [&](const char* key) {
+      return !DroppedMember(d, v.dropped, key) && (!partial || d.Present(key));
+    };
+    auto read_statics = [](const JsonReader& s, ImuInterval* x) {
+      s.Read("start", &x->start);
+      s.Read("end", &x->end);
+      s.Read("samples", &x->samples);
+    };
+    if (keep("statics")) d.ReadArray("statics", &g.statics, read_statics);
+    if (keep("threshold_choice")) d.Read("threshold_choice", &g.threshold_choice);
+    if (keep("imus")) {
+      d.ReadArray("imus", &g.imus, [&](const JsonReader& e, ImuFitDiagnostics* f) {
+        ReadFit(e, v.envelope.usable, f);
       });
     }
-    if (keep("rate")) ReadPresent(d, "rate", &g.rate);
-    if (keep("gaps") && d.Has("gaps")) {
+    // Extensions (absent in results of an earlier calibd).
+    if (!DroppedMember(d, v.dropped, "rate")) ReadPresent(d, "rate", &g.rate);
+    if (!DroppedMember(d, v.dropped, "gaps") && d.Has("gaps")) {
       std::vector<ImuGap> gaps;
       d.ReadArray("gaps", &gaps, [](const JsonReader& e, ImuGap* x) {
-        e.Read("index", &x->index);
-        e.Read("start", &x->start);
-        e.Read("end", &x->end);
+        e.ReadExtension("index", &x->index);
+        e.ReadExtension("start", &x->start);
+        e.ReadExtension("end", &x->end);
       });
       g.gaps = std::move(gaps);
     }
@@ -318,10 +340,17 @@ Status FromJson(const json& doc, ImuResult* out) {
       g.noise_model = n;
     }
     d.Read("saturated_samples", &g.saturated_samples);
-    if (keep("static_window")) d.Read("static_window", &g.static_window);
-    if (keep("min_static")) d.Read("min_static", &g.min_static);
-    if (keep("threshold_choice")) d.Read("threshold_choice", &g.threshold_choice);
-    if (keep("imus")) d.ReadArray("imus", &g.imus, ReadFit);
+    if (!DroppedMember(d, v.dropped, "static_window")) {
+      d.ReadExtension("static_window", &g.static_window);
+    }
+    if (!DroppedMember(d, v.dropped, "min_static")) d.ReadExtension("min_static", &g.min_static);
+    // Diagnostics written without the IMUs' names (an earlier calibd): the parameters' names.
+    for (size_t i = 0; i < g.imus.size(); ++i) {
+      if (!g.imus[i].name.empty() || !d.node().contains("imus")) continue;
+      if (d.node().at("imus").at(i).contains("name")) continue;
+      g.imus[i].name = v.parameters && i < v.parameters->imus.size() ? v.parameters->imus[i].name
+                                                                     : std::to_string(i);
+    }
   }
   if (!r.ok()) return r.status();
   *out = std::move(v);

@@ -13,6 +13,16 @@
 // and rate, gaps, saturation, noise jobs): absent in those, and written only when present, so an
 // old stored result reads and writes back unchanged.
 //
+// Keys SPEC §4/§7 requires are required by FromJson: the envelope, parameters.imus[] and
+// uncertainty.imus[] (results/triad.h), diagnostics.statics[] (start, end, samples),
+// diagnostics.threshold_choice (the threshold used), and per IMU in diagnostics.imus[] its statics
+// (start, end, samples, accel/gyro mean and std), rotations (angle, direction errors before and
+// after), coverage.verdict and residuals. Every other key is an extension (marked "ext." below):
+// when absent (a result stored by an earlier calibd) the member keeps the default given here —
+// NaN for a number (shown as a dash, never exported as 0), empty for a list or text. ToJson
+// writes them all. In a partial document every diagnostics member, and the diagnostics
+// themselves, are optional.
+//
 // A failed run's partial document ({"method", "usable": false, "diagnostics", "warnings"}) reads
 // with envelope.usable == false: `parameters` and `uncertainty` are then absent (nullopt); the
 // diagnostics are as far as the calibration got.
@@ -36,9 +46,13 @@ namespace calibd::results {
 
 inline constexpr int kImuSchemaVersion = 1;
 
+namespace imu_result_internal {
+inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+}
+
 struct ImuParameters {
-  double gravity = std::numeric_limits<double>::quiet_NaN();  // m/s², used by the fit
-  std::string gyro_bias;                                      // "statics" | "estimate"
+  double gravity = std::numeric_limits<double>::quiet_NaN();  // m/s², used by the fit (ext.)
+  std::string gyro_bias;  // "statics" | "estimate" (ext.; "" when absent)
   // The nominal SI per reading unit the log was read with (optional, see above).
   std::optional<double> accel_unit, gyro_unit;
   std::vector<ImuTriads> imus;  // one per IMU, in the log's order
@@ -56,16 +70,18 @@ struct ImuInterval {
 
 // diagnostics.gaps[]: a gap in t.
 struct ImuGap {
-  int64_t index = -1;         // first sample after the gap
-  double start = 0, end = 0;  // s
+  int64_t index = -1;                                       // first sample after the gap (ext.)
+  double start = std::numeric_limits<double>::quiet_NaN();  // s (ext.)
+  double end = std::numeric_limits<double>::quiet_NaN();    // s (ext.)
 };
 
 // diagnostics.noise_model.{accelerometer,gyroscope}: Kalibr's figures of the noise job a config
 // named ({"job": ID}), SI, the largest axis.
 struct ImuNoiseModel {
   std::optional<int64_t> job;
-  double white_noise = std::numeric_limits<double>::quiet_NaN();  // unit/√Hz
-  double random_walk = std::numeric_limits<double>::quiet_NaN();  // unit/s/√Hz; NaN: not shown
+  double white_noise = std::numeric_limits<double>::quiet_NaN();  // unit/√Hz (ext.)
+  double random_walk =
+      std::numeric_limits<double>::quiet_NaN();  // unit/s/√Hz; NaN: not shown (ext.)
 };
 
 // One static of one IMU (diagnostics.imus[].statics[]).
@@ -74,50 +90,62 @@ struct ImuStatic {
   int64_t samples = 0;
   Eigen::Vector3d accel_mean = Eigen::Vector3d::Zero(), accel_std = Eigen::Vector3d::Zero();
   Eigen::Vector3d gyro_mean = Eigen::Vector3d::Zero(), gyro_std = Eigen::Vector3d::Zero();
-  Eigen::Vector3d gravity_direction = Eigen::Vector3d::Zero();  // body frame, unit
-  double norm_residual_before = 0, norm_residual_after = 0;     // |a| − g, m/s²
+  // Body frame, unit (ext.; NaN when absent).
+  Eigen::Vector3d gravity_direction = Eigen::Vector3d::Constant(imu_result_internal::kNaN);
+  // |a| − g, m/s² (ext.; NaN when absent: the plots leave the point out).
+  double norm_residual_before = imu_result_internal::kNaN,
+         norm_residual_after = imu_result_internal::kNaN;
 };
 
 // One rotation between statics `from` and `to` (diagnostics.imus[].rotations[]).
 struct ImuRotation {
-  int64_t from = -1, to = -1;
-  double start = 0, end = 0;                                     // s
-  double angle = 0;                                              // rad
-  double direction_error_before = 0, direction_error_after = 0;  // rad
-  bool used = true;
-  std::string excluded;  // why not used ("" when used)
+  int64_t from = -1, to = -1;  // ext. (-1 when absent)
+  double start = imu_result_internal::kNaN, end = imu_result_internal::kNaN;  // s (ext.)
+  double angle = 0;                                                           // rad
+  double direction_error_before = 0, direction_error_after = 0;               // rad
+  bool used = true;                                                           // ext. (absent: used)
+  std::string excluded;  // why not used ("" when used) (ext.)
 };
 
 // How well the orientations and rotations cover the directions (diagnostics.imus[].coverage).
+// All but `verdict` are extensions: numbers NaN and lists empty when absent.
 struct ImuCoverage {
-  Eigen::Vector3d gravity_eigenvalues = Eigen::Vector3d::Zero();
-  double min_eigenvalue = 0;
-  Eigen::Vector3d least_covered_direction = Eigen::Vector3d::Zero();
-  std::vector<std::string> missing_up;                          // "+x", "-y", ...
-  Eigen::Vector3d rotation_per_axis = Eigen::Vector3d::Zero();  // rad
+  Eigen::Vector3d gravity_eigenvalues = Eigen::Vector3d::Constant(imu_result_internal::kNaN);
+  double min_eigenvalue = imu_result_internal::kNaN;
+  Eigen::Vector3d least_covered_direction = Eigen::Vector3d::Constant(imu_result_internal::kNaN);
+  std::vector<std::string> missing_up;  // "+x", "-y", ...
+  Eigen::Vector3d rotation_per_axis = Eigen::Vector3d::Constant(imu_result_internal::kNaN);  // rad
   std::vector<std::string> weak_axes;
-  bool sufficient = false;
+  // Absent (an earlier calibd): true, i.e. Judge does not reject on it; the verdict in words,
+  // which SPEC requires, still says how the orientations covered the sphere.
+  bool sufficient = true;
   std::string verdict;  // in words
 };
 
+// ext., every member.
 struct ImuThresholdTrial {
-  double multiplier = 0;
+  double multiplier = imu_result_internal::kNaN;
   int64_t statics = 0;
   double accel_chi2_per_dof = std::numeric_limits<double>::quiet_NaN();  // NaN: not fitted
   bool chosen = false;
 };
 
 // diagnostics.imus[]: how the fit of one IMU went.
+// name, usable, termination, reason, chi2_per_dof, degrees_of_freedom, iterations, noise,
+// threshold_trials, threshold_choice and cost are extensions.
 struct ImuFitDiagnostics {
+  // Absent: the parameters' name of the IMU at the same index (else the index).
   std::string name;
-  bool usable = false;
+  bool usable = false;      // absent: the document's usable
   std::string termination;  // core::ImuTerminationName: "converged", "too_few_statics", ...
   std::string reason;       // why not usable; "" when usable
   double chi2_per_dof = std::numeric_limits<double>::quiet_NaN();
   int64_t degrees_of_freedom = -1;
   int64_t accel_iterations = 0, gyro_iterations = 0, joint_iterations = 0;  // "iterations"
-  Eigen::Vector3d accel_noise = Eigen::Vector3d::Zero();  // "noise": σ per sample, SI
-  Eigen::Vector3d gyro_noise = Eigen::Vector3d::Zero();
+  // "noise": σ per sample, SI (NaN when absent: the OpenVINS export then gives no density from
+  // the statics).
+  Eigen::Vector3d accel_noise = Eigen::Vector3d::Constant(imu_result_internal::kNaN);
+  Eigen::Vector3d gyro_noise = Eigen::Vector3d::Constant(imu_result_internal::kNaN);
   // "residuals": RMS of |a| − g over the statics (m/s²) and of the gravity-direction error per
   // rotation (rad), with the nominal conversion and calibrated.
   double accel_norm_rms_before = 0, accel_norm_rms_after = 0;
@@ -146,8 +174,8 @@ struct ImuDiagnostics {
   };
   std::optional<NoiseModels> noise_model;
   std::optional<int64_t> saturated_samples;                         // optional
-  double static_window = std::numeric_limits<double>::quiet_NaN();  // s
-  double min_static = std::numeric_limits<double>::quiet_NaN();     // s
+  double static_window = std::numeric_limits<double>::quiet_NaN();  // s (ext.)
+  double min_static = std::numeric_limits<double>::quiet_NaN();     // s (ext.)
   std::string threshold_choice;
   std::vector<ImuFitDiagnostics> imus;
 };

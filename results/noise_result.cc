@@ -126,43 +126,51 @@ Status FromJson(const json& doc, NoiseResult* out) {
     }
   }
   if (r.ok() && !v.envelope.usable) ReadTrimmed(r, &v.trimmed, &v.dropped);
-  if (Contains(v.dropped, "diagnostics") && !r.Has("diagnostics")) {
-    // Trimmed to the bare envelope: no diagnostics to read.
+  // A partial document (usable false) may lack the diagnostics or any member of them (the
+  // worker leaves out the largest when over its cap): all optional there.
+  const bool partial = !v.envelope.usable;
+  if (partial && !r.Has("diagnostics")) {
+    // Trimmed to the bare envelope (or written without diagnostics): none to read.
   } else {
     JsonReader d = r.Object("diagnostics");
     NoiseDiagnostics& g = v.diagnostics;
+    // Members the trimming set to null (documents trimmed before they were left out) are skipped.
     auto keep = [&](const char* key) { return !DroppedMember(d, v.dropped, key); };
-    if (keep("rate")) d.Read("rate", &g.rate);
-    if (keep("samples")) d.Read("samples", &g.samples);
-    if (keep("duration")) d.Read("duration", &g.duration);
-    if (keep("jitter")) d.Read("jitter", &g.jitter);
-    if (keep("stationary")) d.Read("stationary", &g.stationary);
-    if (keep("taus_per_decade")) d.Read("taus_per_decade", &g.taus_per_decade);
-    if (keep("confidence")) d.Read("confidence", &g.confidence);
-    if (keep("channels")) {
-      d.ReadArray("channels", &g.channels, [](const JsonReader& e, NoiseChannelDiagnostics* c) {
-        e.Read("name", &c->name);
-        e.Read("status", &c->status);
-        e.Read("reason", &c->reason);
-        e.Read("fit_points", &c->fit_points);
-        e.Read("fit_chi2", &c->fit_chi2);
-        e.Read("mean", &c->mean);
-      });
-    }
-    if (keep("allan")) {
+    // SPEC's members (rate, samples, allan): required in a result, optional in a partial one.
+    auto spec = [&](const char* key) { return keep(key) && (!partial || d.Present(key)); };
+    if (spec("rate")) d.Read("rate", &g.rate);
+    if (spec("samples")) d.Read("samples", &g.samples);
+    if (spec("allan")) {
       d.ReadArray("allan", &g.allan, [](const JsonReader& e, NoiseAllanCurve* c) {
         e.Read("name", &c->name);
         e.Read("tau", &c->tau);
         e.Read("adev", &c->adev);
         e.Read("adev_lower", &c->adev_lower);
         e.Read("adev_upper", &c->adev_upper);
-        e.Read("fitted_adev", &c->fitted_adev);
+        e.ReadExtension("fitted_adev", &c->fitted_adev);
       });
+    }
+    // Extensions: absent in a result of an earlier calibd, the defaults of noise_result.h.
+    if (keep("duration")) d.ReadExtension("duration", &g.duration);
+    if (keep("jitter")) d.ReadExtension("jitter", &g.jitter);
+    if (keep("stationary")) d.ReadExtension("stationary", &g.stationary);
+    if (keep("taus_per_decade")) d.ReadExtension("taus_per_decade", &g.taus_per_decade);
+    if (keep("confidence")) d.ReadExtension("confidence", &g.confidence);
+    if (keep("channels")) {
+      d.ReadArrayExtension("channels", &g.channels,
+                           [](const JsonReader& e, NoiseChannelDiagnostics* c) {
+                             e.ReadExtension("name", &c->name);
+                             e.ReadExtension("status", &c->status);
+                             e.ReadExtension("reason", &c->reason);
+                             e.ReadExtension("fit_points", &c->fit_points);
+                             e.ReadExtension("fit_chi2", &c->fit_chi2);
+                             e.ReadExtension("mean", &c->mean);
+                           });
     }
     if (std::optional<JsonReader> u = d.OptionalObject("units")) {
       NoiseUnits units;
-      u->Read("accel_unit", &units.accel_unit);
-      u->Read("gyro_unit", &units.gyro_unit);
+      u->ReadExtension("accel_unit", &units.accel_unit);
+      u->ReadExtension("gyro_unit", &units.gyro_unit);
       g.units = std::move(units);
     }
   }

@@ -8,6 +8,14 @@
 // channels, names a*) or "rad/s" (gyroscope channels, names g*); N in unit/√Hz, B in unit, K in
 // unit/s/√Hz, τ in seconds. A term the log does not show is NaN (written as null).
 //
+// Keys SPEC §4/§7 requires are required by FromJson: the envelope, parameters.channels[] and
+// uncertainty.channels[] with every member, and diagnostics rate, samples and allan[] (name, tau,
+// adev, adev_lower, adev_upper). Every other key is an extension (marked "ext." below): when
+// absent (a result stored by an earlier calibd) the member keeps the default given here — NaN
+// for a number (shown as a dash, never exported as 0), empty for a list or text. ToJson writes
+// them all. In a partial document every diagnostics member, and the diagnostics themselves, are
+// optional.
+//
 // A failed run's partial document ({"method", "usable": false, "diagnostics", "warnings"}) reads
 // with envelope.usable == false: `parameters` and `uncertainty` are then empty (absent in JSON);
 // the diagnostics are as far as the analysis got.
@@ -47,7 +55,7 @@ struct NoiseChannelUncertainty {
   double random_walk_std = std::numeric_limits<double>::quiet_NaN();
 };
 
-// diagnostics.channels[]: how the fit of one channel went.
+// diagnostics.channels[]: how the fit of one channel went (ext., every member).
 struct NoiseChannelDiagnostics {
   std::string name;
   std::string status;      // core::NoiseChannelStatusName: "ok", "not_stationary", ...
@@ -62,10 +70,11 @@ struct NoiseChannelDiagnostics {
 struct NoiseAllanCurve {
   std::string name;
   std::vector<double> tau;  // s
-  std::vector<double> adev, adev_lower, adev_upper, fitted_adev;
+  std::vector<double> adev, adev_lower, adev_upper;
+  std::vector<double> fitted_adev;  // ext. (empty when absent: the plot leaves the model out)
 };
 
-// diagnostics.units: the units the log was read with, as the config gave them.
+// diagnostics.units: the units the log was read with, as the config gave them (ext.).
 struct NoiseUnits {
   std::string accel_unit;
   std::string gyro_unit;
@@ -74,13 +83,14 @@ struct NoiseUnits {
 struct NoiseDiagnostics {
   double rate = std::numeric_limits<double>::quiet_NaN();      // Hz
   int64_t samples = 0;                                         // per channel
-  double duration = std::numeric_limits<double>::quiet_NaN();  // s
-  double jitter = std::numeric_limits<double>::quiet_NaN();    // max |Δt − median| / median
+  double duration = std::numeric_limits<double>::quiet_NaN();  // s (ext.)
+  double jitter = std::numeric_limits<double>::quiet_NaN();  // max |Δt − median| / median (ext.)
+  // ext.; absent: true (Judge then does not reject on it; results were accepted as stationary).
   bool stationary = true;
-  int taus_per_decade = 0;  // 0: octave spacing
-  // Of the Allan deviation's bounds (e.g. 0.683); NaN (null) when there are no channels.
+  int taus_per_decade = 0;  // 0: octave spacing, the default (ext.)
+  // Of the Allan deviation's bounds (e.g. 0.683); NaN (null) when there are no channels (ext.).
   double confidence = std::numeric_limits<double>::quiet_NaN();
-  std::vector<NoiseChannelDiagnostics> channels;
+  std::vector<NoiseChannelDiagnostics> channels;  // ext. (empty when absent)
   std::vector<NoiseAllanCurve> allan;
   std::optional<NoiseUnits> units;  // written by the server's adapter
 };

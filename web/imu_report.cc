@@ -30,6 +30,9 @@ std::string Unreadable(const std::string& what, const Status& s) {
 }
 
 // A number as the diagnostics table shows it (integral values without decimals; NaN a dash).
+// A text member, or a dash when it is empty (absent from a result of an earlier calibd).
+std::string TextOrDash(const std::string& s) { return s.empty() ? std::string(kDash) : s; }
+
 std::string Scalar(double v, int sig) {
   const json j = results::Num(v);
   return ScalarText(&j, sig);
@@ -78,9 +81,10 @@ std::string ImuReport(const JobView& view) {
     if (!r.parameters) return NotAvailable("Parameters");
     const results::ImuParameters& params = *r.parameters;
     std::string s = "<dl class=\"kv\"><dt>gravity</dt><dd>" + E(Scalar(params.gravity, 7)) +
-                    " m/s\xC2\xB2</dd><dt>gyroscope bias</dt><dd>" + E(params.gyro_bias) +
-                    "</dd><dt>static intervals</dt><dd>";
-    s += std::to_string(diag.statics.size()) + " (" + E(diag.threshold_choice) + ")</dd></dl>";
+                    " m/s\xC2\xB2</dd><dt>gyroscope bias</dt><dd>" +
+                    E(TextOrDash(params.gyro_bias)) + "</dd><dt>static intervals</dt><dd>";
+    s += std::to_string(diag.statics.size()) + " (" + E(TextOrDash(diag.threshold_choice)) +
+         ")</dd></dl>";
     if (params.imus.empty()) {
       return Section("parameters", "Parameters", s + NotAvailable("IMUs"));
     }
@@ -163,7 +167,7 @@ std::string ImuPartial(const JobView& view) {
   std::string s = "<dl class=\"kv partial-imu\"><dt>static intervals found</dt><dd>" +
                   std::to_string(n) + "</dd><dt>sample rate</dt><dd>" +
                   FormatSI(diag.rate.value_or(kNaN), "Hz") + "</dd><dt>threshold</dt><dd>" +
-                  E(diag.threshold_choice) + "</dd></dl>";
+                  E(TextOrDash(diag.threshold_choice)) + "</dd></dl>";
   if (n > 0) {
     PlotOptions o;
     o.name = "imu-statics-found";
@@ -196,10 +200,10 @@ std::string ImuPartial(const JobView& view) {
       missing_text += (missing_text.empty() ? "" : ", ") + m;
     }
     s += "<h3>IMU " + E(imu.name) + "</h3><dl class=\"kv\">";
-    s += "<dt>termination</dt><dd>" + E(imu.termination) + "</dd>";
+    s += "<dt>termination</dt><dd>" + E(TextOrDash(imu.termination)) + "</dd>";
     s += "<dt>rotations between statics</dt><dd>" + std::to_string(imu.rotations.size()) + "</dd>";
     s += "<dt>orientation coverage</dt><dd class=\"coverage-verdict\">" +
-         E(imu.coverage.verdict.empty() ? std::string(kDash) : imu.coverage.verdict) + "</dd>";
+         E(TextOrDash(imu.coverage.verdict)) + "</dd>";
     if (!missing_text.empty()) {
       s += "<dt>orientations missing (up)</dt><dd>" + E(missing_text) + "</dd>";
     }

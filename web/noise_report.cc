@@ -149,9 +149,11 @@ std::string NoisePartialReport(const JobView& view) {
     return Unreadable("The partial diagnostics", st);
   }
   const results::NoiseDiagnostics& d = r.diagnostics;
+  // No samples counted: the diagnostics left it out (or the log had none): a dash.
   std::string s = "<dl class=\"kv partial-noise\"><dt>samples</dt><dd>" +
-                  E(std::to_string(d.samples)) + "</dd><dt>rate</dt><dd>" + FormatSI(d.rate, "Hz") +
-                  "</dd><dt>duration</dt><dd>" + FormatSI(d.duration, "s") + "</dd></dl>";
+                  E(d.samples > 0 ? std::to_string(d.samples) : std::string(kDash)) +
+                  "</dd><dt>rate</dt><dd>" + FormatSI(d.rate, "Hz") + "</dd><dt>duration</dt><dd>" +
+                  FormatSI(d.duration, "s") + "</dd></dl>";
   if (!d.channels.empty()) {
     s += "<div class=\"table-wrap\"><table class=\"table-noise-channels\"><thead><tr>"
          "<th>channel</th><th>status</th><th>reason</th></tr></thead><tbody>";

@@ -229,5 +229,53 @@ TEST(ImuResult, TrimmedPartialDocumentsRead) {
   EXPECT_TRUE(back.diagnostics.statics.empty());
 }
 
+// Members beyond SPEC's keys (our extensions) may be absent, as in a result of an earlier calibd:
+// they keep their defaults; SPEC's keys stay required.
+TEST(ImuResult, AbsentExtensionsKeepTheirDefaults) {
+  json j = ToJson(HandBuilt());
+  j["parameters"].erase("gravity");
+  j["parameters"].erase("gyro_bias");
+  for (const char* key : {"static_window", "min_static"}) j["diagnostics"].erase(key);
+  json& fit = j["diagnostics"]["imus"][1];
+  for (const char* key :
+       {"name", "usable", "termination", "reason", "chi2_per_dof", "degrees_of_freedom",
+        "iterations", "noise", "threshold_trials", "threshold_choice", "cost"}) {
+    fit.erase(key);
+  }
+  for (const char* key : {"gravity_eigenvalues", "min_eigenvalue", "least_covered_direction",
+                          "missing_up", "rotation_per_axis", "weak_axes", "sufficient"}) {
+    fit["coverage"].erase(key);
+  }
+  for (const char* key : {"from", "to", "start", "end", "used", "excluded"}) {
+    fit["rotations"][0].erase(key);
+  }
+  for (const char* key : {"gravity_direction", "norm_residual_before", "norm_residual_after"}) {
+    fit["statics"][0].erase(key);
+  }
+  ImuResult r;
+  ASSERT_TRUE(FromJson(j, &r).ok()) << FromJson(j, &r).ToString();
+  EXPECT_TRUE(std::isnan(r.parameters->gravity));
+  EXPECT_EQ(r.parameters->gyro_bias, "");
+  EXPECT_TRUE(std::isnan(r.diagnostics.static_window));
+  const ImuFitDiagnostics& f = r.diagnostics.imus[1];
+  EXPECT_EQ(f.name, r.parameters->imus[1].name) << "the parameters' name of the same IMU";
+  EXPECT_TRUE(f.usable) << "the document's usable";
+  EXPECT_TRUE(std::isnan(f.chi2_per_dof));
+  EXPECT_TRUE(std::isnan(f.accel_noise.x()));
+  EXPECT_TRUE(f.cost.empty());
+  EXPECT_TRUE(f.coverage.sufficient);
+  EXPECT_TRUE(std::isnan(f.coverage.min_eigenvalue));
+  EXPECT_TRUE(f.coverage.missing_up.empty());
+  EXPECT_TRUE(f.rotations[0].used);
+  EXPECT_TRUE(std::isnan(f.rotations[0].start));
+  EXPECT_TRUE(std::isnan(f.statics[0].norm_residual_after));
+  // SPEC's keys are still required.
+  fit["coverage"].erase("verdict");
+  EXPECT_EQ(FromJson(j, &r).field(), "diagnostics.imus[1].coverage.verdict");
+  j = ToJson(HandBuilt());
+  j["diagnostics"]["imus"][0]["statics"][1].erase("gyro_std");
+  EXPECT_EQ(FromJson(j, &r).field(), "diagnostics.imus[0].statics[1].gyro_std");
+}
+
 }  // namespace
 }  // namespace calibd::results

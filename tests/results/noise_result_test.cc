@@ -166,5 +166,29 @@ TEST(NoiseResult, ADocumentThatIsNotAnObjectIsRefused) {
   EXPECT_NE(s.message().find("expected an object"), std::string::npos) << s.message();
 }
 
+// Members beyond SPEC's keys (our extensions) may be absent, as in a result of an earlier calibd:
+// they keep their defaults; SPEC's keys stay required.
+TEST(NoiseResult, AbsentExtensionsKeepTheirDefaults) {
+  json j = ToJson(HandBuilt());
+  for (const char* key :
+       {"duration", "jitter", "stationary", "taus_per_decade", "confidence", "channels", "units"}) {
+    j["diagnostics"].erase(key);
+  }
+  j["diagnostics"]["allan"][0].erase("fitted_adev");
+  NoiseResult r;
+  ASSERT_TRUE(FromJson(j, &r).ok()) << FromJson(j, &r).ToString();
+  EXPECT_TRUE(std::isnan(r.diagnostics.duration));
+  EXPECT_TRUE(std::isnan(r.diagnostics.confidence));
+  EXPECT_TRUE(r.diagnostics.stationary);
+  EXPECT_EQ(r.diagnostics.taus_per_decade, 0);
+  EXPECT_TRUE(r.diagnostics.channels.empty());
+  EXPECT_FALSE(r.diagnostics.units.has_value());
+  EXPECT_TRUE(r.diagnostics.allan[0].fitted_adev.empty());
+  EXPECT_FALSE(r.diagnostics.allan[0].adev.empty());
+  // SPEC's keys are still required.
+  j["diagnostics"].erase("samples");
+  EXPECT_EQ(FromJson(j, &r).field(), "diagnostics.samples");
+}
+
 }  // namespace
 }  // namespace calibd::results

@@ -5,19 +5,96 @@
 // does not read, naming the path.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "results/imu_result.h"
 #include "server/config.h"
+#include "server/exports.h"
 #include "server/failure_reasons.h"
 #include "server/imu_method.h"
 #include "server/method.h"
+#include "web/method_report.h"
+#include "web/pages.h"
 
 namespace calibd::server {
 namespace {
 
 using nlohmann::json;
+
+// The paths SPEC §4/§7 requires of an imu result ("[]": every element of an array). Everything
+// else in the document is an extension, which a result stored by an earlier calibd may lack.
+const char* const kSpecPaths[] = {
+    "method",
+    "model",
+    "verdict.status",
+    "verdict.reasons",
+    "warnings",
+    "parameters.imus[].name",
+    "parameters.imus[].accelerometer.bias",
+    "parameters.imus[].accelerometer.scale",
+    "parameters.imus[].accelerometer.misalignment",
+    "parameters.imus[].accelerometer.matrix",
+    "parameters.imus[].gyroscope.bias",
+    "parameters.imus[].gyroscope.scale",
+    "parameters.imus[].gyroscope.misalignment",
+    "parameters.imus[].gyroscope.matrix",
+    "uncertainty.imus[].name",
+    "uncertainty.imus[].accelerometer.bias_std",
+    "uncertainty.imus[].accelerometer.scale_std",
+    "uncertainty.imus[].accelerometer.misalignment_std",
+    "uncertainty.imus[].gyroscope.bias_std",
+    "uncertainty.imus[].gyroscope.scale_std",
+    "uncertainty.imus[].gyroscope.misalignment_std",
+    // §7 static detection: the intervals and the threshold used.
+    "diagnostics.statics[].start",
+    "diagnostics.statics[].end",
+    "diagnostics.statics[].samples",
+    "diagnostics.threshold_choice",
+    // §7 imu: per IMU its statics (with per-channel mean and std), rotations, coverage, residuals.
+    "diagnostics.imus[].statics[].start",
+    "diagnostics.imus[].statics[].end",
+    "diagnostics.imus[].statics[].samples",
+    "diagnostics.imus[].statics[].accel_mean",
+    "diagnostics.imus[].statics[].accel_std",
+    "diagnostics.imus[].statics[].gyro_mean",
+    "diagnostics.imus[].statics[].gyro_std",
+    "diagnostics.imus[].rotations[].angle",
+    "diagnostics.imus[].rotations[].direction_error_before",
+    "diagnostics.imus[].rotations[].direction_error_after",
+    "diagnostics.imus[].coverage.verdict",
+    "diagnostics.imus[].residuals.accel_norm_rms_before",
+    "diagnostics.imus[].residuals.accel_norm_rms_after",
+    "diagnostics.imus[].residuals.gyro_direction_rms_before",
+    "diagnostics.imus[].residuals.gyro_direction_rms_after",
+};
+
+// Whether `path` is a SPEC path or leads to one.
+bool SpecOrOnTheWay(const std::string& path) {
+  for (const char* spec : kSpecPaths) {
+    const std::string p = spec;
+    if (p == path || p.rfind(path + ".", 0) == 0 || p.rfind(path + "[]", 0) == 0) return true;
+  }
+  return false;
+}
+
+// `j` with every member not on a SPEC path removed, recursively.
+json SpecOnly(const json& j, const std::string& path = "") {
+  if (j.is_array()) {
+    json out = json::array();
+    for (const json& e : j) out.push_back(SpecOnly(e, path + "[]"));
+    return out;
+  }
+  if (!j.is_object()) return j;
+  json out = json::object();
+  for (const auto& [key, value] : j.items()) {
+    const std::string p = path.empty() ? key : path + "." + key;
+    if (SpecOrOnTheWay(p)) out[key] = SpecOnly(value, p);
+  }
+  return out;
+}
 
 // The stored form of a result: its JSON text parsed back (NaN as null, as the store keeps it).
 json Stored(const json& result) { return json::parse(result.dump()); }
@@ -172,6 +249,125 @@ TEST(ImuResultSchema, ConsumersRefuseAResultThatDoesNotReadNamingThePath) {
               std::string::npos)
         << e.message();
   }
+}
+
+TEST(ImuResultSchema, AResultWithOnlyTheSpecsKeysStillReadsExportsAndRenders) {
+  core::ImuSimulationOptions small;
+  small.statics = 12;
+  small.static_duration = 2;
+  small.rotation_duration = 1.5;
+  small.seed = 4;
+  Status s;
+  const json full = Stored(RunImu(small, json::object(), &s));
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  const json spec = SpecOnly(full);
+  // The stripping took the extensions away (schema_version, gravity, the fit's name, cost, ...).
+  ASSERT_FALSE(spec.contains("schema_version"));
+  ASSERT_FALSE(spec["parameters"].contains("gravity"));
+  ASSERT_FALSE(spec["diagnostics"]["imus"][0].contains("name"));
+  ASSERT_FALSE(spec["diagnostics"]["imus"][0]["coverage"].contains("sufficient"));
+  ASSERT_TRUE(spec["diagnostics"]["imus"][0]["rotations"][0].contains("angle"));
+
+  results::ImuResult typed;
+  ASSERT_TRUE(results::FromJson(spec, &typed).ok()) << results::FromJson(spec, &typed).ToString();
+  EXPECT_TRUE(std::isnan(typed.parameters->gravity));
+  EXPECT_TRUE(typed.diagnostics.imus[0].coverage.sufficient);
+  EXPECT_EQ(typed.diagnostics.imus[0].name, full["parameters"]["imus"][0]["name"]);
+
+  // Judge gives a verdict from the SPEC's keys.
+  json judged = spec;
+  judged.erase("verdict");
+  JudgeResult(*FindMethod("imu"), {{"method", "imu"}}, json(), &judged);
+  ASSERT_TRUE(judged.contains("verdict"));
+  EXPECT_EQ(judged["verdict"]["reasons"].dump().find("cannot be judged"), std::string::npos)
+      << judged["verdict"].dump();
+  // The same verdict as the full result's, but for the coverage: coverage.sufficient is an
+  // extension (absent: not rejected on it; the stored verdict of such a result stands).
+  std::vector<std::string> expected;
+  for (const std::string& reason : full["verdict"]["reasons"]) {
+    if (reason.find("the orientations do not determine") == std::string::npos) {
+      expected.push_back(reason);
+    }
+  }
+  EXPECT_EQ(judged["verdict"]["reasons"].get<std::vector<std::string>>(), expected)
+      << "full: " << full["verdict"].dump();
+  EXPECT_EQ(judged["verdict"]["status"], expected.empty() ? "accepted" : "rejected");
+  // The CSV and the C header need only the SPEC's parameters; OpenVINS' yaml needs the reading
+  // units and the rate (extensions): refused as not determinable, saying what to do.
+  const ExportContext context{1, "D", "imu", "now"};
+  for (const char* format : {"csv", "h"}) {
+    std::string out, expected;
+    const Status e = FindMethod("imu")->Export(format, spec, context, &out);
+    ASSERT_TRUE(e.ok()) << format << ": " << e.ToString();
+    ASSERT_TRUE(FindMethod("imu")->Export(format, full, context, &expected).ok());
+    EXPECT_EQ(out, expected) << format;
+  }
+  std::string yaml;
+  const Status y = FindMethod("imu")->Export("yaml", spec, context, &yaml);
+  EXPECT_EQ(y.code(), StatusCode::kNotDeterminable) << y.ToString();
+
+  // The job page's section and the device page's drift render without "not available".
+  web::JobView view;
+  view.job.id = 7;
+  view.job.device = "D";
+  view.job.method = "imu";
+  view.job.status = JobStatus::kSucceeded;
+  view.job.result = spec;
+  const web::MethodReport* report = web::FindMethodReport("imu");
+  ASSERT_NE(report, nullptr);
+  const std::string section = report->Section(view);
+  EXPECT_EQ(section.find("not available"), std::string::npos) << section;
+  EXPECT_NE(section.find("table-imu-parameters"), std::string::npos);
+  EXPECT_EQ(section.find(">nan"), std::string::npos) << section;
+  web::JobSummary older = view.job;
+  older.id = 6;
+  const std::string drift = report->Drift({&older, &view.job});
+  EXPECT_FALSE(drift.empty());
+  EXPECT_EQ(drift.find("not available"), std::string::npos) << drift;
+}
+
+TEST(ImuResultSchema, PartialDocumentsLackingAnyDiagnosticsRead) {
+  core::ImuSimulationOptions few;
+  few.statics = 5;
+  Status s;
+  const json stored = Stored(RunImu(few, json::object(), &s));
+  ASSERT_FALSE(s.ok());
+  ASSERT_EQ(stored.value("usable", true), false);
+  const web::MethodReport* report = web::FindMethodReport("imu");
+  web::JobView view;
+  view.job.method = "imu";
+  view.job.status = JobStatus::kFailed;
+  auto expect_reads = [&](const json& doc) {
+    results::ImuResult typed;
+    const Status r = results::FromJson(doc, &typed);
+    EXPECT_TRUE(r.ok()) << r.ToString() << "\n" << doc.dump();
+    view.job.error_detail = doc;
+    const std::string partial = report->Partial(view);
+    EXPECT_EQ(partial.find("not available"), std::string::npos) << partial;
+  };
+  json empty = stored;
+  empty["diagnostics"] = json::object();
+  expect_reads(empty);
+  json none = stored;
+  none.erase("diagnostics");
+  expect_reads(none);
+  ASSERT_GE(stored["diagnostics"].size(), 5u);
+  for (const auto& [key, value] : stored["diagnostics"].items()) {
+    SCOPED_TRACE(key);
+    json one = stored;
+    one["diagnostics"].erase(key);
+    expect_reads(one);
+  }
+  // A result (usable) still requires the SPEC's diagnostics.
+  core::ImuSimulationOptions small;
+  small.statics = 12;
+  small.static_duration = 2;
+  small.rotation_duration = 1.5;
+  json full = Stored(RunImu(small, json::object(), &s));
+  ASSERT_TRUE(s.ok());
+  full["diagnostics"].erase("statics");
+  results::ImuResult typed;
+  EXPECT_EQ(results::FromJson(full, &typed).field(), "diagnostics.statics");
 }
 
 }  // namespace

@@ -4,19 +4,75 @@
 // Judge and the exports refuse a result that does not read, naming the path.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <nlohmann/json.hpp>
 #include <string>
 
 #include "results/noise_result.h"
 #include "server/config.h"
+#include "server/exports.h"
 #include "server/failure_reasons.h"
 #include "server/method.h"
 #include "server/noise_method.h"
+#include "web/method_report.h"
+#include "web/pages.h"
 
 namespace calibd::server {
 namespace {
 
 using nlohmann::json;
+
+// The paths SPEC §4/§7 requires of a noise result ("[]": every element of an array). Everything
+// else in the document is an extension, which a result stored by an earlier calibd may lack.
+const char* const kSpecPaths[] = {
+    "method",
+    "model",
+    "verdict.status",
+    "verdict.reasons",
+    "warnings",
+    "parameters.channels[].name",
+    "parameters.channels[].unit",
+    "parameters.channels[].white_noise",
+    "parameters.channels[].bias_instability",
+    "parameters.channels[].bias_instability_tau",
+    "parameters.channels[].random_walk",
+    "uncertainty.channels[].name",
+    "uncertainty.channels[].white_noise_std",
+    "uncertainty.channels[].bias_instability_std",
+    "uncertainty.channels[].random_walk_std",
+    "diagnostics.rate",
+    "diagnostics.samples",
+    "diagnostics.allan[].name",
+    "diagnostics.allan[].tau",
+    "diagnostics.allan[].adev",
+    "diagnostics.allan[].adev_lower",
+    "diagnostics.allan[].adev_upper",
+};
+
+// Whether `path` is a SPEC path or leads to one.
+bool SpecOrOnTheWay(const std::string& path) {
+  for (const char* spec : kSpecPaths) {
+    const std::string p = spec;
+    if (p == path || p.rfind(path + ".", 0) == 0 || p.rfind(path + "[]", 0) == 0) return true;
+  }
+  return false;
+}
+
+// `j` with every member not on a SPEC path removed, recursively.
+json SpecOnly(const json& j, const std::string& path = "") {
+  if (j.is_array()) {
+    json out = json::array();
+    for (const json& e : j) out.push_back(SpecOnly(e, path + "[]"));
+    return out;
+  }
+  if (!j.is_object()) return j;
+  json out = json::object();
+  for (const auto& [key, value] : j.items()) {
+    const std::string p = path.empty() ? key : path + "." + key;
+    if (SpecOrOnTheWay(p)) out[key] = SpecOnly(value, p);
+  }
+  return out;
+}
 
 // The stored form of a result: its JSON text parsed back (NaN as null, as the store keeps it).
 json Stored(const json& result) { return json::parse(result.dump()); }
@@ -142,6 +198,137 @@ TEST(NoiseResultSchema, ConsumersRefuseAResultThatDoesNotReadNamingThePath) {
     EXPECT_NE(e.message().find("uncertainty.channels[2].white_noise_std"), std::string::npos)
         << e.message();
   }
+}
+
+TEST(NoiseResultSchema, AResultWithOnlyTheSpecsKeysStillReadsExportsAndRenders) {
+  NoiseSimulationFileOptions sim;
+  sim.rate = 50;
+  sim.seconds = 300;
+  sim.bias_instability = 0.5;
+  sim.seed = 3;
+  json config;
+  const std::string csv = Log(sim, &config);
+  json result;
+  const Status s = Calibrate(csv, "noise.csv", config, &result);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  const json full = Stored(result);
+  const json spec = SpecOnly(full);
+  // The stripping took the extensions away.
+  ASSERT_FALSE(spec.contains("schema_version"));
+  for (const char* key :
+       {"duration", "jitter", "stationary", "taus_per_decade", "confidence", "channels", "units"}) {
+    ASSERT_TRUE(full["diagnostics"].contains(key)) << key;
+    ASSERT_FALSE(spec["diagnostics"].contains(key)) << key;
+  }
+  ASSERT_FALSE(spec["diagnostics"]["allan"][0].contains("fitted_adev"));
+  ASSERT_TRUE(spec["diagnostics"]["allan"][0].contains("adev_upper"));
+
+  results::NoiseResult typed;
+  ASSERT_TRUE(results::FromJson(spec, &typed).ok()) << results::FromJson(spec, &typed).ToString();
+  EXPECT_TRUE(std::isnan(typed.diagnostics.duration));
+  EXPECT_TRUE(typed.diagnostics.channels.empty());
+  EXPECT_FALSE(typed.diagnostics.units.has_value());
+
+  json judged = spec;
+  judged.erase("verdict");
+  JudgeResult(*FindMethod("noise"), {{"method", "noise"}}, json(), &judged);
+  ASSERT_TRUE(judged.contains("verdict"));
+  EXPECT_EQ(judged["verdict"]["reasons"].dump().find("cannot be judged"), std::string::npos)
+      << judged["verdict"].dump();
+  EXPECT_EQ(judged["verdict"]["status"], full["verdict"]["status"]) << judged["verdict"].dump();
+
+  // Every export needs only the SPEC's keys (the rate for Kalibr's update_rate): the same
+  // outcome as from the full result (the yaml needs the random walks, which 300 s do not show,
+  // so both refuse it alike).
+  const ExportContext context{1, "D", "noise", "now"};
+  for (const char* format : {"csv", "h", "yaml"}) {
+    std::string out, expected;
+    const Status e = FindMethod("noise")->Export(format, spec, context, &out);
+    const Status f = FindMethod("noise")->Export(format, full, context, &expected);
+    if (std::string(format) != "yaml") ASSERT_TRUE(e.ok()) << format << ": " << e.ToString();
+    EXPECT_EQ(e.code(), f.code()) << format << ": " << e.ToString() << " / " << f.ToString();
+    EXPECT_EQ(e.message(), f.message()) << format;
+    EXPECT_EQ(out, expected) << format;
+  }
+  // The job page's section and the device page's drift render without "not available".
+  web::JobView view;
+  view.job.id = 7;
+  view.job.device = "D";
+  view.job.method = "noise";
+  view.job.status = JobStatus::kSucceeded;
+  view.job.result = spec;
+  const web::MethodReport* report = web::FindMethodReport("noise");
+  ASSERT_NE(report, nullptr);
+  const std::string section = report->Section(view);
+  EXPECT_EQ(section.find("not available"), std::string::npos) << section;
+  EXPECT_NE(section.find("table-noise-parameters"), std::string::npos);
+  EXPECT_NE(section.find("plot-allan-accel"), std::string::npos) << section;
+  web::JobSummary older = view.job;
+  older.id = 6;
+  const std::string drift = report->Drift({&older, &view.job});
+  EXPECT_FALSE(drift.empty());
+  EXPECT_EQ(drift.find("not available"), std::string::npos) << drift;
+}
+
+TEST(NoiseResultSchema, PartialDocumentsLackingAnyDiagnosticsRead) {
+  // A minute at rest whose a0_x jumps by 1 m/s² halfway: not stationary, a failed run.
+  NoiseSimulationFileOptions sim;
+  sim.rate = 100;
+  sim.seconds = 60;
+  json config;
+  const std::string csv = Log(sim, &config);
+  std::string moved;
+  size_t pos = 0, row = 0;
+  while (pos < csv.size()) {
+    const size_t end = csv.find('\n', pos);
+    std::string line = csv.substr(pos, end - pos);
+    pos = end + 1;
+    if (line[0] != 't' && row++ >= 3000) {
+      const size_t c1 = line.find(','), c2 = line.find(',', c1 + 1);
+      line = line.substr(0, c1 + 1) +
+             std::to_string(std::stod(line.substr(c1 + 1, c2 - c1 - 1)) + 1.0) + line.substr(c2);
+    }
+    moved += line + "\n";
+  }
+  json result;
+  ASSERT_FALSE(Calibrate(moved, "noise.csv", config, &result).ok());
+  const json stored = Stored(result);
+  ASSERT_EQ(stored.value("usable", true), false);
+  const web::MethodReport* report = web::FindMethodReport("noise");
+  web::JobView view;
+  view.job.method = "noise";
+  view.job.status = JobStatus::kFailed;
+  auto expect_reads = [&](const json& doc) {
+    results::NoiseResult typed;
+    const Status r = results::FromJson(doc, &typed);
+    EXPECT_TRUE(r.ok()) << r.ToString() << "\n" << doc.dump();
+    view.job.error_detail = doc;
+    const std::string partial = report->Partial(view);
+    EXPECT_EQ(partial.find("not available"), std::string::npos) << partial;
+  };
+  json empty = stored;
+  empty["diagnostics"] = json::object();
+  expect_reads(empty);
+  json none = stored;
+  none.erase("diagnostics");
+  expect_reads(none);
+  // Nothing known is shown as a dash, not as 0 samples.
+  EXPECT_NE(report->Partial(view).find("<dt>samples</dt><dd>\xE2\x80\x93</dd>"), std::string::npos)
+      << report->Partial(view);
+  ASSERT_GE(stored["diagnostics"].size(), 5u);
+  for (const auto& [key, value] : stored["diagnostics"].items()) {
+    SCOPED_TRACE(key);
+    json one = stored;
+    one["diagnostics"].erase(key);
+    expect_reads(one);
+  }
+  // A result (usable) still requires the SPEC's diagnostics.
+  json ok;
+  ASSERT_TRUE(Calibrate(csv, "noise.csv", config, &ok).ok());
+  ok = Stored(ok);
+  ok["diagnostics"].erase("rate");
+  results::NoiseResult typed;
+  EXPECT_EQ(results::FromJson(ok, &typed).field(), "diagnostics.rate");
 }
 
 }  // namespace
