@@ -1,5 +1,6 @@
 #include "results/envelope.h"
 
+#include <algorithm>
 #include <string>
 #include <utility>
 
@@ -58,6 +59,28 @@ void ReadEnvelope(const JsonReader& r, const char* method, int newest, Envelope*
   r.Read("warnings", &warnings);
   e.warnings = warnings.value_or(std::vector<std::string>());
   if (r.ok()) *out = std::move(e);
+}
+
+void ReadTrimmed(const JsonReader& r, std::optional<json>* trimmed,
+                 std::vector<std::string>* dropped) {
+  std::optional<JsonReader> t = r.OptionalObject("trimmed");
+  if (!t) return;
+  json raw;
+  r.ReadRaw("trimmed", &raw);
+  *trimmed = std::move(raw);
+  std::optional<std::vector<std::string>> keys;
+  t->Read("dropped", &keys);
+  *dropped = keys.value_or(std::vector<std::string>());
+}
+
+bool ContainsKey(const std::vector<std::string>& keys, const char* key) {
+  return std::find(keys.begin(), keys.end(), key) != keys.end();
+}
+
+bool DroppedMember(const JsonReader& d, const std::vector<std::string>& dropped, const char* key) {
+  if (!ContainsKey(dropped, key) || !d.node().is_object()) return false;
+  auto it = d.node().find(key);
+  return it == d.node().end() || it->is_null();
 }
 
 json VerdictJson(const StoredVerdict& v) {

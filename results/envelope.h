@@ -50,6 +50,17 @@ void ReadEnvelope(const JsonReader& r, const char* method, int newest, Envelope*
 // writes its newest; "usable" only when false; "verdict" only when present).
 void WriteEnvelope(const Envelope& e, int version, nlohmann::json* out);
 
+// A failed run's partial document trimmed by the server to fit the store
+// (server/failure_reasons.h): its "trimmed" note as stored, and the diagnostics members it names
+// as dropped ("diagnostics" itself when only the envelope was kept). Nothing when not trimmed.
+void ReadTrimmed(const JsonReader& r, std::optional<nlohmann::json>* trimmed,
+                 std::vector<std::string>* dropped);
+// Whether `key` is in `keys`.
+bool ContainsKey(const std::vector<std::string>& keys, const char* key);
+// Whether diagnostics member `key` of `d` is one the trimming dropped: listed, and absent (or
+// null, in documents trimmed before the members were left out).
+bool DroppedMember(const JsonReader& d, const std::vector<std::string>& dropped, const char* key);
+
 // The verdict as the gate writes it: {"status", "reasons", "limits"}.
 nlohmann::json VerdictJson(const StoredVerdict& v);
 

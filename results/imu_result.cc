@@ -9,31 +9,6 @@ using nlohmann::json;
 
 namespace {
 
-// The "trimmed" note of a trimmed partial document and the members it dropped.
-void ReadTrimmed(const JsonReader& r, std::optional<json>* trimmed,
-                 std::vector<std::string>* dropped) {
-  std::optional<JsonReader> t = r.OptionalObject("trimmed");
-  if (!t) return;
-  json raw;
-  r.ReadRaw("trimmed", &raw);
-  *trimmed = std::move(raw);
-  std::optional<std::vector<std::string>> keys;
-  t->Read("dropped", &keys);
-  *dropped = keys.value_or(std::vector<std::string>());
-}
-
-bool Contains(const std::vector<std::string>& v, const char* key) {
-  return std::find(v.begin(), v.end(), key) != v.end();
-}
-
-// Whether diagnostics member `key` of `d` is one the trimming dropped (listed, and absent; null
-// in documents trimmed before the members were left out).
-bool DroppedMember(const JsonReader& d, const std::vector<std::string>& dropped, const char* key) {
-  if (!Contains(dropped, key) || !d.node().is_object()) return false;
-  auto it = d.node().find(key);
-  return it == d.node().end() || it->is_null();
-}
-
 json Ids(const std::optional<int64_t>& id) { return id ? json(*id) : json(nullptr); }
 
 json NoiseModelJson(const std::optional<ImuNoiseModel>& m) {
@@ -256,7 +231,7 @@ json ToJson(const ImuResult& r) {
   }
   if (d.saturated_samples) diag["saturated_samples"] = *d.saturated_samples;
   for (const std::string& key : r.dropped) diag.erase(key);  // left out by the trimming
-  if (!Contains(r.dropped, "diagnostics")) out["diagnostics"] = std::move(diag);
+  if (!ContainsKey(r.dropped, "diagnostics")) out["diagnostics"] = std::move(diag);
   if (r.trimmed) out["trimmed"] = *r.trimmed;
   return out;
 }
