@@ -252,7 +252,8 @@ json PartialDocument() {
 // The worker leaves out the largest members over the size cap (and wrote null for them before):
 // a partial document's diagnostics may lack any member, even SPEC's, or be absent altogether.
 TEST(PcaResult, PartialDocumentWithoutAnyDiagnosticsMemberReads) {
-  for (const auto& [key, value] : PartialDocument()["diagnostics"].items()) {
+  const json document = PartialDocument();  // outlives the loop (items() of a temporary dangles)
+  for (const auto& [key, value] : document["diagnostics"].items()) {
     json absent = PartialDocument();
     absent["diagnostics"].erase(key);
     json null = PartialDocument();
