@@ -7,6 +7,7 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 
 namespace calibd::core {
@@ -847,6 +848,22 @@ const char* ImuTerminationName(ImuTermination t) {
       return "implausible";
   }
   return "unknown";
+}
+
+std::string ImuResult::BriefReport() const {
+  int used = 0;
+  for (const ImuRotationDiagnostics& r : rotations) used += r.used ? 1 : 0;
+  char buf[640];
+  std::snprintf(buf, sizeof buf,
+                "imu %s: %s%s; termination %s, %zu statics, %d of %zu rotations used, iterations "
+                "%d/%d/%d (accel/gyro/joint), chi2/dof %.4g, |a|-g rms %.3g -> %.3g m/s^2, gyro "
+                "direction rms %.3g -> %.3g rad",
+                name.c_str(), usable ? "usable" : "not usable: ", usable ? "" : reason.c_str(),
+                ImuTerminationName(termination), statics.size(), used, rotations.size(),
+                accel_iterations, gyro_iterations, joint_iterations, chi2_per_dof,
+                accel_norm_rms_before, accel_norm_rms_after, gyro_direction_rms_before,
+                gyro_direction_rms_after);
+  return buf;
 }
 
 bool ImuOptions::IsValid(std::string* error) const {

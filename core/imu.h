@@ -207,6 +207,11 @@ struct ImuResult {
   // b_a(3), K_a(3), T_a01, T_a02, T_a12, b_g(3), K_g(3), T_g01, T_g02, T_g10, T_g12, T_g20, T_g21.
   Eigen::MatrixXd covariance;
   std::vector<std::string> warnings;
+
+  // One line for logs and tests, in the style of every method's result: usable (or why not),
+  // termination, statics and rotations used, iterations per stage, χ²/dof, the residuals before
+  // and after calibration.
+  std::string BriefReport() const;
 };
 
 // Calibrates every IMU of a log with one shared static detection. kInvalidInput: bad options or

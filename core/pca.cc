@@ -905,6 +905,29 @@ const char* PcaCoverageVerdictName(PcaCoverageVerdict verdict) {
   }
 }
 
+const char* PcaFrameName(PcaFrame frame) {
+  switch (frame) {
+    case PcaFrame::kCanonical:
+      return "canonical";
+    case PcaFrame::kNominal:
+      return "nominal";
+    default:
+      return "";
+  }
+}
+
+std::string PcaResult::BriefReport() const {
+  char buf[512];
+  std::snprintf(buf, sizeof buf,
+                "pca: %s%s; d %d, %zu sensors, %d positions (min %d), bias %s, frame %s, rank gap "
+                "%.4g, cost %.6g -> %.6g (%s, %d iterations)",
+                usable ? "usable" : "not usable: ", usable ? "" : reason.c_str(), dimension,
+                sensors.size(), positions, min_positions, BiasModelName(bias_model),
+                frame == PcaFrame::kNone ? "-" : PcaFrameName(frame), rank_gap, cost_closed_form,
+                cost, refined ? "refined" : "closed form", refine_iterations);
+  return buf;
+}
+
 PcaCost EstimatePcaCost(int m, int n, int d, BiasModel bias, PcaInformationSolver solver) {
   const double mm = std::max(m, 0), nn = std::max(n, 0), dd = std::max(d, 1);
   const double p = bias == BiasModel::kEstimate ? dd + 1 : dd;
@@ -1258,12 +1281,12 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
   MatrixXd h;
   std::string frame_note;
   if (options.nominal) {
-    result->frame = "nominal";
+    result->frame = PcaFrame::kNominal;
     h = ProcrustesRotation(fit.a, *options.nominal, true);
     result->reflection = h.determinant() < 0;
     frame_note = "axes of the nominal frame";
   } else {
-    result->frame = "canonical";
+    result->frame = PcaFrame::kCanonical;
     h = CanonicalFrame(fit.a);
     frame_note =
         "axes of the canonical frame: x along the first sensor's axis, y in the plane of "

@@ -120,6 +120,14 @@ enum class PcaCoverageVerdict {
 };
 const char* PcaCoverageVerdictName(PcaCoverageVerdict verdict);  // "unknown" | "good" | "poor"
 
+// The frame the sensitivities are reported in.
+enum class PcaFrame {
+  kNone,       // not reached (the fit failed before the frame was chosen)
+  kCanonical,  // the paper's Eq. 19 frame (h·a upper triangular): no nominal given
+  kNominal,    // the nominal sensitivities' body frame (orthogonal Procrustes fit)
+};
+const char* PcaFrameName(PcaFrame frame);  // "" | "canonical" | "nominal"
+
 struct PcaCoverage {
   // Thresholds of a poor verdict. For 30 random orientations (biases estimated) the 1 % quantiles
   // are about 0.48 (scatter_min) and 0.08 (design_min); for the 6 faces of a box plus 4 positions
@@ -160,9 +168,9 @@ struct PcaSensorEstimate {
 // A usable result has finite parameters (a, v, b, scale, axis, bias); an uncertainty is either
 // finite or NaN (undefined, with a warning saying why), never a made-up 0 or an infinity.
 struct PcaResult {
-  bool usable = false;      // true iff CalibratePca returned OK: the parameters may be used
-  std::string reason;       // why not usable (the failure message); empty when usable
-  std::string frame;        // "canonical" | "nominal"
+  bool usable = false;  // true iff CalibratePca returned OK: the parameters may be used
+  std::string reason;   // why not usable (the failure message); empty when usable
+  PcaFrame frame = PcaFrame::kNone;
   bool reflection = false;  // nominal frame: the Procrustes fit used a reflection (det = -1)
   int dimension = 0;        // d
   double magnitude = std::numeric_limits<double>::quiet_NaN();  // c used (1 when unknown)
@@ -199,6 +207,10 @@ struct PcaResult {
   // (a guide to the orientations to add); else unknown on failure.
   PcaCoverage coverage;
   std::vector<std::string> warnings;  // plain words, for people
+
+  // One line for logs and tests, in the style of every method's result: usable (or why not),
+  // the problem's size, the frame, the rank gap, the costs and the refinement's iterations.
+  std::string BriefReport() const;
 };
 
 // Runs the calibration. kInvalidInput: bad options or problem (shapes, non-finite numbers, nominal

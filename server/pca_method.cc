@@ -118,11 +118,9 @@ results::PcaResult MakePcaResult(const core::PcaResult& r) {
   params.dimension = r.dimension;
   params.magnitude = r.magnitude;
   params.magnitude_known = r.magnitude_known;
-  if (!results::Parse(r.frame, &params.frame)) {
-    // core writes "canonical" or "nominal" (before the fit: empty; such a result is not usable
-    // and its parameters are not written).
-    params.frame = results::PcaFrame::kCanonical;
-  }
+  // kNone only before the fit, when the result is not usable and its parameters are not written.
+  params.frame = r.frame == core::PcaFrame::kNominal ? results::PcaFrame::kNominal
+                                                     : results::PcaFrame::kCanonical;
   params.bias = r.bias_model == core::BiasModel::kEstimate ? results::PcaBias::kEstimate
                                                            : results::PcaBias::kNone;
   results::PcaUncertainty& uncertainty = out.uncertainty.emplace();

@@ -224,6 +224,21 @@ TEST(ImuCalibration, TooFewStaticsSaysHowManyAndWhichOrientations) {
   EXPECT_TRUE(s.message().find("axis up") != std::string::npos ||
               s.message().find("more orientations") != std::string::npos)
       << s.message();
+  EXPECT_NE(r.BriefReport().find("not usable: " + r.reason + "; termination too_few_statics"),
+            std::string::npos)
+      << r.BriefReport();
+}
+
+TEST(ImuCalibration, BriefReportSaysUsableTerminationAndStaticsInOneLine) {
+  ImuSimulationOptions so;
+  so.statics = 14;
+  ImuSimulation sim;
+  ASSERT_TRUE(SimulateImu(so, &sim).ok());
+  ImuResult r;
+  ASSERT_TRUE(CalibrateImu(sim.t, sim.accel, sim.gyro, OptionsFor(so), &r).ok());
+  const std::string brief = r.BriefReport();
+  EXPECT_EQ(brief.find('\n'), std::string::npos) << brief;
+  EXPECT_NE(brief.find(": usable; termination converged, 14 statics"), std::string::npos) << brief;
 }
 
 TEST(ImuCalibration, CoverageNamesTheMissingOrientations) {

@@ -91,7 +91,7 @@ TEST(PcaCalibration, RecoversAxesExactlyWithoutNoise) {
       PcaResult r;
       ASSERT_TRUE(CalibratePca(Problem(x.m), KnownMagnitude(d, c), &r).ok()) << r.reason;
       EXPECT_LT(CalibrationError(x.a, r.a), 1e-9) << "d=" << d << " m=" << m;
-      EXPECT_EQ(r.frame, "canonical");
+      EXPECT_EQ(r.frame, PcaFrame::kCanonical);
       // Given the truth as nominal, the result is the truth itself (Procrustes, any handedness).
       PcaOptions o = KnownMagnitude(d, c);
       o.nominal = x.a;
@@ -331,7 +331,7 @@ TEST(PcaCalibration, NominalFrameFitsEitherHandednessOfTheBodyFrame) {
     o.nominal = frame * sim.a_model;
     PcaResult r;
     ASSERT_TRUE(CalibratePca(Problem(sim.m), o, &r).ok()) << r.reason;
-    EXPECT_EQ(r.frame, "nominal");
+    EXPECT_EQ(r.frame, PcaFrame::kNominal);
     reflections += r.reflection;
     // The nominal frame is the one that best aligns the truth with the nominal design.
     const MatrixXd truth = ProcrustesRotation(sim.a_true, *o.nominal, true) * sim.a_true;
@@ -385,6 +385,20 @@ TEST(PcaPreconditions, TooFewPositionsSaysHowManyToRecord) {
                 StatusCode::kNotDeterminable, "record at least 6 positions");
   EXPECT_FALSE(r.usable);
   EXPECT_FALSE(r.reason.empty());
+}
+
+TEST(PcaCalibration, BriefReportSaysUsableOrWhyNotInOneLine) {
+  const Design good = RandomDesign(3, 6, 12, 1.0, 1e-3, 7);
+  PcaResult r;
+  ASSERT_TRUE(CalibratePca(Problem(good.m), KnownMagnitude(3, 1.0), &r).ok()) << r.reason;
+  const std::string brief = r.BriefReport();
+  EXPECT_EQ(brief.find('\n'), std::string::npos) << brief;
+  EXPECT_NE(brief.find("pca: usable; d 3, 6 sensors, 12 positions (min 6)"), std::string::npos)
+      << brief;
+  EXPECT_NE(brief.find("frame canonical"), std::string::npos) << brief;
+  const Design few = RandomDesign(3, 12, 5, 1.0, 0.0, 1);
+  ASSERT_FALSE(CalibratePca(Problem(few.m), KnownMagnitude(3, 1.0), &r).ok());
+  EXPECT_NE(r.BriefReport().find("not usable: " + r.reason), std::string::npos) << r.BriefReport();
 }
 
 TEST(PcaPreconditions, FewerSensorsThanDimension) {
