@@ -1223,7 +1223,7 @@ class Array : public Method {
 }  // namespace
 
 const Method& ArrayMethod() {
-  static const Array method;
+  static const Array& method = *new Array;  // never destroyed: worker threads may outlive exit
   return method;
 }
 

@@ -532,7 +532,7 @@ Status ParseImuOptions(const json& config, core::ImuOptions* options) {
 }
 
 const Method& ImuMethod() {
-  static const Imu method;
+  static const Imu& method = *new Imu;  // never destroyed: worker threads may outlive exit
   return method;
 }
 

@@ -320,7 +320,7 @@ Status SimulateNoiseFiles(const NoiseSimulationFileOptions& o, std::string* csv,
 }
 
 const Method& NoiseMethod() {
-  static const Noise method;
+  static const Noise& method = *new Noise;  // never destroyed: worker threads may outlive exit
   return method;
 }
 

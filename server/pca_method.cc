@@ -532,7 +532,7 @@ class Pca : public Method {
 }  // namespace
 
 const Method& PcaMethod() {
-  static const Pca method;
+  static const Pca& method = *new Pca;  // never destroyed: worker threads may outlive exit
   return method;
 }
 

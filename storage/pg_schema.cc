@@ -100,7 +100,7 @@ ALTER TABLE jobs ADD COLUMN error_detail_json TEXT;
 )sql";
 
 const std::vector<const char*>& PgSteps() {
-  static const std::vector<const char*> steps = {kPgV1, kPgV2};
+  static const std::vector<const char*>& steps = *new std::vector<const char*>{kPgV1, kPgV2};
   return steps;
 }
 

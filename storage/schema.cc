@@ -167,7 +167,7 @@ struct Step {
 };
 
 const std::vector<Step>& Steps() {
-  static const std::vector<Step> steps = {
+  static const std::vector<Step>& steps = *new std::vector<Step>{
       {kV1, nullptr},
       {kV2, &HashCarriedOverResults},
       {kV3, nullptr},
