@@ -417,6 +417,8 @@ TEST(ArrayNotDeterminable, NoGyroscope) {
   ArraySimulation sim = Simulate(50, 34);
   sim.problem.gyro.resize(50, 0);
   ExpectNotDeterminable(sim.problem, PaperOptions(), {"no gyroscope", "at least one gyroscope"});
+  ArrayResult r;
+  EXPECT_EQ(CalibrateArray(sim.problem, PaperOptions(), &r).reason(), Reason::kNoGyroscope);
 }
 
 TEST(ArrayNotDeterminable, RotationAboutOneFixedAxis) {
@@ -432,6 +434,7 @@ TEST(ArrayNotDeterminable, RotationAboutOneFixedAxis) {
   ArrayResult r;
   const Status s = CalibrateArray(sim.problem, PaperOptions(), &r);
   ASSERT_EQ(s.code(), StatusCode::kNotDeterminable) << s.message();
+  EXPECT_EQ(s.reason(), Reason::kWeakExcitation);
   EXPECT_NE(s.message().find("one fixed axis"), std::string::npos);
   EXPECT_NE(s.message().find("all three axes"), std::string::npos);
   EXPECT_EQ(r.excitation.verdict, "insufficient");

@@ -229,6 +229,40 @@ TEST(ImuCalibration, TooFewStaticsSaysHowManyAndWhichOrientations) {
       << r.BriefReport();
 }
 
+// Rotations so fast that the gyroscope saturates (here: a range limit below the rotation rates)
+// leave the accelerometer determined by the statics but the gyroscope by nothing: the run fails
+// with too_few_rotations, names the count and keeps the statics found and the rotations it
+// excluded, with why.
+TEST(ImuCalibration, SaturatedRotationsFailWithTooFewRotationsAndSayWhy) {
+  ImuSimulationOptions so;
+  so.statics = 12;
+  so.seed = 21;
+  ImuSimulation sim;
+  ASSERT_TRUE(SimulateImu(so, &sim).ok());
+  ImuOptions o = OptionsFor(so);
+  // rad/s: above every static reading (bias and noise), below the peak rate of the rotations
+  // (about 90 degrees in 2 s each); the 12 statics found below show the first half.
+  o.gyro_saturation_high = 0.2;
+  o.gyro_saturation_low = -0.2;
+  ImuResult r;
+  const Status s = CalibrateImu(sim.t, sim.accel, sim.gyro, o, &r);
+  ASSERT_EQ(s.code(), StatusCode::kNotDeterminable) << s.message();
+  EXPECT_EQ(s.reason(), Reason::kTooFewRotations);
+  EXPECT_EQ(r.termination, ImuTermination::kTooFewRotations);
+  EXPECT_FALSE(r.usable);
+  EXPECT_NE(s.message().find("at least 5 rotations"), std::string::npos) << s.message();
+  EXPECT_EQ(r.detection.intervals.size(), 12u);  // what the timeline of the failed job shows
+  ASSERT_EQ(r.rotations.size(), 11u);
+  int excluded = 0;
+  for (const ImuRotationDiagnostics& rd : r.rotations) {
+    if (!rd.used) {
+      ++excluded;
+      EXPECT_EQ(rd.excluded, "saturated gyroscope samples");
+    }
+  }
+  EXPECT_GE(excluded, 7);
+}
+
 TEST(ImuCalibration, BriefReportSaysUsableTerminationAndStaticsInOneLine) {
   ImuSimulationOptions so;
   so.statics = 14;
