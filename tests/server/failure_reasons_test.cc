@@ -243,6 +243,13 @@ TEST(FailureReasons, DrivenFailuresCarryTheReasonOfTheirSite) {
   std::string unused_csv;
   json noise, truth;
   ASSERT_TRUE(SimulateNoiseFiles(sim, &unused_csv, &noise, &truth).ok());
+  // imu: every rotation between the 12 statics exceeds the gyroscope's range (0.2 rad/s).
+  core::ImuSimulationOptions imu_sim;
+  imu_sim.statics = 12;
+  std::string fast_rotations;
+  json imu;
+  ASSERT_TRUE(SimulateImuFiles(imu_sim, &fast_rotations, &imu, &truth).ok());
+  imu["gyro_saturation"] = 0.2;
   const struct {
     std::string csv;
     json config;
@@ -255,6 +262,7 @@ TEST(FailureReasons, DrivenFailuresCarryTheReasonOfTheirSite) {
       {few_positions, {{"method", "pca"}, {"colour", "red"}}, "invalid_config"},
       {"position,s1,s2,s3\np1,1,0\n", pca, "recording_unreadable"},
       {short_noise, noise, "log_too_short"},
+      {fast_rotations, imu, "too_few_rotations"},
   };
   for (const auto& c : cases) {
     json result;
