@@ -134,24 +134,39 @@ void JsonReader::Read(std::string_view key, double* out) const {
   *out = x;
 }
 
+namespace {
+
+// A JSON number that is an int64 exactly: an integer in range, or a whole float within 2^53 (a
+// larger float may not be the integer it was written as). "" on success, else why not.
+std::string Integer(const json& j, int64_t* out) {
+  if (j.is_number_float()) {
+    const double x = j.get<double>();
+    if (!(std::floor(x) == x && std::fabs(x) < 9.007199254740992e15)) {
+      return "expected an integer, found " + j.dump();
+    }
+    *out = static_cast<int64_t>(x);
+    return "";
+  }
+  if (!j.is_number()) return "expected an integer, found " + JsonReader::TypeName(j);
+  if (j.is_number_unsigned() &&
+      j.get<uint64_t>() > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) {
+    return "integer out of range: " + j.dump();
+  }
+  *out = j.get<int64_t>();
+  return "";
+}
+
+}  // namespace
+
 void JsonReader::Read(std::string_view key, int64_t* out) const {
   const json* j = Child(key, "an integer", &json::is_number);
   if (j == nullptr) return;
-  if (j->is_number_float()) {
-    const double x = j->get<double>();
-    if (!(std::floor(x) == x && std::fabs(x) < 9.007199254740992e15)) {
-      Fail("expected an integer, found " + j->dump(), key);
-      return;
-    }
-    *out = static_cast<int64_t>(x);
+  int64_t v = 0;
+  if (const std::string why = Integer(*j, &v); !why.empty()) {
+    Fail(why, key);
     return;
   }
-  if (j->is_number_unsigned() &&
-      j->get<uint64_t>() > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) {
-    Fail("integer out of range: " + j->dump(), key);
-    return;
-  }
-  *out = j->get<int64_t>();
+  *out = v;
 }
 
 void JsonReader::Read(std::string_view key, int* out) const {
@@ -210,15 +225,10 @@ void JsonReader::Read(std::string_view key, std::vector<int64_t>* out) const {
   if (j == nullptr) return;
   std::vector<int64_t> v(j->size());
   for (size_t i = 0; i < j->size(); ++i) {
-    const json& e = (*j)[i];
-    const bool integral = e.is_number_integer() || e.is_number_unsigned() ||
-                          (e.is_number_float() && std::floor(e.get<double>()) == e.get<double>());
-    if (!integral) {
-      Fail("expected an integer, found " + e.dump(),
-           std::string(key) + "[" + std::to_string(i) + "]");
+    if (const std::string why = Integer((*j)[i], &v[i]); !why.empty()) {
+      Fail(why, std::string(key) + "[" + std::to_string(i) + "]");
       return;
     }
-    v[i] = e.get<int64_t>();
   }
   *out = std::move(v);
 }

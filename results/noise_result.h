@@ -103,8 +103,8 @@ struct NoiseResult {
   NoiseDiagnostics diagnostics;
   // A partial document the server trimmed to fit the store (server/failure_reasons.h,
   // PartialDiagnosticsText): its "trimmed" note as stored (open shape) and the diagnostics
-  // members it dropped, which are null in JSON and left at their defaults here ("diagnostics"
-  // itself when all were dropped). Empty for every other document.
+  // members it dropped, which are absent from the JSON and left at their defaults here
+  // ("diagnostics" itself when all were dropped). Empty for every other document.
   std::optional<nlohmann::json> trimmed;
   std::vector<std::string> dropped;
 };

@@ -263,13 +263,14 @@ Status FromJson(const json& doc, PcaResult* out) {
   PcaResult v;
   ReadEnvelope(r, "pca", kPcaSchemaVersion, &v.envelope);
   if (!r.ok()) return r.status();
-  // A usable result must have parameters and uncertainty; a partial document may (read if so).
-  if (v.envelope.usable || r.Has("parameters")) {
+  // A usable result must have parameters and uncertainty; a partial document's are not estimates
+  // and are not read (as for every method: consumers test parameters, never serve a partial).
+  if (v.envelope.usable) {
     PcaParameters p;
     ReadParameters(r.Object("parameters"), &p);
     if (r.ok()) v.parameters = std::move(p);
   }
-  if (v.envelope.usable || r.Has("uncertainty")) {
+  if (v.envelope.usable) {
     PcaUncertainty u;
     ReadUncertainty(r.Object("uncertainty"), &u);
     if (r.ok()) v.uncertainty = std::move(u);

@@ -10,8 +10,9 @@
 //    "uncertainty": {"sensors": [{"name", "scale_std", "axis_std_rad", "bias_std"}], "noise_std"},
 //    "diagnostics": {...PcaDiagnostics...}, "verdict": {...} (once judged), "warnings": [...]}
 // A failed run's partial document is {"method", "schema_version", "usable": false,
-// "diagnostics", "warnings"}: parameters and uncertainty are then nullopt (FromJson reads them if
-// a partial document has them anyway, and ToJson writes them back only when present).
+// "diagnostics", "warnings"}: parameters and uncertainty are then nullopt (FromJson ignores them
+// if a partial document has them anyway: they are not estimates; ToJson writes them only when
+// present).
 // Undefined numbers (an uncertainty the data cannot give, a rank gap without σ_{d+1}) are NaN in
 // the struct and null in the JSON.
 //

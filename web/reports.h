@@ -36,11 +36,10 @@ std::string ArrayDrift(const std::vector<const JobSummary*>& jobs);
 std::string NoiseReport(const JobView& view);
 std::string ImuReport(const JobView& view);
 
-// The partial reports of failed jobs (MethodReport::Partial), one per method's file.
+// The partial reports of failed jobs (MethodReport::Partial) of pca and imu (noise's and array's
+// are private to their files).
 std::string PcaPartial(const JobView& view);
 std::string ImuPartial(const JobView& view);
-std::string NoisePartialReport(const JobView& view);
-std::string ArrayPartialReport(const JobView& view);
 
 // The registry entries (web/method_reports.cc).
 const MethodReport& PcaMethodReport();

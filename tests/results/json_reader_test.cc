@@ -89,6 +89,30 @@ TEST(JsonReader, RefusesANonIntegralNumberWhereAnIntegerBelongs) {
   EXPECT_NE(r.status().message().find("expected an integer, found 3.5"), std::string::npos);
 }
 
+// An array of integers takes each element by the scalar's rule: a float too large to be the
+// integer it was written as, an unsigned beyond int64 or a string is refused naming its index.
+TEST(JsonReader, IntegerArraysRefuseWhatAnIntegerWouldNamingTheElement) {
+  for (const auto& [element, why] : std::vector<std::pair<nlohmann::json, std::string>>{
+           {1e300, "expected an integer, found 1e+300"},
+           {18446744073709551615ull, "integer out of range: 18446744073709551615"},
+           {"7", "expected an integer, found a string"},
+           {2.5, "expected an integer, found 2.5"}}) {
+    const nlohmann::json doc = {{"counts", {1, 2.0, element}}};
+    JsonReader r(doc, "doc");
+    std::vector<int64_t> counts = {9};
+    r.Read("counts", &counts);
+    EXPECT_EQ(r.status().field(), "counts[2]") << why;
+    EXPECT_NE(r.status().message().find(why), std::string::npos) << r.status().message();
+    EXPECT_EQ(counts, std::vector<int64_t>{9});  // untouched
+  }
+  const nlohmann::json doc = {{"counts", {1, 2.0, -3}}};
+  JsonReader r(doc, "doc");
+  std::vector<int64_t> counts;
+  r.Read("counts", &counts);
+  ASSERT_TRUE(r.ok()) << r.status().message();
+  EXPECT_EQ(counts, (std::vector<int64_t>{1, 2, -3}));
+}
+
 TEST(JsonReader, RefusesAVectorOfTheWrongLengthAndANonObjectMember) {
   {
     JsonReader r(kDoc, "doc");

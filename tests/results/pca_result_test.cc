@@ -239,6 +239,18 @@ TEST(PcaResult, PartialDocumentReadsWithoutParameters) {
   EXPECT_EQ(ToJson(back), j);
 }
 
+// Parameters in a not-usable document are not estimates: they are not read, so no consumer (the
+// gate, the exports, the pca -> array chain) can take them for a calibration.
+TEST(PcaResult, ParametersOfAPartialDocumentAreNotRead) {
+  json j = ToJson(HandBuilt());
+  j["usable"] = false;
+  PcaResult back;
+  ASSERT_TRUE(FromJson(j, &back).ok()) << FromJson(j, &back).message();
+  EXPECT_FALSE(back.parameters.has_value());
+  EXPECT_FALSE(back.uncertainty.has_value());
+  EXPECT_FALSE(ToJson(back).contains("parameters"));
+}
+
 json PartialDocument() {
   PcaResult r = HandBuilt();
   r.envelope.usable = false;
