@@ -164,6 +164,10 @@ const FailureReason& StoredFailureReason(std::string_view reason_code,
 
 std::string PartialDiagnosticsText(const nlohmann::json& result, size_t max_bytes) {
   if (!result.is_object() || result.empty()) return "";
+  // Only a run's own partial document (usable: false) is kept: a complete result that failed
+  // later (storing it was busy, the gate threw) must not be shown as "before the failure".
+  const auto usable = result.find("usable");
+  if (usable == result.end() || !usable->is_boolean() || usable->get<bool>()) return "";
   auto dump = [](const nlohmann::json& j) {
     return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   };

@@ -46,7 +46,8 @@ Reason ReasonForErrorCode(std::string_view error_code);
 const FailureReason& StoredFailureReason(std::string_view reason_code, std::string_view error_code);
 
 // The partial diagnostics a failed Method::Run left in `result`, as stored with the job: the
-// JSON text of the object ("" when `result` is not a non-empty object). Over `max_bytes`, the
+// JSON text of the object ("" unless `result` is an object with "usable": false: a complete result
+// whose storing or judging failed is not partial diagnostics). Over `max_bytes`, the
 // largest members of result.diagnostics are left out, largest first, until it fits,
 // and result.trimmed says so: {"bytes": the full size, "dropped": [their names], "note"}; when
 // even that does not fit, only {"method", "usable", "trimmed"} is kept.

@@ -108,6 +108,23 @@ TEST(PartialDiagnostics, OverTheCapTheLargestAreLeftOutAndNamed) {
   EXPECT_EQ(PartialDiagnosticsText(json::object(), 100), "");
 }
 
+// A complete result whose storing failed (the store busy, retries exhausted) or whose gate threw
+// is not "before the failure": the failed job keeps no diagnostics rather than a usable result
+// with parameters and an accepted verdict.
+TEST(PartialDiagnostics, OnlyARunsOwnNotUsableDocumentIsKept) {
+  json complete = {{"method", "pca"},
+                   {"usable", true},
+                   {"parameters", {{"sensors", json::array()}}},
+                   {"verdict", {{"status", "accepted"}}}};
+  EXPECT_EQ(PartialDiagnosticsText(complete, 1 << 20), "");
+  complete.erase("usable");
+  EXPECT_EQ(PartialDiagnosticsText(complete, 1 << 20), "");
+  complete["usable"] = "false";
+  EXPECT_EQ(PartialDiagnosticsText(complete, 1 << 20), "");
+  const json partial = {{"method", "pca"}, {"usable", false}, {"diagnostics", json::object()}};
+  EXPECT_EQ(PartialDiagnosticsText(partial, 1 << 20), partial.dump());
+}
+
 // ----- One failing recording per method.
 
 struct Failing {
