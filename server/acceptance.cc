@@ -199,7 +199,7 @@ void JudgeImuTriads(const std::vector<results::ImuTriads>& imus,
   const auto axis_std_max = limits.Get("max_axis_std");
   const auto range = limits.Get("scale_range");
   const auto implausible = limits.Get("implausible_factor");
-  Offenders undefined, scale_std, axis_std, out_of_range, bias_std, bias;
+  Offenders undefined, scale_std, axis_std, out_of_range, bias_std, bias, not_finite;
   static const char* const kAxes[] = {"x", "y", "z"};
   for (size_t i = 0; i < imus.size(); ++i) {
     const results::ImuTriads& imu = imus[i];
@@ -210,6 +210,10 @@ void JudgeImuTriads(const std::vector<results::ImuTriads>& imus,
       const std::string who = name + " " + quantity;
       const results::SensorTriad& t = accel ? imu.accelerometer : imu.gyroscope;
       const double unit = accel ? nominal.accel_unit : nominal.gyro_unit;
+      if (!t.bias.allFinite() || !t.scale.allFinite() || !t.misalignment.allFinite() ||
+          !t.matrix.allFinite()) {
+        not_finite.Add(who);
+      }
       // Scale factors against the nominal unit conversion.
       for (int k = 0; k < 3; ++k) {
         const double ratio = t.scale(k) / unit;
@@ -282,6 +286,7 @@ void JudgeImuTriads(const std::vector<results::ImuTriads>& imus,
       }
     }
   }
+  not_finite.RejectInto(verdict, kNotFiniteRule);
   undefined.RejectInto(verdict,
                        "the uncertainty could not be computed, so the precision cannot be judged");
   if (range) {

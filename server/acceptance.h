@@ -140,6 +140,11 @@ class Offenders {
   std::vector<std::string> items_;
 };
 
+// The rule every gate applies to the values it would serve: a parameter that is not a finite number
+// (null in the JSON) never reaches a device, whatever the limits (set or not).
+inline constexpr char kNotFiniteRule[] =
+    "a parameter is not a finite number (null), so the calibration cannot be served";
+
 // Why a scale factor `ratio` times its nominal is implausible, for a unit mix-up of a factor
 // close to 9.80665 (g vs m/s²) or 57.3 (deg vs rad); "" when the ratio matches neither.
 // `quantity` is "accelerometer" or "gyroscope".

@@ -925,7 +925,11 @@ void JudgeArray(const json& result, const json& config, const AcceptanceLimits& 
   // Positions (both models: parameters.positions, SPEC §4 and §7) against the nominal geometry.
   const auto offset_max = limits.Get("max_offset");
   const auto std_max = limits.Get("max_position_std");
-  Offenders far, uncertain, undefined;
+  Offenders far, uncertain, undefined, not_finite;
+  for (const results::ArrayPosition& q : params.positions) {
+    if (!q.position.allFinite()) not_finite.Add(q.name);  // the reference's too
+  }
+  not_finite.RejectInto(verdict, kNotFiniteRule);
   for (size_t i = 0; i < params.positions.size(); ++i) {
     if (static_cast<int>(i) == params.reference) continue;  // held at its nominal position
     const results::ArrayPosition& q = params.positions[i];

@@ -1,6 +1,7 @@
 #include "server/pca_method.h"
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -341,12 +342,19 @@ void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
   const auto scale_std_max = limits.Get("max_scale_std");
   const auto axis_std_max = limits.Get("max_axis_std");
   const auto bias_std_max = limits.Get("max_bias_std");
-  Offenders out_of_range, absurd, scale_std, axis_std, bias_std, undefined;
+  Offenders out_of_range, absurd, scale_std, axis_std, bias_std, undefined, not_finite;
   double absurd_ratio = NAN;
+  auto all_finite = [](const std::vector<double>& v) {
+    return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
+  };
   for (size_t i = 0; i < sensors.size(); ++i) {
     const results::PcaSensor& sensor = sensors[i];
     const std::string& name = sensor.name;
     const double scale = sensor.scale;
+    if (!all_finite(sensor.sensitivity) || !all_finite(sensor.axis) || !std::isfinite(scale) ||
+        !std::isfinite(sensor.bias)) {
+      not_finite.Add(name);
+    }
     const double ratio = scale / nominal_scale[i];
     if (std::isfinite(ratio)) {
       if (implausible && (ratio > *implausible || ratio < 1 / *implausible)) {
@@ -377,6 +385,7 @@ void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
       if (rel_bias > *bias_std_max) bias_std.Add(name + " " + Fmt(*b_std) + " reading units");
     }
   }
+  not_finite.RejectInto(verdict, kNotFiniteRule);
   if (!absurd.empty()) {
     // A unit mix-up between the readings and `magnitude` is the usual cause.
     std::string cause;

@@ -417,6 +417,42 @@ TEST(Gate, AResultThatCannotBeJudgedIsRejected) {
   EXPECT_TRUE(HasReason(v, "the result cannot be judged: pca result: model: missing")) << v.dump();
 }
 
+// A value the gate would serve that is not a finite number (null in the JSON) is never accepted,
+// even with every limit removed: pca's sensitivity, imu's matrices and biases, array's positions.
+TEST(Gate, ParametersThatAreNotFiniteAreNeverServed) {
+  auto no_limits = [](const char* method) {
+    json limits = json::object();
+    for (const AcceptanceKey& key : FindMethod(method)->AcceptanceKeys())
+      limits[key.name] = nullptr;
+    return json{{"method", method}, {"acceptance", limits}};
+  };
+  const json pca =
+      Calib(TriadCsv(RandomDirections(30, 7), 9.80665, 1.02, 0.1, 0.002, 7), TriadConfig(9.80665));
+  ASSERT_EQ(pca["verdict"]["status"], "accepted") << pca["verdict"].dump();
+  json bad = pca;
+  bad["parameters"]["sensors"][1]["sensitivity"][2] = nullptr;
+  json v = JudgeWith("pca", bad, TriadConfig(9.80665));
+  EXPECT_EQ(v["status"], "rejected");
+  EXPECT_TRUE(HasReason(v, std::string(kNotFiniteRule) + ": a0_y")) << v.dump();
+  json pca_config = no_limits("pca");
+  pca_config.update(TriadConfig(9.80665));
+  EXPECT_EQ(JudgeWith("pca", bad, pca_config)["status"], "rejected");
+
+  bad = ImuResult(1.0, 0.001, 0.001, 0.001, 1);
+  ASSERT_EQ(JudgeWith("imu", bad, {{"method", "imu"}})["status"], "accepted");
+  bad["parameters"]["imus"][0]["gyroscope"]["bias"][1] = nullptr;
+  v = JudgeWith("imu", bad, no_limits("imu"));
+  EXPECT_EQ(v["status"], "rejected");
+  EXPECT_TRUE(HasReason(v, std::string(kNotFiniteRule) + ": IMU 0 gyroscope")) << v.dump();
+
+  bad = ArrayResult(0.001, 1e-5, 0.04);
+  ASSERT_EQ(JudgeWith("array", bad, {{"method", "array"}})["status"], "accepted");
+  bad["parameters"]["positions"][0]["position"][0] = nullptr;  // the reference's
+  v = JudgeWith("array", bad, no_limits("array"));
+  EXPECT_EQ(v["status"], "rejected");
+  EXPECT_TRUE(HasReason(v, std::string(kNotFiniteRule) + ": a0")) << v.dump();
+}
+
 // ---- noise ----
 
 TEST(Gate, NoiseNeedsAStationaryLogAndAPreciseWhiteNoise) {
