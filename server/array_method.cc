@@ -196,10 +196,6 @@ Status ParseAccelerometerCalibration(const json& value, int triads,
         ", not gravity in m/s^2 (~9.81): the corrected accelerations are in the magnitude's "
         "units while the array expects m/s^2");
   out->bias = results::Name(params.bias);
-  if (params.bias == results::PcaBias::kNone)
-    out->warnings.push_back(
-        "accelerometer_calibration: the pca result assumed bias-free readings (bias: none): "
-        "accelerometer biases are not corrected; calibrate with \"bias\": \"estimate\"");
   const std::vector<results::PcaSensor>& sensors = params.sensors;
   std::map<std::string, int> index;
   for (size_t i = 0; i < sensors.size(); ++i) {
@@ -234,6 +230,15 @@ Status ParseAccelerometerCalibration(const json& value, int triads,
                                 where + ".bias)");
       out->triads[k].bias(i) = sensor.bias;
     }
+  // Biases are applied whatever the model says (a raw log's removed biases are corrections too):
+  // warn only when there is none to apply.
+  bool any_bias = false;
+  for (const core::AccelerometerTriadModel& t : out->triads)
+    any_bias |= (t.bias.array() != 0).any();
+  if (params.bias == results::PcaBias::kNone && !any_bias && missing.empty())
+    out->warnings.push_back(
+        "accelerometer_calibration: the pca result assumed bias-free readings (bias: none): "
+        "accelerometer biases are not corrected; calibrate with \"bias\": \"estimate\"");
   if (!missing.empty()) {
     std::string list;
     const size_t shown = std::min<size_t>(missing.size(), 12);

@@ -51,7 +51,8 @@ struct ArrayAccelerometerCalibration {
 // magnitude unknown; sensors malformed, duplicated or missing (the missing names are listed);
 // a triad's 3×3 block singular or ill-conditioned (condition number >
 // core::kMaxAccelerometerConditionNumber). Sensors other than aK_x/y/z are ignored (warning).
-// Warnings (not errors): magnitude far from 9.80665 (units), bias "none" (biases not corrected).
+// Warnings (not errors): magnitude far from 9.80665 (units), bias "none" with every bias 0 (biases
+// not corrected; nonzero biases are applied whatever parameters.bias says).
 // The pca nominal frame is the best orthogonal fit of all the triads' axes onto the nominal; the
 // array fit assumes it is the gyroscopes' frame (a common accelerometer-to-gyroscope rotation is
 // not observable from static data and is not estimated).
