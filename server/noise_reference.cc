@@ -84,7 +84,10 @@ Status Resolve(storage::Store* store, const std::string& key, json* value) {
 
 Status ResolveNoiseReferences(storage::Store* store, json* config) {
   if (!config->is_object()) return Status::Ok();
-  const std::string method = config->value("method", "");
+  // Before ValidateConfig: a "method" that is not a string is its error to name, not ours.
+  const auto m = config->find("method");
+  if (m == config->end() || !m->is_string()) return Status::Ok();
+  const std::string& method = m->get_ref<const std::string&>();
   if (method != "imu" && method != "array") return Status::Ok();
   for (const char* key : {"accel_noise", "gyro_noise"}) {
     auto it = config->find(key);

@@ -299,6 +299,20 @@ TEST_F(HttpApi, InvalidConfigIs400NamingTheKey) {
                   other.csv, "text/csv");
   ASSERT_TRUE(res);
   EXPECT_EQ(res->status, 400) << res->body;
+  // A rerun whose config has a method that is not a string (JSON body: a number, an object):
+  // 400 naming it, never a 500 from reading it as a string before validation.
+  auto up = client.Post("/api/v1/recordings", data.csv, "text/csv");
+  ASSERT_TRUE(up);
+  ASSERT_EQ(up->status, 201) << up->body;
+  const int64_t recording = Body(up)["recording"]["id"];
+  for (const json& method : {json(5), json::object(), json::array({"imu"}), json(nullptr)}) {
+    res = client.Post("/api/v1/jobs",
+                      json{{"recording_id", recording}, {"config", {{"method", method}}}}.dump(),
+                      "application/json");
+    ASSERT_TRUE(res);
+    EXPECT_EQ(res->status, 400) << method.dump() << " " << res->body;
+    EXPECT_EQ(Body(res)["error"]["field"], "method") << res->body;
+  }
 }
 
 TEST_F(HttpApi, NotDeterminableDataFailsTheJobWithAdvice) {
