@@ -25,7 +25,7 @@ constexpr const char* kArrayModel =
 // result is the server's own writing) or is a failed run's partial diagnostics.
 Status ReadArrayResult(const json& result, results::ArrayResult* out) {
   Status s = results::FromJson(result, out);
-  if (!s.ok()) return Status::Internal(s.message());
+  if (!s.ok()) return UnreadableStoredResult(s);
   if (!out->parameters || !out->uncertainty)
     return Status::Internal("stored array result has no parameters (a failed run)");
   return Status::Ok();

@@ -100,6 +100,10 @@ std::string LowerCase(std::string s) {
 }
 
 // A C double literal (full precision); the caller has checked that v is a finite number.
+Status UnreadableStoredResult(const Status& read) {
+  return Status::Conflict("the stored " + read.message());
+}
+
 std::string CDouble(double v) {
   char buf[40];
   std::snprintf(buf, sizeof buf, "%.17g", v);

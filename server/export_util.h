@@ -34,6 +34,10 @@ std::string CComment(const std::string& s);
 // Letters and digits kept (upper case), every other byte '_' (identifier stems).
 std::string IdentifierStem(const std::string& s);
 std::string LowerCase(std::string s);
+// A stored result this calibd cannot read (results::FromJson failed: written by a newer calibd, or
+// damaged): 409 with the reader's message, which names the path ("... schema_version: version 2 is
+// newer than this calibd reads (up to 1): upgrade calibd to read it"), not an opaque 500.
+Status UnreadableStoredResult(const Status& read);
 // A C double literal (full precision); v must be finite.
 std::string CDouble(double v);
 // Reads `n` numbers of a JSON array into *out; false when the shape is wrong or any is null.

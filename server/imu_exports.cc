@@ -26,7 +26,7 @@ constexpr const char* kImuModel =
 // A stored imu result, typed; kInternal naming the first problem when it does not read.
 Status ReadResult(const json& result, results::ImuResult* out) {
   Status s = results::FromJson(result, out);
-  if (!s.ok()) return Status::Internal("stored imu result: " + s.message());
+  if (!s.ok()) return UnreadableStoredResult(s);
   if (!out->parameters) {
     return Status::Internal("stored imu result is the partial diagnostics of a failed run");
   }

@@ -23,7 +23,7 @@ constexpr const char* kNoiseModel =
 // The stored result, typed; kInternal naming the first problem when it does not read.
 Status ReadResult(const json& result, results::NoiseResult* out) {
   Status s = results::FromJson(result, out);
-  if (!s.ok()) return Status::Internal("stored noise result: " + s.message());
+  if (!s.ok()) return UnreadableStoredResult(s);
   if (!out->envelope.usable) {
     return Status::Internal("stored noise result is the partial diagnostics of a failed run");
   }
@@ -142,6 +142,11 @@ Status NoiseResultToKalibrYaml(const json& result, const ExportContext& context,
       y << type_names[type] << "_" << keys[k] << ": " << Cell(w.value) << "  # " << units[type][k]
         << ", " << w.axis << "\n";
     }
+  }
+  if (!std::isfinite(r.diagnostics.rate)) {
+    return Status::NotDeterminable(
+        "the noise result has no sample rate (diagnostics.rate is null): Kalibr's update_rate "
+        "cannot be written");
   }
   y << "rostopic: /imu0\n"
     << "update_rate: " << Cell(r.diagnostics.rate) << "  # Hz\n";

@@ -307,7 +307,9 @@ json Build() {
             {"text/x-c", {{"schema", {{"type", "string"}}}}}}}}},
         {"304", {{"description", "not modified (If-None-Match matched the ETag)"}}},
         {"400", ErrorResponse("bad method or format")},
-        {"404", ErrorResponse("no accepted calibration, or job not this device's")}}}};
+        {"404", ErrorResponse("no accepted calibration, or job not this device's")},
+        {"409", ErrorResponse("csv, h or yaml of a stored result this calibd cannot read (e.g. "
+                              "a schema_version from a newer calibd), naming the path")}}}};
   paths["/recordings/{id}"]["get"] = {
       {"summary", "Recording metadata"},
       {"parameters", json::array({PathParam("id", "integer", "recording id")})},

@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "results/imu_result.h"
+#include "server/export_util.h"
 
 namespace calibd::server {
 
@@ -19,12 +20,6 @@ std::string Num(double v) {
   std::string s = buf;
   if (s.find_first_of(".eEn") == std::string::npos) s += ".0";  // cv::FileStorage: a real
   return s;
-}
-
-std::string CommentSafe(const std::string& s) {
-  std::string out;
-  for (unsigned char c : s) out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
-  return out;
 }
 
 // M = Q L with Q a rotation and L lower triangular with a positive diagonal (QL decomposition,
@@ -60,7 +55,7 @@ void WriteMatrix(std::ostringstream& y, const char* key, const Eigen::Matrix3d& 
 Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context, std::string* out) {
   results::ImuResult typed;
   if (Status s = results::FromJson(result, &typed); !s.ok()) {
-    return Status::Internal("stored imu result: " + s.message());
+    return UnreadableStoredResult(s);
   }
   if (!typed.parameters || typed.parameters->imus.empty()) {
     return Status::Internal("stored imu result has no imus");

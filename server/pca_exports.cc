@@ -25,7 +25,7 @@ constexpr const char* kPcaModel =
 // does not read, or a failed run's partial document without parameters).
 Status ReadForExport(const json& result, results::PcaResult* out) {
   const Status s = results::FromJson(result, out);
-  if (!s.ok()) return Status::Internal("stored " + s.message());
+  if (!s.ok()) return UnreadableStoredResult(s);
   if (!out->parameters || !out->uncertainty) {
     return Status::Internal("stored pca result has no parameters (a failed run's diagnostics)");
   }
@@ -60,7 +60,7 @@ Status PcaHeader(const results::PcaResult& result, HeaderWriter* w) {
   const size_t d = static_cast<size_t>(params.dimension);
   std::vector<std::string> names;
   std::vector<std::vector<double>> sensitivity(m), axis(m);
-  std::vector<double> bias(m, 0.0), scale(m);
+  std::vector<double> bias(m), scale(m);
   Eigen::MatrixXd a(m, d);
   auto all_finite = [](const std::vector<double>& v) {
     for (double x : v) {
@@ -71,14 +71,15 @@ Status PcaHeader(const results::PcaResult& result, HeaderWriter* w) {
   for (size_t i = 0; i < m; ++i) {
     const results::PcaSensor& s = sensors[i];
     names.push_back(s.name);
-    if (!all_finite(s.sensitivity) || !all_finite(s.axis) || !std::isfinite(s.scale)) {
+    if (!all_finite(s.sensitivity) || !all_finite(s.axis) || !std::isfinite(s.scale) ||
+        !std::isfinite(s.bias)) {
       return Status::NotDeterminable("the pca result of sensor '" + names.back() +
                                      "' has undefined parameters: no C header can be written");
     }
     sensitivity[i] = s.sensitivity;
     axis[i] = s.axis;
     scale[i] = s.scale;
-    if (std::isfinite(s.bias)) bias[i] = s.bias;
+    bias[i] = s.bias;
     for (size_t k = 0; k < d; ++k) a(i, k) = sensitivity[i][k];
   }
   // The least-squares inverse of reading = A v + b: v = (AᵀA)⁻¹Aᵀ (reading − b).

@@ -176,10 +176,10 @@ TEST(ArrayResultSchema, ExportsReadTheTypedResultAndNameWhatDoesNotRead) {
   EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 33);  // header and 32 triads
   result["parameters"]["positions"][4]["offset"] = {1, 2};
   Status s = ArrayResultToCsv(result, &out);
-  EXPECT_EQ(s.code(), StatusCode::kInternal);
+  EXPECT_EQ(s.code(), StatusCode::kConflict);
   EXPECT_NE(s.message().find("parameters.positions[4].offset"), std::string::npos) << s.message();
   s = ArrayResultToHeader(result, {1, "D", "array", "2026-01-01T00:00:00Z"}, &out);
-  EXPECT_EQ(s.code(), StatusCode::kInternal);
+  EXPECT_EQ(s.code(), StatusCode::kConflict);
   EXPECT_NE(s.message().find("parameters.positions[4].offset"), std::string::npos) << s.message();
 }
 
@@ -284,7 +284,9 @@ void ExpectSpecOnlyResultServes(json result, const json& config) {
   ASSERT_TRUE(s.ok()) << s.ToString();
   EXPECT_TRUE(Contains(out, "POSITION"));
   EXPECT_EQ(Contains(out, "OFFSET is not written"), full) << out;
-  if (full) EXPECT_TRUE(Contains(out, "ARRAY_ACCEL_MATRIX[")) << out;
+  if (full) {
+    EXPECT_TRUE(Contains(out, "ARRAY_ACCEL_MATRIX[")) << out;
+  }
 
   Verdict verdict;
   JudgeArray(result, config, EffectiveAcceptance("array", json(), config), &verdict);
@@ -306,7 +308,9 @@ void ExpectSpecOnlyResultServes(json result, const json& config) {
   EXPECT_TRUE(Contains(section, "table-array-parameters"));
   // The offsets (for model full not SPEC's) against the config's geometry, not a dash.
   EXPECT_FALSE(Contains(section, "<dt>RMS offset from nominal</dt><dd>\xE2\x80\x93")) << section;
-  if (full) EXPECT_TRUE(Contains(section, "table-array-full-accelerometer"));
+  if (full) {
+    EXPECT_TRUE(Contains(section, "table-array-full-accelerometer"));
+  }
   EXPECT_NE(report->KeyFigures(result), "");
 }
 

@@ -269,6 +269,30 @@ TEST(Exports, KalibrYamlHasKalibrsKeysWithTheLargestAxisInKalibrsUnits) {
   EXPECT_NE(yaml.find("noise job 9 of device 'IMU-N1'"), std::string::npos) << yaml;
 }
 
+// A parameter value that is undefined in a stored result is never written as a number a device
+// would apply: the C header of a pca result with a null bias, and Kalibr's file of a noise result
+// without a rate, are refused naming what is missing (the CSV keeps the empty cell).
+TEST(Exports, AnUndefinedParameterIsRefusedNeverWrittenAsZero) {
+  json r = PcaResult(24, 0.05);
+  r["parameters"]["sensors"][2]["bias"] = nullptr;
+  const std::string name = r["parameters"]["sensors"][2]["name"];
+  std::string out;
+  ExportContext context{7, "SN-1", "pca", "2026-11-24T00:00:00Z"};
+  Status s = ResultToHeader(r, context, &out);
+  EXPECT_EQ(s.code(), StatusCode::kNotDeterminable) << s.ToString();
+  EXPECT_NE(s.message().find("sensor '" + name + "' has undefined parameters"), std::string::npos)
+      << s.message();
+  ASSERT_TRUE(ResultToCsv(r, &out).ok());
+  EXPECT_EQ(ParseCsv(out)[3][7], "") << out;  // sensor 2's bias cell
+  json truth;
+  json noise = NoiseResult(3600, 4e-4, &truth);
+  ASSERT_TRUE(ResultToKalibrYaml(noise, context, &out).ok());
+  noise["diagnostics"]["rate"] = nullptr;
+  s = ResultToKalibrYaml(noise, context, &out);
+  EXPECT_EQ(s.code(), StatusCode::kNotDeterminable) << s.ToString();
+  EXPECT_NE(s.message().find("update_rate"), std::string::npos) << s.message();
+}
+
 TEST(Exports, KalibrYamlIsOnlyForNoiseResults) {
   std::string yaml;
   const Status s = ResultToKalibrYaml(PcaResult(23, 0), ExportContext{}, &yaml);

@@ -148,19 +148,28 @@ json UsableResult() {
   return j;
 }
 
-TEST(PcaResultSchema, ExportsOfAResultThatDoesNotReadAreInternalNamingThePath) {
+// A stored result this calibd cannot read is a conflict (409) with the reader's message, not an
+// opaque 500: e.g. one written by a newer calibd sharing the database.
+TEST(PcaResultSchema, ExportsOfAResultThatDoesNotReadAreAConflictNamingThePath) {
   json j = UsableResult();
   j["parameters"]["frame"] = "canonical */ int frame; /*";
   std::string out;
   const Status csv = PcaResultToCsv(j, &out);
-  EXPECT_EQ(csv.code(), StatusCode::kInternal);
+  EXPECT_EQ(csv.code(), StatusCode::kConflict);
   EXPECT_NE(csv.message().find("pca result: parameters.frame: expected \"canonical\" or "
                                "\"nominal\""),
             std::string::npos)
       << csv.message();
   const Status h = PcaResultToHeader(j, {1, "SN-1", "pca", "2026-01-01T00:00:00Z"}, &out);
-  EXPECT_EQ(h.code(), StatusCode::kInternal);
+  EXPECT_EQ(h.code(), StatusCode::kConflict);
   EXPECT_NE(h.message().find("parameters.frame"), std::string::npos) << h.message();
+  json newer = UsableResult();
+  newer["schema_version"] = 2;
+  const Status v = PcaResultToCsv(newer, &out);
+  EXPECT_EQ(v.code(), StatusCode::kConflict);
+  EXPECT_NE(v.message().find("schema_version: version 2 is newer than this calibd reads (up to 1)"),
+            std::string::npos)
+      << v.message();
   // The same result unchanged exports.
   EXPECT_TRUE(PcaResultToCsv(UsableResult(), &out).ok());
 }
