@@ -90,13 +90,24 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
   g_service = service.release();
   g_port = g_service->port();
   g_runner = new std::thread([] { g_service->Run(); });
-  std::atexit(StopServer);  // runs before RemoveDir (registered earlier)
-  for (int i = 0; i < 500; ++i) {
+  bool ready = false;
+  for (int i = 0; i < 500 && !ready; ++i) {
     auto res = MakeClient().Get("/healthz");
-    if (res && res->status == 200) return 0;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    ready = res && res->status == 200;
+    if (!ready) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  Fail("the server did not become ready");
+  if (!ready) Fail("the server did not become ready");
+  // One multipart upload before StopServer is registered: cpp-httplib builds function-local
+  // static regexes on its first multipart parse, and exit() destroys statics in the reverse order
+  // of registration. Built now, they outlive StopServer; built by the first fuzz input, they were
+  // destroyed while a request thread still parsed with them (ThreadSanitizer, tsan.sh).
+  const std::string warm_up =
+      "--b\r\nContent-Disposition: form-data; name=\"recording\"; filename=\"w.csv\"\r\n"
+      "Content-Type: text/csv\r\n\r\nposition,s1\np1,1\n\r\n--b--\r\n";
+  auto res = MakeClient().Post("/api/v1/recordings", warm_up, "multipart/form-data; boundary=b");
+  if (!res) Fail("the warm-up upload got no answer");
+  std::atexit(StopServer);  // runs before RemoveDir (registered earlier) and httplib's statics
+  return 0;
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
