@@ -74,10 +74,14 @@ bool WorkerPool::Stop(std::chrono::milliseconds grace) {
     }
   }
   lock.unlock();
-  finished_.notify_all();  // wakes the renewer
   for (auto& t : threads_) t.join();
-  renewer_.join();
   threads_.clear();
+  {
+    std::lock_guard<std::mutex> stop_lock(mu_);
+    renewer_stopping_ = true;
+  }
+  finished_.notify_all();  // wakes the renewer
+  renewer_.join();
   return all_done;
 }
 
@@ -124,9 +128,9 @@ void WorkerPool::WorkerLoop(int index) {
 void WorkerPool::RenewLoop() {
   const auto period = std::chrono::milliseconds(options_.lease_ms / 3);
   std::unique_lock<std::mutex> lock(mu_);
-  while (!stopping_) {
-    finished_.wait_for(lock, period, [this] { return stopping_; });
-    if (stopping_) break;
+  while (!renewer_stopping_) {
+    finished_.wait_for(lock, period, [this] { return renewer_stopping_; });
+    if (renewer_stopping_) break;
     const auto active = active_;
     lock.unlock();
     for (const auto& [job_id, job] : active) {
@@ -166,8 +170,10 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       std::cerr << "calibd: " << worker_id << ": recording the failure of job " << job.id
                 << " failed: " << f.ToString() << "\n";
     }
-    metrics_->ObserveJob(job.method, transient ? "retried" : "failed", seconds());
-    if (!transient) metrics_->ObserveFailure(job.method, failure.reason);
+    // A transient failure on the last attempt fails the job for good (the store's rule).
+    const bool final = !transient || job.attempts >= store_->options().max_attempts;
+    metrics_->ObserveJob(job.method, final ? "failed" : "retried", seconds());
+    if (final) metrics_->ObserveFailure(job.method, failure.reason);
   };
 
   Status s = ParseJsonText(job.config_json, "config of job " + std::to_string(job.id), &config);
@@ -205,9 +211,14 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       if (!parsed.ok() && parsed.reason() == Reason::kUnspecified) {
         parsed.WithReason(Reason::kRecordingUnreadable);
       }
-      s = parsed.ok() ? CalibrateParsed(&parser, file_name, config, &result, &cancel,
-                                        options_.acceptance, options_.executor)
-                      : parsed;
+      // Cancelled mid-read: the parser was never finished; nothing to calibrate (see below).
+      if (cancel.load()) {
+        s = Status::Ok();
+      } else {
+        s = parsed.ok() ? CalibrateParsed(&parser, file_name, config, &result, &cancel,
+                                          options_.acceptance, options_.executor)
+                        : parsed;
+      }
     } catch (const std::bad_alloc&) {
       s = Status::IoError("out of memory while calibrating").WithReason(Reason::kOverMemoryBudget);
     } catch (const std::exception&) {
@@ -226,9 +237,14 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
   if (!s.ok()) {
     std::cerr << "calibd: " << worker_id << ": storing the result of job " << job.id
               << " failed: " << s.ToString() << "\n";
-    if (s.IsTransient()) return fail(s, true);
-    metrics_->ObserveJob(job.method, "released", seconds());
-    return;
+    // Taken back (the lease was lost) or gone: another worker owns the outcome. Anything else
+    // (the result too large for the store, corruption) fails the job with its reason instead of
+    // leaving it running until its lease lapses and it is recomputed.
+    if (s.code() == StatusCode::kConflict || s.code() == StatusCode::kNotFound) {
+      metrics_->ObserveJob(job.method, "released", seconds());
+      return;
+    }
+    return fail(s, s.IsTransient());
   }
   metrics_->ObserveJob(job.method, "succeeded", seconds());
   if (result.contains("verdict") && result["verdict"].is_object()) {

@@ -88,6 +88,9 @@ class WorkerPool {
   std::condition_variable wake_;      // workers wait here for jobs
   std::condition_variable finished_;  // Stop waits here for running jobs
   bool stopping_ = false;
+  // The renewer outlives the workers: leases are renewed through Stop's grace period too (a job
+  // computing longer than a lease would otherwise be taken back by another process).
+  bool renewer_stopping_ = false;
   bool started_ = false;
   uint64_t notifications_ = 0;
   std::atomic<bool> listening_{false};  // the store calls us when jobs arrive (SetJobListener)

@@ -197,6 +197,32 @@ TEST_F(WorkerPoolTest, StopWithAGracePeriodLetsTheRunningJobFinish) {
   EXPECT_EQ(Outcomes("array", "succeeded"), 1);
 }
 
+// A job computing through Stop's grace period keeps its lease: the renewer outlives the workers.
+// (It stopped with them: a job longer than a lease was taken back by another process mid-grace.)
+TEST_F(WorkerPoolTest, LeasesAreRenewedThroughStopsGracePeriod) {
+  const int64_t id = EnqueueArray(15);
+  GatedExecutor gate(/*closed=*/true);
+  WorkerPool pool(store_.get(), &metrics_, Options(gate.Fn()));  // lease 300 ms
+  pool.Start();
+  pool.Notify();
+  ASSERT_TRUE(gate.WaitEntered());
+  bool all_done = false;
+  std::thread stopper([&] { all_done = pool.Stop(std::chrono::minutes(2)); });
+  // Several lease lengths into the grace period, the lease is alive: nothing to recover.
+  int64_t recovered = 0;
+  for (int i = 0; i < 10; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));
+    ASSERT_TRUE(store_->RecoverExpiredLeases(&recovered).ok());
+    EXPECT_EQ(recovered, 0) << "the lease lapsed " << (i + 1) * 150 << " ms into Stop";
+  }
+  gate.Open();
+  stopper.join();
+  EXPECT_TRUE(all_done);
+  const storage::JobInfo job = Job(id);
+  EXPECT_EQ(job.status, JobStatus::kSucceeded) << job.error_code << ": " << job.error_message;
+  EXPECT_EQ(job.attempts, 1);
+}
+
 TEST_F(WorkerPoolTest, StopWithoutGraceReleasesTheRunningJobWithoutCountingTheAttempt) {
   // A whole run of the job first, counting its executor calls: a cancelled run must make fewer.
   const int64_t whole = EnqueueArray(6);
