@@ -4,6 +4,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -206,10 +207,15 @@ bool Service::Shutdown() {
   Impl& d = *impl_;
   std::call_once(d.shutdown_once, [&d] {
     // First the HTTP side, waiting for requests in progress (their handlers use the store and
-    // the worker pool), then the workers, then the store.
+    // the worker pool), then the workers, then the store. One grace period for both: the jobs
+    // (which ran on meanwhile) get what the requests left of it.
+    const auto deadline =
+        std::chrono::steady_clock::now() + std::chrono::seconds(d.options.shutdown_grace_seconds);
     d.http->Shutdown(d.options.shutdown_grace_seconds * 1000);
     if (d.workers) {
-      d.shutdown_clean = d.workers->Stop(std::chrono::seconds(d.options.shutdown_grace_seconds));
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+          deadline - std::chrono::steady_clock::now());
+      d.shutdown_clean = d.workers->Stop(std::max(left, std::chrono::milliseconds(0)));
     }
     if (d.store) {
       d.store->Checkpoint();
