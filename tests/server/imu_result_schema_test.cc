@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <iterator>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -16,6 +17,7 @@
 #include "server/failure_reasons.h"
 #include "server/imu_method.h"
 #include "server/method.h"
+#include "tests/server/result_schema_util.h"
 #include "web/method_report.h"
 #include "web/pages.h"
 
@@ -71,40 +73,14 @@ const char* const kSpecPaths[] = {
     "diagnostics.imus[].residuals.gyro_direction_rms_after",
 };
 
-// Whether `path` is a SPEC path or leads to one.
-bool SpecOrOnTheWay(const std::string& path) {
-  for (const char* spec : kSpecPaths) {
-    const std::string p = spec;
-    if (p == path || p.rfind(path + ".", 0) == 0 || p.rfind(path + "[]", 0) == 0) return true;
-  }
-  return false;
+json SpecOnly(const json& j) {
+  return testing::SpecOnly(j,
+                           std::vector<std::string>(std::begin(kSpecPaths), std::end(kSpecPaths)));
 }
-
-// `j` with every member not on a SPEC path removed, recursively.
-json SpecOnly(const json& j, const std::string& path = "") {
-  if (j.is_array()) {
-    json out = json::array();
-    for (const json& e : j) out.push_back(SpecOnly(e, path + "[]"));
-    return out;
-  }
-  if (!j.is_object()) return j;
-  json out = json::object();
-  for (const auto& [key, value] : j.items()) {
-    const std::string p = path.empty() ? key : path + "." + key;
-    if (SpecOrOnTheWay(p)) out[key] = SpecOnly(value, p);
-  }
-  return out;
-}
-
-// The stored form of a result: its JSON text parsed back (NaN as null, as the store keeps it).
-json Stored(const json& result) { return json::parse(result.dump()); }
+using testing::Stored;
 
 void ExpectRoundTrip(const json& stored) {
-  results::ImuResult typed;
-  const Status s = results::FromJson(stored, &typed);
-  ASSERT_TRUE(s.ok()) << s.ToString();
-  EXPECT_EQ(results::ToJson(typed), stored)
-      << "ToJson: " << results::ToJson(typed).dump() << "\nstored: " << stored.dump();
+  testing::ExpectTypedRoundTrip<results::ImuResult>(stored);
 }
 
 // Drops the rows with t in (from, to): a gap in the log.
