@@ -26,6 +26,8 @@ const char* StatusCodeName(StatusCode code) {
       return "corruption";
     case StatusCode::kInternal:
       return "internal";
+    case StatusCode::kStopped:
+      return "stopped";
   }
   return "unknown";
 }

@@ -25,6 +25,7 @@ enum class StatusCode {
   kIoError,           // transient or environmental: disk full, I/O error, read-only file
   kCorruption,        // the database file is damaged
   kInternal,          // a bug: never the user's fault
+  kStopped,           // a computation stopped before it ended: cancelled, deadline, shutdown
 };
 
 // Stable machine-readable name of a code ("invalid_input", ...), used in JSON errors.
@@ -69,6 +70,10 @@ enum class Reason {
   kTooFewSamples,            // array: fewer usable samples than needed
   kWeakExcitation,           // array: the motion does not excite every direction
   kNumericalFailure,         // the solver found no finite step
+  kImplausibleTimeUnit,      // the time column's sample period is implausible in seconds
+  // The job was stopped before it ended (core/stop_token.h); never retried automatically.
+  kDeadline,   // its time limit (--job-seconds, config job_seconds) ran out
+  kCancelled,  // POST /jobs/{id}/cancel
   // The server's side.
   kLeaseExpired,  // the job ran out of attempts because its worker's lease lapsed
   kStorageError,  // busy database or I/O error past the retries

@@ -518,7 +518,7 @@ constexpr const char* kPositionsModelEquation =
     "parameters are the positions r_k";
 
 Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
-                    const std::atomic<bool>* cancel, core::TaskExecutor executor) {
+                    const core::StopToken* stop, core::TaskExecutor executor) {
   core::ArrayFullProblem problem;
   core::ArrayFullOptions options;
   bool degrees = false;
@@ -546,7 +546,7 @@ Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
   if (degrees) problem.gyro *= core::kDegree;
   for (const auto& name : recording.accel_names)
     problem.names.push_back(name.size() > 1 && name[0] == 'a' ? name.substr(1) : name);
-  if (cancel != nullptr) options.callback = [cancel](int) { return !cancel->load(); };
+  if (stop != nullptr) options.callback = [stop](int) { return !stop->stop_requested(); };
   core::ArrayFullResult r;
   s = core::CalibrateArrayFull(problem, options, &r);
   results::ArrayResult out;
@@ -660,9 +660,9 @@ Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
 }  // namespace
 
 Status RunArray(ArrayRecording recording, const json& config, json* result,
-                const std::atomic<bool>* cancel, core::TaskExecutor executor) {
+                const core::StopToken* stop, core::TaskExecutor executor) {
   if (IsFullModel(config))
-    return RunArrayFull(std::move(recording), config, result, cancel, std::move(executor));
+    return RunArrayFull(std::move(recording), config, result, stop, std::move(executor));
   core::ArrayProblem problem;
   core::ArrayOptions options;
   bool degrees = false;
@@ -688,8 +688,8 @@ Status RunArray(ArrayRecording recording, const json& config, json* result,
     if (!s.ok()) return s.WithField(kCalibrationKey);
   }
 
-  if (cancel != nullptr) {
-    options.callback = [cancel](int, const Eigen::Matrix3Xd&) { return !cancel->load(); };
+  if (stop != nullptr) {
+    options.callback = [stop](int, const Eigen::Matrix3Xd&) { return !stop->stop_requested(); };
   }
   core::ArrayResult r;
   s = core::CalibrateArray(problem, options, &r);
@@ -1225,7 +1225,7 @@ class Array : public Method {
     ArrayRecording recording;
     Status s = parser->TakeArray(&recording);
     if (!s.ok()) return s;
-    return RunArray(std::move(recording), config, result, ctx.cancel, ctx.executor);
+    return RunArray(std::move(recording), config, result, ctx.stop, ctx.executor);
   }
 };
 

@@ -12,6 +12,7 @@
 #include "base/status.h"
 #include "core/array.h"
 #include "core/array_full.h"
+#include "core/stop_token.h"
 #include "server/method.h"
 #include "server/recording.h"
 
@@ -100,13 +101,13 @@ Status ParseArrayConfig(const nlohmann::json& config, core::ArrayProblem* geomet
 // 2000 points (every stride-th usable sample). No NaN/Inf (null instead). Deterministic.
 // The recording's triad count must equal the geometry's (kInvalidInput naming both).
 // Errors as core::CalibrateArray otherwise.
-// `cancel` (optional): the solver stops at its next iteration once it is true.
+// `stop` (optional): the solver stops at its next iteration once it asks to.
 // `executor` (optional): runs the solver's parallel work (e.g. the server's shared pool);
 // without one the solver starts its own threads.
 // The recording is taken by value: pass it with std::move where it is not needed afterwards
 // (the samples are then never copied).
 Status RunArray(ArrayRecording recording, const nlohmann::json& config, nlohmann::json* result,
-                const std::atomic<bool>* cancel = nullptr, core::TaskExecutor executor = {});
+                const core::StopToken* stop = nullptr, core::TaskExecutor executor = {});
 
 // The acceptance gate of an array result (Method::Judge), read typed (results::FromJson; a result
 // that does not read is rejected with the reader's message): every triad but the reference within

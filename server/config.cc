@@ -169,7 +169,7 @@ void PrepareParser(const json& config, RecordingParser* parser) {
 }
 
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, const json& config,
-                       json* result, const std::atomic<bool>* cancel,
+                       json* result, const core::StopToken* stop,
                        const json& acceptance_defaults, core::TaskExecutor executor) {
   CommonConfig common;
   Status s = ValidateConfig(config, &common);
@@ -185,7 +185,7 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
         .WithField("method");
   }
   RunContext context;
-  context.cancel = cancel;
+  context.stop = stop;
   context.executor = std::move(executor);
   s = method->Run(parser, WithoutAcceptance(config), context, result);
   if (!s.ok()) return s;
@@ -194,7 +194,7 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
 }
 
 Status Calibrate(std::string_view recording, const std::string& file_name, const json& config,
-                 json* result, const std::atomic<bool>* cancel, const json& acceptance_defaults) {
+                 json* result, const core::StopToken* stop, const json& acceptance_defaults) {
   RecordingParser parser(file_name, /*collect=*/true);
   PrepareParser(config, &parser);
   Status s = ParseRecording(recording, &parser);
@@ -203,7 +203,7 @@ Status Calibrate(std::string_view recording, const std::string& file_name, const
                ? s.WithReason(Reason::kRecordingUnreadable)
                : s;
   }
-  return CalibrateParsed(&parser, file_name, config, result, cancel, acceptance_defaults);
+  return CalibrateParsed(&parser, file_name, config, result, stop, acceptance_defaults);
 }
 
 }  // namespace calibd::server

@@ -11,6 +11,7 @@
 
 #include "base/status.h"
 #include "core/block_lm.h"
+#include "core/stop_token.h"
 #include "server/recording.h"
 
 namespace calibd::server {
@@ -55,12 +56,12 @@ void JudgeResult(const Method& method, const nlohmann::json& config,
 // calibration and writes the result JSON (SPEC §4) with its verdict (JudgeResult; a rejected
 // result is still OK: it is computed, only not served). kInvalidInput for bad bytes or config,
 // kNotDeterminable when the data cannot determine the parameters.
-// `cancel` (optional): when it becomes true the computation stops early (the result is then
+// `stop` (optional): when it asks to stop, the computation stops early (the result is then
 // meaningless and must be discarded). `acceptance_defaults`: the server-wide limits per method
 // (`serve --acceptance`), null for the built-in defaults.
 Status Calibrate(std::string_view recording, const std::string& file_name,
                  const nlohmann::json& config, nlohmann::json* result,
-                 const std::atomic<bool>* cancel = nullptr,
+                 const core::StopToken* stop = nullptr,
                  const nlohmann::json& acceptance_defaults = nlohmann::json());
 
 // Before feeding a collecting parser for CalibrateParsed: lets the config's method choose how
@@ -72,7 +73,7 @@ void PrepareParser(const nlohmann::json& config, RecordingParser* parser);
 // `executor` (optional): see RunContext::executor.
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name,
                        const nlohmann::json& config, nlohmann::json* result,
-                       const std::atomic<bool>* cancel = nullptr,
+                       const core::StopToken* stop = nullptr,
                        const nlohmann::json& acceptance_defaults = nlohmann::json(),
                        core::TaskExecutor executor = {});
 

@@ -92,6 +92,16 @@ std::vector<FailureReason> MakeCatalog() {
        "fixed axis only."},
       {R::kNumericalFailure, "numerical_failure", "The solver failed",
        "Check the noise settings and the recording's units; record with more motion."},
+      {R::kImplausibleTimeUnit, "implausible_time_unit", "The time column is not in seconds",
+       "Give the time column's unit in the config (time_unit: s, ms, us or ns), or convert it "
+       "to seconds before uploading."},
+      {R::kDeadline, "deadline", "The job ran out of time",
+       "The job took longer than its time limit (--job-seconds, config job_seconds). Check that "
+       "the recording is what the method expects (time unit, layout); shorten it, or ask the "
+       "operator for a longer limit."},
+      {R::kCancelled, "cancelled", "The job was cancelled",
+       "Someone cancelled the job (POST /api/v1/jobs/{id}/cancel); rerun it if that was a "
+       "mistake."},
       {R::kLeaseExpired, "lease_expired", "The job's worker stopped",
        "Upload again; if it recurs, the job may be too large for the server (ask the "
        "operator)."},

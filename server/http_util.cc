@@ -99,6 +99,9 @@ int SendStatus(httplib::Response& res, const Status& s) {
     case StatusCode::kInternal:
       status = 500;
       break;
+    case StatusCode::kStopped:  // a request's own computation stopped (shutdown): try again
+      status = 503;
+      break;
   }
   std::string message = s.message();
   if (status == 500) message = "internal server error";  // no internals to clients

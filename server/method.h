@@ -22,6 +22,7 @@
 
 #include "base/status.h"
 #include "core/block_lm.h"
+#include "core/stop_token.h"
 #include "server/acceptance.h"
 #include "server/exports.h"
 #include "server/recording.h"
@@ -42,8 +43,9 @@ struct SimulatedFiles {
 
 // What a run may consult besides its inputs.
 struct RunContext {
-  // When it becomes true the method stops early; its result is then discarded. May be null.
-  const std::atomic<bool>* cancel = nullptr;
+  // Asks the method to stop early (cancel, deadline, shutdown); its result is then discarded.
+  // Methods poll it in every long loop (core/stop_token.h). May be null: never stops.
+  const core::StopToken* stop = nullptr;
   // Runs a method's parallel numerics (the server's one shared core::TaskPool, so concurrent
   // jobs never start cores × cores threads). Empty: the method starts its own threads.
   core::TaskExecutor executor;

@@ -67,7 +67,7 @@ bool WorkerPool::Stop(std::chrono::milliseconds grace) {
     // Give the still-running jobs back to the queue and cancel their computation; they run again
     // after the restart (a late result would be refused anyway: kConflict).
     for (const auto& [job_id, active] : active_) {
-      active.cancel->store(true);
+      active.stop->RequestStop(core::StopReason::kShutdown);
       Status s = store_->ReleaseJob(job_id, active.worker_id);
       std::cerr << "calibd: shutdown: released job " << job_id << " ("
                 << (s.ok() ? "it will run again after restart" : s.ToString()) << ")\n";
@@ -99,17 +99,17 @@ void WorkerPool::WorkerLoop(int index) {
     Status s = store_->ClaimJob(worker_id, options_.lease_ms, &job, &claimed);
     if (!s.ok()) std::cerr << "calibd: " << worker_id << ": claim failed: " << s.ToString() << "\n";
     if (s.ok() && claimed) {
-      auto cancel = std::make_shared<std::atomic<bool>>(false);
+      auto stop = std::make_shared<core::StopToken>();
       {
         std::lock_guard<std::mutex> lock(mu_);
         if (stopping_) {
           store_->ReleaseJob(job.id, worker_id);
           return;
         }
-        active_[job.id] = Active{worker_id, cancel};
+        active_[job.id] = Active{worker_id, stop};
         ++busy_workers_;
       }
-      RunJob(worker_id, job, *cancel);
+      RunJob(worker_id, job, *stop);
       {
         std::lock_guard<std::mutex> lock(mu_);
         active_.erase(job.id);
@@ -142,7 +142,7 @@ void WorkerPool::RenewLoop() {
       if (s.code() == StatusCode::kConflict || s.code() == StatusCode::kNotFound) {
         // Taken back (the lease lapsed and another worker claimed it, or it was released):
         // whatever this run computes would be refused, so stop computing.
-        job.cancel->store(true);
+        job.stop->RequestStop(core::StopReason::kLeaseLost);
       }
     }
     if (options_.housekeeping) options_.housekeeping();
@@ -151,7 +151,7 @@ void WorkerPool::RenewLoop() {
 }
 
 void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& job,
-                        const std::atomic<bool>& cancel) {
+                        core::StopToken& stop) {
   const auto start = std::chrono::steady_clock::now();
   auto seconds = [&] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -204,18 +204,18 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       Status parsed;
       s = store_->ReadRecordingData(job.recording_id, [&](std::string_view chunk) {
         parsed = parser.Feed(chunk);
-        return parsed.ok() && !cancel.load();
+        return parsed.ok() && !stop.stop_requested();
       });
       if (!s.ok()) return fail(s, s.IsTransient());
-      if (parsed.ok() && !cancel.load()) parsed = parser.Finish();
+      if (parsed.ok() && !stop.stop_requested()) parsed = parser.Finish();
       if (!parsed.ok() && parsed.reason() == Reason::kUnspecified) {
         parsed.WithReason(Reason::kRecordingUnreadable);
       }
       // Cancelled mid-read: the parser was never finished; nothing to calibrate (see below).
-      if (cancel.load()) {
+      if (stop.stop_requested()) {
         s = Status::Ok();
       } else {
-        s = parsed.ok() ? CalibrateParsed(&parser, file_name, config, &result, &cancel,
+        s = parsed.ok() ? CalibrateParsed(&parser, file_name, config, &result, &stop,
                                           options_.acceptance, options_.executor)
                         : parsed;
       }
@@ -226,7 +226,7 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       s = Status::Internal("internal error while calibrating; please report it");
     }
   }
-  if (cancel.load()) {
+  if (stop.stop_requested()) {
     // Released at shutdown or taken back: the job runs again elsewhere or after the restart.
     metrics_->ObserveJob(job.method, "cancelled", seconds());
     return;

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "core/block_lm.h"
+#include "core/stop_token.h"
 #include "server/metrics.h"
 #include "storage/store.h"
 
@@ -73,11 +74,11 @@ class WorkerPool {
   void WorkerLoop(int index);
   void RenewLoop();
   void RunJob(const std::string& worker_id, const storage::JobInfo& job,
-              const std::atomic<bool>& cancel);
+              core::StopToken& stop);
 
   struct Active {
     std::string worker_id;
-    std::shared_ptr<std::atomic<bool>> cancel;  // set on shutdown or when the lease is lost
+    std::shared_ptr<core::StopToken> stop;  // asked on shutdown or when the lease is lost
   };
 
   storage::Store* store_;
