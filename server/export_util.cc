@@ -1,20 +1,28 @@
 // Shared pieces of the exports (server/export_util.h).
 #include "server/export_util.h"
 
+#include <cctype>
 #include <cstdio>
 #include <sstream>
+
+#include "base/sha256.h"
 
 namespace calibd::server {
 
 std::string CsvNumber(const json& v) {
   if (!v.is_number()) return "";  // null: undefined value, an empty CSV cell
   char buf[40];
-  std::snprintf(buf, sizeof buf, "%.17g", v.get<double>());
+  // + 0.0: a negative zero (from a product or a rotation) is written as 0, not "-0".
+  std::snprintf(buf, sizeof buf, "%.17g", v.get<double>() + 0.0);
   return buf;
 }
 
-// CSV field: quoted when it holds a comma, quote or line break.
-std::string CsvField(const std::string& s) {
+// CSV field: quoted when it holds a comma, quote or line break. A text starting with = + - @,
+// tab or CR would be run as a formula by a spreadsheet (OWASP "CSV injection"): it gets a leading
+// apostrophe, which spreadsheets take as "text" and do not show.
+std::string CsvField(const std::string& text) {
+  const bool formula = !text.empty() && std::string("=+-@\t\r").find(text[0]) != std::string::npos;
+  const std::string s = formula ? "'" + text : text;
   if (s.find_first_of(",\"\r\n") == std::string::npos) return s;
   std::string out = "\"";
   for (char c : s) {
@@ -92,6 +100,18 @@ std::string IdentifierStem(const std::string& s) {
   return out.empty() ? "_" : out;
 }
 
+std::string DeviceStem(const std::string& serial) {
+  std::string stem = IdentifierStem(serial);
+  for (unsigned char c : serial) {
+    if (c >= 0x80) {
+      std::string hash = Sha256Hex(serial).substr(0, 8);
+      for (char& h : hash) h = static_cast<char>(std::toupper(static_cast<unsigned char>(h)));
+      return stem + "_" + hash;
+    }
+  }
+  return stem;
+}
+
 std::string LowerCase(std::string s) {
   for (char& c : s) {
     if (c >= 'A' && c <= 'Z') c = static_cast<char>(c - 'A' + 'a');
@@ -106,7 +126,15 @@ Status UnreadableStoredResult(const Status& read) {
 
 std::string CDouble(double v) {
   char buf[40];
-  std::snprintf(buf, sizeof buf, "%.17g", v);
+  std::snprintf(buf, sizeof buf, "%.17g", v + 0.0);  // no "-0.0"
+  std::string s = buf;
+  if (s.find_first_of(".eEn") == std::string::npos) s += ".0";
+  return s;
+}
+
+std::string MeasuredRate(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
   std::string s = buf;
   if (s.find_first_of(".eEn") == std::string::npos) s += ".0";
   return s;
@@ -170,6 +198,14 @@ Status WriteCHeader(
   head.Define("JOB_ID", std::to_string(context.job_id) + "LL", "");
   head.Define("DEVICE", CString(context.device), "");
   head.Define("FINISHED_AT", CString(context.finished_at), "UTC");
+  // Firmware builds can refuse a file that is not a device's served calibration:
+  // #if !PREFIX_ACCEPTED / #error ... #endif.
+  head.Define("ACCEPTED", IsAcceptedExport(context) ? "1" : "0",
+              IsAcceptedExport(context)
+                  ? "accepted: served as the device's calibration"
+                  : "NOT FOR USE: this result was " + context.state +
+                        (context.state == "rejected" ? " by the acceptance gate" : " by a person") +
+                        "; it is never served as the device's calibration");
   h << head.out().str() << body.out().str() << "\n#endif /* " << guard << " */\n";
   *out = h.str();
   return Status::Ok();

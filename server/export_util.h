@@ -17,9 +17,10 @@ namespace calibd::server {
 
 using json = nlohmann::json;
 
-// A CSV cell of a number at full precision (%.17g); "" for null (an undefined value).
+// A CSV cell of a number at full precision (%.17g; -0 as 0); "" for null (an undefined value).
 std::string CsvNumber(const json& v);
-// CSV field: quoted when it holds a comma, quote or line break.
+// CSV field: quoted when it holds a comma, quote or line break; a text a spreadsheet would run
+// as a formula (starting with = + - @, tab or CR) gets a leading apostrophe.
 std::string CsvField(const std::string& s);
 // For a // comment: printable ASCII only.
 std::string CommentSafe(const std::string& s);
@@ -33,6 +34,10 @@ const json& JsonAt(const json& obj, const char* key);
 std::string CComment(const std::string& s);
 // Letters and digits kept (upper case), every other byte '_' (identifier stems).
 std::string IdentifierStem(const std::string& s);
+// The identifier stem of a device serial: IdentifierStem, plus "_" and 8 hex digits of the
+// serial's SHA-256 when the serial has bytes beyond ASCII, whose transliteration to '_' loses
+// what tells serials apart ("Drohne-Üß-測試" and "drohne-üß-測試" would both be DROHNE________).
+std::string DeviceStem(const std::string& serial);
 std::string LowerCase(std::string s);
 // A stored result this calibd cannot read (results::FromJson failed: written by a newer calibd, or
 // damaged): 409 with the reader's message, which names the path ("... schema_version: version 2 is
@@ -40,6 +45,10 @@ std::string LowerCase(std::string s);
 Status UnreadableStoredResult(const Status& read);
 // A C double literal (full precision); v must be finite.
 std::string CDouble(double v);
+// A measured sample rate as written to files: 6 significant digits, the precision a rate measured
+// from a log's time stamps has (100.01013117051603 -> "100.01"), always with a decimal point
+// ("100.0"); v finite.
+std::string MeasuredRate(double v);
 // Reads `n` numbers of a JSON array into *out; false when the shape is wrong or any is null.
 bool Numbers(const json& v, size_t n, std::vector<double>* out);
 
@@ -48,7 +57,7 @@ bool Numbers(const json& v, size_t n, std::vector<double>* out);
 class HeaderWriter {
  public:
   HeaderWriter(const ExportContext& context, const std::string& method)
-      : macro_("CALIBD_" + IdentifierStem(context.device) + "_" + IdentifierStem(method) + "_"),
+      : macro_("CALIBD_" + DeviceStem(context.device) + "_" + IdentifierStem(method) + "_"),
         func_(LowerCase(macro_)) {}
 
   const std::string& macro() const { return macro_; }

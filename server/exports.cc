@@ -57,4 +57,18 @@ Status ResultToHeader(const json& result, const ExportContext& context, std::str
   return ExportAs("h", "C header", result, context, out);
 }
 
+void MarkNotAccepted(const std::string& format, const ExportContext& context, std::string* text) {
+  if (IsAcceptedExport(context) || (format != "csv" && format != "yaml")) return;
+  const std::string line =
+      "# NOT FOR USE: job " + std::to_string(context.job_id) + "'s result was " + context.state +
+      (context.state == "rejected" ? " by the acceptance gate" : " by a person") +
+      "; it is never served as device calibration\n";
+  size_t at = 0;
+  if (text->rfind("%YAML", 0) == 0) {
+    const size_t end = text->find('\n');
+    at = end == std::string::npos ? text->size() : end + 1;
+  }
+  text->insert(at, line);
+}
+
 }  // namespace calibd::server

@@ -34,7 +34,23 @@ struct ExportContext {
   std::string device;
   std::string method;
   std::string finished_at;  // ISO-8601
+  // The result's standing (ServeState name): "" or "accepted" for what is served as the device's
+  // calibration; "rejected" (by the gate) or "revoked" (by a person) for a result fetched with
+  // ?job=, which the file then marks as not for use (C header: ACCEPTED 0 and a comment; CSV and
+  // yaml: a first comment line).
+  std::string state;
 };
+
+// Whether `context` is a result that is served as a calibration (state "" or "accepted").
+inline bool IsAcceptedExport(const ExportContext& context) {
+  return context.state.empty() || context.state == "accepted";
+}
+
+// For a result that is not served (IsAcceptedExport false): puts a comment line saying so at the
+// top of a CSV or yaml export `text` (after a leading "%YAML" directive, which must stay first).
+// Other formats and accepted results are left as they are (the C header marks itself, JSON has
+// "state").
+void MarkNotAccepted(const std::string& format, const ExportContext& context, std::string* text);
 
 // pca: name,scale,scale_std,axis_*,axis_std_rad,bias,bias_std,sensitivity_*;
 // array: name,x,y,z,offset_x,offset_y,offset_z,std_x,std_y,std_z. Full double precision.

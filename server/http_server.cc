@@ -610,25 +610,48 @@ std::string HttpLimits::Validate() const {
   return "";
 }
 
+// Whether the request's body, if it has one, was read whole into req.body (httplib reads the body
+// of a request for a regular handler before calling it; an upload's streamed body, a body refused
+// before routing, or one cut short is not). Without a body: true.
+static bool BodyReadWhole(const httplib::Request& req) {
+  if (req.has_header("Transfer-Encoding")) return false;  // chunked: only uploads stream them
+  if (!req.has_header("Content-Length")) return true;
+  const std::string text = req.get_header_value("Content-Length");
+  if (text.empty() || text.size() > 18 ||
+      text.find_first_not_of("0123456789") != std::string::npos) {
+    return false;
+  }
+  return req.body.size() == static_cast<size_t>(std::stoll(text));
+}
+
 HttpServer::HttpServer(HttpLimits limits) : limits_(limits) {
   new_task_queue = [] { return new InlineQueue(); };
   set_keep_alive_timeout(std::max(1, limits_.keep_alive_timeout_ms / 1000));
   set_keep_alive_max_count(static_cast<size_t>(limits_.keep_alive_max_count));
   set_read_timeout(limits_.read_timeout_ms / 1000, (limits_.read_timeout_ms % 1000) * 1000);
   set_write_timeout(limits_.write_timeout_ms / 1000, (limits_.write_timeout_ms % 1000) * 1000);
+  // Before the answer's head is written: an answer after which request bytes may be left unread
+  // ends the connection, and says so (`Connection: close`, no Keep-Alive), so a keep-alive client
+  // never sends its next request into a socket about to close. Error answers to requests whose
+  // body httplib read whole (JSON bodies of POST /jobs, revoke, accept, unknown routes) keep the
+  // connection like any other answer.
+  set_post_routing_handler([](const httplib::Request& req, httplib::Response& res) {
+    if (ToLower(res.get_header_value("Connection")) == "close" ||
+        (res.status >= 400 && !BodyReadWhole(req)) || req.method.empty()) {
+      res.set_header("Connection", "close");
+      res.headers.erase("Keep-Alive");
+    }
+  });
   set_logger([this](const httplib::Request& req, const httplib::Response& res) {
     Connection* c = t_connection;
     if (c != nullptr) {
-      // Anything that may have left request bytes unread ends the connection: an answer that
-      // says so, an error answer to a request with a body, a request httplib could not parse.
-      const bool has_body = req.has_header("Content-Length")
-                                ? req.get_header_value("Content-Length") != "0"
-                                : req.has_header("Transfer-Encoding");
       const std::string length = req.get_header_value("Content-Length");
       c->large = res.body.size() > (1u << 20) || req.body.size() > (1u << 20) ||
                  length.size() > 6 || req.has_header("Transfer-Encoding");
+      // The post-routing hook above decided (an answer httplib wrote without it, e.g. to a
+      // request it could not parse, is judged the same way here).
       if (ToLower(res.get_header_value("Connection")) == "close" ||
-          (res.status >= 400 && has_body) || req.method.empty()) {
+          (res.status >= 400 && !BodyReadWhole(req)) || req.method.empty()) {
         c->close_after = true;
       }
     }

@@ -1,4 +1,6 @@
 // The API's jobs, decisions, devices, exports and recordings (server/service_impl.h).
+#include <iostream>
+
 #include "server/service_impl.h"
 
 namespace calibd::server {
@@ -53,6 +55,13 @@ void Service::Impl::HandleDecision(const httplib::Request& req, httplib::Respons
     return;
   }
   json body;
+  if (req.body.find_first_not_of(" \t\r\n") == std::string::npos) {
+    return (void)SendStatus(res, Status::InvalidInput(std::string("the body is empty: a ") +
+                                                      (revoke ? "revoke" : "accept") +
+                                                      " needs a reason, sent as {\"reason\": "
+                                                      "\"...\"}")
+                                     .WithField("reason"));
+  }
   Status s = ParseJsonText(req.body, "request body", &body);
   if (!s.ok()) return (void)SendStatus(res, s);
   if (!body.is_object()) {
@@ -286,7 +295,16 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     }
     if (!s.ok()) return (void)SendStatus(res, s);
   }
-  const std::string etag = "\"" + job.result_sha256.substr(0, 32) + "-" + format + "\"";
+  // One ETag per answer: the body holds the job, its time and standing besides the result (and
+  // the C header's guard the job id), so two jobs with the same result, or one result before and
+  // after a revoke, never share an ETag (a flashing script's If-None-Match must not keep a revoked
+  // calibration).
+  const std::string etag =
+      "\"" +
+      Sha256Hex(job.result_sha256 + "\n" + std::to_string(job.id) + "\n" + Name(job.state) + "\n" +
+                job.finished_at + "\n" + serial + "\n" + format)
+          .substr(0, 32) +
+      "-" + format + "\"";
   res.set_header("ETag", etag);
   res.set_header("Cache-Control", "no-cache");
   res.set_header("X-Calibd-Job", std::to_string(job.id));
@@ -311,7 +329,10 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
   }
   json result;
   s = ParseJsonText(job.result_json, "stored result", &result);
-  if (!s.ok()) return (void)SendStatus(res, Status::Internal("stored result is not JSON"));
+  if (!s.ok()) {
+    std::cerr << "calibd: job " << job.id << ": " << s.ToString() << "\n";  // where it broke
+    return (void)SendStatus(res, Status::Internal("stored result is not JSON"));
+  }
   // The method writes its own formats (Method::Export).
   const Method* exporter = FindMethod(method);
   if (exporter == nullptr) return (void)SendStatus(res, Status::Internal("unknown stored method"));
@@ -320,9 +341,10 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
                               [&](const ExportFormat& e) { return e.format == format; });
   if (f == exports.end()) return (void)SendStatus(res, NoSuchExport(format, exporter->name()));
   std::string text;
-  s = exporter->Export(format, result, ExportContext{job.id, serial, method, job.finished_at},
-                       &text);
+  const ExportContext context{job.id, serial, method, job.finished_at, Name(job.state)};
+  s = exporter->Export(format, result, context, &text);
   if (!s.ok()) return (void)SendStatus(res, s);
+  MarkNotAccepted(format, context, &text);
   const std::string file_name =
       f->file_name.empty() ? "calibration-" + std::to_string(job.id) + "." + format : f->file_name;
   res.set_header("Content-Disposition", "attachment; filename=\"" + file_name + "\"");

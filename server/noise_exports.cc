@@ -131,16 +131,24 @@ Status NoiseResultToKalibrYaml(const json& result, const ExportContext& context,
     if (!seen[type]) continue;
     for (int k = 0; k < 2; ++k) {
       const Worst& w = worst[type][k];
-      if (!w.missing.empty()) {
-        std::string list;
-        for (const auto& m : w.missing) list += (list.empty() ? "" : ", ") + m;
+      std::string list;
+      for (const auto& m : w.missing) list += (list.empty() ? "" : ", ") + m;
+      const std::string term = k == 0 ? "white noise" : "random walk";
+      if (w.value < 0) {  // no axis shows it: there is nothing to write
         return Status::NotDeterminable(
-            std::string("the log does not show the ") + (k == 0 ? "white noise" : "random walk") +
-            " of " + list + " (see the result's warnings for how long a log would): Kalibr's " +
-            type_names[type] + "_" + keys[k] + " cannot be written");
+            "the log does not show the " + term + " of " + list +
+            " (see the result's warnings for how long a log would): Kalibr's " + type_names[type] +
+            "_" + keys[k] + " cannot be written");
       }
+      // Some axes show it: the largest of those is written, and the file says which axes the
+      // log was too short for (a device's export never fails because one axis is short).
       y << type_names[type] << "_" << keys[k] << ": " << Cell(w.value) << "  # " << units[type][k]
-        << ", " << w.axis << "\n";
+        << ", " << w.axis;
+      if (!w.missing.empty()) {
+        y << "; the log does not show the " << term << " of " << CommentSafe(list)
+          << ": the largest of the other axes";
+      }
+      y << "\n";
     }
   }
   if (!std::isfinite(r.diagnostics.rate)) {
@@ -149,7 +157,7 @@ Status NoiseResultToKalibrYaml(const json& result, const ExportContext& context,
         "cannot be written");
   }
   y << "rostopic: /imu0\n"
-    << "update_rate: " << Cell(r.diagnostics.rate) << "  # Hz\n";
+    << "update_rate: " << MeasuredRate(r.diagnostics.rate) << "  # Hz, measured\n";
   *out = y.str();
   return Status::Ok();
 }
@@ -163,7 +171,7 @@ Status NoiseResultToHeader(const json& result, const ExportContext& context, std
       [&](const json&, const json&, HeaderWriter* w) {
         Status body = NoiseHeader(r, w);
         if (body.ok() && std::isfinite(r.diagnostics.rate)) {
-          w->Define("RATE", CDouble(r.diagnostics.rate), "Hz");
+          w->Define("RATE", MeasuredRate(r.diagnostics.rate), "Hz, measured");
         }
         return body;
       },

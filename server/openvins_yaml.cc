@@ -14,13 +14,7 @@ using nlohmann::json;
 
 namespace {
 
-std::string Num(double v) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.17g", v);
-  std::string s = buf;
-  if (s.find_first_of(".eEn") == std::string::npos) s += ".0";  // cv::FileStorage: a real
-  return s;
-}
+std::string Num(double v) { return CDouble(v); }  // a real for cv::FileStorage; no -0.0
 
 // M = Q L with Q a rotation and L lower triangular with a positive diagonal (QL decomposition,
 // from the QR decomposition of M J, J the exchange matrix: M J = Q1 U, Q = Q1 J, L = J U J).
@@ -151,7 +145,7 @@ Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context,
     }
     y << "  rostopic: /imu" << k << "\n"
       << "  time_offset: 0.0\n"
-      << "  update_rate: " << Num(rate) << "\n"
+      << "  update_rate: " << MeasuredRate(rate) << "\n"
       << "  model: \"calibrated\"\n";
     WriteMatrix(y, "Tw", lg.inverse());
     WriteMatrix(y, "R_IMUtoGYRO", q.transpose());

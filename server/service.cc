@@ -67,6 +67,19 @@ bool ConstantTimeEquals(const std::string& a, const std::string& b) {
   return diff == 0;
 }
 
+// "revoke", "accept" or "cancel" for a path /api/v1/jobs/{id}/<that>, else "".
+std::string DecisionOfPath(const std::string& path) {
+  const std::string prefix = "/api/v1/jobs/";
+  if (path.rfind(prefix, 0) != 0) return "";
+  const size_t slash = path.find('/', prefix.size());
+  if (slash == std::string::npos || slash == prefix.size() ||
+      path.find_first_not_of("0123456789", prefix.size()) != slash) {
+    return "";
+  }
+  const std::string action = path.substr(slash + 1);
+  return action == "revoke" || action == "accept" || action == "cancel" ? action : "";
+}
+
 }  // namespace
 
 Service::Service(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -300,6 +313,14 @@ void Service::Impl::SetupRoutes() {
     if (write && !req.has_header("Content-Length") && (!chunked || !is_upload) &&
         req.method != "DELETE") {
       res.set_header("Connection", "close");
+      // A decision (revoke, accept, cancel) sent without a body: what it lacks is its reason.
+      if (const std::string decision = DecisionOfPath(req.path); !decision.empty()) {
+        SendError(res, 411, "length_required",
+                  "a " + decision +
+                      " needs a reason: send {\"reason\": \"...\"} as "
+                      "application/json (with its Content-Length)");
+        return httplib::Server::HandlerResponse::Handled;
+      }
       SendError(res, 411, "length_required",
                 "a request body needs Content-Length or chunked "
                 "Transfer-Encoding");

@@ -159,7 +159,13 @@ Status PgStore::Decide(int64_t job_id, bool revoke, const std::string& reason,
   JobEvent event;
   Status s = Txn([&](PgConn* c) {
     JobInfo job;
+    // Lock the job row first, then read the job and its result's decision in a statement of
+    // its own: under READ COMMITTED a statement reads the snapshot taken when it started, so a
+    // decision read by the locking statement itself may predate a concurrent decision that held
+    // the lock while this one waited (then every racing revoke succeeded; issue 27).
     Status s = LoadJob(c, job_id, false, &job, /*for_update=*/true);
+    if (!s.ok()) return s;
+    s = LoadJob(c, job_id, false, &job);
     if (!s.ok()) return s;
     s = internal::CheckDecision(job, revoke);
     if (!s.ok()) return s;

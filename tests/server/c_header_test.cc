@@ -415,5 +415,34 @@ TEST(CHeader, ArrayResultWithIntrinsicsAppliesThemToAReading) {
   EXPECT_EQ(triads, 2);
 }
 
+// Issue 27: two non-ASCII serials that differ only where transliteration writes '_' (case of Ü,
+// ß vs ß, the CJK bytes) get identifiers of their own: both headers compile into one program,
+// and each keeps its own serial. An ASCII serial keeps the plain stem (no hash), so existing
+// firmware code that names CALIBD_SN_1_PCA_... still builds.
+TEST(CHeader, NonAsciiSerialsThatTransliterateAlikeDoNotCollide) {
+  const json result = OneSensorPcaResult("s1", true, 0.5);
+  std::string h1, h2, ascii;
+  ASSERT_TRUE(
+      ResultToHeader(result, {1, "Drohne-\u00dc\u00df-\u6e2c\u8a66", "pca", "t"}, &h1).ok());
+  ASSERT_TRUE(
+      ResultToHeader(result, {2, "drohne-\u00fc\u00df-\u6e2c\u8a66", "pca", "t"}, &h2).ok());
+  ASSERT_TRUE(ResultToHeader(result, {3, "SN-1", "pca", "t"}, &ascii).ok());
+  EXPECT_NE(ascii.find("#define CALIBD_SN_1_PCA_JOB_ID"), std::string::npos) << ascii;
+  EXPECT_NE(ascii.find("#define CALIBD_SN_1_PCA_ACCEPTED 1"), std::string::npos) << ascii;
+  TempDir dir;
+  std::ofstream(dir.path() / "a.h") << h1;
+  std::ofstream(dir.path() / "b.h") << h2;
+  std::ofstream(dir.path() / "both.c") << "#include \"a.h\"\n#include \"b.h\"\nint main(void) { "
+                                          "return 0; }\n";
+  const std::string d = dir.path().string();
+  std::string output;
+  EXPECT_EQ(RunCommand("gcc -std=c99 -Wall -Werror -pedantic -c -o " + d + "/both.o " + d +
+                           "/both.c",
+                       &output),
+            0)
+      << output << "\n"
+      << h1.substr(0, 1200);
+}
+
 }  // namespace
 }  // namespace calibd::server

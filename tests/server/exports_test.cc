@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <map>
+#include <regex>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -264,8 +265,11 @@ TEST(Exports, KalibrYamlHasKalibrsKeysWithTheLargestAxisInKalibrsUnits) {
   EXPECT_NEAR(entries["gyroscope_noise_density"].first, n_g, 0.05 * n_g);
   EXPECT_NEAR(entries["accelerometer_random_walk"].first, k_a, 0.5 * k_a);
   EXPECT_NEAR(entries["gyroscope_random_walk"].first, k_g, 0.5 * k_g);
-  EXPECT_EQ(entries["update_rate"].first, r["diagnostics"]["rate"].get<double>());
+  // The measured rate to its precision (6 significant digits), not 100.01013117051603.
+  const double rate = r["diagnostics"]["rate"].get<double>();
+  EXPECT_NEAR(entries["update_rate"].first, rate, 5e-6 * rate);
   EXPECT_NEAR(entries["update_rate"].first, 50, 1e-6);
+  EXPECT_NE(yaml.find("update_rate: 50.0  # Hz"), std::string::npos) << yaml;
   EXPECT_NE(yaml.find("noise job 9 of device 'IMU-N1'"), std::string::npos) << yaml;
 }
 
@@ -299,6 +303,84 @@ TEST(Exports, KalibrYamlIsOnlyForNoiseResults) {
   EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
   EXPECT_NE(s.message().find("noise"), std::string::npos) << s.message();
   EXPECT_EQ(yaml, "");
+}
+
+// Issue 27: names are the user's text (CSV headers of the recording): one a spreadsheet would run
+// as a formula is written with a leading apostrophe (OWASP CSV injection); plain names as they are.
+TEST(Exports, NamesThatASpreadsheetWouldRunAsFormulasAreNeutralised) {
+  json r = PcaResult(21, 0.05);
+  const std::vector<std::string> names = {"=HYPERLINK(\"x\")", "+1", "-2", "@SUM(A1)",
+                                          "\tcmd", "a0_x"};
+  json& sensors = r["parameters"]["sensors"];
+  json& unc = r["uncertainty"]["sensors"];
+  for (size_t i = 0; i < names.size(); ++i) {
+    sensors[i]["name"] = names[i];
+    unc[i]["name"] = names[i];
+  }
+  std::string csv;
+  ASSERT_TRUE(ResultToCsv(r, &csv).ok());
+  const auto rows = ParseCsv(csv);
+  ASSERT_GE(rows.size(), names.size() + 1);
+  EXPECT_EQ(rows[1][0], "\"'=HYPERLINK(\"\"x\"\")\"");  // quoted: it holds a quote
+  EXPECT_EQ(rows[2][0], "'+1");
+  EXPECT_EQ(rows[3][0], "'-2");
+  EXPECT_EQ(rows[4][0], "'@SUM(A1)");
+  EXPECT_EQ(rows[5][0], "'\tcmd");
+  EXPECT_EQ(rows[6][0], "a0_x");
+  // Negative numbers in number cells are numbers, not formulas: untouched.
+  for (size_t i = 1; i < rows.size(); ++i) {
+    for (size_t c = 1; c < rows[i].size(); ++c) EXPECT_NE(rows[i][c].rfind("'", 0), 0u);
+  }
+}
+
+// Issue 27: a negative zero (a product, a rotation's entry) is written as 0, in CSV and C.
+TEST(Exports, NegativeZeroIsWrittenAsZero) {
+  json r = PcaResult(21, 0.05);
+  r["parameters"]["sensors"][0]["axis"][1] = -0.0;
+  std::string csv, header;
+  ASSERT_TRUE(ResultToCsv(r, &csv).ok());
+  EXPECT_EQ(ParseCsv(csv)[1][4], "0");
+  ASSERT_TRUE(ResultToHeader(r, ExportContext{7, "SN-1", "pca", "2026-11-24T00:00:00Z"}, &header)
+                  .ok());
+  // A negative zero literal: "-0.0" not followed by another digit (-0.01 is a number).
+  EXPECT_FALSE(std::regex_search(header, std::regex("-0\\.0[^0-9eE]"))) << header;
+  EXPECT_NE(header.find("0.0"), std::string::npos);
+}
+
+// Issue 27: a log too short to show the random walk of one axis still exports Kalibr's file: the
+// largest of the axes that show it, with a comment naming the one that does not. Only when no
+// axis of a sensor shows a figure is the file refused.
+TEST(Exports, KalibrYamlWritesWhatTheAxesShowAndNamesTheOneThatIsShort) {
+  json truth;
+  json r = NoiseResult(3600, 4e-4, &truth);
+  for (json& c : r["parameters"]["channels"]) {
+    if (c["name"] == "a0_z") c["random_walk"] = nullptr;
+  }
+  for (json& u : r["uncertainty"]["channels"]) {
+    if (u["name"] == "a0_z") u["random_walk_std"] = nullptr;
+  }
+  const ExportContext context{9, "IMU-N1", "noise", "2026-11-24T00:00:00Z"};
+  std::string yaml;
+  Status s = ResultToKalibrYaml(r, context, &yaml);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  double largest = -1;
+  for (const json& c : r["parameters"]["channels"]) {
+    if (c["name"] != "a0_z" && c["name"].get<std::string>()[0] == 'a') {
+      largest = std::max(largest, c["random_walk"].get<double>());
+    }
+  }
+  const size_t at = yaml.find("accelerometer_random_walk: ");
+  ASSERT_NE(at, std::string::npos) << yaml;
+  const std::string line = yaml.substr(at, yaml.find('\n', at) - at);
+  EXPECT_EQ(Cell(line.substr(27, line.find("  #") - 27)), largest) << line;
+  EXPECT_NE(line.find("does not show the random walk of a0_z"), std::string::npos) << line;
+  // No accelerometer axis shows it: refused, naming them.
+  for (json& c : r["parameters"]["channels"]) {
+    if (c["name"].get<std::string>()[0] == 'a') c["random_walk"] = nullptr;
+  }
+  s = ResultToKalibrYaml(r, context, &yaml);
+  EXPECT_EQ(s.code(), StatusCode::kNotDeterminable) << s.ToString();
+  EXPECT_NE(s.message().find("a0_x, a0_y, a0_z"), std::string::npos) << s.message();
 }
 
 }  // namespace

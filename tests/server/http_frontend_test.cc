@@ -102,6 +102,10 @@ class Smuggling : public ::testing::Test {
     (void)c.Send(first + rest);  // the server may close before all is sent
     std::string bytes = c.Receive();
     EXPECT_EQ(StatusOf(bytes), status) << name << ": " << bytes.substr(0, 400);
+    // It says so before closing: a keep-alive client must not send its next request into it.
+    const std::string head = bytes.substr(0, bytes.find("\r\n\r\n"));
+    EXPECT_NE(head.find("Connection: close"), std::string::npos) << name << ": " << head;
+    EXPECT_EQ(head.find("Keep-Alive"), std::string::npos) << name << ": " << head;
     EXPECT_TRUE(c.ClosedByPeer(5000 * static_cast<int>(sanitizer::kTimeBoundScale), &bytes))
         << name << ": the connection stayed open after the refusal";
     EXPECT_EQ(CountAnswers(bytes), 1) << name << ": " << bytes.substr(0, 800);
@@ -229,6 +233,38 @@ TEST_F(Smuggling, OversizedJsonBodyRefused413NeverRunsTheBody) {
                          Head("POST /api/v1/jobs HTTP/1.1",
                               "Content-Type: application/json\r\nContent-Length: 100000\r\n"),
                          body);
+}
+
+// Error answers to requests whose JSON body was read whole keep the connection (issue 27: a
+// keep-alive client lost its next request when the server closed after a 4xx without saying
+// so): the same connection then carries the next request, and the control upload is all there is.
+TEST_F(Smuggling, ErrorAnswersToWholeJsonBodiesKeepTheConnection) {
+  const std::string json_type = "Content-Type: application/json\r\n";
+  auto post = [&](const std::string& target, const std::string& body) {
+    return Head("POST " + target + " HTTP/1.1",
+                json_type + "Content-Length: " + std::to_string(body.size()) + "\r\n") +
+           body;
+  };
+  const std::vector<std::pair<std::string, int>> cases = {
+      {post("/api/v1/jobs/999/revoke", R"({"reason": "wrong board"})"), 404},
+      {post("/api/v1/jobs/999/accept", R"({"reason": "checked by hand"})"), 404},
+      {post("/api/v1/jobs/1/revoke", "{not json"), 400},
+      {post("/api/v1/jobs", R"({"recording_id": 999, "config": {"method": "pca"}})"), 404},
+      {post("/api/v1/no-such-route", R"({"a": 1})"), 404},
+  };
+  for (const auto& [request, status] : cases) {
+    RawConnection c(server_.port());
+    ASSERT_TRUE(c.ok());
+    ASSERT_TRUE(c.Send(request));
+    std::string bytes;
+    for (int i = 0; i < 50 && CompleteAnswers(bytes) < 1; ++i) bytes += c.Receive();
+    const std::string line = request.substr(0, request.find('\r'));
+    EXPECT_EQ(StatusOf(bytes), status) << line << ": " << bytes.substr(0, 400);
+    EXPECT_EQ(bytes.find("Connection: close"), std::string::npos) << line << ": " << bytes;
+    ASSERT_TRUE(c.Send("GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")) << line;
+    EXPECT_EQ(StatusOf(c.Receive()), 200) << line << ": the connection was closed";
+  }
+  ExpectNothingSmuggled("error answers kept alive");
 }
 
 class Frontend : public ::testing::Test {

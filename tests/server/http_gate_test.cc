@@ -335,5 +335,98 @@ TEST(HttpGateDefaults, ServerWideLimitsApplyAndTheConfigOverridesThem) {
   EXPECT_NE(refused.error().find("max_scale"), std::string::npos) << refused.error();
 }
 
+// Issue 27: the ETag is the answer's, not the result's. Two jobs with the same result (a rerun of
+// one recording) differ in job id, time and the C header's guard, so their ETags differ; and after
+// a revoke, the revoked job's old ETag no longer answers 304: its body now says "revoked".
+TEST_F(HttpGate, EveryAnswerHasItsOwnETagAndARevokeChangesIt) {
+  const json first = Calibrate(GoodCsv(21), "DRONE-9");
+  ASSERT_EQ(first["status"], "succeeded");
+  auto client = server_.Client();
+  const json rerun_request = {{"recording_id", first["recording_id"]},
+                              {"config",
+                               {{"method", "pca"},
+                                {"magnitude", 9.80665},
+                                {"bias", "estimate"},
+                                {"device", "DRONE-9"}}}};
+  auto res = client.Post("/api/v1/jobs", rerun_request.dump(), "application/json");
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 202) << res->body;
+  const json second = server_.WaitForJob(Body(res)["job"]["id"].get<int64_t>());
+  ASSERT_EQ(second["status"], "succeeded");
+  ASSERT_EQ(first["result"]["parameters"], second["result"]["parameters"]);  // deterministic
+  const std::string base = "/api/v1/devices/DRONE-9/calibration?format=h&job=";
+  auto etag_of = [&](const json& job) {
+    auto r = client.Get((base + std::to_string(job["id"].get<int64_t>())).c_str());
+    EXPECT_TRUE(r && r->status == 200);
+    return r ? r->get_header_value("ETag") : std::string();
+  };
+  const std::string etag1 = etag_of(first), etag2 = etag_of(second);
+  EXPECT_NE(etag1, etag2);
+  ASSERT_EQ(Decide(second["id"], "revoke", "fixture was loose")->status, 200);
+  res = client.Get((base + std::to_string(second["id"].get<int64_t>())).c_str(),
+                   {{"If-None-Match", etag2}});
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 200) << "a revoked calibration kept by If-None-Match";
+  EXPECT_NE(res->get_header_value("ETag"), etag2);
+  // The latest falls back to the first job; its ETag as the flashing script saw it before the
+  // revoke (of the second, then latest) does not match it either.
+  res = client.Get("/api/v1/devices/DRONE-9/calibration?method=pca&format=h",
+                   {{"If-None-Match", etag2}});
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 200);
+  EXPECT_EQ(res->get_header_value("X-Calibd-Job"), std::to_string(first["id"].get<int64_t>()));
+}
+
+// Issue 27: a rejected or revoked result fetched with ?job= says so inside the file, so a saved
+// copy never looks like a served calibration.
+TEST_F(HttpGate, FilesOfResultsNotServedSaySoInside) {
+  const json good = Calibrate(GoodCsv(22), "DRONE-10");
+  const json box = Calibrate(BoxFacesCsv(23), "DRONE-10");
+  ASSERT_EQ(box["verdict"], "rejected");
+  auto client = server_.Client();
+  auto get = [&](const json& job, const std::string& format) {
+    auto r = client.Get(("/api/v1/devices/DRONE-10/calibration?format=" + format +
+                         "&job=" + std::to_string(job["id"].get<int64_t>()))
+                            .c_str());
+    EXPECT_TRUE(r && r->status == 200) << (r ? r->body : "no answer");
+    return r ? r->body : std::string();
+  };
+  const std::string rejected_csv = get(box, "csv"), rejected_h = get(box, "h");
+  EXPECT_EQ(rejected_csv.rfind("# NOT FOR USE: job " + std::to_string(box["id"].get<int64_t>()) +
+                                   "'s result was rejected by the acceptance gate",
+                               0),
+            0u)
+      << rejected_csv.substr(0, 200);
+  EXPECT_NE(rejected_h.find("_ACCEPTED 0"), std::string::npos);
+  EXPECT_NE(rejected_h.find("NOT FOR USE: this result was rejected"), std::string::npos);
+  const std::string good_csv = get(good, "csv"), good_h = get(good, "h");
+  EXPECT_EQ(good_csv.find("NOT FOR USE"), std::string::npos);
+  EXPECT_NE(good_h.find("_ACCEPTED 1"), std::string::npos);
+  // Revoked: the same mark, with the word.
+  ASSERT_EQ(Decide(good["id"], "revoke", "dropped on the floor")->status, 200);
+  EXPECT_NE(get(good, "csv").find("was revoked by a person"), std::string::npos);
+  EXPECT_NE(get(good, "h").find("_ACCEPTED 0"), std::string::npos);
+}
+
+// Issue 27: a revoke (or accept) without a body says that it needs a reason, not only that a
+// length is required or that the JSON is invalid.
+TEST_F(HttpGate, ADecisionWithoutABodyAsksForItsReason) {
+  const json good = Calibrate(GoodCsv(24), "DRONE-11");
+  const std::string path = "/api/v1/jobs/" + std::to_string(good["id"].get<int64_t>()) + "/revoke";
+  auto client = server_.Client();
+  auto res = client.Post(path.c_str(), "", "application/json");  // Content-Length: 0
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 400) << res->body;
+  EXPECT_NE(res->body.find("needs a reason"), std::string::npos) << res->body;
+  EXPECT_EQ(Body(res)["error"]["field"], "reason") << res->body;
+  // No Content-Length at all (curl -X POST without -d): 411, saying what to send.
+  testing::RawConnection c(server_.port());
+  ASSERT_TRUE(c.Send("POST " + path + " HTTP/1.1\r\nHost: x\r\n\r\n"));
+  const std::string bytes = c.Receive();
+  EXPECT_EQ(testing::StatusOf(bytes), 411) << bytes;
+  EXPECT_NE(bytes.find("a revoke needs a reason"), std::string::npos) << bytes;
+  EXPECT_EQ(Served("DRONE-11"), good["id"]);  // nothing was revoked
+}
+
 }  // namespace
 }  // namespace calibd::server

@@ -225,6 +225,64 @@ TEST_P(QueueConcurrency, TwoProcessesWithTwoThreadsEachCompleteEachJobExactlyOnc
   ExpectEveryJobCompletedOnce(store.get(), ids, claims);
 }
 
+// Decisions racing (issue 27): six revokes of one job from two stores (two hosts) at once, then
+// six accepts of it: exactly one of each succeeds, the rest are conflicts, and the job's history
+// holds only the two real actions. On PostgreSQL every revoke used to succeed: the decision was
+// read from a snapshot taken before the row lock was granted. Ten jobs, so that a race that
+// happens in most trials cannot pass by luck.
+TEST_P(QueueConcurrency, RacingDecisionsOnOneJobExactlyOneWins) {
+  std::unique_ptr<Store> host_a, host_b;
+  ASSERT_TRUE(Store::Open(target_, StoreOptions(), &host_a).ok());
+  ASSERT_TRUE(Store::Open(target_, StoreOptions(), &host_b).ok());
+  NewRecording r;
+  r.data = "position,s1\np1,1\n";
+  r.device = "SN-RACE";
+  RecordingInfo rec;
+  ASSERT_TRUE(host_a->PutRecording(r, &rec, nullptr).ok());
+  constexpr int kTrials = 10, kRacers = 6;
+  for (int trial = 0; trial < kTrials; ++trial) {
+    JobInfo job;
+    ASSERT_TRUE(host_a->EnqueueJob(rec.id, "pca", "SN-RACE", "{}", &job).ok());
+    JobInfo claimed;
+    bool got = false;
+    ASSERT_TRUE(host_a->ClaimJob("w", 60000, &claimed, &got).ok());
+    ASSERT_TRUE(got);
+    ASSERT_TRUE(host_a->CompleteJob(claimed.id, "w",
+                                    R"({"verdict": {"status": "accepted", "reasons": []}})")
+                    .ok());
+    for (const bool revoke : {true, false}) {
+      std::atomic<int> ready{0}, won{0}, conflicts{0};
+      std::atomic<bool> go{false};
+      std::vector<std::thread> racers;
+      for (int i = 0; i < kRacers; ++i) {
+        racers.emplace_back([&, i] {
+          Store* store = (i % 2 == 0 ? host_a : host_b).get();
+          ++ready;
+          while (!go.load()) std::this_thread::yield();
+          const std::string reason = "racer " + std::to_string(i);
+          const Status st = revoke ? store->RevokeJob(claimed.id, reason, "test", nullptr)
+                                   : store->AcceptJob(claimed.id, reason, "test", nullptr);
+          if (st.ok()) {
+            ++won;
+          } else if (st.code() == StatusCode::kConflict) {
+            ++conflicts;
+          } else {
+            ADD_FAILURE() << st.ToString();
+          }
+        });
+      }
+      while (ready.load() < kRacers) std::this_thread::yield();
+      go = true;
+      for (auto& t : racers) t.join();
+      EXPECT_EQ(won.load(), 1) << (revoke ? "revokes" : "accepts") << " of trial " << trial;
+      EXPECT_EQ(conflicts.load(), kRacers - 1);
+    }
+    std::vector<JobEvent> events;
+    ASSERT_TRUE(host_b->ListJobEvents(claimed.id, &events).ok());
+    EXPECT_EQ(events.size(), 2u) << "trial " << trial;
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, QueueConcurrency, ::testing::Values("sqlite", "postgresql"),
                          [](const ::testing::TestParamInfo<std::string>& info) {
                            return info.param;
