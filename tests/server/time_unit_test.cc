@@ -549,6 +549,34 @@ TEST(TimeUnitHttp, AJobOnAStoredLogInMsFailsAsImplausibleTimeUnit) {
   EXPECT_EQ(job["status"], "succeeded") << job.dump();
 }
 
+TEST(TimeUnitHttp, StaticSegmentsOfALogInMsTakeTheKeyToo) {
+  json config;
+  const std::string csv = ImuLog(&config);
+  TestServer server;
+  ASSERT_EQ(server.error(), "");
+  int status = 0;
+  const json s = Post(server, "/api/v1/recordings", csv, &status);
+  ASSERT_EQ(status, 201) << s.dump();
+  const json ms =
+      Post(server, "/api/v1/recordings", Retime(csv, 10000000, TimeUnit::kMilliseconds), &status);
+  ASSERT_EQ(status, 201) << ms.dump();
+  auto segments = [&](const json& upload, const std::string& query, int* code) {
+    auto res = server.Client().Get(
+        ("/api/v1/recordings/" + upload["recording"]["id"].dump() + "/segments" + query).c_str());
+    *code = res ? res->status : -1;
+    return res ? json::parse(res->body, nullptr, false) : json();
+  };
+  const json reference = segments(s, "", &status);
+  ASSERT_EQ(status, 200) << reference.dump();
+  ASSERT_GE(reference["intervals"].size(), 10u);
+  const json in_ms = segments(ms, "?time_unit=ms", &status);
+  ASSERT_EQ(status, 200) << in_ms.dump();
+  EXPECT_EQ(in_ms["intervals"], reference["intervals"]);
+  const json bad = segments(ms, "?time_unit=min", &status);
+  EXPECT_EQ(status, 400) << bad.dump();
+  EXPECT_EQ(bad["error"]["field"], "time_unit") << bad.dump();
+}
+
 // ----- Numbers in query strings (issue 26, item 7).
 
 TEST(QueryNumbers, KeysTakingANumberOrANameGetTheNumber) {
