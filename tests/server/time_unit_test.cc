@@ -577,6 +577,20 @@ TEST(TimeUnitHttp, StaticSegmentsOfALogInMsTakeTheKeyToo) {
   EXPECT_EQ(bad["error"]["field"], "time_unit") << bad.dump();
 }
 
+// ----- accel_noise / gyro_noise 0 (issue 26, item 7): refused wherever given, saying how to have
+// the noise estimated from the statics (the key left out).
+
+TEST(NoiseLevelZero, IsRefusedWithTheWayToEstimateIt) {
+  CommonConfig common;
+  for (const char* key : {"accel_noise", "gyro_noise"}) {
+    const Status s = ValidateConfig(json{{"method", "imu"}, {key, 0}}, &common);
+    EXPECT_EQ(s.code(), StatusCode::kInvalidInput) << key;
+    EXPECT_EQ(s.field(), key);
+    EXPECT_NE(s.message().find("leave it out"), std::string::npos) << s.message();
+    EXPECT_TRUE(ValidateConfig(json{{"method", "imu"}, {key, 0.01}}, &common).ok()) << key;
+  }
+}
+
 // ----- Numbers in query strings (issue 26, item 7).
 
 TEST(QueryNumbers, KeysTakingANumberOrANameGetTheNumber) {
