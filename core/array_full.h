@@ -85,7 +85,8 @@ enum class ArrayFullDynamicWeighting {
 
 struct ArrayFullOptions {
   // Noise per axis of the readings: accelerometer sigma_a (m/s^2), gyroscope sigma_g (rad/s).
-  // 0 (default): estimated from the statics' pooled within-interval sample std. >= 0.
+  // 0 (default): estimated from the statics' pooled within-interval sample std. >= 0. (The
+  // server's config refuses 0: it leaves the key out for this.)
   double accel_noise = 0;
   double gyro_noise = 0;
   // |g| of the statics, m/s^2. > 0.

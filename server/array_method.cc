@@ -1184,6 +1184,8 @@ class Array : public Method {
            "hand-twisted recording (Carlsson, Skog, Jalden: maximum likelihood)";
   }
   bool Reads(Layout layout) const override { return layout == Layout::kArray; }
+  // The positions model ignores t; the full model finds its statics from it.
+  bool ReadsTime(const nlohmann::json& config) const override { return IsFullModel(config); }
   // Measured server peaks (bench/README.md, "Memory budget per job"): positions model, N = 100 000
   // samples of 32 IMUs, 14 bytes per value; full model, 8 IMUs and 23 000 rows, 58 bytes per
   // value (the per-sample Jacobians of every triad's T and b).

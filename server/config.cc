@@ -2,6 +2,7 @@
 
 #include <cctype>
 
+#include "server/inertial_log.h"
 #include "server/method.h"
 
 namespace calibd::server {
@@ -25,9 +26,11 @@ void LineColumn(std::string_view text, size_t offset, int64_t* line, int64_t* co
   }
 }
 
+// Keys whose values are names only (never numbers): a value that reads as JSON stays a string
+// (device=123 is the serial "123"). Keys that take a number or a name (accel_unit, gyro_unit,
+// accel_noise, ...) are not here: "0.0001598" becomes the number, "deg/s" stays the name.
 bool IsStringKey(const std::string& key) {
-  return key == "method" || key == "device" || key == "bias" || key == "solver" ||
-         key == "gyro_unit";
+  return key == "method" || key == "device" || key == "bias" || key == "solver";
 }
 
 }  // namespace
@@ -135,15 +138,32 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
     Status s =
         ValidateAcceptance(*acceptance, common->method, "config key 'acceptance'", "acceptance");
     if (!s.ok()) return s;
-    return m->ValidateConfig(WithoutAcceptance(config));
   }
-  return m->ValidateConfig(config);
+  // time_unit: for every method whose recordings have a time column (the array layout); the
+  // parser applies it (PrepareParser), so the methods never see it.
+  if (config.contains("time_unit")) {
+    if (!m->Reads(Layout::kArray)) {
+      return Status::InvalidInput(
+                 "'time_unit' is for methods whose recording has a time column "
+                 "'t'; method '" +
+                 common->method + "' reads none")
+          .WithField("time_unit");
+    }
+    TimeUnit unit;
+    bool given;
+    Status s = ParseTimeUnit(config, &unit, &given);
+    if (!s.ok()) return s;
+  }
+  return m->ValidateConfig(WithoutAcceptance(config));
 }
 
 json WithoutAcceptance(const json& config) {
-  if (!config.is_object() || !config.contains("acceptance")) return config;
+  if (!config.is_object() || (!config.contains("acceptance") && !config.contains("time_unit"))) {
+    return config;
+  }
   json out = config;
   out.erase("acceptance");
+  out.erase("time_unit");
   return out;
 }
 
@@ -164,6 +184,9 @@ void PrepareParser(const json& config, RecordingParser* parser) {
   if (!config.is_object()) return;
   const auto it = config.find("method");
   if (it == config.end() || !it->is_string()) return;
+  TimeUnit unit;
+  bool given;
+  if (ParseTimeUnit(config, &unit, &given).ok()) parser->SetTimeUnit(unit);
   const Method* method = FindMethod(it->get_ref<const std::string&>());
   if (method != nullptr) method->PrepareParser(WithoutAcceptance(config), parser);
 }
@@ -184,10 +207,33 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
         .WithFile(file_name)
         .WithField("method");
   }
+  // The time column's unit: as configured (the parser was told, PrepareParser; one that was not
+  // is refused rather than read in the wrong unit), or, when not configured, seconds that must
+  // look like seconds (CheckTimeUnit) for a method that reads the times.
+  TimeUnit unit;
+  bool unit_given;
+  s = ParseTimeUnit(config, &unit, &unit_given);
+  if (!s.ok()) return s.WithReason(Reason::kInvalidConfig);
+  if (parser->summary().t_column != 0 && parser->time_unit() != unit) {
+    return Status::Internal("the recording was parsed with time unit " +
+                            std::string(TimeUnitName(parser->time_unit())) + ", the config says " +
+                            TimeUnitName(unit) + " (PrepareParser not called)");
+  }
+  if (!unit_given && method->ReadsTime(WithoutAcceptance(config))) {
+    s = CheckTimeUnit(parser->summary(), file_name);
+    if (!s.ok()) return s;
+  }
+  const int64_t time_origin = parser->summary().time_origin;
   RunContext context;
   context.stop = stop;
   context.executor = std::move(executor);
   s = method->Run(parser, WithoutAcceptance(config), context, result);
+  // Epoch stamps were counted from this second (RecordingParser): the times in the result are
+  // seconds after it.
+  if (time_origin != 0 && result->is_object() && result->contains("diagnostics") &&
+      (*result)["diagnostics"].is_object()) {
+    (*result)["diagnostics"]["time_origin"] = time_origin;
+  }
   if (!s.ok()) return s;
   JudgeResult(*method, config, acceptance_defaults, result);
   return Status::Ok();

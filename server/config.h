@@ -25,7 +25,8 @@ Status ParseJsonText(std::string_view text, const std::string& what, nlohmann::j
 
 // Builds a config object from query parameters. Values that read as JSON numbers, booleans,
 // arrays or objects become those; everything else stays a string (so device=123 is "123" only
-// for the keys that are strings by the SPEC: method, device, bias, solver, gyro_unit).
+// for the keys that are names by the SPEC: method, device, bias, solver). Keys that take a
+// number or a name (accel_unit, gyro_unit, accel_noise, ...) get the number when it is one.
 // Parameters in `ignore` (e.g. "format") are skipped. A repeated key is an error.
 Status ConfigFromQuery(const std::multimap<std::string, std::string>& params,
                        nlohmann::json* config);
@@ -38,11 +39,13 @@ struct CommonConfig {
 
 // Checks the whole config: an object, `method` known, `device` a non-empty string of at most
 // 128 printable characters when present, `acceptance` (limits of the method's acceptance gate,
-// server/acceptance.h) when present, and the method's own keys (unknown keys are errors).
+// server/acceptance.h) when present, `time_unit` (s, ms, us, ns; only for methods reading the
+// array layout) when present, and the method's own keys (unknown keys are errors).
 // Errors name the key (Status::field(), "acceptance.<limit>" for a limit).
 Status ValidateConfig(const nlohmann::json& config, CommonConfig* common);
 
-// The config without its `acceptance` key (what a Method's ValidateConfig, Run and Judge see).
+// The config without the keys the server handles for every method, `acceptance` and `time_unit`
+// (the parser applies it): what a Method's ValidateConfig, Run and Judge see.
 nlohmann::json WithoutAcceptance(const nlohmann::json& config);
 
 class Method;
@@ -64,12 +67,17 @@ Status Calibrate(std::string_view recording, const std::string& file_name,
                  const core::StopToken* stop = nullptr,
                  const nlohmann::json& acceptance_defaults = nlohmann::json());
 
-// Before feeding a collecting parser for CalibrateParsed: lets the config's method choose how
+// Before feeding a collecting parser for CalibrateParsed: sets the parser's time unit from the
+// config's `time_unit` (RecordingParser::SetTimeUnit), then lets the config's method choose how
 // the numbers are held (Method::PrepareParser). Does nothing for an unknown method or a config
 // that is not an object (CalibrateParsed then reports the error).
 void PrepareParser(const nlohmann::json& config, RecordingParser* parser);
 
-// The same, from a parser that has already been fed and finished (collecting).
+// The same, from a parser that has already been fed and finished (collecting), and prepared by
+// PrepareParser. Without `time_unit`, a method that reads the times (Method::ReadsTime) first
+// refuses a time column that does not look like seconds (CheckTimeUnit, server/inertial_log.h;
+// Reason::kImplausibleTimeUnit). Epoch stamps: the result's diagnostics get `time_origin`, the
+// whole second (of the log's clock) its times count from (RecordingSummary::time_origin).
 // `executor` (optional): see RunContext::executor.
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name,
                        const nlohmann::json& config, nlohmann::json* result,

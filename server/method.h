@@ -63,6 +63,13 @@ class Method {
   // Whether its recordings need a time column `t` that increases strictly (the raw-log methods):
   // an upload with a `t` that repeats or goes back is then refused at once (400 naming the line).
   virtual bool NeedsIncreasingTime() const { return false; }
+  // Whether its run with this config reads the time column's values (then a `t` that does not
+  // look like seconds is refused when `time_unit` is not given: server/inertial_log.h
+  // CheckTimeUnit). `config` has been validated, `acceptance` and `time_unit` removed.
+  virtual bool ReadsTime(const nlohmann::json& config) const {
+    (void)config;
+    return NeedsIncreasingTime();
+  }
   // The method's own config keys (the common keys method and device are checked by the caller;
   // unknown keys are errors). kInvalidInput naming the key (Status::field()).
   virtual Status ValidateConfig(const nlohmann::json& config) const = 0;

@@ -123,7 +123,11 @@ Status ReadNoiseLevel(const json& config, const char* key, std::optional<NoiseLe
     return KeyError(key, "must be a number > 0 or {\"job\": ID} of a succeeded noise job");
   }
   if (!std::isfinite(level.value) || !(level.value > 0)) {
-    return KeyError(key, "must be a finite number > 0");
+    // 0 is no noise level (it would weigh the samples infinitely); where a method can estimate
+    // it from the statics (imu, array model full), leaving the key out does that.
+    return KeyError(key,
+                    "must be a finite number > 0 (leave it out to have it estimated from the "
+                    "statics, where the method can: imu, array model full)");
   }
   *out = level;
   return Status::Ok();

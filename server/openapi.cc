@@ -175,7 +175,11 @@ json Build() {
        QueryParam("geometry", "string", "array: JSON object {positions, reference}"),
        QueryParam("accel_noise", "number", "array: σ_a"),
        QueryParam("gyro_noise", "number", "array: σ_g"),
-       QueryParam("gyro_unit", "string", "array: rad/s | deg/s"),
+       QueryParam("gyro_unit", "string",
+                  "array: rad/s | deg/s; imu, noise: rad/s | deg/s | rad/s per reading unit"),
+       QueryParam("accel_unit", "string", "imu, noise: m/s^2 | g | m/s^2 per reading unit"),
+       QueryParam("time_unit", "string",
+                  "imu, noise, array: unit of the time column t, s (default) | ms | us | ns"),
        QueryParam("solver", "string", "array: joint | bcd")});
   paths["/recordings"]["post"] = {
       {"summary", "Upload a recording (and queue a calibration when a method is given)"},
@@ -333,7 +337,8 @@ json Build() {
                     QueryParam("static_threshold", "string",
                                "{\"accelerometer\": x, \"gyroscope\": y}, reading units"),
                     QueryParam("accel_unit", "string", "m/s^2 per reading unit"),
-                    QueryParam("gyro_unit", "string", "rad/s per reading unit")})},
+                    QueryParam("gyro_unit", "string", "rad/s per reading unit"),
+                    QueryParam("time_unit", "string", "unit of t: s (default) | ms | us | ns")})},
       {"responses",
        {{"200", JsonResponse("intervals, thresholds, gaps", {{"type", "object"}})},
         {"400", ErrorResponse("bad option (field)")},

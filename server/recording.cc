@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <unordered_map>
 
 namespace calibd::server {
@@ -26,6 +27,136 @@ const char* LayoutName(Layout layout) {
   }
   return "unknown";
 }
+
+const char* TimeUnitName(TimeUnit unit) {
+  switch (unit) {
+    case TimeUnit::kSeconds:
+      return "s";
+    case TimeUnit::kMilliseconds:
+      return "ms";
+    case TimeUnit::kMicroseconds:
+      return "us";
+    case TimeUnit::kNanoseconds:
+      return "ns";
+  }
+  return "s";
+}
+
+bool TimeUnitFromName(std::string_view name, TimeUnit* unit) {
+  for (TimeUnit u : {TimeUnit::kSeconds, TimeUnit::kMilliseconds, TimeUnit::kMicroseconds,
+                     TimeUnit::kNanoseconds}) {
+    if (name == TimeUnitName(u)) {
+      *unit = u;
+      return true;
+    }
+  }
+  return false;
+}
+
+int TimeUnitDigits(TimeUnit unit) {
+  switch (unit) {
+    case TimeUnit::kSeconds:
+      return 0;
+    case TimeUnit::kMilliseconds:
+      return 3;
+    case TimeUnit::kMicroseconds:
+      return 6;
+    case TimeUnit::kNanoseconds:
+      return 9;
+  }
+  return 0;
+}
+
+namespace {
+
+// A decimal time stamp ([+|-]digits[.digits][(e|E)[+|-]digits], as the parser accepted it) split
+// exactly into its integer part and its fraction (both with the stamp's sign; the fraction
+// correctly rounded). false for any other shape, or an integer part beyond int64 (9.2e18).
+// `buffer`: scratch, reused.
+bool SplitDecimal(std::string_view text, std::string* buffer, int64_t* integer, double* fraction) {
+  size_t i = 0;
+  bool negative = false;
+  if (i < text.size() && (text[i] == '-' || text[i] == '+')) negative = text[i++] == '-';
+  std::string& digits = *buffer;
+  digits.clear();
+  int64_t point = -1;  // digits before the decimal point
+  for (; i < text.size(); ++i) {
+    const char c = text[i];
+    if (c >= '0' && c <= '9') {
+      if (digits.size() >= 400) return false;
+      digits.push_back(c);
+    } else if (c == '.' && point < 0) {
+      point = static_cast<int64_t>(digits.size());
+    } else {
+      break;
+    }
+  }
+  if (digits.empty()) return false;
+  if (point < 0) point = static_cast<int64_t>(digits.size());
+  if (i < text.size()) {
+    if (text[i] != 'e' && text[i] != 'E') return false;
+    ++i;
+    bool exponent_negative = false;
+    if (i < text.size() && (text[i] == '-' || text[i] == '+')) exponent_negative = text[i++] == '-';
+    if (i == text.size()) return false;
+    int64_t exponent = 0;
+    for (; i < text.size(); ++i) {
+      if (text[i] < '0' || text[i] > '9') return false;
+      exponent = exponent * 10 + (text[i] - '0');
+      if (exponent > 400) return false;
+    }
+    point += exponent_negative ? -exponent : exponent;
+  }
+  const int64_t n = static_cast<int64_t>(digits.size());
+  uint64_t whole = 0;  // at most 19 digits: below 10^19 < 2^64
+  int significant = 0;
+  for (int64_t k = 0; k < point; ++k) {
+    const char c = k < n ? digits[static_cast<size_t>(k)] : '0';
+    if (significant == 0 && c == '0') continue;
+    if (++significant > 19) return false;
+    whole = whole * 10 + static_cast<uint64_t>(c - '0');
+  }
+  if (whole > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) return false;
+  double frac = 0;
+  if (point < n) {
+    std::string rest = "0.";
+    if (point < 0) rest.append(static_cast<size_t>(-point), '0');
+    rest.append(digits, static_cast<size_t>(std::max<int64_t>(point, 0)), std::string::npos);
+    std::from_chars(rest.data(), rest.data() + rest.size(), frac);
+  }
+  *integer = negative ? -static_cast<int64_t>(whole) : static_cast<int64_t>(whole);
+  *fraction = negative ? -frac : frac;
+  return true;
+}
+
+// The decimal `text` times 10^-digits, correctly rounded (its exponent lowered by `digits`, then
+// one std::from_chars): "10" ms gives the very double "0.01" s gives. false when it cannot.
+bool ScaledDecimal(std::string_view text, int digits, std::string* buffer, double* value) {
+  if (!text.empty() && text.front() == '+') text.remove_prefix(1);
+  const size_t e = text.find_first_of("eE");
+  long exponent = 0;
+  if (e != std::string_view::npos) {
+    std::string_view x = text.substr(e + 1);
+    if (!x.empty() && x.front() == '+') x.remove_prefix(1);
+    auto [ptr, ec] = std::from_chars(x.data(), x.data() + x.size(), exponent);
+    if (ec != std::errc() || ptr != x.data() + x.size() || exponent > 100000 ||
+        exponent < -100000) {
+      return false;
+    }
+  }
+  buffer->assign(text.substr(0, e));
+  buffer->push_back('e');
+  buffer->append(std::to_string(exponent - digits));
+  double v = 0;
+  auto [ptr, ec] = std::from_chars(buffer->data(), buffer->data() + buffer->size(), v);
+  if (ec != std::errc() || ptr != buffer->data() + buffer->size() || !std::isfinite(v)) {
+    return false;
+  }
+  *value = v;
+  return true;
+}
+
+}  // namespace
 
 bool LayoutFromName(std::string_view name, Layout* layout) {
   for (Layout l : {Layout::kPcaAveraged, Layout::kPcaRaw, Layout::kArray}) {
@@ -286,8 +417,20 @@ struct RecordingParser::Impl {
   int accel_triads = 0, gyro_triads = 0;
   bool has_t = false;
   int64_t t_column = 0;  // 1-based, when has_t
-  double previous_t = 0;
+  double previous_t = 0;      // seconds (converted), as collected
+  double previous_raw_t = 0;  // as the file writes it
   bool have_previous_t = false;
+  // The time column's unit (SetTimeUnit): seconds = value / time_divisor.
+  TimeUnit time_unit = TimeUnit::kSeconds;
+  int time_digits = 0;
+  double time_divisor = 1;
+  int64_t time_divisor_int = 1;
+  // Epoch stamps (StartTime): every t is read exactly and counted from time_origin_units (the
+  // first stamp's whole second, in the file's unit).
+  bool time_shifted = false;
+  int64_t time_origin_units = 0;
+  std::vector<double> time_steps;    // the first kTimeProbeRows - 1 steps of t, file units
+  std::string time_buffer;           // scratch of the exact time readers
   std::vector<double> array_values;  // N * (3K+3G), row-major (collect only)
   std::vector<double> t_values;
   int64_t expected_rows = 0;  // ExpectRows: the announced number of data rows (0: unknown)
@@ -599,6 +742,7 @@ struct RecordingParser::Impl {
     gyro_triads = static_cast<int>(gyro_cols.size());
     has_t = t_col != 0;
     t_column = t_col;
+    summary.t_column = t_col;
     column_target.assign(f.size(), -1);
     for (int k = 0; k < accel_triads; ++k) {
       for (int axis = 0; axis < 3; ++axis) column_target[accel_cols[k][axis] - 1] = 3 * k + axis;
@@ -694,25 +838,77 @@ struct RecordingParser::Impl {
     const auto& f = fields;
     if (f.size() != column_target.size()) return RowShapeError(f.size(), column_target.size());
     double t = 0;
+    std::string_view t_text;
     for (size_t i = 0; i < f.size(); ++i) {
       const int target = column_target[i];
       double* dst = target < 0 ? &t : &row_values[target];
       Status s = ParseNumber(f[i], static_cast<int64_t>(i) + 1, summary.columns[i], dst);
       if (!s.ok()) return s;
+      if (target < 0) t_text = f[i];
     }
-    CommitArrayRow(t);
+    CommitArrayRow(t, t_text);
     return Status::Ok();
   }
 
-  void CommitArrayRow(double t) {
+  // At the first stamp: counts the times from its whole second when it is far from 0 (epoch
+  // stamps; RecordingSummary::time_origin).
+  void StartTime(double raw, std::string_view text) {
+    if (!(std::fabs(raw) / time_divisor >= kTimeOriginSeconds)) return;
+    int64_t whole = 0;
+    double fraction = 0;
+    if (!SplitDecimal(text, &time_buffer, &whole, &fraction)) {
+      // Not a plain decimal within int64: the origin from the double (the stamps then go
+      // through it too, TimeSeconds).
+      if (!(std::fabs(raw) < 9e18)) return;
+      whole = static_cast<int64_t>(raw);
+    }
+    int64_t seconds = whole / time_divisor_int;
+    if (whole % time_divisor_int < 0) --seconds;  // floor
+    time_shifted = true;
+    time_origin_units = seconds * time_divisor_int;
+    summary.time_origin = seconds;
+  }
+
+  // The stamp `raw` (parsed from `text`) in seconds from the origin.
+  double TimeSeconds(double raw, std::string_view text) {
+    if (time_shifted) {
+      int64_t whole = 0;
+      double fraction = 0;
+      if (SplitDecimal(text, &time_buffer, &whole, &fraction)) {
+        const __int128 from_origin = static_cast<__int128>(whole) - time_origin_units;
+        return (static_cast<double>(from_origin) + fraction) / time_divisor;
+      }
+      return (raw - static_cast<double>(time_origin_units)) / time_divisor;
+    }
+    if (time_digits == 0) return raw;  // seconds near 0: exactly as parsed
+    double seconds = 0;
+    if (ScaledDecimal(text, time_digits, &time_buffer, &seconds)) return seconds;
+    return raw / time_divisor;
+  }
+
+  // `raw`: the row's t as parsed (0 without a t column); `text`: its text.
+  void CommitArrayRow(double raw, std::string_view text) {
+    double t = 0;
     if (has_t) {
-      if (have_previous_t && !(t > previous_t) && summary.t_disorder_line == 0) {
-        summary.t_disorder_line = line_no;
-        summary.t_disorder_column = t_column;
-        summary.t_disorder = t;
-        summary.t_disorder_previous = previous_t;
+      if (!have_previous_t) {
+        StartTime(raw, text);
+        summary.t_first = raw;
+        summary.t_first_line = line_no;
+      }
+      t = TimeSeconds(raw, text);
+      if (have_previous_t) {
+        if (!(t > previous_t) && summary.t_disorder_line == 0) {
+          summary.t_disorder_line = line_no;
+          summary.t_disorder_column = t_column;
+          summary.t_disorder = raw;
+          summary.t_disorder_previous = previous_raw_t;
+        }
+        if (static_cast<int64_t>(time_steps.size()) < kTimeProbeRows - 1) {
+          time_steps.push_back((t - previous_t) * time_divisor);
+        }
       }
       previous_t = t;
+      previous_raw_t = raw;
       have_previous_t = true;
     }
     if (!collect) return;
@@ -821,13 +1017,17 @@ struct RecordingParser::Impl {
     const char* p = line.data();
     const char* const end = p + line.size();
     double t = 0;
+    std::string_view t_text;
     const size_t n = column_target.size();
     for (size_t i = 0; i < n; ++i) {
       const int target = column_target[i];
+      const char* start = p;
       p = NextNumber(p, end, i + 1 == n, target < 0 ? &t : &row_values[target]);
       if (p == nullptr) return Fast::kFallback;
+      if (target < 0)
+        t_text = std::string_view(start, static_cast<size_t>(p - start) - (i + 1 == n ? 0 : 1));
     }
-    CommitArrayRow(t);
+    CommitArrayRow(t, t_text);
     return Fast::kRead;
   }
 
@@ -924,6 +1124,12 @@ struct RecordingParser::Impl {
     }
     if (summary.layout != Layout::kArray)
       summary.positions = static_cast<int64_t>(positions.size());
+    if (!time_steps.empty()) {
+      auto middle = time_steps.begin() + static_cast<std::ptrdiff_t>(time_steps.size() / 2);
+      std::nth_element(time_steps.begin(), middle, time_steps.end());
+      summary.t_median_step = *middle;
+      std::vector<double>().swap(time_steps);
+    }
     return Status::Ok();
   }
 };
@@ -1019,6 +1225,19 @@ void RecordingParser::CollectArrayAsFloat(double accel_scale, double gyro_scale)
   impl_->float_scale_accel = accel_scale;
   impl_->float_scale_gyro = gyro_scale;
 }
+
+void RecordingParser::SetTimeUnit(TimeUnit unit) {
+  Impl& d = *impl_;
+  if (d.have_header) return;  // too late: rows may have been read in the old unit
+  d.time_unit = unit;
+  d.summary.time_unit = unit;
+  d.time_digits = TimeUnitDigits(unit);
+  d.time_divisor_int = 1;
+  for (int i = 0; i < d.time_digits; ++i) d.time_divisor_int *= 10;
+  d.time_divisor = static_cast<double>(d.time_divisor_int);
+}
+
+TimeUnit RecordingParser::time_unit() const { return impl_->time_unit; }
 
 bool RecordingParser::collects_float(double* accel_scale, double* gyro_scale) const {
   if (!impl_->as_float) return false;

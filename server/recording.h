@@ -25,6 +25,14 @@ enum class Layout {
   kArray,        // [t,]aK_x,aK_y,aK_z,...,gJ_x,gJ_y,gJ_z  (any column order)
 };
 const char* LayoutName(Layout layout);  // "pca_averaged", "pca_raw", "array"
+
+// The unit of an array recording's time column `t` (config `time_unit`, SPEC §9): seconds are
+// the value divided by 10^digits.
+enum class TimeUnit { kSeconds, kMilliseconds, kMicroseconds, kNanoseconds };
+const char* TimeUnitName(TimeUnit unit);  // "s", "ms", "us", "ns"
+// The inverse of TimeUnitName; false for anything else.
+bool TimeUnitFromName(std::string_view name, TimeUnit* unit);
+int TimeUnitDigits(TimeUnit unit);  // 0, 3, 6, 9
 // The inverse of LayoutName; false for an unknown name.
 bool LayoutFromName(std::string_view name, Layout* layout);
 
@@ -50,7 +58,9 @@ struct ArrayRecording {
   std::vector<std::string> gyro_names;   // "g0".."g{G-1}", by index
   Eigen::MatrixXd accel;                 // N × 3K: a0_x a0_y a0_z a1_x ... (m/s²)
   Eigen::MatrixXd gyro;                  // N × 3G: g0_x g0_y g0_z ... (unit as recorded)
-  Eigen::VectorXd t;                     // N seconds, or empty when there is no `t` column
+  // N seconds (the `t` column in the parser's time unit converted to seconds, counted from
+  // RecordingSummary::time_origin), or empty when there is no `t` column.
+  Eigen::VectorXd t;
 };
 
 // An array recording held as floats (RecordingParser::CollectArrayAsFloat): what the raw-log
@@ -62,7 +72,7 @@ struct ArrayRecordingFloat {
   std::vector<std::string> gyro_names;   // "g0".."g{G-1}", by index
   Eigen::MatrixXf accel;                 // N × 3K: a0_x a0_y a0_z a1_x ... times accel_scale
   Eigen::MatrixXf gyro;                  // N × 3G: g0_x ... times gyro_scale
-  Eigen::VectorXd t;                     // N seconds, or empty when there is no `t` column
+  Eigen::VectorXd t;                     // as ArrayRecording::t
   double accel_scale = 1, gyro_scale = 1;
 };
 
@@ -76,10 +86,34 @@ struct RecordingSummary {
   int64_t positions = 0;  // pca only: distinct position labels
   // array layout with `t`: the first row whose t is not greater than the previous row's (line
   // and column in the file; 0 when t increases strictly throughout). Not an error of the layout
-  // (the array method accepts any t); the raw-log methods refuse it (CheckLogTimes).
+  // (the array method accepts any t); the raw-log methods refuse it (CheckLogTimes). The values
+  // as the file writes them (its unit, not converted).
   int64_t t_disorder_line = 0, t_disorder_column = 0;
   double t_disorder = 0, t_disorder_previous = 0;
+  // array layout with `t`, for the time-unit plausibility check (server/inertial_log.h
+  // CheckTimeUnit), in the file's own unit whatever the parser's time unit: the first row's t
+  // (its line; the column is t_column), and the median difference of consecutive t over the first
+  // kTimeProbeRows rows (0 with fewer than 2 rows).
+  int64_t t_column = 0;  // 1-based column of `t` (0: none)
+  int64_t t_first_line = 0;
+  double t_first = 0;
+  double t_median_step = 0;
+  // Whole seconds subtracted from every t before it became a double (0: none). Set when the first
+  // stamp is at least kTimeOriginSeconds (epoch stamps): the stamps are read exactly (integer and
+  // fraction digits apart) and counted from this whole second, so no precision is lost to a
+  // double holding e.g. 1.7e18 ns. In the parser's time unit's clock (seconds).
+  int64_t time_origin = 0;
+  // The parser's time unit (RecordingParser::SetTimeUnit), for messages about t.
+  TimeUnit time_unit = TimeUnit::kSeconds;
 };
+
+// The rows whose time steps RecordingSummary::t_median_step is taken over (bounded work: the
+// check is the same cost for any log size).
+inline constexpr int64_t kTimeProbeRows = 4096;
+// A first time stamp at least this many seconds from 0 makes the parser count the times from its
+// whole second (RecordingSummary::time_origin). Logs starting nearer 0 are read exactly as
+// before (the value parsed as a double, divided by 10^digits of the unit).
+inline constexpr double kTimeOriginSeconds = 1e6;
 
 struct RecordingLimits {
   int64_t max_line_bytes = 1 << 20;  // a longer line is an error (guards memory)
@@ -115,6 +149,12 @@ class RecordingParser {
   void CollectArrayAsFloat(double accel_scale, double gyro_scale);
   // Whether CollectArrayAsFloat was called, and with which scales (either pointer may be null).
   bool collects_float(double* accel_scale = nullptr, double* gyro_scale = nullptr) const;
+  // Optional, before the first Feed: the unit of the time column (default seconds). The
+  // collected t (ArrayRecording::t) is then in seconds: the value with its decimal point moved,
+  // correctly rounded (a log in ms gives bit for bit the times of the same log in s). Does
+  // nothing once the header has been read.
+  void SetTimeUnit(TimeUnit unit);
+  TimeUnit time_unit() const;
   // End of input: checks the last line and the whole-file rules (e.g. every raw position has
   // static and moving rows). Must be called once after the last Feed.
   Status Finish();

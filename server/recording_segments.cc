@@ -45,13 +45,18 @@ Status ParseSegmentsQuery(const std::multimap<std::string, std::string>& params,
   if (!s.ok()) return s;
   for (const auto& [key, value] : config.items()) {
     if (key != "static_window" && key != "min_static" && key != "static_threshold" &&
-        key != "accel_unit" && key != "gyro_unit") {
+        key != "accel_unit" && key != "gyro_unit" && key != "time_unit") {
       return Status::InvalidInput("query key '" + key +
                                   "' is not a segments option (known: static_window, "
-                                  "min_static, static_threshold, accel_unit, gyro_unit)")
+                                  "min_static, static_threshold, accel_unit, gyro_unit, "
+                                  "time_unit)")
           .WithField(key);
     }
   }
+  bool time_unit_given = false;
+  s = ParseTimeUnit(config, &options->time_unit, &time_unit_given);
+  if (!s.ok()) return s;
+  config.erase("time_unit");
   core::ImuOptions imu;
   s = ParseImuOptions(config, &imu);
   if (!s.ok()) return s;
@@ -78,6 +83,7 @@ Status ComputeSegments(storage::Store* store, int64_t recording_id, const Segmen
   }
   // Streamed from storage into the parser: the bytes are never held whole.
   RecordingParser parser("recording " + std::to_string(recording_id), /*collect=*/true);
+  parser.SetTimeUnit(options.time_unit);
   Status parse;
   s = store->ReadRecordingData(recording_id, [&](std::string_view chunk) {
     parse = parser.Feed(chunk);

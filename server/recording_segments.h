@@ -16,6 +16,7 @@
 
 #include "base/status.h"
 #include "core/static_detection.h"
+#include "server/recording.h"
 #include "storage/store.h"
 
 namespace calibd::server {
@@ -24,12 +25,14 @@ struct SegmentsOptions {
   core::StaticDetectionOptions detection;  // static_window, min_static, static_threshold
   double accel_unit = 1;                   // m/s² per reading unit
   double gyro_unit = 1;                    // rad/s per reading unit
+  TimeUnit time_unit = TimeUnit::kSeconds;  // the t column's unit (config time_unit)
   size_t timeline_points = 0;  // > 0: also a timeline of |a| and |ω| (SI) of about this many
                                // points per triad (min and max per bucket: peaks survive)
 };
 
 // Options from the request's query keys; kInvalidInput naming the key for a bad value or a key
-// that is not one of static_window, min_static, static_threshold, accel_unit, gyro_unit.
+// that is not one of static_window, min_static, static_threshold, accel_unit, gyro_unit,
+// time_unit.
 Status ParseSegmentsQuery(const std::multimap<std::string, std::string>& params,
                           SegmentsOptions* options);
 

@@ -321,15 +321,27 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     if (!s.ok()) return finish(SendStatus(res, s));
     s = ValidateConfig(config, &common);
     if (!s.ok()) return finish(SendStatus(res, s));
-    if (FindMethod(common.method)->NeedsIncreasingTime()) {  // raw-log methods
-      s = CheckTimesIncrease(summary, common.method);
+    const Method& method = *FindMethod(common.method);
+    TimeUnit time_unit = TimeUnit::kSeconds;
+    bool time_unit_given = false;
+    s = ParseTimeUnit(config, &time_unit, &time_unit_given);  // validated above
+    if (!s.ok()) return finish(SendStatus(res, s));
+    if (method.NeedsIncreasingTime()) {  // raw-log methods
+      s = CheckTimesIncrease(summary, common.method, time_unit);
       if (!s.ok()) return finish(SendStatus(res, s));
     }
-    if (!FindMethod(common.method)->Reads(summary.layout)) {
+    if (!method.Reads(summary.layout)) {
       return finish(SendStatus(res, Status::InvalidInput(std::string("method '") + common.method +
                                                          "' cannot read the recording's " +
                                                          LayoutName(summary.layout) + " layout")
                                         .WithField("method")));
+    }
+    // A time column in ms or ns read as seconds would make the job compute for hours on a
+    // nonsense rate: refused now, nothing stored (the summary's figures are in the file's unit,
+    // whatever unit the config names; the worker checks the same for jobs on stored logs).
+    if (!time_unit_given && method.ReadsTime(WithoutAcceptance(config))) {
+      s = CheckTimeUnit(summary, file_name.empty() ? "upload" : file_name);
+      if (!s.ok()) return finish(SendStatus(res, s));
     }
     const RecordingShape shape{summary.rows, static_cast<int64_t>(summary.columns.size())};
     s = CheckJobBudget(*FindMethod(common.method), shape, WithoutAcceptance(config),
