@@ -321,6 +321,8 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     if (!s.ok()) return finish(SendStatus(res, s));
     s = ValidateConfig(config, &common);
     if (!s.ok()) return finish(SendStatus(res, s));
+    s = CheckJobSeconds(common, static_cast<double>(job_seconds));
+    if (!s.ok()) return finish(SendStatus(res, s));
     if (FindMethod(common.method)->NeedsIncreasingTime()) {  // raw-log methods
       s = CheckTimesIncrease(summary, common.method);
       if (!s.ok()) return finish(SendStatus(res, s));
@@ -416,6 +418,8 @@ void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Respon
   if (!s.ok()) return (void)SendStatus(res, s);
   CommonConfig common;
   s = ValidateConfig(config, &common);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  s = CheckJobSeconds(common, static_cast<double>(job_seconds));
   if (!s.ok()) return (void)SendStatus(res, s);
   storage::RecordingInfo recording;
   s = store->GetRecording(recording_id, &recording);
