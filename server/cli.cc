@@ -9,12 +9,12 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "core/stop_token.h"
 #include "server/acceptance.h"
 #include "server/config.h"
 #include "server/failure_reasons.h"
 #include "server/method.h"
 #include "server/serve.h"
-#include "core/stop_token.h"
 
 namespace calibd::server {
 
@@ -317,8 +317,9 @@ int RunCli(int argc, char** argv) {
   }
 
   if (*serve_cmd) return RunServe(serve);
-  if (*calibrate_cmd) return Calibrate(recording_path, config_path, compact, acceptance_path,
-                                              calibrate_seconds);
+  if (*calibrate_cmd) {
+    return Calibrate(recording_path, config_path, compact, acceptance_path, calibrate_seconds);
+  }
   for (const auto& [command, simulate] : simulations) {
     if (!*command) continue;
     SimulatedFiles files;

@@ -51,8 +51,7 @@ bool IsCancelPath(const std::string& path) {
   if (path.size() <= kPrefix.size() + kSuffix.size()) return false;
   if (path.compare(0, kPrefix.size(), kPrefix) != 0) return false;
   if (path.compare(path.size() - kSuffix.size(), kSuffix.size(), kSuffix) != 0) return false;
-  const std::string id =
-      path.substr(kPrefix.size(), path.size() - kPrefix.size() - kSuffix.size());
+  const std::string id = path.substr(kPrefix.size(), path.size() - kPrefix.size() - kSuffix.size());
   return id.find('/') == std::string::npos;
 }
 
@@ -82,10 +81,10 @@ void Service::Impl::HandleCancel(const httplib::Request& req, httplib::Response&
     httplib::detail::parse_query_text(req.body, params);
     for (const auto& [key, value] : params) {
       if (key != "reason" && key != "token") {
-        return (void)SendStatus(res, Status::InvalidInput("unknown form field '" +
-                                                          key.substr(0, 64) +
-                                                          "' (expected reason, token)")
-                                         .WithField(key.substr(0, 64)));
+        return (void)SendStatus(res,
+                                Status::InvalidInput("unknown form field '" + key.substr(0, 64) +
+                                                     "' (expected reason, token)")
+                                    .WithField(key.substr(0, 64)));
       }
     }
     // A form without the Authorization header: its token field must be the server's.

@@ -151,8 +151,8 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
   impl->job_memory_bytes =
       options.job_memory_bytes > 0 ? options.job_memory_bytes : DefaultJobMemoryBytes(pool.workers);
   pool.job_memory_bytes = impl->job_memory_bytes;
-  impl->job_seconds = options.job_seconds > 0 ? options.job_seconds
-                                              : DefaultJobSeconds(impl->job_memory_bytes);
+  impl->job_seconds =
+      options.job_seconds > 0 ? options.job_seconds : DefaultJobSeconds(impl->job_memory_bytes);
   pool.job_ms = impl->job_seconds * 1000;
   impl->workers = std::make_unique<WorkerPool>(impl->store.get(), &impl->metrics, pool);
   HttpLimits limits;
@@ -392,8 +392,9 @@ void Service::Impl::SetupRoutes() {
             [this](const httplib::Request& req, httplib::Response& res) {
               HandleDecision(req, res, /*revoke=*/false);
             });
-  http.Post(R"(/api/v1/jobs/([^/]+)/cancel)",
-            [this](const httplib::Request& req, httplib::Response& res) { HandleCancel(req, res); });
+  http.Post(
+      R"(/api/v1/jobs/([^/]+)/cancel)",
+      [this](const httplib::Request& req, httplib::Response& res) { HandleCancel(req, res); });
   http.Get("/api/v1/jobs", [this](const httplib::Request& req, httplib::Response& res) {
     HandleListJobs(req, res);
   });

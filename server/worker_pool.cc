@@ -231,8 +231,8 @@ double JobLimitMs(const nlohmann::json& config, int64_t server_ms) {
 Status DeadlineStatus(const Status& run, double limit_ms, double seconds) {
   char text[160];
   std::snprintf(text, sizeof text,
-                "the job reached its time limit of %g s (after %.1f s) and was stopped", limit_ms / 1e3,
-                seconds);
+                "the job reached its time limit of %g s (after %.1f s) and was stopped",
+                limit_ms / 1e3, seconds);
   std::string message = text;
   if (run.code() == StatusCode::kStopped) message += " (" + run.message() + ")";
   message +=

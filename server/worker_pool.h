@@ -107,8 +107,7 @@ class WorkerPool {
   // The failure of a cancelled job: who cancelled it and why (from the store), and where its
   // computation stopped (`run`, when kStopped).
   Status CancelledStatus(int64_t job_id, const Status& run);
-  void RunJob(const std::string& worker_id, const storage::JobInfo& job,
-              core::StopToken& stop);
+  void RunJob(const std::string& worker_id, const storage::JobInfo& job, core::StopToken& stop);
 
   struct Active {
     std::string worker_id;

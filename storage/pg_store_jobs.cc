@@ -346,8 +346,8 @@ Status PgStore::Cancel(int64_t job_id, const std::string& reason, const std::str
           "error_detail_json = NULL, cancel_requested_at = $2, cancel_reason = $6, "
           "cancel_actor = $7 WHERE id = $1",
           {PgInt(job_id), PgInt(now), PgText(internal::kCancelledCode),
-           PgText(internal::kCancelledReason),
-           PgText(internal::CancelledMessage(actor, reason)), PgText(reason), PgText(actor)});
+           PgText(internal::kCancelledReason), PgText(internal::CancelledMessage(actor, reason)),
+           PgText(reason), PgText(actor)});
     } else {  // running: the first request's words are kept
       s = c->Exec(
           "UPDATE jobs SET cancel_requested_at = COALESCE(cancel_requested_at, $2), "

@@ -79,9 +79,7 @@ Status SqliteStore::RecoverLocked(Db* db, int64_t now, int64_t* recovered) {
       "WHERE status = 'running' AND lease_expires_at <= ?1 AND cancel_requested_at IS NOT NULL",
       &st);
   if (!s.ok()) return s;
-  st.BindInt(1, now)
-      .BindText(2, internal::kCancelledCode)
-      .BindText(3, internal::kCancelledReason);
+  st.BindInt(1, now).BindText(2, internal::kCancelledCode).BindText(3, internal::kCancelledReason);
   s = st.Run();
   if (!s.ok()) return s;
   total += db->Changes();

@@ -160,8 +160,9 @@ std::string CancelHtml(const JobView& view) {
          "/cancel\"><label>Reason <input type=\"text\" name=\"reason\" required maxlength=\"500\" "
          "placeholder=\"why stop this job\"></label> ";
   if (view.token_required) {
-    out += "<label>Token <input type=\"password\" name=\"token\" required "
-           "autocomplete=\"current-password\"></label> ";
+    out +=
+        "<label>Token <input type=\"password\" name=\"token\" required "
+        "autocomplete=\"current-password\"></label> ";
   }
   out += "<button type=\"submit\">Cancel job #" + id + "</button></form></div>";
   return out;

@@ -114,8 +114,7 @@ TEST(StopProcess, AJobPastJobSecondsFailsWithReasonDeadlineAndItsPartialDiagnost
   ASSERT_EQ(job["status"], "failed") << job.dump();
   EXPECT_EQ(job["error"]["reason"], "deadline") << job.dump();
   EXPECT_EQ(job["error"]["code"], "stopped");
-  EXPECT_NE(job["error"]["message"].get<std::string>().find("time limit of 1 s"),
-            std::string::npos)
+  EXPECT_NE(job["error"]["message"].get<std::string>().find("time limit of 1 s"), std::string::npos)
       << job.dump();
   // Partial diagnostics: what the method found before it was stopped.
   ASSERT_TRUE(job["error"]["diagnostics"].is_object()) << job.dump();
@@ -144,8 +143,8 @@ TEST(StopProcess, ConfigJobSecondsMayOnlyLowerTheServersLimit) {
   ASSERT_GT(server.port(), 0) << server.log();
   // Bad values are refused at upload, naming the key (and the server's limit when too large).
   for (const json& bad : {json(0), json(-1), json("x"), json(31), json(1e12)}) {
-    auto res = server.Client().Post("/api/v1/recordings",
-                                    ArrayUpload(7, 10, json{{"job_seconds", bad}}));
+    auto res =
+        server.Client().Post("/api/v1/recordings", ArrayUpload(7, 10, json{{"job_seconds", bad}}));
     ASSERT_TRUE(res);
     EXPECT_EQ(res->status, 400) << bad.dump() << ": " << res->body;
     const json body = json::parse(res->body, nullptr, false);

@@ -321,8 +321,7 @@ TEST_F(WorkerPoolTest, AJobPastItsTimeLimitFailsWithReasonDeadline) {
   EXPECT_EQ(job.status, JobStatus::kFailed);
   EXPECT_EQ(job.error_reason, "deadline");
   EXPECT_EQ(job.error_code, "stopped");
-  EXPECT_NE(job.error_message.find("time limit of 0.2 s"), std::string::npos)
-      << job.error_message;
+  EXPECT_NE(job.error_message.find("time limit of 0.2 s"), std::string::npos) << job.error_message;
   EXPECT_EQ(job.attempts, 1);
   EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
   EXPECT_EQ(Job(id).status, JobStatus::kFailed);

@@ -556,8 +556,9 @@ TEST(JobPage, RunningAndQueuedJobsOfferACancelFormAndTheRunningOneItsElapsedTime
   std::string page = RenderJobPage(v);
   ExpectDocument(page, "page-job");
   EXPECT_TRUE(Has(page, "<span class=\"elapsed\">12.3 s</span>")) << page;
-  EXPECT_TRUE(Has(page, "<form class=\"cancel-job\" method=\"post\" "
-                        "action=\"/api/v1/jobs/41/cancel\">"));
+  EXPECT_TRUE(Has(page,
+                  "<form class=\"cancel-job\" method=\"post\" "
+                  "action=\"/api/v1/jobs/41/cancel\">"));
   EXPECT_TRUE(Has(page, "name=\"reason\" required"));
   EXPECT_FALSE(Has(page, "name=\"token\""));  // the server has no token
   v.token_required = true;
