@@ -77,6 +77,17 @@ void Service::Impl::HandleCancel(const httplib::Request& req, httplib::Response&
   const bool form = IsFormMedia(req);
   std::string text;
   if (form) {
+    // A form is a "simple" cross-site request (no CORS preflight): refuse one that a page of
+    // another origin made the browser send (browsers send Origin with every form POST).
+    const std::string origin = req.get_header_value("Origin");
+    if (!origin.empty() && origin != "http://" + req.get_header_value("Host") &&
+        origin != "https://" + req.get_header_value("Host")) {
+      res.set_header("Connection", "close");
+      SendError(res, 403, "forbidden",
+                "a cancel form must be posted from this server's own job page (Origin " +
+                    SanitizeForLog(origin.substr(0, 100)) + ")");
+      return;
+    }
     httplib::Params params;
     httplib::detail::parse_query_text(req.body, params);
     for (const auto& [key, value] : params) {

@@ -303,6 +303,7 @@ json Build() {
         {"303", {{"description", "form post: see the job page (Location)"}}},
         {"400", ErrorResponse("reason missing, empty or too long; body not JSON")},
         {"401", ErrorResponse("missing or wrong token")},
+        {"403", ErrorResponse("a form posted from another origin")},
         {"404", ErrorResponse("no such job")},
         {"409", ErrorResponse("the job already finished (the message names its status)")},
         {"415", ErrorResponse("neither application/json nor a form")}}}};

@@ -302,6 +302,13 @@ TEST(StopProcess, WithATokenCancelNeedsItInTheHeaderOrTheJobPagesForm) {
   auto client = server.Client();
   EXPECT_EQ(GetJob(client, queued)["status"], "queued");
 
+  // A form another site's page made the browser post is refused, token or not.
+  res = PostCancel(server, queued, "reason=x&token=" + token, "application/x-www-form-urlencoded",
+                   {{"Origin", "http://evil.example"}});
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 403) << res->body;
+  EXPECT_EQ(GetJob(client, queued)["status"], "queued");
+
   // The form with the token: 303 back to the job page; the header works too.
   res = PostCancel(server, queued, "reason=not+needed&token=" + token,
                    "application/x-www-form-urlencoded");
