@@ -335,7 +335,17 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
     }
   }
   // Stopped (or past its time limit) while it ran: the reason decides what becomes of the job.
-  switch (stop.reason()) {
+  const core::StopReason why = stop.reason();
+  if ((why == core::StopReason::kDeadline || why == core::StopReason::kCancelled) && s.ok() &&
+      result.is_object() && !result.empty()) {
+    // A method that ended its stopped solver as if finished: what it computed is kept as the
+    // partial diagnostics (never as parameters: a stopped computation is no calibration).
+    result["usable"] = false;
+    result.erase("parameters");
+    result.erase("uncertainty");
+    result.erase("verdict");
+  }
+  switch (why) {
     case core::StopReason::kNone:
       break;
     case core::StopReason::kDeadline:
