@@ -166,6 +166,8 @@ void WorkerPool::RenewLoop() {
     const auto active = active_;
     lock.unlock();
     for (const auto& [job_id, job] : active) {
+      // Lost already: said once, not again every renewal while the computation winds down.
+      if (job.stop->reason() == core::StopReason::kLeaseLost) continue;
       Status s = store_->RenewLease(job_id, job.worker_id, options_.lease_ms);
       if (!s.ok()) {
         std::cerr << "calibd: " << job.worker_id << ": lease of job " << job_id
