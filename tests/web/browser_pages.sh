@@ -133,7 +133,7 @@ render device-drift /devices/IMU-DRIFT
 python3 - "$tmp/array/config.json" "$tmp/endless.json" <<'PY'
 import json, sys
 c = json.load(open(sys.argv[1]))
-c.update({"solver": "bcd", "max_iterations": 100000000, "tolerance": 0})
+c.update({"solver": "bcd", "max_iterations": 1000000, "tolerance": 0})
 json.dump(c, open(sys.argv[2], "w"))
 PY
 j10=$(curl -sf -F "recording=@$tmp/array/recording.csv" -F "config=@$tmp/endless.json" \
