@@ -131,8 +131,8 @@ TEST_F(PgServe, ACancelThroughOneHostStopsTheJobOnAnotherWithinASecond) {
   ASSERT_EQ(res->status, 201) << res->body;
   const int64_t id = json::parse(res->body)["job"]["id"];
   const std::string path = "/api/v1/jobs/" + std::to_string(id);
-  json job;
-  for (int i = 0; i < 3000 && job.value("status", "") != "running"; ++i) {
+  json job = json::object();
+  for (int i = 0; i < 3000 && !(job.is_object() && job.value("status", "") == "running"); ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
     job = testing::GetJob(client, id);
   }
