@@ -12,10 +12,13 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <thread>
+#include <tuple>
+#include <utility>
 
 #include "server/array_method.h"
 #include "storage/store.h"
@@ -134,6 +137,49 @@ TEST(StopProcess, AJobPastJobSecondsFailsWithReasonDeadlineAndItsPartialDiagnost
   ASSERT_TRUE(metrics);
   EXPECT_NE(metrics->body.find("reason=\"deadline\""), std::string::npos) << metrics->body;
   server.Signal(SIGTERM);
+}
+
+// `calibd calibrate --job-seconds`: exit 4 and a message saying the limit was reached; the
+// config's job_seconds lowers it; a bad value is bad input (exit 2).
+TEST(StopProcess, CalibrateStopsAtItsTimeLimitWithExitCodeFour) {
+  testing::TempDir dir;
+  const auto items = ArrayUpload(13, kEndless);
+  const std::string csv = (dir.path() / "r.csv").string(), cfg = (dir.path() / "c.json").string();
+  std::ofstream(csv) << items[0].content;
+  std::ofstream(cfg) << items[1].content;
+  auto run = [&](const std::string& args, std::string* err) {
+    const std::string err_file = (dir.path() / "err.txt").string();
+    const std::string cmd = std::string(CALIBD_BINARY) + " calibrate " + csv + " --config " + cfg +
+                            " " + args + " >/dev/null 2>" + err_file;
+    const auto start = Clock::now();
+    const int status = std::system(cmd.c_str());
+    const double seconds = SecondsSince(start);
+    std::ifstream in(err_file);
+    err->assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    EXPECT_TRUE(WIFEXITED(status));
+    return std::make_pair(WEXITSTATUS(status), seconds);
+  };
+  std::string err;
+  auto [code, seconds] = run("--job-seconds 0.5", &err);
+  EXPECT_EQ(code, 4) << err;
+  EXPECT_LT(seconds, 0.5 + 2.0) << err;
+  EXPECT_NE(err.find("the time limit of 0.5 s (--job-seconds) was reached"), std::string::npos)
+      << err;
+  EXPECT_NE(err.find("reason: deadline"), std::string::npos) << err;
+  std::tie(code, seconds) = run("--job-seconds -1", &err);
+  EXPECT_EQ(code, 2) << err;  // CLI11 refuses it (exit 2 as for any bad option)
+  // The config's job_seconds, lower than the flag.
+  json config = json::parse(items[1].content);
+  config["job_seconds"] = 0.3;
+  std::ofstream(cfg) << config.dump();
+  std::tie(code, seconds) = run("--job-seconds 60", &err);
+  EXPECT_EQ(code, 4) << err;
+  EXPECT_NE(err.find("the time limit of 0.3 s (config job_seconds)"), std::string::npos) << err;
+  config["job_seconds"] = "x";
+  std::ofstream(cfg) << config.dump();
+  std::tie(code, seconds) = run("", &err);
+  EXPECT_EQ(code, 2) << err;
+  EXPECT_NE(err.find("job_seconds"), std::string::npos) << err;
 }
 
 TEST(StopProcess, ConfigJobSecondsMayOnlyLowerTheServersLimit) {
