@@ -48,6 +48,11 @@ json JobJson(const storage::JobInfo& job, bool with_result) {
   j["verdict"] = NullIfEmpty(Name(job.verdict));
   j["revoked"] = job.decision == Decision::kRevoked;
   j["state"] = NullIfEmpty(Name(job.state));
+  // A cancel request (POST /jobs/{id}/cancel): a running job with one is being stopped.
+  j["cancel"] = job.cancel_requested_at_ms == 0 ? json()
+                                                : json{{"at", job.cancel_requested_at},
+                                                       {"reason", job.cancel_reason},
+                                                       {"actor", job.cancel_actor}};
   return j;
 }
 

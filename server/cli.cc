@@ -1,6 +1,7 @@
 #include "server/cli.h"
 
 #include <CLI/CLI.hpp>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -8,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "core/stop_token.h"
 #include "server/acceptance.h"
 #include "server/config.h"
 #include "server/failure_reasons.h"
@@ -29,6 +31,8 @@ int ExitCodeFor(const Status& s) {
       return kExitBadInput;
     case StatusCode::kNotDeterminable:
       return kExitNotDeterminable;
+    case StatusCode::kStopped:
+      return kExitTimeLimit;
     default:
       return kExitFailure;
   }
@@ -91,7 +95,8 @@ Status InlineCalibrationFile(const std::string& config_path, json* config) {
 }
 
 int Calibrate(const std::string& recording_path, const std::string& config_path, bool compact,
-              const std::string& acceptance_path) {
+              const std::string& acceptance_path, double job_seconds) {
+  const auto start = std::chrono::steady_clock::now();
   json acceptance;
   if (!acceptance_path.empty()) {
     Status s = LoadAcceptanceFile(acceptance_path, &acceptance);
@@ -110,6 +115,25 @@ int Calibrate(const std::string& recording_path, const std::string& config_path,
   CommonConfig common;
   s = ValidateConfig(config, &common);
   if (!s.ok()) return Report(s.WithFile(config_path));
+  // The time limit from the start: --job-seconds, or the config's job_seconds when lower.
+  double limit = job_seconds;
+  if (common.job_seconds > 0 && (limit <= 0 || common.job_seconds < limit)) {
+    limit = common.job_seconds;
+  }
+  core::StopToken stop;
+  if (limit > 0) {
+    stop.SetDeadline(start + std::chrono::microseconds(static_cast<int64_t>(limit * 1e6)));
+  }
+  auto time_limit_reached = [&](const Status& run) {
+    char text[160];
+    std::snprintf(text, sizeof text, "the time limit of %g s (%s) was reached after %.1f s", limit,
+                  limit == job_seconds ? "--job-seconds" : "config job_seconds",
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    std::string message = text;
+    if (run.code() == StatusCode::kStopped) message += " (" + run.message() + ")";
+    return ReportFailure(Status(StatusCode::kStopped, message + "; the calibration was stopped")
+                             .WithReason(Reason::kDeadline));
+  };
   RecordingParser parser(recording_path, /*collect=*/true);
   PrepareParser(config, &parser);
   s = ParseRecordingFile(recording_path, &parser);
@@ -118,8 +142,10 @@ int Calibrate(const std::string& recording_path, const std::string& config_path,
                              ? s.WithReason(Reason::kRecordingUnreadable)
                              : s);
   }
+  if (stop.stop_requested()) return time_limit_reached(Status::Ok());
   json result;
-  s = CalibrateParsed(&parser, recording_path, config, &result, nullptr, acceptance);
+  s = CalibrateParsed(&parser, recording_path, config, &result, &stop, acceptance);
+  if (stop.stop_requested()) return time_limit_reached(s);
   if (!s.ok()) return ReportFailure(s);
   std::cout << (compact ? result.dump() : result.dump(2)) << "\n";
   // The verdict for people too (the exit code stays 0: a result was computed; a rejected one is
@@ -236,6 +262,13 @@ int RunCli(int argc, char** argv) {
                    "are released")
       ->check(CLI::Range(0, 3600))
       ->capture_default_str();
+  serve_cmd
+      ->add_option("--job-seconds", serve.job_seconds,
+                   "time limit of every job; a job past it fails with reason deadline (0: "
+                   "0.5 s per MiB of the per-job memory budget, at least 60 s; a config's "
+                   "job_seconds may lower it)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 31))
+      ->capture_default_str();
   serve_cmd->add_flag("!--no-access-log", serve.access_log, "do not log requests to stderr");
 
   // calibrate
@@ -248,10 +281,17 @@ int RunCli(int argc, char** argv) {
   calibrate_cmd->add_flag("--compact", compact, "print the JSON on one line");
   calibrate_cmd->add_option("--acceptance", acceptance_path,
                             "JSON file of acceptance limits per method, as for serve");
+  double calibrate_seconds = 0;
+  calibrate_cmd
+      ->add_option("--job-seconds", calibrate_seconds,
+                   "stop the calibration after this many seconds (exit 4; 0: no limit; the "
+                   "config's job_seconds may lower it)")
+      ->check(CLI::Range(0.0, 1e9));
   calibrate_cmd->footer(
       "Exit codes: 0 a result was computed (its \"verdict\" says whether the acceptance gate "
       "accepts it; also printed on stderr), 2 bad input (file, line, column on stderr), 3 the "
-      "data cannot determine the parameters (the message says what to record instead).");
+      "data cannot determine the parameters (the message says what to record instead), 4 the "
+      "time limit (--job-seconds or the config's job_seconds) was reached.");
 
   // simulate
   CLI::App* simulate_cmd =
@@ -277,7 +317,9 @@ int RunCli(int argc, char** argv) {
   }
 
   if (*serve_cmd) return RunServe(serve);
-  if (*calibrate_cmd) return Calibrate(recording_path, config_path, compact, acceptance_path);
+  if (*calibrate_cmd) {
+    return Calibrate(recording_path, config_path, compact, acceptance_path, calibrate_seconds);
+  }
   for (const auto& [command, simulate] : simulations) {
     if (!*command) continue;
     SimulatedFiles files;

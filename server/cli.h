@@ -9,6 +9,7 @@ inline constexpr int kExitOk = 0;
 inline constexpr int kExitFailure = 1;          // environment or internal error
 inline constexpr int kExitBadInput = 2;         // bad input: file, line, column on stderr
 inline constexpr int kExitNotDeterminable = 3;  // the data cannot determine the parameters
+inline constexpr int kExitTimeLimit = 4;        // the time limit (--job-seconds) was reached
 
 // Runs `calibd` with the process's arguments; returns the exit code.
 int RunCli(int argc, char** argv);

@@ -1,6 +1,7 @@
 #include "server/config.h"
 
 #include <cctype>
+#include <cstdio>
 
 #include "server/inertial_log.h"
 #include "server/method.h"
@@ -134,6 +135,17 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
     }
     common->device = serial;
   }
+  common->job_seconds = 0;
+  if (auto limit = config.find("job_seconds"); limit != config.end()) {
+    if (!limit->is_number() || !(limit->get<double>() > 0) || limit->get<double>() > 1e9) {
+      return Status::InvalidInput(
+                 "'job_seconds' must be a number of seconds > 0 (the job's time limit, at most "
+                 "the server's --job-seconds), not " +
+                 limit->dump().substr(0, 60))
+          .WithField("job_seconds");
+    }
+    common->job_seconds = limit->get<double>();
+  }
   if (auto acceptance = config.find("acceptance"); acceptance != config.end()) {
     Status s =
         ValidateAcceptance(*acceptance, common->method, "config key 'acceptance'", "acceptance");
@@ -158,13 +170,27 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
 }
 
 json WithoutAcceptance(const json& config) {
-  if (!config.is_object() || (!config.contains("acceptance") && !config.contains("time_unit"))) {
+  if (!config.is_object() || (!config.contains("acceptance") && !config.contains("time_unit") &&
+                              !config.contains("job_seconds"))) {
     return config;
   }
   json out = config;
   out.erase("acceptance");
   out.erase("time_unit");
+  out.erase("job_seconds");
   return out;
+}
+
+Status CheckJobSeconds(const CommonConfig& common, double max_seconds) {
+  if (common.job_seconds <= 0 || max_seconds <= 0 || common.job_seconds <= max_seconds) {
+    return Status::Ok();
+  }
+  char text[96];
+  std::snprintf(text, sizeof text, "%g s; this server allows at most %g s (--job-seconds)",
+                common.job_seconds, max_seconds);
+  return Status::InvalidInput(std::string("'job_seconds' asks for ") + text +
+                              ": ask for less, or run it on a server with a larger limit")
+      .WithField("job_seconds");
 }
 
 void JudgeResult(const Method& method, const json& config, const json& acceptance_defaults,

@@ -35,6 +35,10 @@ Status ConfigFromQuery(const std::multimap<std::string, std::string>& params,
 struct CommonConfig {
   std::string method;  // "pca" | "array"
   std::string device;  // serial number; empty when not given
+  // The config's own time limit (`job_seconds`, > 0); 0 when not given: the server's
+  // --job-seconds (or the CLI's) applies. It may only lower the server's limit
+  // (CheckJobSeconds).
+  double job_seconds = 0;
 };
 
 // Checks the whole config: an object, `method` known, `device` a non-empty string of at most
@@ -44,9 +48,14 @@ struct CommonConfig {
 // Errors name the key (Status::field(), "acceptance.<limit>" for a limit).
 Status ValidateConfig(const nlohmann::json& config, CommonConfig* common);
 
-// The config without the keys the server handles for every method, `acceptance` and `time_unit`
-// (the parser applies it): what a Method's ValidateConfig, Run and Judge see.
+// The config without the keys the server handles for every method, `acceptance`, `job_seconds`
+// and `time_unit` (the parser applies it): what a Method's ValidateConfig, Run and Judge see.
 nlohmann::json WithoutAcceptance(const nlohmann::json& config);
+
+// OK when the config's job_seconds (common.job_seconds, 0: none) does not ask for more than the
+// server's limit `max_seconds` (<= 0: no limit); else kInvalidInput with field "job_seconds"
+// naming the server's limit.
+Status CheckJobSeconds(const CommonConfig& common, double max_seconds);
 
 class Method;
 // Judges a result `method` computed with `config` and writes (*result)["verdict"] (SPEC §4):

@@ -1,5 +1,7 @@
 // The HTML pages of SPEC §5: the server fills web/ view structs from storage and serves the
 // rendered documents. No JavaScript; every user string is escaped by web/.
+#include <algorithm>
+#include <chrono>
 #include <nlohmann/json.hpp>
 
 #include "server/config.h"
@@ -88,7 +90,7 @@ bool ParsePositive(const std::string& text, int64_t* out) {
 
 }  // namespace
 
-void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
+void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store, bool token_required) {
   http->Get("/", [store](const httplib::Request& req, httplib::Response& res) {
     web::HistoryView view;
     storage::JobFilter filter;
@@ -124,27 +126,36 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store) {
     SendPage(res, 200, web::RenderHistoryPage(view));
   });
 
-  http->Get(R"(/jobs/([^/]+))", [store](const httplib::Request& req, httplib::Response& res) {
-    int64_t id = 0;
-    if (!ParsePositive(req.matches[1], &id)) {
-      return SendPage(res, 404, web::RenderErrorPage(404, "no such job"));
-    }
-    storage::JobInfo job;
-    Status s = store->GetJob(id, &job);
-    if (!s.ok()) return SendErrorPage(res, s);
-    web::JobView view;
-    view.job = SummarizeWithEvents(store, job, true);
-    view.recording_id = job.recording_id;
-    storage::RecordingInfo rec;
-    if (store->GetRecording(job.recording_id, &rec).ok()) {
-      view.recording_sha256 = rec.sha256;
-      view.recording_bytes = rec.bytes;
-      view.recording_rows = rec.rows;
-    }
-    json config;
-    if (ParseJsonText(job.config_json, "config", &config).ok()) view.config = std::move(config);
-    SendPage(res, 200, web::RenderJobPage(view));
-  });
+  http->Get(R"(/jobs/([^/]+))",
+            [store, token_required](const httplib::Request& req, httplib::Response& res) {
+              int64_t id = 0;
+              if (!ParsePositive(req.matches[1], &id)) {
+                return SendPage(res, 404, web::RenderErrorPage(404, "no such job"));
+              }
+              storage::JobInfo job;
+              Status s = store->GetJob(id, &job);
+              if (!s.ok()) return SendErrorPage(res, s);
+              web::JobView view;
+              view.job = SummarizeWithEvents(store, job, true);
+              view.recording_id = job.recording_id;
+              view.token_required = token_required;
+              if (job.status == JobStatus::kRunning && job.started_at_ms > 0) {
+                const int64_t now = std::chrono::duration_cast<std::chrono::milliseconds>(
+                                        std::chrono::system_clock::now().time_since_epoch())
+                                        .count();
+                view.elapsed_ms = std::max<int64_t>(0, now - job.started_at_ms);
+              }
+              storage::RecordingInfo rec;
+              if (store->GetRecording(job.recording_id, &rec).ok()) {
+                view.recording_sha256 = rec.sha256;
+                view.recording_bytes = rec.bytes;
+                view.recording_rows = rec.rows;
+              }
+              json config;
+              if (ParseJsonText(job.config_json, "config", &config).ok())
+                view.config = std::move(config);
+              SendPage(res, 200, web::RenderJobPage(view));
+            });
 
   http->Get("/devices", [store](const httplib::Request&, httplib::Response& res) {
     std::vector<storage::DeviceInfo> devices;

@@ -136,6 +136,7 @@ std::string RouteLabel(const std::string& path) {
       {std::regex(R"(/api/v1/jobs/[^/]+)"), "/api/v1/jobs/{id}"},
       {std::regex(R"(/api/v1/jobs/[^/]+/revoke)"), "/api/v1/jobs/{id}/revoke"},
       {std::regex(R"(/api/v1/jobs/[^/]+/accept)"), "/api/v1/jobs/{id}/accept"},
+      {std::regex(R"(/api/v1/jobs/[^/]+/cancel)"), "/api/v1/jobs/{id}/cancel"},
       {std::regex(R"(/api/v1/devices)"), "/api/v1/devices"},
       {std::regex(R"(/api/v1/devices/[^/]+/calibration)"), "/api/v1/devices/{serial}/calibration"},
       {std::regex(R"((/api/v1)?/healthz)"), "/healthz"},
@@ -157,7 +158,10 @@ std::string AllowedMethods(const std::string& path) {
   const std::string route = RouteLabel(path);
   if (route == "/api/v1/recordings") return "POST";
   if (route == "/api/v1/jobs") return "GET, POST";
-  if (route == "/api/v1/jobs/{id}/revoke" || route == "/api/v1/jobs/{id}/accept") return "POST";
+  if (route == "/api/v1/jobs/{id}/revoke" || route == "/api/v1/jobs/{id}/accept" ||
+      route == "/api/v1/jobs/{id}/cancel") {
+    return "POST";
+  }
   if (route == "other") return "";
   return "GET";
 }

@@ -50,8 +50,9 @@ bool IfNoneMatchHits(const std::string& header, const std::string& etag);
 std::string AllowedMethods(const std::string& path);
 // The OpenAPI 3 description of the HTTP API.
 const nlohmann::json& OpenApiDocument();
-// The HTML pages (SPEC §5): /, /jobs/{id}, /devices/{serial}.
-void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store);
+// The HTML pages (SPEC §5): /, /jobs/{id}, /devices/{serial}. `token_required`: writes need the
+// server's token (the job page's cancel form asks for it).
+void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store, bool token_required);
 
 }  // namespace calibd::server
 

@@ -53,4 +53,9 @@ int64_t DefaultJobMemoryBytes(int workers) {
   return static_cast<int64_t>(std::clamp(share, 256.0 * (1 << 20), 8.0 * (1 << 30)));
 }
 
+int64_t DefaultJobSeconds(int64_t job_memory_bytes) {
+  const double mib = static_cast<double>(std::max<int64_t>(job_memory_bytes, 0)) / (1 << 20);
+  return std::max(kMinJobSeconds, static_cast<int64_t>(std::ceil(mib * kJobSecondsPerMiB)));
+}
+
 }  // namespace calibd::server

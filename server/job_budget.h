@@ -39,6 +39,14 @@ Status CheckJobBudget(const Method& method, const RecordingShape& shape,
 // among the workers, at least 256 MiB and at most 8 GiB each.
 int64_t DefaultJobMemoryBytes(int workers);
 
+// The time limit per job (`serve --job-seconds`) when none is given, proportional to the memory
+// budget (a job's input, and so its work, is bounded by the budget): kJobSecondsPerMiB seconds
+// per MiB of `job_memory_bytes`, at least kMinJobSeconds. A config's `job_seconds` may only
+// lower it.
+inline constexpr double kJobSecondsPerMiB = 0.5;
+inline constexpr int64_t kMinJobSeconds = 60;
+int64_t DefaultJobSeconds(int64_t job_memory_bytes);
+
 }  // namespace calibd::server
 
 #endif  // CALIBD_SERVER_JOB_BUDGET_H_

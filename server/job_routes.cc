@@ -25,7 +25,146 @@ bool PathRecording(storage::Store* store, const httplib::Request& req, httplib::
   return s.ok();
 }
 
+// The person's reason of a decision or cancel, trimmed: kInvalidInput (field "reason") when
+// empty (`missing` says what it is for), over 500 bytes, or with control characters.
+Status CheckReason(const std::string& missing, std::string* text) {
+  constexpr size_t kMaxReason = 500;
+  while (!text->empty() && isspace(static_cast<unsigned char>(text->back()))) text->pop_back();
+  size_t first = 0;
+  while (first < text->size() && isspace(static_cast<unsigned char>((*text)[first]))) ++first;
+  text->erase(0, first);
+  if (text->empty()) return Status::InvalidInput(missing).WithField("reason");
+  if (text->size() > kMaxReason) {
+    return Status::InvalidInput("'reason' has " + std::to_string(text->size()) +
+                                " bytes; at most " + std::to_string(kMaxReason))
+        .WithField("reason");
+  }
+  for (unsigned char ch : *text) {
+    if (ch < 0x20 && ch != '\t') {
+      return Status::InvalidInput("'reason' may not contain control characters")
+          .WithField("reason");
+    }
+  }
+  return Status::Ok();
+}
+
+bool IsCancelPath(const std::string& path) {
+  static const std::string kPrefix = "/api/v1/jobs/", kSuffix = "/cancel";
+  if (path.size() <= kPrefix.size() + kSuffix.size()) return false;
+  if (path.compare(0, kPrefix.size(), kPrefix) != 0) return false;
+  if (path.compare(path.size() - kSuffix.size(), kSuffix.size(), kSuffix) != 0) return false;
+  const std::string id = path.substr(kPrefix.size(), path.size() - kPrefix.size() - kSuffix.size());
+  return id.find('/') == std::string::npos;
+}
+
+bool IsFormMedia(const httplib::Request& req) {
+  return ToLower(req.get_header_value("Content-Type"))
+             .rfind("application/x-www-form-urlencoded", 0) == 0;
+}
+
 }  // namespace
+
+bool Service::Impl::IsCancelForm(const httplib::Request& req) {
+  return req.method == "POST" && IsCancelPath(req.path) && IsFormMedia(req);
+}
+
+// POST /api/v1/jobs/{id}/cancel: {"reason": "..."} as JSON (the token, if any, in the
+// Authorization header: the request filter checked it), or the job page's HTML form (reason, and
+// token when the server has one; answered with 303 back to the job page). A queued job fails at
+// once (200); a running one is asked to stop (202): at once in this process, within the worker
+// pools' cancel poll (250 ms) in another process on the same database. 409 for a finished job.
+void Service::Impl::HandleCancel(const httplib::Request& req, httplib::Response& res) {
+  int64_t id = 0;
+  if (!PathId(req, res, "job", &id)) return;
+  const bool form = IsFormMedia(req);
+  std::string text;
+  if (form) {
+    // A form is a "simple" cross-site request (no CORS preflight): refuse one that a page of
+    // another origin made the browser send (browsers send Origin with every form POST).
+    const std::string origin = req.get_header_value("Origin");
+    if (!origin.empty() && origin != "http://" + req.get_header_value("Host") &&
+        origin != "https://" + req.get_header_value("Host")) {
+      res.set_header("Connection", "close");
+      SendError(res, 403, "forbidden",
+                "a cancel form must be posted from this server's own job page (Origin " +
+                    SanitizeForLog(origin.substr(0, 100)) + ")");
+      return;
+    }
+    httplib::Params params;
+    httplib::detail::parse_query_text(req.body, params);
+    for (const auto& [key, value] : params) {
+      if (key != "reason" && key != "token") {
+        return (void)SendStatus(res,
+                                Status::InvalidInput("unknown form field '" + key.substr(0, 64) +
+                                                     "' (expected reason, token)")
+                                    .WithField(key.substr(0, 64)));
+      }
+    }
+    // A form without the Authorization header: its token field must be the server's.
+    if (!Authorized(req)) {
+      auto given = params.find("token");
+      if (given == params.end() || !TokenMatches(given->second)) {
+        res.set_header("Connection", "close");
+        SendError(res, 401, "unauthorized",
+                  "the token is missing or wrong: give the server's token in the form's token "
+                  "field (or the header 'Authorization: Bearer TOKEN')");
+        return;
+      }
+    }
+    auto reason = params.find("reason");
+    if (reason != params.end()) text = reason->second;
+  } else {
+    const std::string media = ToLower(req.get_header_value("Content-Type"));
+    if (media.rfind("application/json", 0) != 0) {
+      SendError(res, 415, "unsupported_media_type",
+                "send {\"reason\": \"...\"} as application/json (or the job page's form as "
+                "application/x-www-form-urlencoded)");
+      return;
+    }
+    json body;
+    Status s = ParseJsonText(req.body, "request body", &body);
+    if (!s.ok()) return (void)SendStatus(res, s);
+    if (!body.is_object()) {
+      SendError(res, 400, "invalid_input", "the body must be a JSON object {\"reason\": \"...\"}");
+      return;
+    }
+    for (auto& [key, value] : body.items()) {
+      if (key != "reason") {
+        return (void)SendStatus(
+            res, Status::InvalidInput("unknown key '" + key.substr(0, 64) + "' (expected reason)")
+                     .WithField(key.substr(0, 64)));
+      }
+    }
+    auto reason = body.find("reason");
+    if (reason != body.end() && !reason->is_string()) {
+      return (void)SendStatus(
+          res, Status::InvalidInput("'reason' must be a string: say why the job is cancelled")
+                   .WithField("reason"));
+    }
+    if (reason != body.end()) text = reason->get<std::string>();
+  }
+  Status s = CheckReason("'reason' is required: say why the job is cancelled", &text);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  const std::string actor = token.empty() ? "anonymous" : "token";
+  storage::JobInfo job;
+  storage::JobEvent event;
+  s = store->CancelJob(id, text, actor, &job, &event);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  const bool stopping = job.status == JobStatus::kRunning;
+  if (stopping) workers->Cancel(id);  // this process computes it: stop now
+  std::cerr << "calibd: job " << id << " cancelled by " << actor << " ("
+            << (stopping ? "running: stopping it" : "it was queued") << ")\n";
+  if (form) {
+    res.status = 303;
+    res.set_header("Location", "/jobs/" + std::to_string(id));
+    res.set_content("cancelled; see /jobs/" + std::to_string(id), "text/plain");
+    return;
+  }
+  json out = JobJson(job, false);
+  out["event"] = EventJson(event);
+  res.status = stopping ? 202 : 200;
+  res.set_content(JsonBody(json{{"job", out}}), "application/json");
+}
 
 void Service::Impl::HandleGetJob(const httplib::Request& req, httplib::Response& res) {
   int64_t id = 0;
@@ -46,7 +185,6 @@ void Service::Impl::HandleGetJob(const httplib::Request& req, httplib::Response&
 // (Store::RevokeJob / AcceptJob). The token check ran in the request filter (a write).
 void Service::Impl::HandleDecision(const httplib::Request& req, httplib::Response& res,
                                    bool revoke) {
-  constexpr size_t kMaxReason = 500;
   int64_t id = 0;
   if (!PathId(req, res, "job", &id)) return;
   const std::string media = ToLower(req.get_header_value("Content-Type"));
@@ -78,27 +216,10 @@ void Service::Impl::HandleDecision(const httplib::Request& req, httplib::Respons
   auto reason = body.find("reason");
   std::string text;
   if (reason != body.end() && reason->is_string()) text = reason->get<std::string>();
-  while (!text.empty() && isspace(static_cast<unsigned char>(text.back()))) text.pop_back();
-  while (!text.empty() && isspace(static_cast<unsigned char>(text.front()))) text.erase(0, 1);
-  if (text.empty()) {
-    return (void)SendStatus(res, Status::InvalidInput(std::string("'reason' is required: say why "
-                                                                  "the result is ") +
-                                                      (revoke ? "revoked" : "accepted"))
-                                     .WithField("reason"));
-  }
-  if (text.size() > kMaxReason) {
-    return (void)SendStatus(res,
-                            Status::InvalidInput("'reason' has " + std::to_string(text.size()) +
-                                                 " bytes; at most " + std::to_string(kMaxReason))
-                                .WithField("reason"));
-  }
-  for (unsigned char ch : text) {
-    if (ch < 0x20 && ch != '\t') {
-      return (void)SendStatus(
-          res,
-          Status::InvalidInput("'reason' may not contain control characters").WithField("reason"));
-    }
-  }
+  s = CheckReason(std::string("'reason' is required: say why the result is ") +
+                      (revoke ? "revoked" : "accepted"),
+                  &text);
+  if (!s.ok()) return (void)SendStatus(res, s);
   const std::string actor = token.empty() ? "anonymous" : "token";
   storage::JobEvent event;
   s = revoke ? store->RevokeJob(id, text, actor, &event)

@@ -138,13 +138,20 @@ json Build() {
           {"enum", {"accepted", "rejected", "revoked"}},
           {"nullable", true},
           {"description", "after people's decisions; only accepted results are served"}}},
+        {"cancel",
+         {{"type", "object"},
+          {"nullable", true},
+          {"description",
+           "a cancel request (POST /jobs/{id}/cancel): at, reason, actor; a running job with one "
+           "is being stopped"}}},
         {"events",
          {{"type", "array"},
-          {"description", "GET /jobs/{id} only: revoke/accept decisions, oldest first"},
+          {"description",
+           "GET /jobs/{id} only: revoke/accept decisions and cancel requests, oldest first"},
           {"items",
            {{"type", "object"},
             {"properties",
-             {{"action", {{"type", "string"}, {"enum", {"revoke", "accept"}}}},
+             {{"action", {{"type", "string"}, {"enum", {"revoke", "accept", "cancel"}}}},
               {"reason", {{"type", "string"}}},
               {"actor", {{"type", "string"}, {"description", "token | anonymous"}}},
               {"at", {{"type", "string"}, {"format", "date-time"}}}}}}}}},
@@ -283,6 +290,27 @@ json Build() {
                                        : "the job has no result, or it is already accepted")},
           {"415", ErrorResponse("not application/json")}}}};
   }
+  paths["/jobs/{id}/cancel"]["post"] = {
+      {"summary",
+       "Cancel a job: a queued one fails at once (200), a running one is stopped within a "
+       "second on whichever host computes it (202) and fails with reason cancelled, keeping its "
+       "partial diagnostics. The job page's form may post reason (and token) as "
+       "application/x-www-form-urlencoded instead: answered with 303 to the job page."},
+      {"security", json::array({{{"bearer", json::array()}}})},
+      {"parameters", json::array({PathParam("id", "integer", "job id")})},
+      {"requestBody", decision_body},
+      {"responses",
+       {{"200", JsonResponse("the queued job, now failed, with the recorded event",
+                             {{"type", "object"}, {"properties", {{"job", Ref("Job")}}}})},
+        {"202", JsonResponse("the running job, being stopped, with the recorded event",
+                             {{"type", "object"}, {"properties", {{"job", Ref("Job")}}}})},
+        {"303", {{"description", "form post: see the job page (Location)"}}},
+        {"400", ErrorResponse("reason missing, empty or too long; body not JSON")},
+        {"401", ErrorResponse("missing or wrong token")},
+        {"403", ErrorResponse("a form posted from another origin")},
+        {"404", ErrorResponse("no such job")},
+        {"409", ErrorResponse("the job already finished (the message names its status)")},
+        {"415", ErrorResponse("neither application/json nor a form")}}}};
   paths["/devices"]["get"] = {
       {"summary", "Devices with their latest calibration time per method"},
       {"responses", {{"200", JsonResponse("devices", {{"type", "object"}})}}}};

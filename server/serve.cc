@@ -2,6 +2,7 @@
 
 #include <malloc.h>
 #include <pthread.h>
+#include <unistd.h>
 
 #include <csignal>
 #include <cstdlib>
@@ -44,20 +45,37 @@ int RunServe(const ServeOptions& options) {
             << ":" << service->port() << " (database "
             << storage::RedactConnectionTarget(options.db_path) << ")" << std::endl;
 
-  std::thread watcher([&] {
+  std::thread watcher([&service, &options, signals] {
     int signal_number = 0;
     sigwait(&signals, &signal_number);
     if (signal_number == 0) return;
-    std::cerr << "calibd: " << (signal_number == SIGTERM ? "SIGTERM" : "SIGINT")
-              << ": shutting down (running jobs get " << options.shutdown_grace_seconds << " s)"
-              << std::endl;
+    const char* name = signal_number == SIGTERM ? "SIGTERM" : "SIGINT";
+    std::cerr << "calibd: " << name << ": shutting down (running jobs get "
+              << options.shutdown_grace_seconds << " s, then 1 s to stop; send it again to exit "
+              << "at once)" << std::endl;
+    // A second SIGINT or SIGTERM during the shutdown: exit now. Leases still held lapse, so no
+    // other process computes those jobs before they would have expired anyway.
+    std::thread([signals] {
+      int again = 0;
+      sigwait(&signals, &again);
+      static const char kMessage[] = "calibd: second signal: exiting now\n";
+      [[maybe_unused]] ssize_t n = ::write(STDERR_FILENO, kMessage, sizeof kMessage - 1);
+      std::_Exit(128 + again);
+    }).detach();
     if (!service->Shutdown()) {
-      std::cerr << "calibd: a running job was released; it runs again after the restart"
+      std::cerr << "calibd: running jobs were stopped; those whose computation returned were "
+                   "released and run again after the restart"
                 << std::endl;
     }
   });
   service->Run();
   watcher.join();
+  if (service->abandoned_jobs()) {
+    // A computation still runs on the store: do not wait for it (nor destroy what it uses).
+    std::cerr << "calibd: stopped, leaving a job whose computation did not stop (its lease lapses)"
+              << std::endl;
+    std::_Exit(1);
+  }
   service.reset();
   std::cerr << "calibd: stopped" << std::endl;
   return 0;

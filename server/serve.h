@@ -38,12 +38,19 @@ struct ServeOptions {
   int max_requests_per_client = 64;      // requests in progress per remote address (more wait)
   int64_t lease_ms = 30000;              // job lease; renewed every third of it while a job runs
   int shutdown_grace_seconds = 20;       // on SIGTERM, running jobs may finish within this time
+  // The time limit of every job (a job past it fails with reason deadline); 0 = the default,
+  // DefaultJobSeconds(per-job memory budget) (server/job_budget.h). A config's job_seconds may
+  // only lower it.
+  int64_t job_seconds = 0;
   bool access_log = true;                // one line per request on stderr
   // Returns "" when the options are consistent, else what is wrong (names the flag).
   std::string Validate() const;
 };
 
-// Runs until SIGINT or SIGTERM, then shuts down gracefully. Returns the process exit code.
+// Runs until SIGINT or SIGTERM, then shuts down gracefully: stops accepting, lets running jobs
+// finish within the grace period, stops the rest and releases their leases once their
+// computations have returned (within 1 s more), and exits. A second SIGINT or SIGTERM exits at
+// once (leases still held lapse). Returns the process exit code.
 int RunServe(const ServeOptions& options);
 
 }  // namespace calibd::server

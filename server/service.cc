@@ -95,6 +95,8 @@ std::string ServeOptions::Validate() const {
   if (max_upload_bytes < 1) return "--max-upload-bytes must be >= 1";
   if (!(max_gzip_ratio >= 1)) return "--max-gzip-ratio must be >= 1";
   if (job_memory_bytes < 0) return "--job-memory-bytes must be >= 0 (0: automatic)";
+  if (job_seconds < 0) return "--job-seconds must be >= 0 (0: from the per-job memory budget)";
+  if (shutdown_grace_seconds < 0) return "--grace-seconds must be >= 0";
   if (http_threads < 4) return "--http-threads must be >= 4";
   if (head_timeout_seconds < 1) return "--head-timeout-seconds must be >= 1";
   if (max_connections_per_client < 1) return "--max-connections-per-client must be >= 1";
@@ -162,6 +164,9 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
   impl->job_memory_bytes =
       options.job_memory_bytes > 0 ? options.job_memory_bytes : DefaultJobMemoryBytes(pool.workers);
   pool.job_memory_bytes = impl->job_memory_bytes;
+  impl->job_seconds =
+      options.job_seconds > 0 ? options.job_seconds : DefaultJobSeconds(impl->job_memory_bytes);
+  pool.job_ms = impl->job_seconds * 1000;
   impl->workers = std::make_unique<WorkerPool>(impl->store.get(), &impl->metrics, pool);
   HttpLimits limits;
   limits.threads = options.http_threads;
@@ -225,12 +230,17 @@ bool Service::Shutdown() {
     const auto deadline =
         std::chrono::steady_clock::now() + std::chrono::seconds(d.options.shutdown_grace_seconds);
     d.http->Shutdown(d.options.shutdown_grace_seconds * 1000);
+    StopOutcome outcome = StopOutcome::kFinished;
     if (d.workers) {
       const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
           deadline - std::chrono::steady_clock::now());
-      d.shutdown_clean = d.workers->Stop(std::max(left, std::chrono::milliseconds(0)));
+      outcome = d.workers->Stop(std::max(left, std::chrono::milliseconds(0)));
     }
-    if (d.store) {
+    d.shutdown_clean = outcome == StopOutcome::kFinished;
+    d.abandoned = outcome == StopOutcome::kAbandoned;
+    // An abandoned job's thread still computes and may still touch the store: keep both (the
+    // process exits without destroying them, RunServe).
+    if (d.store && !d.abandoned) {
       d.store->Checkpoint();
       d.workers.reset();
       d.store.reset();
@@ -238,6 +248,8 @@ bool Service::Shutdown() {
   });
   return d.shutdown_clean;
 }
+
+bool Service::abandoned_jobs() const { return impl_->abandoned; }
 
 void Service::Impl::ReapDeadProcesses() {
   instance->ReapDead([this](const std::string& id) {
@@ -251,6 +263,10 @@ void Service::Impl::ReapDeadProcesses() {
     }
     return s;
   });
+}
+
+bool Service::Impl::TokenMatches(const std::string& given) const {
+  return token.empty() || ConstantTimeEquals(given, token);
 }
 
 bool Service::Impl::Authorized(const httplib::Request& req) const {
@@ -326,7 +342,8 @@ void Service::Impl::SetupRoutes() {
                 "Transfer-Encoding");
       return httplib::Server::HandlerResponse::Handled;
     }
-    if (write && !Authorized(req)) {
+    // The job page's cancel form carries its token in the form (HandleCancel checks it).
+    if (write && !Authorized(req) && !IsCancelForm(req)) {
       res.set_header("WWW-Authenticate", "Bearer");
       res.set_header("Connection", "close");
       SendError(res, 401, "unauthorized", "writes need the header 'Authorization: Bearer TOKEN'");
@@ -396,6 +413,9 @@ void Service::Impl::SetupRoutes() {
             [this](const httplib::Request& req, httplib::Response& res) {
               HandleDecision(req, res, /*revoke=*/false);
             });
+  http.Post(
+      R"(/api/v1/jobs/([^/]+)/cancel)",
+      [this](const httplib::Request& req, httplib::Response& res) { HandleCancel(req, res); });
   http.Get("/api/v1/jobs", [this](const httplib::Request& req, httplib::Response& res) {
     HandleListJobs(req, res);
   });
@@ -425,7 +445,7 @@ void Service::Impl::SetupRoutes() {
     res.set_content(JsonBody(OpenApiDocument()), "application/json");
   });
   RegisterRecordingRoutes(&http, store.get());  // /segments and the recording page
-  RegisterHtmlRoutes(&http, store.get());
+  RegisterHtmlRoutes(&http, store.get(), !token.empty());
 
   // Known paths with another method: 405 with Allow; everything else: 404.
   auto not_allowed = [](const httplib::Request& req, httplib::Response& res) {

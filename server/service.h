@@ -27,10 +27,14 @@ class Service {
   // Serves until Shutdown(). Returns after the HTTP server has stopped.
   void Run();
   // Graceful stop; safe from any thread, idempotent. Waits for requests in progress and running
-  // jobs (within the grace period; then jobs are released and cancelled), and closes the
-  // database: afterwards no thread of the service runs. Returns false when some job was
-  // released rather than finished.
+  // jobs (within the grace period; then their computations are stopped and, once returned,
+  // their leases released: WorkerPool::Stop), and closes the database: afterwards no thread of
+  // the service runs. Returns false when some job was stopped rather than finished.
   bool Shutdown();
+  // After Shutdown: true when a job's computation did not return within 1 s of being stopped.
+  // Its thread still runs and uses the store, so the service was not closed: exit the process
+  // without destroying the Service (its lease lapses; nobody computes the job meanwhile).
+  bool abandoned_jobs() const;
 
  private:
   struct Impl;

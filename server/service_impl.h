@@ -55,6 +55,7 @@ struct Service::Impl {
   std::string token;             // empty: no authentication
   nlohmann::json acceptance;     // server-wide acceptance limits (--acceptance), null for none
   int64_t job_memory_bytes = 0;  // the per-job memory budget in force (server/job_budget.h)
+  int64_t job_seconds = 0;       // the time limit per job in force (--job-seconds or its default)
   fs::path staging_dir;
   std::unique_ptr<storage::Store> store;
   std::unique_ptr<ProcessInstance> instance;  // after store: removed before the store closes
@@ -66,17 +67,25 @@ struct Service::Impl {
   std::unique_ptr<HttpServer> http;  // destroyed first: its request threads use the rest
   std::once_flag shutdown_once;
   bool shutdown_clean = true;
+  bool abandoned = false;  // Shutdown left a job whose computation did not stop (Service)
 
   void SetupRoutes();
   // Takes back at once the jobs of calibd processes of this host that died (kill -9, crash)
   // while holding them, instead of waiting for their leases to expire (ProcessInstance).
   void ReapDeadProcesses();
   bool Authorized(const httplib::Request& req) const;
+  // Whether `given` is the server's token (true when it has none); constant time.
+  bool TokenMatches(const std::string& given) const;
   void HandleUpload(const httplib::Request& req, httplib::Response& res,
                     const httplib::ContentReader& reader);
   void HandleCreateJob(const httplib::Request& req, httplib::Response& res);
   void HandleGetJob(const httplib::Request& req, httplib::Response& res);
   void HandleDecision(const httplib::Request& req, httplib::Response& res, bool revoke);
+  // POST /api/v1/jobs/{id}/cancel: JSON {"reason"} or an HTML form (reason, token).
+  void HandleCancel(const httplib::Request& req, httplib::Response& res);
+  // Whether `req` is an HTML form post (application/x-www-form-urlencoded) to the cancel route,
+  // which carries its token in the form (checked by HandleCancel), not in a header.
+  static bool IsCancelForm(const httplib::Request& req);
   void HandleListJobs(const httplib::Request& req, httplib::Response& res);
   void HandleDevices(const httplib::Request& req, httplib::Response& res);
   void HandleLatest(const httplib::Request& req, httplib::Response& res);

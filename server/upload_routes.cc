@@ -321,6 +321,8 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     if (!s.ok()) return finish(SendStatus(res, s));
     s = ValidateConfig(config, &common);
     if (!s.ok()) return finish(SendStatus(res, s));
+    s = CheckJobSeconds(common, static_cast<double>(job_seconds));
+    if (!s.ok()) return finish(SendStatus(res, s));
     const Method& method = *FindMethod(common.method);
     TimeUnit time_unit = TimeUnit::kSeconds;
     bool time_unit_given = false;
@@ -428,6 +430,8 @@ void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Respon
   if (!s.ok()) return (void)SendStatus(res, s);
   CommonConfig common;
   s = ValidateConfig(config, &common);
+  if (!s.ok()) return (void)SendStatus(res, s);
+  s = CheckJobSeconds(common, static_cast<double>(job_seconds));
   if (!s.ok()) return (void)SendStatus(res, s);
   storage::RecordingInfo recording;
   s = store->GetRecording(recording_id, &recording);

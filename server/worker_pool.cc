@@ -1,5 +1,8 @@
 #include "server/worker_pool.h"
 
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <iostream>
 #include <nlohmann/json.hpp>
 
@@ -24,6 +27,10 @@ WorkerPool::~WorkerPool() {
     started = started_ && !stopping_;
   }
   if (started) Stop(std::chrono::milliseconds(0));
+  // Threads of abandoned jobs (StopOutcome::kAbandoned): wait for their computations.
+  for (size_t i = 0; i < threads_.size(); ++i) {
+    if (!joined_[i] && threads_[i].joinable()) threads_[i].join();
+  }
 }
 
 void WorkerPool::Start() {
@@ -31,7 +38,9 @@ void WorkerPool::Start() {
   if (started_) return;
   started_ = true;
   for (int i = 0; i < options_.workers; ++i) threads_.emplace_back([this, i] { WorkerLoop(i); });
+  joined_.assign(threads_.size(), false);
   renewer_ = std::thread([this] { RenewLoop(); });
+  cancel_watcher_ = std::thread([this] { CancelWatchLoop(); });
   // Jobs enqueued by other processes (PostgreSQL NOTIFY) wake every idle worker; the polling
   // stays as the fallback (back-off, lapsed leases, a listener reconnecting).
   listening_ = store_->SetJobListener([this] {
@@ -56,33 +65,56 @@ int WorkerPool::running_jobs() const {
   return static_cast<int>(active_.size());
 }
 
-bool WorkerPool::Stop(std::chrono::milliseconds grace) {
+bool WorkerPool::Cancel(int64_t job_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = active_.find(job_id);
+  if (it == active_.end()) return false;
+  it->second.stop->RequestStop(core::StopReason::kCancelled);
+  return true;
+}
+
+StopOutcome WorkerPool::Stop(std::chrono::milliseconds grace) {
   if (listening_.exchange(false)) store_->SetJobListener(nullptr);  // before mu_: it takes mu_
   std::unique_lock<std::mutex> lock(mu_);
-  if (!started_) return true;
+  if (!started_ || stopping_) return StopOutcome::kFinished;
   stopping_ = true;
   wake_.notify_all();
-  const bool all_done = finished_.wait_for(lock, grace, [this] { return busy_workers_ == 0; });
-  if (!all_done) {
-    // Give the still-running jobs back to the queue and cancel their computation; they run again
-    // after the restart (a late result would be refused anyway: kConflict).
+  StopOutcome outcome = StopOutcome::kFinished;
+  if (!finished_.wait_for(lock, grace, [this] { return busy_workers_ == 0; })) {
+    // Past the grace period: stop the computations, and wait for them to return. Each worker
+    // releases its job itself once its computation has returned (RunJob): the lease is never
+    // given up while this process still computes the job.
+    outcome = StopOutcome::kReleased;
     for (const auto& [job_id, active] : active_) {
       active.stop->RequestStop(core::StopReason::kShutdown);
-      Status s = store_->ReleaseJob(job_id, active.worker_id);
-      std::cerr << "calibd: shutdown: released job " << job_id << " ("
-                << (s.ok() ? "it will run again after restart" : s.ToString()) << ")\n";
+    }
+    if (!finished_.wait_for(lock, std::chrono::milliseconds(options_.stop_wait_ms),
+                            [this] { return busy_workers_ == 0; })) {
+      outcome = StopOutcome::kAbandoned;
+      for (auto& [job_id, active] : active_) {
+        active.abandoned = true;
+        std::cerr << "calibd: shutdown: job " << job_id << " did not stop within "
+                  << options_.stop_wait_ms
+                  << " ms; it keeps its lease, which lapses (nobody computes it meanwhile)\n";
+      }
     }
   }
+  std::vector<int> stuck;
+  for (const auto& [job_id, active] : active_) stuck.push_back(active.index);
   lock.unlock();
-  for (auto& t : threads_) t.join();
-  threads_.clear();
+  for (size_t i = 0; i < threads_.size(); ++i) {
+    if (std::find(stuck.begin(), stuck.end(), static_cast<int>(i)) != stuck.end()) continue;
+    threads_[i].join();
+    joined_[i] = true;
+  }
   {
     std::lock_guard<std::mutex> stop_lock(mu_);
     renewer_stopping_ = true;
   }
-  finished_.notify_all();  // wakes the renewer
+  finished_.notify_all();  // wakes the renewer and the cancel watcher
   renewer_.join();
-  return all_done;
+  cancel_watcher_.join();
+  return outcome;
 }
 
 void WorkerPool::WorkerLoop(int index) {
@@ -106,7 +138,7 @@ void WorkerPool::WorkerLoop(int index) {
           store_->ReleaseJob(job.id, worker_id);
           return;
         }
-        active_[job.id] = Active{worker_id, stop};
+        active_[job.id] = Active{worker_id, index, stop, false};
         ++busy_workers_;
       }
       RunJob(worker_id, job, *stop);
@@ -134,6 +166,8 @@ void WorkerPool::RenewLoop() {
     const auto active = active_;
     lock.unlock();
     for (const auto& [job_id, job] : active) {
+      // Lost already: said once, not again every renewal while the computation winds down.
+      if (job.stop->reason() == core::StopReason::kLeaseLost) continue;
       Status s = store_->RenewLease(job_id, job.worker_id, options_.lease_ms);
       if (!s.ok()) {
         std::cerr << "calibd: " << job.worker_id << ": lease of job " << job_id
@@ -148,6 +182,77 @@ void WorkerPool::RenewLoop() {
     if (options_.housekeeping) options_.housekeeping();
     lock.lock();
   }
+}
+
+void WorkerPool::CancelWatchLoop() {
+  const auto period = std::chrono::milliseconds(std::max<int64_t>(options_.cancel_poll_ms, 10));
+  std::unique_lock<std::mutex> lock(mu_);
+  while (!renewer_stopping_) {
+    finished_.wait_for(lock, period, [this] { return renewer_stopping_; });
+    if (renewer_stopping_) break;
+    std::vector<int64_t> ids;
+    for (const auto& [job_id, active] : active_) {
+      if (!active.stop->stop_requested()) ids.push_back(job_id);
+    }
+    if (ids.empty()) continue;
+    lock.unlock();
+    std::vector<int64_t> requested;
+    Status s = store_->CancelRequests(ids, &requested);
+    lock.lock();
+    if (!s.ok()) {
+      std::cerr << "calibd: reading the cancel requests of running jobs failed: " << s.ToString()
+                << "\n";
+      continue;
+    }
+    for (int64_t job_id : requested) {
+      auto it = active_.find(job_id);
+      if (it != active_.end()) it->second.stop->RequestStop(core::StopReason::kCancelled);
+    }
+  }
+}
+
+namespace {
+
+// The job's time limit in ms: the server's `server_ms` (<= 0: none), or the config's
+// job_seconds when lower (ValidateConfig refused a config asking more at upload; a job queued
+// under a larger server limit gets this server's).
+double JobLimitMs(const nlohmann::json& config, int64_t server_ms) {
+  double limit = server_ms > 0 ? static_cast<double>(server_ms) : 0;
+  if (config.is_object()) {
+    auto it = config.find("job_seconds");
+    if (it != config.end() && it->is_number() && it->get<double>() > 0) {
+      const double own = it->get<double>() * 1e3;
+      limit = limit > 0 ? std::min(limit, own) : own;
+    }
+  }
+  return limit;
+}
+
+// The failure of a job stopped at its time limit: what the computation said when it stopped
+// (where it was), the limit and what to do.
+Status DeadlineStatus(const Status& run, double limit_ms, double seconds) {
+  char text[160];
+  std::snprintf(text, sizeof text,
+                "the job reached its time limit of %g s (after %.1f s) and was stopped",
+                limit_ms / 1e3, seconds);
+  std::string message = text;
+  if (run.code() == StatusCode::kStopped) message += " (" + run.message() + ")";
+  message +=
+      "; give it more time (config job_seconds, at most the server's --job-seconds) or calibrate "
+      "a shorter recording";
+  return Status(StatusCode::kStopped, message).WithReason(Reason::kDeadline);
+}
+
+}  // namespace
+
+Status WorkerPool::CancelledStatus(int64_t job_id, const Status& run) {
+  storage::JobInfo info;
+  std::string who = "cancelled";
+  if (store_->GetJob(job_id, &info).ok() && info.cancel_requested_at_ms != 0) {
+    who = "cancelled by " + info.cancel_actor + ": " + info.cancel_reason;
+  }
+  if (run.code() == StatusCode::kStopped) who += " (" + run.message() + ")";
+  return Status(StatusCode::kStopped, who).WithReason(Reason::kCancelled);
 }
 
 void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& job,
@@ -178,6 +283,11 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
 
   Status s = ParseJsonText(job.config_json, "config of job " + std::to_string(job.id), &config);
   if (!s.ok()) s.WithReason(Reason::kInvalidConfig);
+  // The job's time limit from its start: the server's, or the config's job_seconds when lower.
+  const double limit_ms = JobLimitMs(config, options_.job_ms);
+  if (limit_ms > 0) {
+    stop.SetDeadline(start + std::chrono::microseconds(static_cast<int64_t>(limit_ms * 1e3)));
+  }
   if (s.ok()) {
     try {
       // The stored bytes stream through the collecting parser in the store's 1 MiB pieces, so
@@ -226,10 +336,46 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       s = Status::Internal("internal error while calibrating; please report it");
     }
   }
-  if (stop.stop_requested()) {
-    // Released at shutdown or taken back: the job runs again elsewhere or after the restart.
-    metrics_->ObserveJob(job.method, "cancelled", seconds());
-    return;
+  // Stopped (or past its time limit) while it ran: the reason decides what becomes of the job.
+  const core::StopReason why = stop.reason();
+  if ((why == core::StopReason::kDeadline || why == core::StopReason::kCancelled) && s.ok() &&
+      result.is_object() && !result.empty()) {
+    // A method that ended its stopped solver as if finished: what it computed is kept as the
+    // partial diagnostics (never as parameters: a stopped computation is no calibration).
+    result["usable"] = false;
+    result.erase("parameters");
+    result.erase("uncertainty");
+    result.erase("verdict");
+  }
+  switch (why) {
+    case core::StopReason::kNone:
+      break;
+    case core::StopReason::kDeadline:
+      return fail(DeadlineStatus(s, limit_ms, seconds()), /*transient=*/false);
+    case core::StopReason::kCancelled:
+      return fail(CancelledStatus(job.id, s), /*transient=*/false);
+    case core::StopReason::kShutdown: {
+      // The computation has returned: only now may the job go back to the queue (unless Stop
+      // gave up waiting for it: then its lease lapses).
+      bool abandoned;
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        auto it = active_.find(job.id);
+        abandoned = it != active_.end() && it->second.abandoned;
+      }
+      if (!abandoned) {
+        Status r = store_->ReleaseJob(job.id, worker_id);
+        std::cerr << "calibd: shutdown: released job " << job.id << " after its computation "
+                  << "stopped (" << (r.ok() ? "it runs again after the restart" : r.ToString())
+                  << ")\n";
+      }
+      metrics_->ObserveJob(job.method, "released", seconds());
+      return;
+    }
+    case core::StopReason::kLeaseLost:
+      // Taken back: the job runs again elsewhere; whatever this run computed is refused.
+      metrics_->ObserveJob(job.method, "cancelled", seconds());
+      return;
   }
   if (!s.ok()) return fail(s, s.IsTransient());
   s = store_->CompleteJob(job.id, worker_id,

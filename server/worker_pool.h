@@ -5,8 +5,17 @@
 // back by the store and runs again; results are deterministic, so a second run stores the same
 // result. Failures that are the input's fault (kInvalidInput, kNotDeterminable) fail the job at
 // once; transient ones (kBusy, kIoError) go back to the queue with back-off (storage decides).
-// A running job is cancelled (its computation stops at the next check, nothing is stored) when
-// its lease is lost (taken back by another process) and on Stop after the grace period.
+// Every job runs under a core::StopToken, which its computation polls (at least every 100 ms):
+//  - its time limit (options.job_ms, lowered by the config's `job_seconds`) ends it as failed,
+//    reason `deadline`, with its partial diagnostics; never retried;
+//  - a cancel (Cancel() in this process, or Store::CancelJob from any process on the database,
+//    seen within cancel_poll_ms) ends it as failed, reason `cancelled`, with its partial
+//    diagnostics and who cancelled it and why;
+//  - a lost lease (taken back by another process) stops it and stores nothing;
+//  - Stop past its grace period stops it (kShutdown), and only once its computation has returned
+//    is its lease released (queued again, not counted as an attempt): a restarted server never
+//    computes a job this process still computes. A computation that does not stop within
+//    stop_wait_ms keeps its lease, which lapses (nobody computes the job meanwhile).
 // Thread-safe; never blocks the caller of Notify().
 #ifndef CALIBD_SERVER_WORKER_POOL_H_
 #define CALIBD_SERVER_WORKER_POOL_H_
@@ -49,6 +58,23 @@ struct WorkerPoolOptions {
   // Per-job memory budget (server/job_budget.h), checked before a claimed job reads its
   // recording; <= 0: none.
   int64_t job_memory_bytes = 0;
+  // The time limit of every job, from its claim (reading the recording included); <= 0: none.
+  // A config's `job_seconds` may only lower it.
+  int64_t job_ms = 0;
+  // How often the running jobs' cancel requests are read from the store (one query for all).
+  int64_t cancel_poll_ms = 250;
+  // Stop: how long, past the grace period, stopped computations get to return (they poll every
+  // 100 ms at most) before their jobs are abandoned with their leases.
+  int64_t stop_wait_ms = 1000;
+};
+
+// What Stop did with the jobs still running.
+enum class StopOutcome {
+  kFinished,   // every job finished within the grace period
+  kReleased,   // some were stopped; all their computations returned and their leases released
+  kAbandoned,  // some computation did not return within stop_wait_ms: its job keeps its lease
+               // (it lapses) and its thread still runs; the pool's destructor waits for it, so
+               // a process that must exit now exits without destroying the pool (or the store)
 };
 
 class WorkerPool {
@@ -62,23 +88,32 @@ class WorkerPool {
   void Start();
   // A job was enqueued: wake an idle worker.
   void Notify();
-  // Stops claiming, waits up to `grace` for running jobs to finish, then releases the leases of
-  // those still running (they run again on the next start), cancels them, and joins every
-  // thread: when Stop returns, no thread of the pool touches the store. Returns true when every
-  // job finished within the grace period, false when some were released.
-  bool Stop(std::chrono::milliseconds grace);
+  // Asks the job's computation to stop now with reason kCancelled if it runs in this pool (the
+  // cancel request itself is in the store already: Store::CancelJob). False when it does not.
+  bool Cancel(int64_t job_id);
+  // Stops claiming, waits up to `grace` for running jobs to finish, then asks the rest to stop
+  // (kShutdown) and waits up to stop_wait_ms for their computations to return; those that did
+  // have their leases released (they run again on the next start). Unless kAbandoned, every
+  // thread is joined: no thread of the pool touches the store once Stop returns. With
+  // kAbandoned, the abandoned jobs' threads still run (see StopOutcome).
+  StopOutcome Stop(std::chrono::milliseconds grace);
 
   int running_jobs() const;
 
  private:
   void WorkerLoop(int index);
   void RenewLoop();
-  void RunJob(const std::string& worker_id, const storage::JobInfo& job,
-              core::StopToken& stop);
+  void CancelWatchLoop();
+  // The failure of a cancelled job: who cancelled it and why (from the store), and where its
+  // computation stopped (`run`, when kStopped).
+  Status CancelledStatus(int64_t job_id, const Status& run);
+  void RunJob(const std::string& worker_id, const storage::JobInfo& job, core::StopToken& stop);
 
   struct Active {
     std::string worker_id;
-    std::shared_ptr<core::StopToken> stop;  // asked on shutdown or when the lease is lost
+    int index = 0;                          // its worker thread
+    std::shared_ptr<core::StopToken> stop;  // cancel, deadline, shutdown, lost lease
+    bool abandoned = false;                 // Stop gave up waiting: never release its lease
   };
 
   storage::Store* store_;
@@ -98,7 +133,9 @@ class WorkerPool {
   std::map<int64_t, Active> active_;    // job id -> its worker, guarded by mu_
   int busy_workers_ = 0;
   std::vector<std::thread> threads_;
+  std::vector<bool> joined_;  // per worker thread: joined by Stop
   std::thread renewer_;
+  std::thread cancel_watcher_;  // reads cancel requests of running jobs (cancel_poll_ms)
 };
 
 }  // namespace calibd::server

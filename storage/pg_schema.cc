@@ -7,6 +7,8 @@
 //      and method), job_events.
 //   2  what SQLite schema version 4 adds: jobs.error_reason (a failure's reason code) and
 //      jobs.error_detail_json (the partial diagnostics of a failed calibration).
+//   3  what SQLite schema version 5 adds: a running job's cancel request (jobs.cancel_requested_at,
+//      cancel_reason, cancel_actor) and the job_events action 'cancel'.
 #include <string>
 #include <vector>
 
@@ -99,8 +101,18 @@ ALTER TABLE jobs ADD COLUMN error_reason TEXT;
 ALTER TABLE jobs ADD COLUMN error_detail_json TEXT;
 )sql";
 
+constexpr const char* kPgV3 = R"sql(
+ALTER TABLE jobs ADD COLUMN cancel_requested_at BIGINT;
+ALTER TABLE jobs ADD COLUMN cancel_reason TEXT;
+ALTER TABLE jobs ADD COLUMN cancel_actor TEXT;
+ALTER TABLE job_events DROP CONSTRAINT job_events_action_check;
+ALTER TABLE job_events ADD CONSTRAINT job_events_action_check
+  CHECK (action IN ('revoke', 'accept', 'cancel'));
+)sql";
+
 const std::vector<const char*>& PgSteps() {
-  static const std::vector<const char*>& steps = *new std::vector<const char*>{kPgV1, kPgV2};
+  static const std::vector<const char*>& steps =
+      *new std::vector<const char*>{kPgV1, kPgV2, kPgV3};
   return steps;
 }
 

@@ -56,7 +56,7 @@
 namespace calibd::storage {
 
 // The newest schema version of the PostgreSQL backend (pg_schema.cc).
-inline constexpr int kPgSchemaVersion = 2;
+inline constexpr int kPgSchemaVersion = 3;
 
 // `target` with the password of a URI or keyword string replaced by "***" (for logs, /healthz).
 std::string RedactConnectionTarget(const std::string& target);
@@ -90,6 +90,8 @@ class PgStore final : public Store {
   Status FailJob(int64_t job_id, const std::string& worker_id, const JobFailure& failure,
                  bool transient) override;
   Status ReleaseJob(int64_t job_id, const std::string& worker_id) override;
+  Status CancelRequests(const std::vector<int64_t>& job_ids,
+                        std::vector<int64_t>* requested) override;
   Status RecoverExpiredLeases(int64_t* recovered) override;
   Status ExpireLeasesOf(const std::string& owner_prefix, int64_t* taken_back) override;
   Status GetJob(int64_t id, JobInfo* out) override;
@@ -124,6 +126,8 @@ class PgStore final : public Store {
   Status RecoverLocked(PgConn* c, int64_t now, int64_t* recovered);
   Status RequireHolder(PgConn* c, int64_t job_id, const std::string& worker_id, const char* action,
                        JobInfo* job);
+  Status Cancel(int64_t job_id, const std::string& reason, const std::string& actor,
+                JobInfo* out, JobEvent* event) override;
   Status Decide(int64_t job_id, bool revoke, const std::string& reason, const std::string& actor,
                 JobEvent* out) override;
   void ListenLoop();

@@ -69,9 +69,22 @@ Status PgStore::EnqueueJob(int64_t recording_id, const std::string& method,
 Status PgStore::RecoverLocked(PgConn* c, int64_t now, int64_t* recovered) {
   int64_t total = 0;
   PgResult res;
-  // Out of attempts: failed for good. SKIP LOCKED: a row another transaction is changing (its
-  // holder completing it, another host recovering it) is left to that transaction.
+  // Cancelled while running: failed as cancelled, never queued again. SKIP LOCKED: a row another
+  // transaction is changing (its holder completing it, another host recovering it) is left to
+  // that transaction.
   Status s = c->Exec(
+      "UPDATE jobs SET status = 'failed', finished_at = $1, lease_owner = NULL, "
+      "lease_expires_at = NULL, error_code = $2, error_reason = $3, error_detail_json = NULL, "
+      "error_message = 'cancelled by ' || COALESCE(cancel_actor, '?') || ': ' || "
+      "COALESCE(cancel_reason, '') || ' (the lease of ' || COALESCE(lease_owner, '?') || "
+      "' lapsed before its run stopped)' "
+      "WHERE id IN (SELECT id FROM jobs WHERE status = 'running' AND lease_expires_at <= $1 "
+      "AND cancel_requested_at IS NOT NULL FOR UPDATE SKIP LOCKED)",
+      {PgInt(now), PgText(internal::kCancelledCode), PgText(internal::kCancelledReason)}, &res);
+  if (!s.ok()) return s;
+  total += res.Affected();
+  // Out of attempts: failed for good.
+  s = c->Exec(
       "UPDATE jobs SET status = 'failed', finished_at = $1, lease_owner = NULL, "
       "lease_expires_at = NULL, error_code = 'lease_expired', error_reason = NULL, "
       "error_detail_json = NULL, "
@@ -249,7 +262,8 @@ Status PgStore::FailJob(int64_t job_id, const std::string& worker_id, const JobF
     const std::string error_code = failure.code.empty() ? std::string("error") : failure.code;
     const PgParam reason = PgTextOrNull(failure.reason);
     const PgParam detail = PgTextOrNull(failure.detail_json);
-    if (transient && job.attempts < options_.max_attempts) {
+    // A cancelled job is never queued again, even after a transient failure.
+    if (transient && job.attempts < options_.max_attempts && job.cancel_requested_at_ms == 0) {
       return c->Exec(
           "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_expires_at = NULL, "
           "started_at = NULL, not_before = $2, error_code = $3, error_message = $4, "
@@ -275,6 +289,15 @@ Status PgStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
     JobInfo job;
     Status s = RequireHolder(c, job_id, worker_id, "release", &job);
     if (!s.ok()) return s;
+    if (job.cancel_requested_at_ms != 0) {  // cancelled while running: it ends here
+      return c->Exec(
+          "UPDATE jobs SET status = 'failed', finished_at = $2, lease_owner = NULL, "
+          "lease_expires_at = NULL, error_code = $3, error_reason = $4, error_message = $5, "
+          "error_detail_json = NULL WHERE id = $1",
+          {PgInt(job_id), PgInt(Now()), PgText(internal::kCancelledCode),
+           PgText(internal::kCancelledReason),
+           PgText(internal::CancelledMessage(job.cancel_actor, job.cancel_reason))});
+    }
     s = c->Exec(
         "UPDATE jobs SET status = 'queued', attempts = GREATEST(attempts - 1, 0), "
         "lease_owner = NULL, lease_expires_at = NULL, started_at = NULL, not_before = $2 "
@@ -283,6 +306,69 @@ Status PgStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
     if (!s.ok()) return s;
     return NotifyJobs(c);
   });
+}
+
+Status PgStore::CancelRequests(const std::vector<int64_t>& job_ids,
+                               std::vector<int64_t>* requested) {
+  requested->clear();
+  if (job_ids.empty()) return Status::Ok();
+  std::vector<int64_t> ids;
+  Status s = Read([&](PgConn* c) {
+    ids.clear();
+    PgResult res;
+    Status s = c->Exec(
+        "SELECT id FROM jobs WHERE id = ANY($1::bigint[]) AND status = 'running' "
+        "AND cancel_requested_at IS NOT NULL ORDER BY id",
+        {PgText("{" + internal::IdList(job_ids) + "}")}, &res);
+    if (!s.ok()) return s;
+    for (int i = 0; i < res.rows(); ++i) ids.push_back(res.Int(i, 0));
+    return Status::Ok();
+  });
+  if (!s.ok()) return s;
+  *requested = std::move(ids);
+  return Status::Ok();
+}
+
+Status PgStore::Cancel(int64_t job_id, const std::string& reason, const std::string& actor,
+                       JobInfo* out, JobEvent* event) {
+  JobInfo job;
+  JobEvent cancel_event;
+  Status s = Txn([&](PgConn* c) {
+    Status s = LoadJob(c, job_id, false, &job, /*for_update=*/true);
+    if (!s.ok()) return s;
+    s = internal::CheckCancel(job);
+    if (!s.ok()) return s;
+    const int64_t now = Now();
+    if (job.status == JobStatus::kQueued) {
+      s = c->Exec(
+          "UPDATE jobs SET status = 'failed', finished_at = $2, lease_owner = NULL, "
+          "lease_expires_at = NULL, error_code = $3, error_reason = $4, error_message = $5, "
+          "error_detail_json = NULL, cancel_requested_at = $2, cancel_reason = $6, "
+          "cancel_actor = $7 WHERE id = $1",
+          {PgInt(job_id), PgInt(now), PgText(internal::kCancelledCode),
+           PgText(internal::kCancelledReason), PgText(internal::CancelledMessage(actor, reason)),
+           PgText(reason), PgText(actor)});
+    } else {  // running: the first request's words are kept
+      s = c->Exec(
+          "UPDATE jobs SET cancel_requested_at = COALESCE(cancel_requested_at, $2), "
+          "cancel_reason = COALESCE(cancel_reason, $3), "
+          "cancel_actor = COALESCE(cancel_actor, $4) WHERE id = $1",
+          {PgInt(job_id), PgInt(now), PgText(reason), PgText(actor)});
+    }
+    if (!s.ok()) return s;
+    PgResult res;
+    s = c->Exec(
+        "INSERT INTO job_events (job_id, action, reason, actor, created_at) "
+        "VALUES ($1, 'cancel', $2, $3, $4) RETURNING id",
+        {PgInt(job_id), PgText(reason), PgText(actor), PgInt(now)}, &res);
+    if (!s.ok()) return s;
+    cancel_event = internal::MakeCancelEvent(res.Int(0, 0), job_id, reason, actor, now);
+    return LoadJob(c, job_id, false, &job, /*for_update=*/false);
+  });
+  if (!s.ok()) return s;
+  if (out != nullptr) *out = std::move(job);
+  if (event != nullptr) *event = std::move(cancel_event);
+  return Status::Ok();
 }
 
 }  // namespace calibd::storage

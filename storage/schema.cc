@@ -136,6 +136,29 @@ ALTER TABLE jobs ADD COLUMN error_reason TEXT;
 ALTER TABLE jobs ADD COLUMN error_detail_json TEXT;
 )sql";
 
+// Version 5: stopping jobs (issue #20). A cancel request (POST /jobs/{id}/cancel) on a running
+// job is kept on the job (cancel_requested_at, cancel_reason, cancel_actor; NULL: none), so the
+// process computing it, on any host, sees it and stops; job_events gains the action 'cancel'
+// (SQLite cannot change a CHECK: the table is rebuilt with its rows).
+constexpr const char* kV5 = R"sql(
+ALTER TABLE jobs ADD COLUMN cancel_requested_at INTEGER;
+ALTER TABLE jobs ADD COLUMN cancel_reason TEXT;
+ALTER TABLE jobs ADD COLUMN cancel_actor TEXT;
+CREATE TABLE job_events_v5 (
+  id         INTEGER PRIMARY KEY,
+  job_id     INTEGER NOT NULL REFERENCES jobs(id),
+  action     TEXT    NOT NULL CHECK (action IN ('revoke', 'accept', 'cancel')),
+  reason     TEXT    NOT NULL,
+  actor      TEXT    NOT NULL,
+  created_at INTEGER NOT NULL
+);
+INSERT INTO job_events_v5 (id, job_id, action, reason, actor, created_at)
+  SELECT id, job_id, action, reason, actor, created_at FROM job_events;
+DROP TABLE job_events;
+ALTER TABLE job_events_v5 RENAME TO job_events;
+CREATE INDEX job_events_by_job ON job_events(job_id, id);
+)sql";
+
 // The hashes of results carried over from v1 are computed here (SQLite has no sha256()).
 Status HashCarriedOverResults(Db* db) {
   Stmt select;
@@ -172,6 +195,7 @@ const std::vector<Step>& Steps() {
       {kV2, &HashCarriedOverResults},
       {kV3, nullptr},
       {kV4, nullptr},
+      {kV5, nullptr},
   };
   return steps;
 }

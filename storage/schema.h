@@ -11,6 +11,8 @@
 //      latest served (accepted, not revoked) result
 //   4  failure reasons: jobs.error_reason (the reason code of a failure) and
 //      jobs.error_detail_json (the partial diagnostics of a failed calibration)
+//   5  stopping jobs: a running job's cancel request (jobs.cancel_requested_at, cancel_reason,
+//      cancel_actor) and the job_events action 'cancel'
 //
 // Thread-safety: functions take a Db the caller owns (one thread at a time).
 #ifndef CALIBD_STORAGE_SCHEMA_H_
@@ -23,7 +25,7 @@
 
 namespace calibd::storage {
 
-inline constexpr int kSchemaVersion = 4;
+inline constexpr int kSchemaVersion = 5;
 
 // Reads PRAGMA user_version.
 Status SchemaVersion(Db* db, int64_t* version);

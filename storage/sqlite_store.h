@@ -52,6 +52,8 @@ class SqliteStore final : public Store {
   Status FailJob(int64_t job_id, const std::string& worker_id, const JobFailure& failure,
                  bool transient) override;
   Status ReleaseJob(int64_t job_id, const std::string& worker_id) override;
+  Status CancelRequests(const std::vector<int64_t>& job_ids,
+                        std::vector<int64_t>* requested) override;
   Status RecoverExpiredLeases(int64_t* recovered) override;
   Status ExpireLeasesOf(const std::string& owner_prefix, int64_t* taken_back) override;
   Status GetJob(int64_t id, JobInfo* out) override;
@@ -83,6 +85,8 @@ class SqliteStore final : public Store {
                           JobInfo* out, bool inherit_device = true);
   Status RecoverLocked(Db* db, int64_t now, int64_t* recovered);
   Status LoadJob(Db* db, int64_t id, bool with_result, JobInfo* out);
+  Status Cancel(int64_t job_id, const std::string& reason, const std::string& actor,
+                JobInfo* out, JobEvent* event) override;
   Status Decide(int64_t job_id, bool revoke, const std::string& reason, const std::string& actor,
                 JobEvent* out) override;
   Status RequireHolder(Db* db, int64_t job_id, const std::string& worker_id, const char* action,

@@ -69,8 +69,22 @@ Status SqliteStore::EnqueueJob(int64_t recording_id, const std::string& method,
 Status SqliteStore::RecoverLocked(Db* db, int64_t now, int64_t* recovered) {
   int64_t total = 0;
   Stmt st;
-  // Out of attempts: failed for good.
+  // Cancelled while running: failed as cancelled, never queued again.
   Status s = db->Prepare(
+      "UPDATE jobs SET status = 'failed', finished_at = ?1, lease_owner = NULL, "
+      "lease_expires_at = NULL, error_code = ?2, error_reason = ?3, error_detail_json = NULL, "
+      "error_message = 'cancelled by ' || COALESCE(cancel_actor, '?') || ': ' || "
+      "COALESCE(cancel_reason, '') || ' (the lease of ' || COALESCE(lease_owner, '?') || "
+      "' lapsed before its run stopped)' "
+      "WHERE status = 'running' AND lease_expires_at <= ?1 AND cancel_requested_at IS NOT NULL",
+      &st);
+  if (!s.ok()) return s;
+  st.BindInt(1, now).BindText(2, internal::kCancelledCode).BindText(3, internal::kCancelledReason);
+  s = st.Run();
+  if (!s.ok()) return s;
+  total += db->Changes();
+  // Out of attempts: failed for good.
+  s = db->Prepare(
       "UPDATE jobs SET status = 'failed', finished_at = ?1, lease_owner = NULL, "
       "lease_expires_at = NULL, error_code = 'lease_expired', error_reason = NULL, "
       "error_detail_json = NULL, "
@@ -289,7 +303,8 @@ Status SqliteStore::FailJob(int64_t job_id, const std::string& worker_id, const 
       }
     };
     Stmt st;
-    if (transient && job.attempts < options_.max_attempts) {
+    // A cancelled job is never queued again, even after a transient failure.
+    if (transient && job.attempts < options_.max_attempts && job.cancel_requested_at_ms == 0) {
       s = db->Prepare(
           "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_expires_at = NULL, "
           "started_at = NULL, not_before = ?2, error_code = ?3, error_message = ?4, "
@@ -326,6 +341,20 @@ Status SqliteStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
     s = RequireHolder(db, job_id, worker_id, "release", &job);
     if (!s.ok()) return s;
     Stmt st;
+    if (job.cancel_requested_at_ms != 0) {  // cancelled while running: it ends here
+      s = db->Prepare(
+          "UPDATE jobs SET status = 'failed', finished_at = ?2, lease_owner = NULL, "
+          "lease_expires_at = NULL, error_code = ?3, error_reason = ?4, error_message = ?5, "
+          "error_detail_json = NULL WHERE id = ?1",
+          &st);
+      if (!s.ok()) return s;
+      st.BindInt(1, job_id)
+          .BindInt(2, Now())
+          .BindText(3, internal::kCancelledCode)
+          .BindText(4, internal::kCancelledReason)
+          .BindText(5, internal::CancelledMessage(job.cancel_actor, job.cancel_reason));
+      return st.Run();
+    }
     s = db->Prepare(
         "UPDATE jobs SET status = 'queued', attempts = MAX(attempts - 1, 0), lease_owner = NULL, "
         "lease_expires_at = NULL, started_at = NULL, not_before = ?2 WHERE id = ?1",
@@ -336,6 +365,85 @@ Status SqliteStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
     if (!s.ok()) return s;
     return Status::Ok();
   });
+}
+
+Status SqliteStore::CancelRequests(const std::vector<int64_t>& job_ids,
+                                   std::vector<int64_t>* requested) {
+  requested->clear();
+  if (job_ids.empty()) return Status::Ok();
+  Conn conn(this);
+  Status s = conn.Open();
+  if (!s.ok()) return s;
+  Stmt st;
+  // Uncached: the IN list differs from call to call.
+  s = conn.db()->PrepareUncached(
+      "SELECT id FROM jobs WHERE id IN (" + internal::IdList(job_ids) +
+          ") AND status = 'running' AND cancel_requested_at IS NOT NULL ORDER BY id",
+      &st);
+  if (!s.ok()) return s;
+  std::vector<int64_t> ids;
+  for (bool row = true;;) {
+    s = st.Step(&row);
+    if (!s.ok()) return s;
+    if (!row) break;
+    ids.push_back(st.ColumnInt(0));
+  }
+  *requested = std::move(ids);
+  return Status::Ok();
+}
+
+Status SqliteStore::Cancel(int64_t job_id, const std::string& reason, const std::string& actor,
+                           JobInfo* out, JobEvent* event) {
+  JobInfo job;
+  JobEvent cancel_event;
+  Status s = Write([&](Db* db) {
+    Status s = LoadJob(db, job_id, false, &job);
+    if (!s.ok()) return s;
+    s = internal::CheckCancel(job);
+    if (!s.ok()) return s;
+    const int64_t now = Now();
+    Stmt st;
+    if (job.status == JobStatus::kQueued) {
+      s = db->Prepare(
+          "UPDATE jobs SET status = 'failed', finished_at = ?2, lease_owner = NULL, "
+          "lease_expires_at = NULL, error_code = ?3, error_reason = ?4, error_message = ?5, "
+          "error_detail_json = NULL, cancel_requested_at = ?2, cancel_reason = ?6, "
+          "cancel_actor = ?7 WHERE id = ?1",
+          &st);
+      if (!s.ok()) return s;
+      st.BindInt(1, job_id)
+          .BindInt(2, now)
+          .BindText(3, internal::kCancelledCode)
+          .BindText(4, internal::kCancelledReason)
+          .BindText(5, internal::CancelledMessage(actor, reason))
+          .BindText(6, reason)
+          .BindText(7, actor);
+    } else {  // running: the first request's words are kept
+      s = db->Prepare(
+          "UPDATE jobs SET cancel_requested_at = COALESCE(cancel_requested_at, ?2), "
+          "cancel_reason = COALESCE(cancel_reason, ?3), "
+          "cancel_actor = COALESCE(cancel_actor, ?4) WHERE id = ?1",
+          &st);
+      if (!s.ok()) return s;
+      st.BindInt(1, job_id).BindInt(2, now).BindText(3, reason).BindText(4, actor);
+    }
+    s = st.Run();
+    if (!s.ok()) return s;
+    s = db->Prepare(
+        "INSERT INTO job_events (job_id, action, reason, actor, created_at) "
+        "VALUES (?1, 'cancel', ?2, ?3, ?4)",
+        &st);
+    if (!s.ok()) return s;
+    st.BindInt(1, job_id).BindText(2, reason).BindText(3, actor).BindInt(4, now);
+    s = st.Run();
+    if (!s.ok()) return s;
+    cancel_event = internal::MakeCancelEvent(db->LastInsertRowid(), job_id, reason, actor, now);
+    return LoadJob(db, job_id, false, &job);
+  });
+  if (!s.ok()) return s;
+  if (out != nullptr) *out = std::move(job);
+  if (event != nullptr) *event = std::move(cancel_event);
+  return Status::Ok();
 }
 
 }  // namespace calibd::storage

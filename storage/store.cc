@@ -77,7 +77,8 @@ Status ValidateClaim(const std::string& worker_id, int64_t lease_ms) {
 
 std::string JobSelect(bool with_result) {
   return std::string(kJobColumns) + (with_result ? "r.result_json" : "NULL") +
-         ", j.error_reason, " + (with_result ? "j.error_detail_json" : "NULL") + kJobFrom;
+         ", j.error_reason, " + (with_result ? "j.error_detail_json" : "NULL") +
+         ", j.cancel_requested_at, j.cancel_reason, j.cancel_actor" + kJobFrom;
 }
 
 void ReadJob(const Row& row, JobInfo* job) {
@@ -116,6 +117,12 @@ void ReadJob(const Row& row, JobInfo* job) {
   }
   job->error_reason = row.Text(19);
   job->error_detail_json = row.Text(20);
+  if (!row.IsNull(21)) {
+    job->cancel_requested_at_ms = row.Int(21);
+    job->cancel_requested_at = FormatTimestamp(job->cancel_requested_at_ms);
+    job->cancel_reason = row.Text(22);
+    job->cancel_actor = row.Text(23);
+  }
 }
 
 void ReadRecording(const Row& row, RecordingInfo* out) {
@@ -268,6 +275,43 @@ JobEvent MakeDecisionEvent(int64_t id, int64_t job_id, bool revoke, const std::s
   return event;
 }
 
+std::string CancelledMessage(const std::string& actor, const std::string& reason) {
+  return "cancelled by " + actor + ": " + reason;
+}
+
+Status ValidateCancel(const std::string& reason) {
+  if (!reason.empty()) return Status::Ok();
+  return Status::InvalidInput("a cancel request needs a reason").WithField("reason");
+}
+
+Status CheckCancel(const JobInfo& job) {
+  if (job.status == JobStatus::kQueued || job.status == JobStatus::kRunning) return Status::Ok();
+  return Status::Conflict("job " + std::to_string(job.id) + " is " + Name(job.status) +
+                          ": it has already finished, there is nothing to cancel");
+}
+
+JobEvent MakeCancelEvent(int64_t id, int64_t job_id, const std::string& reason,
+                         const std::string& actor, int64_t now) {
+  JobEvent event;
+  event.id = id;
+  event.job_id = job_id;
+  event.action = "cancel";
+  event.reason = reason;
+  event.actor = actor;
+  event.created_at_ms = now;
+  event.created_at = FormatTimestamp(now);
+  return event;
+}
+
+std::string IdList(const std::vector<int64_t>& ids) {
+  std::string out;
+  for (int64_t id : ids) {
+    if (!out.empty()) out += ",";
+    out += std::to_string(id);
+  }
+  return out;
+}
+
 }  // namespace internal
 
 std::string FormatTimestamp(int64_t ms) {
@@ -326,6 +370,13 @@ Status Store::AcceptJob(int64_t job_id, const std::string& reason, const std::st
   Status s = internal::ValidateDecision(/*revoke=*/false, reason);
   if (!s.ok()) return s;
   return Decide(job_id, /*revoke=*/false, reason, actor, out);
+}
+
+Status Store::CancelJob(int64_t job_id, const std::string& reason, const std::string& actor,
+                        JobInfo* out, JobEvent* event) {
+  Status s = internal::ValidateCancel(reason);
+  if (!s.ok()) return s;
+  return Cancel(job_id, reason, actor, out, event);
 }
 
 Status Store::ReadRecordingBytes(int64_t id, std::string* out) {

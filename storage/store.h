@@ -27,7 +27,9 @@
 //
 // Job states: queued -> running (ClaimJob) -> succeeded (CompleteJob) | failed (FailJob
 // non-transient, or transient/lease expiry past max_attempts) | queued (FailJob transient,
-// ReleaseJob, lease expiry). succeeded and failed are final.
+// ReleaseJob, lease expiry). succeeded and failed are final. CancelJob fails a queued job at once
+// and marks a running one (a cancel request): its holder stops and fails it; if the holder
+// releases it instead, or its lease lapses, it is failed as cancelled, never queued again.
 #ifndef CALIBD_STORAGE_STORE_H_
 #define CALIBD_STORAGE_STORE_H_
 
@@ -156,6 +158,10 @@ struct JobInfo {
   // The partial diagnostics of a failed calibration: a JSON object's text ("" none). Read by
   // GetJob and by ListJobs with include_results only.
   std::string error_detail_json;
+  // A cancel request (CancelJob): when, why and by whom ("" / 0: none). A running job with one
+  // is being stopped; a failed one with one was cancelled.
+  std::string cancel_requested_at, cancel_reason, cancel_actor;
+  int64_t cancel_requested_at_ms = 0;
   std::string result_json;    // "" unless succeeded (and, for ListJobs, include_results)
   std::string result_sha256;  // hex SHA-256 of result_json, for an ETag
   // The acceptance gate (succeeded jobs only, else kNone): the gate's verdict of the result
@@ -172,7 +178,7 @@ struct JobInfo {
 struct JobEvent {
   int64_t id = 0;
   int64_t job_id = 0;
-  std::string action;  // "revoke" | "accept"
+  std::string action;  // "revoke" | "accept" | "cancel"
   std::string reason;  // the person's words
   std::string actor;   // who: "token" (an authenticated request) or "anonymous"
   std::string created_at;
@@ -369,7 +375,25 @@ class Store {
   // and its state is "rejected" or "revoked"; otherwise as RevokeJob.
   Status AcceptJob(int64_t job_id, const std::string& reason, const std::string& actor,
                    JobEvent* out = nullptr);
-  // The job's decisions, oldest first. kNotFound for no such job.
+
+  // ---- Stopping jobs ----
+
+  // Cancels a job, recorded as a JobEvent "cancel" with `reason` and `actor`. A queued job is
+  // failed at once (error_code "stopped", error_reason "cancelled", error_message "cancelled by
+  // ACTOR: REASON"). A running job gets a cancel request (JobInfo::cancel_*; the first request's
+  // words are kept) for the process computing it, which sees it through CancelRequests, stops,
+  // and fails it the same way; a holder that releases it instead, or whose lease lapses, leaves
+  // it failed as cancelled too. `out` (may be null): the job afterwards. kConflict when the job
+  // already finished (succeeded or failed: the message names its status); kInvalidInput for an
+  // empty reason; kNotFound.
+  Status CancelJob(int64_t job_id, const std::string& reason, const std::string& actor,
+                   JobInfo* out = nullptr, JobEvent* event = nullptr);
+  // Which of `job_ids` are running with a cancel request: one cheap query for all of them (a
+  // worker pool asks for its running jobs a few times a second). *requested in ascending order.
+  virtual Status CancelRequests(const std::vector<int64_t>& job_ids,
+                                std::vector<int64_t>* requested) = 0;
+
+  // The job's decisions and cancel requests, oldest first. kNotFound for no such job.
   virtual Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) = 0;
 
   // ---- Maintenance ----
@@ -389,6 +413,10 @@ class Store {
   // device's latest calibration. `out` may be null.
   virtual Status Decide(int64_t job_id, bool revoke, const std::string& reason,
                         const std::string& actor, JobEvent* out) = 0;
+  // CancelJob, the reason checked: one transaction that loads the job (locked), checks
+  // internal::CheckCancel, fails it (queued) or stores the request (running), and the event.
+  virtual Status Cancel(int64_t job_id, const std::string& reason, const std::string& actor,
+                        JobInfo* out, JobEvent* event) = 0;
 
   std::string path_;
   StoreOptions options_;

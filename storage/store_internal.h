@@ -56,7 +56,8 @@ inline constexpr const char* kJobColumns =
     "j.lease_owner, j.lease_expires_at, j.created_at, j.started_at, j.finished_at, "
     "j.error_code, j.error_message, j.not_before, r.sha256, r.verdict, r.decision, ";
 inline constexpr const char* kJobFrom = " FROM jobs j LEFT JOIN results r ON r.job_id = j.id ";
-// kJobColumns + result_json|NULL, error_reason, error_detail_json|NULL + kJobFrom.
+// kJobColumns + result_json|NULL, error_reason, error_detail_json|NULL, cancel_requested_at,
+// cancel_reason, cancel_actor + kJobFrom.
 std::string JobSelect(bool with_result);
 // A job from a row of JobSelect: timestamps formatted ("" when NULL); result, verdict, decision
 // and state only for a succeeded job (state = the decision, else the verdict).
@@ -93,6 +94,19 @@ Status CheckDecision(const JobInfo& job, bool revoke);
 // The event recorded for a decision ("revoke" | "accept"), created now.
 JobEvent MakeDecisionEvent(int64_t id, int64_t job_id, bool revoke, const std::string& reason,
                            const std::string& actor, int64_t now);
+// A cancelled job's failure: error_code "stopped", error_reason "cancelled", and its message.
+inline constexpr const char* kCancelledCode = "stopped";
+inline constexpr const char* kCancelledReason = "cancelled";
+std::string CancelledMessage(const std::string& actor, const std::string& reason);
+// CancelJob: kInvalidInput for an empty reason.
+Status ValidateCancel(const std::string& reason);
+// Whether the loaded job may be cancelled: kConflict "job N is succeeded: ..." for a finished one.
+Status CheckCancel(const JobInfo& job);
+// The event recorded for a cancel request, created now.
+JobEvent MakeCancelEvent(int64_t id, int64_t job_id, const std::string& reason,
+                         const std::string& actor, int64_t now);
+// "1,2,3": job ids for an SQL IN list (integers only, so no quoting is needed).
+std::string IdList(const std::vector<int64_t>& ids);
 // The results.decision a decision stores: "revoked" | "accepted".
 const char* DecisionValue(bool revoke);
 // The event's action: "revoke" | "accept".

@@ -137,6 +137,37 @@ std::string VerdictSection(const JobSummary& job) {
   return out;
 }
 
+// A queued or running job: its elapsed time (running) and a form that cancels it (a plain POST,
+// no JavaScript; the server answers 303 back to this page).
+std::string CancelHtml(const JobView& view) {
+  const JobSummary& job = view.job;
+  if (job.status != JobStatus::kQueued && job.status != JobStatus::kRunning) return "";
+  std::string out = "<div class=\"callout job-stop\">";
+  if (job.status == JobStatus::kRunning) {
+    char text[64];
+    if (view.elapsed_ms >= 0) {
+      std::snprintf(text, sizeof text, "%.1f s", static_cast<double>(view.elapsed_ms) / 1e3);
+    } else {
+      std::snprintf(text, sizeof text, "?");
+    }
+    out += "<p>Running for <span class=\"elapsed\">" + std::string(text) +
+           "</span> (reload the page to update).</p>";
+  } else {
+    out += "<p>Waiting for a worker.</p>";
+  }
+  const std::string id = std::to_string(job.id);
+  out += "<form class=\"cancel-job\" method=\"post\" action=\"/api/v1/jobs/" + id +
+         "/cancel\"><label>Reason <input type=\"text\" name=\"reason\" required maxlength=\"500\" "
+         "placeholder=\"why stop this job\"></label> ";
+  if (view.token_required) {
+    out +=
+        "<label>Token <input type=\"password\" name=\"token\" required "
+        "autocomplete=\"current-password\"></label> ";
+  }
+  out += "<button type=\"submit\">Cancel job #" + id + "</button></form></div>";
+  return out;
+}
+
 std::string JobBody(const JobView& view) {
   const JobSummary& job = view.job;
   std::string out;
@@ -150,6 +181,7 @@ std::string JobBody(const JobView& view) {
          "</h1>";
   out += VerdictSection(job);
   out += StatusCallout(view);
+  out += CancelHtml(view);
   // Header facts.
   std::string kv = "<dl class=\"kv job-header\"><dt>device</dt><dd>" + DeviceLink(job.device) +
                    "</dd><dt>method</dt><dd>" + E(job.method) + "</dd><dt>status</dt><dd>" +

@@ -22,7 +22,8 @@
 //            (pca axes-xz only for d >= 3; array positions-* and position-sigma only when the
 //            result has positions; the others are always present on a job with a result of
 //            that method, saying "no data" when their keys are missing)
-//   other:   form.filters, nav.pager a.older, .callout-error .failure-reason (failed job: the
+//   other:   form.filters, nav.pager a.older, form.cancel-job (queued or running job: posts
+//            reason [and token] to /api/v1/jobs/{id}/cancel), span.elapsed (running job), .callout-error .failure-reason (failed job: the
 //            method's message, the one source of what was wrong and what to do instead; or pca
 //            diagnostics.usable == false), p.model (the result's `model` equation),
 //            ul.warnings, ul.downloads, pre.config, span.badge.badge-STATUS,
@@ -51,7 +52,7 @@ namespace calibd::web {
 
 // A person's decision on a result (the acceptance gate's revoke/accept history).
 struct JobEventSummary {
-  std::string action;  // "revoke" | "accept"
+  std::string action;  // "revoke" | "accept" | "cancel"
   std::string reason;
   std::string actor;  // "token" | "anonymous"
   std::string at;     // ISO 8601 UTC
@@ -115,6 +116,10 @@ struct JobView {
   int64_t recording_bytes = -1;  // optional (-1 unknown)
   int64_t recording_rows = -1;   // optional (-1 unknown)
   nlohmann::json config;         // the job's config (SPEC §3) as given; null when unknown
+  // A running job: how long it has run (the server's clock: now - started_at); -1 unknown.
+  int64_t elapsed_ms = -1;
+  // Whether writes need the server's token: the cancel form then asks for it.
+  bool token_required = false;
 };
 
 // `/devices/{serial}` — one device's calibrations and the drift between them.
@@ -149,7 +154,8 @@ std::string RenderDevicesPage(const DevicesView& view);
 // method, status badge, created time, key figures, warnings flag), "older" pagination link.
 std::string RenderHistoryPage(const HistoryView& view);
 
-// The report of one job: header (device, method, recording download, config, timings, status),
+// The report of one job: header (device, method, recording download, config, timings, status;
+// a running job's elapsed time, and for a queued or running job a Cancel form),
 // the model equation, parameters with uncertainties, downloads, plots, diagnostics and warnings.
 // A failed job instead: the reason's title and code, the method's message and the reason's
 // advice (each once, div.callout-error), then section#partial with what the method found before

@@ -67,6 +67,8 @@ int ServerProcess::Signal(int sig) {
   return status;
 }
 
+void ServerProcess::Send(int sig) { kill(pid_, sig); }
+
 std::string ServerProcess::log() {
   std::lock_guard<std::mutex> lock(mu_);
   return log_;

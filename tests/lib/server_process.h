@@ -32,6 +32,8 @@ class ServerProcess {
   int port() const { return port_; }
   // Sends `sig` and waits for the process to end; returns its wait status.
   int Signal(int sig);
+  // Sends `sig` without waiting.
+  void Send(int sig);
   // Everything the process wrote to stderr so far.
   std::string log();
   // A client of its port: 30 s read timeout, 5 s connection timeout.

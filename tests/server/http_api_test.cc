@@ -633,6 +633,7 @@ TEST_F(HttpApi, OpenApiDocumentsEveryRouteTheServerHas) {
                                         "get /jobs/{id}",
                                         "post /jobs/{id}/revoke",
                                         "post /jobs/{id}/accept",
+                                        "post /jobs/{id}/cancel",
                                         "get /devices",
                                         "get /devices/{serial}/calibration",
                                         "get /recordings/{id}",

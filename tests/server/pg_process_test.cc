@@ -17,6 +17,7 @@
 #include <set>
 #include <thread>
 
+#include "server/array_method.h"
 #include "server/pca_method.h"
 #include "storage/pg_conn.h"
 #include "storage/store.h"
@@ -105,6 +106,57 @@ TEST_F(PgServe, DatabaseGoneGivesServiceUnavailableAndCalibdReconnectsByItself) 
   ASSERT_TRUE(res);
   EXPECT_NE(res->body.find("calibd_database_up{backend=\"postgresql\"} 1"), std::string::npos);
   EXPECT_EQ(server.Signal(SIGTERM), 0) << server.log();
+}
+
+// A cancel sent to one host stops the job where another host computes it, within a second (its
+// worker pool reads the cancel requests of its running jobs every 250 ms).
+TEST_F(PgServe, ACancelThroughOneHostStopsTheJobOnAnotherWithinASecond) {
+  testing::TempDir other_tmp;  // another TMPDIR: another host as far as calibd can tell
+  ServerProcess computing(uri_, {"--workers", "1"}, tmp_.path().string());
+  ASSERT_GT(computing.port(), 0) << computing.log();
+  ArraySimulationFileOptions sim;
+  sim.samples = 1000;
+  std::string csv;
+  json config, truth;
+  ASSERT_TRUE(SimulateArrayFiles(sim, &csv, &config, &truth).ok());
+  config["solver"] = "bcd";
+  config["max_iterations"] = 1000000;  // far longer than the test
+  config["tolerance"] = 0;
+  auto client = computing.Client();
+  auto res = client.Post(
+      "/api/v1/recordings",
+      httplib::MultipartFormDataItems{{"recording", csv, "long.csv", "text/csv"},
+                                      {"config", config.dump(), "", "application/json"}});
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 201) << res->body;
+  const int64_t id = json::parse(res->body)["job"]["id"];
+  const std::string path = "/api/v1/jobs/" + std::to_string(id);
+  json job = json::object();
+  for (int i = 0; i < 3000 && !(job.is_object() && job.value("status", "") == "running"); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    job = testing::GetJob(client, id);
+  }
+  ASSERT_EQ(job["status"], "running") << job.dump();
+  ServerProcess other(uri_, {"--workers", "1"}, other_tmp.path().string());
+  ASSERT_GT(other.port(), 0) << other.log();
+  const auto asked = std::chrono::steady_clock::now();
+  res = other.Client().Post((path + "/cancel").c_str(), R"({"reason": "from another host"})",
+                            "application/json");
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 202) << res->body;
+  for (int i = 0; i < 500 && job["status"] == "running"; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    job = testing::GetJob(client, id);
+  }
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - asked).count();
+  EXPECT_EQ(job["status"], "failed") << job.dump();
+  EXPECT_EQ(job["error"]["reason"], "cancelled") << job.dump();
+  EXPECT_NE(job["error"]["message"].get<std::string>().find("from another host"),
+            std::string::npos);
+  EXPECT_LT(seconds, 1.0) << computing.log();
+  EXPECT_EQ(other.Signal(SIGTERM), 0) << other.log();
+  EXPECT_EQ(computing.Signal(SIGTERM), 0) << computing.log();
 }
 
 // Three hosts on one database, uploads spread over them, one killed -9 every second or so and

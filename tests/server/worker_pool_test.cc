@@ -163,7 +163,7 @@ TEST_F(WorkerPoolTest, JobsOfEveryQueuedMethodComplete) {
   pool.Notify();
   const storage::JobInfo p = WaitFor(pca, JobStatus::kSucceeded);
   const storage::JobInfo a = WaitFor(array, JobStatus::kSucceeded);
-  EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
+  EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
   ASSERT_EQ(p.status, JobStatus::kSucceeded) << p.error_code << ": " << p.error_message;
   ASSERT_EQ(a.status, JobStatus::kSucceeded) << a.error_code << ": " << a.error_message;
   EXPECT_EQ(p.attempts, 1);
@@ -184,13 +184,13 @@ TEST_F(WorkerPoolTest, StopWithAGracePeriodLetsTheRunningJobFinish) {
   ASSERT_TRUE(gate.WaitEntered());
   EXPECT_EQ(pool.running_jobs(), 1);
   EXPECT_EQ(Job(id).status, JobStatus::kRunning);
-  bool all_done = false;
-  std::thread stopper([&] { all_done = pool.Stop(std::chrono::minutes(2)); });
+  StopOutcome outcome = StopOutcome::kAbandoned;
+  std::thread stopper([&] { outcome = pool.Stop(std::chrono::minutes(2)); });
   // Stop is now waiting (or about to) while the job is held; let the job go on.
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
   gate.Open();
   stopper.join();
-  EXPECT_TRUE(all_done);
+  EXPECT_EQ(outcome, StopOutcome::kFinished);
   const storage::JobInfo job = Job(id);
   EXPECT_EQ(job.status, JobStatus::kSucceeded) << job.error_code << ": " << job.error_message;
   EXPECT_EQ(job.attempts, 1);
@@ -206,8 +206,8 @@ TEST_F(WorkerPoolTest, LeasesAreRenewedThroughStopsGracePeriod) {
   pool.Start();
   pool.Notify();
   ASSERT_TRUE(gate.WaitEntered());
-  bool all_done = false;
-  std::thread stopper([&] { all_done = pool.Stop(std::chrono::minutes(2)); });
+  StopOutcome outcome = StopOutcome::kAbandoned;
+  std::thread stopper([&] { outcome = pool.Stop(std::chrono::minutes(2)); });
   // Several lease lengths into the grace period, the lease is alive: nothing to recover.
   int64_t recovered = 0;
   for (int i = 0; i < 10; ++i) {
@@ -217,7 +217,7 @@ TEST_F(WorkerPoolTest, LeasesAreRenewedThroughStopsGracePeriod) {
   }
   gate.Open();
   stopper.join();
-  EXPECT_TRUE(all_done);
+  EXPECT_EQ(outcome, StopOutcome::kFinished);
   const storage::JobInfo job = Job(id);
   EXPECT_EQ(job.status, JobStatus::kSucceeded) << job.error_code << ": " << job.error_message;
   EXPECT_EQ(job.attempts, 1);
@@ -233,7 +233,7 @@ TEST_F(WorkerPoolTest, StopWithoutGraceReleasesTheRunningJobWithoutCountingTheAt
     pool.Start();
     pool.Notify();
     ASSERT_EQ(WaitFor(whole, JobStatus::kSucceeded).status, JobStatus::kSucceeded);
-    EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
+    EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
     full_calls = counter.calls();
   }
   ASSERT_GT(full_calls, 2);
@@ -249,32 +249,111 @@ TEST_F(WorkerPoolTest, StopWithoutGraceReleasesTheRunningJobWithoutCountingTheAt
   pool.Notify();
   ASSERT_TRUE(gate.WaitEntered());
   EXPECT_EQ(Job(id).attempts, 1);
-  bool all_done = true;
-  std::thread stopper([&] { all_done = pool.Stop(std::chrono::milliseconds(0)); });
-  // Stop(0) gives the job back at once; only then does the held computation go on (and must
-  // stop at its next check instead of computing to the end).
-  const storage::JobInfo released = WaitFor(id, JobStatus::kQueued);
-  gate.Open();
+  StopOutcome outcome = StopOutcome::kFinished;
+  std::thread stopper([&] { outcome = pool.Stop(std::chrono::milliseconds(0)); });
+  // Stop(0) asks the computation to stop, but while it still computes (held here) the job keeps
+  // its lease: a restarted server must not claim it yet (the 7.8 s bug of issue #20).
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  EXPECT_EQ(Job(id).status, JobStatus::kRunning);
+  EXPECT_EQ(Job(id).lease_owner, "test:1-0");
+  gate.Open();  // the computation stops at its next check; only then is the job released
   stopper.join();
-  EXPECT_FALSE(all_done);
-  EXPECT_EQ(released.status, JobStatus::kQueued);
+  EXPECT_EQ(outcome, StopOutcome::kReleased);
   const storage::JobInfo job = Job(id);
   EXPECT_EQ(job.status, JobStatus::kQueued);
   EXPECT_EQ(job.attempts, 0) << "a released attempt is not counted";
   EXPECT_EQ(job.lease_owner, "");
   EXPECT_EQ(job.result_json, "");
-  EXPECT_EQ(Outcomes("array", "cancelled"), 1);
+  EXPECT_EQ(Outcomes("array", "released"), 1);
   EXPECT_EQ(Outcomes("array", "succeeded"), 1);  // the whole run only
-  EXPECT_LT(gate.calls(), full_calls) << "the cancelled computation ran to the end";
+  EXPECT_LT(gate.calls(), full_calls) << "the stopped computation ran to the end";
 
   // It runs again, to the same result, after the restart.
   WorkerPool again(store_.get(), &metrics_, Options());
   again.Start();
   again.Notify();
   const storage::JobInfo done = WaitFor(id, JobStatus::kSucceeded);
-  EXPECT_TRUE(again.Stop(std::chrono::seconds(60)));
+  EXPECT_EQ(again.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
   EXPECT_EQ(done.status, JobStatus::kSucceeded) << done.error_code << ": " << done.error_message;
   EXPECT_EQ(done.attempts, 1);
+}
+
+// A computation that does not return within stop_wait_ms of Stop's request is abandoned: its
+// job keeps its lease (which lapses), so nobody computes it while this process still might.
+TEST_F(WorkerPoolTest, AComputationThatDoesNotStopKeepsItsLease) {
+  const int64_t id = EnqueueArray(16);
+  GatedExecutor gate(/*closed=*/true);
+  WorkerPoolOptions o = Options(gate.Fn());
+  o.stop_wait_ms = 300;
+  auto pool = std::make_unique<WorkerPool>(store_.get(), &metrics_, o);
+  pool->Start();
+  pool->Notify();
+  ASSERT_TRUE(gate.WaitEntered());
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_EQ(pool->Stop(std::chrono::milliseconds(0)), StopOutcome::kAbandoned);
+  const double took =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_GE(took, 0.3);
+  EXPECT_LT(took, 2.0);
+  storage::JobInfo job = Job(id);
+  EXPECT_EQ(job.status, JobStatus::kRunning);
+  EXPECT_EQ(job.lease_owner, "test:1-0");
+  gate.Open();
+  pool.reset();  // waits for the abandoned computation, which releases nothing
+  job = Job(id);
+  EXPECT_EQ(job.status, JobStatus::kRunning);
+  EXPECT_EQ(job.lease_owner, "test:1-0");
+}
+
+// The job's time limit ends it as failed, reason deadline, never retried.
+TEST_F(WorkerPoolTest, AJobPastItsTimeLimitFailsWithReasonDeadline) {
+  const int64_t id = EnqueueArray(17);
+  GatedExecutor gate(/*closed=*/true);
+  WorkerPoolOptions o = Options(gate.Fn());
+  o.job_ms = 200;
+  WorkerPool pool(store_.get(), &metrics_, o);
+  pool.Start();
+  pool.Notify();
+  ASSERT_TRUE(gate.WaitEntered());
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // past the limit
+  gate.Open();
+  const storage::JobInfo job = WaitFor(id, JobStatus::kFailed);
+  EXPECT_EQ(job.status, JobStatus::kFailed);
+  EXPECT_EQ(job.error_reason, "deadline");
+  EXPECT_EQ(job.error_code, "stopped");
+  EXPECT_NE(job.error_message.find("time limit of 0.2 s"), std::string::npos) << job.error_message;
+  EXPECT_EQ(job.attempts, 1);
+  EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
+  EXPECT_EQ(Job(id).status, JobStatus::kFailed);
+}
+
+// A cancel in this process (WorkerPool::Cancel) or through the store from anywhere.
+TEST_F(WorkerPoolTest, ACancelledJobFailsWithWhoCancelledItAndWhy) {
+  for (const bool local : {true, false}) {
+    const int64_t id = EnqueueArray(local ? 18 : 19);
+    GatedExecutor gate(/*closed=*/true);
+    WorkerPoolOptions o = Options(gate.Fn());
+    o.cancel_poll_ms = 20;
+    WorkerPool pool(store_.get(), &metrics_, o);
+    pool.Start();
+    pool.Notify();
+    ASSERT_TRUE(gate.WaitEntered());
+    ASSERT_TRUE(store_->CancelJob(id, "wrong board", "token").ok());
+    if (local) {
+      EXPECT_TRUE(pool.Cancel(id));
+    } else {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));  // a few polls
+    }
+    EXPECT_FALSE(pool.Cancel(id + 1000));
+    gate.Open();
+    const storage::JobInfo job = WaitFor(id, JobStatus::kFailed);
+    EXPECT_EQ(job.status, JobStatus::kFailed) << (local ? "local" : "through the store");
+    EXPECT_EQ(job.error_reason, "cancelled");
+    EXPECT_EQ(job.error_message.rfind("cancelled by token: wrong board", 0), 0u)
+        << job.error_message;
+    EXPECT_EQ(job.attempts, 1);
+    EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
+  }
 }
 
 // The lease is taken back (as another process does when it believes this one dead, or after the
@@ -308,7 +387,7 @@ void ExpectTakenBackJobIsCancelled(storage::Store* store, Metrics* metrics, int6
   for (int i = 0; i < 12000 && pool.running_jobs() > 0; ++i)
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_EQ(pool.running_jobs(), 0);
-  EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
+  EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
   storage::JobInfo job;
   ASSERT_TRUE(store->GetJob(id, &job).ok());
   EXPECT_EQ(job.status, JobStatus::kRunning);
@@ -354,7 +433,7 @@ TEST_F(WorkerPoolTest, SharedExecutorIsUsedAndGivesTheIdenticalResult) {
     pool.Start();
     pool.Notify();
     ASSERT_EQ(WaitFor(own, JobStatus::kSucceeded).status, JobStatus::kSucceeded);
-    EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
+    EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
   }
   // The same recording and config again (a second job on the stored recording).
   storage::JobInfo first = Job(own);
@@ -371,7 +450,7 @@ TEST_F(WorkerPoolTest, SharedExecutorIsUsedAndGivesTheIdenticalResult) {
   pool.Start();
   pool.Notify();
   const storage::JobInfo shared = WaitFor(second.id, JobStatus::kSucceeded);
-  EXPECT_TRUE(pool.Stop(std::chrono::seconds(60)));
+  EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
   ASSERT_EQ(shared.status, JobStatus::kSucceeded)
       << shared.error_code << ": " << shared.error_message;
   EXPECT_GT(calls.load(), 0) << "the job did not use the shared executor";

@@ -139,6 +139,12 @@ TEST_F(PgStoreTest, Version1FailuresMigrateAndNewOnesKeepTheirReason) {
   auto c = Sql();
   ASSERT_TRUE(c->ExecScript("ALTER TABLE jobs DROP COLUMN error_reason;"
                             "ALTER TABLE jobs DROP COLUMN error_detail_json;"
+                            "ALTER TABLE jobs DROP COLUMN cancel_requested_at;"
+                            "ALTER TABLE jobs DROP COLUMN cancel_reason;"
+                            "ALTER TABLE jobs DROP COLUMN cancel_actor;"
+                            "ALTER TABLE job_events DROP CONSTRAINT job_events_action_check;"
+                            "ALTER TABLE job_events ADD CONSTRAINT job_events_action_check "
+                            "CHECK (action IN ('revoke', 'accept'));"
                             "UPDATE jobs SET status = 'failed', finished_at = 5, "
                             "error_code = 'not_determinable', error_message = 'too few';"
                             "UPDATE calibd_schema SET version = 1")
@@ -147,7 +153,7 @@ TEST_F(PgStoreTest, Version1FailuresMigrateAndNewOnesKeepTheirReason) {
   ASSERT_NE(store, nullptr);
   int64_t version = 0;
   ASSERT_TRUE(PgSchemaVersion(c.get(), &version).ok());
-  EXPECT_EQ(version, 2);
+  EXPECT_EQ(version, kPgSchemaVersion);
   JobInfo job;
   ASSERT_TRUE(store->GetJob(1, &job).ok());
   EXPECT_EQ(job.status, JobStatus::kFailed);
@@ -165,6 +171,51 @@ TEST_F(PgStoreTest, Version1FailuresMigrateAndNewOnesKeepTheirReason) {
   ASSERT_TRUE(store->GetJob(job.id, &job).ok());
   EXPECT_EQ(job.error_reason, "no_rank_gap");
   EXPECT_EQ(job.error_detail_json, "{\"a\":1}");
+}
+
+TEST_F(PgStoreTest, Version2JobsAndEventsMigrateAndJobsCanBeCancelled) {
+  int64_t running = 0;
+  {
+    auto store = Open();
+    const int64_t rec = Put(store.get(), "abc");
+    JobInfo job;
+    ASSERT_TRUE(store->EnqueueJob(rec, "pca", "", "{}", &job).ok());
+    running = job.id;
+    bool claimed = false;
+    ASSERT_TRUE(store->ClaimJob("w", 60000, &job, &claimed).ok());
+    ASSERT_TRUE(claimed);
+  }
+  // The database as version 2 left it: no cancel columns, events only revoke/accept.
+  auto c = Sql();
+  ASSERT_TRUE(c->ExecScript("ALTER TABLE jobs DROP COLUMN cancel_requested_at;"
+                            "ALTER TABLE jobs DROP COLUMN cancel_reason;"
+                            "ALTER TABLE jobs DROP COLUMN cancel_actor;"
+                            "ALTER TABLE job_events DROP CONSTRAINT job_events_action_check;"
+                            "ALTER TABLE job_events ADD CONSTRAINT job_events_action_check "
+                            "CHECK (action IN ('revoke', 'accept'));"
+                            "UPDATE calibd_schema SET version = 2")
+                  .ok());
+  EXPECT_FALSE(c->ExecScript("INSERT INTO job_events (job_id, action, reason, actor, created_at) "
+                             "VALUES (1, 'cancel', 'x', 'token', 1)")
+                   .ok());
+  auto store = Open();
+  ASSERT_NE(store, nullptr);
+  int64_t version = 0;
+  ASSERT_TRUE(PgSchemaVersion(c.get(), &version).ok());
+  EXPECT_EQ(version, kPgSchemaVersion);
+  JobInfo job;
+  ASSERT_TRUE(store->GetJob(running, &job).ok());
+  EXPECT_EQ(job.status, JobStatus::kRunning);
+  EXPECT_EQ(job.cancel_requested_at_ms, 0);
+  ASSERT_TRUE(store->CancelJob(running, "migrated", "token", &job).ok());
+  EXPECT_EQ(job.cancel_reason, "migrated");
+  std::vector<int64_t> requested;
+  ASSERT_TRUE(store->CancelRequests({running}, &requested).ok());
+  EXPECT_EQ(requested, std::vector<int64_t>({running}));
+  std::vector<JobEvent> events;
+  ASSERT_TRUE(store->ListJobEvents(running, &events).ok());
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].action, "cancel");
 }
 
 TEST_F(PgStoreTest, RefusesADatabaseWithANewerSchema) {

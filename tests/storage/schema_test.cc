@@ -257,7 +257,7 @@ TEST(Schema, Version3FailuresKeepTheirCodeAndMessageWithoutAReason) {
   ASSERT_TRUE(s.ok()) << s.ToString();
   {
     auto db = OpenDb(path);
-    EXPECT_EQ(Version(db.get()), 4);
+    EXPECT_EQ(Version(db.get()), kSchemaVersion);
   }
   JobInfo job;
   ASSERT_TRUE(store->GetJob(1, &job).ok());
@@ -277,6 +277,59 @@ TEST(Schema, Version3FailuresKeepTheirCodeAndMessageWithoutAReason) {
   ASSERT_TRUE(store->GetJob(job.id, &job).ok());
   EXPECT_EQ(job.error_reason, "no_rank_gap");
   EXPECT_EQ(job.error_detail_json, "{\"a\":1}");
+}
+
+TEST(Schema, Version4EventsAndJobsAreCarriedOverAndJobsCanBeCancelled) {
+  TempDir dir;
+  const std::string path = dir.File("v4.db");
+  {
+    auto db = OpenDb(path);
+    ASSERT_TRUE(MigrateSchema(db.get(), 4).ok());
+    // What calibd with schema v4 wrote: a succeeded job revoked by a person, a running job.
+    ASSERT_TRUE(db->Exec("INSERT INTO recordings (id, sha256, bytes, device, layout, rows, "
+                         "created_at) VALUES (1, 'h', 3, 'SN1', 'pca_averaged', 1, 1000);"
+                         "INSERT INTO recording_data VALUES (1, X'616263');"
+                         "INSERT INTO jobs (id, recording_id, method, device, config_json, "
+                         "status, attempts, created_at, finished_at) "
+                         "VALUES (1, 1, 'pca', 'SN1', '{}', 'succeeded', 1, 1100, 2000);"
+                         "INSERT INTO results (job_id, result_json, sha256, created_at, verdict, "
+                         "decision) VALUES (1, '{}', 's', 2000, 'accepted', 'revoked');"
+                         "INSERT INTO job_events (id, job_id, action, reason, actor, created_at) "
+                         "VALUES (7, 1, 'revoke', 'bad fixture', 'token', 3000);"
+                         "INSERT INTO jobs (id, recording_id, method, device, config_json, "
+                         "status, attempts, lease_owner, lease_expires_at, created_at, "
+                         "started_at) VALUES (2, 1, 'pca', 'SN1', '{}', 'running', 1, 'w', "
+                         "999999, 1100, 1200);")
+                    .ok());
+    // v4 refuses the action 'cancel'.
+    EXPECT_FALSE(db->Exec("INSERT INTO job_events (job_id, action, reason, actor, created_at) "
+                          "VALUES (1, 'cancel', 'x', 'token', 1)")
+                     .ok());
+  }
+  std::unique_ptr<Store> store;
+  StoreOptions o;
+  o.now_ms = [] { return int64_t{10000}; };
+  Status s = Store::Open(path, o, &store);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  std::vector<JobEvent> events;
+  ASSERT_TRUE(store->ListJobEvents(1, &events).ok());
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].id, 7);
+  EXPECT_EQ(events[0].action, "revoke");
+  EXPECT_EQ(events[0].reason, "bad fixture");
+  JobInfo job;
+  ASSERT_TRUE(store->GetJob(2, &job).ok());
+  EXPECT_EQ(job.status, JobStatus::kRunning);
+  EXPECT_EQ(job.cancel_requested_at_ms, 0);
+  EXPECT_EQ(job.cancel_reason, "");
+  ASSERT_TRUE(store->CancelJob(2, "migrated", "token", &job).ok());
+  EXPECT_EQ(job.cancel_requested_at_ms, 10000);
+  std::vector<int64_t> requested;
+  ASSERT_TRUE(store->CancelRequests({1, 2}, &requested).ok());
+  EXPECT_EQ(requested, std::vector<int64_t>({2}));
+  ASSERT_TRUE(store->ListJobEvents(2, &events).ok());
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].action, "cancel");
 }
 
 TEST(Schema, NewerSchemaThanThisBuildIsRefused) {

@@ -346,6 +346,120 @@ TEST_P(StoreTest, ClaimRunsTheOldestJobUnderALease) {
   EXPECT_FALSE(claimed);
 }
 
+// ---- cancel ----
+
+TEST_P(StoreTest, CancellingAQueuedJobFailsItAtOnceWithWhoAndWhy) {
+  const int64_t id = Enqueue(Put("x"));
+  clock_.Advance(500);
+  JobInfo job;
+  JobEvent event;
+  ASSERT_TRUE(store_->CancelJob(id, "wrong recording", "token", &job, &event).ok());
+  EXPECT_EQ(job.status, JobStatus::kFailed);
+  EXPECT_EQ(job.error_code, "stopped");
+  EXPECT_EQ(job.error_reason, "cancelled");
+  EXPECT_EQ(job.error_message, "cancelled by token: wrong recording");
+  EXPECT_EQ(job.finished_at_ms, clock_.Now());
+  EXPECT_EQ(job.cancel_requested_at_ms, clock_.Now());
+  EXPECT_EQ(job.cancel_reason, "wrong recording");
+  EXPECT_EQ(job.cancel_actor, "token");
+  EXPECT_EQ(event.action, "cancel");
+  EXPECT_EQ(event.reason, "wrong recording");
+  std::vector<JobEvent> events;
+  ASSERT_TRUE(store_->ListJobEvents(id, &events).ok());
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].action, "cancel");
+  EXPECT_EQ(events[0].actor, "token");
+  // Nothing left to claim, and a second cancel is a conflict naming the status.
+  JobInfo none;
+  bool claimed = true;
+  ASSERT_TRUE(store_->ClaimJob("w", 1000, &none, &claimed).ok());
+  EXPECT_FALSE(claimed);
+  Status again = store_->CancelJob(id, "again", "token");
+  EXPECT_EQ(again.code(), StatusCode::kConflict);
+  EXPECT_NE(again.message().find("failed"), std::string::npos) << again.ToString();
+}
+
+TEST_P(StoreTest, CancellingARunningJobLeavesARequestItsHolderSees) {
+  const int64_t rec = Put("x");
+  const int64_t a = Enqueue(rec), b = Enqueue(rec);
+  ASSERT_EQ(Claim("w1").id, a);
+  ASSERT_EQ(Claim("w2").id, b);
+  std::vector<int64_t> requested = {99};
+  ASSERT_TRUE(store_->CancelRequests({a, b}, &requested).ok());
+  EXPECT_TRUE(requested.empty());
+  JobInfo job;
+  ASSERT_TRUE(store_->CancelJob(b, "takes too long", "anonymous", &job).ok());
+  EXPECT_EQ(job.status, JobStatus::kRunning);  // its holder stops it
+  EXPECT_EQ(job.cancel_reason, "takes too long");
+  // A later request keeps the first one's words (and is recorded too).
+  ASSERT_TRUE(store_->CancelJob(b, "second thoughts", "token", &job).ok());
+  EXPECT_EQ(job.cancel_reason, "takes too long");
+  EXPECT_EQ(job.cancel_actor, "anonymous");
+  ASSERT_TRUE(store_->CancelRequests({a, b, 12345}, &requested).ok());
+  EXPECT_EQ(requested, std::vector<int64_t>({b}));
+  ASSERT_TRUE(store_->CancelRequests({}, &requested).ok());
+  EXPECT_TRUE(requested.empty());
+  // The holder fails it; then it is no longer a request to act on.
+  ASSERT_TRUE(
+      store_->FailJob(b, "w2", {"stopped", "cancelled", "cancelled by anonymous: x", "{}"}, false)
+          .ok());
+  ASSERT_TRUE(store_->CancelRequests({a, b}, &requested).ok());
+  EXPECT_TRUE(requested.empty());
+  EXPECT_EQ(Get(b).error_reason, "cancelled");
+}
+
+TEST_P(StoreTest, ACancelledRunningJobIsNeverQueuedAgain) {
+  const int64_t rec = Put("x");
+  const int64_t released = Enqueue(rec), lapsed = Enqueue(rec), transient = Enqueue(rec);
+  ASSERT_EQ(Claim("w1", 1000).id, released);
+  ASSERT_EQ(Claim("w2", 1000).id, lapsed);
+  ASSERT_EQ(Claim("w3", 60000).id, transient);
+  for (int64_t id : {released, lapsed, transient}) {
+    ASSERT_TRUE(store_->CancelJob(id, "stop it", "token").ok());
+  }
+  // Released at shutdown: it ends as cancelled instead of going back to the queue.
+  ASSERT_TRUE(store_->ReleaseJob(released, "w1").ok());
+  JobInfo job = Get(released);
+  EXPECT_EQ(job.status, JobStatus::kFailed);
+  EXPECT_EQ(job.error_reason, "cancelled");
+  EXPECT_EQ(job.error_message, "cancelled by token: stop it");
+  // Its holder died: when the lease lapses it fails as cancelled (not lease_expired, not queued).
+  clock_.Advance(2000);
+  int64_t recovered = 0;
+  ASSERT_TRUE(store_->RecoverExpiredLeases(&recovered).ok());
+  EXPECT_EQ(recovered, 1);
+  job = Get(lapsed);
+  EXPECT_EQ(job.status, JobStatus::kFailed);
+  EXPECT_EQ(job.error_code, "stopped");
+  EXPECT_EQ(job.error_reason, "cancelled");
+  EXPECT_NE(job.error_message.find("cancelled by token: stop it"), std::string::npos);
+  // A transient failure of a cancelled job is final.
+  ASSERT_TRUE(store_->FailJob(transient, "w3", {"io_error", "", "disk", ""}, true).ok());
+  EXPECT_EQ(Get(transient).status, JobStatus::kFailed);
+  JobInfo none;
+  bool claimed = true;
+  ASSERT_TRUE(store_->ClaimJob("w4", 1000, &none, &claimed).ok());
+  EXPECT_FALSE(claimed);
+}
+
+TEST_P(StoreTest, CancelNeedsAReasonAndAnUnfinishedJob) {
+  const int64_t rec = Put("x");
+  const int64_t id = Enqueue(rec);
+  Status s = store_->CancelJob(id, "", "token");
+  EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+  EXPECT_EQ(s.field(), "reason");
+  EXPECT_EQ(Get(id).status, JobStatus::kQueued);  // nothing changed
+  EXPECT_EQ(store_->CancelJob(424242, "why", "token").code(), StatusCode::kNotFound);
+  ASSERT_EQ(Claim("w").id, id);
+  ASSERT_TRUE(store_->CompleteJob(id, "w", R"({"ok":true})").ok());
+  s = store_->CancelJob(id, "too late", "token");
+  EXPECT_EQ(s.code(), StatusCode::kConflict);
+  EXPECT_NE(s.message().find("succeeded"), std::string::npos) << s.ToString();
+  std::vector<JobEvent> events;
+  ASSERT_TRUE(store_->ListJobEvents(id, &events).ok());
+  EXPECT_TRUE(events.empty());
+}
+
 TEST_P(StoreTest, CompleteStoresResultWithHashAndUpdatesTheDevice) {
   int64_t rec = Put("x", "SN1");
   int64_t id = Enqueue(rec);

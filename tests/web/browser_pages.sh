@@ -129,6 +129,26 @@ render recording "/recordings/$r7"
 render full "/jobs/$j8"
 render device-drift /devices/IMU-DRIFT
 
+# A running job's page: its elapsed time and the Cancel form (issue #20); then it is cancelled.
+python3 - "$tmp/array/config.json" "$tmp/endless.json" <<'PY'
+import json, sys
+c = json.load(open(sys.argv[1]))
+c.update({"solver": "bcd", "max_iterations": 1000000, "tolerance": 0})
+json.dump(c, open(sys.argv[2], "w"))
+PY
+j10=$(curl -sf -F "recording=@$tmp/array/recording.csv" -F "config=@$tmp/endless.json" \
+  "$base/api/v1/recordings?device=ENDLESS" | job_id)
+for _ in $(seq 1 300); do
+  curl -sf "$base/api/v1/jobs/$j10" | grep -q '"status": "running"' && break
+  sleep 0.1
+done
+render running "/jobs/$j10"
+curl -sf -H 'Content-Type: application/json' -d '{"reason": "end of the browser test"}' \
+  "$base/api/v1/jobs/$j10/cancel" >/dev/null
+wait_job "$j10"
+expect running 'badge-running' 'class="elapsed"' 'form class="cancel-job"' \
+  "action=\"/api/v1/jobs/$j10/cancel\"" 'name="reason"'
+
 expect history 'class="page-history' 'table-history' 'form class="filters\|class="filters'
 expect pca 'class="page-job' 'table-pca-parameters' 'plot-singular-values' 'plot-magnitude-error' \
   'plot-residual-rms' 'plot-axes-xy' 'plot-axes-xz' 'table-diagnostics'
@@ -164,7 +184,7 @@ expect recording 'class="page-recording' 'plot-timeline-accel' 'plot-timeline-gy
 expect device-drift 'imu (2 accepted calibrations' 'noise (2 accepted calibrations' \
   'table-drift-imu' 'table-drift-noise' 'data-sensor="accelerometer"' 'data-sensor="gyroscope"' \
   'plot-drift-imu-scale' 'plot-drift-noise-accel' 'plot-drift-noise-gyro'
-for page in history pca array failed failed-imu device devices revoked rejected recording full device-drift; do
+for page in history pca array failed failed-imu device devices revoked rejected recording full device-drift running; do
   reject "$page" '<script' '<img'
   if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"

@@ -549,6 +549,36 @@ TEST(JobPage, QueuedJobRendersWithoutResult) {
   EXPECT_TRUE(Has(page, "This job is queued"));
 }
 
+TEST(JobPage, RunningAndQueuedJobsOfferACancelFormAndTheRunningOneItsElapsedTime) {
+  JobView v;
+  v.job = Job(41, "SN<1>", "array", "running", "2026-11-20T09:20:00Z", json());
+  v.elapsed_ms = 12345;
+  std::string page = RenderJobPage(v);
+  ExpectDocument(page, "page-job");
+  EXPECT_TRUE(Has(page, "<span class=\"elapsed\">12.3 s</span>")) << page;
+  EXPECT_TRUE(Has(page,
+                  "<form class=\"cancel-job\" method=\"post\" "
+                  "action=\"/api/v1/jobs/41/cancel\">"));
+  EXPECT_TRUE(Has(page, "name=\"reason\" required"));
+  EXPECT_FALSE(Has(page, "name=\"token\""));  // the server has no token
+  v.token_required = true;
+  page = RenderJobPage(v);
+  EXPECT_TRUE(Has(page, "<input type=\"password\" name=\"token\" required"));
+  // Unknown elapsed time still renders.
+  v.elapsed_ms = -1;
+  EXPECT_TRUE(Has(RenderJobPage(v), "<span class=\"elapsed\">?</span>"));
+  // A queued job: the form, no elapsed time.
+  v.job = Job(42, "", "pca", "queued", "2026-11-20T09:20:00Z", json());
+  page = RenderJobPage(v);
+  EXPECT_TRUE(Has(page, "action=\"/api/v1/jobs/42/cancel\""));
+  EXPECT_FALSE(Has(page, "class=\"elapsed\""));
+  // Finished jobs have nothing to cancel.
+  for (const char* status : {"succeeded", "failed"}) {
+    v.job = Job(43, "", "pca", status, "2026-11-20T09:20:00Z", json());
+    EXPECT_FALSE(Has(RenderJobPage(v), "cancel-job")) << status;
+  }
+}
+
 TEST(JobPage, ResultWithMissingKeysAndWrongTypesStillRenders) {
   const std::vector<json> broken = {
       json::object(),
