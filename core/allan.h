@@ -28,9 +28,9 @@
 //
 // Cost: O(n · M) time, O(n) memory (8 bytes a sample) for n samples and M cluster sizes (M <=
 // log2(n/4) + 1 with octaves, <= taus_per_decade · log10(n/4) + 1 otherwise, at most 100 per
-// decade). Worst case at the noise job budget's largest input (default 8 GiB budget, 7 B per
-// value: 1.2 G values, 7 columns, 175 M samples per channel, 24 octaves): see bench/README.md
-// "Cost of every method".
+// decade). Worst case at the noise job budget's largest input (5.9 GiB, the default on a 2-core
+// 23 GiB machine, 7 B per value, 7 columns: 128 M samples a channel, 25 octaves): ≈ 4.5 s of CPU
+// a channel (bench/README.md "Cost of every method").
 #ifndef CALIBD_CORE_ALLAN_H_
 #define CALIBD_CORE_ALLAN_H_
 

@@ -33,9 +33,10 @@
 // accelerometer triads, I iterations (joint: max_iterations LM iterations, default 50; bcd:
 // max_iterations sweeps, default 500) and g <= 50 Gauss-Newton steps of the per-sample motion
 // (bcd, and the start); the reduced system is 3(K-1) square (O(K^3) per iteration). Nothing
-// dense grows with N. Worst case at the job budget's largest input (default 8 GiB budget, 24 B
-// per value: 350 M values, e.g. 32 triads and 1.8 M rows): see bench/README.md "Cost of every
-// method" (measured, linear in N · K).
+// dense grows with N. Worst case at the job budget's largest input (5.9 GiB, the default on a
+// 2-core 23 GiB machine, 24 B per value: 32 triads and 1.36 M rows): joint ≈ 27 s of CPU at its
+// usual 4 iterations, ≈ 6 min at the 50-iteration cap; bcd ≈ 5 s a sweep, ≈ 45 min at its
+// 500-sweep cap (measured to 262 k rows, linear: bench/README.md "Cost of every method").
 //
 // Thread-safety: CalibrateArray is reentrant; it uses up to options.threads worker threads and
 // its result does not depend on the number of threads (fixed chunking, ordered reductions).

@@ -65,8 +65,10 @@
 // terms). Memory O(N · K) (the data and the per-sample state) + O((N / 256) · (27K)^2) (the
 // per-chunk Schur sums) + O((27K)^2). The statics are blocks of the solver like the samples:
 // nothing dense grows with N or with the number of statics. Worst case at the job budget's
-// largest input (default 8 GiB budget, 64 B per value: 134 M values, e.g. 8 triads (49 columns)
-// and 2.7 M rows): see bench/README.md "Cost of every method" (measured, linear in N).
+// largest input (5.9 GiB, the default on a 2-core 23 GiB machine, 64 B per value: 8 IMUs, 49
+// columns, 2.0 M rows): 0.29 ms of CPU a row at 4 iterations, ≈ 10 min, ≈ 2 h at the 50-iteration
+// cap (measured to 19 k rows, linear: bench/README.md "Cost of every method"); the job's
+// deadline cuts it short.
 //
 // Thread-safety: CalibrateArrayFull is reentrant; results do not depend on the thread count.
 #ifndef CALIBD_CORE_ARRAY_FULL_H_

@@ -48,9 +48,12 @@
 // n <= max_statics (1000) statics, and the accelerometer fits O(T · max_iterations · n · 21²).
 // Nothing grows faster than N: no dense matrix over the statics (issue #20: a log whose time
 // column was in ms gave ~10⁴ two-sample "statics" and a dense (21 + 2n)² LDLT per iteration,
-// hours). Worst case at the job budget's largest input (default 8 GiB budget, 24 B per value,
-// 7 columns: 51 M rows): see bench/README.md "Cost of every method" (measured: a few seconds per
-// million rows at the worst, linear).
+// hours). Worst case at the job budget's largest input (the default budget on a 2-core 23 GiB
+// machine, 5.9 GiB, 24 B per value, 7 columns: 37 M rows; 51 M rows at the 8 GiB maximum):
+// measured 35 s of CPU and 4.1 GB for a hand-held log of 37 M rows (about 1 µs a row, linear;
+// bench/README.md "Cost of every method"). Every LM stage hitting max_iterations (a log that
+// does not fit the model, e.g. its time column in ms) costs up to 26 µs a row: about 16 min of
+// CPU at 37 M rows, which the job's deadline (core/stop_token.h) cuts short.
 //     There is no null space left: the accelerometer-defined frame (T_a upper triangular) is the
 //     gauge, fixed by the parameterisation.
 //

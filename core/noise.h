@@ -47,8 +47,9 @@
 // Cost: O(C · n · M) time for C channels, n samples and M cluster sizes (core/allan.h), plus
 // O(n log n) for the median Δt; the fit is O(M) per reweighting pass (5 passes, every subset of
 // 3 terms). Memory O(n) besides the samples (one double per sample). Worst case at the job
-// budget's largest input (default 8 GiB budget, 7 B per value: 6 channels and t, 175 M rows):
-// see bench/README.md "Cost of every method" (measured, linear in C · n).
+// budget's largest input (5.9 GiB, the default on a 2-core 23 GiB machine, 7 B per value: 6
+// channels and t, 128 M rows): ≈ 27 s of CPU (0.21 µs a row, measured to 16.8 M rows, linear:
+// bench/README.md "Cost of every method").
 //
 // SPEC §7 result JSON from NoiseResult (for the server):
 //   parameters.channels[i]  {name, unit, white_noise: white_noise.value, bias_instability:
