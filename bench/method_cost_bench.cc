@@ -188,8 +188,11 @@ BENCHMARK(BM_ArrayFullCost)
     ->Range(1 << 12, 1 << 18)
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_PcaCost)->RangeMultiplier(2)->Range(16, 512)->Iterations(1)->Unit(
-    benchmark::kMillisecond);
+BENCHMARK(BM_PcaCost)
+    ->RangeMultiplier(2)
+    ->Range(16, 512)
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

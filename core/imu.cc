@@ -134,11 +134,11 @@ using Mat21 = Eigen::Matrix<double, kShared, kShared>;
 // directions' own part, block tridiagonal with 2×2 blocks (a static's accelerometer residual
 // touches its u_j alone, a rotation u_j and u_{j+1}). O(n) memory; solved in O(n) time.
 struct Normal {
-  Mat21 a;                       // shared × shared
-  MatrixXd e;                    // kShared × 2n: shared × directions
+  Mat21 a;                         // shared × shared
+  MatrixXd e;                      // kShared × 2n: shared × directions
   std::vector<Eigen::Matrix2d> d;  // n: u_j × u_j
   std::vector<Eigen::Matrix2d> f;  // n − 1: u_j × u_{j+1} (u_{j+1} × u_j is its transpose)
-  VectorXd g;                    // kShared + 2n
+  VectorXd g;                      // kShared + 2n
 
   void SetZero(int n) {
     a.setZero();
@@ -229,11 +229,13 @@ bool SolveNormal(const Normal& h, const std::vector<char>& active, double lambda
   for (int i = 0; i < dim; ++i) rhs(i) = on(i) ? scale(i) * rhs_in(i) : 0.0;
   // Block tridiagonal Cholesky C = L Lᵀ: diagonal blocks l[j] (lower), sub-diagonal m[j] =
   // L(j+1, j).
-  std::vector<Eigen::Matrix2d> l(static_cast<size_t>(n)), m(static_cast<size_t>(std::max(0, n - 1)));
+  std::vector<Eigen::Matrix2d> l(static_cast<size_t>(n)),
+      m(static_cast<size_t>(std::max(0, n - 1)));
   auto block = [&](const Eigen::Matrix2d& src, int si, int sj) {
     Eigen::Matrix2d b;
     for (int r = 0; r < 2; ++r) {
-      for (int c = 0; c < 2; ++c) b(r, c) = entry(kShared + 2 * si + r, kShared + 2 * sj + c, src(r, c));
+      for (int c = 0; c < 2; ++c)
+        b(r, c) = entry(kShared + 2 * si + r, kShared + 2 * sj + c, src(r, c));
     }
     return b;
   };
@@ -246,8 +248,10 @@ bool SolveNormal(const Normal& h, const std::vector<char>& active, double lambda
     if (j + 1 < n) {
       // L(j+1, j) L(j, j)ᵀ = C(j+1, j) = F_jᵀ.
       const Eigen::Matrix2d fjt = block(h.f[static_cast<size_t>(j)], j, j + 1).transpose();
-      m[static_cast<size_t>(j)] =
-          l[static_cast<size_t>(j)].triangularView<Eigen::Lower>().solve(fjt.transpose()).transpose();
+      m[static_cast<size_t>(j)] = l[static_cast<size_t>(j)]
+                                      .triangularView<Eigen::Lower>()
+                                      .solve(fjt.transpose())
+                                      .transpose();
     }
   }
   // C⁻¹ [Eᵀ | r_u] by forward and back substitution.

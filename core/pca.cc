@@ -1195,9 +1195,9 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
   result->cost_closed_form = Cost(mm, fit);
   result->cost = result->cost_closed_form;
   if (options.refine) {
-    result->refine_iterations = Refine(mm, c, affine, options.max_refine_iterations,
-                                       result->cost_estimate.solver, &fit, &result->cost,
-                                       options.stop);
+    result->refine_iterations =
+        Refine(mm, c, affine, options.max_refine_iterations, result->cost_estimate.solver, &fit,
+               &result->cost, options.stop);
     if (StopRequested(options.stop)) return stopped("refinement");
     result->refined = result->cost < result->cost_closed_form;
     if (!result->refined) {
