@@ -109,7 +109,7 @@ std::vector<int64_t> AllanClusterSizes(int64_t n, int taus_per_decade) {
 
 std::vector<double> OverlappingAllanVariance(const float* y, int64_t n,
                                              const std::vector<int64_t>& clusters, int threads,
-                                             const TaskExecutor& executor) {
+                                             const TaskExecutor& executor, const StopToken* stop) {
   std::vector<double> avar(clusters.size(), std::numeric_limits<double>::quiet_NaN());
   if (n < 2) return avar;
   const std::vector<double> s = CentredCumulativeSum(y, n);
@@ -136,8 +136,10 @@ std::vector<double> OverlappingAllanVariance(const float* y, int64_t n,
     return begin < end ? SecondDifferenceSquares(s.data(), clusters[j], begin, end) : 0.0;
   };
   for (int64_t g0 = 0; g0 < blocks; g0 += kGroup) {
+    if (StopRequested(stop)) return avar;
     const int64_t gb = std::min(kGroup, blocks - g0);
     const std::function<void(int64_t)> task = [&](int64_t item) {
+      if (StopRequested(stop)) return;
       if (item < gb) {
         for (int64_t a = 0; a < ns; ++a) {
           partial[static_cast<size_t>(a * kGroup + item)] = block_sum(small[a], g0 + item);
@@ -338,7 +340,10 @@ Status ComputeAllanDeviation(const float* y, int64_t n, double tau0, const Allan
   curve->tau0 = tau0;
   curve->samples = n;
   curve->cluster = AllanClusterSizes(n, options.taus_per_decade);
-  curve->avar = OverlappingAllanVariance(y, n, curve->cluster, options.threads, options.executor);
+  if (StopRequested(options.stop)) return StoppedStatus(*options.stop, "allan deviation");
+  curve->avar = OverlappingAllanVariance(y, n, curve->cluster, options.threads, options.executor,
+                                         options.stop);
+  if (StopRequested(options.stop)) return StoppedStatus(*options.stop, "allan deviation");
   for (size_t j = 0; j < curve->cluster.size(); ++j) {
     curve->tau.push_back(static_cast<double>(curve->cluster[j]) * tau0);
     curve->adev.push_back(std::sqrt(curve->avar[j]));

@@ -25,6 +25,12 @@
 // that one sum; each block's partial sum goes to its own slot and the slots are added in block
 // order, so the result is bit-identical for any number of threads. Thread-compatible: no shared
 // state.
+//
+// Cost: O(n · M) time, O(n) memory (8 bytes a sample) for n samples and M cluster sizes (M <=
+// log2(n/4) + 1 with octaves, <= taus_per_decade · log10(n/4) + 1 otherwise, at most 100 per
+// decade). Worst case at the noise job budget's largest input (5.9 GiB, the default on a 2-core
+// 23 GiB machine, 7 B per value, 7 columns: 128 M samples a channel, 25 octaves): ≈ 4.5 s of CPU
+// a channel (bench/README.md "Cost of every method").
 #ifndef CALIBD_CORE_ALLAN_H_
 #define CALIBD_CORE_ALLAN_H_
 
@@ -34,6 +40,7 @@
 
 #include "base/status.h"
 #include "core/block_lm.h"
+#include "core/stop_token.h"
 
 namespace calibd::core {
 
@@ -58,6 +65,10 @@ struct AllanOptions {
   int threads = 1;
   // Optional: runs the blocks instead of the built-in threads (e.g. the server's shared pool).
   TaskExecutor executor;
+  // Polled (core/stop_token.h) for every block of 8192 cluster starts (a few ms at the most)
+  // and between the passes: when it asks, ComputeAllanDeviation returns core::StoppedStatus at
+  // once. Null: never stops.
+  const StopToken* stop = nullptr;
 
   bool IsValid(std::string* error) const;
 };
@@ -69,9 +80,12 @@ std::vector<int64_t> AllanClusterSizes(int64_t n, int taus_per_decade);
 // Overlapping Allan variance σ²(m·τ0) of y[0..n) for every m in `clusters` (each 1 <= m <= n/2),
 // O(n) per cluster size from the centred cumulative sum, on `threads` threads (or `executor`;
 // see AllanOptions), bit-identical for any number. Precondition: y finite.
+// Polls `stop` (may be null) for every block: when it asks, returns early with partial values
+// (the caller checks the token).
 std::vector<double> OverlappingAllanVariance(const float* y, int64_t n,
                                              const std::vector<int64_t>& clusters, int threads = 1,
-                                             const TaskExecutor& executor = {});
+                                             const TaskExecutor& executor = {},
+                                             const StopToken* stop = nullptr);
 
 // The same by direct summation of every cluster average, O(n·m) per cluster size, accumulated in
 // long double: the reference for tests and benchmarks, not for production use.

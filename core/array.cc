@@ -171,8 +171,10 @@ using MotionStates = Eigen::Matrix<double, 9, Eigen::Dynamic>;  // column n: (om
 // Motion step for every sample (x: 9 x N in/out, omega rows used as starting point), plus the
 // sums needed by the closed-form position update of Eq. (9). Returns false if the geometry
 // cannot carry the motion estimator (collinear).
+// Polls `stop` every 16 samples: when it asks, the sums are partial (the caller checks it).
 bool MotionPass(const Data& d, const Eigen::Matrix3Xd& r, const Weights& wt,
-                const ChunkRunner& runner, int max_gn, MotionStates* x, MotionSums* total) {
+                const ChunkRunner& runner, int max_gn, MotionStates* x, MotionSums* total,
+                const StopToken* stop) {
   const MotionModel model(r);
   if (!model.ok) return false;
   std::vector<MotionSums> sums(runner.NumChunks(d.N));
@@ -181,6 +183,7 @@ bool MotionPass(const Data& d, const Eigen::Matrix3Xd& r, const Weights& wt,
     acc.AtY = Eigen::Matrix3Xd::Zero(3, d.K);
     Eigen::Matrix3Xd z(3, d.K);
     for (int64_t n = begin; n < end; ++n) {
+      if (((n - begin) & 15) == 0 && StopRequested(stop)) break;
       Vec3 w = x->col(n).head<3>(), wd, s;
       acc.cost += model.Solve(d.ya.col(n).data(), d.gbar.col(n), d.gscatter(n), d.G, wt.wa, wt.wg,
                               max_gn, &z, &w, &wd, &s);
@@ -578,7 +581,11 @@ SolverRun RunBcd(const Data& d, const ArrayOptions& options, const ChunkRunner& 
     const Eigen::LDLT<Mat3> C(ms->AtA);
     for (int k : free) r->col(k) = C.solve(ms->AtY.col(k));
     const double previous = ms->cost;
-    MotionPass(d, *r, wt, runner, 50, x, ms);
+    MotionPass(d, *r, wt, runner, 50, x, ms, options.stop);
+    if (StopRequested(options.stop)) {
+      run.termination = ArrayTermination::kUserStopped;
+      break;
+    }
     result->cost.push_back(ms->cost);
     if (options.callback && !options.callback(run.iterations, *r)) {
       run.termination = ArrayTermination::kUserStopped;
@@ -604,6 +611,7 @@ BlockLmOptions JointSolverOptions(const ArrayOptions& options, int max_iteration
   o.max_damping = 1e10;
   o.threads = threads;
   o.executor = options.executor;
+  o.stop = options.stop;
   return o;
 }
 
@@ -818,8 +826,16 @@ Status CalibrateArray(const ArrayProblem& problem, const ArrayOptions& options,
   Eigen::Matrix3Xd r = problem.nominal_positions;
   MotionStates x = MotionStates::Zero(9, d.N);
   x.topRows<3>() = d.gbar;
+  auto stopped = [&](const std::string& stage) {
+    result->termination = ArrayTermination::kUserStopped;
+    result->usable = false;
+    const Status s = StoppedStatus(*options.stop, "array: " + stage);
+    result->reason = s.message();
+    return s;
+  };
   MotionSums ms;
-  MotionPass(d, r, wt, runner, 50, &x, &ms);
+  MotionPass(d, r, wt, runner, 50, &x, &ms, options.stop);
+  if (StopRequested(options.stop)) return stopped("start");
   result->cost.push_back(ms.cost);
   const ArrayExcitation start =
       ComputeExcitation(ms.AtA, NoiseFloor(x, MotionModel(r), options, d.G));
@@ -838,6 +854,9 @@ Status CalibrateArray(const ArrayProblem& problem, const ArrayOptions& options,
           : RunJoint(joint, lm_options, options, &r, &x, result);
   result->iterations = run.iterations;
   result->termination = run.termination;
+  if (StopRequested(options.stop)) {
+    return stopped(options.solver == ArraySolver::kBcd ? "bcd solver" : "joint solver");
+  }
   result->converged = run.termination == ArrayTermination::kConvergence ||
                       run.termination == ArrayTermination::kNoProgress;
   if (run.termination == ArrayTermination::kNumericalFailure)
@@ -851,7 +870,8 @@ Status CalibrateArray(const ArrayProblem& problem, const ArrayOptions& options,
   double gyro_dof = 0;
   if (Status s = Diagnose(problem, options, d, joint, lm_options, free, r, x, &gyro_dof, result);
       !s.ok())
-    return s;
+    return StopRequested(options.stop) ? stopped("uncertainty") : s;
+  if (StopRequested(options.stop)) return stopped("uncertainty");
   AddWarnings(options, problem.accel.rows(), max_iterations, gyro_dof, result);
   result->usable = true;
   result->reason = result->converged

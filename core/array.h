@@ -29,6 +29,15 @@
 // Uncertainty: the inverse of the reduced (Schur) Fisher information at the estimate, i.e. the
 // Cramer-Rao bound of the positions given the configured sigma_a, sigma_g.
 //
+// Cost: O(I · N · K · g) time, O(N · K) memory (the data) + O(N) (motion), for N samples, K
+// accelerometer triads, I iterations (joint: max_iterations LM iterations, default 50; bcd:
+// max_iterations sweeps, default 500) and g <= 50 Gauss-Newton steps of the per-sample motion
+// (bcd, and the start); the reduced system is 3(K-1) square (O(K^3) per iteration). Nothing
+// dense grows with N. Worst case at the job budget's largest input (5.9 GiB, the default on a
+// 2-core 23 GiB machine, 24 B per value: 32 triads and 1.36 M rows): joint ≈ 27 s of CPU at its
+// usual 4 iterations, ≈ 6 min at the 50-iteration cap; bcd ≈ 5 s a sweep, ≈ 45 min at its
+// 500-sweep cap (measured to 262 k rows, linear: bench/README.md "Cost of every method").
+//
 // Thread-safety: CalibrateArray is reentrant; it uses up to options.threads worker threads and
 // its result does not depend on the number of threads (fixed chunking, ordered reductions).
 #ifndef CALIBD_CORE_ARRAY_H_
@@ -78,6 +87,10 @@ struct ArrayOptions {
   // converged = false).
   // Optional; used by benchmarks to stop when a target accuracy is reached.
   std::function<bool(int iteration, const Eigen::Matrix3Xd& positions)> callback;
+  // Polled (core/stop_token.h) every BCD sweep and LM iteration and every 16 samples of every
+  // pass over the samples: when it asks, CalibrateArray returns core::StoppedStatus at once
+  // (termination kUserStopped, not usable). Null: never stops.
+  const StopToken* stop = nullptr;
 
   bool IsValid(std::string* error) const;
 };
@@ -95,7 +108,7 @@ enum class ArrayTermination {
   kConvergence,       // tolerance met
   kNoProgress,        // joint: no step decreased the cost any more (numerical optimum)
   kMaxIterations,     // iteration limit reached: usable, converged = false
-  kUserStopped,       // the callback returned false
+  kUserStopped,       // the callback returned false, or options.stop asked (then not usable)
   kNumericalFailure,  // joint: no trial point had a finite cost (CalibrateArray: kNotDeterminable)
 };
 const char* ArrayTerminationName(ArrayTermination termination);

@@ -529,6 +529,14 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
     res.reason = m;
     return Status::NotDeterminable(reason, m);
   };
+  auto stopped = [&](const std::string& stage) {
+    res.usable = false;
+    res.termination = BlockLmTermination::kUserStopped;
+    const Status s = StoppedStatus(*options.stop, "array (full model): " + stage);
+    res.reason = s.message();
+    return s;
+  };
+  if (StopRequested(options.stop)) return stopped("statics");
 
   // ----- Statics.
   std::vector<Eigen::MatrixX3d> series(2 * K);
@@ -548,6 +556,7 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   StaticDetection det;
   if (Status s = DetectStatics(problem.t, triads, options.statics, &det); !s.ok()) return s;
   series.clear();
+  if (StopRequested(options.stop)) return stopped("statics");
   FullData d;
   d.K = K;
   d.gravity = options.gravity;
@@ -683,8 +692,10 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
     ao.executor = options.executor;
     ao.max_iterations = 30;
     ao.tolerance = 1e-8;
+    ao.stop = options.stop;
     ArrayResult ar;
     const Status s = CalibrateArray(ap, ao, &ar);
+    if (StopRequested(options.stop)) return stopped("positions-only start");
     if (s.ok() && ar.usable) {
       for (int k = 0; k < K; ++k) start[k].position = ar.positions.col(k);
       res.initial_positions_from_array = true;
@@ -782,6 +793,8 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   lo.step_tolerance = options.tolerance;
   lo.threads = threads;
   lo.executor = options.executor;
+  lo.stop = options.stop;
+  if (StopRequested(options.stop)) return stopped("joint solver");
   BlockLm<FullProblem> lm(fp, lo);
   BlockLm<FullProblem>::Callback callback;
   if (options.callback)
@@ -798,6 +811,7 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
     for (int round = 0; round < 2; ++round) {
       const std::vector<TriadParams> c = Unpack(theta, K);
       Eigen::MatrixX2d dy = Eigen::MatrixX2d::Zero(K, 2);
+      if (StopRequested(options.stop)) return stopped("joint solver (reweighting)");
       for (int64_t m = 0; m < d.Nd; ++m) fp.AddSquaredResiduals(d.J + m, x.col(d.J + m), c, &dy);
       const double correction = 6.0 * K / (6.0 * K - 9);
       const double sa = std::sqrt(dy.col(0).sum() / (3.0 * K * d.Nd) * correction);
@@ -808,6 +822,7 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
       res.iterations += final_summary.iterations;
       resolved_costs.insert(resolved_costs.end(), final_summary.cost.begin(),
                             final_summary.cost.end());
+      if (StopRequested(options.stop)) return stopped("joint solver (reweighting)");
       if (final_summary.termination == BlockLmTermination::kUserStopped) {
         res.reason = "stopped by the caller";
         return Status::Internal("the full array calibration was stopped by the caller");
@@ -821,6 +836,7 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   res.converged = final_summary.converged();
   res.cost = summary.cost;
   res.cost.insert(res.cost.end(), resolved_costs.begin(), resolved_costs.end());
+  if (StopRequested(options.stop)) return stopped("joint solver");
   if (summary.termination == BlockLmTermination::kUserStopped) {
     res.reason = "stopped by the caller";
     return Status::Internal("the full array calibration was stopped by the caller");
@@ -890,6 +906,7 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   // ----- Information, null directions, Cramér-Rao bound.
   BlockLmInformation info;
   lm.ComputeSharedInformation(x, theta, &info, nullptr);
+  if (StopRequested(options.stop)) return stopped("information");
   {
     Eigen::VectorXd dg = info.information.diagonal();
     Eigen::VectorXd scale(P);
@@ -970,6 +987,7 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
     b.C.resize(9, q);
     int not_converged = 0;
     for (const auto& batch : batches) {
+      if (StopRequested(options.stop)) return stopped("residual-aware covariance");
       FullProblem::Sums sums = fp.MakeSums();
       Ib.setZero();
       for (int64_t n : batch) {

@@ -58,6 +58,18 @@
 // arms) undetermined; (2) null directions of the reduced information (after Jacobi scaling,
 // eigenvalues below 1e-12 of the largest) are named by their largest components.
 //
+// Cost: O(I · N · 9 · (27K)^2 + I · (27K)^3) time for N samples, K triads and I LM iterations
+// (max_iterations, default 50; 3 solves with dynamic_weighting kResidual), plus the residual-
+// aware covariance when reported: O(N · 9 · (27K)^2 + B · 100 · (27K)^2) for B batches (the
+// statics and N·Δt / robust_batch runs of dynamic samples; its Neumann series is capped at 100
+// terms). Memory O(N · K) (the data and the per-sample state) + O((N / 256) · (27K)^2) (the
+// per-chunk Schur sums) + O((27K)^2). The statics are blocks of the solver like the samples:
+// nothing dense grows with N or with the number of statics. Worst case at the job budget's
+// largest input (5.9 GiB, the default on a 2-core 23 GiB machine, 64 B per value: 8 IMUs, 49
+// columns, 2.0 M rows): 0.29 ms of CPU a row at 4 iterations, ≈ 10 min, ≈ 2 h at the 50-iteration
+// cap (measured to 19 k rows, linear: bench/README.md "Cost of every method"); the job's
+// deadline cuts it short.
+//
 // Thread-safety: CalibrateArrayFull is reentrant; results do not depend on the thread count.
 #ifndef CALIBD_CORE_ARRAY_FULL_H_
 #define CALIBD_CORE_ARRAY_FULL_H_
@@ -112,6 +124,11 @@ struct ArrayFullOptions {
   // Called after every accepted LM step with the iteration number; false stops the solver
   // (termination kUserStopped: the result is not used). Optional (cancellation).
   std::function<bool(int iteration)> callback;
+  // Polled (core/stop_token.h) between the stages, in the positions-only start, every LM
+  // iteration and every 16 blocks of its passes, and per batch of the residual-aware covariance:
+  // when it asks, CalibrateArrayFull returns core::StoppedStatus at once (termination
+  // kUserStopped, not usable). Null: never stops.
+  const StopToken* stop = nullptr;
   // Weighting of the dynamic samples. kResidual also reports the residual-aware σ whenever the
   // dynamic residuals exceed the noise.
   ArrayFullDynamicWeighting dynamic_weighting = ArrayFullDynamicWeighting::kNoise;

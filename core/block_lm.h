@@ -14,6 +14,10 @@
 // the Cramer-Rao bound of p (ComputeSharedInformation). Time O(N (B^3 + B q^2)) + O(P^3) per
 // iteration, memory O(N B) besides the problem's own data: H_nn is rebuilt, never stored.
 //
+// Cost: O(max_iterations · (N (B^3 + B q^2) + P^3)) time, O(N B + (N / chunk) q^2) memory; the
+// iterations are capped (max_iterations, and at most log(max_damping / min_damping) / log(
+// damping_increase) rejected steps in a row), and options.stop is polled every 16 blocks.
+//
 // Coupling in compressed form: the problem writes H_np = w C_n L with a B x q matrix C_n per
 // block, a q x P "lift" L common to all blocks and a scalar w, so the per-block work is on q x q
 // sums whatever P is (the positions-only array: q = 12 for any number of triads, because a
@@ -66,6 +70,8 @@
 #include <string>
 #include <utility>
 #include <vector>
+
+#include "core/stop_token.h"
 
 namespace calibd::core {
 
@@ -196,6 +202,11 @@ struct BlockLmOptions {
   int threads = 1;
   // Optional: runs the chunks instead of the built-in threads (e.g. a shared pool).
   TaskExecutor executor;
+  // Polled (core/stop_token.h) every iteration and every 16 blocks of every pass over the
+  // blocks: when it asks, Solve returns at once with kUserStopped (x, p: the last accepted
+  // point) and ComputeSharedInformation leaves partial sums (the caller checks the token).
+  // Null: never stops.
+  const StopToken* stop = nullptr;
 
   bool IsValid(std::string* error) const;
 };
@@ -208,7 +219,7 @@ enum class BlockLmTermination {
   kNoProgress,         // damping exceeded max_damping: no step decreases the cost (an optimum
                        // to working precision)
   kMaxIterations,      // iteration limit: the estimate is usable but not converged
-  kUserStopped,        // the callback returned false
+  kUserStopped,        // the callback returned false, or options.stop asked
   kNumericalFailure,   // non-finite cost at the start, or no finite trial point at any damping
 };
 const char* BlockLmTerminationName(BlockLmTermination termination);
@@ -299,6 +310,11 @@ class BlockLm {
     summary.gradient_max_norm = lin.gradient_max_norm;
     summary.initial_gradient_max_norm = lin.gradient_max_norm;
     const double gradient0 = lin.gradient_max_norm;
+    if (StopRequested(options_.stop)) {
+      summary.termination = BlockLmTermination::kUserStopped;
+      g_.resize(B, 0);
+      return summary;
+    }
     if (!std::isfinite(cost)) {
       summary.termination = BlockLmTermination::kNumericalFailure;
       return summary;
@@ -311,6 +327,11 @@ class BlockLm {
     bool finite_trial_since_accept = false;
     int it = 1;
     for (; it <= options_.max_iterations; ++it) {
+      if (StopRequested(options_.stop)) {
+        termination = BlockLmTermination::kUserStopped;
+        --it;
+        break;
+      }
       if (options_.gradient_tolerance > 0 &&
           lin.gradient_max_norm <= options_.gradient_tolerance * gradient0) {
         termination = BlockLmTermination::kGradientTolerance;
@@ -331,6 +352,10 @@ class BlockLm {
           const QVector dz = lin.shared.lift * dp;
           const double trial_cost =
               Step(*x, context, context_trial, dz, lin.shared.coupling_weight, mu, &x_trial);
+          if (StopRequested(options_.stop)) {  // the trial is incomplete: never accepted
+            termination = BlockLmTermination::kUserStopped;
+            break;
+          }
           step = dp.cwiseAbs().maxCoeff();
           if (std::isfinite(trial_cost)) finite_trial_since_accept = true;
           if (std::isfinite(trial_cost) && trial_cost < cost) {
@@ -377,6 +402,10 @@ class BlockLm {
       // the stored gradients and shared sums are reused and only the blocks are refactored.
       Linearize(*x, context, mu, /*evaluate=*/accepted, /*information=*/false, &lin);
       if (accepted) summary.gradient_max_norm = lin.gradient_max_norm;
+      if (StopRequested(options_.stop)) {
+        termination = BlockLmTermination::kUserStopped;
+        break;
+      }
     }
     summary.iterations = std::min(it, options_.max_iterations);
     summary.termination = termination;
@@ -445,6 +474,7 @@ class BlockLm {
         }
       };
       for (int64_t n = begin; n < end; ++n) {
+        if (((n - begin) & 15) == 0 && StopRequested(options_.stop)) break;
         if (evaluate) {
           problem_.Linearize(n, x.col(n), context, &b, &acc.sums);
           acc.cost += b.cost;
@@ -517,6 +547,7 @@ class BlockLm {
       b.C.resize(B, q);
       double cost = 0;
       for (int64_t n = begin; n < end; ++n) {
+        if (((n - begin) & 15) == 0 && StopRequested(options_.stop)) break;
         problem_.BlockMatrices(n, x.col(n), context, &b);
         if (mu > 0) b.H.diagonal() *= (1 + mu);
         BlockVector rhs;

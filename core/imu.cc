@@ -117,9 +117,176 @@ struct Problem {
   Vector3d wa = Vector3d::Ones(), wg = Vector3d::Ones();  // 1/σ per axis, reading units
   bool use_accel = true, use_gyro_statics = false, use_rotations = false;
   std::vector<char> active;  // per unknown
+  const StopToken* stop = nullptr;  // polled in the rotation integrals and every LM iteration
 
   int Size() const { return kShared + 2 * static_cast<int>(statics.size()); }
+  int Statics() const { return static_cast<int>(statics.size()); }
 };
+
+// Steps between two polls of the stop token in a rotation's integral (~3 ms of work).
+constexpr size_t kStepsPerPoll = 1 << 16;
+
+using Mat21 = Eigen::Matrix<double, kShared, kShared>;
+
+// The Gauss-Newton matrix H = JᵀJ and gradient Jᵀr of the problem, stored in their block
+// structure (issue #20: no dense matrix over the directions, whose number grows with the
+// statics): the 21 shared unknowns (dense), their coupling to the 2n direction unknowns, and the
+// directions' own part, block tridiagonal with 2×2 blocks (a static's accelerometer residual
+// touches its u_j alone, a rotation u_j and u_{j+1}). O(n) memory; solved in O(n) time.
+struct Normal {
+  Mat21 a;                         // shared × shared
+  MatrixXd e;                      // kShared × 2n: shared × directions
+  std::vector<Eigen::Matrix2d> d;  // n: u_j × u_j
+  std::vector<Eigen::Matrix2d> f;  // n − 1: u_j × u_{j+1} (u_{j+1} × u_j is its transpose)
+  VectorXd g;                      // kShared + 2n
+
+  void SetZero(int n) {
+    a.setZero();
+    e.setZero(kShared, 2 * n);
+    d.assign(static_cast<size_t>(n), Eigen::Matrix2d::Zero());
+    f.assign(static_cast<size_t>(std::max(0, n - 1)), Eigen::Matrix2d::Zero());
+    g.setZero(kShared + 2 * n);
+  }
+  int Size() const { return static_cast<int>(g.size()); }
+  double Diagonal(int i) const {
+    if (i < kShared) return a(i, i);
+    const int j = (i - kShared) / 2, r = (i - kShared) % 2;
+    return d[static_cast<size_t>(j)](r, r);
+  }
+  // H(i, j) += v for the entries stored (the upper parts; a symmetric caller adds both (i, j)
+  // and (j, i), the lower one is dropped here). Directions more than one static apart never meet.
+  void Add(int i, int j, double v) {
+    if (i < kShared) {
+      if (j < kShared) {
+        a(i, j) += v;
+      } else {
+        e(i, j - kShared) += v;
+      }
+      return;
+    }
+    if (j < kShared) return;
+    const int si = (i - kShared) / 2, ri = (i - kShared) % 2;
+    const int sj = (j - kShared) / 2, rj = (j - kShared) % 2;
+    if (si == sj) {
+      d[static_cast<size_t>(si)](ri, rj) += v;
+    } else if (sj == si + 1) {
+      f[static_cast<size_t>(si)](ri, rj) += v;
+    }
+  }
+  // H x.
+  VectorXd Times(const VectorXd& x) const {
+    const int n = static_cast<int>(d.size());
+    VectorXd y(x.size());
+    const auto xs = x.head<kShared>();
+    const auto xu = x.tail(2 * n);
+    y.head<kShared>() = a * xs + e * xu;
+    y.tail(2 * n) = e.transpose() * xs;
+    for (int j = 0; j < n; ++j) {
+      y.segment<2>(kShared + 2 * j) += d[static_cast<size_t>(j)] * x.segment<2>(kShared + 2 * j);
+      if (j + 1 < n) {
+        const Eigen::Matrix2d& fj = f[static_cast<size_t>(j)];
+        y.segment<2>(kShared + 2 * j) += fj * x.segment<2>(kShared + 2 * (j + 1));
+        y.segment<2>(kShared + 2 * (j + 1)) += fj.transpose() * x.segment<2>(kShared + 2 * j);
+      }
+    }
+    return y;
+  }
+};
+
+// Solves (H + λ diag(H)) δ = rhs over the active unknowns (inactive ones held: δ_i = 0), with
+// Jacobi scaling for conditioning (the parameters span many orders of magnitude). The direction
+// unknowns are eliminated by a block tridiagonal Cholesky factorisation, the 21 shared unknowns
+// solved from their Schur complement S = A − E C⁻¹ Eᵀ: O(n · 21²) time, O(n · 21) memory.
+// With `shared_inverse` (λ = 0, all active: the Fisher information) it also receives S⁻¹ in the
+// unscaled unknowns: the covariance of the shared unknowns with the directions marginalised.
+// False when a pivot is not positive or the solution is not finite.
+bool SolveNormal(const Normal& h, const std::vector<char>& active, double lambda,
+                 const VectorXd& rhs_in, VectorXd* delta, Mat21* shared_inverse = nullptr) {
+  const int dim = h.Size();
+  const int n = static_cast<int>(h.d.size());
+  auto on = [&](int i) { return active[static_cast<size_t>(i)] != 0; };
+  // Damped diagonal, then the Jacobi scale of every unknown (1 for inactive ones).
+  VectorXd diag(dim), scale(dim);
+  for (int i = 0; i < dim; ++i) {
+    const double hii = h.Diagonal(i);
+    diag(i) = on(i) ? hii + lambda * std::max(hii, 1e-300) : 1.0;
+    scale(i) = 1 / std::sqrt(diag(i));
+  }
+  if (!scale.allFinite()) return false;
+  auto entry = [&](int i, int j, double v) {  // scaled, masked, damped entry
+    if (!on(i) || !on(j)) return i == j ? 1.0 : 0.0;
+    return i == j ? 1.0 : scale(i) * v * scale(j);
+  };
+  Mat21 a;
+  for (int i = 0; i < kShared; ++i) {
+    for (int j = 0; j < kShared; ++j) a(i, j) = entry(i, j, h.a(i, j));
+  }
+  MatrixXd et(2 * n, kShared);  // Eᵀ, scaled
+  for (int i = 0; i < kShared; ++i) {
+    for (int c = 0; c < 2 * n; ++c) et(c, i) = entry(i, kShared + c, h.e(i, c));
+  }
+  VectorXd rhs(dim);
+  for (int i = 0; i < dim; ++i) rhs(i) = on(i) ? scale(i) * rhs_in(i) : 0.0;
+  // Block tridiagonal Cholesky C = L Lᵀ: diagonal blocks l[j] (lower), sub-diagonal m[j] =
+  // L(j+1, j).
+  std::vector<Eigen::Matrix2d> l(static_cast<size_t>(n)),
+      m(static_cast<size_t>(std::max(0, n - 1)));
+  auto block = [&](const Eigen::Matrix2d& src, int si, int sj) {
+    Eigen::Matrix2d b;
+    for (int r = 0; r < 2; ++r) {
+      for (int c = 0; c < 2; ++c)
+        b(r, c) = entry(kShared + 2 * si + r, kShared + 2 * sj + c, src(r, c));
+    }
+    return b;
+  };
+  for (int j = 0; j < n; ++j) {
+    Eigen::Matrix2d dj = block(h.d[static_cast<size_t>(j)], j, j);
+    if (j > 0) dj -= m[static_cast<size_t>(j - 1)] * m[static_cast<size_t>(j - 1)].transpose();
+    const Eigen::LLT<Eigen::Matrix2d> llt(dj);
+    if (llt.info() != Eigen::Success) return false;
+    l[static_cast<size_t>(j)] = llt.matrixL();
+    if (j + 1 < n) {
+      // L(j+1, j) L(j, j)ᵀ = C(j+1, j) = F_jᵀ.
+      const Eigen::Matrix2d fjt = block(h.f[static_cast<size_t>(j)], j, j + 1).transpose();
+      m[static_cast<size_t>(j)] = l[static_cast<size_t>(j)]
+                                      .triangularView<Eigen::Lower>()
+                                      .solve(fjt.transpose())
+                                      .transpose();
+    }
+  }
+  // C⁻¹ [Eᵀ | r_u] by forward and back substitution.
+  MatrixXd x(2 * n, kShared + 1);
+  x.leftCols<kShared>() = et;
+  x.col(kShared) = rhs.tail(2 * n);
+  for (int j = 0; j < n; ++j) {
+    auto xj = x.middleRows<2>(2 * j);
+    if (j > 0) xj -= m[static_cast<size_t>(j - 1)] * x.middleRows<2>(2 * (j - 1));
+    l[static_cast<size_t>(j)].triangularView<Eigen::Lower>().solveInPlace(xj);
+  }
+  for (int j = n - 1; j >= 0; --j) {
+    auto xj = x.middleRows<2>(2 * j);
+    if (j + 1 < n) xj -= m[static_cast<size_t>(j)].transpose() * x.middleRows<2>(2 * (j + 1));
+    l[static_cast<size_t>(j)].transpose().triangularView<Eigen::Upper>().solveInPlace(xj);
+  }
+  // Schur complement onto the shared unknowns.
+  Mat21 s = a - et.transpose() * x.leftCols<kShared>();
+  s = (0.5 * (s + s.transpose())).eval();
+  const Eigen::Matrix<double, kShared, 1> rs =
+      rhs.head<kShared>() - et.transpose() * x.col(kShared);
+  const Eigen::LDLT<Mat21> ldlt(s);
+  if (ldlt.info() != Eigen::Success) return false;
+  const Eigen::Matrix<double, kShared, 1> ds = ldlt.solve(rs);
+  VectorXd out(dim);
+  out.head<kShared>() = ds;
+  out.tail(2 * n) = x.col(kShared) - x.leftCols<kShared>() * ds;
+  *delta = scale.cwiseProduct(out);
+  if (shared_inverse != nullptr) {
+    const Mat21 si = ldlt.solve(Mat21::Identity());
+    *shared_inverse = scale.head<kShared>().asDiagonal() * si * scale.head<kShared>().asDiagonal();
+    if (!shared_inverse->allFinite()) return false;
+  }
+  return delta->allFinite();
+}
 
 std::vector<Eigen::Vector4d> Steps(const VectorXd& t, const Eigen::MatrixX3d& y, int64_t first,
                                    int64_t last) {
@@ -134,13 +301,16 @@ std::vector<Eigen::Vector4d> Steps(const VectorXd& t, const Eigen::MatrixX3d& y,
 
 // Integrates one rotation; with s != nullptr also the sums of the analytic Jacobian:
 // s[l] = Σ_k P_k J_r(φ_k) Δt_k x_k,l (l = 0..2), s[3] = Σ_k P_k J_r(φ_k) Δt_k.
+// Polls `stop` every kStepsPerPoll steps and returns early (a meaningless R) when it asks.
 Matrix3d IntegrateSteps(const std::vector<Eigen::Vector4d>& steps, const Matrix3d& m,
-                        const Vector3d& bias, Matrix3d* s) {
+                        const Vector3d& bias, Matrix3d* s, const StopToken* stop = nullptr) {
   Matrix3d r = Matrix3d::Identity(), e, jr;
   if (s != nullptr) {
     for (int l = 0; l < 4; ++l) s[l].setZero();
   }
-  for (const Eigen::Vector4d& st : steps) {
+  for (size_t k = 0; k < steps.size(); ++k) {
+    if (k % kStepsPerPoll == kStepsPerPoll - 1 && StopRequested(stop)) break;
+    const Eigen::Vector4d& st = steps[k];
     const double dt = st(3);
     const Vector3d x = st.head<3>() - bias;
     const Vector3d phi = m * x * dt;
@@ -160,21 +330,19 @@ Matrix3d Integrate(const VectorXd& t, const Eigen::MatrixX3d& y, const Matrix3d&
   return IntegrateSteps(Steps(t, y, first, last), m, bias, s);
 }
 
-// ½ Σ r² at `x`; with h/grad, the Gauss-Newton matrix JᵀJ and gradient Jᵀr (full size).
-double Evaluate(const Problem& pr, const State& x, MatrixXd* h, VectorXd* grad) {
+// ½ Σ r² at `x`; with h, the Gauss-Newton matrix JᵀJ and gradient Jᵀr (block structure).
+// Stopped by pr.stop: the cost returned is then meaningless (the caller checks the token).
+double Evaluate(const Problem& pr, const State& x, Normal* h) {
   const bool jac = h != nullptr;
-  if (jac) {
-    h->setZero(pr.Size(), pr.Size());
-    grad->setZero(pr.Size());
-  }
+  if (jac) h->SetZero(pr.Statics());
   double cost = 0;
   auto accumulate = [&](const Vector3d& r, const MatrixXd& jb, const std::vector<int>& idx) {
     const MatrixXd jtj = jb.transpose() * jb;
     const VectorXd jtr = jb.transpose() * r;
     for (size_t a = 0; a < idx.size(); ++a) {
-      (*grad)(idx[a]) += jtr(static_cast<Eigen::Index>(a));
+      h->g(idx[a]) += jtr(static_cast<Eigen::Index>(a));
       for (size_t b = 0; b < idx.size(); ++b) {
-        (*h)(idx[a], idx[b]) += jtj(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b));
+        h->Add(idx[a], idx[b], jtj(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)));
       }
     }
   };
@@ -221,7 +389,8 @@ double Evaluate(const Problem& pr, const State& x, MatrixXd* h, VectorXd* grad) 
     MatrixXd jb(3, 16);
     Matrix3d s[4];
     for (const RotationData& rot : pr.rotations) {
-      const Matrix3d r = IntegrateSteps(rot.steps, x.mg, x.bg, jac ? s : nullptr);
+      if (StopRequested(pr.stop)) break;
+      const Matrix3d r = IntegrateSteps(rot.steps, x.mg, x.bg, jac ? s : nullptr, pr.stop);
       const Vector3d v = r.transpose() * x.u[rot.j];
       const Vector3d res = rot.weight * (v - x.u[rot.j + 1]);
       cost += 0.5 * res.squaredNorm();
@@ -257,50 +426,46 @@ State Plus(const State& x, const VectorXd& d) {
 struct LmSummary {
   int iterations = 0;
   bool converged = false;
+  bool stopped = false;  // pr.stop asked: *x is the last accepted point
   std::vector<double> cost;
 };
 
-// Levenberg-Marquardt (Marquardt's diagonal scaling) over the active unknowns.
+// Levenberg-Marquardt (Marquardt's diagonal scaling) over the active unknowns, at most
+// max_iterations accepted steps and 40 rejected ones in a row (λ from 1e-6 past 1e10 by
+// factors of 10); polls pr.stop every iteration and inside every evaluation.
 LmSummary Minimize(const Problem& pr, int max_iterations, State* x) {
   LmSummary sum;
-  const int dim = pr.Size();
-  MatrixXd h;
-  VectorXd g;
-  double cost = Evaluate(pr, *x, &h, &g);
+  Normal h;
+  double cost = Evaluate(pr, *x, &h);
   sum.cost.push_back(cost);
+  if (StopRequested(pr.stop)) {
+    sum.stopped = true;
+    return sum;
+  }
   double lambda = 1e-6;
   while (sum.iterations < max_iterations) {
-    MatrixXd a = h;
-    VectorXd rhs = -g;
-    for (int i = 0; i < dim; ++i) {
-      if (!pr.active[i]) {
-        a.row(i).setZero();
-        a.col(i).setZero();
-        a(i, i) = 1;
-        rhs(i) = 0;
-      } else {
-        a(i, i) += lambda * std::max(h(i, i), 1e-300);
-      }
+    if (StopRequested(pr.stop)) {
+      sum.stopped = true;
+      break;
     }
-    // Jacobi scaling for conditioning (parameters span many orders of magnitude).
-    const VectorXd dscale = a.diagonal().cwiseSqrt().cwiseInverse();
-    const MatrixXd as = dscale.asDiagonal() * a * dscale.asDiagonal();
-    const VectorXd delta = dscale.cwiseProduct(as.ldlt().solve(dscale.cwiseProduct(rhs)));
-    if (!delta.allFinite()) break;
+    VectorXd delta;
+    if (!SolveNormal(h, pr.active, lambda, -h.g, &delta)) break;
     const State y = Plus(*x, delta);
     // The trial point is evaluated with its Jacobian: most steps are accepted, and one pass over
     // the rotations with the Jacobian is cheaper than a cost pass and a Jacobian pass.
-    MatrixXd h_new;
-    VectorXd g_new;
-    const double new_cost = Evaluate(pr, y, &h_new, &g_new);
-    const double step_norm2 = delta.dot(h * delta);  // ‖J δ‖²
+    Normal h_new;
+    const double new_cost = Evaluate(pr, y, &h_new);
+    if (StopRequested(pr.stop)) {
+      sum.stopped = true;
+      break;
+    }
+    const double step_norm2 = delta.dot(h.Times(delta));  // ‖J δ‖²
     if (std::isfinite(new_cost) && new_cost < cost) {
       const double decrease = cost - new_cost;
       *x = y;
       ++sum.iterations;
       cost = new_cost;
-      h.swap(h_new);
-      g.swap(g_new);
+      std::swap(h, h_new);
       sum.cost.push_back(cost);
       lambda = std::max(lambda / 5, 1e-12);
       if (decrease <= 1e-9 * cost || step_norm2 <= 1e-20 * (cost + 1e-300)) {
@@ -401,6 +566,7 @@ void FillTriad(const Matrix3d& m, const Vector3d& b, TriadCalibration* tc) {
 
 struct AccelFit {
   bool ok = false;
+  bool stopped = false;  // options.stop asked during the fit
   std::string failure;
   State x;
   Problem pr;
@@ -437,6 +603,7 @@ Vector3d PooledStd(const StaticDetection& d, int tri) {
 AccelFit FitAccelerometer(const StaticDetection& d, int k, const ImuOptions& o) {
   AccelFit f;
   f.pr.g = o.gravity;
+  f.pr.stop = o.stop;
   f.pr.statics = StaticsOf(d, k);
   const int n = static_cast<int>(f.pr.statics.size());
   Vector3d sa =
@@ -462,6 +629,11 @@ AccelFit FitAccelerometer(const StaticDetection& d, int k, const ImuOptions& o) 
   for (int i = kShared; i < f.pr.Size(); ++i) f.pr.active[static_cast<size_t>(i)] = 1;
   const LmSummary s = Minimize(f.pr, o.max_iterations, &f.x);
   f.iterations = s.iterations;
+  if (s.stopped) {
+    f.stopped = true;
+    f.failure = "stopped";
+    return f;
+  }
   f.dof = 3 * n - 9 - 2 * n;
   f.chi2 = 2 * s.cost.back();
   f.ok = true;
@@ -525,11 +697,40 @@ void Coverage(const std::vector<Vector3d>& u, const Vector3d& rot_axis, ImuCover
   c->verdict = v.str();
 }
 
+// Keeps the `cap` longest intervals of `d` (ties: the earlier), in time order: the number of
+// statics the fits take is bounded whatever the log (issue #20). The rotations then join the
+// kept statics across the dropped ones (still valid: the gyroscope integrates through them).
+void KeepLongestStatics(int cap, StaticDetection* d) {
+  const size_t n = d->intervals.size();
+  if (n <= static_cast<size_t>(cap)) return;
+  std::vector<size_t> order(n);
+  for (size_t i = 0; i < n; ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return d->intervals[a].samples > d->intervals[b].samples;
+  });
+  order.resize(static_cast<size_t>(cap));
+  std::sort(order.begin(), order.end());
+  std::vector<StaticInterval> kept;
+  kept.reserve(order.size());
+  int64_t samples = 0;
+  for (size_t i : order) {
+    samples += d->intervals[i].samples;
+    kept.push_back(std::move(d->intervals[i]));
+  }
+  d->intervals = std::move(kept);
+  d->static_samples = samples;
+}
+
 Status Fail(Status s, ImuTermination term, ImuResult* r) {
   r->usable = false;
   r->termination = term;
   r->reason = s.message();
   return s;
+}
+
+// The failure of a run that options.stop stopped during `stage`.
+Status Stopped(const ImuOptions& o, const std::string& stage, ImuResult* r) {
+  return Fail(StoppedStatus(*o.stop, "imu: " + stage), ImuTermination::kStopped, r);
 }
 
 // Steps 3-5 and the diagnostics for IMU k, given its accelerometer fit on the chosen detection.
@@ -543,6 +744,7 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
   res->accel_iterations = fit.iterations;
   pr.t = &t;
   pr.gyro = &yg;
+  pr.stop = o.stop;
 
   // Gyroscope noise and bias.
   Vector3d sg =
@@ -568,6 +770,7 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
   const Matrix3d mg0 = o.gyro_unit * Matrix3d::Identity();
   const Vector3d bg0 = Vector3d::Constant(o.nominal_gyro_bias);
   for (int j = 0; j + 1 < n; ++j) {
+    if (StopRequested(o.stop)) return Stopped(o, "rotations", res);
     const StaticInterval& a = det.intervals[static_cast<size_t>(j)];
     const StaticInterval& b = det.intervals[static_cast<size_t>(j + 1)];
     ImuRotationDiagnostics rd;
@@ -629,6 +832,7 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
   }
   LmSummary gs = Minimize(pr, o.max_iterations, &x);
   res->gyro_iterations = gs.iterations;
+  if (gs.stopped) return Stopped(o, "gyroscope fit", res);
   bool max_iter = !gs.converged;
   res->cost = gs.cost;
 
@@ -641,14 +845,16 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
   if (o.joint_refinement) {
     LmSummary js = Minimize(pr, o.max_iterations, &x);
     res->joint_iterations = js.iterations;
+    if (js.stopped) return Stopped(o, "joint refinement", res);
     max_iter = max_iter || !js.converged;
     res->cost = js.cost;
   }
 
   // Uncertainty: inverse Fisher information, u_j marginalised, then to the reported quantities.
-  MatrixXd h;
-  VectorXd grad;
-  const double cost = Evaluate(pr, x, &h, &grad);
+  if (StopRequested(o.stop)) return Stopped(o, "uncertainty", res);
+  Normal h;
+  const double cost = Evaluate(pr, x, &h);
+  if (StopRequested(o.stop)) return Stopped(o, "uncertainty", res);
   const int dim = pr.Size();
   const int residuals =
       3 * n * (pr.use_gyro_statics ? 2 : 1) + 3 * static_cast<int>(pr.rotations.size());
@@ -656,16 +862,13 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
   const int informative = residuals - static_cast<int>(pr.rotations.size());
   res->degrees_of_freedom = informative - dim;
   res->chi2_per_dof = res->degrees_of_freedom > 0 ? 2 * cost / res->degrees_of_freedom : kNaN;
-  const VectorXd dscale = h.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
-  const MatrixXd hs = dscale.asDiagonal() * h * dscale.asDiagonal();
-  Eigen::LDLT<MatrixXd> ldlt(hs);
-  MatrixXd rhs = MatrixXd::Zero(dim, kShared);
-  rhs.topRows(kShared) = dscale.head(kShared).asDiagonal();
-  const MatrixXd sol = ldlt.solve(rhs);
-  MatrixXd cov_int = dscale.head(kShared).asDiagonal() * sol.topRows(kShared);
-  cov_int = 0.5 * (cov_int + cov_int.transpose()).eval();
-  if (!cov_int.allFinite() || ldlt.info() != Eigen::Success ||
-      (cov_int.diagonal().array() <= 0).any()) {
+  // The covariance of the shared unknowns: the inverse of their Schur complement (the directions
+  // eliminated block by block), no dense matrix over the directions.
+  Mat21 cov_int = Mat21::Zero();
+  VectorXd unused;
+  const bool solved = SolveNormal(h, pr.active, 0.0, VectorXd::Zero(dim), &unused, &cov_int);
+  cov_int = (0.5 * (cov_int + cov_int.transpose())).eval();
+  if (!solved || !cov_int.allFinite() || (cov_int.diagonal().array() <= 0).any()) {
     return Fail(Status::NotDeterminable(
                     Reason::kSingularInformation,
                     "the information matrix is singular: the statics and rotations do not "
@@ -735,6 +938,7 @@ Status Finish(const VectorXd& t, const ImuReadings& imu, int k, const ImuOptions
   double rb = 0, ra = 0;
   int used = 0;
   for (ImuRotationDiagnostics& rd : res->rotations) {
+    if (StopRequested(o.stop)) return Stopped(o, "diagnostics", res);
     const StaticInterval& a = det.intervals[static_cast<size_t>(rd.from)];
     const StaticInterval& b = det.intervals[static_cast<size_t>(rd.to)];
     const Matrix3d r_after = Integrate(t, yg, x.mg, x.bg, a.last, b.first, nullptr);
@@ -846,6 +1050,8 @@ const char* ImuTerminationName(ImuTermination t) {
       return "degenerate";
     case ImuTermination::kImplausible:
       return "implausible";
+    case ImuTermination::kStopped:
+      return "stopped";
   }
   return "unknown";
 }
@@ -888,6 +1094,7 @@ bool ImuOptions::IsValid(std::string* error) const {
   if (accel_noise && !pos(*accel_noise)) return fail("accel_noise must be a finite number > 0");
   if (gyro_noise && !pos(*gyro_noise)) return fail("gyro_noise must be a finite number > 0");
   if (max_iterations < 1) return fail("max_iterations must be >= 1");
+  if (max_statics < min_statics) return fail("max_statics must be >= min_statics");
   if (!pos(max_scale_deviation)) return fail("max_scale_deviation must be > 0");
   if (!pos(max_direction_error)) return fail("max_direction_error must be > 0 (rad)");
   if (!(accel_saturation_low < accel_saturation_high) ||
@@ -938,9 +1145,15 @@ Status CalibrateImus(const Eigen::VectorXd& t, const std::vector<ImuReadings>& i
     triads.push_back(a);
     triads.push_back(g);
   }
+  auto stopped_all = [&](const std::string& stage) {
+    return fail_all(StoppedStatus(*options.stop, "imu: " + stage), ImuTermination::kStopped);
+  };
+  if (StopRequested(options.stop)) return stopped_all("static detection");
   StaticDetector detector;
   Status s = detector.Init(t, triads, options.detection);
+  if (s.code() == StatusCode::kStopped) return fail_all(s, ImuTermination::kStopped);
   if (!s.ok()) return fail_all(s, ImuTermination::kInvalidInput);
+  if (StopRequested(options.stop)) return stopped_all("static detection");
 
   // Candidate thresholds.
   std::vector<double> mults = options.threshold_multipliers;
@@ -948,14 +1161,20 @@ Status CalibrateImus(const Eigen::VectorXd& t, const std::vector<ImuReadings>& i
   if (mults.empty() || overridden) mults = {options.detection.threshold_multiplier};
   struct Candidate {
     StaticDetection det;
+    int64_t found = 0;  // statics the detection found (det keeps at most max_statics)
     std::vector<AccelFit> fits;
     double criterion = kNaN;
   };
   std::vector<Candidate> cands;
   int best = -1, most = -1;
+  int64_t capped_from = 0;  // statics found by the chosen detection when over max_statics
   for (double m : mults) {
+    if (StopRequested(options.stop)) return stopped_all("threshold choice");
     Candidate c;
     c.det = detector.Detect(m);
+    c.found = static_cast<int64_t>(c.det.intervals.size());
+    KeepLongestStatics(options.max_statics, &c.det);
+    if (StopRequested(options.stop)) return stopped_all("threshold choice");
     const int n = static_cast<int>(c.det.intervals.size());
     if (most < 0 || n > static_cast<int>(cands[static_cast<size_t>(most)].det.intervals.size())) {
       most = static_cast<int>(cands.size());
@@ -966,6 +1185,7 @@ Status CalibrateImus(const Eigen::VectorXd& t, const std::vector<ImuReadings>& i
       bool ok = true;
       for (size_t k = 0; k < imus.size(); ++k) {
         c.fits.push_back(FitAccelerometer(c.det, static_cast<int>(k), options));
+        if (c.fits.back().stopped) return stopped_all("accelerometer fit");
         ok = ok && c.fits.back().ok;
         chi2 += c.fits.back().chi2;
         dof += c.fits.back().dof;
@@ -981,9 +1201,19 @@ Status CalibrateImus(const Eigen::VectorXd& t, const std::vector<ImuReadings>& i
     }
   }
   const int chosen = best >= 0 ? best : most;
+  const Candidate& picked = cands[static_cast<size_t>(chosen)];
+  if (picked.found > static_cast<int64_t>(picked.det.intervals.size())) capped_from = picked.found;
   for (size_t k = 0; k < imus.size(); ++k) {
     ImuResult& r = (*results)[k];
-    r.detection = cands[static_cast<size_t>(chosen)].det;
+    r.detection = picked.det;
+    if (capped_from > 0) {
+      r.warnings.push_back(
+          "static detection found " + std::to_string(capped_from) +
+          " static intervals, more than max_statics (" + std::to_string(options.max_statics) +
+          "): the fits use the " + std::to_string(options.max_statics) +
+          " longest (so many usually means a time column not in seconds, or a static_window "
+          "far shorter than the holds)");
+    }
     if (!overridden && mults.size() > 1) {
       for (size_t i = 0; i < cands.size(); ++i) {
         ImuThresholdTrial tr;
@@ -1038,6 +1268,13 @@ Status CalibrateImus(const Eigen::VectorXd& t, const std::vector<ImuReadings>& i
   for (size_t k = 0; k < imus.size(); ++k) {
     Status st = Finish(t, imus[k], static_cast<int>(k), options,
                        cands[static_cast<size_t>(best)].fits[k], &(*results)[k]);
+    if (st.code() == StatusCode::kStopped) {
+      // Every IMU not finished is stopped too; the status says where the first one was.
+      for (size_t i = k + 1; i < imus.size(); ++i) {
+        Fail(st, ImuTermination::kStopped, &(*results)[i]);
+      }
+      return st;
+    }
     if (!st.ok() && first_failure.ok()) {
       first_failure =
           Status(st.code(), "IMU " + imus[k].name + ": " + st.message()).WithReason(st.reason());

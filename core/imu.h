@@ -36,9 +36,24 @@
 //  5. Joint maximum likelihood over all parameters (P, b_a, M_g, b_g) and all u_j with every
 //     residual (accelerometer statics, gyroscope statics for kStatics, rotations). Rotation
 //     residuals are weighted by 1/σ_θ, σ_θ² = tr(M_g Σ_g M_gᵀ)/3 · Σ_k c_k² (the trapezoid
-//     weights c_k of each sample's white noise). Dense normal equations (21 + 2n unknowns for
-//     n statics, accumulated per residual block; not yet #10's sparse solver). 1σ from the
-//     inverse Fisher information at the estimate (u_j marginalised), propagated to b, K, T.
+//     weights c_k of each sample's white noise). Normal equations (21 + 2n unknowns for n
+//     statics) kept in their block structure: the u_j part is block tridiagonal (2×2 blocks; a
+//     rotation couples u_j and u_{j+1} only), eliminated by a block Cholesky factorisation onto
+//     the 21 shared unknowns (Schur complement). 1σ from the inverse Fisher information at the
+//     estimate (u_j marginalised: the inverse Schur complement), propagated to b, K, T.
+//
+// Cost: O(N · (T + I_max)) time, O(N) memory, for N samples, T threshold candidates (5) and
+// I_max = 2 · max_iterations LM iterations of the stages over the rotations (each integrates every
+// sample between statics once, with its Jacobian); every LM iteration also costs O(n · 21²) for
+// n <= max_statics (1000) statics, and the accelerometer fits O(T · max_iterations · n · 21²).
+// Nothing grows faster than N: no dense matrix over the statics (issue #20: a log whose time
+// column was in ms gave ~10⁴ two-sample "statics" and a dense (21 + 2n)² LDLT per iteration,
+// hours). Worst case at the job budget's largest input (the default budget on a 2-core 23 GiB
+// machine, 5.9 GiB, 24 B per value, 7 columns: 37 M rows; 51 M rows at the 8 GiB maximum):
+// measured 35 s of CPU and 4.1 GB for a hand-held log of 37 M rows (about 1 µs a row, linear;
+// bench/README.md "Cost of every method"). Every LM stage hitting max_iterations (a log that
+// does not fit the model, e.g. its time column in ms) costs up to 26 µs a row: about 16 min of
+// CPU at 37 M rows, which the job's deadline (core/stop_token.h) cuts short.
 //     There is no null space left: the accelerometer-defined frame (T_a upper triangular) is the
 //     gauge, fixed by the parameterisation.
 //
@@ -54,6 +69,7 @@
 
 #include "base/status.h"
 #include "core/static_detection.h"
+#include "core/stop_token.h"
 
 namespace calibd::core {
 
@@ -84,6 +100,10 @@ struct ImuOptions {
   std::vector<double> threshold_multipliers = {2, 3, 4, 6, 8};
   int min_statics = 9;           // >= 9: the accelerometer's 9 unknowns need 9 statics
   int recommended_statics = 15;  // fewer gives a warning
+  // >= min_statics: when the detection finds more, the fits take the max_statics longest (in
+  // time order) and a warning says so: bounds the cost whatever the log (a time column in ms
+  // gives one "static" every few samples). Real hand-held logs have tens to a few hundred.
+  int max_statics = 1000;
   // Accelerometer and gyroscope saturation limits, reading units (samples at or beyond dropped).
   double accel_saturation_low = -std::numeric_limits<double>::infinity();
   double accel_saturation_high = std::numeric_limits<double>::infinity();
@@ -99,6 +119,10 @@ struct ImuOptions {
   // gyroscope model does not explain the rotations (wrong gyro_unit aliasing whole turns,
   // saturation, a time base error): implausible.
   double max_direction_error = 0.05;
+  // Polled (core/stop_token.h) between the stages, in every LM iteration, per rotation and every
+  // 65 536 integration steps: when it asks, CalibrateImus returns core::StoppedStatus at once
+  // (termination kStopped, the results filled as far as they got). Null: never stops.
+  const StopToken* stop = nullptr;
 
   bool IsValid(std::string* error) const;
 };
@@ -134,6 +158,7 @@ enum class ImuTermination {
   kTooFewRotations,  // fewer than 5 usable rotations for the gyroscope's 9 unknowns
   kDegenerate,       // statics do not determine the ellipsoid / singular information
   kImplausible,      // a scale far from the nominal unit (wrong accel_unit / gyro_unit?)
+  kStopped,          // options.stop asked (StatusCode::kStopped): nothing usable
 };
 const char* ImuTerminationName(ImuTermination t);  // "converged", "max_iterations", ...
 

@@ -422,7 +422,11 @@ Status AnalyseChannel(const NoiseChannelInput& in, int64_t n, double tau0,
   ao.confidence = options.confidence;
   ao.threads = options.threads;
   ao.executor = options.executor;
+  ao.stop = options.stop;
   Status s = ComputeAllanDeviation(y, n, tau0, ao, &ch->allan);
+  if (s.code() == StatusCode::kStopped) {
+    return StoppedStatus(*options.stop, "noise: Allan deviation of channel " + in.name);
+  }
   if (!s.ok()) return s;
   if (lo == hi) {
     ch->status = NoiseChannelStatus::kConstant;
@@ -645,6 +649,10 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
   const size_t count = problem.channels.size();
   result->channels.resize(count);
   for (size_t c = 0; c < count; ++c) {
+    if (StopRequested(options.stop)) {
+      return Fail(StoppedStatus(*options.stop, "noise: channel " + problem.channels[c].name),
+                  result);
+    }
     Status s = AnalyseChannel(problem.channels[c], n, tau0, options, &result->channels[c]);
     if (!s.ok()) return Fail(s, result);
   }

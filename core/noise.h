@@ -44,6 +44,12 @@
 // Time: O(n · cluster times) per channel (bench/noise_bench: 2 h at 400 Hz, 6 channels, ~0.5 s
 // of CPU); each channel's cluster times run on `threads` threads and the result does not depend
 // on their number.
+// Cost: O(C · n · M) time for C channels, n samples and M cluster sizes (core/allan.h), plus
+// O(n log n) for the median Δt; the fit is O(M) per reweighting pass (5 passes, every subset of
+// 3 terms). Memory O(n) besides the samples (one double per sample). Worst case at the job
+// budget's largest input (5.9 GiB, the default on a 2-core 23 GiB machine, 7 B per value: 6
+// channels and t, 128 M rows): ≈ 27 s of CPU (0.21 µs a row, measured to 16.8 M rows, linear:
+// bench/README.md "Cost of every method").
 //
 // SPEC §7 result JSON from NoiseResult (for the server):
 //   parameters.channels[i]  {name, unit, white_noise: white_noise.value, bias_instability:
@@ -105,6 +111,10 @@ struct NoiseOptions {
   int threads = 0;
   // Optional: runs those tasks instead of the built-in threads (e.g. the server's shared pool).
   TaskExecutor executor;
+  // Polled (core/stop_token.h) per channel and inside each channel's Allan sweep (every block of
+  // 8192 cluster starts): when it asks, EstimateNoise returns core::StoppedStatus at once (the
+  // channels not analysed stay kNotRun). Null: never stops.
+  const StopToken* stop = nullptr;
 
   bool IsValid(std::string* error) const;
 };

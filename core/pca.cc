@@ -172,7 +172,9 @@ MatrixXd Regressors(const MatrixXd& v, bool with_bias) {
 
 // Reduced (Schur-complement) information of θ = vec([a; bᵀ]) at unit noise, positions eliminated.
 // False when G = a aᵀ is singular.
-bool ReducedInformation(const MatrixXd& a, const MatrixXd& v, bool with_bias, MatrixXd* s) {
+// False when a·aᵀ is singular or `stop` asked (polled per sensor row of S).
+bool ReducedInformation(const MatrixXd& a, const MatrixXd& v, bool with_bias, MatrixXd* s,
+                        const StopToken* stop) {
   const int d = static_cast<int>(a.rows());
   const int m = static_cast<int>(a.cols());
   const int n = static_cast<int>(v.cols());
@@ -199,6 +201,7 @@ bool ReducedInformation(const MatrixXd& a, const MatrixXd& v, bool with_bias, Ma
   s->setZero(p * m, p * m);
   VectorXd w(d * d);
   for (int i = 0; i < m; ++i) {
+    if (StopRequested(stop)) return false;
     for (int kk = i; kk < m; ++kk) {
       // w = vec(a_k a_iᵀ)? P(r,s) is stored at r + s*d; a_iᵀ P a_k = Σ a(r,i) a(s,k) P(r,s).
       for (int ss = 0; ss < d; ++ss) {
@@ -247,8 +250,11 @@ MatrixXd GaugeBasis(const MatrixXd& a, bool with_bias) {
 // ok() false when S is singular beyond the gauge (some parameter not determined by the data).
 class ReducedFisher {
  public:
-  ReducedFisher(const MatrixXd& a, const MatrixXd& u, bool with_bias, PcaInformationSolver solver)
-      : d_(static_cast<int>(a.rows())),
+  // Not ok() when `stop` asked while the dense information was built (the caller checks it).
+  ReducedFisher(const MatrixXd& a, const MatrixXd& u, bool with_bias, PcaInformationSolver solver,
+                const StopToken* stop = nullptr)
+      : stop_(stop),
+        d_(static_cast<int>(a.rows())),
         m_(static_cast<int>(a.cols())),
         n_(static_cast<int>(u.cols())),
         p_(with_bias ? d_ + 1 : d_) {
@@ -311,7 +317,7 @@ class ReducedFisher {
  private:
   void InitDense(const MatrixXd& a, const MatrixXd& u, bool with_bias) {
     MatrixXd s;
-    if (!ReducedInformation(a, u, with_bias, &s)) return;
+    if (!ReducedInformation(a, u, with_bias, &s, stop_)) return;
     kappa_ = s.trace() / static_cast<double>(s.rows());
     if (!(kappa_ > 0) || !std::isfinite(kappa_)) return;
     s.noalias() += kappa_ * nb_ * nb_.transpose();
@@ -392,6 +398,7 @@ class ReducedFisher {
     ok_ = negative == nt && std::isfinite(largest);
   }
 
+  const StopToken* stop_ = nullptr;
   int d_, m_, n_, p_;
   MatrixXd nb_;
   double kappa_ = 0;
@@ -632,13 +639,16 @@ Status ClosedFormAffine(const MatrixXd& mm, int d, double c, const PcaOptions& o
 
 // Maximum-likelihood Gauss-Newton (variable projection over positions). Only accepted steps
 // lower the cost, so the result is never worse than the start.
+// At most max_iterations Gauss-Newton steps of at most 20 step halvings each; polls `stop` at
+// every step and halving (returns at once, *fit the last accepted estimate).
 int Refine(const MatrixXd& mm, double c, bool with_bias, int max_iterations,
-           PcaInformationSolver solver_kind, Fit* fit, double* cost) {
+           PcaInformationSolver solver_kind, Fit* fit, double* cost, const StopToken* stop) {
   const int d = static_cast<int>(fit->a.rows());
   const int m = static_cast<int>(fit->a.cols());
   const int p = with_bias ? d + 1 : d;
   int iterations = 0;
   for (int it = 0; it < max_iterations; ++it) {
+    if (StopRequested(stop)) break;
     const MatrixXd res = Residuals(mm, *fit);  // m×n
     const MatrixXd g = fit->a * fit->a.transpose();
     Eigen::LLT<MatrixXd> llt(g);
@@ -658,7 +668,7 @@ int Refine(const MatrixXd& mm, double c, bool with_bias, int max_iterations,
     const MatrixXd u = fit->v / c;
     const MatrixXd vt = Regressors(u, with_bias);                                       // p×n
     const MatrixXd rhs_mat = vt * res.transpose() - (vt * (w / c).transpose()) * a_eq;  // p×m
-    const ReducedFisher solver(a_eq, u, with_bias, solver_kind);
+    const ReducedFisher solver(a_eq, u, with_bias, solver_kind, stop);
     if (!solver.ok()) break;
     const VectorXd delta = solver.Solve(Eigen::Map<const VectorXd>(rhs_mat.data(), p * m));
     MatrixXd dtheta = Eigen::Map<const MatrixXd>(delta.data(), p, m);
@@ -666,6 +676,7 @@ int Refine(const MatrixXd& mm, double c, bool with_bias, int max_iterations,
     bool accepted = false;
     double step = 1.0;
     for (int half = 0; half < 20; ++half, step *= 0.5) {
+      if (StopRequested(stop)) return iterations;
       Fit trial;
       trial.a = fit->a + step * dtheta.topRows(d);
       trial.b = with_bias ? VectorXd(fit->b + step * dtheta.row(d).transpose()) : fit->b;
@@ -1166,10 +1177,16 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
     }
   }
 
+  auto stopped = [&](const std::string& stage) {
+    return Fail(StoppedStatus(*options.stop, "pca: " + stage), result);
+  };
+  if (StopRequested(options.stop)) return stopped("closed form");
+
   // Closed form.
   Fit fit;
   Status s = affine ? ClosedFormAffine(mm, d, c, options, result, &fit)
                     : ClosedFormBiasFree(mm, d, c, options, result, &fit);
+  if (StopRequested(options.stop)) return stopped("closed form");
   if (!s.ok()) {
     CoverageFromNominal(mm, options, result);
     return Fail(s, result);
@@ -1178,8 +1195,10 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
   result->cost_closed_form = Cost(mm, fit);
   result->cost = result->cost_closed_form;
   if (options.refine) {
-    result->refine_iterations = Refine(mm, c, affine, options.max_refine_iterations,
-                                       result->cost_estimate.solver, &fit, &result->cost);
+    result->refine_iterations =
+        Refine(mm, c, affine, options.max_refine_iterations, result->cost_estimate.solver, &fit,
+               &result->cost, options.stop);
+    if (StopRequested(options.stop)) return stopped("refinement");
     result->refined = result->cost < result->cost_closed_form;
     if (!result->refined) {
       result->warnings.push_back(
@@ -1261,7 +1280,9 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
   // equilibrated coordinates θ'_i = [c·a_i; b_i] (see ReducedFisher).
   std::vector<MatrixXd> cov_blocks;
   if (std::isfinite(result->noise_std)) {
-    const ReducedFisher solver(c * fit.a, fit.v / c, affine, result->cost_estimate.solver);
+    const ReducedFisher solver(c * fit.a, fit.v / c, affine, result->cost_estimate.solver,
+                               options.stop);
+    if (StopRequested(options.stop)) return stopped("uncertainty");
     if (solver.ok()) {
       cov_blocks = solver.DiagonalBlocks();
       VectorXd unscale = VectorXd::Constant(p, 1.0 / c);
@@ -1363,6 +1384,7 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
         "came out negative or not finite); their *_std are NaN.");
   }
 
+  if (StopRequested(options.stop)) return stopped("uncertainty");
   // Coverage of the sphere, in the result's frame.
   result->coverage = Coverage(result->v, affine, frame_note);
   if (result->coverage.verdict == PcaCoverageVerdict::kPoor) {

@@ -10,6 +10,14 @@
 // reflections included; the result is reported in the canonical frame of the paper's Eq. 19 or,
 // given nominal sensitivities, in their frame (orthogonal Procrustes allowing a reflection).
 //
+// Cost: O(m² n + m n d²) time for the closed form (the left SVD of the m×n readings, the quadric
+// fit), O((pm)³) (dense) or O(pm · r²) (low rank, r = n(d−1) + d(d−1)/2) for the uncertainty and
+// each `refine` step (at most max_refine_iterations, each with at most 20 step halvings); memory
+// O(m n + (pm)²) or O(pm · r). EstimatePcaCost states both before any work and the options'
+// max_memory_bytes (1 GiB) and max_flops (1e12) refuse a larger problem at once, so the worst
+// case is bounded whatever the input (the job budget only bounds the readings, m·n values).
+// Measured: bench/README.md "Cost of every method".
+//
 // Everything here is pure numerics: Eigen in, result structs out. Thread-compatible: concurrent
 // calls on different objects are safe.
 #ifndef CALIBD_CORE_PCA_H_
@@ -22,6 +30,7 @@
 #include <vector>
 
 #include "base/status.h"
+#include "core/stop_token.h"
 
 namespace calibd::core {
 
@@ -81,6 +90,12 @@ struct PcaOptions {
   double max_memory_bytes = 1024.0 * 1024 * 1024;  // >= 0; default 1 GiB
   double max_flops = 1e12;  // >= 0; default 1e12 (minutes on one core), counting every refine
                             // iteration allowed by max_refine_iterations
+
+  // Polled (core/stop_token.h) between the stages, at every `refine` step and step halving, and
+  // per sensor row of the dense information: when it asks, CalibratePca returns
+  // core::StoppedStatus at once. A single factorisation is not interrupted: max_flops bounds it.
+  // Null: never stops.
+  const StopToken* stop = nullptr;
 
   static constexpr int kMaxDimension = 32;
 

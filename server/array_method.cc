@@ -546,7 +546,7 @@ Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
   if (degrees) problem.gyro *= core::kDegree;
   for (const auto& name : recording.accel_names)
     problem.names.push_back(name.size() > 1 && name[0] == 'a' ? name.substr(1) : name);
-  if (stop != nullptr) options.callback = [stop](int) { return !stop->stop_requested(); };
+  options.stop = stop;  // a stopped run returns core::StoppedStatus ("array (full model): ...")
   core::ArrayFullResult r;
   s = core::CalibrateArrayFull(problem, options, &r);
   results::ArrayResult out;
@@ -688,9 +688,7 @@ Status RunArray(ArrayRecording recording, const json& config, json* result,
     if (!s.ok()) return s.WithField(kCalibrationKey);
   }
 
-  if (stop != nullptr) {
-    options.callback = [stop](int, const Eigen::Matrix3Xd&) { return !stop->stop_requested(); };
-  }
+  options.stop = stop;  // a stopped run returns core::StoppedStatus ("array: <stage>: ...")
   core::ArrayResult r;
   s = core::CalibrateArray(problem, options, &r);
   results::ArrayResult out;

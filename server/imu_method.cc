@@ -400,12 +400,13 @@ class Imu : public Method {
       }
     }
   }
-  Status Run(RecordingParser* parser, const json& config, const RunContext&,
+  Status Run(RecordingParser* parser, const json& config, const RunContext& ctx,
              json* result) const override {
     core::ImuOptions options;
     Status s = ParseImuConfig(config, &options);
     if (!s.ok())
       return s.reason() == Reason::kUnspecified ? s.WithReason(Reason::kInvalidConfig) : s;
+    options.stop = ctx.stop;  // a stopped run returns core::StoppedStatus ("imu: <stage>: ...")
     ArrayRecording log;
     s = parser->TakeArray(&log);
     if (!s.ok()) return s;

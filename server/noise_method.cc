@@ -182,6 +182,7 @@ class Noise : public Method {
     if (!s.ok())
       return s.reason() == Reason::kUnspecified ? s.WithReason(Reason::kInvalidConfig) : s;
     options.executor = context.executor;
+    options.stop = context.stop;  // a stopped run returns core::StoppedStatus ("noise: ...")
     // The samples as floats in SI, one column per channel (the analysis reads them in place).
     // A prepared parser (PrepareParser) collected them so: held once, 4 bytes a value. Otherwise
     // the parser's doubles are converted (the same rounding: reading × unit in double, then to

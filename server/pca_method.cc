@@ -525,7 +525,7 @@ class Pca : public Method {
     };
     return keys;
   }
-  Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext&,
+  Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
              nlohmann::json* result) const override {
     PcaRecording recording;
     Status s = parser->TakePca(&recording);
@@ -534,6 +534,7 @@ class Pca : public Method {
     s = ParsePcaConfig(config, &options);
     if (!s.ok())
       return s.reason() == Reason::kUnspecified ? s.WithReason(Reason::kInvalidConfig) : s;
+    options.stop = ctx.stop;  // a stopped run returns core::StoppedStatus ("pca: <stage>: ...")
     return RunPca(recording, options, result);
   }
 };
