@@ -332,14 +332,22 @@ StaticDetection StaticDetector::Detect(std::optional<double> multiplier) const {
       d.short_stretches.push_back({t(first), t(last), first, last});
       continue;
     }
+    // The statistics and the samples the fits use: the run of quiet windows' centres (at least
+    // half a window from any motion the windows saw: the grown margin may hold the sub-noise
+    // onset of a smooth motion, which would bias the static's mean and shorten the rotations
+    // between statics). The extent: the grown run.
     StaticInterval iv;
-    iv.first = first;
-    iv.last = last;
-    iv.start = t(first);
-    iv.end = t(last);
-    iv.samples = last - first + 1;
+    iv.first = core_first;
+    iv.last = core_last;
+    iv.start = t(core_first);
+    iv.end = t(core_last);
+    iv.samples = core_last - core_first + 1;
+    iv.extent_first = first;
+    iv.extent_last = last;
+    iv.extent_start = t(first);
+    iv.extent_end = t(last);
     for (const TriadSeries& s : triads_) {
-      const auto block = s.readings->middleRows(first, iv.samples);
+      const auto block = s.readings->middleRows(iv.first, iv.samples);
       const Eigen::RowVector3d mean = block.colwise().mean();
       Eigen::Vector3d sd = Eigen::Vector3d::Zero();
       if (iv.samples > 1) {
@@ -392,8 +400,12 @@ std::string StaticShortfall(const StaticDetection& d) {
     if (items.size() > max) out += ", ...";
     return out;
   };
+  std::vector<StillStretch> found;
+  for (const StaticInterval& iv : d.intervals) {
+    found.push_back({iv.extent_start, iv.extent_end, iv.extent_first, iv.extent_last});
+  }
   m += std::to_string(d.intervals.size()) + " static interval(s)";
-  if (!d.intervals.empty()) m += " (" + list(d.intervals, 6) + ")";
+  if (!found.empty()) m += " (" + list(found, 6) + ")";
   if (d.short_stretches.empty()) {
     m += " and no shorter still stretch";
   } else {

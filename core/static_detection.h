@@ -26,12 +26,14 @@
 // c samples added at that end stays within 3 × floor × sqrt(1/c + 1/n) of the mean of the run's n
 // samples (a smooth motion's onset, each sample still under the threshold, stops it before it can
 // bias the static's mean by much more than its noise; white noise alone stops it rarely);
-// never into the previous run's samples. A static interval is a grown run spanning
-// t[last] - t[first] >= min_static, so a static of length L >= min_static is found when it holds a
-// whole window (a 2 s static with a 1 s window and min_static 1 s, noise-free or noisy). Motion
-// above the threshold never merges into a static (a bump splits it or trims it); the edges may hold
-// the first samples of a smooth motion whose deviation is still within the noise (measured on
-// simulated 1-cos rotations: at most 8 samples at 100 Hz, tests/core/static_detection_test.cc).
+// never into the previous run's samples. A static interval is a grown run (its extent) spanning
+// >= min_static, so a static of length L >= min_static is found when it holds a whole window (a
+// 2 s static with a 1 s window and min_static 1 s, noise-free or noisy). Its statistics and the
+// samples the fits use (first..last) stay the run itself, at least half a window from any motion
+// the windows saw: the extent's edges may hold the sub-noise onset of a smooth motion (measured on
+// simulated 1 - cos rotations: up to 0.14 s, tests/core/static_detection_test.cc), which biased
+// the imu fits' Monte-Carlo means when used. Motion above the threshold never merges into a static
+// (a bump splits it or trims it).
 // Slow bias drift does not change a 1 s window's spread, so drift does not hide statics. Grown runs
 // shorter than min_static are reported as `short_stretches` (what StaticShortfall() describes when
 // a method finds too few statics).
@@ -96,12 +98,17 @@ struct StaticDetectionOptions {
   bool IsValid(std::string* error) const;
 };
 
+// A static interval: the samples the fits use (first..last: the centres of its quiet windows,
+// at least half a window from any motion the windows saw) and its extent (the run grown back out,
+// header: the static as found, what min_static is compared with).
 struct StaticInterval {
-  double start = 0, end = 0;          // t[first], t[last], s
-  int64_t first = -1, last = -1;      // sample indices, inclusive
-  int64_t samples = 0;                // last - first + 1
-  std::vector<Eigen::Vector3d> mean;  // per triad (order of the input), reading units
-  std::vector<Eigen::Vector3d> std;   // per triad, per axis sample std (n - 1), reading units
+  double start = 0, end = 0;                // t[first], t[last], s
+  int64_t first = -1, last = -1;            // sample indices, inclusive
+  int64_t samples = 0;                      // last - first + 1
+  std::vector<Eigen::Vector3d> mean;        // per triad (order of the input), reading units
+  std::vector<Eigen::Vector3d> std;         // per triad, per axis sample std (n - 1), reading units
+  double extent_start = 0, extent_end = 0;  // t[extent_first], t[extent_last], s
+  int64_t extent_first = -1, extent_last = -1;  // the grown run, inclusive
 };
 
 // A grown run of static samples shorter than min_static (not an interval).

@@ -33,12 +33,17 @@ void ExpectMatchesTruth(const StaticDetection& d, const ImuSimulation& sim,
   ASSERT_EQ(d.intervals.size(), sim.statics.size());
   for (size_t j = 0; j < sim.statics.size(); ++j) {
     const StaticInterval& iv = d.intervals[j];
-    EXPECT_GE(iv.first, sim.statics[j].first - kEdge) << "interval " << j << " starts in motion";
-    EXPECT_LE(iv.last, sim.statics[j].second + kEdge) << "interval " << j << " ends in motion";
-    // Grown back to (nearly) the whole static.
-    EXPECT_LE(iv.first, sim.statics[j].first + kEdge) << "interval " << j;
-    EXPECT_GE(iv.last, sim.statics[j].second - kEdge) << "interval " << j;
-    (void)o;
+    EXPECT_GE(iv.first, sim.statics[j].first) << "interval " << j << " starts in motion";
+    EXPECT_LE(iv.last, sim.statics[j].second) << "interval " << j << " ends in motion";
+    // Trimmed by about half a window at each end (a little more without noise: rounding in the
+    // windows that reach into the motion), never by two windows.
+    const double true_len = sim.t(sim.statics[j].second) - sim.t(sim.statics[j].first);
+    EXPECT_GT(iv.end - iv.start, true_len - 2 * o.static_window) << "interval " << j;
+    // The extent: the whole static, within kEdge samples.
+    EXPECT_LE(std::abs(iv.extent_first - sim.statics[j].first), kEdge) << "interval " << j;
+    EXPECT_LE(std::abs(iv.extent_last - sim.statics[j].second), kEdge) << "interval " << j;
+    EXPECT_LE(iv.extent_first, iv.first);
+    EXPECT_GE(iv.extent_last, iv.last);
     EXPECT_EQ(iv.samples, iv.last - iv.first + 1);
   }
 }
@@ -132,10 +137,9 @@ TEST(StaticDetection, ABumpSplitsOrTrimsAStaticButNeverJoinsMotion) {
     EXPECT_FALSE(iv.first <= mid + 4 && iv.last >= mid) << "an interval contains the bump";
     EXPECT_FALSE(iv.first <= mid && iv.last >= mid + 4);
     bool inside = false;
-    for (const auto& [a, b] : sim.statics)
-      inside = inside || (iv.first >= a - kEdge && iv.last <= b + kEdge);
+    for (const auto& [a, b] : sim.statics) inside = inside || (iv.first >= a && iv.last <= b);
     EXPECT_TRUE(inside) << "interval " << iv.start << ".." << iv.end << " contains motion";
-    if (iv.first >= first - kEdge && iv.last <= last + kEdge) ++in_static4;
+    if (iv.first >= first && iv.last <= last) ++in_static4;
   }
   EXPECT_EQ(in_static4, 2);  // split in two
   EXPECT_EQ(d.intervals.size(), sim.statics.size() + 1);
@@ -295,8 +299,7 @@ TEST(StaticDetection, FindsEveryStaticAndNoMotionWhenOnlyAFewPercentOfTheLogIsSt
         ++intervals;
         bool inside = false;
         for (size_t j = 0; j < sim.statics.size(); ++j) {
-          if (iv.first >= sim.statics[j].first - kEdge &&
-              iv.last <= sim.statics[j].second + kEdge) {
+          if (iv.first >= sim.statics[j].first && iv.last <= sim.statics[j].second) {
             inside = true;
             ++found[j];
           }
@@ -338,21 +341,24 @@ TEST(StaticDetection, TwoSecondStaticsAreFoundWithTheirBounds) {
         StaticDetection d;
         ASSERT_TRUE(DetectStatics(sim.t, Triads(sim), o, &d).ok());
         ASSERT_EQ(d.intervals.size(), sim.statics.size());
-        const int64_t h = (d.window_samples - 1) / 2;
         for (size_t j = 0; j < sim.statics.size(); ++j) {
           const StaticInterval& iv = d.intervals[j];
           const auto [first, last] = sim.statics[j];
-          // Noise-free: the exact static (the rotation's first sample, at rest, may join). Noisy:
-          // within kEdgeSeconds of it, never more than the half-window.
+          // The extent: noise-free, the exact static (the rotation's first sample, at rest, may
+          // join); noisy, within kEdgeSeconds of it.
           const int64_t edge =
               noise == 0 ? 1 : static_cast<int64_t>(std::ceil(kEdgeSeconds * rate));
-          EXPECT_LE(std::abs(iv.first - first), edge)
-              << "static " << j << ": first " << iv.first - first << ", last " << iv.last - last;
-          EXPECT_LE(std::abs(iv.last - last), edge)
-              << "static " << j << ": first " << iv.first - first << ", last " << iv.last - last;
-          EXPECT_LE(first - iv.first, h);
-          EXPECT_LE(iv.last - last, h);
-          EXPECT_GE(iv.end - iv.start, o.min_static);
+          EXPECT_LE(std::abs(iv.extent_first - first), edge)
+              << "static " << j << ": first " << iv.extent_first - first << ", last "
+              << iv.extent_last - last;
+          EXPECT_LE(std::abs(iv.extent_last - last), edge)
+              << "static " << j << ": first " << iv.extent_first - first << ", last "
+              << iv.extent_last - last;
+          // The samples used: inside the static, half a window from each end.
+          EXPECT_GE(iv.first, first);
+          EXPECT_LE(iv.last, last);
+          EXPECT_GT(iv.samples, 0);
+          EXPECT_GE(iv.extent_end - iv.extent_start, o.min_static);
         }
         EXPECT_TRUE(d.short_stretches.empty());
       }
