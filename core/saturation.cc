@@ -9,22 +9,22 @@ namespace {
 constexpr double kQuantumFactor = 3;  // a jump is at least 3 reading quanta (header)
 
 // The channel's noise σ from its quietest stretches (header): the 10 % quantile over blocks of
-// kNoiseBlock samples of sqrt(mean((second difference)²) / 6) (white noise: var = 6σ²; smooth
-// motion adds little to second differences at inertial rates).
+// kNoiseBlock samples of sqrt(mean((third difference)²) / 20) (white noise: var = 20σ²; smooth
+// motion adds little to third differences at inertial rates: (ω dt)³ of its amplitude).
 constexpr Eigen::Index kNoiseBlock = 32;
 template <class M>
 double NoiseScale(const M& y, int a, std::vector<double>* scratch) {
   const Eigen::Index n = y.rows();
   std::vector<double>& blocks = *scratch;
   blocks.clear();
-  for (Eigen::Index b = 0; b + kNoiseBlock + 2 <= n; b += kNoiseBlock) {
+  auto v = [&](Eigen::Index i) { return static_cast<double>(y(i, a)); };
+  for (Eigen::Index b = 0; b + kNoiseBlock + 3 <= n; b += kNoiseBlock) {
     double ss = 0;
     for (Eigen::Index i = b; i < b + kNoiseBlock; ++i) {
-      const double d2 = static_cast<double>(y(i + 2, a)) - 2 * static_cast<double>(y(i + 1, a)) +
-                        static_cast<double>(y(i, a));
-      ss += d2 * d2;
+      const double d3 = v(i + 3) - 3 * v(i + 2) + 3 * v(i + 1) - v(i);
+      ss += d3 * d3;
     }
-    blocks.push_back(std::sqrt(ss / (6.0 * kNoiseBlock)));
+    blocks.push_back(std::sqrt(ss / (20.0 * kNoiseBlock)));
   }
   if (blocks.empty()) return 0;
   const size_t k = blocks.size() / 10;

@@ -9,7 +9,7 @@
 //    (a) is entered or left by a jump: |M - y| of the sample just before or just after the run
 //        is >= max(jump_range_fraction × (max - min), jump_noise_factor × σ_n, 3 × q), σ_n the
 //        channel's noise from its quietest stretches (the 10 % quantile over blocks of 32 samples
-//        of the RMS second difference / √6) and q its reading quantum (the smallest nonzero step:
+//        of the RMS third difference / √20) and q its reading quantum (the smallest nonzero step:
 //        1 count for integer counts), and
 //    (b) happens while the triad moves: some other axis of the triad changes within the run.
 //   Then every sample equal to M is pinned (single samples at M too: a fast signal often touches
@@ -49,7 +49,7 @@ namespace calibd::core {
 struct SaturationOptions {
   int min_run = 3;                     // >= 2: identical samples at the extreme establishing it
   double jump_range_fraction = 0.005;  // in [0, 1): entry/exit step >= this × (max - min) ...
-  double jump_noise_factor = 5;        // >= 0: ... and >= this × the channel's noise σ_n
+  double jump_noise_factor = 8;        // >= 0: ... and >= this × the channel's noise σ_n
   // Configured limits, reading units (SPEC `gyro_saturation`, `accel_saturation`): when either is
   // set the data are not searched; values <= low or >= high are pinned. Default: none (search).
   std::optional<double> low;
