@@ -529,6 +529,9 @@ Status CollectSamples(const ArrayProblem& problem, const ArrayOptions& options, 
     if (options.gyro_saturation &&
         problem.gyro.row(n).cwiseAbs().maxCoeff() >= *options.gyro_saturation)
       continue;
+    if (options.accel_saturation &&
+        problem.accel.row(n).cwiseAbs().maxCoeff() >= *options.accel_saturation)
+      continue;
     keep.push_back(n);
   }
   d->N = static_cast<int64_t>(keep.size());
@@ -538,7 +541,7 @@ Status CollectSamples(const ArrayProblem& problem, const ArrayOptions& options, 
     std::string why = "only " + std::to_string(d->N) + " usable sample(s)";
     if (result->samples_dropped > 0)
       why += " (" + std::to_string(result->samples_dropped) +
-             " dropped because a gyroscope reached gyro_saturation)";
+             " dropped because a sensor reached its saturation limit)";
     return NotDeterminable(
         Reason::kTooFewSamples,
         why + "; at least 3 are needed: " + kRecordAdvice +
@@ -707,10 +710,14 @@ void AddWarnings(const ArrayOptions& options, int64_t samples_in, int max_iterat
                  double gyro_dof, ArrayResult* result) {
   auto& warnings = result->warnings;
   if (result->samples_dropped > 0)
-    warnings.push_back(std::to_string(result->samples_dropped) + " of " +
-                       std::to_string(samples_in) +
-                       " samples dropped because a gyroscope reached gyro_saturation (" +
-                       Fmt(*options.gyro_saturation) + " rad/s)");
+    warnings.push_back(
+        std::to_string(result->samples_dropped) + " of " + std::to_string(samples_in) +
+        " samples dropped because a sensor reached its saturation limit (" +
+        (options.gyro_saturation ? "gyroscopes " + Fmt(*options.gyro_saturation) + " rad/s"
+                                 : std::string("gyroscopes none")) +
+        (options.accel_saturation ? ", accelerometers " + Fmt(*options.accel_saturation) + " m/s^2"
+                                  : std::string()) +
+        ")");
   if (result->termination == ArrayTermination::kMaxIterations)
     warnings.push_back("reached max_iterations (" + std::to_string(max_iterations) +
                        ") before the tolerance was met: the positions are usable but not fully "
@@ -780,6 +787,8 @@ bool ArrayOptions::IsValid(std::string* error) const {
     return fail("gyro_noise must be a finite number > 0 (rad/s)");
   if (gyro_saturation && (!(*gyro_saturation > 0) || !std::isfinite(*gyro_saturation)))
     return fail("gyro_saturation must be a finite number > 0 (rad/s)");
+  if (accel_saturation && (!(*accel_saturation > 0) || !std::isfinite(*accel_saturation)))
+    return fail("accel_saturation must be a finite number > 0 (m/s^2)");
   if (max_iterations < 0) return fail("max_iterations must be >= 0 (0: solver default)");
   if (!(tolerance >= 0 && tolerance < 1)) return fail("tolerance must be >= 0 and < 1");
   if (threads < 0) return fail("threads must be >= 0 (0: hardware concurrency)");

@@ -65,6 +65,9 @@ struct ArrayOptions {
   double gyro_noise = 0;
   // rad/s. When set (> 0), samples with any gyroscope |component| >= it are dropped and counted.
   std::optional<double> gyro_saturation;
+  // m/s². When set (> 0), samples with any accelerometer |component| >= it are dropped and
+  // counted with the gyroscope's (server/array_method.cc sets both from the data, core/saturation.h).
+  std::optional<double> accel_saturation;
   // Which optimiser. Default: joint Levenberg-Marquardt with Schur complement.
   ArraySolver solver = ArraySolver::kJoint;
   // Iteration limit (LM iterations for joint, sweeps of Algorithm 1 for bcd). 0 = solver default:
@@ -146,7 +149,7 @@ struct ArrayResult {
   std::vector<double> cost;  // cost C before the first and after every iteration
 
   int64_t samples = 0;          // usable samples N
-  int64_t samples_dropped = 0;  // dropped for gyroscope saturation
+  int64_t samples_dropped = 0;  // dropped for saturation (gyroscope or accelerometer)
   int gyro_triads = 0;          // G
 
   double residual_rms_accel = 0;  // sqrt(mean of squared accel residual components)

@@ -471,6 +471,8 @@ bool ArrayFullOptions::IsValid(std::string* error) const {
   if (!(gravity > 0) || !std::isfinite(gravity)) return fail("gravity must be > 0 (m/s^2)");
   if (gyro_saturation && (!(*gyro_saturation > 0) || !std::isfinite(*gyro_saturation)))
     return fail("gyro_saturation must be a finite number > 0 (rad/s)");
+  if (accel_saturation && (!(*accel_saturation > 0) || !std::isfinite(*accel_saturation)))
+    return fail("accel_saturation must be a finite number > 0 (m/s^2)");
   std::string e;
   if (!statics.IsValid(&e)) return fail("static detection: " + e);
   if (max_iterations < 1) return fail("max_iterations must be >= 1");
@@ -552,6 +554,10 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
       triads[k].saturation_low = -*options.gyro_saturation;
       triads[k].saturation_high = *options.gyro_saturation;
     }
+    if (k < K && options.accel_saturation) {
+      triads[k].saturation_low = -*options.accel_saturation;
+      triads[k].saturation_high = *options.accel_saturation;
+    }
   }
   StaticDetection det;
   if (Status s = DetectStatics(problem.t, triads, options.statics, &det); !s.ok()) return s;
@@ -569,7 +575,8 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
         "the full array model needs at least " + std::to_string(options.min_statics) +
             " static orientations (the accelerometers' closed form); the log has " +
             std::to_string(d.J) +
-            ": record the board at rest in many different orientations before the dynamic phase");
+            ": record the board at rest in many different orientations before the dynamic phase; " +
+            StaticShortfall(det));
   d.static_a.resize(3 * K, d.J);
   d.static_g.resize(3 * K, d.J);
   d.static_n.resize(d.J);
@@ -605,8 +612,10 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   // ----- Dynamic samples: everything outside the statics, without saturated gyroscopes.
   for (int64_t n = 0; n < N; ++n) {
     if (in_static[n]) continue;
-    if (options.gyro_saturation &&
-        problem.gyro.row(n).cwiseAbs().maxCoeff() >= *options.gyro_saturation) {
+    if ((options.gyro_saturation &&
+         problem.gyro.row(n).cwiseAbs().maxCoeff() >= *options.gyro_saturation) ||
+        (options.accel_saturation &&
+         problem.accel.row(n).cwiseAbs().maxCoeff() >= *options.accel_saturation)) {
       ++res.samples_dropped;
       continue;
     }

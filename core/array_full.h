@@ -106,6 +106,9 @@ struct ArrayFullOptions {
   // rad/s (readings). When set (> 0), samples with any gyroscope |component| >= it are dropped
   // from the dynamic phase and never part of a static.
   std::optional<double> gyro_saturation;
+  // m/s². The same for the accelerometers (server/array_method.cc sets both from the data,
+  // core/saturation.h).
+  std::optional<double> accel_saturation;
   // Static detection (core/static_detection.h), on every triad's accelerometer and gyroscope.
   StaticDetectionOptions statics;
   // LM iterations (accepted or rejected). Reaching it is not a failure (converged = false). >= 1.
@@ -227,7 +230,7 @@ struct ArrayFullResult {
   int64_t statics = 0;
   int64_t static_samples = 0;
   int64_t dynamic_samples = 0;
-  int64_t samples_dropped = 0;             // gyroscope saturation
+  int64_t samples_dropped = 0;             // saturation (gyroscope or accelerometer)
   int64_t dof = 0;                         // residuals - block unknowns - free shared unknowns
   double chi2_per_dof = 0;                 // final cost / dof
   double accel_noise = 0, gyro_noise = 0;  // sigma used

@@ -1254,6 +1254,7 @@ Status CalibrateImus(const Eigen::VectorXd& t, const std::vector<ImuReadings>& i
               ? "hold the board still for a few seconds in more orientations spread over the "
                 "sphere"
               : cov.verdict);
+    if (n < options.min_statics) m << "; " << StaticShortfall(d);  // what was found, what to change
     const std::string msg = m.str();
     // Enough statics that do not determine the ellipsoid: their orientations are the problem.
     const Reason why =

@@ -2,9 +2,20 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 namespace calibd::core {
 namespace {
+
+constexpr int64_t kPollSamples = 65536;  // samples of work between two polls of the stop token
+// Growth of a run (header): the mean of the c samples added at one end stays within
+// kGrowthZ × floor × sqrt(1/c + 1/n) of the mean of the run's n samples. The floor is the spread
+// of 3 axes (σ√3 for white noise), so noise alone exceeds it with P(χ²₃ > 27) ≈ 6e-6 per step.
+constexpr double kGrowthZ = 3;
+// At most this many windows of growth per end: the half-window the first quiet window held, and
+// the windows a noise-free log's running sums call not quite quiet next to motion (their
+// rounding), never a long creep.
+constexpr int64_t kGrowthWindows = 2;
 
 double Quantile(std::vector<double> x, double q) {
   if (x.empty()) return 0;
@@ -36,12 +47,20 @@ double NoiseFloor(std::vector<double> spreads, const StaticDetectionOptions& o) 
 // rounding error of the sums stays at the level of the window's own deviation from the anchor:
 // a window inside a static whose anchor is in the same static has exactly zero spread when the
 // readings are constant.
-void WindowSpreads(const Eigen::MatrixX3d& y, int64_t h, Eigen::VectorXd* spread) {
+// False when `stop` asked for a stop (polled every ~65 536 centres).
+bool WindowSpreads(const Eigen::MatrixX3d& y, int64_t h, const StopToken* stop,
+                   Eigen::VectorXd* spread) {
   const int64_t n = y.rows();
   const int64_t w = 2 * h + 1;
   spread->setConstant(n, std::numeric_limits<double>::infinity());
   double s1[3], s2[3], anchor[3];
+  int64_t since_poll = 0;
   for (int64_t c0 = h; c0 + h < n; c0 += w) {
+    since_poll += 2 * w;
+    if (since_poll >= kPollSamples) {
+      since_poll = 0;
+      if (StopRequested(stop)) return false;
+    }
     for (int a = 0; a < 3; ++a) {
       anchor[a] = y(c0, a);
       s1[a] = s2[a] = 0;
@@ -69,6 +88,7 @@ void WindowSpreads(const Eigen::MatrixX3d& y, int64_t h, Eigen::VectorXd* spread
       (*spread)(c) = std::sqrt(var);
     }
   }
+  return true;
 }
 
 }  // namespace
@@ -159,20 +179,26 @@ Status StaticDetector::Init(const Eigen::VectorXd& t, const std::vector<TriadSer
   for (int64_t i = 1; i < n; ++i) dt[static_cast<size_t>(i - 1)] = t(i) - t(i - 1);
   b.sample_period = Quantile(dt, 0.5);
   std::vector<int64_t> gap_prefix(static_cast<size_t>(n + 1), 0);  // gaps at steps < i
+  gap_before_.assign(static_cast<size_t>(n), 0);
   for (int64_t i = 1; i < n; ++i) {
     const bool gap = t(i) - t(i - 1) > options.gap_factor * b.sample_period;
     if (gap) b.gaps.push_back({i, t(i - 1), t(i)});
+    gap_before_[static_cast<size_t>(i)] = gap ? 1 : 0;
     gap_prefix[static_cast<size_t>(i + 1)] = gap_prefix[static_cast<size_t>(i)] + (gap ? 1 : 0);
   }
   int64_t h = std::max<int64_t>(1, std::llround(0.5 * options.static_window / b.sample_period));
   h = std::min(h, (n - 1) / 2);
   const int64_t w = 2 * h + 1;
   b.window_samples = w;
+  b.static_window = options.static_window;
+  b.min_static = options.min_static;
 
   // Saturation.
   const size_t k_triads = triads.size();
   b.saturated_per_triad.assign(k_triads, 0);
   std::vector<int64_t> sat_prefix(static_cast<size_t>(n + 1), 0);
+  sample_saturated_.assign(static_cast<size_t>(n), 0);
+  if (StopRequested(options.stop)) return StoppedStatus(*options.stop, "static detection");
   for (int64_t i = 0; i < n; ++i) {
     bool sat = false;
     for (size_t k = 0; k < k_triads; ++k) {
@@ -184,6 +210,7 @@ Status StaticDetector::Init(const Eigen::VectorXd& t, const std::vector<TriadSer
       }
     }
     if (sat) ++b.saturated_samples;
+    sample_saturated_[static_cast<size_t>(i)] = sat ? 1 : 0;
     sat_prefix[static_cast<size_t>(i + 1)] = sat_prefix[static_cast<size_t>(i)] + (sat ? 1 : 0);
   }
   blocked_.assign(static_cast<size_t>(n), 1);
@@ -201,7 +228,9 @@ Status StaticDetector::Init(const Eigen::VectorXd& t, const std::vector<TriadSer
   Eigen::VectorXd spread;
   for (size_t k = 0; k < k_triads; ++k) {
     const TriadSeries& s = triads[k];
-    WindowSpreads(*s.readings, h, &spread);
+    if (!WindowSpreads(*s.readings, h, options.stop, &spread)) {
+      return StoppedStatus(*options.stop, "static detection");
+    }
     std::vector<double> samples;
     for (int64_t c = h; c + h < n; c += w) {
       if (!blocked_[static_cast<size_t>(c)]) samples.push_back(spread(c));
@@ -239,25 +268,86 @@ StaticDetection StaticDetector::Detect(std::optional<double> multiplier) const {
   auto is_static = [&](int64_t c) {
     return !blocked_[static_cast<size_t>(c)] && ratio_mult_(c) <= m && ratio_abs_(c) <= 1.0;
   };
+  const size_t k_triads = triads_.size();
+  std::vector<Eigen::RowVector3d> core_mean(k_triads), added(k_triads);
+  int64_t core_samples = 1;  // of the run being grown
+  // Grows [first, last] by one sample at a time in direction `step` (-1, +1) up to kGrowthWindows
+  // windows (header): sample i joins when it is not saturated, no gap lies between it and the run,
+  // every triad's |y_i - mean| <= its threshold, and the mean of the samples added on this side
+  // stays within kGrowthZ × floor / sqrt(count) of the run's mean (so a smooth motion's onset, each
+  // sample below the threshold, cannot bias the static's mean by more than noise).
+  auto grow = [&](int64_t from, int step, int64_t limit) {
+    for (auto& a : added) a.setZero();
+    int64_t i = from, count = 0;
+    const double inv_core = 1.0 / static_cast<double>(core_samples);
+    while (count < kGrowthWindows * d.window_samples) {
+      const int64_t next = i + step;
+      if (step < 0 ? next < limit : next > limit) break;
+      if (sample_saturated_[static_cast<size_t>(next)]) break;
+      if (gap_before_[static_cast<size_t>(step < 0 ? i : next)]) break;
+      bool ok = true;
+      for (size_t k = 0; k < k_triads && ok; ++k) {
+        const auto row = triads_[k].readings->row(next);
+        const double floor = d.noise_floor[k];
+        ok = (row - core_mean[k]).norm() <= d.threshold[k] &&
+             ((added[k] + row) / static_cast<double>(count + 1) - core_mean[k]).norm() <=
+                 kGrowthZ * floor * std::sqrt(1.0 / static_cast<double>(count + 1) + inv_core);
+      }
+      if (!ok) break;
+      for (size_t k = 0; k < k_triads; ++k) added[k] += triads_[k].readings->row(next);
+      i = next;
+      ++count;
+    }
+    return i;
+  };
+  int64_t prev_last = -1;  // the previous grown run's last sample
+  int64_t since_poll = 0;
   int64_t c = 0;
   while (c < n) {
+    if (++since_poll >= kPollSamples) {
+      since_poll = 0;
+      if (StopRequested(options_.stop)) {
+        d.stopped = true;
+        return d;
+      }
+    }
     if (!is_static(c)) {
       ++c;
       continue;
     }
-    const int64_t first = c;
+    const int64_t core_first = c;
     while (c + 1 < n && is_static(c + 1)) ++c;
-    const int64_t last = c;
+    const int64_t core_last = c;
     ++c;
-    if (t(last) - t(first) < options_.min_static) continue;
+    since_poll += core_last - core_first;
+    for (size_t k = 0; k < k_triads; ++k) {
+      core_mean[k] =
+          triads_[k].readings->middleRows(core_first, core_last - core_first + 1).colwise().mean();
+    }
+    core_samples = core_last - core_first + 1;
+    const int64_t first = grow(core_first, -1, prev_last + 1);
+    const int64_t last = grow(core_last, +1, n - 1);
+    prev_last = last;
+    if (t(last) - t(first) < options_.min_static) {
+      d.short_stretches.push_back({t(first), t(last), first, last});
+      continue;
+    }
+    // The statistics and the samples the fits use: the run of quiet windows' centres (at least
+    // half a window from any motion the windows saw: the grown margin may hold the sub-noise
+    // onset of a smooth motion, which would bias the static's mean and shorten the rotations
+    // between statics). The extent: the grown run.
     StaticInterval iv;
-    iv.first = first;
-    iv.last = last;
-    iv.start = t(first);
-    iv.end = t(last);
-    iv.samples = last - first + 1;
+    iv.first = core_first;
+    iv.last = core_last;
+    iv.start = t(core_first);
+    iv.end = t(core_last);
+    iv.samples = core_last - core_first + 1;
+    iv.extent_first = first;
+    iv.extent_last = last;
+    iv.extent_start = t(first);
+    iv.extent_end = t(last);
     for (const TriadSeries& s : triads_) {
-      const auto block = s.readings->middleRows(first, iv.samples);
+      const auto block = s.readings->middleRows(iv.first, iv.samples);
       const Eigen::RowVector3d mean = block.colwise().mean();
       Eigen::Vector3d sd = Eigen::Vector3d::Zero();
       if (iv.samples > 1) {
@@ -275,12 +365,82 @@ StaticDetection StaticDetector::Detect(std::optional<double> multiplier) const {
   return d;
 }
 
+namespace {
+
+std::string Num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3g", v);
+  return buf;
+}
+
+}  // namespace
+
+std::string StaticShortfall(const StaticDetection& d) {
+  std::string m = "static detection (static_window " + Num(d.static_window) + " s, min_static " +
+                  Num(d.min_static) + " s, threshold ";
+  bool any_multiplied = false;
+  for (size_t k = 0; k < d.triad_names.size(); ++k) {
+    any_multiplied = any_multiplied || !d.threshold_overridden[k];
+  }
+  if (any_multiplied) m += Num(d.threshold_multiplier) + " × noise floor, ";
+  m += "window spread";
+  const size_t shown = std::min<size_t>(d.triad_names.size(), 4);
+  for (size_t k = 0; k < shown; ++k) {
+    m += (k ? ", " : " ") + d.triad_names[k] + " " + Num(d.threshold[k]) +
+         (d.threshold_overridden[k] ? " (static_threshold)" : "");
+  }
+  if (d.triad_names.size() > shown) m += ", ...";
+  m += " reading units) found ";
+  auto list = [](const auto& items, size_t max) {
+    std::string out;
+    for (size_t i = 0; i < items.size() && i < max; ++i) {
+      out += (i ? ", " : "") + Num(items[i].end - items[i].start) + " s at " + Num(items[i].start) +
+             " s";
+    }
+    if (items.size() > max) out += ", ...";
+    return out;
+  };
+  std::vector<StillStretch> found;
+  for (const StaticInterval& iv : d.intervals) {
+    found.push_back({iv.extent_start, iv.extent_end, iv.extent_first, iv.extent_last});
+  }
+  m += std::to_string(d.intervals.size()) + " static interval(s)";
+  if (!found.empty()) m += " (" + list(found, 6) + ")";
+  if (d.short_stretches.empty()) {
+    m += " and no shorter still stretch";
+  } else {
+    double longest = 0;
+    for (const StillStretch& s : d.short_stretches) longest = std::max(longest, s.end - s.start);
+    m += " and " + std::to_string(d.short_stretches.size()) +
+         " still stretch(es) shorter than min_static (" + list(d.short_stretches, 6) +
+         "; longest " + Num(longest) + " s)";
+  }
+  if (d.saturated_samples > 0) {
+    m += "; " + std::to_string(d.saturated_samples) +
+         " saturated sample(s) block every window holding one";
+  }
+  if (d.intervals.empty() && d.short_stretches.empty()) {
+    m += ": the spread of a " + Num(d.static_window) +
+         " s window never stayed under the threshold: hold the board still for at least " +
+         Num(std::max(d.static_window, d.min_static)) +
+         " s per orientation, use a shorter static_window, or set static_threshold above the "
+         "spread at rest (in reading units)";
+  } else if (!d.short_stretches.empty()) {
+    m += ": hold each static at least " + Num(std::max(d.static_window, d.min_static)) +
+         " s, or lower min_static (and static_window) below the still stretches' lengths";
+  } else {
+    m += ": record more statics (in more orientations)";
+  }
+  return m;
+}
+
 Status DetectStatics(const Eigen::VectorXd& t, const std::vector<TriadSeries>& triads,
                      const StaticDetectionOptions& options, StaticDetection* out) {
   StaticDetector detector;
   Status s = detector.Init(t, triads, options);
   if (!s.ok()) return s;
   *out = detector.Detect();
+  if (out->stopped) return StoppedStatus(*options.stop, "static detection");
   return Status::Ok();
 }
 

@@ -229,6 +229,7 @@ json PositionsDiagnosticsJson(const ArrayPositionsDiagnostics& d, bool usable) {
   } else {
     out["accelerometer_calibration"] = nullptr;
   }
+  if (d.saturation) out["saturation"] = ToJson(*d.saturation);
   return out;
 }
 
@@ -283,6 +284,7 @@ void ReadPositionsDiagnostics(const JsonReader& r, bool usable, ArrayPositionsDi
     Ext(*c, "max_condition_number", &v.max_condition_number);
     if (c->ok()) d->accelerometer_calibration = std::move(v);
   }
+  ReadSaturation(r, &d->saturation);
 }
 
 // ---- diagnostics, full model ----
@@ -347,6 +349,7 @@ json FullDiagnosticsJson(const ArrayFullDiagnostics& d, bool usable) {
                    {"batch_seconds", Num(d.robust.batch_seconds)},
                    {"ratio", Num(d.robust.ratio)}};
   PutCount(&out, "positions_only_start", d.positions_only_start);
+  if (d.saturation) out["saturation"] = ToJson(*d.saturation);
   json changed = json::array();
   for (const auto& c : d.changed_from_positions_only) {
     json e = {{"name", c.name},
@@ -433,6 +436,7 @@ void ReadFullDiagnostics(const JsonReader& r, bool usable, ArrayFullDiagnostics*
     Ext(*b, "ratio", &d->robust.ratio);
   }
   ReadMember(r, false, "positions_only_start", &d->positions_only_start);
+  ReadSaturation(r, &d->saturation);
   ExtArray(r, "changed_from_positions_only", &d->changed_from_positions_only,
            [](const JsonReader& e, ArrayPositionChange* c) {
              Ext(e, "name", &c->name);

@@ -42,6 +42,7 @@
 
 #include "base/status.h"
 #include "results/envelope.h"
+#include "results/saturation.h"
 #include "results/triad.h"
 
 namespace calibd::results {
@@ -164,6 +165,7 @@ struct ArrayPositionsDiagnostics {
   double parallel_fraction = array_internal::kNaN;
   ArrayMotion motion;                                             // no points when absent
   std::optional<ArrayCalibrationUsed> accelerometer_calibration;  // null without one (or absent)
+  std::optional<SaturationDiagnostics> saturation;  // results/saturation.h; absent: none pinned
 };
 
 // diagnostics.gauge (full).
@@ -257,6 +259,7 @@ struct ArrayFullDiagnostics {
   // absent.
   std::optional<bool> positions_only_start;
   std::vector<ArrayPositionChange> changed_from_positions_only;
+  std::optional<SaturationDiagnostics> saturation;  // results/saturation.h; absent: none pinned
 };
 
 struct ArrayResult {

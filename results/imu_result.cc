@@ -230,6 +230,7 @@ json ToJson(const ImuResult& r) {
                            {"gyroscope", NoiseModelJson(d.noise_model->gyroscope)}};
   }
   if (d.saturated_samples) diag["saturated_samples"] = *d.saturated_samples;
+  if (d.saturation) diag["saturation"] = ToJson(*d.saturation);
   for (const std::string& key : r.dropped) diag.erase(key);  // left out by the trimming
   if (!ContainsKey(r.dropped, "diagnostics")) out["diagnostics"] = std::move(diag);
   if (r.trimmed) out["trimmed"] = *r.trimmed;
@@ -315,6 +316,7 @@ Status FromJson(const json& doc, ImuResult* out) {
       g.noise_model = n;
     }
     d.Read("saturated_samples", &g.saturated_samples);
+    ReadSaturation(d, &g.saturation);
     if (!DroppedMember(d, v.dropped, "static_window")) {
       d.ReadExtension("static_window", &g.static_window);
     }

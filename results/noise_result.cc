@@ -61,6 +61,7 @@ json ToJson(const NoiseResult& r) {
   if (d.units) {
     diag["units"] = {{"accel_unit", d.units->accel_unit}, {"gyro_unit", d.units->gyro_unit}};
   }
+  if (d.saturation) diag["saturation"] = ToJson(*d.saturation);
   for (const std::string& key : r.dropped) diag.erase(key);  // left out by the trimming
   if (!ContainsKey(r.dropped, "diagnostics")) out["diagnostics"] = std::move(diag);
   if (r.trimmed) out["trimmed"] = *r.trimmed;
@@ -146,6 +147,7 @@ Status FromJson(const json& doc, NoiseResult* out) {
       u->ReadExtension("gyro_unit", &units.gyro_unit);
       g.units = std::move(units);
     }
+    ReadSaturation(d, &g.saturation);
   }
   if (!r.ok()) return r.status();
   *out = std::move(v);

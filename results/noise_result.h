@@ -32,6 +32,7 @@
 #include "base/status.h"
 #include "results/envelope.h"
 #include "results/json_reader.h"
+#include "results/saturation.h"
 
 namespace calibd::results {
 
@@ -93,6 +94,7 @@ struct NoiseDiagnostics {
   std::vector<NoiseChannelDiagnostics> channels;  // ext. (empty when absent)
   std::vector<NoiseAllanCurve> allan;
   std::optional<NoiseUnits> units;  // written by the server's adapter
+  std::optional<SaturationDiagnostics> saturation;  // results/saturation.h; absent: none pinned
 };
 
 struct NoiseResult {

@@ -7,6 +7,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <tuple>
 
 #include "core/array_full.h"
 #include "core/array_full_simulation.h"
@@ -15,6 +16,7 @@
 #include "results/pca_result.h"
 #include "server/inertial_log.h"
 #include "server/noise_reference.h"
+#include "server/saturation_report.h"
 
 namespace calibd::server {
 namespace {
@@ -299,18 +301,11 @@ Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
                                 std::string(config.type_name()));
   *options = core::ArrayOptions();
   *gyro_in_degrees = false;
-  static const char* const kKeys[] = {"method",
-                                      "device",
-                                      "geometry",
-                                      "accel_noise",
-                                      "gyro_noise",
-                                      "gyro_unit",
-                                      "gyro_saturation",
-                                      "solver",
-                                      "max_iterations",
-                                      "tolerance",
-                                      "accelerometer_calibration",
-                                      "model"};
+  static const char* const kKeys[] = {
+      "method",     "device",         "geometry",        "accel_noise",
+      "gyro_noise", "gyro_unit",      "gyro_saturation", "accel_saturation",
+      "solver",     "max_iterations", "tolerance",       "accelerometer_calibration",
+      "model"};
   if (auto m = config.find("model"); m != config.end()) {
     std::string model;
     Status s = ReadString(*m, "model", &model);
@@ -324,8 +319,8 @@ Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
                      [&](const char* k) { return it.key() == k; }) == std::end(kKeys))
       return KeyError(it.key(),
                       "unknown key for method array (known: geometry, accel_noise, gyro_noise, "
-                      "gyro_unit, gyro_saturation, solver, max_iterations, tolerance, "
-                      "accelerometer_calibration, model, method, device)");
+                      "gyro_unit, gyro_saturation, accel_saturation, solver, max_iterations, "
+                      "tolerance, accelerometer_calibration, model, method, device)");
   }
   // Units first: they apply to gyro_noise and gyro_saturation.
   if (Status u = ParseGyroUnit(config, gyro_in_degrees); !u.ok()) return u;
@@ -353,6 +348,12 @@ Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
     s = ReadPositive(*it, "gyro_saturation", &v);
     if (!s.ok()) return s;
     options->gyro_saturation = v * gyro_scale;
+  }
+  if (auto it = config.find("accel_saturation"); it != config.end() && !it->is_null()) {
+    double v = 0;
+    s = ReadPositive(*it, "accel_saturation", &v);
+    if (!s.ok()) return s;
+    options->accel_saturation = v;  // m/s^2
   }
   if (auto it = config.find("solver"); it != config.end()) {
     std::string solver;
@@ -409,9 +410,10 @@ Status ParseArrayFullConfig(const json& config, core::ArrayFullProblem* geometry
   *options = core::ArrayFullOptions();
   *gyro_in_degrees = false;
   static const char* const kKeys[] = {
-      "method",     "device",        "model",           "geometry",     "accel_noise",
-      "gyro_noise", "gyro_unit",     "gyro_saturation", "gravity",      "max_iterations",
-      "tolerance",  "static_window", "min_static",      "robust_batch", "dynamic_weighting"};
+      "method",          "device",        "model",           "geometry",     "accel_noise",
+      "gyro_noise",      "gyro_unit",     "gyro_saturation", "gravity",      "max_iterations",
+      "tolerance",       "static_window", "min_static",      "robust_batch", "dynamic_weighting",
+      "accel_saturation"};
   for (auto it = config.begin(); it != config.end(); ++it) {
     if (it.key() == "solver" || it.key() == "accelerometer_calibration")
       return KeyError(it.key(),
@@ -421,7 +423,8 @@ Status ParseArrayFullConfig(const json& config, core::ArrayFullProblem* geometry
                      [&](const char* k) { return it.key() == k; }) == std::end(kKeys))
       return KeyError(it.key(),
                       "unknown key for method array with model full (known: geometry, "
-                      "accel_noise, gyro_noise, gyro_unit, gyro_saturation, gravity, "
+                      "accel_noise, gyro_noise, gyro_unit, gyro_saturation, accel_saturation, "
+                      "gravity, "
                       "max_iterations, tolerance, static_window, min_static, robust_batch, "
                       "dynamic_weighting, model, method, device)");
   }
@@ -449,6 +452,9 @@ Status ParseArrayFullConfig(const json& config, core::ArrayFullProblem* geometry
   double saturation = 0;
   if (s = optional_positive("gyro_saturation", gyro_scale, &saturation); !s.ok()) return s;
   if (saturation > 0) options->gyro_saturation = saturation;
+  saturation = 0;
+  if (s = optional_positive("accel_saturation", 1, &saturation); !s.ok()) return s;
+  if (saturation > 0) options->accel_saturation = saturation;
   if (s = optional_positive("gravity", 1, &options->gravity); !s.ok()) return s;
   if (s = optional_positive("static_window", 1, &options->statics.static_window); !s.ok()) return s;
   if (s = optional_positive("robust_batch", 1, &options->robust_batch); !s.ok()) return s;
@@ -517,6 +523,65 @@ constexpr const char* kPositionsModelEquation =
     "the origin, omega the angular rate, Omega(x) the cross-product matrix; the "
     "parameters are the positions r_k";
 
+// Saturation of an array log (core/saturation.h), on the readings in SI (m/s², rad/s) before
+// any correction: a configured accel_saturation / gyro_saturation (symmetric) overrides the search
+// for its kind; otherwise the clip levels found in the data give one symmetric limit per kind
+// (the tightest over the kind's channels, core::SymmetricLimit), which the fit drops like a
+// configured one (every sample with any |component| at or beyond it; model full: never part of a
+// static). Sets the limits in *accel_limit / *gyro_limit and, when anything is pinned, the
+// diagnostics and a warning.
+constexpr double kFullScaleMargin = 0.002;
+
+Status ArraySaturation(const Eigen::MatrixXd& accel, const std::vector<std::string>& accel_names,
+                       const Eigen::MatrixXd& gyro, const std::vector<std::string>& gyro_names,
+                       bool degrees, const core::StopToken* stop,
+                       std::optional<double>* accel_limit, std::optional<double>* gyro_limit,
+                       std::optional<results::SaturationDiagnostics>* diagnostics,
+                       std::vector<std::string>* warnings) {
+  results::SaturationDiagnostics report{"dropped", 0, {}};
+  std::vector<core::ChannelSaturation> accel_channels, gyro_channels;
+  for (auto [columns, names, limit, channels, scale, unit] :
+       {std::tuple<const Eigen::MatrixXd*, const std::vector<std::string>*, std::optional<double>*,
+                   std::vector<core::ChannelSaturation>*, double, const char*>{
+            &accel, &accel_names, accel_limit, &accel_channels, 1.0, "m/s^2"},
+        std::tuple<const Eigen::MatrixXd*, const std::vector<std::string>*, std::optional<double>*,
+                   std::vector<core::ChannelSaturation>*, double, const char*>{
+            &gyro, &gyro_names, gyro_limit, &gyro_channels, degrees ? 1 / core::kDegree : 1.0,
+            degrees ? "deg/s" : "rad/s"}}) {
+    if (columns->cols() != 3 * static_cast<Eigen::Index>(names->size())) continue;
+    core::SaturationOptions so;
+    so.stop = stop;
+    if (*limit) {
+      so.low = -**limit;
+      so.high = **limit;
+    }
+    Status s = FindSaturation(*columns, *names, so, channels);
+    if (!s.ok()) return s;
+    if (!*limit) {
+      // The levels found, less kFullScaleMargin of them: the last fraction of a percent of a
+      // sensor's range is where clipped excursions begin and end (and where its linearity is
+      // least specified); the samples there are dropped with the pinned ones.
+      if (const std::optional<double> level = core::SymmetricLimit(core::CombinedLimits(*channels)))
+        *limit = *level * (1 - kFullScaleMargin);
+    }
+    AddSaturationChannels(*channels, scale, unit, &report);
+  }
+  if (report.channels.empty()) return Status::Ok();
+  // The samples the fit drops: any |component| at or beyond its kind's limit.
+  for (Eigen::Index n = 0; n < accel.rows(); ++n) {
+    if ((*accel_limit && accel.row(n).cwiseAbs().maxCoeff() >= **accel_limit) ||
+        (*gyro_limit && gyro.rows() == accel.rows() &&
+         gyro.row(n).cwiseAbs().maxCoeff() >= **gyro_limit)) {
+      ++report.samples;
+    }
+  }
+  warnings->push_back(PinnedList(report) + ": " + std::to_string(report.samples) +
+                      " sample(s) at or beyond the saturation limits were dropped from the fit; "
+                      "gyro_saturation / accel_saturation in the config override the levels found");
+  *diagnostics = std::move(report);
+  return Status::Ok();
+}
+
 Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
                     const core::StopToken* stop, core::TaskExecutor executor) {
   core::ArrayFullProblem problem;
@@ -544,6 +609,13 @@ Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
   problem.accel = std::move(recording.accel);
   problem.gyro = std::move(recording.gyro);
   if (degrees) problem.gyro *= core::kDegree;
+  std::optional<results::SaturationDiagnostics> saturation;
+  std::vector<std::string> saturation_warnings;
+  options.statics.stop = stop;
+  s = ArraySaturation(problem.accel, recording.accel_names, problem.gyro, recording.gyro_names,
+                      degrees, stop, &options.accel_saturation, &options.gyro_saturation,
+                      &saturation, &saturation_warnings);
+  if (!s.ok()) return s;
   for (const auto& name : recording.accel_names)
     problem.names.push_back(name.size() > 1 && name[0] == 'a' ? name.substr(1) : name);
   options.stop = stop;  // a stopped run returns core::StoppedStatus ("array (full model): ...")
@@ -552,8 +624,10 @@ Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
   results::ArrayResult out;
   out.envelope.method = "array";
   out.envelope.warnings = r.warnings;
+  for (auto& w : saturation_warnings) out.envelope.warnings.push_back(std::move(w));
   out.full = true;
   results::ArrayFullDiagnostics& d = out.full_diagnostics;
+  d.saturation = std::move(saturation);
   d.termination = core::BlockLmTerminationName(r.termination);
   d.iterations = r.iterations;
   d.statics = r.statics;
@@ -682,6 +756,13 @@ Status RunArray(ArrayRecording recording, const json& config, json* result,
   problem.accel = std::move(recording.accel);
   problem.gyro = std::move(recording.gyro);
   if (degrees) problem.gyro *= core::kDegree;
+  // Saturation on the raw readings, before the accelerometer calibration corrects them.
+  std::optional<results::SaturationDiagnostics> saturation;
+  std::vector<std::string> saturation_warnings;
+  s = ArraySaturation(problem.accel, recording.accel_names, problem.gyro, recording.gyro_names,
+                      degrees, stop, &options.accel_saturation, &options.gyro_saturation,
+                      &saturation, &saturation_warnings);
+  if (!s.ok()) return s;
   problem.accel_names = std::move(recording.accel_names);
   if (calibration.present) {
     s = core::CorrectAccelerometerReadings(calibration.triads, problem.accel_names, &problem.accel);
@@ -694,7 +775,9 @@ Status RunArray(ArrayRecording recording, const json& config, json* result,
   results::ArrayResult out;
   out.envelope.method = "array";
   out.envelope.warnings = r.warnings;
+  for (auto& w : saturation_warnings) out.envelope.warnings.push_back(std::move(w));
   results::ArrayPositionsDiagnostics& d = out.diagnostics;
+  d.saturation = std::move(saturation);
   d.solver = core::ArraySolverName(r.solver);
   d.termination = core::ArrayTerminationName(r.termination);
   d.iterations = r.iterations;

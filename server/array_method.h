@@ -62,7 +62,9 @@ Status ParseAccelerometerCalibration(const nlohmann::json& value, int triads,
 
 // Reads the array keys of a config object (SPEC §3): geometry {"positions": [[x,y,z], ...K],
 // "reference": k (default 0)}, accel_noise (m/s²), gyro_noise (in gyro_unit), gyro_unit
-// ("rad/s" default | "deg/s"), gyro_saturation (in gyro_unit), solver ("joint" | "bcd"),
+// ("rad/s" default | "deg/s"), gyro_saturation (in gyro_unit), accel_saturation (m/s²; both
+// default: the clip levels found in the data, core/saturation.h, less 0.2 %; what is pinned is
+// reported in diagnostics.saturation and a warning), solver ("joint" | "bcd"),
 // max_iterations (integer >= 0, 0 = solver default), tolerance (>= 0, < 1).
 // accelerometer_calibration (optional, see ParseAccelerometerCalibration; checked against the
 // geometry's triad count). The common keys method and device are ignored. Unknown keys, missing
@@ -123,7 +125,8 @@ void JudgeArray(const nlohmann::json& result, const nlohmann::json& config,
 
 // model "full" (SPEC §7): the keys geometry (as above), accel_noise (m/s², optional: default
 // from the statics), gyro_noise (gyro_unit, optional: from the statics), gyro_unit,
-// gyro_saturation, gravity (m/s², default 9.80665), max_iterations (>= 1), tolerance,
+// gyro_saturation, accel_saturation (as for positions), gravity (m/s², default 9.80665),
+// max_iterations (>= 1), tolerance,
 // static_window and min_static (s, static detection), robust_batch (s, the residual-aware σ's
 // batches), dynamic_weighting ("noise" default | "residual": the dynamic samples weighted by
 // their own residual level, core::ArrayFullDynamicWeighting), model, method, device. solver and

@@ -11,6 +11,7 @@
 #include "server/inertial_log.h"
 #include "server/noise_reference.h"
 #include "server/openvins_yaml.h"
+#include "server/saturation_report.h"
 
 namespace calibd::server {
 
@@ -400,13 +401,13 @@ class Imu : public Method {
       }
     }
   }
-  Status Run(RecordingParser* parser, const json& config, const RunContext& ctx,
+  Status Run(RecordingParser* parser, const json& config, const RunContext& context,
              json* result) const override {
     core::ImuOptions options;
     Status s = ParseImuConfig(config, &options);
     if (!s.ok())
       return s.reason() == Reason::kUnspecified ? s.WithReason(Reason::kInvalidConfig) : s;
-    options.stop = ctx.stop;  // a stopped run returns core::StoppedStatus ("imu: <stage>: ...")
+    options.stop = context.stop;  // a stopped run returns core::StoppedStatus ("imu: <stage>: ...")
     ArrayRecording log;
     s = parser->TakeArray(&log);
     if (!s.ok()) return s;
@@ -433,6 +434,37 @@ class Imu : public Method {
       readings[k].accel = &accel[k];
       readings[k].gyro = &gyro[k];
     }
+    // Saturation (core/saturation.h): per kind, the configured limit or the clip levels found in
+    // the data, combined into the one [low, high] the fit takes (the tightest over the kind's
+    // channels); pinned samples never join a static (nor any window holding one) and rotations
+    // through one are not used.
+    options.detection.stop = context.stop;
+    results::SaturationDiagnostics saturation{"dropped", 0, {}};
+    std::vector<core::ChannelSaturation> accel_channels, gyro_channels;
+    for (auto [columns, names, low, high, channels] :
+         {std::tuple<const Eigen::MatrixXd*, const std::vector<std::string>*, double*, double*,
+                     std::vector<core::ChannelSaturation>*>{
+              &log.accel, &log.accel_names, &options.accel_saturation_low,
+              &options.accel_saturation_high, &accel_channels},
+          std::tuple<const Eigen::MatrixXd*, const std::vector<std::string>*, double*, double*,
+                     std::vector<core::ChannelSaturation>*>{
+              &log.gyro, &log.gyro_names, &options.gyro_saturation_low,
+              &options.gyro_saturation_high, &gyro_channels}}) {
+      core::SaturationOptions so;
+      so.stop = context.stop;
+      if (std::isfinite(*low) || std::isfinite(*high)) {  // configured: overrides the search
+        so.low = *low;
+        so.high = *high;
+      }
+      s = FindSaturation(*columns, *names, so, channels);
+      if (!s.ok()) return s;
+      if (!so.low && !so.high) {
+        const core::SaturationLimits limits = core::CombinedLimits(*channels);
+        *low = limits.low;
+        *high = limits.high;
+      }
+      AddSaturationChannels(*channels, 1, "reading units", &saturation);
+    }
     log.accel.resize(0, 0);
     log.gyro.resize(0, 0);
     std::vector<core::ImuResult> results;
@@ -458,7 +490,14 @@ class Imu : public Method {
                          "): no static interval spans one, and rotations across one are not "
                          "used");
     }
-    if (d.saturated_samples > 0) {
+    if (!saturation.channels.empty()) {
+      saturation.samples = d.saturated_samples;
+      warnings.push_back(PinnedList(saturation) + ": " + std::to_string(d.saturated_samples) +
+                         " saturated sample(s) dropped (never in a static nor in any window "
+                         "holding one; rotations through one are not used); accel_saturation / "
+                         "gyro_saturation in the config override the levels found");
+      diag.saturation = saturation;
+    } else if (d.saturated_samples > 0) {
       warnings.push_back(std::to_string(d.saturated_samples) +
                          " saturated sample(s) dropped from the static intervals");
     }

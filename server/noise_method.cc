@@ -6,9 +6,11 @@
 #include <limits>
 #include <memory>
 #include <set>
+#include <vector>
 
 #include "results/noise_result.h"
 #include "server/inertial_log.h"
+#include "server/saturation_report.h"
 
 namespace calibd::server {
 
@@ -206,6 +208,52 @@ class Noise : public Method {
     }
     s = CheckLogTimes(log.t, "noise", &parser->summary());
     if (!s.ok()) return s;
+    // Saturation (core/saturation.h): a noise log is recorded at rest, far from full scale, so a
+    // pinned sample means the sensor was knocked (or its range is wrong). Refused, not dropped:
+    // the Allan deviation needs the uniformly sampled series (a hole would bias every cluster
+    // that spans it) and a clipped stretch is not the sensor's noise either.
+    {
+      core::SaturationOptions so;
+      so.stop = context.stop;
+      std::vector<core::ChannelSaturation> channels;
+      s = FindSaturation(log.accel, log.accel_names, so, &channels);
+      if (s.ok()) s = FindSaturation(log.gyro, log.gyro_names, so, &channels);
+      if (!s.ok()) return s;
+      if (AnyPinned(channels)) {
+        const std::vector<core::ChannelSaturation> accel_part(channels.begin(),
+                                                              channels.begin() + log.accel.cols());
+        const std::vector<core::ChannelSaturation> gyro_part(channels.begin() + log.accel.cols(),
+                                                             channels.end());
+        results::SaturationDiagnostics report{"refused", 0, {}};
+        AddSaturationChannels(accel_part, 1, "m/s^2", &report);
+        AddSaturationChannels(gyro_part, 1, "rad/s", &report);
+        for (Eigen::Index i = 0; i < log.t.size(); ++i) {  // rows with any channel pinned
+          bool pinned = false;
+          for (size_t c = 0; c < channels.size() && !pinned; ++c) {
+            const auto col = static_cast<Eigen::Index>(c);
+            const double v =
+                col < log.accel.cols() ? log.accel(i, col) : log.gyro(i, col - log.accel.cols());
+            pinned = v <= channels[c].low || v >= channels[c].high;
+          }
+          if (pinned) ++report.samples;
+        }
+        results::NoiseResult typed;
+        typed.envelope.method = "noise";
+        typed.envelope.usable = false;
+        typed.diagnostics.samples = log.t.size();
+        typed.diagnostics.saturation = report;
+        typed.diagnostics.units = results::NoiseUnits{units.accel_text, units.gyro_text};
+        *result = results::ToJson(typed);
+        return Status::NotDeterminable(
+            Reason::kNotStationary,
+            PinnedList(report) +
+                ": a noise log recorded at rest never reaches its sensor's full scale, so the "
+                "sensor was knocked or moved (or its range is too small); the Allan deviation of "
+                "a clipped log is not the sensor's noise, and dropping the samples would break "
+                "the uniform sampling it needs: record again at rest, or cut the log before or "
+                "after the knock");
+      }
+    }
     const Eigen::Index n = log.t.size();
     const Eigen::Index na = log.accel.cols(), ng = log.gyro.cols();
     core::NoiseProblem problem;

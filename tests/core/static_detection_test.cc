@@ -20,6 +20,13 @@ std::vector<TriadSeries> Triads(const ImuSimulation& sim) {
           TriadSeries{"g0", TriadKind::kGyroscope, &sim.gyro}};
 }
 
+// How far a grown interval may reach past a true static: the growth stops on the smooth end of a
+// rotation (1 - cos rate profile) once the mean of the added samples leaves the noise. Measured
+// over the logs of these tests: at most 0.14 s (the end of a slow 5 s rotation at 100 Hz); 11
+// samples at 200 Hz. kEdgeSeconds bounds it, kEdge in samples at the 100 Hz of Log().
+constexpr double kEdgeSeconds = 0.15;
+constexpr int64_t kEdge = 15;
+
 // Every detected interval lies inside one true static, and every true static is found once.
 void ExpectMatchesTruth(const StaticDetection& d, const ImuSimulation& sim,
                         const StaticDetectionOptions& o) {
@@ -32,6 +39,11 @@ void ExpectMatchesTruth(const StaticDetection& d, const ImuSimulation& sim,
     // windows that reach into the motion), never by two windows.
     const double true_len = sim.t(sim.statics[j].second) - sim.t(sim.statics[j].first);
     EXPECT_GT(iv.end - iv.start, true_len - 2 * o.static_window) << "interval " << j;
+    // The extent: the whole static, within kEdge samples.
+    EXPECT_LE(std::abs(iv.extent_first - sim.statics[j].first), kEdge) << "interval " << j;
+    EXPECT_LE(std::abs(iv.extent_last - sim.statics[j].second), kEdge) << "interval " << j;
+    EXPECT_LE(iv.extent_first, iv.first);
+    EXPECT_GE(iv.extent_last, iv.last);
     EXPECT_EQ(iv.samples, iv.last - iv.first + 1);
   }
 }
@@ -304,6 +316,104 @@ TEST(StaticDetection, FindsEveryStaticAndNoMotionWhenOnlyAFewPercentOfTheLogIsSt
     EXPECT_EQ(floors_off, 0) << "fraction " << fraction << ": noise floor off by > 20 %";
     EXPECT_EQ(intervals, trials * 10) << "fraction " << fraction;
   }
+}
+
+// A static of L >= min_static is found (issue #20): 2 s statics with the default 1 s window and
+// 1 s minimum, at 62.5 Hz and other rates, noise-free and noisy, with their full length (each run
+// of quiet windows grown back out by the half-window).
+TEST(StaticDetection, TwoSecondStaticsAreFoundWithTheirBounds) {
+  for (double rate : {62.5, 50.0, 100.0, 200.0}) {
+    for (double noise : {0.0, 1.0}) {
+      for (uint64_t seed = 1; seed <= 4; ++seed) {
+        SCOPED_TRACE("rate " + std::to_string(rate) + " noise " + std::to_string(noise) + " seed " +
+                     std::to_string(seed));
+        ImuSimulationOptions so;
+        so.rate = rate;
+        so.statics = 12;
+        so.static_duration = 2;
+        so.rotation_duration = 2;
+        so.seed = seed;
+        so.accel_noise *= noise;
+        so.gyro_noise *= noise;
+        ImuSimulation sim;
+        ASSERT_TRUE(SimulateImu(so, &sim).ok());
+        StaticDetectionOptions o;
+        StaticDetection d;
+        ASSERT_TRUE(DetectStatics(sim.t, Triads(sim), o, &d).ok());
+        ASSERT_EQ(d.intervals.size(), sim.statics.size());
+        for (size_t j = 0; j < sim.statics.size(); ++j) {
+          const StaticInterval& iv = d.intervals[j];
+          const auto [first, last] = sim.statics[j];
+          // The extent: noise-free, the exact static (the rotation's first sample, at rest, may
+          // join); noisy, within kEdgeSeconds of it.
+          const int64_t edge =
+              noise == 0 ? 1 : static_cast<int64_t>(std::ceil(kEdgeSeconds * rate));
+          EXPECT_LE(std::abs(iv.extent_first - first), edge)
+              << "static " << j << ": first " << iv.extent_first - first << ", last "
+              << iv.extent_last - last;
+          EXPECT_LE(std::abs(iv.extent_last - last), edge)
+              << "static " << j << ": first " << iv.extent_first - first << ", last "
+              << iv.extent_last - last;
+          // The samples used: inside the static, half a window from each end.
+          EXPECT_GE(iv.first, first);
+          EXPECT_LE(iv.last, last);
+          EXPECT_GT(iv.samples, 0);
+          EXPECT_GE(iv.extent_end - iv.extent_start, o.min_static);
+        }
+        EXPECT_TRUE(d.short_stretches.empty());
+      }
+    }
+  }
+}
+
+// When too few statics are found, StaticShortfall says what was found and what to change.
+TEST(StaticDetection, TheShortfallMessageListsTheStillStretches) {
+  ImuSimulationOptions so;
+  so.statics = 5;
+  so.static_duration = 1.5;
+  ImuSimulation sim;
+  ASSERT_TRUE(SimulateImu(so, &sim).ok());
+  StaticDetectionOptions o;
+  o.min_static = 2;
+  StaticDetection d;
+  ASSERT_TRUE(DetectStatics(sim.t, Triads(sim), o, &d).ok());
+  EXPECT_TRUE(d.intervals.empty());
+  ASSERT_EQ(d.short_stretches.size(), 5u);
+  for (size_t j = 0; j < 5; ++j) {
+    EXPECT_NEAR(d.short_stretches[j].end - d.short_stretches[j].start, 1.5, 0.1) << j;
+    EXPECT_NEAR(d.short_stretches[j].start, sim.t(sim.statics[j].first), 0.1) << j;
+  }
+  const std::string m = StaticShortfall(d);
+  for (const char* part : {"static_window 1 s", "min_static 2 s", "threshold 3 × noise floor",
+                           "found 0 static interval(s)",
+                           "5 still stretch(es) shorter than "
+                           "min_static (1.",
+                           "longest 1.", "lower min_static", "a0 ", "g0 "}) {
+    EXPECT_NE(m.find(part), std::string::npos) << "missing \"" << part << "\" in: " << m;
+  }
+  // A threshold below the noise: no stretch at all, and the advice names static_threshold.
+  o.accel_threshold = 1e-6;
+  o.gyro_threshold = 1e-6;
+  ASSERT_TRUE(DetectStatics(sim.t, Triads(sim), o, &d).ok());
+  EXPECT_TRUE(d.intervals.empty() && d.short_stretches.empty());
+  const std::string none = StaticShortfall(d);
+  EXPECT_NE(none.find("no shorter still stretch"), std::string::npos) << none;
+  EXPECT_NE(none.find("static_threshold"), std::string::npos) << none;
+  EXPECT_NE(none.find("a0 1e-06 (static_threshold)"), std::string::npos) << none;
+}
+
+TEST(StaticDetection, StopsWhenTheTokenAsks) {
+  ImuSimulation sim;
+  ASSERT_TRUE(SimulateImu(Log(), &sim).ok());
+  StopToken token;
+  StaticDetectionOptions o;
+  o.stop = &token;
+  StaticDetection d;
+  ASSERT_TRUE(DetectStatics(sim.t, Triads(sim), o, &d).ok());  // not stopped: runs
+  token.RequestStop(StopReason::kDeadline);
+  const Status s = DetectStatics(sim.t, Triads(sim), o, &d);
+  EXPECT_EQ(s.code(), StatusCode::kStopped);
+  EXPECT_EQ(s.reason(), Reason::kDeadline);
 }
 
 TEST(StaticDetection, RejectsBadInputNamingIt) {

@@ -1,0 +1,212 @@
+// Saturation found in the data on the public MIMU4444 recordings (issue #20): the array method,
+// model full, through its adapter (server::RunArray) with the default config (no saturation
+// limit) against the run naming the limit (gyro_saturation 1995 °/s). The recordings are not
+// part of calibd (see tests/core/array_full_mimu4444_test.cc for their source and packet format):
+// the test skips when they are absent ($CALIBD_MIMU4444_DATA, default /work/data/mimu4444).
+//
+// Before #20 the default config took the 1 035 samples of exp_1 pinned at ±1998 °/s as data:
+// no warning, samples_dropped 0, positions up to 1 011 µm from the run with the limit.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "core/array_full_simulation.h"
+#include "core/array_simulation.h"
+#include "server/array_method.h"
+#include "tests/lib/sanitizer.h"
+
+namespace calibd::server {
+namespace {
+
+using nlohmann::json;
+
+std::string DataDir() {
+  const char* env = std::getenv("CALIBD_MIMU4444_DATA");
+  return env && *env ? env : "/work/data/mimu4444";
+}
+
+// One data.bin as a recording (m/s², deg/s, board frame; packet format in the core test).
+bool ReadMimu4444(const std::string& path, ArrayRecording* rec) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return false;
+  const std::string d((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  constexpr size_t kPacket = 106;
+  auto u8 = [&](size_t i) { return static_cast<unsigned>(static_cast<unsigned char>(d[i])); };
+  auto i16 = [&](size_t i) { return static_cast<int16_t>((u8(i) << 8) | u8(i + 1)); };
+  std::vector<std::array<int16_t, 48>> rows;
+  std::vector<double> t;
+  uint32_t last_ts = 0;
+  double time = 0;
+  for (size_t i = 0; i + kPacket <= d.size();) {
+    unsigned sum = 0;
+    if (u8(i) == 0xAA)
+      for (size_t j = 0; j < kPacket - 2; ++j) sum += u8(i + j);
+    if (u8(i) != 0xAA || (sum & 0xFFFF) != ((u8(i + 104) << 8) | u8(i + 105))) {
+      ++i;
+      continue;
+    }
+    const uint32_t ts = (u8(i + 4) << 24) | (u8(i + 5) << 16) | (u8(i + 6) << 8) | u8(i + 7);
+    if (!rows.empty()) time += static_cast<uint32_t>(ts - last_ts) / 64e6;
+    last_ts = ts;
+    std::array<int16_t, 48> row;
+    for (int c = 0; c < 48; ++c) row[c] = i16(i + 8 + 2 * c);
+    rows.push_back(row);
+    t.push_back(time);
+    i += kPacket;
+  }
+  const Eigen::Index n = static_cast<Eigen::Index>(rows.size());
+  rec->t = Eigen::Map<Eigen::VectorXd>(t.data(), n);
+  rec->accel.resize(n, 24);
+  rec->gyro.resize(n, 24);
+  const double a_unit = core::kStandardGravity / 2048, g_unit = 1 / 16.4;
+  for (Eigen::Index r = 0; r < n; ++r)
+    for (int k = 0; k < 8; ++k) {
+      Eigen::Vector3d a, g;
+      for (int i = 0; i < 3; ++i) {
+        a(i) = rows[r][6 * k + i] * a_unit;
+        g(i) = rows[r][6 * k + 3 + i] * g_unit;
+      }
+      if (k % 2 == 1) {  // underside: x <-> -y, z -> -z
+        a = Eigen::Vector3d(-a.y(), -a.x(), -a.z());
+        g = Eigen::Vector3d(-g.y(), -g.x(), -g.z());
+      }
+      rec->accel.row(r).segment<3>(3 * k) = a.transpose();
+      rec->gyro.row(r).segment<3>(3 * k) = g.transpose();
+    }
+  rec->accel_names.clear();
+  rec->gyro_names.clear();
+  for (int k = 0; k < 8; ++k) {
+    rec->accel_names.push_back("a" + std::to_string(k));
+    rec->gyro_names.push_back("g" + std::to_string(k));
+  }
+  return n > 0;
+}
+
+json Config() {
+  const Eigen::Matrix3Xd p = core::Mimu4444NominalPositions();
+  json positions = json::array();
+  for (Eigen::Index k = 0; k < p.cols(); ++k) positions.push_back({p(0, k), p(1, k), p(2, k)});
+  return {{"method", "array"},
+          {"model", "full"},
+          {"gyro_unit", "deg/s"},
+          {"geometry", {{"positions", positions}, {"reference", 0}}}};
+}
+
+Eigen::Vector3d Position(const json& result, int k) {
+  const json& p = result.at("parameters").at("positions").at(k).at("position");
+  return {p[0].get<double>(), p[1].get<double>(), p[2].get<double>()};
+}
+
+TEST(ArrayFullMimu4444, TheDefaultConfigFindsTheSaturationAndMatchesTheConfiguredLimit) {
+  if (sanitizer::kAddressSanitizer)
+    GTEST_SKIP() << "two fits per 10-minute recording: ~7 s of CPU each in Release, not under ASan";
+  const std::string dir = DataDir();
+  std::vector<std::string> files;
+  for (int e = 1; e <= 10; ++e) {
+    const std::string f = dir + "/exp_" + std::to_string(e) + "/data.bin";
+    if (std::filesystem::exists(f)) files.push_back(f);
+  }
+  if (files.empty())
+    GTEST_SKIP() << "MIMU4444 recordings not found under " << dir
+                 << " (set CALIBD_MIMU4444_DATA to the folder holding exp_N/data.bin)";
+  json with_limit = Config();
+  with_limit["gyro_saturation"] = 1995;  // deg/s
+  std::vector<std::vector<Eigen::Vector3d>> found_pos, limit_pos;
+  for (const std::string& f : files) {
+    SCOPED_TRACE(f);
+    ArrayRecording rec;
+    ASSERT_TRUE(ReadMimu4444(f, &rec));
+    json by_data, by_limit;
+    Status s = RunArray(rec, Config(), &by_data);
+    ASSERT_TRUE(s.ok()) << s.message();
+    s = RunArray(std::move(rec), with_limit, &by_limit);
+    ASSERT_TRUE(s.ok()) << s.message();
+    // Warned, counted per channel, dropped.
+    const json& d = by_data.at("diagnostics");
+    ASSERT_TRUE(d.contains("saturation")) << d.dump().substr(0, 400);
+    const json& sat = d.at("saturation");
+    EXPECT_EQ(sat.at("policy"), "dropped");
+    int64_t pinned = 0;
+    for (const json& c : sat.at("channels")) {
+      EXPECT_EQ(c.at("source"), "data");
+      EXPECT_EQ(c.at("unit"), "deg/s");
+      EXPECT_EQ(c.at("name").get<std::string>()[0], 'g') << c.dump();  // no accelerometer clips
+      // The int16 full scale, +32767 / -32768 counts, or -32768 / +32767 on the underside
+      // IMUs (x <-> -y, z -> -z).
+      if (c.at("pinned_high").get<int64_t>() > 0) {
+        const double high = c.at("high").get<double>();
+        EXPECT_TRUE(std::abs(high - 32767 / 16.4) < 1e-9 || std::abs(high - 32768 / 16.4) < 1e-9)
+            << c.dump();
+      }
+      if (c.at("pinned_low").get<int64_t>() > 0) {
+        const double low = c.at("low").get<double>();
+        EXPECT_TRUE(std::abs(low + 32767 / 16.4) < 1e-9 || std::abs(low + 32768 / 16.4) < 1e-9)
+            << c.dump();
+      }
+      pinned += c.at("pinned_low").get<int64_t>() + c.at("pinned_high").get<int64_t>();
+    }
+    EXPECT_GT(pinned, 0);
+    EXPECT_GT(sat.at("samples").get<int64_t>(), 0);
+    EXPECT_GT(d.at("samples_dropped").get<int64_t>(), 0);
+    bool warned = false;
+    for (const json& w : by_data.at("warnings")) {
+      warned = warned || w.get<std::string>().find("samples pinned at") != std::string::npos;
+    }
+    EXPECT_TRUE(warned) << by_data.at("warnings").dump();
+    // The configured limit is what the run with it reports (source config), and nothing else.
+    ASSERT_TRUE(by_limit.at("diagnostics").contains("saturation"));
+    for (const json& c : by_limit.at("diagnostics").at("saturation").at("channels")) {
+      EXPECT_EQ(c.at("source"), "config");
+    }
+    // The positions agree within 20 µm (the limit at 1995 °/s also drops the few samples in
+    // [1995, 1998) °/s that are not pinned).
+    std::vector<Eigen::Vector3d> a, b;
+    double worst = 0;
+    for (int k = 0; k < 8; ++k) {
+      a.push_back(Position(by_data, k));
+      b.push_back(Position(by_limit, k));
+      worst = std::max(worst, (a.back() - b.back()).norm());
+    }
+    std::printf(
+        "%s: %lld pinned channel samples, %lld samples dropped (%lld with the limit), "
+        "positions differ by at most %.2f um\n",
+        f.c_str(), static_cast<long long>(pinned),
+        static_cast<long long>(d.at("samples_dropped").get<int64_t>()),
+        static_cast<long long>(by_limit.at("diagnostics").at("samples_dropped").get<int64_t>()),
+        1e6 * worst);
+    EXPECT_LT(worst, 20e-6);
+    found_pos.push_back(a);
+    limit_pos.push_back(b);
+  }
+  // Repeatability of the positions across the experiments, both ways (reported).
+  if (files.size() >= 3) {
+    auto scatter = [](const std::vector<std::vector<Eigen::Vector3d>>& pos) {
+      double ss = 0;
+      int count = 0;
+      for (int k = 1; k < 8; ++k)
+        for (int i = 0; i < 3; ++i) {
+          double mean = 0;
+          for (const auto& p : pos) mean += p[k](i);
+          mean /= pos.size();
+          double v = 0;
+          for (const auto& p : pos) v += (p[k](i) - mean) * (p[k](i) - mean);
+          ss += v / (pos.size() - 1);
+          ++count;
+        }
+      return std::sqrt(ss / count);
+    };
+    std::printf(
+        "%zu experiments: positions repeat to %.1f um rms (default config), %.1f um "
+        "(gyro_saturation 1995 deg/s)\n",
+        files.size(), 1e6 * scatter(found_pos), 1e6 * scatter(limit_pos));
+  }
+}
+
+}  // namespace
+}  // namespace calibd::server
