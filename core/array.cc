@@ -539,9 +539,22 @@ Status CollectSamples(const ArrayProblem& problem, const ArrayOptions& options, 
   result->samples_dropped = N_in - d->N;
   if (d->N < 3) {
     std::string why = "only " + std::to_string(d->N) + " usable sample(s)";
-    if (result->samples_dropped > 0)
+    if (result->samples_dropped > 0) {
+      // Name the limits in force (the config's or the levels found in the data), so the user
+      // can tell a wrong limit from a recording turned beyond the sensors' range.
+      std::string limits;
+      char buf[64];
+      if (options.gyro_saturation) {
+        std::snprintf(buf, sizeof buf, "gyro_saturation %.6g rad/s", *options.gyro_saturation);
+        limits += buf;
+      }
+      if (options.accel_saturation) {
+        std::snprintf(buf, sizeof buf, "accel_saturation %.6g m/s^2", *options.accel_saturation);
+        limits += (limits.empty() ? "" : ", ") + std::string(buf);
+      }
       why += " (" + std::to_string(result->samples_dropped) +
-             " dropped because a sensor reached its saturation limit)";
+             " dropped because a sensor reached its saturation limit: " + limits + ")";
+    }
     return NotDeterminable(
         Reason::kTooFewSamples,
         why + "; at least 3 are needed: " + kRecordAdvice +

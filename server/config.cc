@@ -254,6 +254,20 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
   context.stop = stop;
   context.executor = std::move(executor);
   s = method->Run(parser, WithoutAcceptance(config), context, result);
+  if (s.code() == StatusCode::kStopped) {
+    // A stop can land in a stage shared by the methods (static detection, the saturation search)
+    // whose message does not name the method, and before the method wrote its partial document:
+    // the job's error still names the method, and its partial diagnostics say it was not usable.
+    if (s.message().rfind(common.method + ":", 0) != 0) {
+      s = Status(StatusCode::kStopped, common.method + ": " + s.message()).WithReason(s.reason());
+    }
+    if (!result->is_object()) {
+      *result = json{{"method", common.method},
+                     {"usable", false},
+                     {"diagnostics", json::object()},
+                     {"warnings", json::array()}};
+    }
+  }
   // Epoch stamps were counted from this second (RecordingParser): the times in the result are
   // seconds after it.
   if (time_origin != 0 && result->is_object() && result->contains("diagnostics") &&
