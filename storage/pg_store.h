@@ -124,6 +124,9 @@ class PgStore final : public Store {
                           const std::string& device, const std::string& config_json, int64_t now,
                           JobInfo* out, bool inherit_device);
   Status RecoverLocked(PgConn* c, int64_t now, int64_t* recovered);
+  // Fails a running job whose cancel was requested as cancelled, with `message` (in the
+  // caller's transaction).
+  Status FailCancelledLocked(PgConn* c, int64_t job_id, const std::string& message);
   Status RequireHolder(PgConn* c, int64_t job_id, const std::string& worker_id, const char* action,
                        JobInfo* job);
   Status Cancel(int64_t job_id, const std::string& reason, const std::string& actor,

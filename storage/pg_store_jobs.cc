@@ -83,7 +83,8 @@ Status PgStore::RecoverLocked(PgConn* c, int64_t now, int64_t* recovered) {
       {PgInt(now), PgText(internal::kCancelledCode), PgText(internal::kCancelledReason)}, &res);
   if (!s.ok()) return s;
   total += res.Affected();
-  // Out of attempts: failed for good.
+  // Out of attempts: failed for good. (Each statement reads its own snapshot: a job cancelled
+  // after the first one is left running here, and failed as cancelled by the next recovery.)
   s = c->Exec(
       "UPDATE jobs SET status = 'failed', finished_at = $1, lease_owner = NULL, "
       "lease_expires_at = NULL, error_code = 'lease_expired', error_reason = NULL, "
@@ -91,7 +92,7 @@ Status PgStore::RecoverLocked(PgConn* c, int64_t now, int64_t* recovered) {
       "error_message = 'the lease of ' || COALESCE(lease_owner, '?') || "
       "' expired on attempt ' || attempts::text || ' of ' || $2::bigint::text || '; giving up' "
       "WHERE id IN (SELECT id FROM jobs WHERE status = 'running' AND lease_expires_at <= $1 "
-      "AND attempts >= $2::bigint FOR UPDATE SKIP LOCKED)",
+      "AND attempts >= $2::bigint AND cancel_requested_at IS NULL FOR UPDATE SKIP LOCKED)",
       {PgInt(now), PgInt(options_.max_attempts)}, &res);
   if (!s.ok()) return s;
   total += res.Affected();
@@ -101,7 +102,7 @@ Status PgStore::RecoverLocked(PgConn* c, int64_t now, int64_t* recovered) {
       "error_detail_json = NULL, "
       "error_message = 'the lease of ' || COALESCE(lease_owner, '?') || ' expired' "
       "WHERE id IN (SELECT id FROM jobs WHERE status = 'running' AND lease_expires_at <= $1 "
-      "FOR UPDATE SKIP LOCKED)",
+      "AND cancel_requested_at IS NULL FOR UPDATE SKIP LOCKED)",
       {PgInt(now)}, &res);
   if (!s.ok()) return s;
   const int64_t requeued = res.Affected();
@@ -222,7 +223,9 @@ Status PgStore::CompleteJob(int64_t job_id, const std::string& worker_id,
   if (result_json.empty()) return Status::InvalidInput("storage: empty result");
   const std::string sha = Sha256Hex(result_json);
   const char* verdict = Name(internal::VerdictOf(result_json));
-  return Txn([&](PgConn* c) {
+  std::string cancelled;  // set when the job was cancelled while it ran: failed, not completed
+  Status written = Txn([&](PgConn* c) {
+    cancelled.clear();
     JobInfo job;
     // The row lock serialises every transition of this job across hosts.
     Status s = LoadJob(c, job_id, false, &job, /*for_update=*/true);
@@ -230,6 +233,12 @@ Status PgStore::CompleteJob(int64_t job_id, const std::string& worker_id,
     bool done = false;
     s = internal::CheckCompletion(job, worker_id, sha, &done);
     if (!s.ok() || done) return s;
+    if (job.cancel_requested_at_ms != 0) {
+      // A cancel answered "stopping it" wins over a run that finished meanwhile: the job ends
+      // as cancelled (committed here), and the caller hears kConflict below.
+      cancelled = internal::CancelledMessage(job.cancel_actor, job.cancel_reason);
+      return FailCancelledLocked(c, job_id, cancelled);
+    }
     const int64_t now = Now();
     s = c->Exec(
         "INSERT INTO results (job_id, result_json, sha256, created_at, verdict) "
@@ -250,6 +259,20 @@ Status PgStore::CompleteJob(int64_t job_id, const std::string& worker_id,
     }
     return Status::Ok();
   });
+  if (written.ok() && !cancelled.empty()) {
+    return Status::Conflict("job " + std::to_string(job_id) + " was " + cancelled +
+                            ": its result is not stored");
+  }
+  return written;
+}
+
+Status PgStore::FailCancelledLocked(PgConn* c, int64_t job_id, const std::string& message) {
+  return c->Exec(
+      "UPDATE jobs SET status = 'failed', finished_at = $2, lease_owner = NULL, "
+      "lease_expires_at = NULL, error_code = $3, error_reason = $4, error_message = $5, "
+      "error_detail_json = NULL WHERE id = $1",
+      {PgInt(job_id), PgInt(Now()), PgText(internal::kCancelledCode),
+       PgText(internal::kCancelledReason), PgText(message)});
 }
 
 Status PgStore::FailJob(int64_t job_id, const std::string& worker_id, const JobFailure& failure,
@@ -290,13 +313,8 @@ Status PgStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
     Status s = RequireHolder(c, job_id, worker_id, "release", &job);
     if (!s.ok()) return s;
     if (job.cancel_requested_at_ms != 0) {  // cancelled while running: it ends here
-      return c->Exec(
-          "UPDATE jobs SET status = 'failed', finished_at = $2, lease_owner = NULL, "
-          "lease_expires_at = NULL, error_code = $3, error_reason = $4, error_message = $5, "
-          "error_detail_json = NULL WHERE id = $1",
-          {PgInt(job_id), PgInt(Now()), PgText(internal::kCancelledCode),
-           PgText(internal::kCancelledReason),
-           PgText(internal::CancelledMessage(job.cancel_actor, job.cancel_reason))});
+      return FailCancelledLocked(
+          c, job_id, internal::CancelledMessage(job.cancel_actor, job.cancel_reason));
     }
     s = c->Exec(
         "UPDATE jobs SET status = 'queued', attempts = GREATEST(attempts - 1, 0), "

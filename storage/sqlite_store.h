@@ -89,6 +89,9 @@ class SqliteStore final : public Store {
                 JobInfo* out, JobEvent* event) override;
   Status Decide(int64_t job_id, bool revoke, const std::string& reason, const std::string& actor,
                 JobEvent* out) override;
+  // Fails a running job whose cancel was requested as cancelled, with `message` (in the
+  // caller's transaction).
+  Status FailCancelledLocked(Db* db, int64_t job_id, const std::string& message);
   Status RequireHolder(Db* db, int64_t job_id, const std::string& worker_id, const char* action,
                        JobInfo* job);
 

@@ -241,7 +241,8 @@ Status SqliteStore::CompleteJob(int64_t job_id, const std::string& worker_id,
                                 const std::string& result_json) {
   if (result_json.empty()) return Status::InvalidInput("storage: empty result");
   const std::string sha = Sha256Hex(result_json);
-  return Write([&](Db* db) {
+  std::string cancelled;  // set when the job was cancelled while it ran: failed, not completed
+  Status written = Write([&](Db* db) {
     Status s;
     JobInfo job;
     s = LoadJob(db, job_id, false, &job);
@@ -249,6 +250,12 @@ Status SqliteStore::CompleteJob(int64_t job_id, const std::string& worker_id,
     bool done = false;
     s = internal::CheckCompletion(job, worker_id, sha, &done);
     if (!s.ok() || done) return s;
+    if (job.cancel_requested_at_ms != 0) {
+      // A cancel answered "stopping it" wins over a run that finished meanwhile: the job ends
+      // as cancelled (committed here), and the caller hears kConflict below.
+      cancelled = internal::CancelledMessage(job.cancel_actor, job.cancel_reason);
+      return FailCancelledLocked(db, job_id, cancelled);
+    }
     const int64_t now = Now();
     Stmt st;
     // The gate's verdict, read from the result (anything but "rejected" counts as accepted).
@@ -278,6 +285,27 @@ Status SqliteStore::CompleteJob(int64_t job_id, const std::string& worker_id,
     }
     return Status::Ok();
   });
+  if (written.ok() && !cancelled.empty()) {
+    return Status::Conflict("job " + std::to_string(job_id) + " was " + cancelled +
+                            ": its result is not stored");
+  }
+  return written;
+}
+
+Status SqliteStore::FailCancelledLocked(Db* db, int64_t job_id, const std::string& message) {
+  Stmt st;
+  Status s = db->Prepare(
+      "UPDATE jobs SET status = 'failed', finished_at = ?2, lease_owner = NULL, "
+      "lease_expires_at = NULL, error_code = ?3, error_reason = ?4, error_message = ?5, "
+      "error_detail_json = NULL WHERE id = ?1",
+      &st);
+  if (!s.ok()) return s;
+  st.BindInt(1, job_id)
+      .BindInt(2, Now())
+      .BindText(3, internal::kCancelledCode)
+      .BindText(4, internal::kCancelledReason)
+      .BindText(5, message);
+  return st.Run();
 }
 
 Status SqliteStore::FailJob(int64_t job_id, const std::string& worker_id, const JobFailure& failure,
@@ -342,18 +370,8 @@ Status SqliteStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
     if (!s.ok()) return s;
     Stmt st;
     if (job.cancel_requested_at_ms != 0) {  // cancelled while running: it ends here
-      s = db->Prepare(
-          "UPDATE jobs SET status = 'failed', finished_at = ?2, lease_owner = NULL, "
-          "lease_expires_at = NULL, error_code = ?3, error_reason = ?4, error_message = ?5, "
-          "error_detail_json = NULL WHERE id = ?1",
-          &st);
-      if (!s.ok()) return s;
-      st.BindInt(1, job_id)
-          .BindInt(2, Now())
-          .BindText(3, internal::kCancelledCode)
-          .BindText(4, internal::kCancelledReason)
-          .BindText(5, internal::CancelledMessage(job.cancel_actor, job.cancel_reason));
-      return st.Run();
+      return FailCancelledLocked(
+          db, job_id, internal::CancelledMessage(job.cancel_actor, job.cancel_reason));
     }
     s = db->Prepare(
         "UPDATE jobs SET status = 'queued', attempts = MAX(attempts - 1, 0), lease_owner = NULL, "

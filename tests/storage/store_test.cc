@@ -442,6 +442,26 @@ TEST_P(StoreTest, ACancelledRunningJobIsNeverQueuedAgain) {
   EXPECT_FALSE(claimed);
 }
 
+// A cancel answered "stopping it" wins over a run that finished meanwhile (its holder had not
+// seen the request yet): the completion is refused (kConflict), nothing is stored, and the job
+// ends as cancelled, so a cancelled calibration never becomes a device's calibration.
+TEST_P(StoreTest, ACancelledRunningJobIsNotCompletedByItsLateResult) {
+  const int64_t rec = Put("x");
+  const int64_t id = Enqueue(rec, "pca", "SN-CANCEL");
+  ASSERT_EQ(Claim("w1").id, id);
+  ASSERT_TRUE(store_->CancelJob(id, "wrong board", "token").ok());
+  const Status s =
+      store_->CompleteJob(id, "w1", R"({"verdict": {"status": "accepted", "reasons": []}})");
+  EXPECT_EQ(s.code(), StatusCode::kConflict) << s.ToString();
+  EXPECT_NE(s.message().find("cancelled by token: wrong board"), std::string::npos) << s.message();
+  const JobInfo job = Get(id);
+  EXPECT_EQ(job.status, JobStatus::kFailed);
+  EXPECT_EQ(job.error_reason, "cancelled");
+  EXPECT_TRUE(job.result_json.empty());
+  JobInfo latest;
+  EXPECT_EQ(store_->LatestResult(job.device, "pca", &latest).code(), StatusCode::kNotFound);
+}
+
 TEST_P(StoreTest, CancelNeedsAReasonAndAnUnfinishedJob) {
   const int64_t rec = Put("x");
   const int64_t id = Enqueue(rec);
