@@ -62,6 +62,54 @@ bool IsFormMedia(const httplib::Request& req) {
              .rfind("application/x-www-form-urlencoded", 0) == 0;
 }
 
+// The reason of a JSON decision body {"reason": "..."} (revoke, accept, cancel: `action`) into
+// *text, untrimmed; false after answering 415 / 400 (an empty body says that the action needs a
+// reason; other keys, a non-object or a non-string reason are named). An absent reason leaves
+// *text empty (CheckReason then says it is required).
+bool ReadJsonReason(const httplib::Request& req, httplib::Response& res, const std::string& action,
+                    std::string* text) {
+  const std::string media = ToLower(req.get_header_value("Content-Type"));
+  if (media.rfind("application/json", 0) != 0) {
+    SendError(res, 415, "unsupported_media_type",
+              "send {\"reason\": \"...\"} as application/json" +
+                  std::string(action == "cancel" ? " (or the job page's form as "
+                                                   "application/x-www-form-urlencoded)"
+                                                 : ""));
+    return false;
+  }
+  if (req.body.find_first_not_of(" \t\r\n") == std::string::npos) {
+    SendStatus(res, Status::InvalidInput("the body is empty: a " + action +
+                                         " needs a reason, sent as {\"reason\": \"...\"}")
+                        .WithField("reason"));
+    return false;
+  }
+  json body;
+  Status s = ParseJsonText(req.body, "request body", &body);
+  if (!s.ok()) {
+    SendStatus(res, s);
+    return false;
+  }
+  if (!body.is_object()) {
+    SendError(res, 400, "invalid_input", "the body must be a JSON object {\"reason\": \"...\"}");
+    return false;
+  }
+  for (auto& [key, value] : body.items()) {
+    if (key != "reason") {
+      SendStatus(res,
+                 Status::InvalidInput("unknown key '" + key.substr(0, 64) + "' (expected reason)")
+                     .WithField(key.substr(0, 64)));
+      return false;
+    }
+  }
+  auto reason = body.find("reason");
+  if (reason != body.end() && !reason->is_string()) {
+    SendStatus(res, Status::InvalidInput("'reason' must be a string: say why").WithField("reason"));
+    return false;
+  }
+  if (reason != body.end()) *text = reason->get<std::string>();
+  return true;
+}
+
 }  // namespace
 
 bool Service::Impl::IsCancelForm(const httplib::Request& req) {
@@ -113,35 +161,8 @@ void Service::Impl::HandleCancel(const httplib::Request& req, httplib::Response&
     }
     auto reason = params.find("reason");
     if (reason != params.end()) text = reason->second;
-  } else {
-    const std::string media = ToLower(req.get_header_value("Content-Type"));
-    if (media.rfind("application/json", 0) != 0) {
-      SendError(res, 415, "unsupported_media_type",
-                "send {\"reason\": \"...\"} as application/json (or the job page's form as "
-                "application/x-www-form-urlencoded)");
-      return;
-    }
-    json body;
-    Status s = ParseJsonText(req.body, "request body", &body);
-    if (!s.ok()) return (void)SendStatus(res, s);
-    if (!body.is_object()) {
-      SendError(res, 400, "invalid_input", "the body must be a JSON object {\"reason\": \"...\"}");
-      return;
-    }
-    for (auto& [key, value] : body.items()) {
-      if (key != "reason") {
-        return (void)SendStatus(
-            res, Status::InvalidInput("unknown key '" + key.substr(0, 64) + "' (expected reason)")
-                     .WithField(key.substr(0, 64)));
-      }
-    }
-    auto reason = body.find("reason");
-    if (reason != body.end() && !reason->is_string()) {
-      return (void)SendStatus(
-          res, Status::InvalidInput("'reason' must be a string: say why the job is cancelled")
-                   .WithField("reason"));
-    }
-    if (reason != body.end()) text = reason->get<std::string>();
+  } else if (!ReadJsonReason(req, res, "cancel", &text)) {
+    return;
   }
   Status s = CheckReason("'reason' is required: say why the job is cancelled", &text);
   if (!s.ok()) return (void)SendStatus(res, s);
@@ -187,36 +208,9 @@ void Service::Impl::HandleDecision(const httplib::Request& req, httplib::Respons
                                    bool revoke) {
   int64_t id = 0;
   if (!PathId(req, res, "job", &id)) return;
-  const std::string media = ToLower(req.get_header_value("Content-Type"));
-  if (media.rfind("application/json", 0) != 0) {
-    SendError(res, 415, "unsupported_media_type", "send {\"reason\": \"...\"} as application/json");
-    return;
-  }
-  json body;
-  if (req.body.find_first_not_of(" \t\r\n") == std::string::npos) {
-    return (void)SendStatus(res, Status::InvalidInput(std::string("the body is empty: a ") +
-                                                      (revoke ? "revoke" : "accept") +
-                                                      " needs a reason, sent as {\"reason\": "
-                                                      "\"...\"}")
-                                     .WithField("reason"));
-  }
-  Status s = ParseJsonText(req.body, "request body", &body);
-  if (!s.ok()) return (void)SendStatus(res, s);
-  if (!body.is_object()) {
-    SendError(res, 400, "invalid_input", "the body must be a JSON object {\"reason\": \"...\"}");
-    return;
-  }
-  for (auto& [key, value] : body.items()) {
-    if (key != "reason") {
-      return (void)SendStatus(
-          res, Status::InvalidInput("unknown key '" + key.substr(0, 64) + "' (expected reason)")
-                   .WithField(key.substr(0, 64)));
-    }
-  }
-  auto reason = body.find("reason");
   std::string text;
-  if (reason != body.end() && reason->is_string()) text = reason->get<std::string>();
-  s = CheckReason(std::string("'reason' is required: say why the result is ") +
+  if (!ReadJsonReason(req, res, revoke ? "revoke" : "accept", &text)) return;
+  Status s = CheckReason(std::string("'reason' is required: say why the result is ") +
                       (revoke ? "revoked" : "accepted"),
                   &text);
   if (!s.ok()) return (void)SendStatus(res, s);

@@ -864,8 +864,14 @@ struct RecordingParser::Impl {
     }
     int64_t seconds = whole / time_divisor_int;
     if (whole % time_divisor_int < 0) --seconds;  // floor
+    // The origin in the log's units must fit int64 (a first stamp near -9.2e18 ns would not).
+    const __int128 units = static_cast<__int128>(seconds) * time_divisor_int;
+    if (units < std::numeric_limits<int64_t>::min() ||
+        units > std::numeric_limits<int64_t>::max()) {
+      return;
+    }
     time_shifted = true;
-    time_origin_units = seconds * time_divisor_int;
+    time_origin_units = static_cast<int64_t>(units);
     summary.time_origin = seconds;
   }
 

@@ -124,6 +124,7 @@ Status ComputeSegments(storage::Store* store, int64_t recording_id, const Segmen
   }
   *out = RecordingSegments();
   out->recording_id = recording_id;
+  out->time_origin = parser.summary().time_origin;
   out->samples = log.t.size();
   out->start = log.t.size() > 0 ? log.t[0] : 0;
   out->end = log.t.size() > 0 ? log.t[log.t.size() - 1] : 0;
@@ -177,6 +178,7 @@ json SegmentsJson(const RecordingSegments& r, const SegmentsOptions& options) {
                          {"std", std}});
   }
   return {{"recording_id", r.recording_id},
+          {"time_origin", r.time_origin},
           {"samples", r.samples},
           {"start", Num(r.start)},
           {"end", Num(r.end)},

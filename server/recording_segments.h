@@ -39,7 +39,10 @@ Status ParseSegmentsQuery(const std::multimap<std::string, std::string>& params,
 struct RecordingSegments {
   int64_t recording_id = 0;
   int64_t samples = 0;
-  double start = 0, end = 0;  // first and last t, s
+  double start = 0, end = 0;  // first and last t, s (after time_origin)
+  // Epoch stamps are counted from this whole second (RecordingSummary::time_origin; 0: the log's
+  // own times): every time in the answer is seconds after it.
+  int64_t time_origin = 0;
   std::vector<std::string> accel_names, gyro_names;
   core::StaticDetection detection;  // triads: accelerometers, then gyroscopes
   // Timeline (when asked for): per triad, times and norms in SI, decimated.

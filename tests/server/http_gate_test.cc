@@ -419,6 +419,14 @@ TEST_F(HttpGate, ADecisionWithoutABodyAsksForItsReason) {
   EXPECT_EQ(res->status, 400) << res->body;
   EXPECT_NE(res->body.find("needs a reason"), std::string::npos) << res->body;
   EXPECT_EQ(Body(res)["error"]["field"], "reason") << res->body;
+  for (const std::string action : {"accept", "cancel"}) {
+    res = client.Post(("/api/v1/jobs/" + std::to_string(good["id"].get<int64_t>()) + "/" + action)
+                          .c_str(),
+                      "", "application/json");
+    ASSERT_TRUE(res);
+    EXPECT_EQ(res->status, 400) << action << ": " << res->body;
+    EXPECT_NE(res->body.find("a " + action + " needs a reason"), std::string::npos) << res->body;
+  }
   // No Content-Length at all (curl -X POST without -d): 411, saying what to send.
   testing::RawConnection c(server_.port());
   ASSERT_TRUE(c.Send("POST " + path + " HTTP/1.1\r\nHost: x\r\n\r\n"));

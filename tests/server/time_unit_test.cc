@@ -572,6 +572,21 @@ TEST(TimeUnitHttp, StaticSegmentsOfALogInMsTakeTheKeyToo) {
   const json in_ms = segments(ms, "?time_unit=ms", &status);
   ASSERT_EQ(status, 200) << in_ms.dump();
   EXPECT_EQ(in_ms["intervals"], reference["intervals"]);
+  EXPECT_EQ(reference["time_origin"], 0);
+  // Epoch nanoseconds: the intervals are seconds after the origin the answer names (the times
+  // alone would not map back to the log).
+  const json ns = Post(server, "/api/v1/recordings",
+                       Retime(csv, 10000000, TimeUnit::kNanoseconds, kEpochNs), &status);
+  ASSERT_EQ(status, 201) << ns.dump();
+  const json in_ns = segments(ns, "?time_unit=ns", &status);
+  ASSERT_EQ(status, 200) << in_ns.dump();
+  EXPECT_EQ(in_ns["time_origin"], kEpochNs / 1000000000) << in_ns.dump().substr(0, 300);
+  ASSERT_EQ(in_ns["intervals"].size(), reference["intervals"].size());
+  const double offset = kEpochNs % 1000000000 * 1e-9;  // the origin's fraction of a second
+  for (size_t i = 0; i < reference["intervals"].size(); ++i) {
+    EXPECT_NEAR(in_ns["intervals"][i]["start"].get<double>(),
+                reference["intervals"][i]["start"].get<double>() + offset, 1e-9);
+  }
   const json bad = segments(ms, "?time_unit=min", &status);
   EXPECT_EQ(status, 400) << bad.dump();
   EXPECT_EQ(bad["error"]["field"], "time_unit") << bad.dump();
