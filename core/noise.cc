@@ -580,6 +580,9 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
     const double* t = problem.times;
     std::vector<double> dt(static_cast<size_t>(n - 1));
     for (int64_t i = 0; i < n; ++i) {
+      if ((i & 0xFFFF) == 0 && StopRequested(options.stop)) {  // ~0.1 ms of work between polls
+        return Fail(StoppedStatus(*options.stop, "noise: sample times"), result);
+      }
       if (!std::isfinite(t[i])) {
         return Fail(Status::InvalidInput(
                         Reason::kInvalidRecording,
@@ -601,6 +604,9 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
     tau0 = Median(std::move(dt));  // no copy: one double per sample at a time
     double worst = 0;
     int64_t worst_index = 1;
+    if (StopRequested(options.stop)) {  // after the median (one nth_element over n values)
+      return Fail(StoppedStatus(*options.stop, "noise: sample times"), result);
+    }
     for (int64_t i = 1; i < n; ++i) {
       const double jitter = std::fabs(t[i] - t[i - 1] - tau0) / tau0;
       if (jitter > worst) {

@@ -114,9 +114,14 @@ Status FindImpl(const M& y, const std::string& name, const SaturationOptions& o,
       continue;
     }
     if (n < 3 || !(mx > mn)) continue;  // a constant channel has no clip to find
-    const double jump = std::max({o.jump_range_fraction * (mx - mn),
-                                  o.jump_noise_factor * NoiseScale(y, a, &scratch),
-                                  kQuantumFactor * Quantum(y, a)});
+    // Polled between the passes over the channel (each one pass over n samples).
+    if (StopRequested(o.stop)) return StoppedStatus(*o.stop, "saturation search");
+    const double noise = NoiseScale(y, a, &scratch);
+    if (StopRequested(o.stop)) return StoppedStatus(*o.stop, "saturation search");
+    const double quantum = Quantum(y, a);
+    if (StopRequested(o.stop)) return StoppedStatus(*o.stop, "saturation search");
+    const double jump = std::max({o.jump_range_fraction * (mx - mn), o.jump_noise_factor * noise,
+                                  kQuantumFactor * quantum});
     int64_t count = 0;
     if (IsClipLevel(y, a, mx, jump, o.min_run, &count)) {
       c.high = mx;
