@@ -116,7 +116,7 @@ struct Problem {
   std::vector<RotationData> rotations;
   Vector3d wa = Vector3d::Ones(), wg = Vector3d::Ones();  // 1/σ per axis, reading units
   bool use_accel = true, use_gyro_statics = false, use_rotations = false;
-  std::vector<char> active;  // per unknown
+  std::vector<char> active;         // per unknown
   const StopToken* stop = nullptr;  // polled in the rotation integrals and every LM iteration
 
   int Size() const { return kShared + 2 * static_cast<int>(statics.size()); }

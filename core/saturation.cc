@@ -120,8 +120,8 @@ Status FindImpl(const M& y, const std::string& name, const SaturationOptions& o,
     if (StopRequested(o.stop)) return StoppedStatus(*o.stop, "saturation search");
     const double quantum = Quantum(y, a);
     if (StopRequested(o.stop)) return StoppedStatus(*o.stop, "saturation search");
-    const double jump = std::max({o.jump_range_fraction * (mx - mn), o.jump_noise_factor * noise,
-                                  kQuantumFactor * quantum});
+    const double jump = std::max(
+        {o.jump_range_fraction * (mx - mn), o.jump_noise_factor * noise, kQuantumFactor * quantum});
     int64_t count = 0;
     if (IsClipLevel(y, a, mx, jump, o.min_run, &count)) {
       c.high = mx;

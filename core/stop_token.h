@@ -48,12 +48,12 @@ class StopToken {
   // From `deadline` on, stop_requested() is true with reason kDeadline (unless another reason
   // came first). Set before the computation starts; a later call replaces the deadline.
   void SetDeadline(Clock::time_point deadline) {
-    deadline_ns_.store(deadline.time_since_epoch().count() > 0
-                           ? std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                 deadline.time_since_epoch())
-                                 .count()
-                           : 1,
-                       std::memory_order_release);
+    deadline_ns_.store(
+        deadline.time_since_epoch().count() > 0
+            ? std::chrono::duration_cast<std::chrono::nanoseconds>(deadline.time_since_epoch())
+                  .count()
+            : 1,
+        std::memory_order_release);
   }
 
   // True once a stop was requested or the deadline has passed.
@@ -63,9 +63,9 @@ class StopToken {
     }
     const int64_t deadline = deadline_ns_.load(std::memory_order_acquire);
     if (deadline == 0) return false;
-    const int64_t now = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                            Clock::now().time_since_epoch())
-                            .count();
+    const int64_t now =
+        std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch())
+            .count();
     if (now < deadline) return false;
     int expected = static_cast<int>(StopReason::kNone);
     reason_.compare_exchange_strong(expected, static_cast<int>(StopReason::kDeadline),
@@ -81,8 +81,8 @@ class StopToken {
   }
 
  private:
-  mutable std::atomic<int> reason_{  // a StopReason; set once
-      static_cast<int>(StopReason::kNone)};
+  mutable std::atomic<int> reason_{// a StopReason; set once
+                                   static_cast<int>(StopReason::kNone)};
   std::atomic<int64_t> deadline_ns_{0};  // steady clock, ns since its epoch; 0: none
 };
 

@@ -39,8 +39,8 @@
 
 #include "base/status.h"
 #include "results/envelope.h"
-#include "results/saturation.h"
 #include "results/json_reader.h"
+#include "results/saturation.h"
 #include "results/triad.h"
 
 namespace calibd::results {
@@ -174,7 +174,7 @@ struct ImuDiagnostics {
     std::optional<ImuNoiseModel> accelerometer, gyroscope;
   };
   std::optional<NoiseModels> noise_model;
-  std::optional<int64_t> saturated_samples;                         // optional
+  std::optional<int64_t> saturated_samples;         // optional
   std::optional<SaturationDiagnostics> saturation;  // results/saturation.h; absent: none pinned
   double static_window = std::numeric_limits<double>::quiet_NaN();  // s (ext.)
   double min_static = std::numeric_limits<double>::quiet_NaN();     // s (ext.)

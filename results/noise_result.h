@@ -93,7 +93,7 @@ struct NoiseDiagnostics {
   double confidence = std::numeric_limits<double>::quiet_NaN();
   std::vector<NoiseChannelDiagnostics> channels;  // ext. (empty when absent)
   std::vector<NoiseAllanCurve> allan;
-  std::optional<NoiseUnits> units;  // written by the server's adapter
+  std::optional<NoiseUnits> units;                  // written by the server's adapter
   std::optional<SaturationDiagnostics> saturation;  // results/saturation.h; absent: none pinned
 };
 

@@ -218,8 +218,8 @@ void PrepareParser(const json& config, RecordingParser* parser) {
 }
 
 Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, const json& config,
-                       json* result, const core::StopToken* stop,
-                       const json& acceptance_defaults, core::TaskExecutor executor) {
+                       json* result, const core::StopToken* stop, const json& acceptance_defaults,
+                       core::TaskExecutor executor) {
   CommonConfig common;
   Status s = ValidateConfig(config, &common);
   if (!s.ok()) return s.reason() == Reason::kUnspecified ? s.WithReason(Reason::kInvalidConfig) : s;

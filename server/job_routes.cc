@@ -211,8 +211,8 @@ void Service::Impl::HandleDecision(const httplib::Request& req, httplib::Respons
   std::string text;
   if (!ReadJsonReason(req, res, revoke ? "revoke" : "accept", &text)) return;
   Status s = CheckReason(std::string("'reason' is required: say why the result is ") +
-                      (revoke ? "revoked" : "accepted"),
-                  &text);
+                             (revoke ? "revoked" : "accepted"),
+                         &text);
   if (!s.ok()) return (void)SendStatus(res, s);
   const std::string actor = token.empty() ? "anonymous" : "token";
   storage::JobEvent event;

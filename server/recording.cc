@@ -416,7 +416,7 @@ struct RecordingParser::Impl {
   std::vector<int> column_target;
   int accel_triads = 0, gyro_triads = 0;
   bool has_t = false;
-  int64_t t_column = 0;  // 1-based, when has_t
+  int64_t t_column = 0;       // 1-based, when has_t
   double previous_t = 0;      // seconds (converted), as collected
   double previous_raw_t = 0;  // as the file writes it
   bool have_previous_t = false;

@@ -22,9 +22,9 @@
 namespace calibd::server {
 
 struct SegmentsOptions {
-  core::StaticDetectionOptions detection;  // static_window, min_static, static_threshold
-  double accel_unit = 1;                   // m/s² per reading unit
-  double gyro_unit = 1;                    // rad/s per reading unit
+  core::StaticDetectionOptions detection;   // static_window, min_static, static_threshold
+  double accel_unit = 1;                    // m/s² per reading unit
+  double gyro_unit = 1;                     // rad/s per reading unit
   TimeUnit time_unit = TimeUnit::kSeconds;  // the t column's unit (config time_unit)
   size_t timeline_points = 0;  // > 0: also a timeline of |a| and |ω| (SI) of about this many
                                // points per triad (min and max per bucket: peaks survive)
