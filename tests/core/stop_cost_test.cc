@@ -21,6 +21,7 @@
 #include "core/noise_simulation.h"
 #include "core/pca.h"
 #include "core/stop_token.h"
+#include "tests/lib/sanitizer.h"
 
 namespace calibd::core {
 namespace {
@@ -155,7 +156,9 @@ TEST(ImuCost, ALogWithItsTimeColumnInMillisecondsEndsInBoundedTime) {
   const Status s = CalibrateImu(t_ms, sim.accel, sim.gyro, o, &r);
   const double took = Seconds(Clock::now() - start);
   std::printf("t in ms: %.3f s, %s\n  %s\n", took, s.message().c_str(), r.BriefReport().c_str());
-  EXPECT_LT(took, 10.0);
+  // A hang detector, not a speed test (the figure is in bench/README.md: 0.8 s of CPU in
+  // Release): the old code was still inside its first dense factorisation after 300 s.
+  EXPECT_LT(took, 30.0 * sanitizer::kTimeBoundScale);
   EXPECT_NE(s.code(), StatusCode::kStopped);
   // Either a result or a failure that says why; never a hang.
   if (!s.ok()) {
