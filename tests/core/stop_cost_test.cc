@@ -279,7 +279,9 @@ TEST(StopToken, ArrayFullModelStopsAtItsDeadline) {
   ExpectStopsThroughout(
       [&](const StopToken* t) {
         const Status s = run(t, &r);
-        if (t != nullptr && !s.ok()) EXPECT_FALSE(r.usable);
+        if (t != nullptr && !s.ok()) {
+          EXPECT_FALSE(r.usable);
+        }
         return s;
       },
       "array full");
