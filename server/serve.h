@@ -42,7 +42,7 @@ struct ServeOptions {
   // DefaultJobSeconds(per-job memory budget) (server/job_budget.h). A config's job_seconds may
   // only lower it.
   int64_t job_seconds = 0;
-  bool access_log = true;                // one line per request on stderr
+  bool access_log = true;  // one line per request on stderr
   // Returns "" when the options are consistent, else what is wrong (names the flag).
   std::string Validate() const;
 };

@@ -111,8 +111,7 @@ ALTER TABLE job_events ADD CONSTRAINT job_events_action_check
 )sql";
 
 const std::vector<const char*>& PgSteps() {
-  static const std::vector<const char*>& steps =
-      *new std::vector<const char*>{kPgV1, kPgV2, kPgV3};
+  static const std::vector<const char*>& steps = *new std::vector<const char*>{kPgV1, kPgV2, kPgV3};
   return steps;
 }
 

@@ -129,8 +129,8 @@ class PgStore final : public Store {
   Status FailCancelledLocked(PgConn* c, int64_t job_id, const std::string& message);
   Status RequireHolder(PgConn* c, int64_t job_id, const std::string& worker_id, const char* action,
                        JobInfo* job);
-  Status Cancel(int64_t job_id, const std::string& reason, const std::string& actor,
-                JobInfo* out, JobEvent* event) override;
+  Status Cancel(int64_t job_id, const std::string& reason, const std::string& actor, JobInfo* out,
+                JobEvent* event) override;
   Status Decide(int64_t job_id, bool revoke, const std::string& reason, const std::string& actor,
                 JobEvent* out) override;
   void ListenLoop();

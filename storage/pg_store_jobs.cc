@@ -313,8 +313,8 @@ Status PgStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
     Status s = RequireHolder(c, job_id, worker_id, "release", &job);
     if (!s.ok()) return s;
     if (job.cancel_requested_at_ms != 0) {  // cancelled while running: it ends here
-      return FailCancelledLocked(
-          c, job_id, internal::CancelledMessage(job.cancel_actor, job.cancel_reason));
+      return FailCancelledLocked(c, job_id,
+                                 internal::CancelledMessage(job.cancel_actor, job.cancel_reason));
     }
     s = c->Exec(
         "UPDATE jobs SET status = 'queued', attempts = GREATEST(attempts - 1, 0), "

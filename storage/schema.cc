@@ -191,10 +191,7 @@ struct Step {
 
 const std::vector<Step>& Steps() {
   static const std::vector<Step>& steps = *new std::vector<Step>{
-      {kV1, nullptr},
-      {kV2, &HashCarriedOverResults},
-      {kV3, nullptr},
-      {kV4, nullptr},
+      {kV1, nullptr}, {kV2, &HashCarriedOverResults}, {kV3, nullptr}, {kV4, nullptr},
       {kV5, nullptr},
   };
   return steps;

@@ -85,8 +85,8 @@ class SqliteStore final : public Store {
                           JobInfo* out, bool inherit_device = true);
   Status RecoverLocked(Db* db, int64_t now, int64_t* recovered);
   Status LoadJob(Db* db, int64_t id, bool with_result, JobInfo* out);
-  Status Cancel(int64_t job_id, const std::string& reason, const std::string& actor,
-                JobInfo* out, JobEvent* event) override;
+  Status Cancel(int64_t job_id, const std::string& reason, const std::string& actor, JobInfo* out,
+                JobEvent* event) override;
   Status Decide(int64_t job_id, bool revoke, const std::string& reason, const std::string& actor,
                 JobEvent* out) override;
   // Fails a running job whose cancel was requested as cancelled, with `message` (in the

@@ -370,8 +370,8 @@ Status SqliteStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
     if (!s.ok()) return s;
     Stmt st;
     if (job.cancel_requested_at_ms != 0) {  // cancelled while running: it ends here
-      return FailCancelledLocked(
-          db, job_id, internal::CancelledMessage(job.cancel_actor, job.cancel_reason));
+      return FailCancelledLocked(db, job_id,
+                                 internal::CancelledMessage(job.cancel_actor, job.cancel_reason));
     }
     s = db->Prepare(
         "UPDATE jobs SET status = 'queued', attempts = MAX(attempts - 1, 0), lease_owner = NULL, "

@@ -436,10 +436,10 @@ TEST(CHeader, NonAsciiSerialsThatTransliterateAlikeDoNotCollide) {
                                           "return 0; }\n";
   const std::string d = dir.path().string();
   std::string output;
-  EXPECT_EQ(RunCommand("gcc -std=c99 -Wall -Werror -pedantic -c -o " + d + "/both.o " + d +
-                           "/both.c",
-                       &output),
-            0)
+  EXPECT_EQ(
+      RunCommand("gcc -std=c99 -Wall -Werror -pedantic -c -o " + d + "/both.o " + d + "/both.c",
+                 &output),
+      0)
       << output << "\n"
       << h1.substr(0, 1200);
 }

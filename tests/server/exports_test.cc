@@ -9,8 +9,8 @@
 #include <cmath>
 #include <cstdlib>
 #include <map>
-#include <regex>
 #include <nlohmann/json.hpp>
+#include <regex>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -309,8 +309,8 @@ TEST(Exports, KalibrYamlIsOnlyForNoiseResults) {
 // as a formula is written with a leading apostrophe (OWASP CSV injection); plain names as they are.
 TEST(Exports, NamesThatASpreadsheetWouldRunAsFormulasAreNeutralised) {
   json r = PcaResult(21, 0.05);
-  const std::vector<std::string> names = {"=HYPERLINK(\"x\")", "+1", "-2", "@SUM(A1)",
-                                          "\tcmd", "a0_x"};
+  const std::vector<std::string> names = {"=HYPERLINK(\"x\")", "+1",    "-2",
+                                          "@SUM(A1)",          "\tcmd", "a0_x"};
   json& sensors = r["parameters"]["sensors"];
   json& unc = r["uncertainty"]["sensors"];
   for (size_t i = 0; i < names.size(); ++i) {
@@ -340,8 +340,8 @@ TEST(Exports, NegativeZeroIsWrittenAsZero) {
   std::string csv, header;
   ASSERT_TRUE(ResultToCsv(r, &csv).ok());
   EXPECT_EQ(ParseCsv(csv)[1][4], "0");
-  ASSERT_TRUE(ResultToHeader(r, ExportContext{7, "SN-1", "pca", "2026-11-24T00:00:00Z"}, &header)
-                  .ok());
+  ASSERT_TRUE(
+      ResultToHeader(r, ExportContext{7, "SN-1", "pca", "2026-11-24T00:00:00Z"}, &header).ok());
   // A negative zero literal: "-0.0" not followed by another digit (-0.01 is a number).
   EXPECT_FALSE(std::regex_search(header, std::regex("-0\\.0[^0-9eE]"))) << header;
   EXPECT_NE(header.find("0.0"), std::string::npos);

@@ -342,12 +342,10 @@ TEST_F(HttpGate, EveryAnswerHasItsOwnETagAndARevokeChangesIt) {
   const json first = Calibrate(GoodCsv(21), "DRONE-9");
   ASSERT_EQ(first["status"], "succeeded");
   auto client = server_.Client();
-  const json rerun_request = {{"recording_id", first["recording_id"]},
-                              {"config",
-                               {{"method", "pca"},
-                                {"magnitude", 9.80665},
-                                {"bias", "estimate"},
-                                {"device", "DRONE-9"}}}};
+  const json rerun_request = {
+      {"recording_id", first["recording_id"]},
+      {"config",
+       {{"method", "pca"}, {"magnitude", 9.80665}, {"bias", "estimate"}, {"device", "DRONE-9"}}}};
   auto res = client.Post("/api/v1/jobs", rerun_request.dump(), "application/json");
   ASSERT_TRUE(res);
   ASSERT_EQ(res->status, 202) << res->body;
@@ -420,9 +418,9 @@ TEST_F(HttpGate, ADecisionWithoutABodyAsksForItsReason) {
   EXPECT_NE(res->body.find("needs a reason"), std::string::npos) << res->body;
   EXPECT_EQ(Body(res)["error"]["field"], "reason") << res->body;
   for (const std::string action : {"accept", "cancel"}) {
-    res = client.Post(("/api/v1/jobs/" + std::to_string(good["id"].get<int64_t>()) + "/" + action)
-                          .c_str(),
-                      "", "application/json");
+    res = client.Post(
+        ("/api/v1/jobs/" + std::to_string(good["id"].get<int64_t>()) + "/" + action).c_str(), "",
+        "application/json");
     ASSERT_TRUE(res);
     EXPECT_EQ(res->status, 400) << action << ": " << res->body;
     EXPECT_NE(res->body.find("a " + action + " needs a reason"), std::string::npos) << res->body;
