@@ -7,7 +7,14 @@
 # Six Monte-Carlo sweeps of the array method are left out: they repeat the same arithmetic 100+
 # times (9 of the 15 minutes the suite needs under ASan on 2 cores) and run in the normal build;
 # the array code still runs under ASan in every other array test (including one Monte-Carlo test
-# at N = 100). CALIBD_SANITIZE_EXCLUDE='^$' runs everything.
+# at N = 100). Also left out: browser_pages (its time is Chromium's, and every page's rendering
+# runs under ASan in the web tests) and the StopProcess timing test (a job of several seconds made
+# of BCD sweeps, 143 s under ASan; the other StopProcess tests run the same shutdown code here).
+# CALIBD_SANITIZE_EXCLUDE='^$' runs everything.
+#
+# CALIBD_FUZZ_FOLLOWS=1 (scripts/test.sh) also leaves out the replays of the committed fuzz corpora
+# (fuzz_corpus.*, 100 s): tests/fuzz/run.sh, which runs next, executes every corpus file first
+# (all of them fit its -max_len) with the same binaries and checks.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build=${CALIBD_SANITIZE_BUILD_DIR:-build-sanitize}
@@ -24,7 +31,10 @@ export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 slow='^(ArrayCalibration\.(EfficientAtTheCramerRaoBoundForN1000|BothSolversReachTheSameEstimate'
 slow+='|RmseFallsAsInverseSquareRootOfN|BcdRecoversPositionsExactlyWithoutNoise'
 slow+='|PaperHeadlineMicrometreErrorsWithFig4Dynamics)'
-slow+='|CalibrationChain\.ArrayReachesTheCramerRaoBoundOnlyWithTheCalibration)$'
+slow+='|CalibrationChain\.ArrayReachesTheCramerRaoBoundOnlyWithTheCalibration'
+slow+='|StopProcess\.SigtermPastTheGraceStopsTheJobExitsWithinOneSecondAndTheRestartCompletesIt'
+slow+='|browser_pages)$'
+[ "${CALIBD_FUZZ_FOLLOWS:-0}" = 1 ] && slow+='|^fuzz_corpus\.'
 exclude=${CALIBD_SANITIZE_EXCLUDE:-$slow}
 args=(--output-on-failure -j "$(nproc)")
 [ -n "$exclude" ] && args+=(-E "$exclude")

@@ -15,7 +15,7 @@ scripts/setup.sh
 scripts/build.sh
 (cd build && ctest --output-on-failure -j "$(nproc)")
 normal=$(date +%s)
-scripts/sanitize.sh
+CALIBD_FUZZ_FOLLOWS=1 scripts/sanitize.sh
 sanitized=$(date +%s)
 tests/fuzz/run.sh ${CALIBD_FUZZ_SECONDS:-}
 end=$(date +%s)
