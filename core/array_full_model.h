@@ -1,0 +1,363 @@
+// The maximum-likelihood model of the full array calibration (core/array_full.h): parameter
+// layout, the ML problem for core/block_lm.h and the gauge. Internal to core/array_full*.cc.
+#ifndef CALIBD_CORE_ARRAY_FULL_MODEL_H_
+#define CALIBD_CORE_ARRAY_FULL_MODEL_H_
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "core/array_full.h"
+#include "core/block_lm.h"
+
+namespace calibd::core::array_full_model {
+
+using Vec3 = Eigen::Vector3d;
+using Mat3 = Eigen::Matrix3d;
+using Vec27 = Eigen::Matrix<double, 27, 1>;
+using Mat27 = Eigen::Matrix<double, 27, 27>;
+using Vec9 = Eigen::Matrix<double, 9, 1>;
+using Vec10 = Eigen::Matrix<double, 10, 1>;
+using Mat9 = Eigen::Matrix<double, 9, 9>;
+
+constexpr int kP = kArrayFullTriadParameters;
+// Offsets in a triad's 27 parameters.
+constexpr int kTa = 0, kBa = 9, kTg = 12, kBg = 21, kR = 24;
+
+inline Mat3 Skew(const Vec3& v) {
+  Mat3 m;
+  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return m;
+}
+
+// A = Omega_omega^2 + Omega_omega_dot: u = A r + s.
+inline Mat3 MatrixA(const Vec3& w, const Vec3& wd) {
+  return w * w.transpose() - w.squaredNorm() * Mat3::Identity() + Skew(wd);
+}
+
+// d/d omega [omega x (omega x r)] = (omega . r) I + omega r^T - 2 r omega^T.
+inline Mat3 CentripetalJacobian(const Vec3& w, const Vec3& r) {
+  return w.dot(r) * Mat3::Identity() + w * r.transpose() - 2 * r * w.transpose();
+}
+
+// Orthonormal basis of the tangent plane of the sphere at s (a deterministic function of s).
+inline Eigen::Matrix<double, 3, 2> SphereBasis(const Vec3& s) {
+  int i = 0;
+  s.cwiseAbs().minCoeff(&i);
+  const Vec3 e = Vec3::Unit(i);
+  const Vec3 b1 = e.cross(s).normalized();
+  const Vec3 b2 = s.normalized().cross(b1);
+  Eigen::Matrix<double, 3, 2> B;
+  B << b1, b2;
+  return B;
+}
+
+struct TriadParams {
+  Mat3 Ta, Tg;
+  Vec3 ba, bg, r;
+};
+
+inline std::vector<TriadParams> Unpack(const Eigen::VectorXd& theta, int K) {
+  std::vector<TriadParams> c(K);
+  for (int k = 0; k < K; ++k) {
+    const double* p = theta.data() + kP * k;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) {
+        c[k].Ta(i, j) = p[kTa + 3 * i + j];
+        c[k].Tg(i, j) = p[kTg + 3 * i + j];
+      }
+    c[k].ba = Vec3(p[kBa], p[kBa + 1], p[kBa + 2]);
+    c[k].bg = Vec3(p[kBg], p[kBg + 1], p[kBg + 2]);
+    c[k].r = Vec3(p[kR], p[kR + 1], p[kR + 2]);
+  }
+  return c;
+}
+
+// The data of the fit: static means and dynamic samples, column-wise.
+struct FullData {
+  int K = 0;
+  int64_t J = 0;                       // statics
+  int64_t Nd = 0;                      // dynamic samples
+  Eigen::MatrixXd static_a, static_g;  // 3K x J means
+  Eigen::VectorXd static_n;            // J sample counts
+  Eigen::MatrixXd ya, yg;              // 3K x Nd
+  std::vector<int64_t> dyn_index;      // Nd: sample index in the log
+  double wa = 0, wg = 0;               // 1 / sigma (statics)
+  double wa_d = 0, wg_d = 0;           // 1 / sigma (dynamic samples)
+  double gravity = 9.80665;
+};
+
+// The ML problem for core/block_lm.h: blocks 0..J-1 are the statics, J.. the dynamic samples.
+class FullProblem {
+ public:
+  static constexpr int kBlockDim = 9;
+  static constexpr int kBlockStateDim = 10;  // (omega, omega_dot, s, 0) or (s, 0..., 1)
+  static constexpr int kCouplingDim = Eigen::Dynamic;
+  using SharedState = Eigen::VectorXd;
+  using Context = std::vector<TriadParams>;
+  using Normal = BlockNormal<9, Eigen::Dynamic>;
+  struct Sums {
+    std::vector<Mat27> H;
+    Eigen::VectorXd g;
+  };
+
+  FullProblem(const FullData& d, const Eigen::MatrixXd& E) : d_(d), E_(E) {}
+
+  int64_t NumBlocks() const { return d_.J + d_.Nd; }
+  int SharedDim() const { return static_cast<int>(E_.cols()); }
+  int CouplingDim() const { return kP * d_.K; }
+  Context MakeContext(const SharedState& p) const { return Unpack(p, d_.K); }
+  Sums MakeSums() const {
+    return Sums{std::vector<Mat27>(d_.K, Mat27::Zero()), Eigen::VectorXd::Zero(kP * d_.K)};
+  }
+  void Merge(const Sums& from, Sums* into) const {
+    for (int k = 0; k < d_.K; ++k) into->H[k] += from.H[k];
+    into->g += from.g;
+  }
+
+  template <class X>
+  void Linearize(int64_t n, const X& x, const Context& c, Normal* out, Sums* sums) const {
+    Evaluate(n, Vec10(x), c, out, true, &sums->H, &sums->g);
+  }
+  template <class X>
+  void BlockMatrices(int64_t n, const X& x, const Context& c, Normal* out) const {
+    Evaluate(n, Vec10(x), c, out, true, nullptr, nullptr);
+  }
+  template <class X>
+  double Cost(int64_t n, const X& x, const Context& c) const {
+    Normal b;
+    Evaluate(n, Vec10(x), c, &b, false, nullptr, nullptr);
+    return b.cost;
+  }
+  template <class M>
+  void Factored(int64_t, const M&, Sums*) const {}
+  void AssembleShared(const Sums& sums, const Context&, SharedNormal* out) const {
+    const int q = CouplingDim();
+    Eigen::MatrixXd HE(q, E_.cols());
+    for (int k = 0; k < d_.K; ++k)
+      HE.middleRows(kP * k, kP).noalias() = sums.H[k] * E_.middleRows(kP * k, kP);
+    out->H.noalias() = E_.transpose() * HE;
+    out->g.noalias() = E_.transpose() * sums.g;
+    out->lift = E_;
+    out->coupling_weight = 1;
+  }
+  template <class X, class D>
+  Vec10 PlusBlock(const X& x_in, const D& dx) const {
+    Vec10 x = x_in;
+    if (x(9) > 0.5) {
+      const Vec3 s = x.head<3>();
+      const Vec3 moved = s + SphereBasis(s) * dx.template head<2>();
+      x.head<3>() = d_.gravity * moved.normalized();
+    } else {
+      x.head<9>() += dx;
+    }
+    return x;
+  }
+  SharedState PlusShared(const SharedState& p, const Eigen::VectorXd& dp) const {
+    return p + E_ * dp;
+  }
+  double SharedMaxNorm(const SharedState& p) const { return p.cwiseAbs().maxCoeff(); }
+
+  // Raw (unwhitened) residuals of block n: accel and gyro, 3K each, added squared per triad
+  // into acc (K x 2).
+  void AddSquaredResiduals(int64_t n, const Vec10& x, const Context& c,
+                           Eigen::MatrixX2d* acc) const {
+    for (int k = 0; k < d_.K; ++k) {
+      Vec3 ea, eg;
+      if (n < d_.J) {
+        const double sq = std::sqrt(d_.static_n(n));
+        ea = sq * (d_.static_a.col(n).segment<3>(3 * k) - c[k].Ta * x.head<3>() - c[k].ba);
+        eg = sq * (d_.static_g.col(n).segment<3>(3 * k) - c[k].bg);
+      } else {
+        const int64_t m = n - d_.J;
+        const Vec3 w = x.head<3>();
+        const Vec3 u = MatrixA(w, x.segment<3>(3)) * c[k].r + x.segment<3>(6);
+        ea = d_.ya.col(m).segment<3>(3 * k) - c[k].Ta * u - c[k].ba;
+        eg = d_.yg.col(m).segment<3>(3 * k) - c[k].Tg * w - c[k].bg;
+      }
+      (*acc)(k, 0) += ea.squaredNorm();
+      (*acc)(k, 1) += eg.squaredNorm();
+    }
+  }
+
+ private:
+  // Residuals r = whitened (y - prediction); J = d r / d(unknowns) = -w d prediction.
+  // full: also H, g and C of the block. H_pp/g_p sums when H/g are given.
+  void Evaluate(int64_t n, const Vec10& x, const Context& c, Normal* out, bool full,
+                std::vector<Mat27>* H, Eigen::VectorXd* g) const {
+    const int K = d_.K;
+    out->cost = 0;
+    if (full) {
+      out->H.setZero();
+      out->g.setZero();
+      out->C.setZero(9, CouplingDim());
+    }
+    if (n < d_.J) {
+      EvaluateStatic(n, x, c, out, full, H, g);
+      return;
+    }
+    const int64_t m = n - d_.J;
+    const double wa = d_.wa_d, wg = d_.wg_d;
+    const Vec3 w = x.head<3>(), wd = x.segment<3>(3), s = x.segment<3>(6);
+    const Mat3 A = MatrixA(w, wd);
+    for (int k = 0; k < K; ++k) {
+      const TriadParams& p = c[k];
+      const int o = kP * k;
+      const Vec3 u = A * p.r + s;
+      const Vec3 ea = wa * (d_.ya.col(m).segment<3>(3 * k) - p.Ta * u - p.ba);
+      const Vec3 eg = wg * (d_.yg.col(m).segment<3>(3 * k) - p.Tg * w - p.bg);
+      out->cost += ea.squaredNorm() + eg.squaredNorm();
+      if (!full && !g) continue;
+      // Accelerometer: J_p over (T_a row-major, b_a, r).
+      Eigen::Matrix<double, 3, 15> Jp = Eigen::Matrix<double, 3, 15>::Zero();
+      for (int i = 0; i < 3; ++i) Jp.block<1, 3>(i, 3 * i) = -wa * u.transpose();
+      Jp.block<3, 3>(0, 9) = -wa * Mat3::Identity();
+      Jp.block<3, 3>(0, 12) = -wa * p.Ta * A;
+      // Gyroscope: J_p over (T_g row-major, b_g).
+      Eigen::Matrix<double, 3, 12> Jg = Eigen::Matrix<double, 3, 12>::Zero();
+      for (int i = 0; i < 3; ++i) Jg.block<1, 3>(i, 3 * i) = -wg * w.transpose();
+      Jg.block<3, 3>(0, 9) = -wg * Mat3::Identity();
+      if (g) {
+        const Eigen::Matrix<double, 15, 1> ga = -Jp.transpose() * ea;
+        g->segment<12>(o) += ga.head<12>();
+        g->segment<3>(o + kR) += ga.tail<3>();
+        g->segment<12>(o + kTg) -= Jg.transpose() * eg;
+      }
+      if (!full) continue;
+      Eigen::Matrix<double, 3, 9> dU;
+      dU << CentripetalJacobian(w, p.r), -Skew(p.r), Mat3::Identity();
+      const Eigen::Matrix<double, 3, 9> Jx = -wa * p.Ta * dU;
+      const Mat3 Jxg = -wg * p.Tg;
+      out->H.noalias() += Jx.transpose() * Jx;
+      out->H.topLeftCorner<3, 3>().noalias() += Jxg.transpose() * Jxg;
+      out->g.noalias() -= Jx.transpose() * ea;
+      out->g.head<3>().noalias() -= Jxg.transpose() * eg;
+      const Eigen::Matrix<double, 9, 15> CJ = Jx.transpose() * Jp;
+      out->C.block(0, o, 9, 12) += CJ.leftCols<12>();
+      out->C.block(0, o + kR, 9, 3) += CJ.rightCols<3>();
+      out->C.block(0, o + kTg, 3, 12).noalias() += Jxg.transpose() * Jg;
+      if (H) {
+        Mat27& h = (*H)[k];
+        const Eigen::Matrix<double, 15, 15> hp = Jp.transpose() * Jp;
+        h.topLeftCorner<12, 12>() += hp.topLeftCorner<12, 12>();
+        h.block<12, 3>(0, kR) += hp.topRightCorner<12, 3>();
+        h.block<3, 12>(kR, 0) += hp.bottomLeftCorner<3, 12>();
+        h.block<3, 3>(kR, kR) += hp.bottomRightCorner<3, 3>();
+        h.block<12, 12>(kTg, kTg).noalias() += Jg.transpose() * Jg;
+      }
+    }
+  }
+
+  void EvaluateStatic(int64_t j, const Vec10& x, const Context& c, Normal* out, bool full,
+                      std::vector<Mat27>* H, Eigen::VectorXd* g) const {
+    const double sq = std::sqrt(d_.static_n(j));
+    const double wa = d_.wa * sq, wg = d_.wg * sq;
+    const Vec3 s = x.head<3>();
+    const Eigen::Matrix<double, 3, 2> Bs = SphereBasis(s);
+    Eigen::Matrix2d H2 = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d g2 = Eigen::Vector2d::Zero();
+    for (int k = 0; k < d_.K; ++k) {
+      const TriadParams& p = c[k];
+      const int o = kP * k;
+      const Vec3 ea = wa * (d_.static_a.col(j).segment<3>(3 * k) - p.Ta * s - p.ba);
+      const Vec3 eg = wg * (d_.static_g.col(j).segment<3>(3 * k) - p.bg);
+      out->cost += ea.squaredNorm() + eg.squaredNorm();
+      if (!full && !g) continue;
+      Eigen::Matrix<double, 3, 12> Jp = Eigen::Matrix<double, 3, 12>::Zero();
+      for (int i = 0; i < 3; ++i) Jp.block<1, 3>(i, 3 * i) = -wa * s.transpose();
+      Jp.block<3, 3>(0, 9) = -wa * Mat3::Identity();
+      if (g) {
+        g->segment<12>(o) -= Jp.transpose() * ea;
+        g->segment<3>(o + kBg) += wg * eg;
+      }
+      if (!full) continue;
+      const Eigen::Matrix<double, 3, 2> Jx = -wa * p.Ta * Bs;
+      H2.noalias() += Jx.transpose() * Jx;
+      g2.noalias() -= Jx.transpose() * ea;
+      out->C.block(0, o, 2, 12).noalias() += Jx.transpose() * Jp;
+      if (H) {
+        Mat27& h = (*H)[k];
+        h.topLeftCorner<12, 12>().noalias() += Jp.transpose() * Jp;
+        h.block<3, 3>(kBg, kBg).diagonal().array() += wg * wg;
+      }
+    }
+    if (full) {
+      // The unused tangent coordinates 2..8: identity Hessian, zero gradient and coupling.
+      out->H.setIdentity();
+      out->H.topLeftCorner<2, 2>() = H2;
+      out->g.head<2>() = g2;
+    }
+  }
+
+  const FullData& d_;
+  const Eigen::MatrixXd& E_;
+};
+
+// Orthonormal basis of the gauge-fixed subspace of theta (27K): all coordinates but the
+// reference's T_a lower entries and position; the 3K T_g diagonals restricted to sum zero
+// (Helmert contrasts).
+inline Eigen::MatrixXd GaugeBasis(int K, int reference) {
+  const int q = kP * K;
+  std::vector<int> free;
+  std::vector<int> diag;
+  for (int k = 0; k < K; ++k)
+    for (int l = 0; l < kP; ++l) {
+      const int i = kP * k + l;
+      if (k == reference && (l == kTa + 3 || l == kTa + 6 || l == kTa + 7 || l >= kR)) continue;
+      if (l == kTg || l == kTg + 4 || l == kTg + 8) {
+        diag.push_back(i);
+        continue;
+      }
+      free.push_back(i);
+    }
+  const int m = static_cast<int>(diag.size());
+  Eigen::MatrixXd E = Eigen::MatrixXd::Zero(q, static_cast<int>(free.size()) + m - 1);
+  int col = 0;
+  for (int i : free) E(i, col++) = 1;
+  for (int a = 1; a < m; ++a, ++col) {
+    const double norm = std::sqrt(static_cast<double>(a) * (a + 1));
+    for (int b = 0; b < a; ++b) E(diag[b], col) = 1 / norm;
+    E(diag[a], col) = -a / norm;
+  }
+  return E;
+}
+
+// Ellipsoid through the static means: M upper triangular, b with |M (y_j - b)| = g (the
+// closed form of core/imu.cc, worked in scaled coordinates for conditioning).
+inline bool EllipsoidFit(const Eigen::Matrix3Xd& y, double g, Mat3* m_out, Vec3* b_out) {
+  const int n = static_cast<int>(y.cols());
+  const Vec3 c = y.rowwise().mean();
+  const double sc = 1 / g;
+  Eigen::MatrixXd d(n, 10);
+  for (int j = 0; j < n; ++j) {
+    const Vec3 z = (y.col(j) - c) * sc;
+    d.row(j) << z.x() * z.x(), z.y() * z.y(), z.z() * z.z(), 2 * z.x() * z.y(), 2 * z.x() * z.z(),
+        2 * z.y() * z.z(), z.x(), z.y(), z.z(), 1;
+  }
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(d, Eigen::ComputeFullV);
+  const Eigen::VectorXd sv = svd.singularValues();
+  if (!(sv(8) > 1e-9 * sv(0))) return false;  // the statics do not determine a quadric
+  const Eigen::VectorXd th = svd.matrixV().col(9);
+  Mat3 q;
+  q << th(0), th(3), th(4), th(3), th(1), th(5), th(4), th(5), th(2);
+  const Vec3 l = th.segment<3>(6);
+  Eigen::FullPivLU<Mat3> lu(q);
+  if (!lu.isInvertible()) return false;
+  const Vec3 z0 = -0.5 * lu.solve(l);
+  const double k = z0.dot(q * z0) - th(9);
+  if (!(std::abs(k) > 0)) return false;
+  Eigen::LLT<Mat3> llt(q / k);
+  if (llt.info() != Eigen::Success) return false;
+  const Mat3 mz = llt.matrixL().transpose();
+  *m_out = g * sc * mz;
+  *b_out = c + z0 / sc;
+  return m_out->allFinite() && b_out->allFinite();
+}
+
+}  // namespace calibd::core::array_full_model
+
+#endif  // CALIBD_CORE_ARRAY_FULL_MODEL_H_
