@@ -162,14 +162,15 @@ Status PgStore::ClaimJob(const std::string& worker_id, int64_t lease_ms, JobInfo
     bool any = false;
     Status s = Read([&](PgConn* c) {
       PgResult res;
-      // One round trip: the time is the injected clock ($1) or the database's.
-      Status s = c->Exec(
-          "WITH t AS (SELECT COALESCE($1::bigint, " CALIBD_PG_NOW_MS
-          ") AS now) "
-          "SELECT EXISTS (SELECT 1 FROM jobs, t WHERE status = 'queued' AND not_before <= t.now) "
-          "OR EXISTS (SELECT 1 FROM jobs, t WHERE status = 'running' AND "
-          "lease_expires_at <= t.now)",
-          {clock_injected() ? PgInt(Now()) : PgTextOrNull("")}, &res);
+      // One round trip: the time is the injected clock ($1) or the database's, computed once
+      // (a scalar subquery: an index bound, which the volatile clock_timestamp() is not).
+      Status s = c->Exec("WITH t AS (SELECT COALESCE($1::bigint, " CALIBD_PG_NOW_MS
+                         ") AS now) "
+                         "SELECT EXISTS (SELECT 1 FROM jobs WHERE status = 'queued' AND "
+                         "not_before <= (SELECT now FROM t)) "
+                         "OR EXISTS (SELECT 1 FROM jobs WHERE status = 'running' AND "
+                         "lease_expires_at <= (SELECT now FROM t))",
+                         {clock_injected() ? PgInt(Now()) : PgTextOrNull("")}, &res);
       if (!s.ok()) return s;
       any = res.Text(0, 0) == "t";
       return Status::Ok();
