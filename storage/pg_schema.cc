@@ -9,6 +9,8 @@
 //      jobs.error_detail_json (the partial diagnostics of a failed calibration).
 //   3  what SQLite schema version 5 adds: a running job's cancel request (jobs.cancel_requested_at,
 //      cancel_reason, cancel_actor) and the job_events action 'cancel'.
+//   4  what SQLite schema version 6 adds: results.seq, the order results were stored in (from the
+//      sequence results_seq), which picks a device's latest served result instead of finished_at.
 #include <string>
 #include <vector>
 
@@ -110,8 +112,28 @@ ALTER TABLE job_events ADD CONSTRAINT job_events_action_check
   CHECK (action IN ('revoke', 'accept', 'cancel'));
 )sql";
 
+// Results already stored are numbered in the order the old rule used (finished_at, then id); the
+// sequence continues after them. A sequence value is taken when the result is inserted, so two
+// hosts completing at once may commit in the other order: RefreshLatest (advisory lock, fresh
+// snapshot) still ends on the largest seq, whichever commits last.
+constexpr const char* kPgV4 = R"sql(
+CREATE SEQUENCE results_seq;
+ALTER TABLE results ADD COLUMN seq BIGINT;
+UPDATE results SET seq = o.n FROM (
+  SELECT r.job_id AS id,
+         row_number() OVER (ORDER BY COALESCE(j.finished_at, j.created_at), j.id) AS n
+  FROM results r JOIN jobs j ON j.id = r.job_id) AS o
+WHERE results.job_id = o.id;
+SELECT setval('results_seq', COALESCE((SELECT MAX(seq) FROM results), 0) + 1, false);
+ALTER TABLE results ALTER COLUMN seq SET DEFAULT nextval('results_seq'),
+                    ALTER COLUMN seq SET NOT NULL;
+ALTER SEQUENCE results_seq OWNED BY results.seq;
+CREATE UNIQUE INDEX results_by_seq ON results(seq);
+)sql";
+
 const std::vector<const char*>& PgSteps() {
-  static const std::vector<const char*>& steps = *new std::vector<const char*>{kPgV1, kPgV2, kPgV3};
+  static const std::vector<const char*>& steps =
+      *new std::vector<const char*>{kPgV1, kPgV2, kPgV3, kPgV4};
   return steps;
 }
 

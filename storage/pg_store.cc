@@ -153,6 +153,18 @@ Status PgStore::Txn(const std::function<Status(PgConn*)>& op) {
   }
 }
 
+Status PgStore::DbNow(PgConn* c, int64_t* now) {
+  if (clock_injected()) {
+    *now = Now();
+    return Status::Ok();
+  }
+  PgResult res;
+  Status s = c->Exec("SELECT " CALIBD_PG_NOW_MS, {}, &res);
+  if (!s.ok()) return s;
+  *now = res.Int(0, 0);
+  return Status::Ok();
+}
+
 Status PgStore::Read(const std::function<Status(PgConn*)>& op) {
   for (int attempt = 1;; ++attempt) {
     Lease lease(this);

@@ -56,7 +56,7 @@
 namespace calibd::storage {
 
 // The newest schema version of the PostgreSQL backend (pg_schema.cc).
-inline constexpr int kPgSchemaVersion = 3;
+inline constexpr int kPgSchemaVersion = 4;
 
 // `target` with the password of a URI or keyword string replaced by "***" (for logs, /healthz).
 std::string RedactConnectionTarget(const std::string& target);
@@ -117,6 +117,10 @@ class PgStore final : public Store {
   Status Txn(const std::function<Status(PgConn*)>& op);
   // Runs `op` on a pooled connection outside any explicit transaction (reads).
   Status Read(const std::function<Status(PgConn*)>& op);
+  // The time for the statements of the caller's transaction: the injected clock (tests), else
+  // the database server's clock (clock_timestamp()), never this host's (issue 27: hosts whose
+  // clocks disagree took each other's live leases).
+  Status DbNow(PgConn* c, int64_t* now);
 
   Status PutRecordingLocked(PgConn* c, const NewRecording& r, const std::string& sha,
                             RecordingInfo* out, bool* existed);

@@ -32,7 +32,7 @@ Status RefreshLatest(PgConn* c, const std::string& device, const std::string& me
       "FROM jobs j JOIN results r ON r.job_id = j.id "
       "WHERE j.device = $1 AND j.method = $2 AND j.status = 'succeeded' "
       "AND COALESCE(r.decision, r.verdict) = 'accepted' "
-      "ORDER BY COALESCE(j.finished_at, j.created_at) DESC, j.id DESC LIMIT 1",
+      "ORDER BY r.seq DESC, j.id DESC LIMIT 1",
       {PgText(device), PgText(method)});
 }
 
@@ -169,7 +169,9 @@ Status PgStore::Decide(int64_t job_id, bool revoke, const std::string& reason,
     if (!s.ok()) return s;
     s = internal::CheckDecision(job, revoke);
     if (!s.ok()) return s;
-    const int64_t now = Now();
+    int64_t now = 0;
+    s = DbNow(c, &now);
+    if (!s.ok()) return s;
     s = c->Exec("UPDATE results SET decision = $2 WHERE job_id = $1",
                 {PgInt(job_id), PgText(internal::DecisionValue(revoke))});
     if (!s.ok()) return s;

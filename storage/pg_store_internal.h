@@ -16,6 +16,10 @@
 #include "storage/pg_store.h"
 #include "storage/store_internal.h"
 
+// The database server's clock in milliseconds since the Unix epoch, as an SQL expression
+// (clock_timestamp(): the time when it is evaluated, not when the transaction began).
+#define CALIBD_PG_NOW_MS "floor(extract(epoch FROM clock_timestamp()) * 1000)::bigint"
+
 namespace calibd::storage {
 
 // A pooled connection, returned on destruction.

@@ -59,7 +59,10 @@ Status PgStore::EnqueueJob(int64_t recording_id, const std::string& method,
   if (method.empty()) return Status::InvalidInput("storage: a job needs a method");
   JobInfo job;
   Status s = Txn([&](PgConn* c) {
-    return EnqueueJobLocked(c, recording_id, method, device, config_json, Now(), &job, true);
+    int64_t now = 0;
+    Status s = DbNow(c, &now);
+    if (!s.ok()) return s;
+    return EnqueueJobLocked(c, recording_id, method, device, config_json, now, &job, true);
   });
   if (!s.ok()) return s;
   if (out != nullptr) *out = std::move(job);
@@ -117,7 +120,12 @@ Status PgStore::RecoverLocked(PgConn* c, int64_t now, int64_t* recovered) {
 
 Status PgStore::RecoverExpiredLeases(int64_t* recovered) {
   int64_t n = 0;
-  Status s = Txn([&](PgConn* c) { return RecoverLocked(c, Now(), &n); });
+  Status s = Txn([&](PgConn* c) {
+    int64_t now = 0;
+    Status s = DbNow(c, &now);
+    if (!s.ok()) return s;
+    return RecoverLocked(c, now, &n);
+  });
   if (!s.ok()) return s;
   if (recovered != nullptr) *recovered = n;
   return Status::Ok();
@@ -127,9 +135,11 @@ Status PgStore::ExpireLeasesOf(const std::string& owner_prefix, int64_t* taken_b
   if (owner_prefix.empty()) return Status::InvalidInput("storage: owner_prefix must not be empty");
   int64_t n = 0;
   Status s = Txn([&](PgConn* c) {
-    const int64_t now = Now();
+    int64_t now = 0;
+    Status s = DbNow(c, &now);
+    if (!s.ok()) return s;
     PgResult res;
-    Status s = c->Exec(
+    s = c->Exec(
         "UPDATE jobs SET lease_expires_at = $1 WHERE status = 'running' AND "
         "left(lease_owner, length($2)) = $2 AND lease_expires_at > $1",
         {PgInt(now), PgText(owner_prefix)}, &res);
@@ -152,10 +162,15 @@ Status PgStore::ClaimJob(const std::string& worker_id, int64_t lease_ms, JobInfo
     bool any = false;
     Status s = Read([&](PgConn* c) {
       PgResult res;
-      Status s = c->Exec(
-          "SELECT EXISTS (SELECT 1 FROM jobs WHERE status = 'queued' AND not_before <= $1) "
-          "OR EXISTS (SELECT 1 FROM jobs WHERE status = 'running' AND lease_expires_at <= $1)",
-          {PgInt(Now())}, &res);
+      // One round trip: the time is the injected clock ($1) or the database's, computed once
+      // (a scalar subquery: an index bound, which the volatile clock_timestamp() is not).
+      Status s = c->Exec("WITH t AS (SELECT COALESCE($1::bigint, " CALIBD_PG_NOW_MS
+                         ") AS now) "
+                         "SELECT EXISTS (SELECT 1 FROM jobs WHERE status = 'queued' AND "
+                         "not_before <= (SELECT now FROM t)) "
+                         "OR EXISTS (SELECT 1 FROM jobs WHERE status = 'running' AND "
+                         "lease_expires_at <= (SELECT now FROM t))",
+                         {clock_injected() ? PgInt(Now()) : PgTextOrNull("")}, &res);
       if (!s.ok()) return s;
       any = res.Text(0, 0) == "t";
       return Status::Ok();
@@ -167,8 +182,10 @@ Status PgStore::ClaimJob(const std::string& worker_id, int64_t lease_ms, JobInfo
   bool got = false;
   Status s = Txn([&](PgConn* c) {
     got = false;
-    const int64_t now = Now();
-    Status s = RecoverLocked(c, now, nullptr);
+    int64_t now = 0;
+    Status s = DbNow(c, &now);
+    if (!s.ok()) return s;
+    s = RecoverLocked(c, now, nullptr);
     if (!s.ok()) return s;
     PgResult res;
     // The oldest claimable job nobody else is claiming right now (SKIP LOCKED: claimers on
@@ -204,11 +221,14 @@ Status PgStore::RequireHolder(PgConn* c, int64_t job_id, const std::string& work
 Status PgStore::RenewLease(int64_t job_id, const std::string& worker_id, int64_t lease_ms) {
   if (lease_ms <= 0) return Status::InvalidInput("storage: lease_ms must be positive");
   return Txn([&](PgConn* c) {
+    int64_t now = 0;
+    Status s = DbNow(c, &now);
+    if (!s.ok()) return s;
     PgResult res;
-    Status s = c->Exec(
+    s = c->Exec(
         "UPDATE jobs SET lease_expires_at = $3 "
         "WHERE id = $1 AND status = 'running' AND lease_owner = $2",
-        {PgInt(job_id), PgText(worker_id), PgInt(Now() + lease_ms)}, &res);
+        {PgInt(job_id), PgText(worker_id), PgInt(now + lease_ms)}, &res);
     if (!s.ok()) return s;
     if (res.Affected() == 1) return Status::Ok();
     JobInfo job;
@@ -239,7 +259,9 @@ Status PgStore::CompleteJob(int64_t job_id, const std::string& worker_id,
       cancelled = internal::CancelledMessage(job.cancel_actor, job.cancel_reason);
       return FailCancelledLocked(c, job_id, cancelled);
     }
-    const int64_t now = Now();
+    int64_t now = 0;
+    s = DbNow(c, &now);
+    if (!s.ok()) return s;
     s = c->Exec(
         "INSERT INTO results (job_id, result_json, sha256, created_at, verdict) "
         "VALUES ($1, $2, $3, $4, $5)",
@@ -267,11 +289,14 @@ Status PgStore::CompleteJob(int64_t job_id, const std::string& worker_id,
 }
 
 Status PgStore::FailCancelledLocked(PgConn* c, int64_t job_id, const std::string& message) {
+  int64_t now = 0;
+  Status s = DbNow(c, &now);
+  if (!s.ok()) return s;
   return c->Exec(
       "UPDATE jobs SET status = 'failed', finished_at = $2, lease_owner = NULL, "
       "lease_expires_at = NULL, error_code = $3, error_reason = $4, error_message = $5, "
       "error_detail_json = NULL WHERE id = $1",
-      {PgInt(job_id), PgInt(Now()), PgText(internal::kCancelledCode),
+      {PgInt(job_id), PgInt(now), PgText(internal::kCancelledCode),
        PgText(internal::kCancelledReason), PgText(message)});
 }
 
@@ -281,7 +306,9 @@ Status PgStore::FailJob(int64_t job_id, const std::string& worker_id, const JobF
     JobInfo job;
     Status s = RequireHolder(c, job_id, worker_id, "fail", &job);
     if (!s.ok()) return s;
-    const int64_t now = Now();
+    int64_t now = 0;
+    s = DbNow(c, &now);
+    if (!s.ok()) return s;
     const std::string error_code = failure.code.empty() ? std::string("error") : failure.code;
     const PgParam reason = PgTextOrNull(failure.reason);
     const PgParam detail = PgTextOrNull(failure.detail_json);
@@ -316,11 +343,14 @@ Status PgStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
       return FailCancelledLocked(c, job_id,
                                  internal::CancelledMessage(job.cancel_actor, job.cancel_reason));
     }
+    int64_t now = 0;
+    s = DbNow(c, &now);
+    if (!s.ok()) return s;
     s = c->Exec(
         "UPDATE jobs SET status = 'queued', attempts = GREATEST(attempts - 1, 0), "
         "lease_owner = NULL, lease_expires_at = NULL, started_at = NULL, not_before = $2 "
         "WHERE id = $1",
-        {PgInt(job_id), PgInt(Now())});
+        {PgInt(job_id), PgInt(now)});
     if (!s.ok()) return s;
     return NotifyJobs(c);
   });
@@ -356,7 +386,9 @@ Status PgStore::Cancel(int64_t job_id, const std::string& reason, const std::str
     if (!s.ok()) return s;
     s = internal::CheckCancel(job);
     if (!s.ok()) return s;
-    const int64_t now = Now();
+    int64_t now = 0;
+    s = DbNow(c, &now);
+    if (!s.ok()) return s;
     if (job.status == JobStatus::kQueued) {
       s = c->Exec(
           "UPDATE jobs SET status = 'failed', finished_at = $2, lease_owner = NULL, "

@@ -98,9 +98,11 @@ Status PgStore::PutRecording(const NewRecording& r, RecordingInfo* out, bool* ex
 
 Status PgStore::PutRecordingLocked(PgConn* c, const NewRecording& r, const std::string& sha,
                                    RecordingInfo* out, bool* existed) {
-  const int64_t now = Now();
+  int64_t now = 0;
+  Status s = DbNow(c, &now);  // the database's clock (store.h, StoreOptions::now_ms)
+  if (!s.ok()) return s;
   PgResult res;
-  Status s = c->Exec("SELECT id FROM recordings WHERE sha256 = $1", {PgText(sha)}, &res);
+  s = c->Exec("SELECT id FROM recordings WHERE sha256 = $1", {PgText(sha)}, &res);
   if (!s.ok()) return s;
   int64_t id = res.rows() > 0 ? res.Int(0, 0) : 0;
   bool duplicate = id != 0;

@@ -159,6 +159,21 @@ ALTER TABLE job_events_v5 RENAME TO job_events;
 CREATE INDEX job_events_by_job ON job_events(job_id, id);
 )sql";
 
+// Version 6: "latest" without host clocks (issue 27). results.seq numbers the results in the
+// order they were stored (one more than the largest, under the write lock), and a device's latest
+// served result is the one with the largest seq: a host whose clock is behind no longer keeps a
+// newer result from being served. Results already stored are numbered in the order the old rule
+// used (finished_at, then id). A unique index keeps MAX(seq) one index lookup.
+constexpr const char* kV6 = R"sql(
+ALTER TABLE results ADD COLUMN seq INTEGER;
+UPDATE results SET seq = o.n FROM (
+  SELECT r.job_id AS id,
+         row_number() OVER (ORDER BY COALESCE(j.finished_at, j.created_at), j.id) AS n
+  FROM results r JOIN jobs j ON j.id = r.job_id) AS o
+WHERE results.job_id = o.id;
+CREATE UNIQUE INDEX results_by_seq ON results(seq);
+)sql";
+
 // The hashes of results carried over from v1 are computed here (SQLite has no sha256()).
 Status HashCarriedOverResults(Db* db) {
   Stmt select;
@@ -191,8 +206,9 @@ struct Step {
 
 const std::vector<Step>& Steps() {
   static const std::vector<Step>& steps = *new std::vector<Step>{
-      {kV1, nullptr}, {kV2, &HashCarriedOverResults}, {kV3, nullptr}, {kV4, nullptr},
-      {kV5, nullptr},
+      {kV1, nullptr}, {kV2, &HashCarriedOverResults},
+      {kV3, nullptr}, {kV4, nullptr},
+      {kV5, nullptr}, {kV6, nullptr},
   };
   return steps;
 }

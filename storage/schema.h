@@ -13,6 +13,8 @@
 //      jobs.error_detail_json (the partial diagnostics of a failed calibration)
 //   5  stopping jobs: a running job's cancel request (jobs.cancel_requested_at, cancel_reason,
 //      cancel_actor) and the job_events action 'cancel'
+//   6  "latest" without host clocks: results.seq, the order results were stored in (unique),
+//      which picks a device's latest served result instead of finished_at
 //
 // Thread-safety: functions take a Db the caller owns (one thread at a time).
 #ifndef CALIBD_STORAGE_SCHEMA_H_
@@ -25,7 +27,7 @@
 
 namespace calibd::storage {
 
-inline constexpr int kSchemaVersion = 5;
+inline constexpr int kSchemaVersion = 6;
 
 // Reads PRAGMA user_version.
 Status SchemaVersion(Db* db, int64_t* version);

@@ -33,7 +33,7 @@ Status RefreshLatest(Db* db, const std::string& device, const std::string& metho
       "FROM jobs j JOIN results r ON r.job_id = j.id "
       "WHERE j.device = ?1 AND j.method = ?2 AND j.status = 'succeeded' "
       "AND COALESCE(r.decision, r.verdict) = 'accepted' "
-      "ORDER BY COALESCE(j.finished_at, j.created_at) DESC, j.id DESC LIMIT 1",
+      "ORDER BY r.seq DESC, j.id DESC LIMIT 1",
       &st);
   if (!s.ok()) return s;
   st.BindText(1, device).BindText(2, method);

@@ -258,11 +258,13 @@ Status SqliteStore::CompleteJob(int64_t job_id, const std::string& worker_id,
     }
     const int64_t now = Now();
     Stmt st;
-    // The gate's verdict, read from the result (anything but "rejected" counts as accepted).
+    // The gate's verdict, read from the result (anything but "rejected" counts as accepted), and
+    // the result's place in the order of storing (seq: "latest" never compares host clocks).
     s = db->Prepare(
-        "INSERT INTO results (job_id, result_json, sha256, created_at, verdict) VALUES (?1, ?2, "
-        "?3, ?4, CASE WHEN (CASE WHEN json_valid(?2) THEN json_extract(?2, '$.verdict.status') "
-        "END) = 'rejected' THEN 'rejected' ELSE 'accepted' END)",
+        "INSERT INTO results (job_id, result_json, sha256, created_at, verdict, seq) VALUES (?1, "
+        "?2, ?3, ?4, CASE WHEN (CASE WHEN json_valid(?2) THEN json_extract(?2, '$.verdict.status') "
+        "END) = 'rejected' THEN 'rejected' ELSE 'accepted' END, "
+        "(SELECT COALESCE(MAX(seq), 0) + 1 FROM results))",
         &st);
     if (!s.ok()) return s;
     st.BindInt(1, job_id).BindText(2, result_json).BindText(3, sha).BindInt(4, now);

@@ -332,7 +332,9 @@ std::string FormatTimestamp(int64_t ms) {
 }
 
 Store::Store(std::string path, StoreOptions options)
-    : path_(std::move(path)), options_(std::move(options)) {
+    : path_(std::move(path)),
+      options_(std::move(options)),
+      clock_injected_(static_cast<bool>(options_.now_ms)) {
   if (!options_.now_ms) options_.now_ms = &internal::SystemNowMs;
 }
 

@@ -73,8 +73,12 @@ using calibd::ServeState;
 std::string FormatTimestamp(int64_t ms);
 
 struct StoreOptions {
-  // Clock, milliseconds since the Unix epoch. Default: the system clock. Must be thread-safe.
-  // Tests inject a fake clock to expire leases and back-offs without sleeping.
+  // Clock, milliseconds since the Unix epoch. Must be thread-safe. Default: on SQLite the host's
+  // system clock (every process on one database file runs on one host); on PostgreSQL the
+  // database server's clock (clock_timestamp(), read in each transaction), so that leases,
+  // back-offs and times stored by hosts whose clocks disagree are measured on one clock.
+  // Tests inject a fake clock to expire leases and back-offs without sleeping; an injected
+  // clock is used on both backends.
   std::function<int64_t()> now_ms;
   // Lock wait before kBusy (per statement / BEGIN IMMEDIATE; PostgreSQL: lock_timeout).
   // Default 5000 ms.
@@ -355,7 +359,8 @@ class Store {
   // Every device seen (uploads and jobs), by serial, with its latest calibration per method.
   virtual Status ListDevices(std::vector<DeviceInfo>* out) = 0;
   // The device's latest served job for `method` (succeeded, accepted by the gate or a person, not
-  // revoked; by finished time), with result_json and result_sha256. kNotFound if there is none.
+  // revoked; the one stored last: results are numbered in the order they were stored, so no host's
+  // clock decides), with result_json and result_sha256. kNotFound if there is none.
   virtual Status LatestResult(const std::string& device, const std::string& method,
                               JobInfo* out) = 0;
   // Jobs per state.
@@ -408,6 +413,8 @@ class Store {
  protected:
   Store(std::string path, StoreOptions options);
   int64_t Now() const { return options_.now_ms(); }
+  // Whether options.now_ms was given (a test's clock) rather than defaulted.
+  bool clock_injected() const { return clock_injected_; }
   // RevokeJob (revoke) or AcceptJob, the reason checked: one transaction that loads the job
   // (locked), checks internal::CheckDecision, stores the decision and its event and refreshes the
   // device's latest calibration. `out` may be null.
@@ -420,6 +427,9 @@ class Store {
 
   std::string path_;
   StoreOptions options_;
+
+ private:
+  bool clock_injected_ = false;
 };
 
 }  // namespace calibd::storage

@@ -12,7 +12,8 @@ namespace calibd::server::testing {
 using nlohmann::json;
 
 ServerProcess::ServerProcess(const std::string& db, std::vector<std::string> extra,
-                             const std::string& tmpdir) {
+                             const std::string& tmpdir,
+                             const std::map<std::string, std::string>& env) {
   int fds[2];
   if (pipe(fds) != 0) return;
   pid_ = fork();
@@ -21,6 +22,7 @@ ServerProcess::ServerProcess(const std::string& db, std::vector<std::string> ext
     close(fds[0]);
     close(fds[1]);
     if (!tmpdir.empty()) setenv("TMPDIR", tmpdir.c_str(), 1);
+    for (const auto& [name, value] : env) setenv(name.c_str(), value.c_str(), 1);
     std::vector<std::string> args = {CALIBD_BINARY, "serve",       "--db",           db,
                                      "--listen",    "127.0.0.1:0", "--no-access-log"};
     args.insert(args.end(), extra.begin(), extra.end());

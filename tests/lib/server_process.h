@@ -10,6 +10,7 @@
 #include <httplib.h>
 #include <sys/types.h>
 
+#include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -22,9 +23,12 @@ class ServerProcess {
  public:
   // Starts `calibd serve --db DB --listen 127.0.0.1:0 --no-access-log EXTRA...` and waits up to
   // 30 s for its "listening on" line; port() is 0 when it never came (see log()). `tmpdir`, when
-  // not empty, becomes the child's TMPDIR (where a PostgreSQL calibd stages uploads).
+  // not empty, becomes the child's TMPDIR (where a PostgreSQL calibd stages uploads). `env` is
+  // set in the child's environment (e.g. LD_PRELOAD of the clock-skew shim, tests/storage/
+  // clock_test.cc).
   explicit ServerProcess(const std::string& db, std::vector<std::string> extra = {},
-                         const std::string& tmpdir = "");
+                         const std::string& tmpdir = "",
+                         const std::map<std::string, std::string>& env = {});
   ~ServerProcess();
   ServerProcess(const ServerProcess&) = delete;
   ServerProcess& operator=(const ServerProcess&) = delete;
