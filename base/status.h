@@ -77,6 +77,8 @@ enum class Reason {
   // The server's side.
   kLeaseExpired,  // the job ran out of attempts because its worker's lease lapsed
   kStorageError,  // busy database or I/O error past the retries
+  kDiskFull,      // the disk (or quota) holding the database or the staging folder is full
+  kStorageDamaged,  // stored bytes are damaged (SHA-256 mismatch, a corrupt database page)
   kInternal,      // a bug: never the user's fault
   kCount,         // sentinel: the number of values
 };

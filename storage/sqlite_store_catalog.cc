@@ -268,6 +268,32 @@ Status SqliteStore::IntegrityCheck(std::string* result) {
   return Status::Ok();
 }
 
+Status SqliteStore::QuickCheck(std::string* result) {
+  Conn conn(this);
+  Status s = conn.Open();
+  if (s.code() == StatusCode::kCorruption) {
+    *result = s.message();
+    return Status::Ok();
+  }
+  if (!s.ok()) return s;
+  Stmt st;
+  s = conn.db()->PrepareUncached("PRAGMA quick_check(20)", &st);
+  std::string report;
+  for (bool row = s.ok(); row;) {
+    s = st.Step(&row);
+    if (!s.ok() || !row) break;
+    if (!report.empty()) report += "\n";
+    report += st.ColumnText(0);
+  }
+  if (s.code() == StatusCode::kCorruption) {
+    report = s.message();  // too damaged to check
+  } else if (!s.ok()) {
+    return s;
+  }
+  *result = report.empty() ? "ok" : report;
+  return Status::Ok();
+}
+
 Status SqliteStore::Checkpoint() {
   Conn conn(this);
   Status s = conn.Open();
