@@ -402,8 +402,9 @@ class Store {
   // PostgreSQL: every recording's stored bytes add up to its size).
   virtual Status IntegrityCheck(std::string* result) = 0;
   // A quicker check for a schedule: *result = "ok" when sound, else the report. SQLite: PRAGMA
-  // quick_check (every page and record's structure, O(file size), no index cross-check); a
-  // check that cannot even run on a damaged file gives its error as the report (and OK).
+  // quick_check on a fresh connection, so the file is read as it is now (every page and record's
+  // structure, O(file size), no index cross-check); a check that cannot even run on a damaged
+  // file gives its error as the report (and OK).
   // PostgreSQL (which checks its own pages): "ok" when the database answers (Ping).
   virtual Status QuickCheck(std::string* result) {
     Status s = Ping();

@@ -212,6 +212,36 @@ TEST(StorageDamage, AStructureCheckAtStartFindsDamageThatTheQueueDoesNotSee) {
   EXPECT_EQ(res->status, 200) << res->body;
 }
 
+TEST(StorageDamage, TheScheduledStructureCheckFindsDamageDoneWhileTheServerRuns) {
+  TempDir dir;
+  const std::string db = (dir.path() / "calibd.db").string();
+  int64_t recording = 0, job = 0;
+  MakeDatabase(db, Csv(3000), "result-marker-yzabcdef", &recording, &job);
+  ServerProcess server(db, {"--workers", "1", "--check-seconds", "1"});
+  ASSERT_GT(server.port(), 0) << server.log();
+  httplib::Client client = KeepAlive(server);
+  ASSERT_EQ(client.Get("/healthz")->status, 200);
+  const std::string file = ReadFile(db);
+  const size_t at = file.find("\np2345,2345,");
+  ASSERT_NE(at, std::string::npos);
+  {
+    std::fstream f(db, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(static_cast<std::streamoff>(at / 4096 * 4096));
+    f.write("\x7f\xff\xff\xff", 4);
+  }
+  int status = 0;
+  std::string body;
+  for (int i = 0; i < 250 && status != 503; ++i) {  // the check runs every second
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    auto health = client.Get("/healthz");
+    ASSERT_TRUE(health);
+    status = health->status;
+    body = health->body;
+  }
+  EXPECT_EQ(status, 503) << body;
+  EXPECT_NE(body.find("quick_check"), std::string::npos) << body;
+}
+
 TEST(StorageDamage, AFullDatabaseAnswers507DiskFullWithoutSqlAndHealthzSaysSo) {
   TempDir dir;
   const std::string db = (dir.path() / "calibd.db").string();
