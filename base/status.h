@@ -75,10 +75,12 @@ enum class Reason {
   kDeadline,   // its time limit (--job-seconds, config job_seconds) ran out
   kCancelled,  // POST /jobs/{id}/cancel
   // The server's side.
-  kLeaseExpired,  // the job ran out of attempts because its worker's lease lapsed
-  kStorageError,  // busy database or I/O error past the retries
-  kInternal,      // a bug: never the user's fault
-  kCount,         // sentinel: the number of values
+  kLeaseExpired,    // the job ran out of attempts because its worker's lease lapsed
+  kStorageError,    // busy database or I/O error past the retries
+  kDiskFull,        // the disk (or quota) holding the database or the staging folder is full
+  kStorageDamaged,  // stored bytes are damaged (SHA-256 mismatch, a corrupt database page)
+  kInternal,        // a bug: never the user's fault
+  kCount,           // sentinel: the number of values
 };
 
 class Status {

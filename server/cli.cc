@@ -269,6 +269,18 @@ int RunCli(int argc, char** argv) {
                    "job_seconds may lower it)")
       ->check(CLI::Range(int64_t{0}, int64_t{1} << 31))
       ->capture_default_str();
+  serve_cmd
+      ->add_option("--check-seconds", serve.check_seconds,
+                   "how often the database's structure is checked (SQLite quick_check) besides "
+                   "at start; damage makes /healthz answer 503 (0: only at start)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 31))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--db-max-pages", serve.db_max_pages,
+                   "a quota on the SQLite file in pages of 4 KiB; writes beyond it answer 507 "
+                   "like a full disk (0: none)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 40))
+      ->capture_default_str();
   serve_cmd->add_flag("!--no-access-log", serve.access_log, "do not log requests to stderr");
 
   // calibrate

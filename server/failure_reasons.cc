@@ -107,6 +107,12 @@ std::vector<FailureReason> MakeCatalog() {
        "operator)."},
       {R::kStorageError, "storage_error", "Storage error",
        "Upload again later; the server could not read or write its database."},
+      {R::kDiskFull, "disk_full", "The server's disk is full",
+       "Ask the operator to free space where the database and its staging folder are; then "
+       "upload again. Nothing of the failed request was stored."},
+      {R::kStorageDamaged, "storage_damaged", "Stored data is damaged",
+       "The database holds damaged bytes (see /healthz). Upload the original recording again to "
+       "repair a damaged recording; the operator should restore the database from a backup."},
       {R::kInternal, "internal", "Internal error",
        "Report it to the operator with the job id: this is calibd's fault, not the data's."},
   };
@@ -147,9 +153,10 @@ Reason ReasonOf(const Status& s) {
       return Reason::kNotDeterminable;
     case StatusCode::kTooLarge:
       return Reason::kOverMemoryBudget;
+    case StatusCode::kCorruption:
+      return Reason::kStorageDamaged;
     case StatusCode::kBusy:
     case StatusCode::kIoError:
-    case StatusCode::kCorruption:
       return Reason::kStorageError;
     default:
       return Reason::kInternal;
@@ -161,8 +168,8 @@ Reason ReasonForErrorCode(std::string_view error_code) {
   if (error_code == "invalid_input") return Reason::kInvalidRecording;
   if (error_code == "not_determinable") return Reason::kNotDeterminable;
   if (error_code == "too_large") return Reason::kOverMemoryBudget;
-  if (error_code == "busy" || error_code == "io_error" || error_code == "corruption")
-    return Reason::kStorageError;
+  if (error_code == "corruption") return Reason::kStorageDamaged;
+  if (error_code == "busy" || error_code == "io_error") return Reason::kStorageError;
   return Reason::kInternal;
 }
 

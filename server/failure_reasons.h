@@ -34,7 +34,8 @@ const FailureReason* FindFailureReason(std::string_view code);
 
 // The reason of a failed calibration: s.reason() when set, else one derived from the code
 // (kInvalidInput: invalid_recording, kNotDeterminable: not_determinable, kTooLarge:
-// over_memory_budget, kBusy/kIoError/kCorruption: storage_error, the rest: internal).
+// over_memory_budget, kBusy/kIoError: storage_error, kCorruption: storage_damaged, the rest:
+// internal).
 Reason ReasonOf(const Status& s);
 
 // The reason stored with a job failed before reasons were stored (schema v3 and older) or by

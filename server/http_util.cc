@@ -91,7 +91,8 @@ int SendStatus(httplib::Response& res, const Status& s) {
       status = 503;
       break;
     case StatusCode::kIoError:
-      status = 503;
+      // A full disk is not a moment's unavailability: 507 (RFC 4918) with reason disk_full.
+      status = s.reason() == Reason::kDiskFull ? 507 : 503;
       break;
     case StatusCode::kCorruption:
       status = 500;
@@ -104,10 +105,12 @@ int SendStatus(httplib::Response& res, const Status& s) {
       break;
   }
   std::string message = s.message();
-  if (status == 500) message = "internal server error";  // no internals to clients
+  // No internals to clients; damaged storage is named (its messages never hold SQL: storage/db.h).
+  if (status == 500 && s.code() != StatusCode::kCorruption) message = "internal server error";
   if (status == 503) res.set_header("Retry-After", "1");
   json error = ErrorObject(StatusCodeName(s.code()), message, s.line(), s.column(), s.field());
-  if (s.reason() != Reason::kUnspecified && status != 500) {
+  if (s.reason() != Reason::kUnspecified &&
+      (status != 500 || s.code() == StatusCode::kCorruption)) {
     // A refusal with a failure reason (e.g. over_memory_budget, invalid_config): its code and
     // advice as in a failed job's error (README "Failure reasons").
     const FailureReason& reason = DescribeReason(s.reason());

@@ -35,7 +35,8 @@ void SendError(httplib::Response& res, int status, const std::string& code,
 // throws).
 std::string JsonBody(const nlohmann::json& value);
 // The HTTP status for a Status code: 400 invalid input, 422 not determinable, 404, 409 conflict,
-// 413, 415, 503 busy, 500 otherwise. Writes the error body and returns the status.
+// 413, 415, 503 busy or I/O error, 507 a full disk (Reason::kDiskFull), 500 otherwise (with the
+// message only for damaged storage). Writes the error body and returns the status.
 int SendStatus(httplib::Response& res, const Status& status);
 
 std::string ToLower(std::string s);

@@ -311,6 +311,32 @@ void Service::Impl::HandleDevices(const httplib::Request&, httplib::Response& re
   res.set_content(JsonBody(json{{"devices", list}}), "application/json");
 }
 
+namespace {
+
+// kCorruption (naming the job and what is wrong) unless `job` holds a result that is what was
+// stored (its SHA-256), parses as a JSON object, and is served (state accepted; any state when
+// `any_state`, but still a known one).
+Status CheckServedResult(const storage::JobInfo& job, bool any_state) {
+  std::string problem;
+  if (job.result_json.empty()) {
+    problem = "it is empty";
+  } else if (job.result_sha256.empty() || Sha256Hex(job.result_json) != job.result_sha256) {
+    problem = "its SHA-256 is not the one stored with it";
+  } else if (!json::accept(job.result_json)) {
+    problem = "it is not JSON";
+  } else if (job.result_json.front() != '{') {
+    problem = "it is not a JSON object";
+  } else if (job.state == ServeState::kNone || (!any_state && !job.served())) {
+    problem = "its standing (accepted, rejected or revoked) is unreadable";
+  }
+  if (problem.empty()) return Status::Ok();
+  return Status::Corruption("the stored result of job " + std::to_string(job.id) +
+                            " is damaged: " + problem + "; it is not served")
+      .WithReason(Reason::kStorageDamaged);
+}
+
+}  // namespace
+
 void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response& res) {
   const std::string serial = req.matches[1];
   std::string method = req.get_param_value("method");
@@ -410,6 +436,13 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     }
     if (!s.ok()) return (void)SendStatus(res, s);
   }
+  // Never a 200 without a sound, served result: a damaged database can hand back a row whose
+  // result is empty, cut or changed, or whose standing is unreadable (README "Storage damage").
+  if (s = CheckServedResult(job, /*any_state=*/req.has_param("job")); !s.ok()) {
+    health.Note(s, "the result of job " + std::to_string(job.id), false);
+    std::cerr << "calibd: " << s.message() << "\n";
+    return (void)SendStatus(res, s);
+  }
   // One ETag per answer: the body holds the job, its time and standing besides the result (and
   // the C header's guard the job id), so two jobs with the same result, or one result before and
   // after a revoke, never share an ETag (a flashing script's If-None-Match must not keep a revoked
@@ -479,6 +512,14 @@ void Service::Impl::HandleRecordingData(const httplib::Request& req, httplib::Re
   if (!PathRecording(store.get(), req, res, &id, &info)) return;
   res.set_header("Content-Disposition",
                  "attachment; filename=\"recording-" + std::to_string(id) + ".csv\"");
+  // The bytes are checked against their SHA-256 before the answer starts (a second read): a
+  // damaged copy answers 500 storage_damaged, never a 200 with other bytes than those uploaded.
+  Status verified = store->ReadRecordingData(id, [](std::string_view) { return true; });
+  health.Note(verified, "recording " + std::to_string(id), false);
+  if (!verified.ok()) {
+    std::cerr << "calibd: " << verified.message() << "\n";
+    return (void)SendStatus(res, verified);
+  }
   res.set_header("ETag", "\"" + info.sha256 + "\"");
   storage::Store* st = store.get();
   res.set_content_provider(static_cast<size_t>(info.bytes), "text/csv",

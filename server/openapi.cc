@@ -215,7 +215,9 @@ json Build() {
                               "--max-upload-bytes, or expanding more than --max-gzip-ratio")},
         {"415", ErrorResponse("not text/csv or multipart/form-data, or an encoding other than "
                               "gzip")},
-        {"503", ErrorResponse("database busy")}}}};
+        {"503", ErrorResponse("database busy")},
+        {"507", ErrorResponse("the disk (or quota) of the database or staging folder is full "
+                              "(reason disk_full); nothing was stored")}}}};
   paths["/jobs"]["post"] = {
       {"summary", "Queue a calibration of a stored recording with another config"},
       {"security", json::array({{{"bearer", json::array()}}})},
@@ -376,7 +378,9 @@ json Build() {
       {"summary", "Liveness (also at /healthz)"},
       {"responses",
        {{"200", JsonResponse("alive", {{"type", "object"}})},
-        {"503", JsonResponse("database unavailable", {{"type", "object"}})}}}};
+        {"503", JsonResponse("database unavailable (status unavailable), damaged (status damaged) "
+                             "or its disk full (status disk_full); problems names them",
+                             {{"type", "object"}})}}}};
   paths["/metrics"]["get"] = {
       {"summary", "Prometheus text format (also at /metrics)"},
       {"responses",

@@ -43,6 +43,13 @@ struct ServeOptions {
   // only lower it.
   int64_t job_seconds = 0;
   bool access_log = true;  // one line per request on stderr
+  // How often the database's structure is checked (Store::QuickCheck: SQLite PRAGMA
+  // quick_check), besides once at start; a damaged database makes /healthz answer 503 naming
+  // the damage. 0 = only at start. Default 3600 s.
+  int64_t check_seconds = 3600;
+  // > 0: a quota on the SQLite file in pages of 4 KiB (PRAGMA max_page_count); writes beyond it
+  // answer 507 like a full disk. 0 = none (default). SQLite only.
+  int64_t db_max_pages = 0;
   // Returns "" when the options are consistent, else what is wrong (names the flag).
   std::string Validate() const;
 };

@@ -2,6 +2,7 @@
 
 #include <arpa/inet.h>
 #include <sys/socket.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -80,6 +81,38 @@ std::string DecisionOfPath(const std::string& path) {
   return action == "revoke" || action == "accept" || action == "cancel" ? action : "";
 }
 
+// Why an SQLite --db path cannot be opened for writing, in words ("" when nothing is seen
+// wrong): SQLite itself says only "unable to open database file".
+std::string DbPathProblem(const std::string& db) {
+  std::error_code ec;
+  const fs::path path(db);
+  if (fs::is_directory(path, ec)) {
+    return "--db " + db + " is a directory; give the database file's path (e.g. " +
+           (path / "calibd.db").string() + ")";
+  }
+  const bool exists = fs::exists(path, ec);
+  const fs::path folder = fs::absolute(path, ec).parent_path();
+  // The folder is created when missing (and that failing is said by the store).
+  const fs::path checked = exists ? path : folder;
+  if (!exists && !fs::exists(folder, ec)) return "";
+  struct statvfs vfs;
+  if (::statvfs(checked.c_str(), &vfs) == 0 && (vfs.f_flag & ST_RDONLY) != 0) {
+    return "--db " + db + ": " + (exists ? "the file" : "its folder " + folder.string()) +
+           " is on a read-only file system; calibd writes its database (give a writable path)";
+  }
+  if (exists && ::access(path.c_str(), W_OK) != 0) {
+    return "--db " + db + " is read-only (" + std::strerror(errno) +
+           "); calibd writes its database: give it write permission or another path";
+  }
+  // SQLite also writes its -wal and -shm files beside the database.
+  if (::access(folder.c_str(), W_OK) != 0) {
+    return "--db " + db + ": its folder " + folder.string() + " is not writable (" +
+           std::strerror(errno) + "); SQLite writes the journal files " + path.filename().string() +
+           "-wal and -shm there";
+  }
+  return "";
+}
+
 }  // namespace
 
 Service::Service(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -115,11 +148,22 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
     std::ifstream in(options.token_file);
     if (!in) return Status::InvalidInput("cannot read --token-file " + options.token_file);
     std::getline(in, impl->token);
-    while (!impl->token.empty() && isspace(static_cast<unsigned char>(impl->token.back()))) {
-      impl->token.pop_back();
+    // Spaces, tabs or a CR around the token are never part of it: a header cannot carry them
+    // (HTTP trims a field value), so a token with them could never be sent. Trimmed, and said.
+    const size_t first = impl->token.find_first_not_of(" \t\r\v\f");
+    const size_t last = impl->token.find_last_not_of(" \t\r\v\f");
+    const std::string trimmed =
+        first == std::string::npos ? "" : impl->token.substr(first, last - first + 1);
+    if (trimmed.size() != impl->token.size() && !trimmed.empty()) {
+      std::cerr << "calibd: warning: --token-file " << options.token_file
+                << " line 1: " << (first > 0 ? "leading" : "trailing")
+                << (first > 0 && last + 1 < impl->token.size() ? " and trailing" : "")
+                << " whitespace removed from the token (clients send it without)\n";
     }
+    impl->token = trimmed;
     if (impl->token.size() < 16) {
-      return Status::InvalidInput("the token in --token-file must have at least 16 characters");
+      return Status::InvalidInput("the token in --token-file " + options.token_file +
+                                  " (line 1) must have at least 16 characters");
     }
   }
   if (!IsLoopback(impl->host) && impl->token.empty() && !options.insecure) {
@@ -131,8 +175,17 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
     if (!s.ok()) return s;
   }
   storage::StoreOptions store_options;
+  store_options.max_page_count = options.db_max_pages;
+  const bool sqlite = !storage::Store::IsPostgresTarget(options.db_path);
+  if (sqlite && options.db_path != ":memory:") {
+    const std::string problem = DbPathProblem(options.db_path);
+    if (!problem.empty()) return Status::IoError(problem);
+  }
   Status s = storage::Store::Open(options.db_path, store_options, &impl->store);
   if (!s.ok()) return s;
+  // A damaged file serves nothing wrong, but is said at once (log, /healthz) and then on the
+  // schedule (Run).
+  impl->CheckStorage();
   int64_t recovered = 0;
   s = impl->store->RecoverExpiredLeases(&recovered);
   if (!s.ok()) return s;
@@ -152,6 +205,9 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
   impl->staging_dir = impl->instance->staging_dir();
   impl->ReapDeadProcesses();
   WorkerPoolOptions pool;
+  pool.storage_outcome = [d = impl.get()](const Status& st, const std::string& what, bool write) {
+    d->health.Note(st, what, write);
+  };
   pool.workers =
       options.workers > 0 ? options.workers : std::max(1u, std::thread::hardware_concurrency());
   pool.lease_ms = options.lease_ms;
@@ -217,6 +273,21 @@ Status Service::Bind() {
 int Service::port() const { return impl_->bound_port; }
 
 void Service::Run() {
+  Impl& d = *impl_;
+  if (d.options.check_seconds > 0 && !d.checker.joinable()) {
+    d.checker = std::thread([&d] {
+      std::unique_lock<std::mutex> lock(d.checker_mu);
+      for (;;) {
+        if (d.checker_cv.wait_for(lock, std::chrono::seconds(d.options.check_seconds),
+                                  [&d] { return d.checker_stop; })) {
+          return;
+        }
+        lock.unlock();
+        d.CheckStorage();
+        lock.lock();
+      }
+    });
+  }
   impl_->workers->Start();
   impl_->http->listen_after_bind();
 }
@@ -230,6 +301,12 @@ bool Service::Shutdown() {
     const auto deadline =
         std::chrono::steady_clock::now() + std::chrono::seconds(d.options.shutdown_grace_seconds);
     d.http->Shutdown(d.options.shutdown_grace_seconds * 1000);
+    {
+      std::lock_guard<std::mutex> lock(d.checker_mu);
+      d.checker_stop = true;
+    }
+    d.checker_cv.notify_all();
+    if (d.checker.joinable()) d.checker.join();
     StopOutcome outcome = StopOutcome::kFinished;
     if (d.workers) {
       const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
@@ -263,6 +340,21 @@ void Service::Impl::ReapDeadProcesses() {
     }
     return s;
   });
+}
+
+void Service::Impl::CheckStorage() {
+  std::string report;
+  Status s = store->QuickCheck(&report);
+  if (!s.ok()) {
+    // Unreachable or busy: /healthz sees that itself; the structure is checked next time.
+    std::cerr << "calibd: cannot check the database: " << s.ToString() << "\n";
+    return;
+  }
+  if (report != "ok") {
+    std::cerr << "calibd: the database " << store->path() << " is damaged (quick_check): " << report
+              << "\ncalibd: /healthz answers 503 until it is repaired; restore it from a backup\n";
+  }
+  health.NoteCheck(report);
 }
 
 bool Service::Impl::TokenMatches(const std::string& given) const {
@@ -353,8 +445,19 @@ void Service::Impl::SetupRoutes() {
   });
 
   http.set_exception_handler(
-      [](const httplib::Request&, httplib::Response& res, std::exception_ptr) {
-        // Never exception text: it may reveal internals.
+      [](const httplib::Request& req, httplib::Response& res, std::exception_ptr error) {
+        // Never exception text to the client: it may reveal internals. The operator's log has
+        // it, with the request, to find the bug.
+        std::string what = "an exception that is not a std::exception";
+        try {
+          if (error) std::rethrow_exception(error);
+        } catch (const std::exception& e) {
+          what = e.what();
+        } catch (...) {
+        }
+        const std::string line = "calibd: internal error in " + SanitizeForLog(req.method) + " " +
+                                 SanitizeForLog(req.path) + ": " + SanitizeForLog(what) + "\n";
+        [[maybe_unused]] ssize_t n = ::write(STDERR_FILENO, line.data(), line.size());
         SendError(res, 500, "internal", "internal server error");
       });
 
@@ -470,11 +573,27 @@ void Service::Impl::HandleHealth(const httplib::Request&, httplib::Response& res
   storage::QueueCounts counts;
   Status s = store->QueueDepth(&counts);
   if (!s.ok()) {
+    health.Note(s, "the job queue", false);
     res.status = 503;
-    res.set_content(
-        JsonBody(json{
-            {"status", "unavailable"}, {"backend", store->backend()}, {"database", s.message()}}),
-        "application/json");
+    json body = {
+        {"status", "unavailable"}, {"backend", store->backend()}, {"database", s.message()}};
+    if (s.code() == StatusCode::kCorruption) body["status"] = "damaged";
+    const json problems = health.Problems();
+    if (!problems.empty()) body["problems"] = problems;
+    res.set_content(JsonBody(body), "application/json");
+    return;
+  }
+  // Damage found by the structure check or by a read, or a full disk: not healthy, whatever
+  // still works (README "Storage damage").
+  if (const json problems = health.Problems(); !problems.empty()) {
+    res.status = 503;
+    res.set_content(JsonBody(json{{"status", problems.contains("damage") ? "damaged" : "disk_full"},
+                                  {"backend", store->backend()},
+                                  {"database", "reachable"},
+                                  {"problems", problems},
+                                  {"queued", counts.queued},
+                                  {"running", counts.running}}),
+                    "application/json");
     return;
   }
   res.set_content(json{{"status", "ok"},

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <cerrno>
 #include <chrono>
+#include <condition_variable>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -39,6 +40,7 @@
 #include "server/recording.h"
 #include "server/recording_routes.h"
 #include "server/service.h"
+#include "server/storage_health.h"
 #include "server/worker_pool.h"
 #include "storage/store.h"
 
@@ -68,11 +70,20 @@ struct Service::Impl {
   std::once_flag shutdown_once;
   bool shutdown_clean = true;
   bool abandoned = false;  // Shutdown left a job whose computation did not stop (Service)
+  // What requests, jobs and the structure checks found about the storage (/healthz).
+  StorageHealth health;
+  // The scheduled structure check (options.check_seconds; none when 0), stopped by Shutdown.
+  std::thread checker;
+  std::mutex checker_mu;
+  std::condition_variable checker_cv;
+  bool checker_stop = false;
 
   void SetupRoutes();
   // Takes back at once the jobs of calibd processes of this host that died (kill -9, crash)
   // while holding them, instead of waiting for their leases to expire (ProcessInstance).
   void ReapDeadProcesses();
+  // Runs Store::QuickCheck and notes its report in `health` (logged when not "ok").
+  void CheckStorage();
   bool Authorized(const httplib::Request& req) const;
   // Whether `given` is the server's token (true when it has none); constant time.
   bool TokenMatches(const std::string& given) const;

@@ -27,6 +27,7 @@ class StagingFile {
       const ssize_t n = ::write(fd_, data, len);
       if (n < 0) {
         if (errno == EINTR) continue;
+        errno_ = errno;
         return false;
       }
       data += n;
@@ -36,15 +37,29 @@ class StagingFile {
   }
   Status Close() {
     if (fd_ >= 0 && ::close(fd_) != 0) {
+      errno_ = errno;
       fd_ = -1;
-      return Status::IoError("cannot write the staging file");
+      return WriteError();
     }
     fd_ = -1;
     return Status::Ok();
   }
+  // Why the last Write or Close failed: a full disk (or quota) is 507 with reason disk_full.
+  Status WriteError() const {
+    if (errno_ == ENOSPC || errno_ == EDQUOT) {
+      return Status::IoError(
+                 "cannot write the upload to disk: the disk holding the staging "
+                 "folder is full (" +
+                 std::string(std::strerror(errno_)) + ")")
+          .WithReason(Reason::kDiskFull);
+    }
+    return Status::IoError("cannot write the upload to disk: " +
+                           std::string(std::strerror(errno_)));
+  }
   const std::string& path() const { return path_; }
 
  private:
+  int errno_ = 0;  // of the last failed write
   int fd_ = -1;
   std::string path_;
 };
@@ -170,7 +185,7 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     }
     sha.Update(std::string_view(data, len));
     if (!staged.Write(data, len)) {
-      body_status = Status::IoError("cannot write the upload to disk");
+      body_status = staged.WriteError();
       return false;
     }
     parse_status = parser.Feed(std::string_view(data, len));
@@ -289,6 +304,7 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
   if (read_ok && body_status.ok() && parse_status.ok()) end_recording();
 
   if (!body_status.ok()) {
+    if (body_status.reason() == Reason::kDiskFull) health.Note(body_status, "an upload", true);
     res.set_header("Connection", "close");
     return finish(SendStatus(res, body_status));
   }
@@ -372,6 +388,9 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
   storage::RecordingInfo info;
   bool existed = false;
   s = store->PutRecording(rec, &info, &existed);
+  // A stored upload is a sound write (the disk is not full) and repairs a damaged copy of the
+  // same bytes (Store::PutRecording).
+  health.Note(s, s.ok() ? "recording " + std::to_string(info.id) : "an upload", true);
   if (!s.ok()) return finish(SendStatus(res, s));
   json body = {{"recording",
                 {{"id", info.id},

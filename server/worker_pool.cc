@@ -271,7 +271,29 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
     failure.message = s.ToString();
     failure.detail_json = PartialDiagnosticsText(result, kMaxPartialDiagnosticsBytes);
     Status f = store_->FailJob(job.id, worker_id, failure, transient);
-    if (!f.ok()) {
+    if (options_.storage_outcome && f.code() != StatusCode::kConflict &&
+        f.code() != StatusCode::kNotFound) {
+      options_.storage_outcome(f, "job " + std::to_string(job.id), true);
+    }
+    if (!f.ok() && f.code() != StatusCode::kConflict && f.code() != StatusCode::kNotFound) {
+      std::cerr << "calibd: " << worker_id << ": recording the failure of job " << job.id
+                << " failed: " << f.ToString() << "\n";
+      // A full disk or quota: a failure without its diagnostics may still fit (it rewrites the
+      // row in place); else give the job back, so that it does not stay running until its lease
+      // lapses. Only when the store takes neither does the lease decide.
+      storage::JobFailure small = failure;
+      small.detail_json.clear();
+      if (small.message.size() > 200) small.message.resize(200);
+      f = store_->FailJob(job.id, worker_id, small, transient);
+      if (!f.ok()) {
+        const Status r = store_->ReleaseJob(job.id, worker_id);
+        std::cerr << "calibd: " << worker_id << ": job " << job.id
+                  << (r.ok() ? ": released to the queue instead"
+                             : ": cannot release it either (" + r.ToString() +
+                                   "): it runs again when its lease lapses")
+                  << "\n";
+      }
+    } else if (!f.ok()) {
       std::cerr << "calibd: " << worker_id << ": recording the failure of job " << job.id
                 << " failed: " << f.ToString() << "\n";
     }
@@ -316,7 +338,12 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
         parsed = parser.Feed(chunk);
         return parsed.ok() && !stop.stop_requested();
       });
-      if (!s.ok()) return fail(s, s.IsTransient());
+      if (options_.storage_outcome) {
+        options_.storage_outcome(s, "recording " + std::to_string(job.recording_id), false);
+      }
+      // Damaged stored bytes (their SHA-256 is not the stored one): never calibrated, and not
+      // retried until a re-upload repairs them.
+      if (!s.ok()) return fail(s, s.IsTransient() && s.code() != StatusCode::kCorruption);
       if (parsed.ok() && !stop.stop_requested()) parsed = parser.Finish();
       if (!parsed.ok() && parsed.reason() == Reason::kUnspecified) {
         parsed.WithReason(Reason::kRecordingUnreadable);
@@ -331,8 +358,11 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       }
     } catch (const std::bad_alloc&) {
       s = Status::IoError("out of memory while calibrating").WithReason(Reason::kOverMemoryBudget);
-    } catch (const std::exception&) {
-      // Never leak exception text to clients: the job says only that it was our fault.
+    } catch (const std::exception& e) {
+      // Never leak exception text to clients: the job says only that it was our fault; the
+      // operator's log has what was thrown, to find the bug.
+      std::cerr << "calibd: " << worker_id << ": job " << job.id << " (" << job.method
+                << "): exception while calibrating: " << e.what() << "\n";
       s = Status::Internal("internal error while calibrating; please report it");
     }
   }
@@ -380,6 +410,10 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
   if (!s.ok()) return fail(s, s.IsTransient());
   s = store_->CompleteJob(job.id, worker_id,
                           result.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+  if (options_.storage_outcome && s.code() != StatusCode::kConflict &&
+      s.code() != StatusCode::kNotFound) {
+    options_.storage_outcome(s, "job " + std::to_string(job.id), true);
+  }
   if (!s.ok()) {
     std::cerr << "calibd: " << worker_id << ": storing the result of job " << job.id
               << " failed: " << s.ToString() << "\n";

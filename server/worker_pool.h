@@ -66,6 +66,10 @@ struct WorkerPoolOptions {
   // Stop: how long, past the grace period, stopped computations get to return (they poll every
   // 100 ms at most) before their jobs are abandoned with their leases.
   int64_t stop_wait_ms = 1000;
+  // Optional: told the outcome of the jobs' storage calls (StorageHealth::Note): reading the
+  // recording `what` = "recording N" (write false), storing the result or failure `what` =
+  // "job N" (write true). Must be thread-safe and quick.
+  std::function<void(const Status& s, const std::string& what, bool write)> storage_outcome;
 };
 
 // What Stop did with the jobs still running.

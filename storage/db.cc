@@ -3,11 +3,64 @@
 #include <sqlite3.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <thread>
 #include <utility>
+#include <vector>
 
 namespace calibd::storage {
+
+std::string DescribeStatement(std::string_view sql) {
+  // Words of the statement, upper-cased, without its parameters or literals.
+  std::vector<std::string> words;
+  std::string word;
+  for (size_t i = 0; i <= sql.size() && words.size() < 8; ++i) {
+    const char c = i < sql.size() ? sql[i] : ' ';
+    if (std::isalnum(static_cast<unsigned char>(c)) || c == '_') {
+      word += static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    } else if (!word.empty()) {
+      words.push_back(std::move(word));
+      word.clear();
+    }
+  }
+  if (words.empty()) return "a statement";
+  auto table_after = [&](const char* keyword) -> std::string {
+    for (size_t i = 0; i + 1 < words.size(); ++i) {
+      if (words[i] == keyword) {
+        std::string t = words[i + 1];
+        for (char& c : t) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+        return t;
+      }
+    }
+    return "";
+  };
+  const std::string& verb = words[0];
+  std::string table;
+  const char* what = "a statement";
+  if (verb == "SELECT" || verb == "WITH") {
+    what = "reading";
+    table = table_after("FROM");
+  } else if (verb == "INSERT" || verb == "REPLACE") {
+    what = "writing";
+    table = table_after("INTO");
+  } else if (verb == "UPDATE") {
+    what = "writing";
+    table = words.size() > 1 ? table_after("UPDATE") : "";
+  } else if (verb == "DELETE") {
+    what = "deleting from";
+    table = table_after("FROM");
+  } else if (verb == "BEGIN" || verb == "COMMIT" || verb == "END" || verb == "ROLLBACK" ||
+             verb == "SAVEPOINT" || verb == "RELEASE") {
+    return "a transaction";
+  } else if (verb == "PRAGMA") {
+    return "a database setting";
+  } else if (verb == "CREATE" || verb == "ALTER" || verb == "DROP") {
+    return "the schema";
+  }
+  if (table.empty()) return what;
+  return std::string(what) + " " + table;
+}
 
 Status StatusFromSqlite(int rc, sqlite3* db, std::string_view context) {
   if (rc == SQLITE_OK || rc == SQLITE_ROW || rc == SQLITE_DONE) return Status::Ok();
@@ -30,6 +83,7 @@ Status StatusFromSqlite(int rc, sqlite3* db, std::string_view context) {
     case SQLITE_LOCKED:
       return Status::Busy(std::move(msg));
     case SQLITE_FULL:
+      return Status::IoError(std::move(msg)).WithReason(Reason::kDiskFull);
     case SQLITE_IOERR:
     case SQLITE_READONLY:
     case SQLITE_CANTOPEN:
@@ -38,7 +92,7 @@ Status StatusFromSqlite(int rc, sqlite3* db, std::string_view context) {
       return Status::IoError(std::move(msg));
     case SQLITE_CORRUPT:
     case SQLITE_NOTADB:
-      return Status::Corruption(std::move(msg));
+      return Status::Corruption(std::move(msg)).WithReason(Reason::kStorageDamaged);
     case SQLITE_CONSTRAINT:
       return Status::Conflict(std::move(msg));
     case SQLITE_TOOBIG:
@@ -128,9 +182,9 @@ Status Stmt::Step(bool* row) {
   *row = false;
   if (stmt_ == nullptr) return Status::Internal("storage: step on an unprepared statement");
   if (bind_rc_ != SQLITE_OK) {
-    return StatusFromSqlite(
-        bind_rc_, nullptr,
-        "binding parameter " + std::to_string(bind_index_) + " of `" + sqlite3_sql(stmt_) + "`");
+    return StatusFromSqlite(bind_rc_, nullptr,
+                            "binding parameter " + std::to_string(bind_index_) + " for " +
+                                DescribeStatement(sqlite3_sql(stmt_)));
   }
   int rc = sqlite3_step(stmt_);
   if (rc == SQLITE_ROW) {
@@ -138,7 +192,7 @@ Status Stmt::Step(bool* row) {
     return Status::Ok();
   }
   if (rc == SQLITE_DONE) return Status::Ok();
-  Status s = StatusFromSqlite(rc, db_, std::string("`") + sqlite3_sql(stmt_) + "`");
+  Status s = StatusFromSqlite(rc, db_, DescribeStatement(sqlite3_sql(stmt_)));
   sqlite3_reset(stmt_);
   return s;
 }
@@ -250,8 +304,7 @@ Status Db::Exec(std::string_view sql) {
   int rc = sqlite3_exec(db_, text.c_str(), nullptr, nullptr, &err);
   if (err != nullptr) sqlite3_free(err);
   if (rc == SQLITE_OK) return Status::Ok();
-  std::string what = text.size() > 60 ? text.substr(0, 60) + "..." : text;
-  return StatusFromSqlite(rc, db_, "`" + what + "`");
+  return StatusFromSqlite(rc, db_, DescribeStatement(text));
 }
 
 Status Db::Prepare(std::string_view sql, Stmt* out) {
@@ -262,7 +315,7 @@ Status Db::Prepare(std::string_view sql, Stmt* out) {
     sqlite3_stmt* stmt = nullptr;
     int rc = sqlite3_prepare_v3(db_, key.data(), static_cast<int>(key.size()),
                                 SQLITE_PREPARE_PERSISTENT, &stmt, nullptr);
-    if (rc != SQLITE_OK) return StatusFromSqlite(rc, db_, "prepare `" + key + "`");
+    if (rc != SQLITE_OK) return StatusFromSqlite(rc, db_, "preparing " + DescribeStatement(key));
     it = cache_.emplace(std::move(key), Cached{stmt, false}).first;
   }
   if (it->second.in_use) return PrepareUncached(sql, out);
@@ -275,7 +328,7 @@ Status Db::PrepareUncached(std::string_view sql, Stmt* out) {
   *out = Stmt();
   sqlite3_stmt* stmt = nullptr;
   int rc = sqlite3_prepare_v2(db_, sql.data(), static_cast<int>(sql.size()), &stmt, nullptr);
-  if (rc != SQLITE_OK) return StatusFromSqlite(rc, db_, "prepare `" + std::string(sql) + "`");
+  if (rc != SQLITE_OK) return StatusFromSqlite(rc, db_, "preparing " + DescribeStatement(sql));
   *out = Stmt(stmt, db_, /*owned=*/true);
   return Status::Ok();
 }

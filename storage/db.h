@@ -10,6 +10,9 @@
 //   foreign key rule) SQLITE_TOOBIG                                      -> kTooLarge anything else
 //   (SQLITE_ERROR, MISUSE, NOMEM, ...)   -> kInternal   (a bug on our side)
 //
+// SQLITE_FULL carries Reason::kDiskFull, SQLITE_CORRUPT/NOTADB Reason::kStorageDamaged. Messages
+// name what a statement did (DescribeStatement), never its SQL text.
+//
 // Only prepared statements with bound parameters are used; no SQL text is ever built from user
 // input. Statements prepared through Db::Prepare are cached per connection.
 //
@@ -35,6 +38,9 @@ namespace calibd::storage {
 // Maps an SQLite result code (primary or extended) to a Status. `db` (may be null) supplies
 // sqlite3_errmsg; `context` says what was being done ("claim job", ...). OK for SQLITE_OK/ROW/DONE.
 Status StatusFromSqlite(int rc, sqlite3* db, std::string_view context);
+// What a statement does, without its SQL text (messages never show SQL, which reaches HTTP
+// answers): "writing jobs", "reading recordings", "a transaction", "a database setting".
+std::string DescribeStatement(std::string_view sql);
 
 // A prepared statement. Move-only. Parameters are 1-based, columns 0-based.
 // A Stmt obtained from Db::Prepare is borrowed from the connection's cache: its destructor

@@ -134,13 +134,14 @@ Status PgConn::StatusFrom(pg_result* res, std::string_view what) {
     return Status::Busy(text);
   }
   if (Starts(state, "23")) return Status::Conflict(text);
+  if (!std::strcmp(state, "53100")) return Status::IoError(text).WithReason(Reason::kDiskFull);
   if (Starts(state, "53") || Starts(state, "58") || !std::strcmp(state, "25006")) {
     return Status::IoError(text);
   }
   if (!std::strcmp(state, "54000")) return Status(StatusCode::kTooLarge, text);
   if (Starts(state, "22")) return Status::InvalidInput(text);
   if (!std::strcmp(state, "XX001") || !std::strcmp(state, "XX002")) {
-    return Status::Corruption(text);
+    return Status::Corruption(text).WithReason(Reason::kStorageDamaged);
   }
   return Status::Internal(text);
 }

@@ -124,6 +124,13 @@ class PgStore final : public Store {
 
   Status PutRecordingLocked(PgConn* c, const NewRecording& r, const std::string& sha,
                             RecordingInfo* out, bool* existed);
+  // Writes the upload's bytes as recording `id`'s chunk rows, checking they hash to `sha`. `fd`:
+  // the staged file (r.path, at its start) or -1 for r.data.
+  Status WriteChunks(PgConn* c, const NewRecording& r, int64_t id, int fd, int64_t size,
+                     const std::string& sha);
+  // A re-upload of recording `id`'s bytes: when the stored chunks do not hash to `sha` (damaged),
+  // replaces them with the upload's.
+  Status RepairIfDamaged(PgConn* c, const NewRecording& r, int64_t id, const std::string& sha);
   Status EnqueueJobLocked(PgConn* c, int64_t recording_id, const std::string& method,
                           const std::string& device, const std::string& config_json, int64_t now,
                           JobInfo* out, bool inherit_device);

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <iostream>
 #include <utility>
 #include <vector>
 
@@ -139,6 +140,76 @@ Status PgStore::PutRecordingLocked(PgConn* c, const NewRecording& r, const std::
       duplicate = true;
     } else {
       id = res.Int(0, 0);
+      s = WriteChunks(c, r, id, file.fd, size, sha);
+      if (!s.ok()) return s;
+    }
+  }
+  if (duplicate) {
+    // Identical bytes are stored already, unless the stored copy was damaged since: then this
+    // upload repairs it (README "Storage damage").
+    s = RepairIfDamaged(c, r, id, sha);
+    if (!s.ok()) return s;
+  }
+  s = RememberDevice(c, r.device, now);
+  if (!s.ok()) return s;
+  RecordingInfo info;
+  s = LoadRecording(c, id, &info);
+  if (!s.ok()) return s;
+  if (r.job) {
+    JobInfo job;
+    // The job is for the device this upload names, or none (never the stored one's device).
+    const std::string& device = !r.job->device.empty() ? r.job->device : r.device;
+    s = EnqueueJobLocked(c, id, r.job->method, device, r.job->config_json, now, &job,
+                         /*inherit_device=*/false);
+    if (!s.ok()) return s;
+    info.job = std::move(job);
+  }
+  *out = std::move(info);
+  *existed = duplicate;
+  return Status::Ok();
+}
+
+Status PgStore::RepairIfDamaged(PgConn* c, const NewRecording& r, int64_t id,
+                                const std::string& sha) {
+  PgResult res;
+  Status s = c->Exec("SELECT bytes FROM recordings WHERE id = $1", {PgInt(id)}, &res);
+  if (!s.ok()) return s;
+  const int64_t bytes = res.rows() > 0 ? res.Int(0, 0) : -1;
+  Sha256 hasher;
+  int64_t stored = 0;
+  for (int seq = 0;; ++seq) {
+    s = c->Exec("SELECT data FROM recording_chunks WHERE recording_id = $1 AND seq = $2",
+                {PgInt(id), PgInt(seq)}, &res, /*binary_result=*/true);
+    if (!s.ok()) return s;
+    if (res.rows() == 0) break;
+    hasher.Update(res.Bytes(0, 0));
+    stored += static_cast<int64_t>(res.Bytes(0, 0).size());
+  }
+  if (stored == bytes && hasher.HexDigest() == sha) return Status::Ok();
+  s = c->Exec("DELETE FROM recording_chunks WHERE recording_id = $1", {PgInt(id)});
+  if (!s.ok()) return s;
+  Fd file;
+  int64_t size = static_cast<int64_t>(r.data.size());
+  if (!r.path.empty()) {
+    file.fd = ::open(r.path.c_str(), O_RDONLY | O_CLOEXEC);
+    struct stat st;
+    if (file.fd < 0 || ::fstat(file.fd, &st) != 0) {
+      return Status::IoError("storage: cannot open " + r.path + ": " + std::strerror(errno));
+    }
+    size = static_cast<int64_t>(st.st_size);
+  }
+  s = WriteChunks(c, r, id, file.fd, size, sha);
+  if (!s.ok()) return s;
+  std::cerr << "calibd: recording " << id
+            << ": the stored copy was damaged; repaired from a new upload of the same bytes\n";
+  return Status::Ok();
+}
+
+Status PgStore::WriteChunks(PgConn* c, const NewRecording& r, int64_t id, int fd, int64_t size,
+                            const std::string& sha) {
+  Status s;
+  {
+    {
       // The bytes, one chunk row (<= 1 MiB) at a time, hashed on the way to check them.
       Sha256 hasher;
       std::vector<char> buffer;
@@ -152,7 +223,7 @@ Status PgStore::PutRecordingLocked(PgConn* c, const NewRecording& r, const std::
                                 std::min<size_t>(kChunkBytes, static_cast<size_t>(size - offset)));
         } else {
           size_t got = 0;
-          s = ReadFull(file.fd, buffer.data(), buffer.size(), r.path, &got);
+          s = ReadFull(fd, buffer.data(), buffer.size(), r.path, &got);
           if (!s.ok()) return s;
           if (got == 0) break;
           chunk = std::string_view(buffer.data(), got);
@@ -177,22 +248,6 @@ Status PgStore::PutRecordingLocked(PgConn* c, const NewRecording& r, const std::
       }
     }
   }
-  s = RememberDevice(c, r.device, now);
-  if (!s.ok()) return s;
-  RecordingInfo info;
-  s = LoadRecording(c, id, &info);
-  if (!s.ok()) return s;
-  if (r.job) {
-    JobInfo job;
-    // The job is for the device this upload names, or none (never the stored one's device).
-    const std::string& device = !r.job->device.empty() ? r.job->device : r.device;
-    s = EnqueueJobLocked(c, id, r.job->method, device, r.job->config_json, now, &job,
-                         /*inherit_device=*/false);
-    if (!s.ok()) return s;
-    info.job = std::move(job);
-  }
-  *out = std::move(info);
-  *existed = duplicate;
   return Status::Ok();
 }
 
@@ -215,10 +270,12 @@ Status PgStore::ReadRecordingData(int64_t id,
   }
   PgConn* c = lease->get();
   PgResult res;
-  s = c->Exec("SELECT bytes FROM recordings WHERE id = $1", {PgInt(id)}, &res);
+  RecordingInfo info;  // its stored hash, which the bytes read are checked against
+  s = LoadRecording(c, id, &info);
   if (!s.ok()) return s;
-  if (res.rows() == 0) return Status::NotFound("recording " + std::to_string(id) + " not found");
-  const int64_t bytes = res.Int(0, 0);
+  const int64_t bytes = info.bytes;
+  Sha256 hasher;
+  bool whole = true;
   int64_t offset = 0;
   for (int seq = 0; offset < bytes; ++seq) {
     s = c->Exec("SELECT data FROM recording_chunks WHERE recording_id = $1 AND seq = $2",
@@ -231,9 +288,15 @@ Status PgStore::ReadRecordingData(int64_t id,
     }
     std::string_view chunk = res.Bytes(0, 0);
     offset += static_cast<int64_t>(chunk.size());
-    if (!sink(chunk)) break;
+    hasher.Update(chunk);
+    if (!sink(chunk)) {
+      whole = false;
+      break;
+    }
   }
-  return c->ExecScript("COMMIT");
+  s = c->ExecScript("COMMIT");
+  if (!s.ok() || !whole) return s;
+  return internal::CheckRecordingDigest(info, offset, hasher.HexDigest());
 }
 
 }  // namespace calibd::storage

@@ -64,6 +64,7 @@ class SqliteStore final : public Store {
   Status QueueDepth(QueueCounts* out) override;
   Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) override;
   Status IntegrityCheck(std::string* result) override;
+  Status QuickCheck(std::string* result) override;
   Status Checkpoint() override;
 
  private:

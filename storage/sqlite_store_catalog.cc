@@ -268,6 +268,34 @@ Status SqliteStore::IntegrityCheck(std::string* result) {
   return Status::Ok();
 }
 
+Status SqliteStore::QuickCheck(std::string* result) {
+  // A connection of its own, not a pooled one: a pooled connection's page cache may still hold
+  // pages as they were before the file was damaged (nothing written since tells it otherwise).
+  std::unique_ptr<Db> db;
+  Status s = Db::Open(path_, db_options_, &db);
+  if (s.code() == StatusCode::kCorruption) {
+    *result = s.message();
+    return Status::Ok();
+  }
+  if (!s.ok()) return s;
+  Stmt st;
+  s = db->PrepareUncached("PRAGMA quick_check(20)", &st);
+  std::string report;
+  for (bool row = s.ok(); row;) {
+    s = st.Step(&row);
+    if (!s.ok() || !row) break;
+    if (!report.empty()) report += "\n";
+    report += st.ColumnText(0);
+  }
+  if (s.code() == StatusCode::kCorruption) {
+    report = s.message();  // too damaged to check
+  } else if (!s.ok()) {
+    return s;
+  }
+  *result = report.empty() ? "ok" : report;
+  return Status::Ok();
+}
+
 Status SqliteStore::Checkpoint() {
   Conn conn(this);
   Status s = conn.Open();

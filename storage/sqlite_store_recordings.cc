@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <iostream>
 #include <utility>
 #include <vector>
 
@@ -132,6 +133,72 @@ Status StreamFileIntoNewRow(Db* db, const NewRecording& r, int fd, int64_t size,
   return Status::Ok();
 }
 
+// The SHA-256 of recording `id`'s stored bytes (inside the caller's transaction).
+Status HashStoredBlob(Db* db, int64_t id, std::string* sha) {
+  Blob blob;
+  int rc = sqlite3_blob_open(db->handle(), "main", "recording_data", "data", id, /*write=*/0,
+                             &blob.blob);
+  if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "open recording blob");
+  const int64_t size = sqlite3_blob_bytes(blob.blob);
+  std::vector<char> buffer(static_cast<size_t>(std::min<int64_t>(size, kChunkBytes)));
+  Sha256 hasher;
+  for (int64_t offset = 0; offset < size;) {
+    const int n = static_cast<int>(std::min<int64_t>(size - offset, kChunkBytes));
+    rc = sqlite3_blob_read(blob.blob, buffer.data(), n, static_cast<int>(offset));
+    if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "read recording blob");
+    hasher.Update(std::string_view(buffer.data(), static_cast<size_t>(n)));
+    offset += n;
+  }
+  *sha = hasher.HexDigest();
+  return Status::Ok();
+}
+
+// Replaces recording `id`'s stored bytes with the upload's (a repair of a damaged copy; inside
+// the caller's transaction). The bytes are hashed again on the way and must give `sha`.
+Status RewriteStoredBlob(Db* db, int64_t id, const NewRecording& r, int fd, int64_t size,
+                         const std::string& sha) {
+  Stmt st;
+  Status s = db->Prepare("UPDATE recording_data SET data = ?1 WHERE recording_id = ?2", &st);
+  if (!s.ok()) return s;
+  if (fd < 0) {
+    st.BindBlobNoCopy(1, r.data).BindInt(2, id);
+    return st.Run();
+  }
+  st.BindZeroBlob(1, size).BindInt(2, id);
+  s = st.Run();
+  if (!s.ok()) return s;
+  if (::lseek(fd, 0, SEEK_SET) != 0) {
+    return Status::IoError("storage: cannot rewind " + r.path + ": " + std::strerror(errno));
+  }
+  Blob blob;
+  int rc = sqlite3_blob_open(db->handle(), "main", "recording_data", "data", id, /*write=*/1,
+                             &blob.blob);
+  if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "open recording blob");
+  std::vector<char> buffer(kChunkBytes);
+  Sha256 hasher;
+  int64_t offset = 0;
+  while (offset < size) {
+    ssize_t n = ::read(fd, buffer.data(),
+                       static_cast<size_t>(std::min<int64_t>(size - offset, kChunkBytes)));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      return Status::IoError("storage: reading " + r.path + ": " +
+                             (n < 0 ? std::strerror(errno) : "it shrank while being stored"));
+    }
+    hasher.Update(std::string_view(buffer.data(), static_cast<size_t>(n)));
+    rc =
+        sqlite3_blob_write(blob.blob, buffer.data(), static_cast<int>(n), static_cast<int>(offset));
+    if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "write recording blob");
+    offset += n;
+  }
+  rc = blob.Close();
+  if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "close recording blob");
+  if (hasher.HexDigest() != sha) {
+    return Status::IoError("storage: " + r.path + " changed while being stored");
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 namespace sqlite {
@@ -234,6 +301,22 @@ Status SqliteStore::PutRecordingLocked(Db* db, const NewRecording& r, const std:
       if (!s.ok()) return s;
     }
   }
+  if (duplicate) {
+    // Identical bytes are stored already, unless the stored copy was damaged since (a copied
+    // database file, a bad sector): then this upload repairs it (README "Storage damage").
+    RecordingInfo stored;
+    s = LoadRecording(db, id, &stored);
+    if (!s.ok()) return s;
+    std::string stored_sha;
+    s = HashStoredBlob(db, id, &stored_sha);
+    if (!s.ok() && s.code() != StatusCode::kCorruption) return s;
+    if (!s.ok() || stored_sha != stored.sha256 || stored.bytes != size) {
+      s = RewriteStoredBlob(db, id, r, file.fd, size, stored.sha256);
+      if (!s.ok()) return s;
+      std::cerr << "calibd: recording " << id
+                << ": the stored copy was damaged; repaired from a new upload of the same bytes\n";
+    }
+  }
   s = RememberDevice(db, r.device, now);
   if (!s.ok()) return s;
 
@@ -279,17 +362,29 @@ Status SqliteStore::ReadRecordingData(int64_t id,
     if (s.code() == StatusCode::kNotFound) return s;
     return open_error;
   }
+  // The metadata in the blob's snapshot: the stored hash the bytes are checked against.
+  RecordingInfo info;
+  s = LoadRecording(db, id, &info);
+  if (!s.ok()) return s;
   const int64_t size = sqlite3_blob_bytes(blob.blob);
   std::vector<char> buffer(static_cast<size_t>(std::min<int64_t>(size, kChunkBytes)));
+  Sha256 hasher;
+  bool whole = true;
   for (int64_t offset = 0; offset < size;) {
     int n = static_cast<int>(std::min<int64_t>(size - offset, kChunkBytes));
     rc = sqlite3_blob_read(blob.blob, buffer.data(), n, static_cast<int>(offset));
     if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "read recording blob");
     offset += n;
-    if (!sink(std::string_view(buffer.data(), static_cast<size_t>(n)))) break;
+    const std::string_view chunk(buffer.data(), static_cast<size_t>(n));
+    hasher.Update(chunk);
+    if (!sink(chunk)) {
+      whole = false;
+      break;
+    }
   }
   rc = blob.Close();
   if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "close recording blob");
+  if (whole) return internal::CheckRecordingDigest(info, size, hasher.HexDigest());
   return Status::Ok();
 }
 

@@ -56,6 +56,16 @@ GateVerdict VerdictOf(const std::string& result_json) {
 
 int PageLimit(const JobFilter& f) { return std::clamp(f.limit <= 0 ? 50 : f.limit, 1, 500); }
 
+Status CheckRecordingDigest(const RecordingInfo& info, int64_t bytes, const std::string& sha) {
+  if (bytes == info.bytes && sha == info.sha256) return Status::Ok();
+  return Status::Corruption("storage: recording " + std::to_string(info.id) +
+                            " is damaged: its stored bytes (" + std::to_string(bytes) +
+                            ") have SHA-256 " + sha + ", not the " + info.sha256 + " of the " +
+                            std::to_string(info.bytes) +
+                            " bytes uploaded; upload the original file again to repair it")
+      .WithReason(Reason::kStorageDamaged);
+}
+
 Status ValidateNewRecording(const NewRecording& r) {
   if (!r.columns_json.empty() && !IsJsonArray(r.columns_json)) {
     return Status::InvalidInput("storage: columns_json is not a JSON array");

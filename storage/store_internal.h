@@ -34,6 +34,10 @@ int PageLimit(const JobFilter& f);
 
 // PutRecording's argument checks (kInvalidInput): columns/sensors JSON arrays, a job's method.
 Status ValidateNewRecording(const NewRecording& r);
+// After a whole recording was read: kCorruption naming the recording and both hashes when the
+// bytes read (`bytes`, their SHA-256 `sha`) are not the ones stored (`info`), with how to repair
+// it.
+Status CheckRecordingDigest(const RecordingInfo& info, int64_t bytes, const std::string& sha);
 // ClaimJob's argument checks (kInvalidInput): a worker id, a positive lease.
 Status ValidateClaim(const std::string& worker_id, int64_t lease_ms);
 

@@ -452,5 +452,34 @@ TEST_F(PgStoreTest, ServerGoingAwayIsBusyAndTheStoreReconnectsByItself) {
   EXPECT_EQ(n, 1);  // the refused enqueue left nothing behind
 }
 
+TEST_F(PgStoreTest, AChangedChunkIsFoundWhenReadAndARepeatedUploadRepairsIt) {
+  auto store = Open();
+  const std::string bytes = RandomBytes((2u << 20) + 77, 11);
+  const int64_t rec = Put(store.get(), bytes);
+  auto c = Sql();
+  // One byte of the second chunk changed (a bad copy, a bad disk): the size is right, the hash
+  // is not.
+  ASSERT_TRUE(c->Exec("UPDATE recording_chunks SET data = set_byte(data, 1000, "
+                      "(get_byte(data, 1000) # 1)) WHERE recording_id = $1 AND seq = 1",
+                      {PgInt(rec)})
+                  .ok());
+  std::string back;
+  Status s = store->ReadRecordingBytes(rec, &back);
+  EXPECT_EQ(s.code(), StatusCode::kCorruption) << s.ToString();
+  EXPECT_NE(s.message().find("recording " + std::to_string(rec) + " is damaged"), std::string::npos)
+      << s.message();
+  NewRecording again;
+  again.data = bytes;
+  RecordingInfo info;
+  bool existed = false;
+  s = store->PutRecording(again, &info, &existed);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  EXPECT_TRUE(existed);
+  EXPECT_EQ(info.id, rec);
+  s = store->ReadRecordingBytes(rec, &back);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  EXPECT_TRUE(back == bytes);
+}
+
 }  // namespace
 }  // namespace calibd::storage
