@@ -298,6 +298,7 @@ font-weight:600;border:1px solid;line-height:1.5;white-space:nowrap}
 .badge-revoked{color:#fff;background:#6b4f00;border-color:#6b4f00}
 .badge-accepted{color:var(--ok);background:#fff;border-color:#9fd0b3}
 .verdict-reason{font-size:.8rem;color:var(--bad);display:block;max-width:28rem}
+.verdict-reason-accepted{color:var(--ok)}
 .flag-warn{color:var(--warn);font-weight:600;white-space:nowrap}
 .sd{font-size:.7rem;color:var(--muted);margin-left:.2rem}
 table.table-array-full td,table.table-array-full th{padding:.28rem .3rem}

@@ -189,6 +189,12 @@ JobSummary Job(int64_t id, const std::string& device, const std::string& method,
   return j;
 }
 
+size_t Count(const std::string& page, const std::string& needle) {
+  size_t n = 0;
+  for (size_t p = page.find(needle); p != std::string::npos; p = page.find(needle, p + 1)) ++n;
+  return n;
+}
+
 bool Has(const std::string& page, const std::string& needle) {
   return page.find(needle) != std::string::npos;
 }
@@ -715,6 +721,92 @@ TEST(KeyFiguresTest, PcaAndArraySummaries) {
   EXPECT_NE(a.find("offset RMS"), std::string::npos);
   EXPECT_NE(a.find("\xC2\xB5m"), std::string::npos);
   EXPECT_EQ(KeyFigures("pca", json()), "\xE2\x80\x93");
+}
+
+// The imu and noise methods have key figures too (the history showed a dash for them).
+TEST(KeyFiguresTest, ImuAndNoiseSummaries) {
+  results::ImuResult imu;
+  imu.envelope.method = "imu";
+  imu.envelope.model = "a = T_a K_a (y_a - b_a)";
+  imu.parameters = results::ImuParameters{9.8, "statics", 1.0, 1.0, {{"0", {}, {}}, {"1", {}, {}}}};
+  imu.uncertainty = results::ImuUncertainty{{{"0", {}, {}}, {"1", {}, {}}}};
+  for (int i = 0; i < 24; ++i) imu.diagnostics.statics.push_back({10.0 * i, 10.0 * i + 4, 400});
+  imu.diagnostics.threshold_choice = "best of 3";
+  for (const double rms : {1.2e-3, 3.4e-3}) {
+    results::ImuFitDiagnostics fit;
+    fit.name = std::to_string(imu.diagnostics.imus.size());
+    fit.usable = true;
+    fit.accel_norm_rms_after = rms;
+    fit.chi2_per_dof = rms * 1000;
+    fit.coverage.verdict = "sufficient";
+    imu.diagnostics.imus.push_back(fit);
+  }
+  const std::string i = KeyFigures("imu", results::ToJson(imu));
+  // The worst IMU's residual and fit, and the statics.
+  EXPECT_EQ(i,
+            "|a|\xE2\x88\x92g RMS \xE2\x89\xA4 3.4 mm/s\xC2\xB2 \xC2\xB7 \xCF\x87\xC2\xB2/"
+            "\xCE\xBD \xE2\x89\xA4 3.40 \xC2\xB7 24 statics");
+  json unreadable = results::ToJson(imu);
+  unreadable["diagnostics"]["imus"][0]["chi2_per_dof"] = "big";
+  EXPECT_EQ(
+      KeyFigures("imu", unreadable).rfind("not available: imu result: diagnostics.imus[0]", 0), 0u)
+      << KeyFigures("imu", unreadable);
+
+  results::NoiseResult noise;
+  noise.envelope.method = "noise";
+  noise.envelope.model = "the Allan variance";
+  const double kNaN = std::numeric_limits<double>::quiet_NaN();
+  for (const char* name : {"a0_x", "a0_y", "a0_z", "g0_x", "g0_y", "g0_z"}) {
+    const bool gyro = name[0] == 'g';
+    noise.channels.push_back({name, gyro ? "rad/s" : "m/s^2",
+                              gyro ? (name[3] == 'y' ? 1.2e-4 : 9e-5) : kNaN, kNaN, kNaN, kNaN});
+    noise.channel_stds.push_back({name, kNaN, kNaN, kNaN});
+  }
+  std::string n = KeyFigures("noise", results::ToJson(noise));
+  EXPECT_EQ(n, "accel N not visible \xC2\xB7 gyro N \xE2\x89\xA4 120 \xC2\xB5rad/s/\xE2\x88\x9AHz");
+  noise.channels[1].white_noise = 2e-3;
+  noise.diagnostics.stationary = false;
+  n = KeyFigures("noise", results::ToJson(noise));
+  EXPECT_EQ(
+      n.rfind("not stationary \xC2\xB7 accel N \xE2\x89\xA4 2.0 mm/s\xC2\xB2/\xE2\x88\x9AHz", 0), 0u)
+      << n;
+  // The history page shows them instead of a dash.
+  HistoryView h;
+  h.jobs = {Job(5, "IMU-1", "imu", "succeeded", "2026-01-01T08:00:00Z", results::ToJson(imu)),
+            Job(4, "IMU-1", "noise", "succeeded", "2026-01-01T07:00:00Z", results::ToJson(noise))};
+  const std::string page = RenderHistoryPage(h);
+  EXPECT_TRUE(Has(page, "24 statics"));
+  EXPECT_TRUE(Has(page, "gyro N \xE2\x89\xA4 120"));
+}
+
+// A result a person accepted (overriding the gate, or after a revoke) carries a badge with the
+// person's reason; one the gate accepted carries none.
+TEST(HistoryPage, MarksResultsAPersonAccepted) {
+  JobSummary overridden = Job(9, "D", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult());
+  overridden.state = ServeState::kAccepted;
+  overridden.result["verdict"] = {{"status", "rejected"}, {"reasons", {"too noisy"}}};
+  overridden.events = {{"accept", "checked <b>on the rig</b>", "token", "2026-01-01T09:00:00Z"}};
+  JobSummary reaccepted = Job(8, "D", "pca", "succeeded", "2026-01-01T07:00:00Z", PcaResult());
+  reaccepted.state = ServeState::kAccepted;
+  reaccepted.events = {{"revoke", "wrong board", "token", "2026-01-01T09:00:00Z"},
+                       {"accept", "right board after all", "token", "2026-01-01T09:05:00Z"}};
+  JobSummary gate = Job(7, "D", "pca", "succeeded", "2026-01-01T06:00:00Z", PcaResult());
+  HistoryView h;
+  h.jobs = {overridden, reaccepted, gate};
+  const std::string page = RenderHistoryPage(h);
+  EXPECT_EQ(Count(page, "<span class=\"badge badge-accepted badge-accepted-by-person\""), 2u)
+      << page;
+  EXPECT_TRUE(Has(page, "accepted by a person: checked &lt;b&gt;on the rig&lt;/b&gt;"));
+  EXPECT_TRUE(Has(page, ">right board after all</span>"));
+  // The gate-accepted job's row has no badge besides its status.
+  const size_t row = page.find("href=\"/jobs/7\"");
+  ASSERT_NE(row, std::string::npos);
+  EXPECT_EQ(page.find("badge-accepted", row), std::string::npos);
+  // The device page marks them the same way.
+  DeviceView d;
+  d.serial = "D";
+  d.jobs = h.jobs;
+  EXPECT_EQ(Count(RenderDevicePage(d), "badge-accepted-by-person\""), 2u);
 }
 
 TEST(DevicePage, ShowsCalibrationsAndDriftTablesAndPlots) {
