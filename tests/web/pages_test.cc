@@ -707,6 +707,58 @@ TEST(HistoryPage, ListsJobsWithFiltersKeyFiguresAndPager) {
   EXPECT_LT(page.find("/jobs/24\""), page.find("/jobs/21\""));
 }
 
+// The device filter: exact when a device has the serial, else a case-insensitive prefix.
+TEST(HistoryPage, DeviceFilterMatchesExactlyThenByPrefixIgnoringCase) {
+  const std::vector<std::string> known = {"SN-0001", "SN-0002", "sn-0001-b", "OTHER", "SN-1"};
+  DeviceMatch m = MatchDevices("SN-1", known);
+  EXPECT_TRUE(m.exact);  // exact wins over the prefix of "SN-1..." serials
+  EXPECT_EQ(m.devices, std::vector<std::string>{"SN-1"});
+  m = MatchDevices("sn-000", known);
+  EXPECT_FALSE(m.exact);
+  EXPECT_EQ(m.devices, (std::vector<std::string>{"SN-0001", "SN-0002", "sn-0001-b"}));
+  m = MatchDevices("other", known);
+  EXPECT_EQ(m.devices, std::vector<std::string>{"OTHER"});
+  EXPECT_TRUE(MatchDevices("X", known).devices.empty());
+  EXPECT_TRUE(MatchDevices("", known).devices.empty());
+  m = MatchDevices("s", known, 2);  // at most `limit`, the rest counted
+  EXPECT_EQ(m.devices.size(), 2u);
+  EXPECT_EQ(m.more, 2u);
+  // Non-ASCII bytes compare exactly.
+  EXPECT_TRUE(MatchDevices("caf\xC3\x89", {"caf\xC3\xA9-1"}).devices.empty());
+  EXPECT_EQ(MatchDevices("CAF\xC3\xA9", {"caf\xC3\xA9-1"}).devices.size(), 1u);
+
+  // The page names the devices it shows and links each; what was typed stays in the form.
+  HistoryView h;
+  h.filter.device = "sn-<000";
+  h.device_matches = {"SN-<0001", "SN-<0002"};
+  h.device_more = 3;
+  h.jobs = {Job(2, "SN-<0002", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult()),
+            Job(1, "SN-<0001", "pca", "succeeded", "2026-01-01T07:00:00Z", PcaResult())};
+  h.next_before = "1";
+  std::string page = RenderHistoryPage(h);
+  EXPECT_TRUE(Has(page,
+                  "No device is called \xE2\x80\x9Csn-&lt;000\xE2\x80\x9D: showing the 2 "
+                  "first devices whose serial starts with it (case ignored): "
+                  "<a href=\"/?device=SN-%3C0001\">SN-&lt;0001</a>, "
+                  "<a href=\"/?device=SN-%3C0002\">SN-&lt;0002</a>. 3 more devices match"))
+      << page;
+  EXPECT_TRUE(Has(page, "name=\"device\" value=\"sn-&lt;000\""));
+  EXPECT_TRUE(Has(page, "href=\"/?before=1&amp;device=sn-%3C000\""));
+  // Nothing matched: the server's hint as given.
+  h.device_matches.clear();
+  h.device_more = 0;
+  h.jobs.clear();
+  h.device_hint = "no device 'sn-<000'; did you mean 'SN-0001'?";
+  page = RenderHistoryPage(h);
+  EXPECT_TRUE(Has(page,
+                  "<div class=\"callout device-hint\"><p>no device &#39;sn-&lt;000&#39;; "
+                  "did you mean &#39;SN-0001&#39;?</p></div>"))
+      << page;
+  // An exact serial: no hint.
+  h.device_hint.clear();
+  EXPECT_FALSE(Has(RenderHistoryPage(h), "device-hint"));
+}
+
 TEST(HistoryPage, EmptyHistorySaysSoWithoutPager) {
   const std::string page = RenderHistoryPage(HistoryView{});
   ExpectDocument(page, "page-history");
@@ -768,7 +820,8 @@ TEST(KeyFiguresTest, ImuAndNoiseSummaries) {
   noise.diagnostics.stationary = false;
   n = KeyFigures("noise", results::ToJson(noise));
   EXPECT_EQ(
-      n.rfind("not stationary \xC2\xB7 accel N \xE2\x89\xA4 2.0 mm/s\xC2\xB2/\xE2\x88\x9AHz", 0), 0u)
+      n.rfind("not stationary \xC2\xB7 accel N \xE2\x89\xA4 2.0 mm/s\xC2\xB2/\xE2\x88\x9AHz", 0),
+      0u)
       << n;
   // The history page shows them instead of a dash.
   HistoryView h;
