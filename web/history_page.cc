@@ -107,10 +107,14 @@ std::string HistoryBody(const HistoryView& v) {
       } else {
         figures = E(Guard("figures", [&] { return KeyFigures(j.method, j.result); }));
       }
-      out += "<tr><td>" + JobLink(j.id) + "</td><td class=\"name\">" + DeviceLink(j.device) +
-             "</td><td>" + E(j.method) + "</td><td>" + StatusBadge(j.status) + VerdictBadge(j) +
-             "</td><td class=\"time\">" + TimeHtml(j.created_at) + "</td><td>" + figures + "</td>" +
-             WarningsCell(j) + "</tr>";
+      // data-label: the column's name, shown before the value where a narrow screen stacks
+      // the cells of a row (the stylesheet).
+      out += "<tr><td data-label=\"job\">" + JobLink(j.id) +
+             "</td><td class=\"name\" data-label=\"device\">" + DeviceLink(j.device) +
+             "</td><td data-label=\"method\">" + E(j.method) + "</td><td data-label=\"status\">" +
+             StatusBadge(j.status) + VerdictBadge(j) +
+             "</td><td class=\"time\" data-label=\"created\">" + TimeHtml(j.created_at) +
+             "</td><td data-label=\"key figures\">" + figures + "</td>" + WarningsCell(j) + "</tr>";
     }
     out += "</tbody></table></div>";
   }

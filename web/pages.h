@@ -28,7 +28,10 @@
 //            what was wrong and what to do instead; or pca diagnostics.usable == false), p.model
 //            (the result's `model` equation), ul.warnings, ul.downloads, pre.config,
 //            span.badge.badge-STATUS, table.table-drift-detail (inside <details>, per sensor /
-//            triad)
+//            triad), span.badge.badge-accepted-by-person (history, device page),
+//            div.device-hint (history: the device filter read as a prefix, or nothing matched),
+//            td[data-label] (history, device and devices tables: the column's name, shown on
+//            narrow screens where a row's cells stack)
 //
 // Result keys read beyond SPEC §4 (all optional): pca diagnostics.usable, .reason, .noise_std
 // (drawn as a line on the residual plot); array diagnostics.termination, .gyro_unit,
@@ -190,7 +193,9 @@ std::string RenderDevicePage(const DeviceView& view);
 std::string RenderErrorPage(int status, const std::string& message);
 
 // Key figures of a result for tables: pca "σ(scale) ≤ 0.12 % · gap 85", array
-// "offset RMS 812 µm · σ ≤ 2.1 µm"; "–" when not available. Plain text (escape before use).
+// "offset RMS 812 µm · σ ≤ 2.1 µm", imu "|a|−g RMS 1.2 mm/s² · χ²/ν 1.03 · 24 statics", noise
+// "accel N ≤ 2.0 mm/s²/√Hz · gyro N ≤ 120 µrad/s/√Hz"; "–" when not available. Plain text
+// (escape before use).
 std::string KeyFigures(const std::string& method, const nlohmann::json& result);
 
 }  // namespace calibd::web

@@ -444,8 +444,10 @@ std::string VerdictBadge(const JobSummary& job) {
 
 std::string WarningsCell(const JobSummary& j) {
   const size_t w = WarningCount(j.result);
-  if (w == 0) return "<td class=\"num muted\">" + std::string(kDash) + "</td>";
-  return "<td class=\"num\"><span class=\"flag-warn\" title=\"warnings\">\xE2\x9A\xA0 " +
+  if (w == 0)
+    return "<td class=\"num muted\" data-label=\"warnings\">" + std::string(kDash) + "</td>";
+  return "<td class=\"num\" data-label=\"warnings\"><span class=\"flag-warn\" "
+         "title=\"warnings\">\xE2\x9A\xA0 " +
          std::to_string(w) + "</span></td>";
 }
 
