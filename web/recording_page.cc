@@ -78,20 +78,24 @@ std::string JobsSection(const RecordingPageView& v) {
 }
 
 // What the timelines' norms are in: SI when the units were given or the accelerometer norm at
-// rest is within 20 % of 1 g; else reading units (a log of counts: |a| of 54 000 at rest).
+// rest is within 20 % of 1 g; else reading units (a log of counts: |a| of 54 000 at rest). A
+// given accel_unit that does not make the rest norm about 1 g is trusted but questioned.
 struct Units {
   bool accel_si = true, gyro_si = true;
-  std::string note;  // "" when both are SI
+  std::string note;  // "" when both are SI and the rest norm is about 1 g
 };
 
 Units JudgeUnits(const RecordingPageView& v) {
   constexpr double kG = 9.80665;
   Units u;
-  if (v.accel_unit_given && v.gyro_unit_given) return u;
   const double rest = RestNorm(v);
   const bool looks_si = std::isfinite(rest) && rest > 0.8 * kG && rest < 1.2 * kG;
   u.accel_si = v.accel_unit_given || looks_si;
   u.gyro_si = v.gyro_unit_given || (!v.accel_unit_given && looks_si);
+  if (v.accel_unit_given && !looks_si && std::isfinite(rest)) {
+    u.note = "With the accel_unit given, the accelerometer norm at rest is " + FormatSig(rest, 4) +
+             " m/s\xC2\xB2, not about 9.81: check accel_unit.";
+  }
   if (u.accel_si && u.gyro_si) return u;
   if (!u.accel_si) {
     u.note = "The accelerometer norm at rest is " + FormatSig(rest, 4) +

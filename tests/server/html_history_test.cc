@@ -1,7 +1,8 @@
-// The history page's device filter over real sockets (server/html_routes.cc), on one kept-alive
-// connection: an exact serial lists that device only; otherwise every device whose serial starts
-// with what was typed, ignoring case, is listed together and named in a hint; nothing matching
-// says so. The page is always a 200 with the typed text kept in the form.
+// The HTML pages over real sockets, on one kept-alive connection. The history's device filter
+// (server/html_routes.cc): an exact serial lists that device only; otherwise every device whose
+// serial starts with what was typed, ignoring case, is listed together and named in a hint;
+// nothing matching says so; the page is always a 200 with the typed text kept in the form. The
+// recording page (server/recording_routes.cc) says which units its timelines are in.
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
@@ -55,12 +56,12 @@ TEST(HistoryDeviceFilter, ExactThenCaseInsensitivePrefixWithAHint) {
   EXPECT_TRUE(Has(page, job(a)));
   EXPECT_FALSE(Has(page, job(longer)));
   EXPECT_FALSE(Has(page, job(b)));
-  EXPECT_FALSE(Has(page, "device-hint"));
+  EXPECT_FALSE(Has(page, "class=\"callout device-hint\""));
   EXPECT_TRUE(Has(page, "1 matching calibrations."));
 
   // Case and prefix: the three SN-000* devices together, newest first, named in the hint.
   page = get("/?device=sn-000");
-  EXPECT_TRUE(Has(page, "device-hint")) << page;
+  EXPECT_TRUE(Has(page, "class=\"callout device-hint\"")) << page;
   EXPECT_TRUE(Has(page,
                   "No device is called \xE2\x80\x9Csn-000\xE2\x80\x9D: showing the 3 "
                   "devices whose serial starts with it (case ignored)"));
@@ -93,6 +94,47 @@ TEST(HistoryDeviceFilter, ExactThenCaseInsensitivePrefixWithAHint) {
                   "serial starts with it"))
       << page;
   EXPECT_TRUE(Has(page, "No calibrations match."));
+}
+
+// The recording page of a log in counts (|a| of about 5500 at rest): the timelines say reading
+// units, not m/s², until the query gives the units.
+TEST(RecordingPageUnits, ACountLogIsLabelledReadingUnitsUntilTheUnitsAreGiven) {
+  TestServer server;
+  ASSERT_EQ(server.error(), "");
+  httplib::Client client = server.Client();
+  client.set_keep_alive(true);
+  std::string csv = "t,a0_x,a0_y,a0_z,g0_x,g0_y,g0_z\n";
+  for (int i = 0; i < 1500; ++i) {  // 15 s at 100 Hz, still, with a little noise
+    const int n = (i * 7919) % 13 - 6;
+    csv += std::to_string(i / 100.0) + "," + std::to_string(3 + n) + "," + std::to_string(-2 - n) +
+           "," + std::to_string(5500 + n) + "," + std::to_string(n) + "," + std::to_string(-n) +
+           ",1\n";
+  }
+  auto res = client.Post("/api/v1/recordings?method=noise&device=COUNTS", csv, "text/csv");
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 201) << res->body;
+  const std::string id =
+      std::to_string(nlohmann::json::parse(res->body)["recording"]["id"].get<int64_t>());
+  res = client.Get(("/recordings/" + id).c_str());
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 200);
+  EXPECT_TRUE(Has(res->body, "|a| (reading units)")) << res->body.substr(0, 3000);
+  EXPECT_FALSE(Has(res->body, "|a| (m/s\xC2\xB2)"));
+  EXPECT_TRUE(Has(res->body, "The accelerometer norm at rest is 5500"));
+  res = client.Get(("/recordings/" + id + "?accel_unit=0.001783&gyro_unit=0.001").c_str());
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 200);
+  EXPECT_TRUE(Has(res->body, "|a| (m/s\xC2\xB2)"));
+  EXPECT_TRUE(Has(res->body, "|\xCF\x89| (rad/s)"));
+  EXPECT_FALSE(Has(res->body, "units-note"));
+  // Units given that do not fit the log: labelled as given, and questioned.
+  res = client.Get(("/recordings/" + id + "?accel_unit=1&gyro_unit=1").c_str());
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 200);
+  EXPECT_TRUE(Has(res->body, "|a| (m/s\xC2\xB2)"));
+  EXPECT_TRUE(Has(res->body,
+                  "With the accel_unit given, the accelerometer norm at rest is 5500 "
+                  "m/s\xC2\xB2, not about 9.81: check accel_unit."));
 }
 
 }  // namespace

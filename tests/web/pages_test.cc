@@ -756,7 +756,7 @@ TEST(HistoryPage, DeviceFilterMatchesExactlyThenByPrefixIgnoringCase) {
       << page;
   // An exact serial: no hint.
   h.device_hint.clear();
-  EXPECT_FALSE(Has(RenderHistoryPage(h), "device-hint"));
+  EXPECT_FALSE(Has(RenderHistoryPage(h), "class=\"callout device-hint\""));
 }
 
 TEST(HistoryPage, EmptyHistorySaysSoWithoutPager) {

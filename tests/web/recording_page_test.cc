@@ -120,11 +120,17 @@ TEST(RecordingPage, ACountLogIsNotLabelledSI) {
   EXPECT_EQ(html.find("|\xCF\x89| (rad/s)"), std::string::npos);
   EXPECT_NE(html.find("|a| (reading units)"), std::string::npos);
   EXPECT_NE(html.find("|\xCF\x89| (reading units)"), std::string::npos);
-  EXPECT_NE(html.find("The accelerometer norm at rest is 53955, not about 9.81"), std::string::npos) << html;
+  EXPECT_NE(html.find("The accelerometer norm at rest is 53955, not about 9.81"), std::string::npos)
+      << html;
   EXPECT_NE(html.find("?accel_unit=1.818e-4"), std::string::npos);
   EXPECT_EQ(html.find("threshold (SI)"), std::string::npos);
-  // Units given in the query: the norms are SI, whatever their size.
+  // Units given in the query: the norms are SI as given, questioned when not about 1 g at rest.
   v.accel_unit_given = v.gyro_unit_given = true;
+  html = RenderRecordingPage(v);
+  EXPECT_NE(html.find("|a| (m/s\xC2\xB2)"), std::string::npos);
+  EXPECT_NE(html.find("With the accel_unit given, the accelerometer norm at rest is 53955 m/s"),
+            std::string::npos);
+  for (auto& x : v.accel[0].norm) x /= 5500;
   html = RenderRecordingPage(v);
   EXPECT_NE(html.find("|a| (m/s\xC2\xB2)"), std::string::npos);
   EXPECT_EQ(html.find("units-note"), std::string::npos);
