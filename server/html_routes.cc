@@ -2,7 +2,10 @@
 // rendered documents. No JavaScript; every user string is escaped by web/.
 #include <algorithm>
 #include <chrono>
+#include <iterator>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
 
 #include "server/config.h"
 #include "server/device_lookup.h"
@@ -96,7 +99,7 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store, bool token
     storage::JobFilter filter;
     filter.limit = 50;
     filter.include_results = true;
-    view.filter.device = filter.device = req.get_param_value("device");
+    view.filter.device = req.get_param_value("device");
     const std::string method = req.get_param_value("method");
     const std::string status = req.get_param_value("status");
     if (FindMethod(method) != nullptr) view.filter.method = filter.method = method;
@@ -110,19 +113,54 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store, bool token
     if (req.has_param("before") && !ParsePositive(req.get_param_value("before"), &filter.before)) {
       return SendPage(res, 400, web::RenderErrorPage(400, "'before' must be a job id"));
     }
-    std::vector<storage::JobInfo> jobs;
-    Status s = store->ListJobs(filter, &jobs);
-    if (!s.ok()) return SendErrorPage(res, s);
-    for (const auto& job : jobs) view.jobs.push_back(SummarizeWithEvents(store, job, false));
-    if (static_cast<int>(jobs.size()) == filter.limit) {
-      view.next_before = std::to_string(jobs.back().id);
-    }
-    storage::JobFilter count_filter = filter;
-    if (store->CountJobs(count_filter, &view.total).ok() == false) view.total = -1;
     std::vector<storage::DeviceInfo> devices;
-    if (store->ListDevices(&devices).ok()) {
-      for (const auto& d : devices) view.devices.push_back(d.serial);
+    const bool have_devices = store->ListDevices(&devices).ok();
+    for (const auto& d : devices) view.devices.push_back(d.serial);
+    // The device filter: the exact serial when a device has it, else every device whose serial
+    // starts with what was typed, ignoring case (web::MatchDevices), listed together.
+    std::vector<std::string> listed = {view.filter.device};  // "": any device
+    if (!view.filter.device.empty() && have_devices) {
+      const web::DeviceMatch match = web::MatchDevices(view.filter.device, view.devices);
+      if (!match.exact && !match.devices.empty()) {
+        listed = view.device_matches = match.devices;
+        view.device_more = match.more;
+      } else if (match.devices.empty()) {
+        view.device_hint = WrongCaseDeviceMessage(store, view.filter.device);
+        if (view.device_hint.empty()) {
+          view.device_hint = "No device is called \xE2\x80\x9C" + view.filter.device +
+                             "\xE2\x80\x9D, and no device's serial starts with it (case "
+                             "ignored): pick one from the list the device field offers.";
+        }
+      }
     }
+    // One page, newest first, over the listed devices: each one's newest `limit` jobs before
+    // the cursor, merged by id (the cursor is a job id, so it pages the merged list as well).
+    std::vector<storage::JobInfo> jobs;
+    bool more = false;
+    view.total = 0;
+    for (const std::string& device : listed) {
+      filter.device = device;
+      std::vector<storage::JobInfo> part;
+      Status s = store->ListJobs(filter, &part);
+      if (!s.ok()) return SendErrorPage(res, s);
+      more = more || static_cast<int>(part.size()) == filter.limit;
+      jobs.insert(jobs.end(), std::make_move_iterator(part.begin()),
+                  std::make_move_iterator(part.end()));
+      int64_t count = 0;
+      if (view.total >= 0 && store->CountJobs(filter, &count).ok()) {
+        view.total += count;
+      } else {
+        view.total = -1;
+      }
+    }
+    std::sort(jobs.begin(), jobs.end(),
+              [](const storage::JobInfo& a, const storage::JobInfo& b) { return a.id > b.id; });
+    if (jobs.size() > static_cast<size_t>(filter.limit)) {
+      jobs.resize(static_cast<size_t>(filter.limit));
+      more = true;
+    }
+    for (const auto& job : jobs) view.jobs.push_back(SummarizeWithEvents(store, job, false));
+    if (more && !jobs.empty()) view.next_before = std::to_string(jobs.back().id);
     SendPage(res, 200, web::RenderHistoryPage(view));
   });
 

@@ -104,6 +104,8 @@ void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store) {
     options.timeline_points = kTimelinePoints;
     s = ParseSegmentsQuery(req.params, &options);
     view.query = s.ok() ? EchoQuery(req) : "";
+    view.accel_unit_given = s.ok() && req.has_param("accel_unit");
+    view.gyro_unit_given = s.ok() && req.has_param("gyro_unit");
     if (s.ok()) {
       RecordingSegments segments;
       s = ComputeSegments(store, id, options, &segments);

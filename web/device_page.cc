@@ -58,10 +58,13 @@ std::string DeviceBody(const DeviceView& v) {
       } else {
         figures = E(Guard("figures", [&] { return KeyFigures(j.method, j.result); }));
       }
-      table += "<tr>" + NumCell(std::to_string(i + 1)) + "<td>" + JobLink(j.id) + "</td><td>" +
-               E(j.method) + "</td><td>" + StatusBadge(j.status) + VerdictBadge(j) +
-               "</td><td class=\"time\">" + TimeHtml(j.created_at) + "</td><td>" + figures +
-               "</td>" + WarningsCell(j) + "</tr>";
+      // data-label: see the history page.
+      table += "<tr><td class=\"num\" data-label=\"#\">" + std::to_string(i + 1) +
+               "</td><td data-label=\"job\">" + JobLink(j.id) + "</td><td data-label=\"method\">" +
+               E(j.method) + "</td><td data-label=\"status\">" + StatusBadge(j.status) +
+               VerdictBadge(j) + "</td><td class=\"time\" data-label=\"created\">" +
+               TimeHtml(j.created_at) + "</td><td data-label=\"key figures\">" + figures + "</td>" +
+               WarningsCell(j) + "</tr>";
     }
     table += "</tbody></table></div>";
   }
@@ -119,20 +122,22 @@ std::string RenderDevicesPage(const DevicesView& view) {
     for (const auto& m : view.methods) out += "<th>latest " + E(m) + " (UTC)</th>";
     out += "</tr></thead><tbody>";
     for (const auto& d : view.devices) {
-      out += "<tr><td>" + DeviceLink(d.serial) + "</td><td class=\"time\">" +
-             TimeHtml(d.first_seen) + "</td>";
+      out += "<tr><td class=\"name\" data-label=\"device\">" + DeviceLink(d.serial) +
+             "</td><td class=\"time\" data-label=\"first seen (UTC)\">" + TimeHtml(d.first_seen) +
+             "</td>";
       for (const auto& m : view.methods) {
         const DevicesView::Latest* latest = nullptr;
         for (const auto& l : d.latest) {
           if (l.method == m) latest = &l;
         }
+        const std::string label = " data-label=\"" + A("latest " + m) + "\"";
         if (latest == nullptr) {
-          out += "<td class=\"muted\">" + std::string(kDash) + "</td>";
+          out += "<td class=\"muted\"" + label + ">" + std::string(kDash) + "</td>";
           continue;
         }
-        out += "<td><a class=\"time\" href=\"/jobs/" + std::to_string(latest->job_id) + "\">" +
-               TimeHtml(latest->calibrated_at) + "</a> (report #" + std::to_string(latest->job_id) +
-               ") \xC2\xB7 <a href=\"" +
+        out += "<td" + label + "><a class=\"time\" href=\"/jobs/" + std::to_string(latest->job_id) +
+               "\">" + TimeHtml(latest->calibrated_at) + "</a> (report #" +
+               std::to_string(latest->job_id) + ") \xC2\xB7 <a href=\"" +
                A("/api/v1/devices/" + UrlEncode(d.serial) + "/calibration?method=" + UrlEncode(m)) +
                "\">JSON</a></td>";
       }

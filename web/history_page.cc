@@ -62,6 +62,32 @@ std::string HistoryBody(const HistoryView& v) {
   }
   out += "</select></label><button type=\"submit\">Filter</button>";
   out += "<a href=\"/\">clear</a></form>";
+  if (!v.filter.device.empty() && (!v.device_matches.empty() || !v.device_hint.empty())) {
+    out += "<div class=\"callout device-hint\"><p>";
+    if (v.device_matches.empty()) {
+      out += E(v.device_hint) + "</p>";
+    } else {
+      out += "No device is called \xE2\x80\x9C" + E(v.filter.device) + "\xE2\x80\x9D";
+      const size_t n = v.device_matches.size();
+      out +=
+          ": showing " +
+          (n == 1 ? std::string("the device")
+                  : "the " + std::to_string(n) + (v.device_more > 0 ? " first" : "") + " devices") +
+          " whose serial starts with it (case ignored): ";
+      for (size_t i = 0; i < n; ++i) {
+        out += (i ? ", " : "") + std::string("<a href=\"") +
+               A("/?device=" + UrlEncode(v.device_matches[i])) + "\">" + E(v.device_matches[i]) +
+               "</a>";
+      }
+      out += ".";
+      if (v.device_more > 0) {
+        out += " " + std::to_string(v.device_more) +
+               " more devices match: type more of the serial to see theirs.";
+      }
+      out += "</p>";
+    }
+    out += "</div>";
+  }
   if (v.total >= 0) {
     out += "<p class=\"muted small\">" + std::to_string(v.total) + " matching calibrations.</p>";
   }
@@ -81,10 +107,14 @@ std::string HistoryBody(const HistoryView& v) {
       } else {
         figures = E(Guard("figures", [&] { return KeyFigures(j.method, j.result); }));
       }
-      out += "<tr><td>" + JobLink(j.id) + "</td><td class=\"name\">" + DeviceLink(j.device) +
-             "</td><td>" + E(j.method) + "</td><td>" + StatusBadge(j.status) + VerdictBadge(j) +
-             "</td><td class=\"time\">" + TimeHtml(j.created_at) + "</td><td>" + figures + "</td>" +
-             WarningsCell(j) + "</tr>";
+      // data-label: the column's name, shown before the value where a narrow screen stacks
+      // the cells of a row (the stylesheet).
+      out += "<tr><td data-label=\"job\">" + JobLink(j.id) +
+             "</td><td class=\"name\" data-label=\"device\">" + DeviceLink(j.device) +
+             "</td><td data-label=\"method\">" + E(j.method) + "</td><td data-label=\"status\">" +
+             StatusBadge(j.status) + VerdictBadge(j) +
+             "</td><td class=\"time\" data-label=\"created\">" + TimeHtml(j.created_at) +
+             "</td><td data-label=\"key figures\">" + figures + "</td>" + WarningsCell(j) + "</tr>";
     }
     out += "</tbody></table></div>";
   }
@@ -103,6 +133,31 @@ std::string HistoryBody(const HistoryView& v) {
 namespace calibd::web {
 
 using namespace internal;  // NOLINT: this file is part of internal's pages
+
+DeviceMatch MatchDevices(const std::string& typed, const std::vector<std::string>& known,
+                         size_t limit) {
+  DeviceMatch m;
+  if (typed.empty()) return m;
+  if (std::find(known.begin(), known.end(), typed) != known.end()) {
+    m.exact = true;
+    m.devices = {typed};
+    return m;
+  }
+  const auto lower = [](char c) { return c >= 'A' && c <= 'Z' ? static_cast<char>(c + 32) : c; };
+  for (const std::string& serial : known) {
+    if (serial.size() < typed.size()) continue;
+    bool prefix = true;
+    for (size_t i = 0; i < typed.size() && prefix; ++i)
+      prefix = lower(serial[i]) == lower(typed[i]);
+    if (!prefix) continue;
+    if (m.devices.size() < limit) {
+      m.devices.push_back(serial);
+    } else {
+      ++m.more;
+    }
+  }
+  return m;
+}
 
 std::string RenderHistoryPage(const HistoryView& view) {
   return SafePage("Calibration history", "page-history", [&] { return HistoryBody(view); });

@@ -298,6 +298,8 @@ font-weight:600;border:1px solid;line-height:1.5;white-space:nowrap}
 .badge-revoked{color:#fff;background:#6b4f00;border-color:#6b4f00}
 .badge-accepted{color:var(--ok);background:#fff;border-color:#9fd0b3}
 .verdict-reason{font-size:.8rem;color:var(--bad);display:block;max-width:28rem}
+.verdict-reason-accepted{color:var(--ok)}
+.device-hint a{white-space:nowrap}
 .flag-warn{color:var(--warn);font-weight:600;white-space:nowrap}
 .sd{font-size:.7rem;color:var(--muted);margin-left:.2rem}
 table.table-array-full td,table.table-array-full th{padding:.28rem .3rem}
@@ -336,7 +338,20 @@ summary{cursor:pointer;color:var(--accent)}
 footer.foot{margin-top:2.5rem;color:var(--muted);font-size:.8rem}
 @media (max-width:640px){
 body{font-size:14px}main{padding:.6rem .7rem 2rem}header.top{padding:.5rem .7rem}
-th,td{padding:.25rem .35rem}dl.kv{grid-template-columns:1fr}dl.kv dd{margin-bottom:.3rem}}
+th,td{padding:.25rem .35rem}dl.kv{grid-template-columns:1fr}dl.kv dd{margin-bottom:.3rem}
+table.table-history thead,table.table-calibrations thead,table.table-devices thead{position:absolute;
+width:1px;height:1px;overflow:hidden;clip:rect(0 0 0 0)}
+table.table-history,table.table-history tbody,table.table-history tr,table.table-history td,
+table.table-calibrations,table.table-calibrations tbody,table.table-calibrations tr,
+table.table-calibrations td,table.table-devices,table.table-devices tbody,table.table-devices tr,
+table.table-devices td{display:block;width:100%}
+table.table-history tr,table.table-calibrations tr,table.table-devices tr{padding:.35rem 0;
+border-bottom:1px solid var(--line)}
+table.table-history td,table.table-calibrations td,table.table-devices td{border:0;
+padding:.08rem .2rem;text-align:left;white-space:normal;overflow-wrap:anywhere}
+table.table-history td[data-label]::before,table.table-calibrations td[data-label]::before,
+table.table-devices td[data-label]::before{content:attr(data-label) ": ";color:var(--muted);
+font-size:.8rem}}
 @media print{
 header.top,form.filters,nav.pager,ul.downloads{display:none}
 body{font-size:10pt;color:#000}main{max-width:none;padding:0}

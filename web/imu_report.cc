@@ -219,6 +219,24 @@ class ImuReportImpl : public MethodReport {
   const char* method() const override { return "imu"; }
   std::string Section(const JobView& view) const override { return ImuReport(view); }
   std::string Partial(const JobView& view) const override { return ImuPartial(view); }
+  // "|a|−g RMS ≤ 1.2 mm/s² · χ²/ν ≤ 1.03 · 24 statics": the worst IMU's accelerometer residual
+  // over the statics and its fit quality, and the statics found.
+  std::string KeyFigures(const json& result) const override {
+    results::ImuResult r;
+    const Status read = results::FromJson(result, &r);
+    if (!read.ok()) return "not available: " + read.message();
+    double norm = kNaN, chi2 = kNaN;
+    for (const results::ImuFitDiagnostics& imu : r.diagnostics.imus) {
+      if (std::isfinite(imu.accel_norm_rms_after) && !(norm >= imu.accel_norm_rms_after))
+        norm = imu.accel_norm_rms_after;
+      if (std::isfinite(imu.chi2_per_dof) && !(chi2 >= imu.chi2_per_dof)) chi2 = imu.chi2_per_dof;
+    }
+    if (!std::isfinite(norm) && !std::isfinite(chi2)) return "";
+    const std::string le = r.diagnostics.imus.size() > 1 ? " \xE2\x89\xA4 " : " ";
+    return "|a|\xE2\x88\x92g RMS" + le + FormatSI(norm, "m/s\xC2\xB2", 2) +
+           " \xC2\xB7 \xCF\x87\xC2\xB2/\xCE\xBD" + le + FormatSig(chi2, 3) + " \xC2\xB7 " +
+           std::to_string(r.diagnostics.statics.size()) + " statics";
+  }
   std::string Drift(const std::vector<const JobSummary*>& jobs) const override {
     return ImuDriftHtml(jobs);  // web/device_drift.h
   }

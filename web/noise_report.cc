@@ -174,6 +174,36 @@ class NoiseReportImpl : public MethodReport {
   const char* method() const override { return "noise"; }
   std::string Section(const JobView& view) const override { return NoiseReport(view); }
   std::string Partial(const JobView& view) const override { return NoisePartialReport(view); }
+  // "accel N ≤ 2 mm/s²/√Hz · gyro N ≤ 120 µrad/s/√Hz": the largest white noise density per
+  // sensor type ("not visible" when no channel of that type shows it), led by "not stationary"
+  // when the sensor moved.
+  std::string KeyFigures(const json& result) const override {
+    results::NoiseResult r;
+    const Status read = results::FromJson(result, &r);
+    if (!read.ok()) return "not available: " + read.message();
+    if (r.channels.empty()) return "";
+    std::string out = r.diagnostics.stationary ? "" : "not stationary \xC2\xB7 ";
+    bool first = true;
+    for (const char kind : {'a', 'g'}) {
+      double worst = kNaN;
+      bool any = false;
+      for (const results::NoiseChannelParameters& c : r.channels) {
+        if (c.name.empty() || c.name[0] != kind) continue;
+        any = true;
+        if (std::isfinite(c.white_noise) && !(worst >= c.white_noise)) worst = c.white_noise;
+      }
+      if (!any) continue;
+      out += std::string(first ? "" : " \xC2\xB7 ") + (kind == 'a' ? "accel" : "gyro") + " N ";
+      out +=
+          std::isfinite(worst)
+              ? "\xE2\x89\xA4 " +
+                    FormatSI(worst,
+                             kind == 'a' ? "m/s\xC2\xB2/\xE2\x88\x9AHz" : "rad/s/\xE2\x88\x9AHz", 2)
+              : std::string("not visible");
+      first = false;
+    }
+    return out;
+  }
   std::string Drift(const std::vector<const JobSummary*>& jobs) const override {
     return NoiseDriftHtml(jobs);  // web/device_drift.h
   }

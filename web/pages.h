@@ -23,11 +23,15 @@
 //            result has positions; the others are always present on a job with a result of
 //            that method, saying "no data" when their keys are missing)
 //   other:   form.filters, nav.pager a.older, form.cancel-job (queued or running job: posts
-//            reason [and token] to /api/v1/jobs/{id}/cancel), span.elapsed (running job), .callout-error .failure-reason (failed job: the
-//            method's message, the one source of what was wrong and what to do instead; or pca
-//            diagnostics.usable == false), p.model (the result's `model` equation),
-//            ul.warnings, ul.downloads, pre.config, span.badge.badge-STATUS,
-//            table.table-drift-detail (inside <details>, per sensor / triad)
+//            reason [and token] to /api/v1/jobs/{id}/cancel), span.elapsed (running job),
+//            .callout-error .failure-reason (failed job: the method's message, the one source of
+//            what was wrong and what to do instead; or pca diagnostics.usable == false), p.model
+//            (the result's `model` equation), ul.warnings, ul.downloads, pre.config,
+//            span.badge.badge-STATUS, table.table-drift-detail (inside <details>, per sensor /
+//            triad), span.badge.badge-accepted-by-person (history, device page),
+//            div.device-hint (history: the device filter read as a prefix, or nothing matched),
+//            td[data-label] (history, device and devices tables: the column's name, shown on
+//            narrow screens where a row's cells stack)
 //
 // Result keys read beyond SPEC §4 (all optional): pca diagnostics.usable, .reason, .noise_std
 // (drawn as a line on the residual plot); array diagnostics.termination, .gyro_unit,
@@ -106,7 +110,26 @@ struct HistoryView {
   std::string next_before;  // cursor for the next (older) page; empty: no older page. The link
                             // is "/?before=CURSOR" plus the active filters.
   int64_t total = -1;       // total matching jobs when known (-1: unknown)
+  // The device filter when no device has exactly the serial typed (MatchDevices): the devices
+  // whose calibrations are listed instead and how many more matched than were used; when none
+  // matched, the server's hint, shown as is ("no device 'x'; did you mean ..."). All empty: the
+  // serial was exact (or no device filter). The page says which devices it shows, linking each.
+  std::vector<std::string> device_matches;
+  size_t device_more = 0;
+  std::string device_hint;
 };
+
+// How the history's device filter reads what was typed: the exact serial when a device in
+// `known` has it (exact = true, devices = {typed}); otherwise every device whose serial starts
+// with `typed` ignoring ASCII case (so "sn-00" finds "SN-0001" and "SN-0002"), in `known`'s
+// order, at most `limit` of them (`more` counts the rest). Empty `typed`: no match at all.
+struct DeviceMatch {
+  bool exact = false;
+  std::vector<std::string> devices;
+  size_t more = 0;
+};
+DeviceMatch MatchDevices(const std::string& typed, const std::vector<std::string>& known,
+                         size_t limit = 20);
 
 // `/jobs/{id}` — one calibration report.
 struct JobView {
@@ -170,7 +193,9 @@ std::string RenderDevicePage(const DeviceView& view);
 std::string RenderErrorPage(int status, const std::string& message);
 
 // Key figures of a result for tables: pca "σ(scale) ≤ 0.12 % · gap 85", array
-// "offset RMS 812 µm · σ ≤ 2.1 µm"; "–" when not available. Plain text (escape before use).
+// "offset RMS 812 µm · σ ≤ 2.1 µm", imu "|a|−g RMS 1.2 mm/s² · χ²/ν 1.03 · 24 statics", noise
+// "accel N ≤ 2.0 mm/s²/√Hz · gyro N ≤ 120 µrad/s/√Hz"; "–" when not available. Plain text
+// (escape before use).
 std::string KeyFigures(const std::string& method, const nlohmann::json& result);
 
 }  // namespace calibd::web

@@ -1,6 +1,9 @@
 #include "web/recording_page.h"
 
+#include <algorithm>
 #include <cmath>
+#include <utility>
+#include <vector>
 
 #include "web/html.h"
 #include "web/svg_plot.h"
@@ -74,6 +77,44 @@ std::string JobsSection(const RecordingPageView& v) {
   return s + "</tbody></table></div></section>";
 }
 
+// What the timelines' norms are in: SI when the units were given or the accelerometer norm at
+// rest is within 20 % of 1 g; else reading units (a log of counts: |a| of 54 000 at rest). A
+// given accel_unit that does not make the rest norm about 1 g is trusted but questioned.
+struct Units {
+  bool accel_si = true, gyro_si = true;
+  std::string note;  // "" when both are SI and the rest norm is about 1 g
+};
+
+Units JudgeUnits(const RecordingPageView& v) {
+  constexpr double kG = 9.80665;
+  Units u;
+  const double rest = RestNorm(v);
+  const bool looks_si = std::isfinite(rest) && rest > 0.8 * kG && rest < 1.2 * kG;
+  u.accel_si = v.accel_unit_given || looks_si;
+  u.gyro_si = v.gyro_unit_given || (!v.accel_unit_given && looks_si);
+  if (v.accel_unit_given && !looks_si && std::isfinite(rest)) {
+    u.note = "With the accel_unit given, the accelerometer norm at rest is " + FormatSig(rest, 4) +
+             " m/s\xC2\xB2, not about 9.81: check accel_unit.";
+  }
+  if (u.accel_si && u.gyro_si) return u;
+  if (!u.accel_si) {
+    u.note = "The accelerometer norm at rest is " + FormatSig(rest, 4) +
+             ", not about 9.81 m/s\xC2\xB2: this log is not in m/s\xC2\xB2, so the timeline shows "
+             "reading units. Give accel_unit (m/s\xC2\xB2 per reading unit";
+    if (std::isfinite(rest) && rest > 0) {
+      const std::string unit = FormatSig(kG / rest, 4);
+      u.note += "; about " + unit + " here: ?accel_unit=" + unit;
+    }
+    u.note += ") to see SI.";
+  }
+  if (!u.gyro_si) {
+    u.note += std::string(u.note.empty() ? "" : " ") +
+              "The gyroscope norm is shown in reading units: give gyro_unit (rad/s per reading "
+              "unit) to see rad/s.";
+  }
+  return u;
+}
+
 std::string SegmentsSection(const RecordingPageView& v) {
   std::string s = "<section id=\"segments\"><h2>Static intervals</h2>";
   const json& seg = v.segments;
@@ -93,12 +134,16 @@ std::string SegmentsSection(const RecordingPageView& v) {
        (v.query.empty() ? std::string() : "?" + EscapeAttr(v.query)) +
        "\">segments</a>. Try other options with <code>?static_window=&amp;min_static=&amp;"
        "static_threshold={\"accelerometer\":x,\"gyroscope\":y}</code>.</p>";
+  const Units units = JudgeUnits(v);
+  if (!units.note.empty()) s += "<p class=\"callout units-note\">" + E(units.note) + "</p>";
   s += "<div class=\"timelines\">";  // one under the other, full width: a shared time axis
   s += "<figure>" +
-       Timeline(v.accel, intervals, "timeline-accel", "Accelerometer norm", "|a| (m/s\xC2\xB2)") +
+       Timeline(v.accel, intervals, "timeline-accel", "Accelerometer norm",
+                units.accel_si ? "|a| (m/s\xC2\xB2)" : "|a| (reading units)") +
        "<figcaption>Shaded and numbered: the static intervals.</figcaption></figure>";
   s += "<figure>" +
-       Timeline(v.gyro, intervals, "timeline-gyro", "Gyroscope norm", "|\xCF\x89| (rad/s)") +
+       Timeline(v.gyro, intervals, "timeline-gyro", "Gyroscope norm",
+                units.gyro_si ? "|\xCF\x89| (rad/s)" : "|\xCF\x89| (reading units)") +
        "<figcaption>Between two statics the board was turned; the rotations the imu method "
        "integrates.</figcaption></figure>";
   s += "</div>";
@@ -106,7 +151,10 @@ std::string SegmentsSection(const RecordingPageView& v) {
   if (seg.contains("triads") && seg["triads"].is_array()) {
     s += "<div class=\"table-wrap\"><table class=\"table-thresholds\"><thead><tr><th>triad</th>"
          "<th>kind</th><th>noise floor (reading units)</th><th>threshold (reading units)</th>"
-         "<th>threshold (SI)</th><th>saturated samples</th></tr></thead><tbody>";
+         "<th>" +
+         std::string(units.accel_si && units.gyro_si ? "threshold (SI)"
+                                                     : "threshold \xC3\x97 unit (no unit given)") +
+         "</th><th>saturated samples</th></tr></thead><tbody>";
     for (const json& t : seg["triads"]) {
       s += "<tr><td>" + E(t.value("name", "")) + "</td><td>" + E(t.value("kind", "")) +
            "</td><td>" + E(FormatSig(NumberOr(t, "noise_floor", NAN))) + "</td><td>" +
@@ -160,6 +208,31 @@ std::string SegmentsSection(const RecordingPageView& v) {
 }
 
 }  // namespace
+
+double RestNorm(const RecordingPageView& view) {
+  std::vector<std::pair<double, double>> statics;
+  const json* intervals = view.segments.is_object() && view.segments.contains("intervals")
+                              ? &view.segments["intervals"]
+                              : nullptr;
+  if (intervals != nullptr && intervals->is_array()) {
+    for (const json& iv : *intervals) {
+      const double a = NumberOr(iv, "start", NAN), b = NumberOr(iv, "end", NAN);
+      if (std::isfinite(a) && std::isfinite(b)) statics.push_back({a, b});
+    }
+  }
+  std::vector<double> norms;
+  for (const auto& tr : view.accel) {
+    for (size_t i = 0; i < tr.t.size() && i < tr.norm.size(); ++i) {
+      if (!std::isfinite(tr.norm[i])) continue;
+      bool inside = statics.empty();
+      for (const auto& [a, b] : statics) inside = inside || (tr.t[i] >= a && tr.t[i] <= b);
+      if (inside) norms.push_back(tr.norm[i]);
+    }
+  }
+  if (norms.empty()) return NAN;
+  std::nth_element(norms.begin(), norms.begin() + norms.size() / 2, norms.end());
+  return norms[norms.size() / 2];
+}
 
 std::string RenderRecordingPage(const RecordingPageView& v) {
   const std::string id = std::to_string(v.id);

@@ -28,10 +28,19 @@ struct RecordingPageView {
   std::string query;  // the detection options of the request, shown and linked ("" = defaults)
   struct Trace {
     std::string name;             // "a0", "g0", ...
-    std::vector<double> t, norm;  // s, SI norm (decimated)
+    std::vector<double> t, norm;  // s, norm × the unit (1 unless given; decimated)
   };
   std::vector<Trace> accel, gyro;
+  // Whether the request gave accel_unit / gyro_unit (the norms are then SI). Without them the
+  // norms are the readings as logged: the page labels them m/s² and rad/s only when the
+  // accelerometer norm at rest is about 1 g (RestNorm), else "reading units", saying why and
+  // which accel_unit would convert them.
+  bool accel_unit_given = false, gyro_unit_given = false;
 };
+
+// The accelerometer norm at rest: the median of the accelerometer norms inside the static
+// intervals of `view.segments` (all of them when there are none); NaN without samples.
+double RestNorm(const RecordingPageView& view);
 
 std::string RenderRecordingPage(const RecordingPageView& view);
 

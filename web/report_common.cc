@@ -405,6 +405,25 @@ std::string ExportLinks(const std::string& base, const std::string& method) {
 // an accepted result: the usual case needs no mark).
 std::string VerdictBadge(const JobSummary& job) {
   const ServeState gate = GateState(job);
+  if (gate == ServeState::kAccepted) {
+    // Accepted by a person (an accept decision, or a result the gate rejected that is served
+    // anyway): marked, with the person's reason; accepted by the gate: no mark.
+    const JobEventSummary* accept = nullptr;
+    for (const auto& e : job.events) {
+      if (e.action == "accept") accept = &e;
+    }
+    const bool overridden = Str(Get(Get(job.result, "verdict"), "status")) == "rejected";
+    if (accept == nullptr && !overridden) return "";
+    const std::string reason = accept != nullptr ? accept->reason : "";
+    std::string shown = reason;
+    if (shown.size() > 140) shown = shown.substr(0, 140) + "\xE2\x80\xA6";
+    return " <span class=\"badge badge-accepted badge-accepted-by-person\" title=\"" +
+           E("accepted by a person" + (reason.empty() ? std::string() : ": " + reason)) +
+           "\">accepted by a person</span>" +
+           (shown.empty()
+                ? ""
+                : "<span class=\"verdict-reason verdict-reason-accepted\">" + E(shown) + "</span>");
+  }
   if (gate != ServeState::kRejected && gate != ServeState::kRevoked) return "";
   const std::string state = Name(gate);
   std::string reason;
@@ -425,8 +444,10 @@ std::string VerdictBadge(const JobSummary& job) {
 
 std::string WarningsCell(const JobSummary& j) {
   const size_t w = WarningCount(j.result);
-  if (w == 0) return "<td class=\"num muted\">" + std::string(kDash) + "</td>";
-  return "<td class=\"num\"><span class=\"flag-warn\" title=\"warnings\">\xE2\x9A\xA0 " +
+  if (w == 0)
+    return "<td class=\"num muted\" data-label=\"warnings\">" + std::string(kDash) + "</td>";
+  return "<td class=\"num\" data-label=\"warnings\"><span class=\"flag-warn\" "
+         "title=\"warnings\">\xE2\x9A\xA0 " +
          std::to_string(w) + "</span></td>";
 }
 

@@ -84,8 +84,10 @@ double Norm3(const double* v);
 // --- Pieces shared by the job, history and device pages.
 // The export formats of a method's calibration (GET .../calibration?format=).
 std::string ExportLinks(const std::string& base, const std::string& method);
-// A badge for a result the gate rejected or a person revoked, with the reason in words ("" for
-// an accepted result: the usual case needs no mark).
+// A badge for a result the gate rejected or a person revoked, or one a person accepted (an accept
+// decision in job.events, or a gate verdict of "rejected" that is served anyway: "accepted by a
+// person"), with the reason in words; "" for a result the gate accepted (the usual case needs no
+// mark).
 std::string VerdictBadge(const JobSummary& job);
 std::string WarningsCell(const JobSummary& j);
 // A complete page; a failure while rendering the body becomes a short error body.

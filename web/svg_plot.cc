@@ -1,12 +1,14 @@
 #include "web/svg_plot.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <limits>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "web/html.h"
 
@@ -78,6 +80,52 @@ std::string Truncate(const std::string& s, size_t max_chars) {
   return s;
 }
 
+constexpr double kLabelCharWidth = kCharWidth * 9.5 / 11;  // point labels (9.5 px)
+constexpr double kBandCharWidth = kCharWidth * 9 / 11;     // band labels (9 px)
+
+// Boxes of text already placed in a plot (pixel coordinates, y down).
+class Occupancy {
+ public:
+  void Add(double x0, double y0, double x1, double y1) { boxes_.push_back({x0, y0, x1, y1}); }
+  bool Overlaps(double x0, double y0, double x1, double y1) const {
+    for (const auto& b : boxes_) {
+      if (x0 < b[2] && b[0] < x1 && y0 < b[3] && b[1] < y1) return true;
+    }
+    return false;
+  }
+
+ private:
+  std::vector<std::array<double, 4>> boxes_;
+};
+
+// How a series is drawn. Colours cycle through the palette; past its end the dash pattern
+// changes (and, past two rounds, the marker of a series that has one), so that series 0 and 7
+// never look alike.
+struct SeriesStyle {
+  std::string color;
+  std::string dash;  // stroke-dasharray, "" solid
+  Marker marker = Marker::kNone;
+};
+
+SeriesStyle StyleOf(const Series& se, size_t index) {
+  const size_t ci = se.color >= 0 ? static_cast<size_t>(se.color) : index;
+  const size_t round = ci / kPaletteSize;
+  SeriesStyle st;
+  st.color = kPalette[ci % kPaletteSize];
+  // Round 0: solid (dashed: 6 3); round 1: 2 2 (8 3 2 3); round 2 as 0, round 3 as 1, ...
+  const size_t dash = (se.dashed ? 1 : 0) + 2 * (round % 2);
+  st.dash = kDashes[dash % (sizeof(kDashes) / sizeof(kDashes[0]))];
+  st.marker = se.marker;
+  if (se.marker != Marker::kNone && round >= 2) {
+    static constexpr Marker kCycle[] = {Marker::kCircle, Marker::kSquare, Marker::kOpenCircle,
+                                        Marker::kCross};
+    size_t at = 0;
+    while (at < 4 && kCycle[at] != se.marker) ++at;
+    st.marker = kCycle[(at + round / 2) % 4];
+  }
+  return st;
+}
+
 bool Usable(double v, ScaleType t) {
   return std::isfinite(v) && (t == ScaleType::kLinear || v > 0);
 }
@@ -111,6 +159,10 @@ std::pair<double, double> AxisDomain(const AxisOptions& axis, Extent e) {
     if (!std::isfinite(lo) || !std::isfinite(hi) || lo <= 0) return {1, 10};
     return {lo, hi};
   }
+  // Data of one value (a constant |ω|): drawn inside the frame, never on its edge.
+  const bool flat =
+      !e.empty() && !(e.hi - e.lo > std::max(std::fabs(e.lo), std::fabs(e.hi)) * 1e-12);
+  const double value = e.lo;
   if (axis.include_zero) e.Add(0);
   if (e.empty()) return {0, 1};
   double lo = e.lo, hi = e.hi;
@@ -119,10 +171,16 @@ std::pair<double, double> AxisDomain(const AxisOptions& axis, Extent e) {
     lo -= pad;
     hi += pad;
   }
-  const double step = NiceStep(lo, hi, axis.target_ticks);
+  double step = NiceStep(lo, hi, axis.target_ticks);
   if (step > 0 && std::isfinite(step)) {
     lo = std::floor(lo / step + 1e-9) * step;
     hi = std::ceil(hi / step - 1e-9) * step;
+  }
+  if (flat && std::isfinite(lo) && std::isfinite(hi) && lo < hi) {
+    if (!(step > 0 && std::isfinite(step))) step = (hi - lo) / 4;
+    const double room = 0.05 * (hi - lo);
+    if (hi - value < room) hi += step;
+    if (value - lo < room) lo -= step;
   }
   if (!std::isfinite(lo) || !std::isfinite(hi) || !(lo < hi)) return {0, 1};
   return {lo, hi};
@@ -625,24 +683,35 @@ std::string RenderXYPlot(const PlotOptions& o, const std::vector<Series>& series
   }
   const bool empty = ex.empty();
   if (empty) notes.push_back("No data to plot.");
+  // The x axis covers every band (a static interval far from the plotted points stays visible).
+  for (const auto& b : o.bands) {
+    if (Usable(b.x0, tx) && Usable(b.x1, tx)) {
+      ex.Add(b.x0);
+      ex.Add(b.x1);
+    }
+  }
 
   std::pair<double, double> dx = AxisDomain(o.x, ex), dy = AxisDomain(o.y, ey);
 
-  // Legend entries.
+  // Styles, then legend entries.
+  std::vector<SeriesStyle> styles;
+  for (size_t s = 0; s < series.size(); ++s) styles.push_back(StyleOf(series[s], s));
   std::vector<LegendEntry> legend;
   if (o.legend) {
     for (size_t s = 0; s < series.size(); ++s) {
       const Series& se = series[s];
       if (se.label.empty()) continue;
-      const size_t ci = se.color >= 0 ? static_cast<size_t>(se.color) : s;
       legend.push_back(
-          {se.label, PaletteColor(ci), se.dashed ? kDashes[1] : "", se.marker, se.line, false});
+          {se.label, styles[s].color, styles[s].dash, styles[s].marker, se.line, false});
     }
   }
 
   Frame f;
   AxisTicks yt = MakeTicks(o.y, dy.first, dy.second);
-  LayoutFrame(o, yt, legend.size(), 0, notes.size(), &f);
+  // A plot with point labels keeps a line for the note on labels left out.
+  bool point_labels = false;
+  for (const Series& se : series) point_labels = point_labels || !se.point_labels.empty();
+  LayoutFrame(o, yt, legend.size(), 0, notes.size() + (point_labels ? 1 : 0), &f);
   double legend_h = 0;
   std::string legend_svg = LegendSvg(legend, f.px0(), f.px1(), f.top, &legend_h);
   f.top += legend_h + (legend_h > 0 ? 6 : 0);
@@ -655,7 +724,11 @@ std::string RenderXYPlot(const PlotOptions& o, const std::vector<Series>& series
   const Scale sy(ty, dy.first, dy.second, f.py0(), f.py1());
 
   std::string body;
-  // Shaded bands, behind everything else; labels at the top of the plot area.
+  // Text placed inside the plot area (band, reference-line and point labels): each avoids what
+  // was placed before it.
+  Occupancy occupied;
+  // Shaded bands, behind everything else; labels at the top of the plot area (a label that
+  // would overlap its neighbour's goes one row lower).
   if (!o.bands.empty()) {
     body += "<g class=\"bands\">";
     for (const auto& b : o.bands) {
@@ -669,7 +742,14 @@ std::string RenderXYPlot(const PlotOptions& o, const std::vector<Series>& series
               N(std::max(c - a, 0.6)) + "\" height=\"" + N(f.py0() - f.py1()) +
               "\" fill=\"#cfe3f3\" fill-opacity=\"0.75\"/>";
       if (!b.label.empty()) {
-        body += "<text x=\"" + N((a + c) / 2) + "\" y=\"" + N(f.py1() + 10) +
+        const double w = EstimateTextWidth(b.label, kBandCharWidth), mid = (a + c) / 2;
+        double y = f.py1() + 10;
+        for (int row = 0; row < 3 && occupied.Overlaps(mid - w / 2, y - 8, mid + w / 2, y + 1);
+             ++row) {
+          y += 10;
+        }
+        occupied.Add(mid - w / 2, y - 8, mid + w / 2, y + 1);
+        body += "<text x=\"" + N(mid) + "\" y=\"" + N(y) +
                 "\" text-anchor=\"middle\" font-size=\"9\" fill=\"" + kMuted + "\">" +
                 EscapeText(b.label) + "</text>";
       }
@@ -691,14 +771,25 @@ std::string RenderXYPlot(const PlotOptions& o, const std::vector<Series>& series
     body += " stroke=\"#6b7580\" stroke-width=\"1.2\"" +
             std::string(r.dashed ? " stroke-dasharray=\"5 4\"" : "") + "/>";
     if (!r.label.empty()) {
+      // Next to its line, at the top (vertical) or the right (horizontal); a label that would
+      // overlap one placed before moves a row down (vertical) or to the other side of its line.
+      const double w = EstimateTextWidth(r.label);
       if (r.vertical) {
         const bool right_half = p > (f.px0() + f.px1()) / 2;
-        body += "<text x=\"" + N(right_half ? p - 4 : p + 4) + "\" y=\"" + N(f.py1() + 12) +
+        const double x0 = right_half ? p - 4 - w : p + 4;
+        double y = f.py1() + 12;
+        for (int row = 0; row < 6 && occupied.Overlaps(x0, y - 9, x0 + w, y + 2); ++row) y += 13;
+        occupied.Add(x0, y - 9, x0 + w, y + 2);
+        body += "<text x=\"" + N(right_half ? p - 4 : p + 4) + "\" y=\"" + N(y) +
                 "\" text-anchor=\"" + (right_half ? "end" : "start") + "\" fill=\"" + kMuted +
                 "\">" + EscapeText(r.label) + "</text>";
       } else {
-        body += "<text x=\"" + N(f.px1() - 4) + "\" y=\"" + N(p - 4) +
-                "\" text-anchor=\"end\" fill=\"" + kMuted + "\">" + EscapeText(r.label) + "</text>";
+        const double x1 = f.px1() - 4;
+        double y = p - 4;
+        if (occupied.Overlaps(x1 - w, y - 9, x1, y + 2)) y = p + 13;
+        occupied.Add(x1 - w, y - 9, x1, y + 2);
+        body += "<text x=\"" + N(x1) + "\" y=\"" + N(y) + "\" text-anchor=\"end\" fill=\"" +
+                kMuted + "\">" + EscapeText(r.label) + "</text>";
       }
     }
     body += "</g>";
@@ -724,10 +815,10 @@ std::string RenderXYPlot(const PlotOptions& o, const std::vector<Series>& series
     body += coloured + "</g>";
   }
   // Series.
+  size_t labels_left_out = 0;
   for (size_t s = 0; s < series.size(); ++s) {
     const Series& se = series[s];
-    const size_t ci = se.color >= 0 ? static_cast<size_t>(se.color) : s;
-    const std::string color = PaletteColor(ci);
+    const std::string& color = styles[s].color;
     body += "<g class=\"series series-" + std::to_string(s) + "\">";
     // Ellipses first (under the markers).
     if (!se.ellipses.empty() && tx == ScaleType::kLinear && ty == ScaleType::kLinear) {
@@ -792,13 +883,14 @@ std::string RenderXYPlot(const PlotOptions& o, const std::vector<Series>& series
         const size_t i = keep[s][k];
         d += (k == 0 ? "M" : "L") + N(sx(se.x[i])) + " " + N(sy(se.y[i]));
       }
+      const std::string& dash = styles[s].dash;
       body += "<path class=\"line\" d=\"" + d + "\" fill=\"none\" stroke=\"" + color +
               "\" stroke-width=\"" + N(se.line_width) + "\" stroke-linejoin=\"round\"" +
-              (se.dashed ? std::string(" stroke-dasharray=\"") + kDashes[1] + "\"" : "") + "/>";
+              (dash.empty() ? std::string() : " stroke-dasharray=\"" + dash + "\"") + "/>";
     }
     // Markers (one path for crosses, keeps the SVG small).
     if (se.marker != Marker::kNone || (!se.line && !keep[s].empty()) || keep[s].size() == 1) {
-      const Marker m = se.marker == Marker::kNone ? Marker::kCircle : se.marker;
+      const Marker m = styles[s].marker == Marker::kNone ? Marker::kCircle : styles[s].marker;
       std::string d;
       for (size_t i : keep[s]) {
         const double px = sx(se.x[i]), py = sy(se.y[i]);
@@ -815,19 +907,66 @@ std::string RenderXYPlot(const PlotOptions& o, const std::vector<Series>& series
         body += "<g class=\"markers\">" + d + "</g>";
       }
     }
-    // Point labels.
+    // Point labels: the labels of points drawn on the same spot are joined ("s1, s4"), and each
+    // label goes to the first of several places around its point where it overlaps no label,
+    // no labelled point and no reference-line label placed before it; one with no free place is
+    // left out (and counted in a note).
     if (!se.point_labels.empty()) {
-      body += "<g class=\"point-labels\" font-size=\"9.5\" fill=\"" + std::string(kMuted) + "\">";
+      struct Spot {
+        double x, y;
+        std::string text;
+      };
+      std::vector<Spot> spots;
       for (size_t i : keep[s]) {
         if (i >= se.point_labels.size() || se.point_labels[i].empty()) continue;
-        body += "<text x=\"" + N(sx(se.x[i]) + 5) + "\" y=\"" + N(sy(se.y[i]) - 5) + "\">" +
-                EscapeText(Truncate(se.point_labels[i], 16)) + "</text>";
+        const double px = sx(se.x[i]), py = sy(se.y[i]);
+        if (!std::isfinite(px) || !std::isfinite(py)) continue;
+        occupied.Add(px - 3.5, py - 3.5, px + 3.5, py + 3.5);
+        bool joined = false;
+        for (Spot& sp : spots) {
+          if (std::fabs(sp.x - px) < 3 && std::fabs(sp.y - py) < 3) {
+            sp.text += ", " + Truncate(se.point_labels[i], 16);
+            joined = true;
+            break;
+          }
+        }
+        if (!joined) spots.push_back({px, py, Truncate(se.point_labels[i], 16)});
+      }
+      body += "<g class=\"point-labels\" font-size=\"9.5\" fill=\"" + std::string(kMuted) + "\">";
+      for (const Spot& sp : spots) {
+        const std::string text = Truncate(sp.text, 40);
+        const double w = EstimateTextWidth(text, kLabelCharWidth), h = 10;
+        // Baseline-left corners of the candidate places: NE, SE, NW, SW, E, W, N, S, then the
+        // same farther out.
+        bool placed = false;
+        for (double r : {1.0, 2.2}) {
+          const double c[8][2] = {{5 * r, -5 * r},         {5 * r, 5 * r + 8}, {-5 * r - w, -5 * r},
+                                  {-5 * r - w, 5 * r + 8}, {7 * r, 3.5},       {-7 * r - w, 3.5},
+                                  {-w / 2, -7 * r},        {-w / 2, 7 * r + 8}};
+          for (const auto& d : c) {
+            const double x = sp.x + d[0], y = sp.y + d[1];
+            if (x < f.px0() || x + w > f.px1() || y - h + 2 < f.py1() || y + 2 > f.py0()) {
+              continue;
+            }
+            if (occupied.Overlaps(x, y - h + 2, x + w, y + 2)) continue;
+            occupied.Add(x, y - h + 2, x + w, y + 2);
+            body += "<text x=\"" + N(x) + "\" y=\"" + N(y) + "\">" + EscapeText(text) + "</text>";
+            placed = true;
+            break;
+          }
+          if (placed) break;
+        }
+        if (!placed) ++labels_left_out;
       }
       body += "</g>";
     }
     body += "</g>";
   }
 
+  if (labels_left_out > 0) {
+    notes.push_back(
+        PluralNote(labels_left_out, "point label(s) left out where they would overlap."));
+  }
   const std::string clip = ClipId(o, body);
   std::string out = SvgOpen(o, "");
   out += "<defs><clipPath id=\"" + clip + "\"><rect x=\"" + N(f.px0() - 4) + "\" y=\"" +

@@ -149,7 +149,8 @@ wait_job "$j10"
 expect running 'badge-running' 'class="elapsed"' 'form class="cancel-job"' \
   "action=\"/api/v1/jobs/$j10/cancel\"" 'name="reason"'
 
-expect history 'class="page-history' 'table-history' 'form class="filters\|class="filters'
+expect history 'class="page-history' 'table-history' 'form class="filters\|class="filters' \
+  ' statics' 'gyro N '  # imu and noise key figures
 expect pca 'class="page-job' 'table-pca-parameters' 'plot-singular-values' 'plot-magnitude-error' \
   'plot-residual-rms' 'plot-axes-xy' 'plot-axes-xz' 'table-diagnostics'
 expect array 'table-array-parameters' 'plot-cost' 'plot-positions-xy' 'plot-positions-xz'
@@ -179,6 +180,7 @@ expect devices 'class="page-devices' 'table-devices' 'first seen (UTC)'
 expect pca 'class="model"'
 expect array 'class="model"'
 reject failed 'class="advice"'
+expect recording '|a| (m/s²)'
 expect recording 'class="page-recording' 'plot-timeline-accel' 'plot-timeline-gyro' \
   'table-intervals' 'table-thresholds' "href=\"/jobs/$j7\""
 expect device-drift 'imu (2 accepted calibrations' 'noise (2 accepted calibrations' \
@@ -199,6 +201,16 @@ if python3 "$(dirname "$0")/table_widths.py" "$chromium" "$tmp/profile-widths" "
   passed=$((passed + 1))
 else
   failed=$((failed + 1)); echo "FAIL: a table is wider than 1280 px allows:"; cat "$tmp/widths.log"
+fi
+# At 400 px (a phone) the history, device and devices tables stack each row's cells: none
+# scrolls sideways and no status or verdict badge is out of sight (issue 27).
+if python3 "$(dirname "$0")/table_widths.py" --width 400 \
+  --tables table-history,table-calibrations,table-devices "$chromium" "$tmp/profile-narrow" \
+  "$base/" "$base/devices" "$base/devices/$hostile" >"$tmp/narrow.log" 2>&1; then
+  passed=$((passed + 1))
+else
+  failed=$((failed + 1)); echo "FAIL: a table does not fit 400 px or hides a badge:"
+  cat "$tmp/narrow.log"
 fi
 echo "browser pages: screenshots in $shots"
 echo "$passed passed, $failed failed"

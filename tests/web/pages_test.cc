@@ -189,6 +189,12 @@ JobSummary Job(int64_t id, const std::string& device, const std::string& method,
   return j;
 }
 
+size_t Count(const std::string& page, const std::string& needle) {
+  size_t n = 0;
+  for (size_t p = page.find(needle); p != std::string::npos; p = page.find(needle, p + 1)) ++n;
+  return n;
+}
+
 bool Has(const std::string& page, const std::string& needle) {
   return page.find(needle) != std::string::npos;
 }
@@ -701,6 +707,58 @@ TEST(HistoryPage, ListsJobsWithFiltersKeyFiguresAndPager) {
   EXPECT_LT(page.find("/jobs/24\""), page.find("/jobs/21\""));
 }
 
+// The device filter: exact when a device has the serial, else a case-insensitive prefix.
+TEST(HistoryPage, DeviceFilterMatchesExactlyThenByPrefixIgnoringCase) {
+  const std::vector<std::string> known = {"SN-0001", "SN-0002", "sn-0001-b", "OTHER", "SN-1"};
+  DeviceMatch m = MatchDevices("SN-1", known);
+  EXPECT_TRUE(m.exact);  // exact wins over the prefix of "SN-1..." serials
+  EXPECT_EQ(m.devices, std::vector<std::string>{"SN-1"});
+  m = MatchDevices("sn-000", known);
+  EXPECT_FALSE(m.exact);
+  EXPECT_EQ(m.devices, (std::vector<std::string>{"SN-0001", "SN-0002", "sn-0001-b"}));
+  m = MatchDevices("other", known);
+  EXPECT_EQ(m.devices, std::vector<std::string>{"OTHER"});
+  EXPECT_TRUE(MatchDevices("X", known).devices.empty());
+  EXPECT_TRUE(MatchDevices("", known).devices.empty());
+  m = MatchDevices("s", known, 2);  // at most `limit`, the rest counted
+  EXPECT_EQ(m.devices.size(), 2u);
+  EXPECT_EQ(m.more, 2u);
+  // Non-ASCII bytes compare exactly.
+  EXPECT_TRUE(MatchDevices("caf\xC3\x89", {"caf\xC3\xA9-1"}).devices.empty());
+  EXPECT_EQ(MatchDevices("CAF\xC3\xA9", {"caf\xC3\xA9-1"}).devices.size(), 1u);
+
+  // The page names the devices it shows and links each; what was typed stays in the form.
+  HistoryView h;
+  h.filter.device = "sn-<000";
+  h.device_matches = {"SN-<0001", "SN-<0002"};
+  h.device_more = 3;
+  h.jobs = {Job(2, "SN-<0002", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult()),
+            Job(1, "SN-<0001", "pca", "succeeded", "2026-01-01T07:00:00Z", PcaResult())};
+  h.next_before = "1";
+  std::string page = RenderHistoryPage(h);
+  EXPECT_TRUE(Has(page,
+                  "No device is called \xE2\x80\x9Csn-&lt;000\xE2\x80\x9D: showing the 2 "
+                  "first devices whose serial starts with it (case ignored): "
+                  "<a href=\"/?device=SN-%3C0001\">SN-&lt;0001</a>, "
+                  "<a href=\"/?device=SN-%3C0002\">SN-&lt;0002</a>. 3 more devices match"))
+      << page;
+  EXPECT_TRUE(Has(page, "name=\"device\" value=\"sn-&lt;000\""));
+  EXPECT_TRUE(Has(page, "href=\"/?before=1&amp;device=sn-%3C000\""));
+  // Nothing matched: the server's hint as given.
+  h.device_matches.clear();
+  h.device_more = 0;
+  h.jobs.clear();
+  h.device_hint = "no device 'sn-<000'; did you mean 'SN-0001'?";
+  page = RenderHistoryPage(h);
+  EXPECT_TRUE(Has(page,
+                  "<div class=\"callout device-hint\"><p>no device &#39;sn-&lt;000&#39;; "
+                  "did you mean &#39;SN-0001&#39;?</p></div>"))
+      << page;
+  // An exact serial: no hint.
+  h.device_hint.clear();
+  EXPECT_FALSE(Has(RenderHistoryPage(h), "class=\"callout device-hint\""));
+}
+
 TEST(HistoryPage, EmptyHistorySaysSoWithoutPager) {
   const std::string page = RenderHistoryPage(HistoryView{});
   ExpectDocument(page, "page-history");
@@ -715,6 +773,93 @@ TEST(KeyFiguresTest, PcaAndArraySummaries) {
   EXPECT_NE(a.find("offset RMS"), std::string::npos);
   EXPECT_NE(a.find("\xC2\xB5m"), std::string::npos);
   EXPECT_EQ(KeyFigures("pca", json()), "\xE2\x80\x93");
+}
+
+// The imu and noise methods have key figures too (the history showed a dash for them).
+TEST(KeyFiguresTest, ImuAndNoiseSummaries) {
+  results::ImuResult imu;
+  imu.envelope.method = "imu";
+  imu.envelope.model = "a = T_a K_a (y_a - b_a)";
+  imu.parameters = results::ImuParameters{9.8, "statics", 1.0, 1.0, {{"0", {}, {}}, {"1", {}, {}}}};
+  imu.uncertainty = results::ImuUncertainty{{{"0", {}, {}}, {"1", {}, {}}}};
+  for (int i = 0; i < 24; ++i) imu.diagnostics.statics.push_back({10.0 * i, 10.0 * i + 4, 400});
+  imu.diagnostics.threshold_choice = "best of 3";
+  for (const double rms : {1.2e-3, 3.4e-3}) {
+    results::ImuFitDiagnostics fit;
+    fit.name = std::to_string(imu.diagnostics.imus.size());
+    fit.usable = true;
+    fit.accel_norm_rms_after = rms;
+    fit.chi2_per_dof = rms * 1000;
+    fit.coverage.verdict = "sufficient";
+    imu.diagnostics.imus.push_back(fit);
+  }
+  const std::string i = KeyFigures("imu", results::ToJson(imu));
+  // The worst IMU's residual and fit, and the statics.
+  EXPECT_EQ(i,
+            "|a|\xE2\x88\x92g RMS \xE2\x89\xA4 3.4 mm/s\xC2\xB2 \xC2\xB7 \xCF\x87\xC2\xB2/"
+            "\xCE\xBD \xE2\x89\xA4 3.40 \xC2\xB7 24 statics");
+  json unreadable = results::ToJson(imu);
+  unreadable["diagnostics"]["imus"][0]["chi2_per_dof"] = "big";
+  EXPECT_EQ(
+      KeyFigures("imu", unreadable).rfind("not available: imu result: diagnostics.imus[0]", 0), 0u)
+      << KeyFigures("imu", unreadable);
+
+  results::NoiseResult noise;
+  noise.envelope.method = "noise";
+  noise.envelope.model = "the Allan variance";
+  const double kNaN = std::numeric_limits<double>::quiet_NaN();
+  for (const char* name : {"a0_x", "a0_y", "a0_z", "g0_x", "g0_y", "g0_z"}) {
+    const bool gyro = name[0] == 'g';
+    noise.channels.push_back({name, gyro ? "rad/s" : "m/s^2",
+                              gyro ? (name[3] == 'y' ? 1.2e-4 : 9e-5) : kNaN, kNaN, kNaN, kNaN});
+    noise.channel_stds.push_back({name, kNaN, kNaN, kNaN});
+  }
+  std::string n = KeyFigures("noise", results::ToJson(noise));
+  EXPECT_EQ(n, "accel N not visible \xC2\xB7 gyro N \xE2\x89\xA4 120 \xC2\xB5rad/s/\xE2\x88\x9AHz");
+  noise.channels[1].white_noise = 2e-3;
+  noise.diagnostics.stationary = false;
+  n = KeyFigures("noise", results::ToJson(noise));
+  EXPECT_EQ(
+      n.rfind("not stationary \xC2\xB7 accel N \xE2\x89\xA4 2.0 mm/s\xC2\xB2/\xE2\x88\x9AHz", 0),
+      0u)
+      << n;
+  // The history page shows them instead of a dash.
+  HistoryView h;
+  h.jobs = {Job(5, "IMU-1", "imu", "succeeded", "2026-01-01T08:00:00Z", results::ToJson(imu)),
+            Job(4, "IMU-1", "noise", "succeeded", "2026-01-01T07:00:00Z", results::ToJson(noise))};
+  const std::string page = RenderHistoryPage(h);
+  EXPECT_TRUE(Has(page, "24 statics"));
+  EXPECT_TRUE(Has(page, "gyro N \xE2\x89\xA4 120"));
+}
+
+// A result a person accepted (overriding the gate, or after a revoke) carries a badge with the
+// person's reason; one the gate accepted carries none.
+TEST(HistoryPage, MarksResultsAPersonAccepted) {
+  JobSummary overridden = Job(9, "D", "pca", "succeeded", "2026-01-01T08:00:00Z", PcaResult());
+  overridden.state = ServeState::kAccepted;
+  overridden.result["verdict"] = {{"status", "rejected"}, {"reasons", {"too noisy"}}};
+  overridden.events = {{"accept", "checked <b>on the rig</b>", "token", "2026-01-01T09:00:00Z"}};
+  JobSummary reaccepted = Job(8, "D", "pca", "succeeded", "2026-01-01T07:00:00Z", PcaResult());
+  reaccepted.state = ServeState::kAccepted;
+  reaccepted.events = {{"revoke", "wrong board", "token", "2026-01-01T09:00:00Z"},
+                       {"accept", "right board after all", "token", "2026-01-01T09:05:00Z"}};
+  JobSummary gate = Job(7, "D", "pca", "succeeded", "2026-01-01T06:00:00Z", PcaResult());
+  HistoryView h;
+  h.jobs = {overridden, reaccepted, gate};
+  const std::string page = RenderHistoryPage(h);
+  EXPECT_EQ(Count(page, "<span class=\"badge badge-accepted badge-accepted-by-person\""), 2u)
+      << page;
+  EXPECT_TRUE(Has(page, "accepted by a person: checked &lt;b&gt;on the rig&lt;/b&gt;"));
+  EXPECT_TRUE(Has(page, ">right board after all</span>"));
+  // The gate-accepted job's row has no badge besides its status.
+  const size_t row = page.find("href=\"/jobs/7\"");
+  ASSERT_NE(row, std::string::npos);
+  EXPECT_EQ(page.find("badge-accepted", row), std::string::npos);
+  // The device page marks them the same way.
+  DeviceView d;
+  d.serial = "D";
+  d.jobs = h.jobs;
+  EXPECT_EQ(Count(RenderDevicePage(d), "badge-accepted-by-person\""), 2u);
 }
 
 TEST(DevicePage, ShowsCalibrationsAndDriftTablesAndPlots) {

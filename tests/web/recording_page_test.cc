@@ -102,6 +102,43 @@ TEST(RecordingPage, AnHourLongLogIsDecimatedToABoundedPage) {
   EXPECT_NE(html.find("decimated"), std::string::npos);
 }
 
+// A log of counts (|a| of 54 000 at rest) without accel_unit: the timelines say reading units,
+// not m/s², and the page names the accel_unit that would convert them.
+TEST(RecordingPage, ACountLogIsNotLabelledSI) {
+  RecordingPageView v = View();
+  EXPECT_NEAR(RestNorm(v), 9.81, 0.02);
+  std::string html = RenderRecordingPage(v);
+  EXPECT_NE(html.find("|a| (m/s\xC2\xB2)"), std::string::npos);
+  EXPECT_NE(html.find("|\xCF\x89| (rad/s)"), std::string::npos);
+  EXPECT_EQ(html.find("units-note"), std::string::npos);
+  EXPECT_NE(html.find("threshold (SI)"), std::string::npos);
+  for (auto& x : v.accel[0].norm) x *= 5500;  // counts: 1 g = 5500
+  for (auto& x : v.gyro[0].norm) x *= 900;
+  EXPECT_NEAR(RestNorm(v), 53955, 120);  // the statics only, not the motion between them
+  html = RenderRecordingPage(v);
+  EXPECT_EQ(html.find("|a| (m/s\xC2\xB2)"), std::string::npos);
+  EXPECT_EQ(html.find("|\xCF\x89| (rad/s)"), std::string::npos);
+  EXPECT_NE(html.find("|a| (reading units)"), std::string::npos);
+  EXPECT_NE(html.find("|\xCF\x89| (reading units)"), std::string::npos);
+  EXPECT_NE(html.find("The accelerometer norm at rest is 53955, not about 9.81"), std::string::npos)
+      << html;
+  EXPECT_NE(html.find("?accel_unit=1.818e-4"), std::string::npos);
+  EXPECT_EQ(html.find("threshold (SI)"), std::string::npos);
+  // Units given in the query: the norms are SI as given, questioned when not about 1 g at rest.
+  v.accel_unit_given = v.gyro_unit_given = true;
+  html = RenderRecordingPage(v);
+  EXPECT_NE(html.find("|a| (m/s\xC2\xB2)"), std::string::npos);
+  EXPECT_NE(html.find("With the accel_unit given, the accelerometer norm at rest is 53955 m/s"),
+            std::string::npos);
+  for (auto& x : v.accel[0].norm) x /= 5500;
+  html = RenderRecordingPage(v);
+  EXPECT_NE(html.find("|a| (m/s\xC2\xB2)"), std::string::npos);
+  EXPECT_EQ(html.find("units-note"), std::string::npos);
+  // No samples: no judgement against SI.
+  v.accel.clear();
+  EXPECT_TRUE(std::isnan(RestNorm(v)));
+}
+
 TEST(RecordingPage, WithoutSegmentsTheNoteSaysWhy) {
   RecordingPageView v = View();
   v.segments = nullptr;

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -271,6 +272,225 @@ TEST(XYPlot, EllipsesErrorBarsLegendAndEqualAspect) {
   EXPECT_NE(svg.find("class=\"error-bars\""), std::string::npos);
   EXPECT_NE(svg.find("class=\"legend\""), std::string::npos);
   EXPECT_NE(svg.find(">estimated</text>"), std::string::npos);
+}
+
+// ---- Geometry read back from an SVG (the attributes the renderer writes).
+
+// The value of attribute `name` in the element starting at `at` ("" when absent).
+std::string Attr(const std::string& svg, size_t at, const std::string& name) {
+  const size_t end = svg.find('>', at);
+  const size_t p = svg.find(" " + name + "=\"", at);
+  if (p == std::string::npos || p > end) return "";
+  const size_t v = p + name.size() + 3;
+  return svg.substr(v, svg.find('"', v) - v);
+}
+double NumAttr(const std::string& svg, size_t at, const std::string& name) {
+  const std::string v = Attr(svg, at, name);
+  return v.empty() ? std::nan("") : std::stod(v);
+}
+
+// The plot frame: the axes' outlined rect (x0, y0 top, x1, y1 bottom).
+struct Box {
+  double x0, y0, x1, y1;
+};
+Box FrameOf(const std::string& svg) {
+  const size_t r = svg.rfind("<rect", svg.find("fill=\"none\" stroke=\"#8a949e\""));
+  const double x = NumAttr(svg, r, "x"), y = NumAttr(svg, r, "y");
+  return {x, y, x + NumAttr(svg, r, "width"), y + NumAttr(svg, r, "height")};
+}
+
+// Every <text> inside the group whose opening tag contains `group` (e.g. "point-labels"), as
+// (x, y, anchor, text).
+struct Text {
+  double x, y;
+  std::string anchor, text;
+};
+std::vector<Text> TextsIn(const std::string& svg, const std::string& group) {
+  std::vector<Text> out;
+  for (size_t g = svg.find(group); g != std::string::npos; g = svg.find(group, g + 1)) {
+    const size_t end = svg.find("</g>", g);
+    for (size_t t = svg.find("<text", g); t != std::string::npos && t < end;
+         t = svg.find("<text", t + 1)) {
+      const size_t open = svg.find('>', t) + 1;
+      out.push_back({NumAttr(svg, t, "x"), NumAttr(svg, t, "y"), Attr(svg, t, "text-anchor"),
+                     svg.substr(open, svg.find("</text>", open) - open)});
+    }
+  }
+  return out;
+}
+
+// The box a text covers at `char_width` px per character (the renderer's own estimate).
+Box TextBox(const Text& t, double char_width, double height) {
+  size_t n = 0;
+  for (unsigned char c : t.text) n += (c & 0xC0) != 0x80;
+  const double w = static_cast<double>(n) * char_width;
+  const double x0 = t.anchor == "end" ? t.x - w : t.anchor == "middle" ? t.x - w / 2 : t.x;
+  return {x0, t.y - height + 2, x0 + w, t.y + 2};
+}
+bool Overlap(const Box& a, const Box& b) {
+  return a.x0 < b.x1 && b.x0 < a.x1 && a.y0 < b.y1 && b.y0 < a.y1;
+}
+
+TEST(XYPlotLayout, TheXAxisCoversEveryBandNotOnlyThePoints) {
+  // A failed imu job's timeline: intervals from 0.5 s to 29.5 s, the one marker between 13.5 s
+  // and 17 s. Every interval is drawn whole inside the frame.
+  PlotOptions o;
+  o.name = "bands";
+  o.bands = {{0.5, 3, "1"}, {13.5, 17, "2"}, {27, 29.5, "3"}};
+  Series mid;
+  mid.line = false;
+  mid.x = {15.25};
+  mid.y = {3.5};
+  const std::string svg = RenderXYPlot(o, {mid});
+  ExpectValidSvg(svg, "bands");
+  const Box f = FrameOf(svg);
+  size_t rects = 0;
+  for (size_t r = svg.find("fill=\"#cfe3f3\""); r != std::string::npos;
+       r = svg.find("fill=\"#cfe3f3\"", r + 1)) {
+    const size_t at = svg.rfind("<rect", r);
+    const double x = NumAttr(svg, at, "x"), w = NumAttr(svg, at, "width");
+    EXPECT_GE(x, f.x0 - 0.1);
+    EXPECT_LE(x + w, f.x1 + 0.1);
+    EXPECT_GT(w, 0.05 * (f.x1 - f.x0)) << "band " << rects << " is clipped";
+    ++rects;
+  }
+  EXPECT_EQ(rects, 3u);
+}
+
+TEST(XYPlotLayout, AConstantSeriesIsDrawnInsideTheFrameNotOnIt) {
+  // A constant |ω| (the rig turned at one rate) with the axis from zero: the line would sit on
+  // the frame's top edge.
+  for (double value : {2.0, 0.5, -3.0, 1e-3}) {
+    PlotOptions o;
+    o.name = "flat";
+    o.y.include_zero = true;
+    Series s;
+    for (int i = 0; i < 50; ++i) {
+      s.x.push_back(i);
+      s.y.push_back(value);
+    }
+    const std::string svg = RenderXYPlot(o, {s});
+    ExpectValidSvg(svg, "flat");
+    const Box f = FrameOf(svg);
+    const size_t line = svg.find("class=\"line\"");
+    ASSERT_NE(line, std::string::npos);
+    const std::string d = Attr(svg, line, "d");
+    const double y = std::stod(d.substr(d.find(' ') + 1));
+    const double margin = 0.05 * (f.y1 - f.y0);
+    EXPECT_GT(y, f.y0 + margin) << value << ": " << d.substr(0, 40);
+    EXPECT_LT(y, f.y1 - margin) << value;
+  }
+}
+
+TEST(XYPlotLayout, SeriesPastThePaletteStillLookDifferentInTheLegend) {
+  // Twelve triads (drift of positions): series 0 and 7 used to share colour and style.
+  for (bool markers : {false, true}) {
+    PlotOptions o;
+    o.name = "many";
+    o.width = 1400;  // room for every legend entry
+    std::vector<Series> series;
+    for (int i = 0; i < 14; ++i) {
+      Series s;
+      s.label = "t" + std::to_string(i);
+      s.x = {0, 1};
+      s.y = {double(i), double(i) + 1};
+      if (markers) s.marker = Marker::kCircle;
+      series.push_back(s);
+    }
+    const std::string svg = RenderXYPlot(o, series);
+    std::vector<std::string> styles;
+    const size_t legend = svg.find("class=\"legend\"");
+    ASSERT_NE(legend, std::string::npos);
+    for (size_t l = svg.find("<line", legend);
+         l != std::string::npos && l < svg.find("</g>", legend); l = svg.find("<line", l + 1)) {
+      styles.push_back(Attr(svg, l, "stroke") + "|" + Attr(svg, l, "stroke-dasharray"));
+    }
+    ASSERT_EQ(styles.size(), 14u);
+    for (size_t a = 0; a < styles.size(); ++a) {
+      for (size_t b = a + 1; b < styles.size(); ++b) {
+        EXPECT_NE(styles[a], styles[b]) << "series " << a << " and " << b;
+      }
+    }
+  }
+  // Past two rounds of the palette a series with markers gets another marker shape.
+  std::vector<Series> series(16);
+  for (int i = 0; i < 16; ++i) {
+    series[i].x = {0};
+    series[i].y = {double(i)};
+    series[i].marker = Marker::kCircle;
+  }
+  PlotOptions o;
+  o.name = "markers";
+  const std::string svg = RenderXYPlot(o, series);
+  const size_t s14 = svg.find("series series-14");
+  ASSERT_NE(s14, std::string::npos);
+  EXPECT_EQ(svg.find("<circle", s14), svg.find("<circle", svg.find("series series-15")))
+      << "series 14 is drawn with circles like series 0";
+}
+
+TEST(XYPlotLayout, PointLabelsNeverOverlapAndLabelsOfOnePointAreJoined) {
+  // Sensitivity axes projected onto a plane: twelve sensors close together, two of them on the
+  // same spot (their axes project to the same point).
+  PlotOptions o;
+  o.name = "axes";
+  o.x.min = o.y.min = -1.25;
+  o.x.max = o.y.max = 1.25;
+  o.equal_aspect = true;
+  o.height = 520;
+  Series est;
+  est.line = false;
+  est.marker = Marker::kCross;
+  for (int i = 0; i < 12; ++i) {
+    est.x.push_back(0.02 * (i % 4));
+    est.y.push_back(0.03 * (i / 4));
+    est.point_labels.push_back("sensor" + std::to_string(i));
+  }
+  est.x.push_back(0);
+  est.y.push_back(0);
+  est.point_labels.push_back("twin");
+  const std::string svg = RenderXYPlot(o, {est});
+  ExpectValidSvg(svg, "axes");
+  const auto texts = TextsIn(svg, "class=\"point-labels\"");
+  ASSERT_FALSE(texts.empty());
+  std::vector<Box> boxes;
+  for (const Text& t : texts) boxes.push_back(TextBox(t, 6.3 * 9.5 / 11, 10));
+  for (size_t a = 0; a < boxes.size(); ++a) {
+    for (size_t b = a + 1; b < boxes.size(); ++b) {
+      EXPECT_FALSE(Overlap(boxes[a], boxes[b])) << texts[a].text << " / " << texts[b].text;
+    }
+  }
+  EXPECT_NE(svg.find(">sensor0, twin<"), std::string::npos);
+  // Every label is drawn or counted in a note.
+  size_t drawn = 0;
+  for (const Text& t : texts) drawn += 1 + std::count(t.text.begin(), t.text.end(), ',');
+  if (drawn < 13) {
+    EXPECT_NE(svg.find(std::to_string(13 - drawn) + " point label(s) left out"), std::string::npos);
+  }
+  EXPECT_GE(drawn, 8u);
+}
+
+TEST(XYPlotLayout, ReferenceLineLabelsNeverOverlap) {
+  // The Allan plot's τ markers: 1 s and 3 s are close together on six decades.
+  PlotOptions o;
+  o.name = "allan";
+  o.x.type = o.y.type = ScaleType::kLog10;
+  o.ref_lines.push_back({true, 1.0, "\xCF\x84 = 1 s: N", true});
+  o.ref_lines.push_back({true, 3.0, "\xCF\x84 = 3 s: K", true});
+  o.ref_lines.push_back({false, 1e-3, "noise floor", true});
+  o.ref_lines.push_back({false, 1.2e-3, "configured", true});
+  Series s;
+  s.x = {0.01, 0.1, 1, 10, 100, 1000, 10000};
+  s.y = {1e-2, 3e-3, 1e-3, 4e-4, 3e-4, 5e-4, 1e-3};
+  const std::string svg = RenderXYPlot(o, {s});
+  ExpectValidSvg(svg, "allan");
+  const auto texts = TextsIn(svg, "class=\"ref-line\"");
+  ASSERT_EQ(texts.size(), 4u);
+  for (size_t a = 0; a < texts.size(); ++a) {
+    for (size_t b = a + 1; b < texts.size(); ++b) {
+      EXPECT_FALSE(Overlap(TextBox(texts[a], 6.3, 11), TextBox(texts[b], 6.3, 11)))
+          << texts[a].text << " / " << texts[b].text;
+    }
+  }
 }
 
 TEST(BarChart, LogAxisSkipsNonPositiveAndHandlesNoCategories) {

@@ -1,12 +1,15 @@
 #!/usr/bin/env python3
 """Measures, in headless Chromium at a 1280 px wide window, whether every table of a page fits.
 
-Usage: table_widths.py CHROMIUM PROFILE_DIR URL...
+Usage: table_widths.py [--width PX] [--tables CLASS,...] CHROMIUM PROFILE_DIR URL...
 
 For each URL, prints one line per table: its classes, its width and the width its container
 offers (the .table-wrap that would scroll it sideways, else the page), "ok" or "SCROLLS". Exits 1
 when a table is wider than its container or the page itself scrolls sideways, 2 when Chromium
-cannot be driven. Chromium is driven over the DevTools protocol on a pipe
+cannot be driven. --width sets the window's width (a phone: 400); --tables checks only tables
+with one of those classes (the others may scroll in their .table-wrap) and also that every
+status or verdict badge (.badge) inside them is laid out wholly inside the window, so that
+nothing hides a verdict off to the side. Chromium is driven over the DevTools protocol on a pipe
 (--remote-debugging-pipe: JSON messages separated by NUL bytes, commands on fd 3, answers on
 fd 4), so no port is opened and nothing but the standard library is needed.
 """
@@ -17,7 +20,7 @@ import subprocess
 import sys
 import time
 
-WIDTH, HEIGHT = 1280, 2400
+WIDTH, HEIGHT = 1280, 2400  # --width changes WIDTH
 
 MEASURE = r"""
 (() => {
@@ -28,8 +31,15 @@ MEASURE = r"""
     // The table's own laid-out width against the room its container offers (a wrap's
     // scrollWidth would also blame a narrow table for a wide neighbour in the same wrap).
     const width = Math.ceil(t.getBoundingClientRect().width);
+    const badges = [];
+    for (const b of t.querySelectorAll('.badge')) {
+      const r = b.getBoundingClientRect();
+      const shown = r.width > 0 && r.height > 0 && r.left >= -1 && r.right <= window.innerWidth + 1;
+      badges.push({text: b.textContent, shown: shown, left: Math.round(r.left),
+                   right: Math.round(r.right)});
+    }
     out.tables.push({name: t.className || '(no class)', width: width, room: room,
-                     scrolls: width > room + 1});
+                     scrolls: width > room + 1, badges: badges});
   }
   return JSON.stringify(out);
 })()
@@ -118,23 +128,49 @@ def measure(chromium, url):
 
 
 def main():
-    if len(sys.argv) < 4:
+    global WIDTH
+    args = sys.argv[1:]
+    only = None
+    while args and args[0].startswith("--"):
+        if args[0] == "--width" and len(args) > 1:
+            WIDTH = int(args[1])
+        elif args[0] == "--tables" and len(args) > 1:
+            only = set(args[1].split(","))
+        else:
+            print(__doc__.strip().splitlines()[2])
+            return 2
+        args = args[2:]
+    if len(args) < 3:
         print(__doc__.strip().splitlines()[2])
         return 2
-    chromium = Chromium(sys.argv[1], sys.argv[2])
+    chromium = Chromium(args[0], args[1])
     failed = False
+    checked = 0
     try:
-        for url in sys.argv[3:]:
+        for url in args[2:]:
             m = measure(chromium, url)
             page_scrolls = m["page"] > m["window"] + 1
             print("%s: page %d px in a %d px window%s" %
                   (url, m["page"], m["window"], " SCROLLS" if page_scrolls else ""))
             failed = failed or page_scrolls
             for t in m["tables"]:
+                if only is not None and not only & set(t["name"].split()):
+                    continue
+                checked += 1
                 print("  table.%s: %d px in %d px %s" %
                       (t["name"].replace(" ", "."), t["width"], t["room"],
                        "SCROLLS" if t["scrolls"] else "ok"))
                 failed = failed or t["scrolls"]
+                if only is None:
+                    continue
+                for b in t["badges"]:
+                    if not b["shown"]:
+                        print("    badge '%s' at %d..%d px: HIDDEN" %
+                              (b["text"], b["left"], b["right"]))
+                        failed = True
+        if only is not None and checked == 0:
+            print("table_widths: no table of class %s on these pages" % ",".join(sorted(only)))
+            failed = True
     except RuntimeError as e:
         print("table_widths: " + str(e))
         return 2
