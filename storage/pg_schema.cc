@@ -9,6 +9,9 @@
 //      jobs.error_detail_json (the partial diagnostics of a failed calibration).
 //   3  what SQLite schema version 5 adds: a running job's cancel request (jobs.cancel_requested_at,
 //      cancel_reason, cancel_actor) and the job_events action 'cancel'.
+//   4  what SQLite schema version 6 adds: results_by_state (?verdict= reads the matching
+//      results only); and devices_by_serial_bytes, the devices in byte order (COLLATE "C", as
+//      SQLite sorts) for the pages of ListDevices.
 #include <string>
 #include <vector>
 
@@ -110,8 +113,14 @@ ALTER TABLE job_events ADD CONSTRAINT job_events_action_check
   CHECK (action IN ('revoke', 'accept', 'cancel'));
 )sql";
 
+constexpr const char* kPgV4 = R"sql(
+CREATE INDEX results_by_state ON results ((COALESCE(decision, verdict)), job_id);
+CREATE INDEX devices_by_serial_bytes ON devices (serial COLLATE "C");
+)sql";
+
 const std::vector<const char*>& PgSteps() {
-  static const std::vector<const char*>& steps = *new std::vector<const char*>{kPgV1, kPgV2, kPgV3};
+  static const std::vector<const char*>& steps =
+      *new std::vector<const char*>{kPgV1, kPgV2, kPgV3, kPgV4};
   return steps;
 }
 

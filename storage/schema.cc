@@ -159,6 +159,12 @@ ALTER TABLE job_events_v5 RENAME TO job_events;
 CREATE INDEX job_events_by_job ON job_events(job_id, id);
 )sql";
 
+// Version 6: lists (issue #27). An index of results by their standing (a person's decision, else
+// the gate's verdict) so ?verdict= reads only the matching results, newest first.
+constexpr const char* kV6 = R"sql(
+CREATE INDEX results_by_state ON results(COALESCE(decision, verdict), job_id);
+)sql";
+
 // The hashes of results carried over from v1 are computed here (SQLite has no sha256()).
 Status HashCarriedOverResults(Db* db) {
   Stmt select;
@@ -192,7 +198,7 @@ struct Step {
 const std::vector<Step>& Steps() {
   static const std::vector<Step>& steps = *new std::vector<Step>{
       {kV1, nullptr}, {kV2, &HashCarriedOverResults}, {kV3, nullptr}, {kV4, nullptr},
-      {kV5, nullptr},
+      {kV5, nullptr}, {kV6, nullptr},
   };
   return steps;
 }

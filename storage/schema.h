@@ -25,7 +25,7 @@
 
 namespace calibd::storage {
 
-inline constexpr int kSchemaVersion = 5;
+inline constexpr int kSchemaVersion = 6;
 
 // Reads PRAGMA user_version.
 Status SchemaVersion(Db* db, int64_t* version);
