@@ -23,12 +23,11 @@
 //            result has positions; the others are always present on a job with a result of
 //            that method, saying "no data" when their keys are missing)
 //   other:   form.filters, nav.pager a.older, form.cancel-job (queued or running job: posts
-//            reason [and token] to /api/v1/jobs/{id}/cancel), span.elapsed (running job),
-//            .callout-error .failure-reason (failed job: the method's message, the one source of
-//            what was wrong and what to do instead; or pca diagnostics.usable == false), p.model
-//            (the result's `model` equation), ul.warnings, ul.downloads, pre.config,
-//            span.badge.badge-STATUS, table.table-drift-detail (inside <details>, per sensor /
-//            triad)
+//            reason [and token] to /api/v1/jobs/{id}/cancel), span.elapsed (running job), .callout-error .failure-reason (failed job: the
+//            method's message, the one source of what was wrong and what to do instead; or pca
+//            diagnostics.usable == false), p.model (the result's `model` equation),
+//            ul.warnings, ul.downloads, pre.config, span.badge.badge-STATUS,
+//            table.table-drift-detail (inside <details>, per sensor / triad)
 //
 // Result keys read beyond SPEC §4 (all optional): pca diagnostics.usable, .reason, .noise_std
 // (drawn as a line on the residual plot); array diagnostics.termination, .gyro_unit,
