@@ -3,6 +3,7 @@
 #include <cctype>
 #include <cstdio>
 
+#include "server/device_lookup.h"
 #include "server/inertial_log.h"
 #include "server/method.h"
 
@@ -122,18 +123,9 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
       return Status::InvalidInput("'device' must be a string (the serial number)")
           .WithField("device");
     }
-    const std::string& serial = device->get_ref<const std::string&>();
-    if (serial.empty() || serial.size() > 128) {
-      return Status::InvalidInput("'device' must have 1 to 128 characters").WithField("device");
-    }
-    for (unsigned char ch : serial) {
-      if (ch < 0x20 || ch == 0x7f || ch == '/') {
-        return Status::InvalidInput(
-                   "'device' may not contain control characters or '/' (it is part of URLs)")
-            .WithField("device");
-      }
-    }
-    common->device = serial;
+    // Stored in NFC; invisible, bidi-control and edge white-space characters refused.
+    Status s = NormalizeSerial(device->get_ref<const std::string&>(), &common->device);
+    if (!s.ok()) return s;
   }
   common->job_seconds = 0;
   if (auto limit = config.find("job_seconds"); limit != config.end()) {

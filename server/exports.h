@@ -39,6 +39,10 @@ struct ExportContext {
   // ?job=, which the file then marks as not for use (C header: ACCEPTED 0 and a comment; CSV and
   // yaml: a first comment line).
   std::string state;
+  // The job's config (JSON object; null when not known). Exports that convert readings to SI
+  // read the nominal bias of offset-binary counts from it (nominal_accel_bias,
+  // nominal_gyro_bias; absent = 0).
+  nlohmann::json config = nullptr;
 };
 
 // Whether `context` is a result that is served as a calibration (state "" or "accepted").

@@ -195,9 +195,12 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store, bool token
               SendPage(res, 200, web::RenderJobPage(view));
             });
 
-  http->Get("/devices", [store](const httplib::Request&, httplib::Response& res) {
+  http->Get("/devices", [store](const httplib::Request& req, httplib::Response& res) {
+    // A page of devices (the default limit, 100), after= the last serial of the previous one.
+    storage::DeviceFilter filter;
+    filter.after = ToNfc(req.get_param_value("after"));
     std::vector<storage::DeviceInfo> devices;
-    Status s = store->ListDevices(&devices);
+    Status s = store->ListDevices(filter, &devices);
     if (!s.ok()) return SendErrorPage(res, s);
     web::DevicesView view;
     view.methods.clear();
@@ -207,12 +210,13 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store, bool token
       for (const auto& c : d.latest) row.latest.push_back({c.method, c.job_id, c.calibrated_at});
       view.devices.push_back(std::move(row));
     }
+    if (static_cast<int>(devices.size()) == filter.limit) view.next_after = devices.back().serial;
     SendPage(res, 200, web::RenderDevicesPage(view));
   });
 
   http->Get(R"(/devices/([^/]+))", [store](const httplib::Request& req, httplib::Response& res) {
     web::DeviceView view;
-    view.serial = req.matches[1];
+    view.serial = ToNfc(std::string(req.matches[1]));  // serials are stored in NFC
     storage::JobFilter filter;
     filter.device = view.serial;
     filter.limit = 500;
@@ -221,7 +225,7 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store, bool token
     Status s = store->ListJobs(filter, &jobs);
     if (!s.ok()) return SendErrorPage(res, s);
     if (jobs.empty()) {
-      const std::string hint = WrongCaseDeviceMessage(store, view.serial);
+      const std::string hint = SimilarDeviceMessage(store, view.serial);
       return SendPage(
           res, 404,
           web::RenderErrorPage(

@@ -231,7 +231,7 @@ void Service::Impl::HandleListJobs(const httplib::Request& req, httplib::Respons
   storage::JobFilter filter;
   for (const auto& [key, value] : req.params) {
     if (key == "device") {
-      filter.device = value;
+      filter.device = ToNfc(value);
     } else if (key == "method") {
       if (FindMethod(value) == nullptr) {
         return (void)SendStatus(
@@ -290,9 +290,29 @@ void Service::Impl::HandleListJobs(const httplib::Request& req, httplib::Respons
   res.set_content(JsonBody(body), "application/json");
 }
 
-void Service::Impl::HandleDevices(const httplib::Request&, httplib::Response& res) {
+void Service::Impl::HandleDevices(const httplib::Request& req, httplib::Response& res) {
+  // A page of devices (limit, after = the last serial of the previous page), with the URL of the
+  // next page in "next" (null on the last page): the answer's size is bounded by the limit.
+  storage::DeviceFilter filter;
+  for (const auto& [key, value] : req.params) {
+    if (key == "limit") {
+      int64_t limit;
+      if (!ParseId(value, &limit) || limit > 1000) {
+        return (void)SendStatus(res,
+                                Status::InvalidInput("limit must be 1..1000").WithField("limit"));
+      }
+      filter.limit = static_cast<int>(limit);
+    } else if (key == "after") {
+      filter.after = ToNfc(value);
+    } else {
+      return (void)SendStatus(res,
+                              Status::InvalidInput("unknown query parameter '" + key.substr(0, 64) +
+                                                   "' (known: limit, after)")
+                                  .WithField(key.substr(0, 64)));
+    }
+  }
   std::vector<storage::DeviceInfo> devices;
-  Status s = store->ListDevices(&devices);
+  Status s = store->ListDevices(filter, &devices);
   if (!s.ok()) return (void)SendStatus(res, s);
   json list = json::array();
   for (const auto& d : devices) {
@@ -308,7 +328,14 @@ void Service::Impl::HandleDevices(const httplib::Request&, httplib::Response& re
                     {"latest", latest},
                     {"url", "/devices/" + UrlEncode(d.serial)}});
   }
-  res.set_content(JsonBody(json{{"devices", list}}), "application/json");
+  json body = {{"devices", list}, {"next", json()}};
+  if (static_cast<int>(devices.size()) == filter.limit) {
+    httplib::Params next = req.params;
+    next.erase("after");
+    next.emplace("after", devices.back().serial);
+    body["next"] = "/api/v1/devices?" + httplib::detail::params_to_query_str(next);
+  }
+  res.set_content(JsonBody(body), "application/json");
 }
 
 namespace {
@@ -338,7 +365,8 @@ Status CheckServedResult(const storage::JobInfo& job, bool any_state) {
 }  // namespace
 
 void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response& res) {
-  const std::string serial = req.matches[1];
+  // Serials are stored in NFC: a decomposed "CAFE\u0301" in the URL finds "CAF\u00c9".
+  const std::string serial = ToNfc(std::string(req.matches[1]));
   std::string method = req.get_param_value("method");
   const std::string format = req.has_param("format") ? req.get_param_value("format") : "json";
   // json, or a format some method exports (Method::ExportFormats).
@@ -394,7 +422,9 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
     method = job.method;
   } else if (method.empty()) {
     std::vector<storage::DeviceInfo> devices;
-    Status s = store->ListDevices(&devices);
+    storage::DeviceFilter one;
+    one.serial = serial;
+    Status s = store->ListDevices(one, &devices);
     if (!s.ok()) return (void)SendStatus(res, s);
     std::vector<std::string> methods;
     for (const auto& d : devices) {
@@ -408,7 +438,7 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
                                        .WithField("method"));
     }
     if (methods.empty()) {
-      const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
+      const std::string hint = SimilarDeviceMessage(store.get(), serial);
       SendError(res, 404, "not_found",
                 hint.empty()
                     ? "no accepted calibration for device '" + serial +
@@ -425,7 +455,7 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
   if (!req.has_param("job")) {
     s = store->LatestResult(serial, method, &job);
     if (s.code() == StatusCode::kNotFound) {
-      const std::string hint = WrongCaseDeviceMessage(store.get(), serial);
+      const std::string hint = SimilarDeviceMessage(store.get(), serial);
       SendError(res, 404, "not_found",
                 hint.empty()
                     ? "no accepted " + method + " calibration for device '" + serial +
@@ -489,7 +519,14 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
                               [&](const ExportFormat& e) { return e.format == format; });
   if (f == exports.end()) return (void)SendStatus(res, NoSuchExport(format, exporter->name()));
   std::string text;
-  const ExportContext context{job.id, serial, method, job.finished_at, Name(job.state)};
+  // With the job's config (nominal offsets for SI exports; a stored config is validated JSON).
+  const ExportContext context{
+      job.id,
+      serial,
+      method,
+      job.finished_at,
+      Name(job.state),
+      json::parse(job.config_json.empty() ? "{}" : job.config_json, nullptr, false)};
   s = exporter->Export(format, result, context, &text);
   if (!s.ok()) return (void)SendStatus(res, s);
   MarkNotAccepted(format, context, &text);

@@ -314,8 +314,16 @@ json Build() {
         {"409", ErrorResponse("the job already finished (the message names its status)")},
         {"415", ErrorResponse("neither application/json nor a form")}}}};
   paths["/devices"]["get"] = {
-      {"summary", "Devices with their latest calibration time per method"},
-      {"responses", {{"200", JsonResponse("devices", {{"type", "object"}})}}}};
+      {"summary",
+       "Devices with their latest calibration time per method, a page at a time in byte order "
+       "of the serials; `next` is the next page's URL (null on the last)"},
+      {"parameters",
+       json::array({QueryParam("limit", "integer", "1..1000, default 100"),
+                    QueryParam("after", "string",
+                               "cursor: the last serial of the previous page")})},
+      {"responses",
+       {{"200", JsonResponse("devices", {{"type", "object"}})},
+        {"400", ErrorResponse("limit out of range or an unknown query parameter")}}}};
   paths["/devices/{serial}/calibration"]["get"] = {
       {"summary",
        "The latest accepted (not rejected by the acceptance gate, not revoked) calibration of a "

@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "results/imu_result.h"
+#include "server/acceptance.h"
 #include "server/export_util.h"
 
 namespace calibd::server {
@@ -66,6 +67,19 @@ Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context,
   const double gyro_unit = *params.gyro_unit;
   const double rate = *diagnostics.rate;
   const std::vector<results::ImuTriads>& imus = params.imus;
+  double nominal_accel_bias = 0, nominal_gyro_bias = 0;
+  if (context.config.is_object()) {
+    for (auto [key, value] : {std::pair{"nominal_accel_bias", &nominal_accel_bias},
+                              std::pair{"nominal_gyro_bias", &nominal_gyro_bias}}) {
+      if (!context.config.contains(key) || context.config[key].is_null()) continue;
+      const std::optional<double> n = Number(context.config[key]);
+      if (!n || !std::isfinite(*n)) {
+        return Status::Internal(std::string("the job's config key '") + key +
+                                "' is not a number: " + context.config[key].dump().substr(0, 60));
+      }
+      *value = *n;
+    }
+  }
 
   std::ostringstream y;
   y << "%YAML:1.0\n"
@@ -107,7 +121,10 @@ Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context,
       if (d.accel_noise.allFinite()) accel_sigma = d.accel_noise.maxCoeff();
       if (d.gyro_noise.allFinite()) gyro_sigma = d.gyro_noise.maxCoeff();
     }
-    const Eigen::Vector3d ba_si = ba * accel_unit, bg_si = bg * gyro_unit;
+    // a = M_a (y - b) = (M_a / u) (u (y - n) - u (b - n)): a driver publishing u (y - n), n the
+    // nominal offset of offset-binary counts, leaves the bias u (b - n) in SI.
+    const Eigen::Vector3d ba_si = (ba.array() - nominal_accel_bias).matrix() * accel_unit;
+    const Eigen::Vector3d bg_si = (bg.array() - nominal_gyro_bias).matrix() * gyro_unit;
     y << "imu" << k << ":  # calibd IMU " << CommentSafe(name) << "\n"
       << "  T_i_b:\n"
       << "    - [1.0, 0.0, 0.0, 0.0]\n"
@@ -156,7 +173,9 @@ Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context,
     for (int i = 0; i < 3; ++i) {
       y << " [" << Num(r(0, i)) << ", " << Num(r(1, i)) << ", " << Num(r(2, i)) << "]";
     }
-    y << "\n  # biases in SI for initialising the filter: b_a = [" << Num(ba_si(0)) << ", "
+    y << "\n  # biases in SI for initialising the filter (readings u (y - n), n the nominal offset "
+      << Num(nominal_accel_bias) << " / " << Num(nominal_gyro_bias) << " counts):\n"
+      << "  # b_a = [" << Num(ba_si(0)) << ", "
       << Num(ba_si(1)) << ", " << Num(ba_si(2)) << "] m/s^2, b_g = [" << Num(bg_si(0)) << ", "
       << Num(bg_si(1)) << ", " << Num(bg_si(2)) << "] rad/s\n";
   }

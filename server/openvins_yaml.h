@@ -15,7 +15,8 @@
 // Tw = L_g^-1, R_IMUtoGYRO = Q^T. Tg = 0 (calibd estimates no g-sensitivity). The frame I differs
 // from calibd's body frame by the small rotation R (written in a comment; VIO extrinsics are
 // calibrated against I anyway). Biases are not keys of the file (OpenVINS estimates them online);
-// their SI values are given in comments. Noise figures: when the calibration named noise jobs
+// their SI values, u (b - n) with n the job's nominal_*_bias (offset-binary counts; 0 when not
+// given), are given in comments. Noise figures: when the calibration named noise jobs
 // (accel_noise/gyro_noise {"job": ID}, diagnostics.noise_model), their densities and random walks
 // (the largest axis, Kalibr's units); else the densities from the static intervals' per-sample
 // spread, sigma / sqrt(rate), and the random walks only as a comment saying to run a noise job

@@ -337,6 +337,7 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     if (!s.ok()) return finish(SendStatus(res, s));
     s = ValidateConfig(config, &common);
     if (!s.ok()) return finish(SendStatus(res, s));
+    if (!common.device.empty()) config["device"] = common.device;  // the stored (NFC) serial
     s = CheckJobSeconds(common, static_cast<double>(job_seconds));
     if (!s.ok()) return finish(SendStatus(res, s));
     const Method& method = *FindMethod(common.method);
@@ -372,7 +373,8 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
       return finish(
           SendStatus(res, Status::InvalidInput("'device' must be a string").WithField("device")));
     }
-    common.device = config["device"].get<std::string>();
+    s = NormalizeSerial(config["device"].get_ref<const std::string&>(), &common.device);
+    if (!s.ok()) return finish(SendStatus(res, s));
     for (auto& [key, value] : config.items()) {
       if (key != "device") {
         return finish(
@@ -450,6 +452,7 @@ void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Respon
   CommonConfig common;
   s = ValidateConfig(config, &common);
   if (!s.ok()) return (void)SendStatus(res, s);
+  if (!common.device.empty()) config["device"] = common.device;  // the stored (NFC) serial
   s = CheckJobSeconds(common, static_cast<double>(job_seconds));
   if (!s.ok()) return (void)SendStatus(res, s);
   storage::RecordingInfo recording;

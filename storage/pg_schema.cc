@@ -11,6 +11,9 @@
 //      cancel_reason, cancel_actor) and the job_events action 'cancel'.
 //   4  what SQLite schema version 6 adds: results.seq, the order results were stored in (from the
 //      sequence results_seq), which picks a device's latest served result instead of finished_at.
+//   5  what SQLite schema version 7 adds: results_by_state (?verdict= reads the matching
+//      results only); and devices_by_serial_bytes, the devices in byte order (COLLATE "C", as
+//      SQLite sorts) for the pages of ListDevices.
 #include <string>
 #include <vector>
 
@@ -131,9 +134,14 @@ ALTER SEQUENCE results_seq OWNED BY results.seq;
 CREATE UNIQUE INDEX results_by_seq ON results(seq);
 )sql";
 
+constexpr const char* kPgV5 = R"sql(
+CREATE INDEX results_by_state ON results ((COALESCE(decision, verdict)), job_id);
+CREATE INDEX devices_by_serial_bytes ON devices (serial COLLATE "C");
+)sql";
+
 const std::vector<const char*>& PgSteps() {
   static const std::vector<const char*>& steps =
-      *new std::vector<const char*>{kPgV1, kPgV2, kPgV3, kPgV4};
+      *new std::vector<const char*>{kPgV1, kPgV2, kPgV3, kPgV4, kPgV5};
   return steps;
 }
 

@@ -56,7 +56,7 @@
 namespace calibd::storage {
 
 // The newest schema version of the PostgreSQL backend (pg_schema.cc).
-inline constexpr int kPgSchemaVersion = 4;
+inline constexpr int kPgSchemaVersion = 5;
 
 // `target` with the password of a URI or keyword string replaced by "***" (for logs, /healthz).
 std::string RedactConnectionTarget(const std::string& target);
@@ -97,7 +97,8 @@ class PgStore final : public Store {
   Status GetJob(int64_t id, JobInfo* out) override;
   Status ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) override;
   Status CountJobs(const JobFilter& filter, int64_t* count) override;
-  Status ListDevices(std::vector<DeviceInfo>* out) override;
+  using Store::ListDevices;
+  Status ListDevices(const DeviceFilter& filter, std::vector<DeviceInfo>* out) override;
   Status LatestResult(const std::string& device, const std::string& method, JobInfo* out) override;
   Status QueueDepth(QueueCounts* out) override;
   Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) override;

@@ -174,6 +174,12 @@ WHERE results.job_id = o.id;
 CREATE UNIQUE INDEX results_by_seq ON results(seq);
 )sql";
 
+// Version 7: lists (issue #27). An index of results by their standing (a person's decision, else
+// the gate's verdict) so ?verdict= reads only the matching results, newest first.
+constexpr const char* kV7 = R"sql(
+CREATE INDEX results_by_state ON results(COALESCE(decision, verdict), job_id);
+)sql";
+
 // The hashes of results carried over from v1 are computed here (SQLite has no sha256()).
 Status HashCarriedOverResults(Db* db) {
   Stmt select;
@@ -208,7 +214,7 @@ const std::vector<Step>& Steps() {
   static const std::vector<Step>& steps = *new std::vector<Step>{
       {kV1, nullptr}, {kV2, &HashCarriedOverResults},
       {kV3, nullptr}, {kV4, nullptr},
-      {kV5, nullptr}, {kV6, nullptr},
+      {kV5, nullptr}, {kV6, nullptr}, {kV7, nullptr},
   };
   return steps;
 }

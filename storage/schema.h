@@ -15,6 +15,7 @@
 //      cancel_actor) and the job_events action 'cancel'
 //   6  "latest" without host clocks: results.seq, the order results were stored in (unique),
 //      which picks a device's latest served result instead of finished_at
+//   7  lists: results_by_state, results by their standing, read by ?verdict= listings
 //
 // Thread-safety: functions take a Db the caller owns (one thread at a time).
 #ifndef CALIBD_STORAGE_SCHEMA_H_
@@ -27,7 +28,7 @@
 
 namespace calibd::storage {
 
-inline constexpr int kSchemaVersion = 6;
+inline constexpr int kSchemaVersion = 7;
 
 // Reads PRAGMA user_version.
 Status SchemaVersion(Db* db, int64_t* version);

@@ -59,7 +59,8 @@ class SqliteStore final : public Store {
   Status GetJob(int64_t id, JobInfo* out) override;
   Status ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) override;
   Status CountJobs(const JobFilter& filter, int64_t* count) override;
-  Status ListDevices(std::vector<DeviceInfo>* out) override;
+  using Store::ListDevices;
+  Status ListDevices(const DeviceFilter& filter, std::vector<DeviceInfo>* out) override;
   Status LatestResult(const std::string& device, const std::string& method, JobInfo* out) override;
   Status QueueDepth(QueueCounts* out) override;
   Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) override;

@@ -53,6 +53,20 @@ Status SqliteStore::GetJob(int64_t id, JobInfo* out) {
 
 namespace {
 
+// A verdict filter without a device reads the matching results from index results_by_state,
+// newest first, and their jobs (CROSS JOIN fixes that order: SQLite, without statistics, would
+// otherwise scan every succeeded job for a rare verdict such as revoked). With a device, the
+// device's jobs (jobs_by_device) are fewer.
+bool ByState(const JobFilter& f) { return f.state.has_value() && f.device.empty(); }
+
+std::string FromSql(const JobFilter& f, bool with_results) {
+  std::string select = internal::JobSelect(with_results);
+  if (!ByState(f)) return select;
+  const std::string from = internal::kJobFrom;
+  return select.replace(select.rfind(from), from.size(),
+                        " FROM results r CROSS JOIN jobs j ON j.id = r.job_id ");
+}
+
 // WHERE clause from constant fragments; the values are bound by BindFilter in the same order.
 std::string FilterSql(const JobFilter& f, bool with_cursor) {
   std::string where = "WHERE 1 ";
@@ -64,7 +78,10 @@ std::string FilterSql(const JobFilter& f, bool with_cursor) {
     where += "AND j.status = 'succeeded' AND COALESCE(r.decision, r.verdict) = ?" +
              std::to_string(++n) + " ";
   }
-  if (with_cursor && f.before > 0) where += "AND j.id < ?" + std::to_string(++n) + " ";
+  if (with_cursor && f.before > 0) {
+    where +=
+        std::string(ByState(f) ? "AND r.job_id < ?" : "AND j.id < ?") + std::to_string(++n) + " ";
+  }
   return where;
 }
 
@@ -91,9 +108,11 @@ Status SqliteStore::ListJobs(const JobFilter& filter, std::vector<JobInfo>* out)
   const int limit_param = 1 + (!filter.device.empty()) + (!filter.method.empty()) +
                           filter.status.has_value() + filter.state.has_value() +
                           (filter.before > 0);
-  s = conn.db()->Prepare(internal::JobSelect(filter.include_results) + where +
-                             "ORDER BY j.id DESC LIMIT ?" + std::to_string(limit_param),
-                         &st);
+  s = conn.db()->Prepare(
+      FromSql(filter, filter.include_results) + where +
+          (ByState(filter) ? "ORDER BY r.job_id DESC LIMIT ?" : "ORDER BY j.id DESC LIMIT ?") +
+          std::to_string(limit_param),
+      &st);
   if (!s.ok()) return s;
   int n = BindFilter(&st, filter, true);
   st.BindInt(n + 1, limit);
@@ -115,7 +134,12 @@ Status SqliteStore::CountJobs(const JobFilter& filter, int64_t* count) {
   if (!s.ok()) return s;
   Stmt st;
   s = conn.db()->Prepare(
-      "SELECT COUNT(*) FROM jobs j LEFT JOIN results r ON r.job_id = j.id " + where, &st);
+      std::string(ByState(filter) ? "SELECT COUNT(*) FROM results r CROSS JOIN jobs j ON j.id = "
+                                    "r.job_id "
+                                  : "SELECT COUNT(*) FROM jobs j LEFT JOIN results r ON r.job_id = "
+                                    "j.id ") +
+          where,
+      &st);
   if (!s.ok()) return s;
   BindFilter(&st, filter, false);
   bool row = false;
@@ -125,18 +149,23 @@ Status SqliteStore::CountJobs(const JobFilter& filter, int64_t* count) {
   return Status::Ok();
 }
 
-Status SqliteStore::ListDevices(std::vector<DeviceInfo>* out) {
+Status SqliteStore::ListDevices(const DeviceFilter& filter, std::vector<DeviceInfo>* out) {
   out->clear();
   Conn conn(this);
   Status s = conn.Open();
   if (!s.ok()) return s;
   Stmt st;
+  // The page of devices first (a range scan of the serial's primary key: BINARY = byte order),
+  // then their calibrations.
   s = conn.db()->Prepare(
       "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
-      "FROM devices d LEFT JOIN device_calibrations c ON c.device = d.serial "
+      "FROM (SELECT serial, first_seen FROM devices WHERE serial > ?1 AND (?2 = '' OR serial = ?2) "
+      "ORDER BY serial LIMIT ?3) d "
+      "LEFT JOIN device_calibrations c ON c.device = d.serial "
       "ORDER BY d.serial, c.method",
       &st);
   if (!s.ok()) return s;
+  st.BindText(1, filter.after).BindText(2, filter.serial).BindInt(3, internal::PageLimit(filter));
   for (bool row = true;;) {
     s = st.Step(&row);
     if (!s.ok()) return s;

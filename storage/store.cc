@@ -66,6 +66,8 @@ Status CheckRecordingDigest(const RecordingInfo& info, int64_t bytes, const std:
       .WithReason(Reason::kStorageDamaged);
 }
 
+int PageLimit(const DeviceFilter& f) { return std::clamp(f.limit <= 0 ? 100 : f.limit, 1, 1000); }
+
 Status ValidateNewRecording(const NewRecording& r) {
   if (!r.columns_json.empty() && !IsJsonArray(r.columns_json)) {
     return Status::InvalidInput("storage: columns_json is not a JSON array");
@@ -368,6 +370,21 @@ Status Store::Open(const std::string& target, StoreOptions options, std::unique_
   out->reset();
   if (IsPostgresTarget(target)) return PgStore::Connect(target, std::move(options), out);
   return SqliteStore::OpenFile(target, std::move(options), out);
+}
+
+Status Store::ListDevices(std::vector<DeviceInfo>* out) {
+  out->clear();
+  DeviceFilter filter;
+  filter.limit = 1000;
+  std::vector<DeviceInfo> page;
+  for (;;) {
+    Status s = ListDevices(filter, &page);
+    if (!s.ok()) return s;
+    const bool last = static_cast<int>(page.size()) < filter.limit;
+    if (!page.empty()) filter.after = page.back().serial;
+    for (auto& d : page) out->push_back(std::move(d));
+    if (last) return Status::Ok();
+  }
 }
 
 Status Store::RevokeJob(int64_t job_id, const std::string& reason, const std::string& actor,

@@ -230,6 +230,13 @@ struct DeviceInfo {
   std::vector<DeviceCalibration> latest;  // one per method with a succeeded job, by method name
 };
 
+// A page of ListDevices.
+struct DeviceFilter {
+  std::string serial;  // "" = any; else only the device with exactly this serial
+  std::string after;   // cursor: only serials after this one (byte order); "" = from the first
+  int limit = 100;     // 1..1000 (clamped); default 100
+};
+
 struct QueueCounts {
   int64_t queued = 0, running = 0, succeeded = 0, failed = 0;
 };
@@ -356,8 +363,14 @@ class Store {
   virtual Status ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) = 0;
   // Number of jobs matching filter's device/method/status (limit/before ignored).
   virtual Status CountJobs(const JobFilter& filter, int64_t* count) = 0;
-  // Every device seen (uploads and jobs), by serial, with its latest calibration per method.
-  virtual Status ListDevices(std::vector<DeviceInfo>* out) = 0;
+  // Devices seen (uploads and jobs) in byte order of their serials, at most filter.limit of them
+  // after filter.after, each with its latest calibration per method. For the next page pass
+  // after = the last returned serial; a page shorter than the limit is the last. Memory and time
+  // are bounded by the page (index range scan), whatever the number of devices.
+  virtual Status ListDevices(const DeviceFilter& filter, std::vector<DeviceInfo>* out) = 0;
+  // Every device: ListDevices page after page (memory grows with the number of devices; for
+  // tools and tests, not for request handlers).
+  Status ListDevices(std::vector<DeviceInfo>* out);
   // The device's latest served job for `method` (succeeded, accepted by the gate or a person, not
   // revoked; the one stored last: results are numbered in the order they were stored, so no host's
   // clock decides), with result_json and result_sha256. kNotFound if there is none.

@@ -29,6 +29,8 @@ int64_t Backoff(const StoreOptions& o, int64_t failures);
 GateVerdict VerdictOf(const std::string& result_json);
 // ListJobs' page size: filter.limit clamped to 1..500, 50 when unset.
 int PageLimit(const JobFilter& f);
+// DeviceFilter::limit clamped to 1..1000 (100 when <= 0).
+int PageLimit(const DeviceFilter& f);
 
 // ---- arguments ----------------------------------------------------------------------------------
 

@@ -143,7 +143,13 @@ std::string RenderDevicesPage(const DevicesView& view) {
       }
       out += "</tr>";
     }
-    return out + "</tbody></table></div>";
+    out += "</tbody></table></div>";
+    if (!view.next_after.empty()) {
+      out += "<nav class=\"pager\"><a class=\"older\" rel=\"next\" href=\"" +
+             A("/devices?after=" + UrlEncode(view.next_after)) +
+             "\">More devices \xE2\x86\x92</a></nav>";
+    }
+    return out;
   });
 }
 

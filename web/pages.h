@@ -166,6 +166,7 @@ struct DevicesView {
   };
   std::vector<Device> devices;  // rendered in the given order
   std::vector<std::string> methods = {"pca", "array", "imu", "noise"};  // one column each
+  std::string next_after;  // "" = the last page; else the next page is /devices?after=<this>
 };
 
 // The devices page: table.table-devices, one row per device (serial linking to its page, first

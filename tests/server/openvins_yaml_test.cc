@@ -149,6 +149,43 @@ TEST(OpenVinsYaml, IntrinsicsPredictCalibdsModelUpToOneRotationInTheCalibratedFo
   }
 }
 
+// The b_a = [..] / b_g = [..] comment's three numbers (NAN when missing).
+Eigen::Vector3d YamlBias(const std::string& yaml, const std::string& key) {
+  Eigen::Vector3d v = Eigen::Vector3d::Constant(NAN);
+  const size_t at = yaml.find(key + " = [");
+  if (at == std::string::npos) return v;
+  char c1, c2;
+  std::istringstream in(yaml.substr(at + key.size() + 4));
+  in >> v(0) >> c1 >> v(1) >> c2 >> v(2);
+  return v;
+}
+
+TEST(OpenVinsYaml, BiasesAreInSiAfterTheNominalOffsetOfCounts) {
+  const double ua = 0.0024, ug = 2e-4;
+  const Eigen::Vector3d ba(32768 + 10, 32768 - 20, 32768 + 5), bg(32768 + 50, 32768, 32768 - 25);
+  const Eigen::Vector3d noise(0.01, 0.01, 0.01);
+  const json result = ImuResult(ua * Eigen::Matrix3d::Identity(), ba,
+                                ug * Eigen::Matrix3d::Identity(), bg, ua, ug, 100, noise, noise);
+  ExportContext context{7, "SN-1", "imu", "2026-01-01"};
+  context.config = {{"method", "imu"}, {"nominal_accel_bias", 32768}, {"nominal_gyro_bias", 32768}};
+  std::string yaml;
+  ASSERT_TRUE(ImuResultToOpenVinsYaml(result, context, &yaml).ok());
+  const Eigen::Vector3d b_a = YamlBias(yaml, "b_a"), b_g = YamlBias(yaml, "b_g");
+  ASSERT_TRUE(b_a.allFinite() && b_g.allFinite()) << yaml;
+  EXPECT_LT((b_a - Eigen::Vector3d(10, -20, 5) * ua).norm(), 1e-12) << yaml;
+  EXPECT_LT((b_g - Eigen::Vector3d(50, 0, -25) * ug).norm(), 1e-12) << yaml;
+  // Without a nominal offset (signed readings), the bias is the reading bias x unit.
+  context.config = {{"method", "imu"}, {"nominal_gyro_bias", nullptr}};
+  ASSERT_TRUE(ImuResultToOpenVinsYaml(result, context, &yaml).ok());
+  EXPECT_NEAR(YamlBias(yaml, "b_a")(0), ba(0) * ua, 1e-9) << yaml;
+  EXPECT_NEAR(YamlBias(yaml, "b_g")(2), bg(2) * ug, 1e-9) << yaml;
+  // A config whose offset is not a number is not silently taken as 0.
+  context.config = {{"method", "imu"}, {"nominal_accel_bias", "32768"}};
+  Status s = ImuResultToOpenVinsYaml(result, context, &yaml);
+  EXPECT_EQ(s.code(), StatusCode::kInternal);
+  EXPECT_NE(s.message().find("nominal_accel_bias"), std::string::npos) << s.message();
+}
+
 TEST(OpenVinsYaml, AMirroringMatrixOrAnOldResultIsRefusedSayingWhy) {
   const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
   json result = ImuResult(-Eigen::Matrix3d::Identity(), zero, Eigen::Matrix3d::Identity(), zero, 1,
@@ -190,6 +227,16 @@ TEST(OpenVinsYaml, TheCalibrationRouteServesItForAnImuJobInCounts) {
   // Per SI reading, the gains are ≈ 1 (the counts' unit is divided out).
   const Eigen::Matrix3d ta = YamlMatrix(yaml->body, "imu0", "Ta");
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(ta(i, i), 1, 0.05) << yaml->body;
+  // The biases in SI after the nominal offset of 32768 counts: the simulation's are small (not
+  // 32768 x 0.0024 = 78.6 m/s^2), and equal to the result's (b - 32768) x unit.
+  const Eigen::Vector3d b_a = YamlBias(yaml->body, "b_a"), b_g = YamlBias(yaml->body, "b_g");
+  ASSERT_TRUE(b_a.allFinite() && b_g.allFinite()) << yaml->body;
+  const json& bias = job["result"]["parameters"]["imus"][0]["accelerometer"]["bias"];
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(b_a(i), (bias[i].get<double>() - 32768) * 0.0024, 1e-9) << yaml->body;
+  }
+  EXPECT_LT(b_a.norm(), 2.0) << yaml->body;
+  EXPECT_LT(b_g.norm(), 0.2) << yaml->body;
 }
 
 }  // namespace

@@ -137,7 +137,8 @@ TEST_F(PgStoreTest, Version1FailuresMigrateAndNewOnesKeepTheirReason) {
   }
   // The database as version 1 left it: without the v2 columns, the job failed.
   auto c = Sql();
-  ASSERT_TRUE(c->ExecScript("ALTER TABLE jobs DROP COLUMN error_reason;"
+  ASSERT_TRUE(c->ExecScript("DROP INDEX results_by_state; DROP INDEX devices_by_serial_bytes;"
+                            "ALTER TABLE jobs DROP COLUMN error_reason;"
                             "ALTER TABLE jobs DROP COLUMN error_detail_json;"
                             "ALTER TABLE jobs DROP COLUMN cancel_requested_at;"
                             "ALTER TABLE jobs DROP COLUMN cancel_reason;"
@@ -188,7 +189,8 @@ TEST_F(PgStoreTest, Version2JobsAndEventsMigrateAndJobsCanBeCancelled) {
   }
   // The database as version 2 left it: no cancel columns, events only revoke/accept.
   auto c = Sql();
-  ASSERT_TRUE(c->ExecScript("ALTER TABLE jobs DROP COLUMN cancel_requested_at;"
+  ASSERT_TRUE(c->ExecScript("DROP INDEX results_by_state; DROP INDEX devices_by_serial_bytes;"
+                            "ALTER TABLE jobs DROP COLUMN cancel_requested_at;"
                             "ALTER TABLE jobs DROP COLUMN cancel_reason;"
                             "ALTER TABLE jobs DROP COLUMN cancel_actor;"
                             "ALTER TABLE results DROP COLUMN seq;"
