@@ -193,6 +193,91 @@ int WriteSimulation(const std::string& out_dir, const std::string& csv, const js
   return kExitOk;
 }
 
+// Adds `serve` and its flags to `app`; parsing fills *serve.
+CLI::App* AddServeCommand(CLI::App* app, ServeOptions* serve) {
+  CLI::App* serve_cmd = app->add_subcommand("serve", "HTTP server plus job workers");
+  serve_cmd
+      ->add_option("--db", serve->db_path,
+                   "SQLite database file (created with its folder), or a PostgreSQL "
+                   "connection URI postgresql://USER@HOST/DB shared by several calibd")
+      ->capture_default_str();
+  serve_cmd->add_option("--listen", serve->listen, "HOST:PORT to listen on")->capture_default_str();
+  serve_cmd->add_option("--workers", serve->workers, "calibration worker threads (0: one per core)")
+      ->check(CLI::Range(0, 256))
+      ->capture_default_str();
+  serve_cmd->add_option("--token-file", serve->token_file,
+                        "file holding the bearer token that writes require");
+  serve_cmd->add_option("--acceptance", serve->acceptance_file,
+                        "JSON file of server-wide acceptance limits per method, e.g. "
+                        "{\"pca\": {\"max_scale_std\": 0.005}} (a config's `acceptance` overrides "
+                        "them per key)");
+  serve_cmd->add_flag("--insecure", serve->insecure,
+                      "allow a non-loopback --listen without a token");
+  serve_cmd
+      ->add_option("--max-upload-bytes", serve->max_upload_bytes,
+                   "largest accepted upload (a gzip'd recording: compressed and decompressed)")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 40))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--max-gzip-ratio", serve->max_gzip_ratio,
+                   "a gzip'd recording expanding more than this is refused (413)")
+      ->check(CLI::Range(1.0, 1e6))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--job-memory-bytes", serve->job_memory_bytes,
+                   "memory one job may use; larger jobs are refused with 422 (0: half the "
+                   "machine's memory shared among the workers, 256 MiB to 8 GiB each)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 50))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--http-threads", serve->http_threads,
+                   "threads that process requests (slow and idle connections hold none)")
+      ->check(CLI::Range(4, 1024))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--head-timeout-seconds", serve->head_timeout_seconds,
+                   "a request's line and headers must arrive within this (else 408)")
+      ->check(CLI::Range(1, 300))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--max-connections-per-client", serve->max_connections_per_client,
+                   "open connections per client address (503 beyond)")
+      ->check(CLI::Range(1, 900))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--max-requests-per-client", serve->max_requests_per_client,
+                   "requests in progress per client address (more wait their turn)")
+      ->check(CLI::Range(1, 1024))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--grace-seconds", serve->shutdown_grace_seconds,
+                   "on SIGTERM, how long running jobs may finish before their leases "
+                   "are released")
+      ->check(CLI::Range(0, 3600))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--job-seconds", serve->job_seconds,
+                   "time limit of every job; a job past it fails with reason deadline (0: "
+                   "0.5 s per MiB of the per-job memory budget, at least 60 s; a config's "
+                   "job_seconds may lower it)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 31))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--check-seconds", serve->check_seconds,
+                   "how often the database's structure is checked (SQLite quick_check) besides "
+                   "at start; damage makes /healthz answer 503 (0: only at start)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 31))
+      ->capture_default_str();
+  serve_cmd
+      ->add_option("--db-max-pages", serve->db_max_pages,
+                   "a quota on the SQLite file in pages of 4 KiB; writes beyond it answer 507 "
+                   "like a full disk (0: none)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 40))
+      ->capture_default_str();
+  serve_cmd->add_flag("!--no-access-log", serve->access_log, "do not log requests to stderr");
+  return serve_cmd;
+}
+
 }  // namespace
 
 int RunCli(int argc, char** argv) {
@@ -200,88 +285,8 @@ int RunCli(int argc, char** argv) {
   app.require_subcommand(1);
   app.set_version_flag("--version", "calibd 0.1.0");
 
-  // serve
   ServeOptions serve;
-  CLI::App* serve_cmd = app.add_subcommand("serve", "HTTP server plus job workers");
-  serve_cmd
-      ->add_option("--db", serve.db_path,
-                   "SQLite database file (created with its folder), or a PostgreSQL "
-                   "connection URI postgresql://USER@HOST/DB shared by several calibd")
-      ->capture_default_str();
-  serve_cmd->add_option("--listen", serve.listen, "HOST:PORT to listen on")->capture_default_str();
-  serve_cmd->add_option("--workers", serve.workers, "calibration worker threads (0: one per core)")
-      ->check(CLI::Range(0, 256))
-      ->capture_default_str();
-  serve_cmd->add_option("--token-file", serve.token_file,
-                        "file holding the bearer token that writes require");
-  serve_cmd->add_option("--acceptance", serve.acceptance_file,
-                        "JSON file of server-wide acceptance limits per method, e.g. "
-                        "{\"pca\": {\"max_scale_std\": 0.005}} (a config's `acceptance` overrides "
-                        "them per key)");
-  serve_cmd->add_flag("--insecure", serve.insecure,
-                      "allow a non-loopback --listen without a token");
-  serve_cmd
-      ->add_option("--max-upload-bytes", serve.max_upload_bytes,
-                   "largest accepted upload (a gzip'd recording: compressed and decompressed)")
-      ->check(CLI::Range(int64_t{1}, int64_t{1} << 40))
-      ->capture_default_str();
-  serve_cmd
-      ->add_option("--max-gzip-ratio", serve.max_gzip_ratio,
-                   "a gzip'd recording expanding more than this is refused (413)")
-      ->check(CLI::Range(1.0, 1e6))
-      ->capture_default_str();
-  serve_cmd
-      ->add_option("--job-memory-bytes", serve.job_memory_bytes,
-                   "memory one job may use; larger jobs are refused with 422 (0: half the "
-                   "machine's memory shared among the workers, 256 MiB to 8 GiB each)")
-      ->check(CLI::Range(int64_t{0}, int64_t{1} << 50))
-      ->capture_default_str();
-  serve_cmd
-      ->add_option("--http-threads", serve.http_threads,
-                   "threads that process requests (slow and idle connections hold none)")
-      ->check(CLI::Range(4, 1024))
-      ->capture_default_str();
-  serve_cmd
-      ->add_option("--head-timeout-seconds", serve.head_timeout_seconds,
-                   "a request's line and headers must arrive within this (else 408)")
-      ->check(CLI::Range(1, 300))
-      ->capture_default_str();
-  serve_cmd
-      ->add_option("--max-connections-per-client", serve.max_connections_per_client,
-                   "open connections per client address (503 beyond)")
-      ->check(CLI::Range(1, 900))
-      ->capture_default_str();
-  serve_cmd
-      ->add_option("--max-requests-per-client", serve.max_requests_per_client,
-                   "requests in progress per client address (more wait their turn)")
-      ->check(CLI::Range(1, 1024))
-      ->capture_default_str();
-  serve_cmd
-      ->add_option("--grace-seconds", serve.shutdown_grace_seconds,
-                   "on SIGTERM, how long running jobs may finish before their leases "
-                   "are released")
-      ->check(CLI::Range(0, 3600))
-      ->capture_default_str();
-  serve_cmd
-      ->add_option("--job-seconds", serve.job_seconds,
-                   "time limit of every job; a job past it fails with reason deadline (0: "
-                   "0.5 s per MiB of the per-job memory budget, at least 60 s; a config's "
-                   "job_seconds may lower it)")
-      ->check(CLI::Range(int64_t{0}, int64_t{1} << 31))
-      ->capture_default_str();
-  serve_cmd
-      ->add_option("--check-seconds", serve.check_seconds,
-                   "how often the database's structure is checked (SQLite quick_check) besides "
-                   "at start; damage makes /healthz answer 503 (0: only at start)")
-      ->check(CLI::Range(int64_t{0}, int64_t{1} << 31))
-      ->capture_default_str();
-  serve_cmd
-      ->add_option("--db-max-pages", serve.db_max_pages,
-                   "a quota on the SQLite file in pages of 4 KiB; writes beyond it answer 507 "
-                   "like a full disk (0: none)")
-      ->check(CLI::Range(int64_t{0}, int64_t{1} << 40))
-      ->capture_default_str();
-  serve_cmd->add_flag("!--no-access-log", serve.access_log, "do not log requests to stderr");
+  CLI::App* serve_cmd = AddServeCommand(&app, &serve);
 
   // calibrate
   std::string recording_path, config_path, acceptance_path;

@@ -38,7 +38,7 @@ struct ExportContext {
   // calibration; "rejected" (by the gate) or "revoked" (by a person) for a result fetched with
   // ?job=, which the file then marks as not for use (C header: ACCEPTED 0 and a comment; CSV and
   // yaml: a first comment line).
-  std::string state;
+  std::string state = "";
   // The job's config (JSON object; null when not known). Exports that convert readings to SI
   // read the nominal bias of offset-binary counts from it (nominal_accel_bias,
   // nominal_gyro_bias; absent = 0).

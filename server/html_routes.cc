@@ -125,7 +125,7 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store, bool token
         listed = view.device_matches = match.devices;
         view.device_more = match.more;
       } else if (match.devices.empty()) {
-        view.device_hint = WrongCaseDeviceMessage(store, view.filter.device);
+        view.device_hint = SimilarDeviceMessage(store, view.filter.device);
         if (view.device_hint.empty()) {
           view.device_hint = "No device is called \xE2\x80\x9C" + view.filter.device +
                              "\xE2\x80\x9D, and no device's serial starts with it (case "
