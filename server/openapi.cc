@@ -317,10 +317,9 @@ json Build() {
       {"summary",
        "Devices with their latest calibration time per method, a page at a time in byte order "
        "of the serials; `next` is the next page's URL (null on the last)"},
-      {"parameters",
-       json::array({QueryParam("limit", "integer", "1..1000, default 100"),
-                    QueryParam("after", "string",
-                               "cursor: the last serial of the previous page")})},
+      {"parameters", json::array({QueryParam("limit", "integer", "1..1000, default 100"),
+                                  QueryParam("after", "string",
+                                             "cursor: the last serial of the previous page")})},
       {"responses",
        {{"200", JsonResponse("devices", {{"type", "object"}})},
         {"400", ErrorResponse("limit out of range or an unknown query parameter")}}}};

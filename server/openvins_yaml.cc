@@ -175,9 +175,9 @@ Status ImuResultToOpenVinsYaml(const json& result, const ExportContext& context,
     }
     y << "\n  # biases in SI for initialising the filter (readings u (y - n), n the nominal offset "
       << Num(nominal_accel_bias) << " / " << Num(nominal_gyro_bias) << " counts):\n"
-      << "  # b_a = [" << Num(ba_si(0)) << ", "
-      << Num(ba_si(1)) << ", " << Num(ba_si(2)) << "] m/s^2, b_g = [" << Num(bg_si(0)) << ", "
-      << Num(bg_si(1)) << ", " << Num(bg_si(2)) << "] rad/s\n";
+      << "  # b_a = [" << Num(ba_si(0)) << ", " << Num(ba_si(1)) << ", " << Num(ba_si(2))
+      << "] m/s^2, b_g = [" << Num(bg_si(0)) << ", " << Num(bg_si(1)) << ", " << Num(bg_si(2))
+      << "] rad/s\n";
   }
   *out = y.str();
   return Status::Ok();

@@ -214,7 +214,8 @@ const std::vector<Step>& Steps() {
   static const std::vector<Step>& steps = *new std::vector<Step>{
       {kV1, nullptr}, {kV2, &HashCarriedOverResults},
       {kV3, nullptr}, {kV4, nullptr},
-      {kV5, nullptr}, {kV6, nullptr}, {kV7, nullptr},
+      {kV5, nullptr}, {kV6, nullptr},
+      {kV7, nullptr},
   };
   return steps;
 }
