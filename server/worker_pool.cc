@@ -283,7 +283,11 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       // lapses. Only when the store takes neither does the lease decide.
       storage::JobFailure small = failure;
       small.detail_json.clear();
-      if (small.message.size() > 200) small.message.resize(200);
+      if (small.message.size() > 200) {
+        size_t cut = 200;  // on a character boundary: the message is stored as UTF-8 JSON text
+        while (cut > 0 && (static_cast<unsigned char>(small.message[cut]) & 0xC0) == 0x80) --cut;
+        small.message.resize(cut);
+      }
       f = store_->FailJob(job.id, worker_id, small, transient);
       if (!f.ok()) {
         const Status r = store_->ReleaseJob(job.id, worker_id);

@@ -23,6 +23,7 @@
 #include "server/array_method.h"
 #include "server/metrics.h"
 #include "server/pca_method.h"
+#include "storage/db.h"
 #include "storage/store.h"
 #include "tests/lib/sanitizer.h"
 #include "tests/storage/storage_test_util.h"
@@ -332,6 +333,44 @@ TEST_F(WorkerPoolTest, AJobPastItsTimeLimitFailsWithReasonDeadline) {
   EXPECT_EQ(job.attempts, 1);
   EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
   EXPECT_EQ(Job(id).status, JobStatus::kFailed);
+}
+
+// A full disk: the result does not fit. The job must not stay running until its lease lapses:
+// its failure (reason disk_full) is stored in place, or, when not even that fits, it is released.
+// (The path where the failure with diagnostics fails and the one without fits is not reached
+// here: partial diagnostics this small are rewritten in place.)
+TEST_F(WorkerPoolTest, AJobWhoseResultDoesNotFitOnAFullDiskStillEnds) {
+  const int64_t id = EnqueueArray(20);
+  store_.reset();
+  int64_t pages = 0;
+  {
+    std::unique_ptr<storage::Db> db;
+    ASSERT_TRUE(storage::Db::Open(dir_.File("calibd.db"), storage::Db::Options(), &db).ok());
+    ASSERT_TRUE(db->QueryInt("PRAGMA page_count", &pages).ok());
+  }
+  storage::StoreOptions so;
+  so.max_page_count = pages;  // full: rows change in place, nothing new fits
+  ASSERT_TRUE(storage::Store::Open(dir_.File("calibd.db"), so, &store_).ok());
+  WorkerPool pool(store_.get(), &metrics_, Options());
+  pool.Start();
+  pool.Notify();
+  storage::JobInfo job;
+  for (int i = 0; i < 12000; ++i) {  // a liveness bound (two minutes), not a speed claim
+    job = Job(id);
+    if (job.status == JobStatus::kFailed || (job.status == JobStatus::kQueued && job.attempts > 0))
+      break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
+  job = Job(id);
+  ASSERT_NE(job.status, JobStatus::kRunning) << "the job stayed running";
+  if (job.status == JobStatus::kFailed) {
+    EXPECT_EQ(job.error_reason, "disk_full") << job.error_message;
+    EXPECT_NE(job.error_message.find("disk is full"), std::string::npos) << job.error_message;
+    EXPECT_EQ(job.error_message.find("INSERT"), std::string::npos) << job.error_message;
+  } else {
+    EXPECT_EQ(job.lease_owner, "");  // given back to the queue
+  }
 }
 
 // A cancel in this process (WorkerPool::Cancel) or through the store from anywhere.
