@@ -5,9 +5,8 @@
 #      (scripts/sanitize.sh), including a replay of the committed fuzz corpora;
 #   3. fuzzes each libFuzzer target with a fixed budget of inputs from a fixed seed (about a minute
 #      each), or for $CALIBD_FUZZ_SECONDS s each when that is set (tests/fuzz/run.sh).
-# About 20 minutes on 2 cores alone from a clean checkout (19 min 13 s measured on a fresh
-# Debian 12; the builds are about half of it, with precompiled headers); on a shared machine up to
-# twice that (bench/README.md, "CI time: precompiled headers").
+# Over 30 minutes on 2 cores from a clean checkout today (README, "Tests and benchmarks": CI took
+# 43 min; the builds are about half of it, with precompiled headers).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 start=$(date +%s)

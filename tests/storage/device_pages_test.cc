@@ -36,8 +36,9 @@ class DevicePagesTest : public ::testing::TestWithParam<std::string> {
 
   // A recording of `device` (distinct bytes each time) and its id.
   int64_t Put(const std::string& device) {
+    const std::string data = "recording " + std::to_string(++puts_);  // r.data only views it
     NewRecording r;
-    r.data = "recording " + std::to_string(++puts_);
+    r.data = data;
     r.device = device;
     r.layout = "pca_averaged";
     r.rows = 3;
