@@ -255,6 +255,13 @@ Status WorkerPool::CancelledStatus(int64_t job_id, const Status& run) {
   return Status(StatusCode::kStopped, who).WithReason(Reason::kCancelled);
 }
 
+// Cuts `text` to at most `bytes` bytes on a character boundary (it is stored as UTF-8 text).
+static void ShortenUtf8(std::string* text, size_t bytes) {
+  if (text->size() <= bytes) return;
+  while (bytes > 0 && (static_cast<unsigned char>((*text)[bytes]) & 0xC0) == 0x80) --bytes;
+  text->resize(bytes);
+}
+
 void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& job,
                         core::StopToken& stop) {
   const auto start = std::chrono::steady_clock::now();
@@ -283,11 +290,7 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       // lapses. Only when the store takes neither does the lease decide.
       storage::JobFailure small = failure;
       small.detail_json.clear();
-      if (small.message.size() > 200) {
-        size_t cut = 200;  // on a character boundary: the message is stored as UTF-8 JSON text
-        while (cut > 0 && (static_cast<unsigned char>(small.message[cut]) & 0xC0) == 0x80) --cut;
-        small.message.resize(cut);
-      }
+      ShortenUtf8(&small.message, 200);
       f = store_->FailJob(job.id, worker_id, small, transient);
       if (!f.ok()) {
         const Status r = store_->ReleaseJob(job.id, worker_id);
