@@ -4,12 +4,17 @@
 # scripts/test.sh. Usage: scripts/sanitize.sh [extra ctest args]. Exits non-zero on any failure
 # or sanitizer report.
 #
-# Six Monte-Carlo sweeps of the array method are left out: they repeat the same arithmetic 100+
-# times (9 of the 15 minutes the suite needs under ASan on 2 cores) and run in the normal build;
-# the array code still runs under ASan in every other array test (including one Monte-Carlo test
-# at N = 100). Also left out: browser_pages (its time is Chromium's, and every page's rendering
-# runs under ASan in the web tests) and the StopProcess timing test (a job of several seconds made
-# of BCD sweeps, 143 s under ASan; the other StopProcess tests run the same shutdown code here).
+# Left out, because their subject is statistics or timing, which the normal build checks, while
+# the code they run is run here by other tests:
+#   - Monte-Carlo sweeps and exact-recovery runs of the array, full-model and imu numerics: they
+#     repeat the same arithmetic hundreds of times (together about 10 minutes of CPU under ASan);
+#     every other array, array-full and imu test runs here, including one Monte-Carlo test of the
+#     array at N = 100, and the method tests run the same code through the adapters;
+#   - three of the core stop-token timing tests (array, full model, imu: 235 s of CPU under ASan;
+#     the noise and pca ones, and every adapter's stop test in MethodStop, run here);
+#   - browser_pages (its time is Chromium's; every page's rendering runs here in the web tests)
+#     and the StopProcess timing test (a job of several seconds made of BCD sweeps, 143 s under
+#     ASan; the other StopProcess tests run the same shutdown code here).
 # CALIBD_SANITIZE_EXCLUDE='^$' runs everything.
 #
 # CALIBD_FUZZ_FOLLOWS=1 (scripts/test.sh) also leaves out the replays of the committed fuzz corpora
@@ -32,6 +37,11 @@ slow='^(ArrayCalibration\.(EfficientAtTheCramerRaoBoundForN1000|BothSolversReach
 slow+='|RmseFallsAsInverseSquareRootOfN|BcdRecoversPositionsExactlyWithoutNoise'
 slow+='|PaperHeadlineMicrometreErrorsWithFig4Dynamics)'
 slow+='|CalibrationChain\.ArrayReachesTheCramerRaoBoundOnlyWithTheCalibration'
+slow+='|ArrayFull\.(RecoversThe32TriadArrayExactlyWithoutNoise|IsEfficientAndItsSigmaMatchesTheSpreadOnAnEightImuBoard'
+slow+='|ResidualAwareSigmaMatchesTheSpreadWhenTheNoiseIsUnderstated|ResidualWeightingFindsTheNoiseWhenTheModelFits)'
+slow+='|ImuCalibration\.(ReportedSigmaMatchesMonteCarloSpread|ReportedSigmaMatchesMonteCarloSpreadWithGyroBiasEstimated)'
+slow+='|StopToken\.(ArrayPositionsStopAtTheirDeadlineForBothSolvers|ArrayFullModelStopsAtItsDeadline'
+slow+='|ImuStopsAtItsDeadlineBeforeItStartsAndChangesNothingWhenSilent)'
 slow+='|StopProcess\.SigtermPastTheGraceStopsTheJobExitsWithinOneSecondAndTheRestartCompletesIt'
 slow+='|browser_pages)$'
 [ "${CALIBD_FUZZ_FOLLOWS:-0}" = 1 ] && slow+='|^fuzz_corpus\.'
