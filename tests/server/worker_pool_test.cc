@@ -15,6 +15,7 @@
 #include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <stdexcept>
 #include <string>
 #include <thread>
 
@@ -462,6 +463,34 @@ TEST_F(WorkerPoolTest, AJobWhoseFailureCannotBeStoredIsReleasedCountedAndBacking
   EXPECT_EQ(job.error_message, "");               // what did not fit
   EXPECT_EQ(Outcomes("array", "released"), 1);
   EXPECT_EQ(Outcomes("array", "failed"), 0);
+}
+
+// An exception thrown inside a job's computation (here by the numerics executor, where the
+// solver's parallel work runs): the job fails with the generic internal error and never shows
+// what was thrown (clients read it); the operator's log has it, with the job's id.
+TEST_F(WorkerPoolTest, AnExceptionsTextGoesToTheLogNeverIntoTheJob) {
+  const int64_t id = EnqueueArray(21);
+  const std::string marker = "marker-7f3a: the solver's secret state";
+  WorkerPool pool(store_.get(), &metrics_,
+                  Options([&](int64_t, const std::function<void(int64_t)>&) {
+                    throw std::runtime_error(marker);
+                  }));
+  ::testing::internal::CaptureStderr();
+  pool.Start();
+  pool.Notify();
+  const storage::JobInfo job = WaitFor(id, JobStatus::kFailed);
+  EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
+  const std::string log = ::testing::internal::GetCapturedStderr();
+  ASSERT_EQ(job.status, JobStatus::kFailed) << job.error_message;
+  EXPECT_EQ(job.error_code, "internal");
+  EXPECT_NE(job.error_message.find("internal error while calibrating"), std::string::npos)
+      << job.error_message;
+  EXPECT_EQ(job.error_message.find("marker-7f3a"), std::string::npos) << job.error_message;
+  EXPECT_EQ(job.error_detail_json.find("marker-7f3a"), std::string::npos);
+  EXPECT_NE(
+      log.find("job " + std::to_string(id) + " (array): exception while calibrating: " + marker),
+      std::string::npos)
+      << log;
 }
 
 // A cancel in this process (WorkerPool::Cancel) or through the store from anywhere.
