@@ -116,12 +116,18 @@ Status PgStore::ListDevices(const DeviceFilter& filter, std::vector<DeviceInfo>*
     // COLLATE "C": byte order, as SQLite sorts, whatever the database's locale (the page is a
     // range scan of index devices_by_serial_bytes).
     Status s = c->Exec(
-        "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
-        "FROM (SELECT serial, first_seen FROM devices "
-        "WHERE serial COLLATE \"C\" > $1 AND ($2 = '' OR serial = $2) "
-        "ORDER BY serial COLLATE \"C\" LIMIT $3) d "
-        "LEFT JOIN device_calibrations c ON c.device = d.serial "
-        "ORDER BY d.serial COLLATE \"C\", c.method COLLATE \"C\"",
+        filter.from ? "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
+                      "FROM (SELECT serial, first_seen FROM devices "
+                      "WHERE serial COLLATE \"C\" >= $1 AND ($2 = '' OR serial = $2) "
+                      "ORDER BY serial COLLATE \"C\" LIMIT $3) d "
+                      "LEFT JOIN device_calibrations c ON c.device = d.serial "
+                      "ORDER BY d.serial COLLATE \"C\", c.method COLLATE \"C\""
+                    : "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
+                      "FROM (SELECT serial, first_seen FROM devices "
+                      "WHERE serial COLLATE \"C\" > $1 AND ($2 = '' OR serial = $2) "
+                      "ORDER BY serial COLLATE \"C\" LIMIT $3) d "
+                      "LEFT JOIN device_calibrations c ON c.device = d.serial "
+                      "ORDER BY d.serial COLLATE \"C\", c.method COLLATE \"C\"",
         {PgText(filter.after), PgText(filter.serial), PgInt(internal::PageLimit(filter))}, &res);
     if (!s.ok()) return s;
     for (int i = 0; i < res.rows(); ++i) internal::AddDeviceRow(PgRow(res, i), out);

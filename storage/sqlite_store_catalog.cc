@@ -157,13 +157,19 @@ Status SqliteStore::ListDevices(const DeviceFilter& filter, std::vector<DeviceIn
   Stmt st;
   // The page of devices first (a range scan of the serial's primary key: BINARY = byte order),
   // then their calibrations.
-  s = conn.db()->Prepare(
-      "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
-      "FROM (SELECT serial, first_seen FROM devices WHERE serial > ?1 AND (?2 = '' OR serial = ?2) "
-      "ORDER BY serial LIMIT ?3) d "
-      "LEFT JOIN device_calibrations c ON c.device = d.serial "
-      "ORDER BY d.serial, c.method",
-      &st);
+  // Two texts (> or >=), each a range over the index.
+  s = conn.db()->Prepare(filter.from
+                             ? "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
+                               "FROM (SELECT serial, first_seen FROM devices WHERE serial >= ?1 "
+                               "AND (?2 = '' OR serial = ?2) ORDER BY serial LIMIT ?3) d "
+                               "LEFT JOIN device_calibrations c ON c.device = d.serial "
+                               "ORDER BY d.serial, c.method"
+                             : "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
+                               "FROM (SELECT serial, first_seen FROM devices WHERE serial > ?1 "
+                               "AND (?2 = '' OR serial = ?2) ORDER BY serial LIMIT ?3) d "
+                               "LEFT JOIN device_calibrations c ON c.device = d.serial "
+                               "ORDER BY d.serial, c.method",
+                         &st);
   if (!s.ok()) return s;
   st.BindText(1, filter.after).BindText(2, filter.serial).BindInt(3, internal::PageLimit(filter));
   for (bool row = true;;) {

@@ -246,6 +246,7 @@ struct DeviceInfo {
 struct DeviceFilter {
   std::string serial;  // "" = any; else only the device with exactly this serial
   std::string after;   // cursor: only serials after this one (byte order); "" = from the first
+  bool from = false;   // true: from `after` on, itself included (>=: a prefix's range starts it)
   int limit = 100;     // 1..1000 (clamped); default 100
 };
 

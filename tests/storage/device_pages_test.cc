@@ -124,6 +124,24 @@ TEST_P(DevicePagesTest, PagesFollowTheLastSerialInByteOrderAndEndShort) {
   ASSERT_TRUE(store_->ListDevices(&all).ok());
   ASSERT_EQ(all.size(), expected.size());
   EXPECT_EQ(all.back().serial, expected.back());
+  // `from`: the cursor itself included (a range that starts at a prefix), or not there.
+  filter = DeviceFilter();
+  filter.after = "SN-1";
+  filter.from = true;
+  filter.limit = 2;
+  ASSERT_TRUE(store_->ListDevices(filter, &page).ok());
+  ASSERT_EQ(page.size(), 2u);
+  EXPECT_EQ(page[0].serial, "SN-1");
+  EXPECT_EQ(page[1].serial, "SN-10");
+  filter.after = "SN-0";  // not a serial: from the next one
+  ASSERT_TRUE(store_->ListDevices(filter, &page).ok());
+  ASSERT_EQ(page.size(), 2u);
+  EXPECT_EQ(page[0].serial, "SN-1");
+  filter.from = false;
+  filter.after = "SN-1";
+  ASSERT_TRUE(store_->ListDevices(filter, &page).ok());
+  ASSERT_EQ(page.size(), 2u);
+  EXPECT_EQ(page[0].serial, "SN-10");
   // Limits are clamped: 0 is the default 100, 5000 is 1000.
   filter = DeviceFilter();
   filter.limit = 0;
