@@ -262,6 +262,17 @@ static void ShortenUtf8(std::string* text, size_t bytes) {
   text->resize(bytes);
 }
 
+// A run's failure as stored: its code, reason code and message, and the partial diagnostics the
+// method left in `result` (capped: kMaxPartialDiagnosticsBytes).
+static storage::JobFailure FailureOf(const Status& s, const nlohmann::json& result) {
+  storage::JobFailure failure;
+  failure.code = StatusCodeName(s.code());
+  failure.reason = DescribeReason(ReasonOf(s)).code;
+  failure.message = s.ToString();
+  failure.detail_json = PartialDiagnosticsText(result, kMaxPartialDiagnosticsBytes);
+  return failure;
+}
+
 bool WorkerPool::StoreFailure(const std::string& worker_id, const storage::JobInfo& job,
                               const storage::JobFailure& failure, bool transient) {
   Status f = store_->FailJob(job.id, worker_id, failure, transient);
@@ -300,11 +311,7 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
   // The failure with its reason code and, when the method got as far as its numerics, the
   // partial diagnostics it left in `result` (capped: kMaxPartialDiagnosticsBytes).
   auto fail = [&](const Status& s, bool transient) {
-    storage::JobFailure failure;
-    failure.code = StatusCodeName(s.code());
-    failure.reason = DescribeReason(ReasonOf(s)).code;
-    failure.message = s.ToString();
-    failure.detail_json = PartialDiagnosticsText(result, kMaxPartialDiagnosticsBytes);
+    const storage::JobFailure failure = FailureOf(s, result);
     if (!StoreFailure(worker_id, job, failure, transient)) {
       return metrics_->ObserveJob(job.method, "released", seconds());
     }
