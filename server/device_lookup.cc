@@ -2,6 +2,7 @@
 
 #include <unicode/uchar.h>
 
+#include <algorithm>
 #include <vector>
 
 #include "base/utf8.h"
@@ -116,6 +117,122 @@ std::string SimilarDeviceMessage(storage::Store* store, const std::string& seria
   if (!found) return "";
   return "no device '" + serial + "'; did you mean '" + near + "'? They look alike " +
          FirstDifference(serial, near) + ".";
+}
+
+namespace {
+
+// The case variants of a typed prefix (ASCII letters either case, every other byte itself), as
+// ranges of serials in byte order.
+class CaseVariants {
+ public:
+  explicit CaseVariants(const std::string& typed) : typed_(typed) {}
+
+  // The smallest variant: every letter upper case ('A' < 'a').
+  std::string First() const { return Completion(std::string(), 0); }
+
+  bool Matches(const std::string& serial) const {
+    if (serial.size() < typed_.size()) return false;
+    for (size_t i = 0; i < typed_.size(); ++i) {
+      if (!IsOption(i, serial[i])) return false;
+    }
+    return true;
+  }
+
+  // The smallest variant greater than `serial`, a serial that does not match (no variant is its
+  // prefix); false when there is none. No serial between the two matches.
+  bool NextAfter(const std::string& serial, std::string* out) const {
+    size_t m = 0;  // the longest prefix of `serial` that is a variant's prefix
+    while (m < typed_.size() && m < serial.size() && IsOption(m, serial[m])) ++m;
+    for (size_t i = m;; --i) {
+      if (i == serial.size()) {  // `serial` is a proper prefix of variants
+        *out = Completion(serial.substr(0, i), i);
+        return true;
+      }
+      const unsigned char c = static_cast<unsigned char>(serial[i]);
+      const unsigned char lo = Lower(i), up = Upper(i);
+      const unsigned char smallest = std::min(lo, up), largest = std::max(lo, up);
+      const int bigger = smallest > c ? smallest : (largest > c ? largest : -1);
+      if (bigger >= 0) {
+        *out = Completion(serial.substr(0, i) + static_cast<char>(bigger), i + 1);
+        return true;
+      }
+      if (i == 0) return false;
+    }
+  }
+
+ private:
+  unsigned char Upper(size_t i) const {
+    const unsigned char c = static_cast<unsigned char>(typed_[i]);
+    return c >= 'a' && c <= 'z' ? c - 32 : c;
+  }
+  unsigned char Lower(size_t i) const {
+    const unsigned char c = static_cast<unsigned char>(typed_[i]);
+    return c >= 'A' && c <= 'Z' ? c + 32 : c;
+  }
+  bool IsOption(size_t i, char c) const {
+    const unsigned char u = static_cast<unsigned char>(c);
+    return u == Upper(i) || u == Lower(i);
+  }
+  // `head` followed by the smallest options from position `from` on.
+  std::string Completion(std::string head, size_t from) const {
+    for (size_t i = from; i < typed_.size(); ++i) head += static_cast<char>(Upper(i));
+    return head;
+  }
+
+  const std::string& typed_;
+};
+
+}  // namespace
+
+Status MatchStoredDevices(storage::Store* store, const std::string& typed, size_t limit,
+                          size_t max_reads, web::DeviceMatch* out, bool* complete) {
+  *out = web::DeviceMatch();
+  *complete = true;
+  if (typed.empty()) return Status::Ok();
+  std::vector<storage::DeviceInfo> page;
+  storage::DeviceFilter filter;
+  filter.serial = typed;
+  filter.limit = 1;
+  Status s = store->ListDevices(filter, &page);
+  if (!s.ok()) return s;
+  if (!page.empty()) {
+    out->exact = true;
+    out->devices = {typed};
+    return Status::Ok();
+  }
+  const CaseVariants variants(typed);
+  filter = storage::DeviceFilter();
+  filter.after = variants.First();
+  filter.from = true;
+  size_t reads = 0;
+  for (;;) {
+    if (reads >= max_reads) {
+      *complete = false;
+      return Status::Ok();
+    }
+    filter.limit = static_cast<int>(std::min<size_t>(max_reads - reads, 64));
+    s = store->ListDevices(filter, &page);
+    if (!s.ok()) return s;
+    reads += page.size();
+    std::string next;  // where the next variant's range starts, after a serial that did not match
+    bool jump = false;
+    for (const auto& d : page) {
+      if (variants.Matches(d.serial)) {
+        if (out->devices.size() < limit) {
+          out->devices.push_back(d.serial);
+        } else {
+          ++out->more;
+        }
+        continue;
+      }
+      if (!variants.NextAfter(d.serial, &next)) return Status::Ok();  // past every variant
+      jump = true;
+      break;  // what the page holds before `next` cannot match: read on from `next`
+    }
+    if (static_cast<int>(page.size()) < filter.limit && !jump) return Status::Ok();
+    filter.after = jump ? next : page.back().serial;
+    filter.from = jump;
+  }
 }
 
 }  // namespace calibd::server

@@ -12,6 +12,7 @@
 #include "base/status.h"
 #include "base/utf8.h"
 #include "storage/store.h"
+#include "web/pages.h"
 
 namespace calibd::server {
 
@@ -30,6 +31,16 @@ Status NormalizeSerial(std::string_view raw, std::string* out);
 // stored serial looks alike, or when the store cannot be read (the caller's own message then
 // stands). Reads the devices a page at a time (bounded memory).
 std::string SimilarDeviceMessage(storage::Store* store, const std::string& serial);
+
+// The history page's device filter: web::MatchDevices's rule over the stored serials, reading a
+// bounded number of them (not every device): the exact serial when stored (exact = true);
+// else the serials starting with `typed` ignoring ASCII case, in byte order, at most `limit`
+// listed and the rest counted in `more`. Each case variant of `typed` is one range of the
+// serials' index; a skip scan reads those ranges (and at most one page between two of them),
+// at most `max_reads` serials in all. *complete = false when it stopped there (`more` is then a
+// lower bound). Empty `typed`: no match, nothing read.
+Status MatchStoredDevices(storage::Store* store, const std::string& typed, size_t limit,
+                          size_t max_reads, web::DeviceMatch* out, bool* complete);
 
 }  // namespace calibd::server
 

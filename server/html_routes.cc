@@ -93,6 +93,52 @@ bool ParsePositive(const std::string& text, int64_t* out) {
 
 }  // namespace
 
+namespace {
+
+// The history page's device field and filter: serials offered, devices listed for a prefix,
+// serials read at most to find them.
+constexpr int kOfferedDevices = 200;
+constexpr size_t kListedDevices = 20;
+constexpr size_t kMatchReads = 1000;
+
+// The history's device field and filter: offers the first kOfferedDevices serials (a page view
+// reads a bounded number of devices, however many there are) and reads the filter. Returns the
+// devices whose jobs are listed: the exact serial when a device has it, else every device whose
+// serial starts with what was typed, ignoring case (web::MatchDevices's rule, read from the
+// store a bounded number at a time), listed together; {""} (any device) without a filter.
+std::vector<std::string> FilterDevices(storage::Store* store, web::HistoryView* view) {
+  storage::DeviceFilter offered;
+  offered.limit = kOfferedDevices;
+  std::vector<storage::DeviceInfo> devices;
+  if (store->ListDevices(offered, &devices).ok()) {
+    for (const auto& d : devices) view->devices.push_back(d.serial);
+  }
+  const std::string& typed = view->filter.device;
+  web::DeviceMatch match;
+  bool complete = true;
+  if (typed.empty() ||
+      !MatchStoredDevices(store, typed, kListedDevices, kMatchReads, &match, &complete).ok()) {
+    return {typed};
+  }
+  if (!match.exact && !match.devices.empty()) {
+    view->device_matches = match.devices;
+    view->device_more = match.more;
+    view->device_more_at_least = !complete;
+    return match.devices;
+  }
+  if (match.devices.empty()) {
+    view->device_hint = SimilarDeviceMessage(store, typed);
+    if (view->device_hint.empty()) {
+      view->device_hint = "No device is called \xE2\x80\x9C" + typed +
+                          "\xE2\x80\x9D, and no device's serial starts with it (case "
+                          "ignored): pick one from the list the device field offers.";
+    }
+  }
+  return {typed};
+}
+
+}  // namespace
+
 void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store, bool token_required) {
   http->Get("/", [store](const httplib::Request& req, httplib::Response& res) {
     web::HistoryView view;
@@ -113,26 +159,7 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store, bool token
     if (req.has_param("before") && !ParsePositive(req.get_param_value("before"), &filter.before)) {
       return SendPage(res, 400, web::RenderErrorPage(400, "'before' must be a job id"));
     }
-    std::vector<storage::DeviceInfo> devices;
-    const bool have_devices = store->ListDevices(&devices).ok();
-    for (const auto& d : devices) view.devices.push_back(d.serial);
-    // The device filter: the exact serial when a device has it, else every device whose serial
-    // starts with what was typed, ignoring case (web::MatchDevices), listed together.
-    std::vector<std::string> listed = {view.filter.device};  // "": any device
-    if (!view.filter.device.empty() && have_devices) {
-      const web::DeviceMatch match = web::MatchDevices(view.filter.device, view.devices);
-      if (!match.exact && !match.devices.empty()) {
-        listed = view.device_matches = match.devices;
-        view.device_more = match.more;
-      } else if (match.devices.empty()) {
-        view.device_hint = SimilarDeviceMessage(store, view.filter.device);
-        if (view.device_hint.empty()) {
-          view.device_hint = "No device is called \xE2\x80\x9C" + view.filter.device +
-                             "\xE2\x80\x9D, and no device's serial starts with it (case "
-                             "ignored): pick one from the list the device field offers.";
-        }
-      }
-    }
+    const std::vector<std::string> listed = FilterDevices(store, &view);
     // One page, newest first, over the listed devices: each one's newest `limit` jobs before
     // the cursor, merged by id (the cursor is a job id, so it pages the merged list as well).
     std::vector<storage::JobInfo> jobs;

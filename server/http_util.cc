@@ -1,5 +1,8 @@
 #include "server/http_util.h"
 
+#include <unistd.h>
+
+#include <exception>
 #include <regex>
 #include <vector>
 
@@ -175,6 +178,21 @@ std::string SanitizeForLog(const std::string& s) {
     out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
   if (s.size() > 200) out += "...";
   return out;
+}
+
+void AnswerException(const httplib::Request& req, httplib::Response& res,
+                     std::exception_ptr error) {
+  std::string what = "an exception that is not a std::exception";
+  try {
+    if (error) std::rethrow_exception(error);
+  } catch (const std::exception& e) {
+    what = e.what();
+  } catch (...) {
+  }
+  const std::string line = "calibd: internal error in " + SanitizeForLog(req.method) + " " +
+                           SanitizeForLog(req.path) + ": " + SanitizeForLog(what) + "\n";
+  [[maybe_unused]] ssize_t n = ::write(STDERR_FILENO, line.data(), line.size());
+  SendError(res, 500, "internal", "internal server error");
 }
 
 bool IfNoneMatchHits(const std::string& header, const std::string& etag) {

@@ -45,6 +45,10 @@ std::string ToLower(std::string s);
 std::string RouteLabel(const std::string& path);
 // Printable ASCII only, at most 200 characters: safe for a log line.
 std::string SanitizeForLog(const std::string& s);
+// The server's exception handler (a route threw `error`): 500 {"code": "internal"} with a
+// generic message, never the exception's text (it may reveal internals); the operator's log
+// (stderr, one write) has the request's method and path and what was thrown.
+void AnswerException(const httplib::Request& req, httplib::Response& res, std::exception_ptr error);
 // True when an If-None-Match header value matches `etag` (a list, or "*").
 bool IfNoneMatchHits(const std::string& header, const std::string& etag);
 // "GET, HEAD" style list of the methods a known path allows; "" for an unknown path.

@@ -399,9 +399,9 @@ void Service::Impl::SetupRoutes() {
       const std::string text = req.get_header_value("Content-Length");
       const int64_t limit = is_upload ? options.max_upload_bytes : options.max_json_body_bytes;
       int64_t length = -1;
-      if (!text.empty() && text.size() <= 19 &&
-          text.find_first_not_of("0123456789") == std::string::npos) {
-        length = std::stoll(text);
+      if (!text.empty() && text.find_first_not_of("0123456789") == std::string::npos) {
+        // Over 18 digits: beyond any limit (and std::stoll's range from 19 on).
+        length = text.size() <= 18 ? std::stoll(text) : INT64_MAX;
       }
       if (length < 0) {
         res.set_header("Connection", "close");
@@ -444,22 +444,7 @@ void Service::Impl::SetupRoutes() {
     return httplib::Server::HandlerResponse::Unhandled;
   });
 
-  http.set_exception_handler(
-      [](const httplib::Request& req, httplib::Response& res, std::exception_ptr error) {
-        // Never exception text to the client: it may reveal internals. The operator's log has
-        // it, with the request, to find the bug.
-        std::string what = "an exception that is not a std::exception";
-        try {
-          if (error) std::rethrow_exception(error);
-        } catch (const std::exception& e) {
-          what = e.what();
-        } catch (...) {
-        }
-        const std::string line = "calibd: internal error in " + SanitizeForLog(req.method) + " " +
-                                 SanitizeForLog(req.path) + ": " + SanitizeForLog(what) + "\n";
-        [[maybe_unused]] ssize_t n = ::write(STDERR_FILENO, line.data(), line.size());
-        SendError(res, 500, "internal", "internal server error");
-      });
+  http.set_exception_handler(AnswerException);
 
   http.set_error_handler(
       httplib::Server::HandlerWithResponse([](const httplib::Request& req, httplib::Response& res) {

@@ -135,7 +135,7 @@ void WorkerPool::WorkerLoop(int index) {
       {
         std::lock_guard<std::mutex> lock(mu_);
         if (stopping_) {
-          store_->ReleaseJob(job.id, worker_id);
+          store_->ReleaseJob(job.id, worker_id, storage::ReleaseKind::kShutdown);
           return;
         }
         active_[job.id] = Active{worker_id, index, stop, false};
@@ -262,6 +262,45 @@ static void ShortenUtf8(std::string* text, size_t bytes) {
   text->resize(bytes);
 }
 
+// A run's failure as stored: its code, reason code and message, and the partial diagnostics the
+// method left in `result` (capped: kMaxPartialDiagnosticsBytes).
+static storage::JobFailure FailureOf(const Status& s, const nlohmann::json& result) {
+  storage::JobFailure failure;
+  failure.code = StatusCodeName(s.code());
+  failure.reason = DescribeReason(ReasonOf(s)).code;
+  failure.message = s.ToString();
+  failure.detail_json = PartialDiagnosticsText(result, kMaxPartialDiagnosticsBytes);
+  return failure;
+}
+
+bool WorkerPool::StoreFailure(const std::string& worker_id, const storage::JobInfo& job,
+                              const storage::JobFailure& failure, bool transient) {
+  Status f = store_->FailJob(job.id, worker_id, failure, transient);
+  const bool not_mine = f.code() == StatusCode::kConflict || f.code() == StatusCode::kNotFound;
+  if (options_.storage_outcome && !not_mine) {
+    options_.storage_outcome(f, "job " + std::to_string(job.id), true);
+  }
+  if (f.ok()) return true;
+  std::cerr << "calibd: " << worker_id << ": recording the failure of job " << job.id
+            << " failed: " << f.ToString() << "\n";
+  if (not_mine) return false;  // taken back or gone: its new holder decides
+  // A full disk or quota: a failure without its diagnostics may still fit (it rewrites the row
+  // in place); else give the job back, its attempt counted and backing off, so that it neither
+  // stays running until its lease lapses nor is claimed again at once, forever.
+  storage::JobFailure small = failure;
+  small.detail_json.clear();
+  ShortenUtf8(&small.message, 200);
+  f = store_->FailJob(job.id, worker_id, small, transient);
+  if (f.ok()) return true;
+  const Status r = store_->ReleaseJob(job.id, worker_id, storage::ReleaseKind::kStoreFailed);
+  std::cerr << "calibd: " << worker_id << ": job " << job.id
+            << (r.ok() ? ": released to the queue instead (the attempt counts; it backs off)"
+                       : ": cannot release it either (" + r.ToString() +
+                             "): it runs again when its lease lapses")
+            << "\n";
+  return false;
+}
+
 void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& job,
                         core::StopToken& stop) {
   const auto start = std::chrono::steady_clock::now();
@@ -272,37 +311,9 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
   // The failure with its reason code and, when the method got as far as its numerics, the
   // partial diagnostics it left in `result` (capped: kMaxPartialDiagnosticsBytes).
   auto fail = [&](const Status& s, bool transient) {
-    storage::JobFailure failure;
-    failure.code = StatusCodeName(s.code());
-    failure.reason = DescribeReason(ReasonOf(s)).code;
-    failure.message = s.ToString();
-    failure.detail_json = PartialDiagnosticsText(result, kMaxPartialDiagnosticsBytes);
-    Status f = store_->FailJob(job.id, worker_id, failure, transient);
-    if (options_.storage_outcome && f.code() != StatusCode::kConflict &&
-        f.code() != StatusCode::kNotFound) {
-      options_.storage_outcome(f, "job " + std::to_string(job.id), true);
-    }
-    if (!f.ok() && f.code() != StatusCode::kConflict && f.code() != StatusCode::kNotFound) {
-      std::cerr << "calibd: " << worker_id << ": recording the failure of job " << job.id
-                << " failed: " << f.ToString() << "\n";
-      // A full disk or quota: a failure without its diagnostics may still fit (it rewrites the
-      // row in place); else give the job back, so that it does not stay running until its lease
-      // lapses. Only when the store takes neither does the lease decide.
-      storage::JobFailure small = failure;
-      small.detail_json.clear();
-      ShortenUtf8(&small.message, 200);
-      f = store_->FailJob(job.id, worker_id, small, transient);
-      if (!f.ok()) {
-        const Status r = store_->ReleaseJob(job.id, worker_id);
-        std::cerr << "calibd: " << worker_id << ": job " << job.id
-                  << (r.ok() ? ": released to the queue instead"
-                             : ": cannot release it either (" + r.ToString() +
-                                   "): it runs again when its lease lapses")
-                  << "\n";
-      }
-    } else if (!f.ok()) {
-      std::cerr << "calibd: " << worker_id << ": recording the failure of job " << job.id
-                << " failed: " << f.ToString() << "\n";
+    const storage::JobFailure failure = FailureOf(s, result);
+    if (!StoreFailure(worker_id, job, failure, transient)) {
+      return metrics_->ObserveJob(job.method, "released", seconds());
     }
     // A transient failure on the last attempt fails the job for good (the store's rule).
     const bool final = !transient || job.attempts >= store_->options().max_attempts;
@@ -401,7 +412,7 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
         abandoned = it != active_.end() && it->second.abandoned;
       }
       if (!abandoned) {
-        Status r = store_->ReleaseJob(job.id, worker_id);
+        Status r = store_->ReleaseJob(job.id, worker_id, storage::ReleaseKind::kShutdown);
         std::cerr << "calibd: shutdown: released job " << job.id << " after its computation "
                   << "stopped (" << (r.ok() ? "it runs again after the restart" : r.ToString())
                   << ")\n";

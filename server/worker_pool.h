@@ -112,6 +112,12 @@ class WorkerPool {
   // computation stopped (`run`, when kStopped).
   Status CancelledStatus(int64_t job_id, const Status& run);
   void RunJob(const std::string& worker_id, const storage::JobInfo& job, core::StopToken& stop);
+  // Stores the failure of the holder's run. When that fails (other than "not yours": kConflict,
+  // kNotFound), e.g. on a full disk: the failure without its diagnostics and with a shortened
+  // message, else the job is released as kStoreFailed (its attempt counts, it backs off); only
+  // when the store takes none of these does the lease decide. Whether a failure was stored.
+  bool StoreFailure(const std::string& worker_id, const storage::JobInfo& job,
+                    const storage::JobFailure& failure, bool transient);
 
   struct Active {
     std::string worker_id;

@@ -74,15 +74,35 @@ Status PgStore::GetJob(int64_t id, JobInfo* out) {
   return Read([&](PgConn* c) { return LoadJob(c, id, true, out); });
 }
 
-Status PgStore::ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) {
-  out->clear();
-  const int limit = internal::PageLimit(filter);
+// A verdict filter joins the results (an inner join: jobs without one cannot match), so the
+// planner may start from index results_by_state. PostgreSQL keeps a LEFT JOIN whose WHERE tests
+// COALESCE(r...) (it cannot tell the test rejects a missing result), and then can only scan the
+// jobs: every succeeded job for a rare verdict.
+static const char* JobsFrom(const JobFilter& f) {
+  return f.state ? " FROM jobs j JOIN results r ON r.job_id = j.id " : internal::kJobFrom;
+}
+
+std::string pg::ListJobsSql(const JobFilter& filter, std::vector<PgParam>* params) {
   int n = 0;
   const std::string where = FilterSql(filter, true, &n);
-  const std::string sql = internal::JobSelect(filter.include_results) + where +
-                          "ORDER BY j.id DESC LIMIT $" + std::to_string(n + 1);
-  std::vector<PgParam> params = FilterParams(filter, true);
-  params.push_back(PgInt(limit));
+  *params = FilterParams(filter, true);
+  params->push_back(PgInt(internal::PageLimit(filter)));
+  std::string select = internal::JobSelect(filter.include_results);
+  const std::string from = internal::kJobFrom;
+  select.replace(select.rfind(from), from.size(), JobsFrom(filter));
+  return select + where + "ORDER BY j.id DESC LIMIT $" + std::to_string(n + 1);
+}
+
+std::string pg::CountJobsSql(const JobFilter& filter, std::vector<PgParam>* params) {
+  int n = 0;
+  *params = FilterParams(filter, false);
+  return std::string("SELECT COUNT(*)") + JobsFrom(filter) + FilterSql(filter, false, &n);
+}
+
+Status PgStore::ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) {
+  out->clear();
+  std::vector<PgParam> params;
+  const std::string sql = pg::ListJobsSql(filter, &params);
   return Read([&](PgConn* c) {
     PgResult res;
     Status s = c->Exec(sql.c_str(), params, &res);
@@ -97,12 +117,11 @@ Status PgStore::ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) {
 }
 
 Status PgStore::CountJobs(const JobFilter& filter, int64_t* count) {
-  int n = 0;
-  const std::string sql = "SELECT COUNT(*) FROM jobs j LEFT JOIN results r ON r.job_id = j.id " +
-                          FilterSql(filter, false, &n);
+  std::vector<PgParam> params;
+  const std::string sql = pg::CountJobsSql(filter, &params);
   return Read([&](PgConn* c) {
     PgResult res;
-    Status s = c->Exec(sql.c_str(), FilterParams(filter, false), &res);
+    Status s = c->Exec(sql.c_str(), params, &res);
     if (!s.ok()) return s;
     *count = res.rows() > 0 ? res.Int(0, 0) : 0;
     return Status::Ok();
@@ -116,12 +135,18 @@ Status PgStore::ListDevices(const DeviceFilter& filter, std::vector<DeviceInfo>*
     // COLLATE "C": byte order, as SQLite sorts, whatever the database's locale (the page is a
     // range scan of index devices_by_serial_bytes).
     Status s = c->Exec(
-        "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
-        "FROM (SELECT serial, first_seen FROM devices "
-        "WHERE serial COLLATE \"C\" > $1 AND ($2 = '' OR serial = $2) "
-        "ORDER BY serial COLLATE \"C\" LIMIT $3) d "
-        "LEFT JOIN device_calibrations c ON c.device = d.serial "
-        "ORDER BY d.serial COLLATE \"C\", c.method COLLATE \"C\"",
+        filter.from ? "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
+                      "FROM (SELECT serial, first_seen FROM devices "
+                      "WHERE serial COLLATE \"C\" >= $1 AND ($2 = '' OR serial = $2) "
+                      "ORDER BY serial COLLATE \"C\" LIMIT $3) d "
+                      "LEFT JOIN device_calibrations c ON c.device = d.serial "
+                      "ORDER BY d.serial COLLATE \"C\", c.method COLLATE \"C\""
+                    : "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
+                      "FROM (SELECT serial, first_seen FROM devices "
+                      "WHERE serial COLLATE \"C\" > $1 AND ($2 = '' OR serial = $2) "
+                      "ORDER BY serial COLLATE \"C\" LIMIT $3) d "
+                      "LEFT JOIN device_calibrations c ON c.device = d.serial "
+                      "ORDER BY d.serial COLLATE \"C\", c.method COLLATE \"C\"",
         {PgText(filter.after), PgText(filter.serial), PgInt(internal::PageLimit(filter))}, &res);
     if (!s.ok()) return s;
     for (int i = 0; i < res.rows(); ++i) internal::AddDeviceRow(PgRow(res, i), out);

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "storage/pg_conn.h"
 #include "storage/pg_store.h"
@@ -68,6 +69,11 @@ Status RememberDevice(PgConn* c, const std::string& serial, int64_t now);
 Status RefreshLatest(PgConn* c, const std::string& device, const std::string& method);
 // Listeners are woken after the transaction commits (PgStore::Txn). (pg_store.cc)
 Status NotifyJobs(PgConn* c);
+
+// The statements ListJobs and CountJobs run for `filter`, with their parameters in order (a
+// test EXPLAINs them: ?verdict= must read index results_by_state). (pg_store_catalog.cc)
+std::string ListJobsSql(const JobFilter& filter, std::vector<PgParam>* params);
+std::string CountJobsSql(const JobFilter& filter, std::vector<PgParam>* params);
 
 }  // namespace pg
 }  // namespace calibd::storage

@@ -334,7 +334,7 @@ Status PgStore::FailJob(int64_t job_id, const std::string& worker_id, const JobF
   });
 }
 
-Status PgStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
+Status PgStore::ReleaseJob(int64_t job_id, const std::string& worker_id, ReleaseKind kind) {
   return Txn([&](PgConn* c) {
     JobInfo job;
     Status s = RequireHolder(c, job_id, worker_id, "release", &job);
@@ -346,11 +346,15 @@ Status PgStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
     int64_t now = 0;
     s = DbNow(c, &now);
     if (!s.ok()) return s;
+    // Shutdown: the run does not count, claimable at once. After a store failure: it counts
+    // and backs off.
+    const bool shutdown = kind == ReleaseKind::kShutdown;
     s = c->Exec(
-        "UPDATE jobs SET status = 'queued', attempts = GREATEST(attempts - 1, 0), "
+        "UPDATE jobs SET status = 'queued', attempts = GREATEST(attempts - $3, 0), "
         "lease_owner = NULL, lease_expires_at = NULL, started_at = NULL, not_before = $2 "
         "WHERE id = $1",
-        {PgInt(job_id), PgInt(now)});
+        {PgInt(job_id), PgInt(shutdown ? now : now + internal::Backoff(options_, job.attempts)),
+         PgInt(shutdown ? 1 : 0)});
     if (!s.ok()) return s;
     return NotifyJobs(c);
   });

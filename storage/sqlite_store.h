@@ -51,7 +51,7 @@ class SqliteStore final : public Store {
                      const std::string& result_json) override;
   Status FailJob(int64_t job_id, const std::string& worker_id, const JobFailure& failure,
                  bool transient) override;
-  Status ReleaseJob(int64_t job_id, const std::string& worker_id) override;
+  Status ReleaseJob(int64_t job_id, const std::string& worker_id, ReleaseKind kind) override;
   Status CancelRequests(const std::vector<int64_t>& job_ids,
                         std::vector<int64_t>* requested) override;
   Status RecoverExpiredLeases(int64_t* recovered) override;

@@ -97,22 +97,31 @@ int BindFilter(Stmt* st, const JobFilter& f, bool with_cursor) {
 
 }  // namespace
 
+std::string sqlite::ListJobsSql(const JobFilter& filter) {
+  const int limit_param = 1 + (!filter.device.empty()) + (!filter.method.empty()) +
+                          filter.status.has_value() + filter.state.has_value() +
+                          (filter.before > 0);
+  return FromSql(filter, filter.include_results) + FilterSql(filter, true) +
+         (ByState(filter) ? "ORDER BY r.job_id DESC LIMIT ?" : "ORDER BY j.id DESC LIMIT ?") +
+         std::to_string(limit_param);
+}
+
+std::string sqlite::CountJobsSql(const JobFilter& filter) {
+  return std::string(ByState(filter) ? "SELECT COUNT(*) FROM results r CROSS JOIN jobs j ON j.id = "
+                                       "r.job_id "
+                                     : "SELECT COUNT(*) FROM jobs j LEFT JOIN results r ON "
+                                       "r.job_id = j.id ") +
+         FilterSql(filter, false);
+}
+
 Status SqliteStore::ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) {
   out->clear();
-  const std::string where = FilterSql(filter, true);
   const int limit = internal::PageLimit(filter);
   Conn conn(this);
   Status s = conn.Open();
   if (!s.ok()) return s;
   Stmt st;
-  const int limit_param = 1 + (!filter.device.empty()) + (!filter.method.empty()) +
-                          filter.status.has_value() + filter.state.has_value() +
-                          (filter.before > 0);
-  s = conn.db()->Prepare(
-      FromSql(filter, filter.include_results) + where +
-          (ByState(filter) ? "ORDER BY r.job_id DESC LIMIT ?" : "ORDER BY j.id DESC LIMIT ?") +
-          std::to_string(limit_param),
-      &st);
+  s = conn.db()->Prepare(sqlite::ListJobsSql(filter), &st);
   if (!s.ok()) return s;
   int n = BindFilter(&st, filter, true);
   st.BindInt(n + 1, limit);
@@ -128,18 +137,11 @@ Status SqliteStore::ListJobs(const JobFilter& filter, std::vector<JobInfo>* out)
 }
 
 Status SqliteStore::CountJobs(const JobFilter& filter, int64_t* count) {
-  const std::string where = FilterSql(filter, false);
   Conn conn(this);
   Status s = conn.Open();
   if (!s.ok()) return s;
   Stmt st;
-  s = conn.db()->Prepare(
-      std::string(ByState(filter) ? "SELECT COUNT(*) FROM results r CROSS JOIN jobs j ON j.id = "
-                                    "r.job_id "
-                                  : "SELECT COUNT(*) FROM jobs j LEFT JOIN results r ON r.job_id = "
-                                    "j.id ") +
-          where,
-      &st);
+  s = conn.db()->Prepare(sqlite::CountJobsSql(filter), &st);
   if (!s.ok()) return s;
   BindFilter(&st, filter, false);
   bool row = false;
@@ -157,13 +159,19 @@ Status SqliteStore::ListDevices(const DeviceFilter& filter, std::vector<DeviceIn
   Stmt st;
   // The page of devices first (a range scan of the serial's primary key: BINARY = byte order),
   // then their calibrations.
-  s = conn.db()->Prepare(
-      "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
-      "FROM (SELECT serial, first_seen FROM devices WHERE serial > ?1 AND (?2 = '' OR serial = ?2) "
-      "ORDER BY serial LIMIT ?3) d "
-      "LEFT JOIN device_calibrations c ON c.device = d.serial "
-      "ORDER BY d.serial, c.method",
-      &st);
+  // Two texts (> or >=), each a range over the index.
+  s = conn.db()->Prepare(filter.from
+                             ? "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
+                               "FROM (SELECT serial, first_seen FROM devices WHERE serial >= ?1 "
+                               "AND (?2 = '' OR serial = ?2) ORDER BY serial LIMIT ?3) d "
+                               "LEFT JOIN device_calibrations c ON c.device = d.serial "
+                               "ORDER BY d.serial, c.method"
+                             : "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
+                               "FROM (SELECT serial, first_seen FROM devices WHERE serial > ?1 "
+                               "AND (?2 = '' OR serial = ?2) ORDER BY serial LIMIT ?3) d "
+                               "LEFT JOIN device_calibrations c ON c.device = d.serial "
+                               "ORDER BY d.serial, c.method",
+                         &st);
   if (!s.ok()) return s;
   st.BindText(1, filter.after).BindText(2, filter.serial).BindInt(3, internal::PageLimit(filter));
   for (bool row = true;;) {

@@ -55,6 +55,11 @@ Status RememberDevice(Db* db, const std::string& serial, int64_t now);
 // accepted by the gate or a person, not revoked), or nothing. (sqlite_store_catalog.cc)
 Status RefreshLatest(Db* db, const std::string& device, const std::string& method);
 
+// The statements ListJobs and CountJobs prepare for `filter` (a test EXPLAINs them: ?verdict=
+// must read index results_by_state). (sqlite_store_catalog.cc)
+std::string ListJobsSql(const JobFilter& filter);
+std::string CountJobsSql(const JobFilter& filter);
+
 }  // namespace sqlite
 }  // namespace calibd::storage
 

@@ -364,7 +364,7 @@ Status SqliteStore::FailJob(int64_t job_id, const std::string& worker_id, const 
   });
 }
 
-Status SqliteStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
+Status SqliteStore::ReleaseJob(int64_t job_id, const std::string& worker_id, ReleaseKind kind) {
   return Write([&](Db* db) {
     Status s;
     JobInfo job;
@@ -375,12 +375,18 @@ Status SqliteStore::ReleaseJob(int64_t job_id, const std::string& worker_id) {
       return FailCancelledLocked(db, job_id,
                                  internal::CancelledMessage(job.cancel_actor, job.cancel_reason));
     }
+    // Shutdown: the run does not count, claimable at once. After a store failure: it counts
+    // and backs off (the row changes in place: no new text, so it fits on a full disk).
+    const bool shutdown = kind == ReleaseKind::kShutdown;
     s = db->Prepare(
-        "UPDATE jobs SET status = 'queued', attempts = MAX(attempts - 1, 0), lease_owner = NULL, "
+        "UPDATE jobs SET status = 'queued', attempts = MAX(attempts - ?3, 0), lease_owner = NULL, "
         "lease_expires_at = NULL, started_at = NULL, not_before = ?2 WHERE id = ?1",
         &st);
     if (!s.ok()) return s;
-    st.BindInt(1, job_id).BindInt(2, Now());
+    const int64_t now = Now();
+    st.BindInt(1, job_id)
+        .BindInt(2, shutdown ? now : now + Backoff(options_, job.attempts))
+        .BindInt(3, shutdown ? 1 : 0);
     s = st.Run();
     if (!s.ok()) return s;
     return Status::Ok();

@@ -27,9 +27,10 @@
 //
 // Job states: queued -> running (ClaimJob) -> succeeded (CompleteJob) | failed (FailJob
 // non-transient, or transient/lease expiry past max_attempts) | queued (FailJob transient,
-// ReleaseJob, lease expiry). succeeded and failed are final. CancelJob fails a queued job at once
-// and marks a running one (a cancel request): its holder stops and fails it; if the holder
-// releases it instead, or its lease lapses, it is failed as cancelled, never queued again.
+// ReleaseJob (shutdown, or after a store failure), lease expiry). succeeded and failed are final.
+// CancelJob fails a queued job at once and marks a running one (a cancel request): its holder stops
+// and fails it; if the holder releases it instead, or its lease lapses, it is failed as cancelled,
+// never queued again.
 #ifndef CALIBD_STORAGE_STORE_H_
 #define CALIBD_STORAGE_STORE_H_
 
@@ -141,6 +142,17 @@ struct JobFailure {
   std::string detail_json;  // the partial diagnostics, a JSON object's text; "" none
 };
 
+// Why a holder gives its job back (Store::ReleaseJob).
+enum class ReleaseKind {
+  // Shutdown: the run did not count (attempts - 1), claimable at once.
+  kShutdown,
+  // Neither the job's outcome nor its failure could be stored (full disk): the attempt counts
+  // and the job backs off as after a transient failure (now + Backoff(attempts)), so a job
+  // whose outcome can never be stored is not claimed again at once, forever. Its last failure
+  // (error_*) is left as it was: writing it is what did not fit.
+  kStoreFailed,
+};
+
 struct JobInfo {
   int64_t id = 0;
   int64_t recording_id = 0;
@@ -148,7 +160,7 @@ struct JobInfo {
   std::string device;
   std::string config_json;
   JobStatus status = JobStatus::kQueued;
-  int64_t attempts = 0;          // claims that counted (ReleaseJob does not count)
+  int64_t attempts = 0;          // claims that counted (a shutdown ReleaseJob does not count)
   std::string lease_owner;       // "" unless running
   std::string lease_expires_at;  // "" unless running
   std::string created_at, started_at, finished_at;  // "" when unset
@@ -234,6 +246,7 @@ struct DeviceInfo {
 struct DeviceFilter {
   std::string serial;  // "" = any; else only the device with exactly this serial
   std::string after;   // cursor: only serials after this one (byte order); "" = from the first
+  bool from = false;   // true: from `after` on, itself included (>=: a prefix's range starts it)
   int limit = 100;     // 1..1000 (clamped); default 100
 };
 
@@ -340,9 +353,12 @@ class Store {
   virtual Status FailJob(int64_t job_id, const std::string& worker_id, const JobFailure& failure,
                          bool transient) = 0;
 
-  // Graceful shutdown: gives the job back (queued, claimable at once) without counting the
-  // attempt. kConflict if not the holder; kNotFound.
-  virtual Status ReleaseJob(int64_t job_id, const std::string& worker_id) = 0;
+  // Gives the job back to the queue (lease cleared), as `kind` says: kShutdown claimable at once
+  // without counting the attempt; kStoreFailed counting it, not claimable before now +
+  // back-off. Past max_attempts a kStoreFailed job is still queued (ending it as failed needs
+  // the write that did not fit); its next failure that can be stored ends it. A job with a
+  // cancel request is failed as cancelled instead. kConflict if not the holder; kNotFound.
+  virtual Status ReleaseJob(int64_t job_id, const std::string& worker_id, ReleaseKind kind) = 0;
 
   // Takes back every running job whose lease expired before now: queued again (claimable at
   // once), or failed with error_code "lease_expired" when it already used max_attempts.

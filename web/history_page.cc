@@ -69,11 +69,12 @@ std::string HistoryBody(const HistoryView& v) {
     } else {
       out += "No device is called \xE2\x80\x9C" + E(v.filter.device) + "\xE2\x80\x9D";
       const size_t n = v.device_matches.size();
-      out +=
-          ": showing " +
-          (n == 1 ? std::string("the device")
-                  : "the " + std::to_string(n) + (v.device_more > 0 ? " first" : "") + " devices") +
-          " whose serial starts with it (case ignored): ";
+      out += ": showing " +
+             (n == 1 ? std::string("the device")
+                     : "the " + std::to_string(n) +
+                           (v.device_more > 0 || v.device_more_at_least ? " first" : "") +
+                           " devices") +
+             " whose serial starts with it (case ignored): ";
       for (size_t i = 0; i < n; ++i) {
         out += (i ? ", " : "") + std::string("<a href=\"") +
                A("/?device=" + UrlEncode(v.device_matches[i])) + "\">" + E(v.device_matches[i]) +
@@ -81,8 +82,11 @@ std::string HistoryBody(const HistoryView& v) {
       }
       out += ".";
       if (v.device_more > 0) {
-        out += " " + std::to_string(v.device_more) +
+        out += std::string(v.device_more_at_least ? " At least " : " ") +
+               std::to_string(v.device_more) +
                " more devices match: type more of the serial to see theirs.";
+      } else if (v.device_more_at_least) {
+        out += " More devices may match: type more of the serial to see theirs.";
       }
       out += "</p>";
     }

@@ -105,7 +105,7 @@ struct HistoryView {
   std::vector<JobSummary> jobs;  // one page, newest first (rendered in the given order);
                                  // result may be null to save memory (key figures then "–")
   HistoryFilter filter;
-  std::vector<std::string> devices;  // optional: known device serials, offered in the form
+  std::vector<std::string> devices;  // optional: device serials offered in the form (some)
   std::vector<std::string> methods = {"pca", "array"};  // offered in the form's method filter
   std::string next_before;  // cursor for the next (older) page; empty: no older page. The link
                             // is "/?before=CURSOR" plus the active filters.
@@ -116,6 +116,7 @@ struct HistoryView {
   // serial was exact (or no device filter). The page says which devices it shows, linking each.
   std::vector<std::string> device_matches;
   size_t device_more = 0;
+  bool device_more_at_least = false;  // device_more is a lower bound (the search stopped there)
   std::string device_hint;
 };
 

@@ -5,10 +5,19 @@
 // recording page (server/recording_routes.cc) says which units its timelines are in.
 #include <gtest/gtest.h>
 
+#include <cstdio>
+#include <memory>
 #include <nlohmann/json.hpp>
+#include <random>
+#include <set>
 #include <string>
+#include <vector>
 
+#include "server/device_lookup.h"
+#include "storage/db.h"
+#include "storage/store.h"
 #include "tests/server/http_test_util.h"
+#include "web/pages.h"
 
 namespace calibd::server {
 namespace {
@@ -94,6 +103,126 @@ TEST(HistoryDeviceFilter, ExactThenCaseInsensitivePrefixWithAHint) {
                   "serial starts with it"))
       << page;
   EXPECT_TRUE(Has(page, "No calibrations match."));
+}
+
+// A database (made by the Store) holding `serials` as known devices, inserted in one transaction
+// into the devices table as the Store's uploads remember them (thousands in well under a second;
+// an upload each would fsync each).
+void StoreDevices(const std::string& db, const std::vector<std::string>& serials) {
+  {
+    std::unique_ptr<storage::Store> store;
+    ASSERT_TRUE(storage::Store::Open(db, storage::StoreOptions(), &store).ok());
+  }
+  std::unique_ptr<storage::Db> conn;
+  ASSERT_TRUE(storage::Db::Open(db, storage::Db::Options(), &conn).ok());
+  ASSERT_TRUE(conn->Exec("BEGIN").ok());
+  for (const std::string& serial : serials) {
+    storage::Stmt st;
+    ASSERT_TRUE(conn->Prepare("INSERT INTO devices (serial, first_seen) VALUES (?1, 1)", &st).ok());
+    st.BindText(1, serial);
+    ASSERT_TRUE(st.Run().ok()) << serial;
+  }
+  ASSERT_TRUE(conn->Exec("COMMIT").ok());
+}
+
+// MatchStoredDevices (a skip scan over the case variants of what was typed, a bounded number of
+// serials read) finds what web::MatchDevices finds in the list of every serial, on random
+// serials of few letters in either case, digits, '-' and a non-ASCII letter.
+TEST(HistoryDeviceFilter, TheBoundedSearchFindsWhatMatchingEverySerialFinds) {
+  testing::TempDir dir;
+  const std::string db = (dir.path() / "calibd.db").string();
+  std::mt19937 rng(27);
+  const std::vector<std::string> alphabet = {"a", "A", "b", "B", "-", "1", "Ã©"};
+  auto random_text = [&](int max_length) {
+    std::string text;
+    const int length = 1 + static_cast<int>(rng() % static_cast<unsigned>(max_length));
+    for (int i = 0; i < length; ++i) text += alphabet[rng() % alphabet.size()];
+    return text;
+  };
+  std::set<std::string> serials;
+  while (serials.size() < 300) serials.insert(random_text(5));
+  StoreDevices(db, std::vector<std::string>(serials.begin(), serials.end()));
+  std::unique_ptr<storage::Store> store;
+  ASSERT_TRUE(storage::Store::Open(db, storage::StoreOptions(), &store).ok());
+  const std::vector<std::string> known(serials.begin(), serials.end());  // byte order
+  int matched = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    const std::string typed = random_text(3);
+    SCOPED_TRACE(typed);
+    const web::DeviceMatch want = web::MatchDevices(typed, known, 5);
+    web::DeviceMatch got;
+    bool complete = false;
+    ASSERT_TRUE(MatchStoredDevices(store.get(), typed, 5, 100000, &got, &complete).ok());
+    EXPECT_TRUE(complete);
+    EXPECT_EQ(got.exact, want.exact);
+    EXPECT_EQ(got.devices, want.devices);
+    EXPECT_EQ(got.more, want.more);
+    if (!want.devices.empty() && !want.exact) ++matched;
+    // Fewer reads: the same first devices, and complete only when all were counted.
+    ASSERT_TRUE(MatchStoredDevices(store.get(), typed, 5, 3, &got, &complete).ok());
+    if (!want.exact && want.devices.size() + want.more > 3) EXPECT_FALSE(complete);
+    if (complete) EXPECT_EQ(got.more, want.more);
+    EXPECT_LE(got.devices.size() + got.more, 3u + (want.exact ? 1u : 0u));
+    for (size_t i = 0; i < got.devices.size(); ++i) EXPECT_EQ(got.devices[i], want.devices[i]);
+  }
+  EXPECT_GT(matched, 100);  // the trials did exercise prefixes
+}
+
+// Thousands of devices: the field offers the first 200 serials, the filter still finds every
+// device of a prefix (the 20 first listed, the rest counted), and a prefix with more devices than
+// the search reads says "at least".
+TEST(HistoryDeviceFilter, WithThousandsOfDevicesThePageStaysCorrectAndTheListBounded) {
+  testing::TempDir dir;
+  const std::string db = (dir.path() / "calibd.db").string();
+  std::vector<std::string> serials;
+  for (int i = 0; i < 3000; ++i) {
+    char serial[16];
+    std::snprintf(serial, sizeof serial, "SN-%04d", i);
+    serials.push_back(serial);
+  }
+  for (const char* odd : {"sn-0050x", "Sn-0051y", "SN-0X", "OTHER"}) serials.push_back(odd);
+  StoreDevices(db, serials);
+  TestServer server(ServeOptions(), db);
+  ASSERT_EQ(server.error(), "");
+  httplib::Client client = server.Client();
+  client.set_keep_alive(true);
+  const auto get = [&](const std::string& path) {
+    auto res = client.Get(path.c_str());
+    EXPECT_TRUE(res) << path;
+    if (!res) return std::string();
+    EXPECT_EQ(res->status, 200) << path;
+    return res->body;
+  };
+  const auto count = [](const std::string& page, const std::string& needle) {
+    size_t n = 0;
+    for (size_t at = page.find(needle); at != std::string::npos; at = page.find(needle, at + 1))
+      ++n;
+    return n;
+  };
+  std::string page = get("/");
+  const size_t list = page.find("<datalist id=\"devices\">");
+  ASSERT_NE(list, std::string::npos);
+  const std::string offered = page.substr(list, page.find("</datalist>", list) - list);
+  EXPECT_EQ(count(offered, "<option "), 200u) << "the field offers the first 200";
+  EXPECT_TRUE(Has(page, "<option value=\"OTHER\">"));  // 'O' < 'S': among the first
+  EXPECT_FALSE(Has(page, "<option value=\"SN-0200\">"));
+
+  // sn-005: SN-0050..SN-0059 and the two odd ones between them, case ignored; not SN-0X.
+  page = get("/?device=sn-005");
+  EXPECT_TRUE(Has(page, "showing the 12 devices whose serial starts with it")) << page;
+  for (const char* d : {"SN-0050", "SN-0059", "Sn-0051y", "sn-0050x"}) {
+    EXPECT_TRUE(Has(page, std::string("<a href=\"/?device=") + d + "\">")) << d;
+  }
+  page = get("/?device=sn-00");  // 100 + 2 devices: 20 listed, 82 counted
+  EXPECT_TRUE(Has(page, "showing the 20 first devices whose serial starts with it")) << page;
+  EXPECT_TRUE(Has(page, " 82 more devices match")) << page;
+  page = get("/?device=sN-");  // 3002 devices: more than the search reads
+  EXPECT_TRUE(Has(page, "showing the 20 first devices")) << page;
+  EXPECT_TRUE(Has(page, "At least 980 more devices match")) << page;
+  page = get("/?device=SN-2999");  // exact, past the offered ones
+  EXPECT_FALSE(Has(page, "class=\"callout device-hint\""));
+  page = get("/?device=SN-3");  // nothing: the hint
+  EXPECT_TRUE(Has(page, "no device&#39;s serial starts with it")) << page;
 }
 
 // The recording page of a log in counts (|a| of about 5500 at rest): the timelines say reading

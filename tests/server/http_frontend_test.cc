@@ -5,9 +5,11 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <exception>
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -158,6 +160,52 @@ TEST_F(Smuggling, TooLargeContentLengthRefused413NeverRunsTheBody) {
                          Head("POST /api/v1/recordings?device=A HTTP/1.1",
                               "Content-Type: text/csv\r\nContent-Length: 600000000\r\n"),
                          SmuggledUpload());
+}
+
+// 19 digits and more: beyond std::stoll's range (it threw, and the request was answered 500 as
+// an internal error), and beyond any limit.
+TEST_F(Smuggling, ContentLengthBeyondInt64Refused413NeverRunsTheBody) {
+  for (const char* length : {"9999999999999999999", "99999999999999999999999"}) {
+    ::testing::internal::CaptureStderr();
+    ExpectRefusedAndClosed(length, 413,
+                           Head("POST /api/v1/jobs HTTP/1.1",
+                                "Content-Type: application/json\r\n"
+                                "Content-Length: " +
+                                    std::string(length) + "\r\n"),
+                           SmuggledUpload());
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_EQ(log.find("internal error"), std::string::npos) << log;
+  }
+}
+
+// What a route throws (no route throws on any input we know of, so the handler is driven
+// directly): the client gets a generic 500, the operator's log the request and the text.
+TEST(ExceptionHandler, TheTextGoesToTheLogNeverToTheClient) {
+  httplib::Request req;
+  req.method = "POST";
+  req.path = "/api/v1/jobs/12/revoke";
+  httplib::Response res;
+  ::testing::internal::CaptureStderr();
+  AnswerException(req, res, std::make_exception_ptr(std::out_of_range("marker-91c: stoll")));
+  std::string log = ::testing::internal::GetCapturedStderr();
+  EXPECT_EQ(res.status, 500);
+  EXPECT_EQ(res.body.find("marker-91c"), std::string::npos) << res.body;
+  const json body = json::parse(res.body);
+  EXPECT_EQ(body["error"]["code"], "internal");
+  EXPECT_EQ(body["error"]["message"], "internal server error");
+  EXPECT_NE(log.find("internal error in POST /api/v1/jobs/12/revoke: marker-91c: stoll"),
+            std::string::npos)
+      << log;
+  // Not a std::exception: said so; control characters never reach the log raw.
+  httplib::Response other;
+  req.path = "/api/v1/jobs/\n1";
+  ::testing::internal::CaptureStderr();
+  AnswerException(req, other, std::make_exception_ptr(42));
+  log = ::testing::internal::GetCapturedStderr();
+  EXPECT_EQ(other.status, 500);
+  EXPECT_NE(log.find("in POST /api/v1/jobs/?1: an exception that is not a std::exception"),
+            std::string::npos)
+      << log;
 }
 
 TEST_F(Smuggling, ExpectContinueIsAnsweredWithTheRefusalNotContinue) {

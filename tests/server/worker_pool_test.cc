@@ -15,6 +15,7 @@
 #include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <stdexcept>
 #include <string>
 #include <thread>
 
@@ -337,8 +338,8 @@ TEST_F(WorkerPoolTest, AJobPastItsTimeLimitFailsWithReasonDeadline) {
 
 // A full disk: the result does not fit. The job must not stay running until its lease lapses:
 // its failure (reason disk_full) is stored in place, or, when not even that fits, it is released.
-// (The path where the failure with diagnostics fails and the one without fits is not reached
-// here: partial diagnostics this small are rewritten in place.)
+// (The paths where the failure with diagnostics does not fit, or neither does, are the two
+// tests after this one.)
 TEST_F(WorkerPoolTest, AJobWhoseResultDoesNotFitOnAFullDiskStillEnds) {
   const int64_t id = EnqueueArray(20);
   store_.reset();
@@ -371,6 +372,125 @@ TEST_F(WorkerPoolTest, AJobWhoseResultDoesNotFitOnAFullDiskStillEnds) {
   } else {
     EXPECT_EQ(job.lease_owner, "");  // given back to the queue
   }
+}
+
+// A job that fails with partial diagnostics (an array log of 2 samples: too_few_samples), on a
+// database filled to its max_page_count, with a trigger (made through a second connection)
+// that makes any UPDATE of a job matching `when` insert 200 kB: a genuine SQLITE_FULL (never
+// RAISE(), which the store reports as a conflict). Returns the job's id; the store is reopened
+// full, backing off 10 minutes after a transient failure.
+int64_t EnqueueFailingJobOnAFullDisk(const TempDir& dir, const std::string& when,
+                                     std::unique_ptr<storage::Store>* store) {
+  int64_t id = 0;
+  {
+    ArraySimulationFileOptions so;
+    so.samples = 2;
+    std::string csv;
+    json config, truth;
+    EXPECT_TRUE(SimulateArrayFiles(so, &csv, &config, &truth).ok());
+    storage::NewRecording r;
+    r.data = csv;
+    r.layout = "array";
+    r.file_name = "short.csv";
+    r.job = storage::NewJob{"array", "", config.dump()};
+    storage::RecordingInfo info;
+    EXPECT_TRUE((*store)->PutRecording(r, &info, nullptr).ok());
+    id = info.job ? info.job->id : 0;
+  }
+  store->reset();
+  int64_t pages = 0, free_pages = 0;
+  {
+    std::unique_ptr<storage::Db> db;
+    EXPECT_TRUE(storage::Db::Open(dir.File("calibd.db"), storage::Db::Options(), &db).ok());
+    EXPECT_TRUE(db->Exec("CREATE TABLE filler(b BLOB); "
+                         "CREATE TRIGGER grow BEFORE UPDATE ON jobs WHEN " +
+                         when + " BEGIN INSERT INTO filler VALUES (randomblob(200000)); END")
+                    .ok());
+    EXPECT_TRUE(db->QueryInt("PRAGMA page_count", &pages).ok());
+    EXPECT_TRUE(db->QueryInt("PRAGMA freelist_count", &free_pages).ok());
+  }
+  EXPECT_LT(free_pages * 4096, 200000) << "the free pages would hold the trigger's blob";
+  storage::StoreOptions so;
+  so.max_page_count = pages;  // full: rows change in place, nothing new fits
+  so.backoff_base_ms = so.backoff_max_ms = 600000;
+  EXPECT_TRUE(storage::Store::Open(dir.File("calibd.db"), so, store).ok());
+  return id;
+}
+
+// The failure with its diagnostics does not fit; the one without them does: the job ends failed
+// with its reason and message, and no diagnostics.
+TEST_F(WorkerPoolTest, AFailureWhoseDiagnosticsDoNotFitIsStoredWithoutThem) {
+  const int64_t id =
+      EnqueueFailingJobOnAFullDisk(dir_, "NEW.error_detail_json IS NOT NULL", &store_);
+  WorkerPool pool(store_.get(), &metrics_, Options());
+  pool.Start();
+  pool.Notify();
+  const storage::JobInfo job = WaitFor(id, JobStatus::kFailed);
+  EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
+  ASSERT_EQ(job.status, JobStatus::kFailed) << job.error_message;
+  EXPECT_EQ(job.error_reason, "too_few_samples") << job.error_message;
+  EXPECT_FALSE(job.error_message.empty());
+  EXPECT_LE(job.error_message.size(), 200u);
+  EXPECT_EQ(job.error_detail_json, "");
+  EXPECT_EQ(job.attempts, 1);
+  EXPECT_EQ(Outcomes("array", "failed"), 1);
+}
+
+// Neither failure fits: the job goes back to the queue, its attempt counted and backing off
+// (the shutdown release would uncount it and make it claimable at once: a job whose outcome can
+// never be stored would be claimed again and again, forever).
+TEST_F(WorkerPoolTest, AJobWhoseFailureCannotBeStoredIsReleasedCountedAndBackingOff) {
+  const int64_t id = EnqueueFailingJobOnAFullDisk(dir_, "NEW.error_message IS NOT NULL", &store_);
+  const int64_t before = std::chrono::duration_cast<std::chrono::milliseconds>(
+                             std::chrono::system_clock::now().time_since_epoch())
+                             .count();
+  WorkerPool pool(store_.get(), &metrics_, Options());
+  pool.Start();
+  pool.Notify();
+  storage::JobInfo job;
+  for (int i = 0; i < 12000; ++i) {  // a liveness bound (two minutes), not a speed claim
+    job = Job(id);
+    if (job.status == JobStatus::kFailed || (job.status == JobStatus::kQueued && job.attempts > 0))
+      break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
+  job = Job(id);
+  ASSERT_EQ(job.status, JobStatus::kQueued) << job.error_message;
+  EXPECT_EQ(job.lease_owner, "");
+  EXPECT_EQ(job.attempts, 1);
+  EXPECT_GE(job.not_before_ms, before + 600000);  // backing off: 10 minutes
+  EXPECT_EQ(job.error_message, "");               // what did not fit
+  EXPECT_EQ(Outcomes("array", "released"), 1);
+  EXPECT_EQ(Outcomes("array", "failed"), 0);
+}
+
+// An exception thrown inside a job's computation (here by the numerics executor, where the
+// solver's parallel work runs): the job fails with the generic internal error and never shows
+// what was thrown (clients read it); the operator's log has it, with the job's id.
+TEST_F(WorkerPoolTest, AnExceptionsTextGoesToTheLogNeverIntoTheJob) {
+  const int64_t id = EnqueueArray(21);
+  const std::string marker = "marker-7f3a: the solver's secret state";
+  WorkerPool pool(store_.get(), &metrics_,
+                  Options([&](int64_t, const std::function<void(int64_t)>&) {
+                    throw std::runtime_error(marker);
+                  }));
+  ::testing::internal::CaptureStderr();
+  pool.Start();
+  pool.Notify();
+  const storage::JobInfo job = WaitFor(id, JobStatus::kFailed);
+  EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
+  const std::string log = ::testing::internal::GetCapturedStderr();
+  ASSERT_EQ(job.status, JobStatus::kFailed) << job.error_message;
+  EXPECT_EQ(job.error_code, "internal");
+  EXPECT_NE(job.error_message.find("internal error while calibrating"), std::string::npos)
+      << job.error_message;
+  EXPECT_EQ(job.error_message.find("marker-7f3a"), std::string::npos) << job.error_message;
+  EXPECT_EQ(job.error_detail_json.find("marker-7f3a"), std::string::npos);
+  EXPECT_NE(
+      log.find("job " + std::to_string(id) + " (array): exception while calibrating: " + marker),
+      std::string::npos)
+      << log;
 }
 
 // A cancel in this process (WorkerPool::Cancel) or through the store from anywhere.

@@ -13,6 +13,7 @@
 #include "storage/schema.h"
 #include "storage/sha256.h"
 #include "storage/store.h"
+#include "tests/lib/unprivileged.h"
 #include "tests/storage/storage_test_util.h"
 
 namespace calibd::storage {
@@ -241,18 +242,25 @@ TEST_F(ReadOnly, ReadOnlyStoreServesReadsAndRefusesWritesClearly) {
   ExpectNothingChanged();
 }
 
+// The file's mode says read-only: opened by a user it binds (as root: nobody, in a child).
 TEST_F(ReadOnly, WriteProtectedFileRefusesWritesClearly) {
-  if (geteuid() == 0) GTEST_SKIP() << "root ignores file permissions";
   ASSERT_EQ(chmod(path_.c_str(), 0444), 0);
-  std::unique_ptr<Store> store;
-  Status s = Store::Open(path_, StoreOptions(), &store);
-  if (s.ok()) {
-    ExpectWritesRefused(store.get());
-  } else {
-    EXPECT_EQ(s.code(), StatusCode::kIoError) << s.ToString();
-  }
-  store.reset();
+  ASSERT_TRUE(unprivileged::OpenFolderToNobody(dir_.path()));
+  const int outcome = unprivileged::RunUnprivileged(path_, [&] {
+    ASSERT_NE(geteuid(), 0u);  // permissions bind this user
+    std::unique_ptr<Store> store;
+    Status s = Store::Open(path_, StoreOptions(), &store);
+    if (s.ok()) {
+      ExpectWritesRefused(store.get());
+    } else {
+      EXPECT_EQ(s.code(), StatusCode::kIoError) << s.ToString();
+    }
+  });
   ASSERT_EQ(chmod(path_.c_str(), 0644), 0);
+  if (outcome == unprivileged::kUnprivilegedUnavailable) {
+    GTEST_SKIP() << "running as root, and a child cannot become nobody and read " << path_;
+  }
+  EXPECT_EQ(outcome, 0) << "the checks failed as " << (geteuid() == 0 ? "nobody" : "this user");
   ExpectNothingChanged();
 }
 

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "storage/pg_conn.h"
+#include "storage/pg_store_internal.h"
 #include "storage/store.h"
 #include "tests/lib/sanitizer.h"
 #include "tests/storage/pg_test_cluster.h"
@@ -64,6 +65,59 @@ class PgStoreTest : public ::testing::Test {
   std::string uri_;
   FakeClock clock_;
 };
+
+// The plan PostgreSQL makes for `sql` with `params` (EXPLAIN's lines, one per line).
+std::string Plan(PgConn* c, const std::string& sql, const std::vector<PgParam>& params) {
+  PgResult res;
+  const std::string explain = "EXPLAIN " + sql;
+  Status s = c->Exec(explain.c_str(), params, &res);
+  EXPECT_TRUE(s.ok()) << s.ToString();
+  std::string plan;
+  for (int i = 0; i < res.rows(); ++i) plan += res.Text(i, 0) + "\n";
+  return plan;
+}
+
+// ?verdict= (ListJobs and CountJobs with a state and no device) reads index results_by_state,
+// on a table of 20 000 succeeded jobs (0.1 % revoked) with its statistics (ANALYZE), so the
+// planner chooses by the data, no setting forcing it: without the index it would scan every
+// succeeded job (the issue measured 0.23 s at 20 000 jobs) for a verdict that few have.
+TEST_F(PgStoreTest, AVerdictListingReadsTheIndexOfResultsByTheirStanding) {
+  auto store = Open();
+  const int64_t rec = Put(store.get(), "x");
+  auto c = Sql();
+  ASSERT_TRUE(c->ExecScript(("INSERT INTO jobs (recording_id, method, device, status, created_at) "
+                             "SELECT " +
+                             std::to_string(rec) +
+                             ", 'pca', 'SN-' || (g % 50), 'succeeded', g "
+                             "FROM generate_series(1, 20000) g; "
+                             "INSERT INTO results (job_id, result_json, sha256, created_at, "
+                             "verdict, decision) SELECT id, '{}', 'x', 1, CASE WHEN id % 10 = 0 "
+                             "THEN 'rejected' ELSE 'accepted' END, CASE WHEN id % 1000 = 0 THEN "
+                             "'revoked' END FROM jobs; ANALYZE jobs; ANALYZE results;")
+                                .c_str())
+                  .ok());
+  for (const ServeState state : {ServeState::kRevoked, ServeState::kRejected}) {
+    SCOPED_TRACE(Name(state));
+    JobFilter filter;
+    filter.state = state;
+    filter.limit = 50;
+    std::vector<PgParam> params;
+    std::string plan = Plan(c.get(), pg::ListJobsSql(filter, &params), params);
+    EXPECT_NE(plan.find("results_by_state"), std::string::npos) << plan;
+    EXPECT_EQ(plan.find("Seq Scan on jobs"), std::string::npos) << plan;
+    plan = Plan(c.get(), pg::CountJobsSql(filter, &params), params);
+    EXPECT_NE(plan.find("results_by_state"), std::string::npos) << plan;
+    // And what they read.
+    std::vector<JobInfo> jobs;
+    ASSERT_TRUE(store->ListJobs(filter, &jobs).ok());
+    ASSERT_EQ(jobs.size(), state == ServeState::kRevoked ? 20u : 50u);
+    for (const JobInfo& job : jobs) EXPECT_EQ(job.state, state);
+    EXPECT_EQ(jobs[0].id, state == ServeState::kRevoked ? 20000 : 19990);
+    int64_t count = 0;
+    ASSERT_TRUE(store->CountJobs(filter, &count).ok());
+    EXPECT_EQ(count, state == ServeState::kRevoked ? 20 : 1980);
+  }
+}
 
 TEST_F(PgStoreTest, OpenPicksThePostgresBackendForUrisAndKeywordStrings) {
   EXPECT_TRUE(Store::IsPostgresTarget("postgresql://u@db/calibd"));

@@ -418,7 +418,7 @@ TEST_P(StoreTest, ACancelledRunningJobIsNeverQueuedAgain) {
     ASSERT_TRUE(store_->CancelJob(id, "stop it", "token").ok());
   }
   // Released at shutdown: it ends as cancelled instead of going back to the queue.
-  ASSERT_TRUE(store_->ReleaseJob(released, "w1").ok());
+  ASSERT_TRUE(store_->ReleaseJob(released, "w1", ReleaseKind::kShutdown).ok());
   JobInfo job = Get(released);
   EXPECT_EQ(job.status, JobStatus::kFailed);
   EXPECT_EQ(job.error_reason, "cancelled");
@@ -678,7 +678,7 @@ TEST_P(StoreTest, RenewingALeaseTakenByAnotherWorkerIsAConflict) {
   // ... and so is completing, failing or releasing it.
   EXPECT_EQ(store_->CompleteJob(id, "w1", "{}").code(), StatusCode::kConflict);
   EXPECT_EQ(store_->FailJob(id, "w1", {"x", "", "y", ""}, true).code(), StatusCode::kConflict);
-  EXPECT_EQ(store_->ReleaseJob(id, "w1").code(), StatusCode::kConflict);
+  EXPECT_EQ(store_->ReleaseJob(id, "w1", ReleaseKind::kShutdown).code(), StatusCode::kConflict);
   EXPECT_EQ(Get(id).lease_owner, "w2");
   EXPECT_TRUE(store_->CompleteJob(id, "w2", "{}").ok());
 }
@@ -869,12 +869,53 @@ TEST_P(StoreTest, ARetriedFailureLeavesNoStaleReasonOnSuccessOrLeaseExpiry) {
 TEST_P(StoreTest, ReleaseRequeuesWithoutCountingTheAttempt) {
   int64_t id = Enqueue(Put("x"));
   Claim("w1");
-  ASSERT_TRUE(store_->ReleaseJob(id, "w1").ok());
+  ASSERT_TRUE(store_->ReleaseJob(id, "w1", ReleaseKind::kShutdown).ok());
   JobInfo job = Get(id);
   EXPECT_EQ(job.status, JobStatus::kQueued);
   EXPECT_EQ(job.attempts, 0);
   EXPECT_EQ(job.lease_owner, "");
   EXPECT_EQ(Claim("w2").id, id);  // claimable at once
+}
+
+// Released because its outcome could not be stored (full disk): unlike the shutdown release
+// the attempt counts and the job backs off as after a transient failure; past max_attempts it
+// stays queued (failing it is the write that did not fit), and its next storable failure ends it.
+TEST_P(StoreTest, AReleaseAfterAStoreFailureCountsTheAttemptAndBacksOff) {
+  StoreOptions o;
+  o.max_attempts = 2;
+  Reopen(o);
+  int64_t id = Enqueue(Put("x"));
+  Claim("w1");
+  ASSERT_TRUE(store_->ReleaseJob(id, "w1", ReleaseKind::kShutdown).ok());
+  JobInfo job = Get(id);
+  EXPECT_EQ(job.attempts, 0);
+  EXPECT_EQ(job.not_before_ms, clock_.Now());
+  EXPECT_EQ(Claim("w2").attempts, 1);  // at once
+  ASSERT_TRUE(store_->ReleaseJob(id, "w2", ReleaseKind::kStoreFailed).ok());
+  job = Get(id);
+  EXPECT_EQ(job.status, JobStatus::kQueued);
+  EXPECT_EQ(job.attempts, 1);
+  EXPECT_EQ(job.lease_owner, "");
+  EXPECT_EQ(job.error_code, "");  // nothing written about a failure it could not store
+  EXPECT_EQ(job.not_before_ms, clock_.Now() + 1000);
+  JobInfo none;
+  bool claimed = true;
+  clock_.Advance(999);
+  ASSERT_TRUE(store_->ClaimJob("w3", 1000, &none, &claimed).ok());
+  EXPECT_FALSE(claimed);  // backing off
+  clock_.Advance(1);
+  EXPECT_EQ(Claim("w3").attempts, 2);
+  ASSERT_TRUE(store_->ReleaseJob(id, "w3", ReleaseKind::kStoreFailed).ok());
+  job = Get(id);
+  EXPECT_EQ(job.status, JobStatus::kQueued);  // out of attempts, yet nothing could be stored
+  EXPECT_EQ(job.attempts, 2);
+  EXPECT_EQ(job.not_before_ms, clock_.Now() + 2000);  // doubled
+  clock_.Advance(2000);
+  EXPECT_EQ(Claim("w4").attempts, 3);
+  ASSERT_TRUE(store_->FailJob(id, "w4", {"io_error", "disk_full", "full", ""}, true).ok());
+  job = Get(id);
+  EXPECT_EQ(job.status, JobStatus::kFailed);
+  EXPECT_EQ(job.error_message, "gave up after 3 attempts: full");
 }
 
 // ---- illegal transitions ----
@@ -900,7 +941,7 @@ TEST_P(StoreTest, FailingOrReleasingAFinishedJobIsAConflict) {
   ASSERT_TRUE(store_->FailJob(bad, "w", {"bad", "", "bad input", ""}, false).ok());
   EXPECT_EQ(store_->FailJob(ok, "w", {"x", "", "y", ""}, false).code(), StatusCode::kConflict);
   EXPECT_EQ(store_->FailJob(ok, "w", {"x", "", "y", ""}, true).code(), StatusCode::kConflict);
-  EXPECT_EQ(store_->ReleaseJob(ok, "w").code(), StatusCode::kConflict);
+  EXPECT_EQ(store_->ReleaseJob(ok, "w", ReleaseKind::kStoreFailed).code(), StatusCode::kConflict);
   EXPECT_EQ(store_->RenewLease(ok, "w", 1000).code(), StatusCode::kConflict);
   EXPECT_EQ(store_->CompleteJob(bad, "w", "{}").code(), StatusCode::kConflict);
   EXPECT_EQ(store_->FailJob(bad, "w", {"x", "", "y", ""}, true).code(), StatusCode::kConflict);
@@ -915,7 +956,7 @@ TEST_P(StoreTest, OperationsOnUnknownJobsAreNotFound) {
   EXPECT_EQ(store_->RenewLease(99, "w", 1000).code(), StatusCode::kNotFound);
   EXPECT_EQ(store_->CompleteJob(99, "w", "{}").code(), StatusCode::kNotFound);
   EXPECT_EQ(store_->FailJob(99, "w", {"x", "", "y", ""}, false).code(), StatusCode::kNotFound);
-  EXPECT_EQ(store_->ReleaseJob(99, "w").code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->ReleaseJob(99, "w", ReleaseKind::kStoreFailed).code(), StatusCode::kNotFound);
 }
 
 TEST_P(StoreTest, EmptyResultIsInvalid) {

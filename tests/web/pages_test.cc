@@ -744,6 +744,16 @@ TEST(HistoryPage, DeviceFilterMatchesExactlyThenByPrefixIgnoringCase) {
       << page;
   EXPECT_TRUE(Has(page, "name=\"device\" value=\"sn-&lt;000\""));
   EXPECT_TRUE(Has(page, "href=\"/?before=1&amp;device=sn-%3C000\""));
+  // The search stopped before it had counted every match: a lower bound, or only "may".
+  h.device_more_at_least = true;
+  EXPECT_TRUE(Has(RenderHistoryPage(h), "SN-&lt;0002</a>. At least 3 more devices match"));
+  h.device_more = 0;
+  page = RenderHistoryPage(h);
+  EXPECT_TRUE(Has(page, "showing the 2 first devices"));
+  EXPECT_TRUE(Has(page, "SN-&lt;0002</a>. More devices may match: type more of the serial"));
+  h.device_more_at_least = false;
+  EXPECT_FALSE(Has(RenderHistoryPage(h), "more devices match"));
+  EXPECT_FALSE(Has(RenderHistoryPage(h), "may match"));
   // Nothing matched: the server's hint as given.
   h.device_matches.clear();
   h.device_more = 0;
