@@ -18,6 +18,7 @@
 #include "server/imu_method.h"
 #include "server/noise_method.h"
 #include "server/recording.h"
+#include "tests/lib/sanitizer.h"
 
 namespace calibd::server {
 namespace {
@@ -56,7 +57,10 @@ void ExpectStopsAtDeadline(const Input& in) {
   EXPECT_EQ(s.reason(), Reason::kDeadline) << in.name << ": " << s.message();
   EXPECT_EQ(s.message().rfind(in.config["method"].get<std::string>(), 0), 0u)
       << "the message names the method and its stage: " << s.message();
-  EXPECT_LT(late, 1.0) << in.name << " returned " << late << " s after its deadline";
+  // Within a second (the bound); under a sanitizer the unpolled stretches (pca's one SVD
+  // call) take up to twice that on a loaded machine (0.55-0.7 s alone, 1.08 s beside other tests).
+  EXPECT_LT(late, 1.0 * sanitizer::kTimeBoundScale)
+      << in.name << " returned " << late << " s after its deadline";
   // The partial diagnostics of a failure: the method, not usable.
   ASSERT_TRUE(result.is_object()) << in.name;
   EXPECT_EQ(result.value("method", ""), in.config["method"]) << result.dump().substr(0, 300);
