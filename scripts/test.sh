@@ -9,9 +9,9 @@
 #      runs), so every test runs at least once;
 #   3. fuzzes each libFuzzer target with a fixed budget of inputs from a fixed seed (about a minute
 #      each), or for $CALIBD_FUZZ_SECONDS s each when that is set (tests/fuzz/run.sh).
-# Still over the 30-minute target on 2 cores from a clean checkout (README, "Tests and
-# benchmarks"; bench/README.md, "CI time: each test where it means most"): the two builds of every
-# library are most of it.
+# 37.7 min on 2 cores from a clean checkout (fresh Debian 12), still over the 30-minute target
+# (README, "Tests and benchmarks"; bench/README.md, "CI time: each test where it means most"):
+# the two builds of every library are most of it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 start=$(date +%s)
