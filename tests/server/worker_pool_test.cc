@@ -132,6 +132,20 @@ class WorkerPoolTest : public ::testing::Test {
     }
     return job;
   }
+  // Waits (a liveness bound of two minutes, not a speed claim) until the job has failed or is
+  // back in the queue after an attempt.
+  storage::JobInfo WaitUntilFailedOrRequeued(int64_t id) {
+    storage::JobInfo job;
+    for (int i = 0; i < 12000; ++i) {
+      job = Job(id);
+      if (job.status == JobStatus::kFailed ||
+          (job.status == JobStatus::kQueued && job.attempts > 0)) {
+        break;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return job;
+  }
   int Outcomes(const std::string& method, const std::string& outcome) {
     const std::string text = metrics_.Render({}, {});
     const std::string key =
@@ -355,15 +369,9 @@ TEST_F(WorkerPoolTest, AJobWhoseResultDoesNotFitOnAFullDiskStillEnds) {
   WorkerPool pool(store_.get(), &metrics_, Options());
   pool.Start();
   pool.Notify();
-  storage::JobInfo job;
-  for (int i = 0; i < 12000; ++i) {  // a liveness bound (two minutes), not a speed claim
-    job = Job(id);
-    if (job.status == JobStatus::kFailed || (job.status == JobStatus::kQueued && job.attempts > 0))
-      break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
+  WaitUntilFailedOrRequeued(id);
   EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
-  job = Job(id);
+  const storage::JobInfo job = Job(id);
   ASSERT_NE(job.status, JobStatus::kRunning) << "the job stayed running";
   if (job.status == JobStatus::kFailed) {
     EXPECT_EQ(job.error_reason, "disk_full") << job.error_message;
@@ -447,15 +455,9 @@ TEST_F(WorkerPoolTest, AJobWhoseFailureCannotBeStoredIsReleasedCountedAndBacking
   WorkerPool pool(store_.get(), &metrics_, Options());
   pool.Start();
   pool.Notify();
-  storage::JobInfo job;
-  for (int i = 0; i < 12000; ++i) {  // a liveness bound (two minutes), not a speed claim
-    job = Job(id);
-    if (job.status == JobStatus::kFailed || (job.status == JobStatus::kQueued && job.attempts > 0))
-      break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
+  WaitUntilFailedOrRequeued(id);
   EXPECT_EQ(pool.Stop(std::chrono::seconds(60)), StopOutcome::kFinished);
-  job = Job(id);
+  const storage::JobInfo job = Job(id);
   ASSERT_EQ(job.status, JobStatus::kQueued) << job.error_message;
   EXPECT_EQ(job.lease_owner, "");
   EXPECT_EQ(job.attempts, 1);
