@@ -73,11 +73,25 @@ char32_t DecodeUtf8(std::string_view s, size_t i, size_t n) {
   return cp;
 }
 
+// ICU's NFC normalizer, created once. Through a function-local static (not ICU's own once-flag
+// alone), so that the instance's construction visibly happens before every thread's use: ICU is
+// not built with ThreadSanitizer, which otherwise reports its lazy construction in one worker
+// and a virtual call in another as a race. nullptr when ICU's data is missing (cannot happen with
+// a linked libicu).
+static const icu::Normalizer2* NfcNormalizer() {
+  static const icu::Normalizer2* const nfc = [] {
+    UErrorCode err = U_ZERO_ERROR;
+    const icu::Normalizer2* n = icu::Normalizer2::getNFCInstance(err);
+    return U_SUCCESS(err) ? n : nullptr;
+  }();
+  return nfc;
+}
+
 std::string ToNfc(std::string_view s) {
   UErrorCode err = U_ZERO_ERROR;
-  const icu::Normalizer2* nfc = icu::Normalizer2::getNFCInstance(err);
+  const icu::Normalizer2* nfc = NfcNormalizer();
   const std::string valid = SanitizeUtf8(s);
-  if (U_FAILURE(err)) return valid;  // ICU's data missing: cannot happen with a linked libicu
+  if (nfc == nullptr) return valid;
   const icu::UnicodeString in = icu::UnicodeString::fromUTF8(valid);
   if (nfc->isNormalized(in, err) && U_SUCCESS(err)) return valid;
   err = U_ZERO_ERROR;
