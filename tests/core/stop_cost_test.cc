@@ -52,7 +52,10 @@ void ExpectStopsAtDeadline(const std::function<Status(const StopToken*)>& run,
   EXPECT_EQ(s.code(), StatusCode::kStopped) << what << ": " << s.message();
   EXPECT_EQ(s.reason(), Reason::kDeadline) << what << ": " << s.message();
   EXPECT_NE(s.message().find("time limit"), std::string::npos) << s.message();
-  EXPECT_LT(late, 1.0) << what << " returned " << late << " s after its deadline";
+  // Within a second (issue #20's bound); under a sanitizer pca's one unpolled SVD call alone can
+  // take about that on a loaded machine (1.11 s seen beside other tests), so twice it there.
+  EXPECT_LT(late, 1.0 * sanitizer::kTimeBoundScale)
+      << what << " returned " << late << " s after its deadline";
   std::printf("%s, deadline %lld ms: stopped %.3f s after it (%s)\n", what.c_str(),
               static_cast<long long>(after.count()), late, s.message().c_str());
 }
