@@ -6,7 +6,7 @@
 #include <random>
 #include <string>
 
-#include "server/recording.h"
+#include "formats/recording.h"
 
 namespace {
 

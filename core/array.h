@@ -66,7 +66,7 @@ struct ArrayOptions {
   // rad/s. When set (> 0), samples with any gyroscope |component| >= it are dropped and counted.
   std::optional<double> gyro_saturation;
   // m/s². When set (> 0), samples with any accelerometer |component| >= it are dropped and
-  // counted with the gyroscope's (server/array_method.cc sets both from the data,
+  // counted with the gyroscope's (methods/array/array_method.cc sets both from the data,
   // core/saturation.h).
   std::optional<double> accel_saturation;
   // Which optimiser. Default: joint Levenberg-Marquardt with Schur complement.

@@ -106,7 +106,7 @@ struct ArrayFullOptions {
   // rad/s (readings). When set (> 0), samples with any gyroscope |component| >= it are dropped
   // from the dynamic phase and never part of a static.
   std::optional<double> gyro_saturation;
-  // m/s². The same for the accelerometers (server/array_method.cc sets both from the data,
+  // m/s². The same for the accelerometers (methods/array/array_method.cc sets both from the data,
   // core/saturation.h).
   std::optional<double> accel_saturation;
   // Static detection (core/static_detection.h), on every triad's accelerometer and gyroscope.

@@ -22,7 +22,7 @@
 
 namespace calibd::results {
 
-// The acceptance gate's answer as stored in a result ("verdict"; server/acceptance.h writes it).
+// The acceptance gate's answer as stored in a result ("verdict"; methods/acceptance.h writes it).
 struct StoredVerdict {
   GateVerdict status = GateVerdict::kNone;  // kAccepted | kRejected (never kNone when present)
   std::vector<std::string> reasons;         // one per failed rule, in words; empty when accepted
@@ -31,7 +31,7 @@ struct StoredVerdict {
 };
 
 struct Envelope {
-  std::string method;      // "pca", "array", "imu", "noise"
+  std::string method;      // the registered method's name (methods/registry.h)
   int schema_version = 1;  // the method's typed schema version the document was written in
   // false: a failed run's partial diagnostics ({"method", "usable": false, "diagnostics",
   // "warnings"}): no model, parameters or uncertainty. Written only when false.

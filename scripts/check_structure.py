@@ -2,8 +2,8 @@
 """The product tree against the structure rules of issue #23 (tracker 29), as a ratchet.
 
 Rules: no product file over 800 lines, no function over 150 lines, no product file outside
-methods/<name>/ that names a method (a string literal "pca", "array", ...), base/ free of method
-vocabulary. Today's offenders are recorded in scripts/structure_baseline.json with their sizes;
+methods/<name>/ and the registry (methods/registry.*) that names a method (a string literal "pca",
+"array", ..., comments included), base/ free of method vocabulary. Today's offenders are recorded in scripts/structure_baseline.json with their sizes;
 the check fails when a new offender appears or a recorded one grows, so the tree only moves
 towards the rules. After a refactor shrinks an offender, `--update` records the smaller figures.
 
@@ -21,8 +21,16 @@ import re
 import sys
 from collections import defaultdict
 
-PRODUCT_DIRS = ["base", "core", "results", "methods", "storage", "server", "web"]
+PRODUCT_DIRS = ["base", "core", "results", "formats", "methods", "storage", "server", "web"]
 METHODS = ["pca", "array", "imu", "noise", "thermal", "mag"]
+# Files that may name a method besides its folder: the registry, which lists them all.
+REGISTRY = ("methods/registry.h", "methods/registry.cc")
+# A name that is the same word but not the method: (file, name) -> why.
+NOT_THE_METHOD = {
+    ("formats/recording.cc", "array"): "the stored name of the inertial-log layout (SPEC §2)",
+}
+# JSON Schema's type keyword (server/openapi.cc): {"type", "array"} names a JSON type.
+JSON_SCHEMA_TYPE = re.compile(r'\{"type", "array"\}')
 MAX_FILE_LINES = 800
 MAX_FUNCTION_LINES = 150
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -76,10 +84,13 @@ def measure(root):
             if n > MAX_FUNCTION_LINES:
                 key = "%s:%s" % (f, name)
                 funcs[key] = max(n, funcs.get(key, 0))
-        if not f.startswith("methods/"):
-            for m in METHODS:
-                if '"%s"' % m in text:
-                    mentions[m].append(f)
+        parts = f.split("/")
+        if f in REGISTRY or (parts[0] == "methods" and len(parts) > 2 and parts[1] in METHODS):
+            continue  # a method's own folder, or the registry
+        text = JSON_SCHEMA_TYPE.sub("", text)
+        for m in METHODS:
+            if '"%s"' % m in text and (f, m) not in NOT_THE_METHOD:
+                mentions[m].append(f)
     return files, funcs, {m: sorted(mentions[m]) for m in METHODS}
 
 

@@ -10,10 +10,11 @@
 #include <thread>
 
 #include "core/stop_token.h"
-#include "server/acceptance.h"
+#include "methods/acceptance.h"
 #include "server/config.h"
 #include "server/failure_reasons.h"
-#include "server/method.h"
+#include "methods/method.h"
+#include "methods/registry.h"
 #include "server/serve.h"
 
 namespace calibd::server {

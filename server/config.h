@@ -12,16 +12,14 @@
 #include "base/status.h"
 #include "core/block_lm.h"
 #include "core/stop_token.h"
-#include "server/recording.h"
+#include "results/json_text.h"
+#include "formats/recording.h"
 
 namespace calibd::server {
 
-// Nesting deeper than this in any JSON we accept is an error (guards the stack and memory).
-inline constexpr int kMaxJsonDepth = 64;
-
-// Parses JSON text. Errors are kInvalidInput naming `what` (e.g. "config.json") with the 1-based
-// line and column of the fault. Rejects nesting deeper than kMaxJsonDepth.
-Status ParseJsonText(std::string_view text, const std::string& what, nlohmann::json* out);
+// JSON text to a document (results/json_text.h), as every route and the CLI read it.
+using results::kMaxJsonDepth;
+using results::ParseJsonText;
 
 // Builds a config object from query parameters. Values that read as JSON numbers, booleans,
 // arrays or objects become those; everything else stays a string (so device=123 is "123" only
@@ -33,7 +31,7 @@ Status ConfigFromQuery(const std::multimap<std::string, std::string>& params,
 
 // The common keys of every config.
 struct CommonConfig {
-  std::string method;  // "pca" | "array"
+  std::string method;  // a registered method's name (methods/registry.h)
   std::string device;  // serial number; empty when not given
   // The config's own time limit (`job_seconds`, > 0); 0 when not given: the server's
   // --job-seconds (or the CLI's) applies. It may only lower the server's limit
@@ -43,7 +41,7 @@ struct CommonConfig {
 
 // Checks the whole config: an object, `method` known, `device` a non-empty string of at most
 // 128 printable characters when present, `acceptance` (limits of the method's acceptance gate,
-// server/acceptance.h) when present, `time_unit` (s, ms, us, ns; only for methods reading the
+// methods/acceptance.h) when present, `time_unit` (s, ms, us, ns; only for methods reading the
 // array layout) when present, and the method's own keys (unknown keys are errors).
 // Errors name the key (Status::field(), "acceptance.<limit>" for a limit).
 Status ValidateConfig(const nlohmann::json& config, CommonConfig* common);
@@ -84,7 +82,7 @@ void PrepareParser(const nlohmann::json& config, RecordingParser* parser);
 
 // The same, from a parser that has already been fed and finished (collecting), and prepared by
 // PrepareParser. Without `time_unit`, a method that reads the times (Method::ReadsTime) first
-// refuses a time column that does not look like seconds (CheckTimeUnit, server/inertial_log.h;
+// refuses a time column that does not look like seconds (CheckTimeUnit, formats/inertial_log.h;
 // Reason::kImplausibleTimeUnit). Epoch stamps: the result's diagnostics get `time_origin`, the
 // whole second (of the log's clock) its times count from (RecordingSummary::time_origin).
 // `executor` (optional): see RunContext::executor.

@@ -11,7 +11,8 @@
 #include "server/device_lookup.h"
 #include "server/failure_reasons.h"
 #include "server/http_util.h"
-#include "server/method.h"
+#include "methods/method.h"
+#include "methods/registry.h"
 #include "storage/store.h"
 #include "web/pages.h"
 

@@ -14,7 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "base/status.h"
-#include "server/method.h"
+#include "methods/method.h"
 
 namespace calibd::server {
 

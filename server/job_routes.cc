@@ -2,6 +2,7 @@
 #include <iostream>
 
 #include "server/service_impl.h"
+#include "methods/registry.h"
 
 namespace calibd::server {
 

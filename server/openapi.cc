@@ -2,7 +2,8 @@
 // tests/server/http_api_test.cc, which checks every documented path against the running server.
 #include "server/failure_reasons.h"
 #include "server/http_util.h"
-#include "server/method.h"
+#include "methods/method.h"
+#include "methods/registry.h"
 
 namespace calibd::server {
 
@@ -164,7 +165,11 @@ json Build() {
         {"sha256", {{"type", "string"}}},
         {"bytes", {{"type", "integer"}}},
         {"rows", {{"type", "integer"}}},
-        {"layout", {{"type", "string"}, {"enum", {"pca_averaged", "pca_raw", "array"}}}},
+        {"layout",
+         {{"type", "string"},
+          {"enum",
+           {LayoutName(Layout::kPcaAveraged), LayoutName(Layout::kPcaRaw),
+            LayoutName(Layout::kArray)}}}},
         {"device", {{"type", "string"}, {"nullable", true}}},
         {"created_at", {{"type", "string"}}},
         {"columns", {{"type", "array"}, {"items", {{"type", "string"}}}}},

@@ -4,9 +4,9 @@
 #include <mutex>
 
 #include "server/config.h"
-#include "server/imu_method.h"
-#include "server/inertial_log.h"
-#include "server/recording.h"
+#include "methods/imu/imu_method.h"
+#include "formats/inertial_log.h"
+#include "formats/recording.h"
 #include "web/svg_plot.h"
 
 namespace calibd::server {
@@ -75,7 +75,7 @@ Status ComputeSegments(storage::Store* store, int64_t recording_id, const Segmen
   storage::RecordingInfo info;
   Status s = store->GetRecording(recording_id, &info);
   if (!s.ok()) return s;
-  if (info.layout != "array") {
+  if (info.layout != LayoutName(Layout::kArray)) {
     return Status::InvalidInput("recording " + std::to_string(recording_id) + " has the " +
                                 info.layout +
                                 " layout; static intervals are found in inertial logs (t, aK_*, "

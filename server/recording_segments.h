@@ -16,7 +16,7 @@
 
 #include "base/status.h"
 #include "core/static_detection.h"
-#include "server/recording.h"
+#include "formats/recording.h"
 #include "storage/store.h"
 
 namespace calibd::server {

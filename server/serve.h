@@ -14,8 +14,8 @@ struct ServeOptions {
   int workers = 0;                         // calibration threads; 0 = one per core
   std::string token_file;                  // non-empty: writes need "Authorization: Bearer TOKEN"
   bool insecure = false;                   // allow a non-loopback address without a token
-  // Non-empty: a JSON file of server-wide acceptance limits per method (server/acceptance.h),
-  // {"pca": {"max_scale_std": 0.005}, ...}; a config's own `acceptance` overrides them per key.
+  // Non-empty: a JSON file of server-wide acceptance limits per method (methods/acceptance.h),
+  // {"<method>": {"<limit>": value, ...}, ...}; a config's own `acceptance` overrides them per key.
   std::string acceptance_file;
   // Larger uploads: 413. For a gzip-compressed recording, the limit applies to the compressed
   // body and to the decompressed CSV (what is stored).

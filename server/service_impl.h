@@ -24,20 +24,19 @@
 
 #include "base/sha256.h"
 #include "core/task_pool.h"
-#include "server/acceptance.h"
+#include "methods/acceptance.h"
 #include "server/config.h"
 #include "server/device_lookup.h"
-#include "server/exports.h"
+#include "methods/exports.h"
 #include "server/gzip_stream.h"
 #include "server/http_server.h"
 #include "server/http_util.h"
-#include "server/inertial_log.h"
+#include "formats/inertial_log.h"
 #include "server/instance.h"
 #include "server/job_budget.h"
-#include "server/method.h"
+#include "methods/method.h"
 #include "server/metrics.h"
-#include "server/noise_reference.h"
-#include "server/recording.h"
+#include "formats/recording.h"
 #include "server/recording_routes.h"
 #include "server/service.h"
 #include "server/storage_health.h"
@@ -117,10 +116,9 @@ bool ParseId(const std::string& text, int64_t* id);
 
 // --- Uploads (upload_routes.cc).
 bool IsGzipEncoding(const std::string& encoding);  // "gzip" or "x-gzip", any case
-// Over HTTP, an array config may name its accelerometer calibration by a succeeded pca job:
-// {"accelerometer_calibration": {"job": ID}} becomes {"job": ID, "result": {...}} before the job
-// is stored.
-Status ResolveCalibrationReference(storage::Store* store, nlohmann::json* config);
+// The config's references to other jobs, resolved by its method before the job is stored
+// (Method::ResolveReferences); a config without a known method is left to ValidateConfig.
+Status ResolveJobReferences(storage::Store* store, nlohmann::json* config);
 
 }  // namespace calibd::server
 

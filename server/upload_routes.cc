@@ -1,5 +1,6 @@
 // POST /api/v1/recordings and POST /api/v1/jobs (server/service_impl.h).
 #include "server/service_impl.h"
+#include "methods/registry.h"
 
 namespace calibd::server {
 
@@ -71,55 +72,15 @@ bool IsGzipEncoding(const std::string& encoding) {
   return e == "gzip" || e == "x-gzip";
 }
 
-// Over HTTP, an array config may name its accelerometer calibration by a succeeded pca job:
-// {"accelerometer_calibration": {"job": ID}} becomes {"job": ID, "result": {...}} before the job
-// is stored, so the job is self-contained (its result cannot change under it) and says which
-// calibration it used.
-Status ResolveCalibrationReference(storage::Store* store, json* config) {
+// The config's references to other jobs, resolved by its method before the job is stored
+// (Method::ResolveReferences). A config without a known method is left as is: ValidateConfig then
+// names what is wrong with it.
+Status ResolveJobReferences(storage::Store* store, json* config) {
   if (!config->is_object()) return Status::Ok();
-  // accel_noise / gyro_noise: {"job": ID} of a noise job, resolved the same way.
-  Status noise = ResolveNoiseReferences(store, config);
-  if (!noise.ok()) return noise;
-  auto it = config->find("accelerometer_calibration");
-  if (it == config->end() || !it->is_object() || !it->contains("job") || it->contains("result")) {
-    return Status::Ok();
-  }
-  const json& ref = (*it)["job"];
-  if (!ref.is_number_integer() || it->size() != 1) {
-    return Status::InvalidInput(
-               "'accelerometer_calibration' must be a pca result or {\"job\": ID} of a "
-               "succeeded pca job")
-        .WithField("accelerometer_calibration");
-  }
-  const int64_t id = ref.get<int64_t>();
-  storage::JobInfo job;
-  Status s = store->GetJob(id, &job);
-  if (s.code() == StatusCode::kNotFound) {
-    return Status::InvalidInput("accelerometer_calibration: there is no job " + std::to_string(id))
-        .WithField("accelerometer_calibration");
-  }
-  if (!s.ok()) return s;
-  if (job.method != "pca" || job.status != JobStatus::kSucceeded) {
-    return Status::InvalidInput("accelerometer_calibration: job " + std::to_string(id) + " is a " +
-                                Name(job.status) + " " + job.method +
-                                " job; it must be a succeeded pca job")
-        .WithField("accelerometer_calibration");
-  }
-  if (!job.served()) {
-    // The gate applies to calibrations that feed other calibrations too.
-    return Status::InvalidInput(
-               "accelerometer_calibration: job " + std::to_string(id) + " is " + Name(job.state) +
-               (job.state == ServeState::kRejected ? " by the acceptance gate" : std::string()) +
-               " (see /jobs/" + std::to_string(id) +
-               "); use an accepted pca calibration, or accept this one with a "
-               "reason first")
-        .WithField("accelerometer_calibration");
-  }
-  json result;
-  s = ParseJsonText(job.result_json, "result of job " + std::to_string(id), &result);
-  if (!s.ok()) return Status::Internal("stored result is not JSON");
-  *it = json{{"job", id}, {"result", std::move(result)}};
-  return Status::Ok();
+  const auto m = config->find("method");
+  if (m == config->end() || !m->is_string()) return Status::Ok();
+  const Method* method = FindMethod(m->get_ref<const std::string&>());
+  return method == nullptr ? Status::Ok() : method->ResolveReferences(store, config);
 }
 
 void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response& res,
@@ -333,7 +294,7 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
   CommonConfig common;
   const bool has_method = config.contains("method");
   if (has_method) {
-    s = ResolveCalibrationReference(store.get(), &config);
+    s = ResolveJobReferences(store.get(), &config);
     if (!s.ok()) return finish(SendStatus(res, s));
     s = ValidateConfig(config, &common);
     if (!s.ok()) return finish(SendStatus(res, s));
@@ -447,7 +408,7 @@ void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Respon
   }
   const int64_t recording_id = body["recording_id"].get<int64_t>();
   json& config = body["config"];
-  s = ResolveCalibrationReference(store.get(), &config);
+  s = ResolveJobReferences(store.get(), &config);
   if (!s.ok()) return (void)SendStatus(res, s);
   CommonConfig common;
   s = ValidateConfig(config, &common);

@@ -9,8 +9,9 @@
 #include "server/config.h"
 #include "server/failure_reasons.h"
 #include "server/job_budget.h"
-#include "server/method.h"
-#include "server/recording.h"
+#include "methods/method.h"
+#include "methods/registry.h"
+#include "formats/recording.h"
 
 namespace calibd::server {
 

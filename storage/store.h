@@ -110,7 +110,7 @@ struct StoreOptions {
 
 // A job to enqueue (alone or with its recording).
 struct NewJob {
-  std::string method;       // "pca" | "array" (validated by the server; must be non-empty)
+  std::string method;       // a registered method's name (validated by the server; non-empty)
   std::string device;       // serial; "" = the upload's device (NewRecording::device), or none
   std::string config_json;  // the config as JSON text, stored verbatim; "" = "{}"
 };
@@ -126,7 +126,7 @@ struct NewRecording {
   // hash is still computed and must match (else kIoError: the file changed).
   std::string sha256;
   std::string device;               // serial number, "" if unknown
-  std::string layout;               // "pca_averaged" | "pca_raw" | "array" (from the parser)
+  std::string layout;               // formats/recording.h LayoutName (from the parser)
   int64_t rows = 0;                 // data rows
   std::string columns_json = "[]";  // JSON array of header names
   std::string sensors_json = "[]";  // JSON array of sensor / triad names

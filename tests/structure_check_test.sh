@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # scripts/check_structure.py on a made-up tree: it fails on a new long file, a long function and a
-# method named outside methods/, passes once they are recorded, and fails when a recorded one grows.
+# method named outside its folder methods/<name>/ and the registry, passes once they are recorded,
+# and fails when a recorded one grows.
 set -euo pipefail
 check=$1/scripts/check_structure.py
 tree=$(mktemp -d)
@@ -19,8 +20,12 @@ expect 1 "function core/f.cc:Long has 162 lines, over the limit of 150: split it
 for i in $(seq 700); do echo "// $i"; done >>"$tree/core/f.cc"
 expect 1 "core/f.cc has 863 lines, over the limit of 800: split it"
 echo 'const char* k = "imu";' >"$tree/server/s.cc"
-echo 'const char* k = "imu";' >"$tree/methods/pca/m.cc"  # inside methods/: allowed
+echo 'const char* k = "imu";' >"$tree/methods/pca/m.cc"  # inside a method's folder: allowed
+echo 'const char* k = "imu";' >"$tree/methods/registry.cc"  # the registry: allowed
+echo 'j = {{"type", "array"}};' >"$tree/server/openapi.cc"   # JSON Schema's type: not the method
 expect 1 '"imu" is named outside methods/ in 1 files, recorded 0: server/s.cc'
+echo '// the "imu" method' >"$tree/methods/method.h"  # methods/ but not a method's folder
+expect 1 '"imu" is named outside methods/ in 2 files, recorded 0: methods/method.h server/s.cc'
 python3 "$check" --root "$tree" --baseline "$tree/baseline.json" --update >/dev/null
 expect 0 "no rule broken beyond the recorded offenders (1 files, 1 functions)"
 echo '// one more line' >>"$tree/core/f.cc"

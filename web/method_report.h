@@ -1,12 +1,9 @@
-// MethodReport: what the HTML pages show of one method's results — its section of the job report,
-// its key figures in the history and device tables, its drift between calibrations on the device
-// page, and the export links — and the registry of them (web/method_reports.cc), one line per
-// method. The server's registry (server/methods.cc) has the same methods; a server test checks
-// that every server method has a report here with the same export formats.
-//
-// Adding a method's report: web/<name>_report.cc with a class implementing MethodReport (its
-// accessor declared in web/reports.h) and one line in AllMethodReports(). pages.cc, history and
-// device pages find it here.
+// MethodReport: what the HTML pages show of one method's results: its section of the job report,
+// its partial report of a failed job, its key figures in the history and device tables and its
+// drift between calibrations on the device page. Each method implements it in its folder
+// (methods/<name>/<name>_report.cc) and names it in its registry entry (methods/registry.h);
+// the pages (web/pages/) find it there. The export links come from the method itself
+// (Method::ExportFormats).
 #ifndef CALIBD_WEB_METHOD_REPORT_H_
 #define CALIBD_WEB_METHOD_REPORT_H_
 
@@ -22,7 +19,7 @@ namespace calibd::web {
 class MethodReport {
  public:
   virtual ~MethodReport() = default;
-  // The result's `method` value ("pca", ...).
+  // The result's `method` value: its method's registered name.
   virtual const char* method() const = 0;
   // The method's part of the job page after the model statement (parameters with uncertainties,
   // plots); the page adds the header, downloads and the diagnostics table. Never throws for a
@@ -49,20 +46,7 @@ class MethodReport {
     (void)jobs;
     return "";
   }
-  // A download besides the JSON (GET /api/v1/devices/{serial}/calibration?format=FORMAT).
-  struct Download {
-    std::string format;  // "csv", "h", "yaml"
-    std::string label;   // link text: "CSV"
-  };
-  // In the order the pages offer them; the same formats as the server's Method::ExportFormats().
-  virtual std::vector<Download> Downloads() const = 0;
 };
-
-// Every method's report, in the order of the server's registry. Never empty; the pointers live
-// for the process.
-const std::vector<const MethodReport*>& AllMethodReports();
-// The report of `method`, or null.
-const MethodReport* FindMethodReport(std::string_view method);
 
 }  // namespace calibd::web
 

@@ -18,7 +18,7 @@
 //                   the result carries histograms), excitation-omega, excitation-omega-dot
 //                   (only when it carries diagnostics.motion.omega_norm / omega_dot_norm)
 //            device: drift-scale, drift-axis, drift-position (noise and imu drift: see
-//            web/device_drift.h for its tables and plots)
+//            methods/noise/noise_drift.h and methods/imu/imu_drift.h)
 //            (pca axes-xz only for d >= 3; array positions-* and position-sigma only when the
 //            result has positions; the others are always present on a job with a result of
 //            that method, saying "no data" when their keys are missing)
@@ -67,7 +67,7 @@ struct JobSummary {
   int64_t id = 0;
   JobStatus status = JobStatus::kQueued;
   std::string device;       // serial number; may be empty (no device given)
-  std::string method;       // "pca" | "array" (others shown as is)
+  std::string method;       // the method's registered name
   std::string created_at;   // timestamps as stored: ISO 8601 UTC ("2026-11-22T04:04:04Z" or
   std::string started_at;   //   "2026-11-22 04:04:04", fractions allowed) or Unix seconds;
   std::string finished_at;  //   empty when not reached yet
@@ -106,7 +106,7 @@ struct HistoryView {
                                  // result may be null to save memory (key figures then "–")
   HistoryFilter filter;
   std::vector<std::string> devices;  // optional: device serials offered in the form (some)
-  std::vector<std::string> methods = {"pca", "array"};  // offered in the form's method filter
+  std::vector<std::string> methods;  // offered in the form's method filter (the registry's)
   std::string next_before;  // cursor for the next (older) page; empty: no older page. The link
                             // is "/?before=CURSOR" plus the active filters.
   int64_t total = -1;       // total matching jobs when known (-1: unknown)
@@ -166,7 +166,7 @@ struct DevicesView {
     std::vector<Latest> latest;  // one per method with a calibration, any order
   };
   std::vector<Device> devices;  // rendered in the given order
-  std::vector<std::string> methods = {"pca", "array", "imu", "noise"};  // one column each
+  std::vector<std::string> methods;  // one column each (the registry's)
   std::string next_after;  // "" = the last page; else the next page is /devices?after=<this>
 };
 
@@ -199,6 +199,12 @@ std::string RenderErrorPage(int status, const std::string& message);
 // "accel N ≤ 2.0 mm/s²/√Hz · gyro N ≤ 120 µrad/s/√Hz"; "–" when not available. Plain text
 // (escape before use).
 std::string KeyFigures(const std::string& method, const nlohmann::json& result);
+
+namespace internal {
+// The links to a method's latest calibration in JSON and in each of its export formats, under
+// `base` (".../calibration?format="): "JSON · CSV · C header".
+std::string ExportLinks(const std::string& base, const std::string& method);
+}  // namespace internal
 
 }  // namespace calibd::web
 

@@ -14,9 +14,7 @@
 #include <vector>
 
 #include "web/html.h"
-#include "web/method_report.h"
 #include "web/report_common.h"
-#include "web/reports.h"
 #include "web/svg_plot.h"
 
 namespace calibd::web::internal {
@@ -390,17 +388,6 @@ double AngleBetween(const std::vector<double>& a, const std::vector<double>& b) 
 
 double Norm3(const double* v) { return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
 
-// The export formats of a method's calibration (GET .../calibration?format=).
-std::string ExportLinks(const std::string& base, const std::string& method) {
-  std::string out = "<a href=\"" + A(base + "json") + "\">JSON</a>";
-  if (const MethodReport* report = FindMethodReport(method)) {
-    for (const auto& d : report->Downloads()) {
-      out += " \xC2\xB7 <a href=\"" + A(base + d.format) + "\">" + E(d.label) + "</a>";
-    }
-  }
-  return out;
-}
-
 // A badge for a result the gate rejected or a person revoked, with the reason in words ("" for
 // an accepted result: the usual case needs no mark).
 std::string VerdictBadge(const JobSummary& job) {
@@ -524,3 +511,16 @@ std::string SafePage(const std::string& title, const std::string& cls,
 }
 
 }  // namespace calibd::web::internal
+
+namespace calibd::web {
+
+using namespace internal;  // NOLINT: Str and Get
+
+ServeState GateState(const JobSummary& job) {
+  if (job.status != JobStatus::kSucceeded) return ServeState::kNone;
+  if (job.state != ServeState::kNone) return job.state;
+  return Str(Get(Get(job.result, "verdict"), "status")) == "rejected" ? ServeState::kRejected
+                                                                      : ServeState::kAccepted;
+}
+
+}  // namespace calibd::web

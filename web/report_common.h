@@ -1,5 +1,5 @@
 // Shared helpers of the HTML pages (web/pages.h) and the per-method report sections
-// (web/reports.h): defensive JSON access, HTML fragments, key-figure formatting, the generic
+// (methods/reports.h): defensive JSON access, HTML fragments, key-figure formatting, the generic
 // diagnostics table and the device page's drift scaffolding. Internal to web/: not for other
 // layers. Every function is pure and thread-safe; JSON readers never throw (a missing key or a
 // key of the wrong type reads as absent: nullptr, NaN, "").
@@ -81,9 +81,6 @@ std::vector<double> Unit(const std::vector<double>& a);  // NaN when not availab
 double AngleBetween(const std::vector<double>& a, const std::vector<double>& b);  // rad
 double Norm3(const double* v);
 
-// --- Pieces shared by the job, history and device pages.
-// The export formats of a method's calibration (GET .../calibration?format=).
-std::string ExportLinks(const std::string& base, const std::string& method);
 // A badge for a result the gate rejected or a person revoked, or one a person accepted (an accept
 // decision in job.events, or a gate verdict of "rejected" that is served anyway: "accepted by a
 // person"), with the reason in words; "" for a result the gate accepted (the usual case needs no

@@ -17,7 +17,8 @@
 #include <string_view>
 
 #include "server/config.h"
-#include "server/method.h"
+#include "methods/method.h"
+#include "methods/registry.h"
 
 namespace {
 

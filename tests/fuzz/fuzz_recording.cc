@@ -1,4 +1,4 @@
-// libFuzzer target: the incremental CSV parser (server/recording.h) on arbitrary bytes.
+// libFuzzer target: the incremental CSV parser (formats/recording.h) on arbitrary bytes.
 //
 // Input: byte 0 picks the chunking seed, the rest is the recording. The bytes are parsed four
 // ways: whole by a collecting parser, whole by a collecting parser without the one-pass row
@@ -20,7 +20,7 @@
 #include <string>
 #include <string_view>
 
-#include "server/recording.h"
+#include "formats/recording.h"
 
 namespace {
 

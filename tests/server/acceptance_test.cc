@@ -1,7 +1,7 @@
-// The acceptance gate (server/acceptance.h, each method's Judge): limits and their validation, and
+// The acceptance gate (methods/acceptance.h, each method's Judge): limits and their validation, and
 // the verdicts of real calibrations of simulated recordings (pca) and of results whose numbers sit
 // just inside and just outside each limit (imu, array, noise), so that a wrong rule fails.
-#include "server/acceptance.h"
+#include "methods/acceptance.h"
 
 #include <gtest/gtest.h>
 
@@ -13,11 +13,12 @@
 #include <vector>
 
 #include "core/pca_simulation.h"
-#include "results/array_result.h"
-#include "results/imu_result.h"
-#include "results/noise_result.h"
+#include "methods/array/array_result.h"
+#include "methods/imu/imu_result.h"
+#include "methods/noise/noise_result.h"
 #include "server/config.h"
-#include "server/method.h"
+#include "methods/method.h"
+#include "methods/registry.h"
 
 namespace calibd::server {
 namespace {
@@ -248,7 +249,7 @@ TEST(Gate, UnknownLimitKeysAreRefusedNamingTheKeyForEveryMethod) {
 
 // ---- imu: results built by hand around the limits ----
 
-// A complete imu result (results/imu_result.h) of IMU "0": both triads with these scales, the
+// A complete imu result (methods/imu/imu_result.h) of IMU "0": both triads with these scales, the
 // 1σ given, and the fit's chi2 and residuals.
 json ImuResult(double accel_scale, double scale_std, double misalignment_std, double bias_std,
                double chi2, double accel_residual = 0.001, double gyro_residual = 0.005) {
@@ -337,7 +338,7 @@ TEST(Gate, ImuUnitMixUpsNameTheProbableCause) {
 
 // ---- array ----
 
-// A positions-model array result (results/array_result.h, every key the adapter writes): triads
+// A positions-model array result (methods/array/array_result.h, every key the adapter writes): triads
 // a1, a2 at `offset` from their nominal positions with 1 sigma `std`, the accelerometer residual
 // RMS `accel_rms` against a configured noise of 0.04 m/s^2.
 results::ArrayResult TypedArrayResult(double offset, double std, double accel_rms) {
@@ -409,7 +410,7 @@ TEST(Gate, AnArrayResultThatDoesNotReadIsRejectedNamingThePath) {
 
 TEST(Gate, AResultThatCannotBeJudgedIsRejected) {
   // A damaged result (a string where a count belongs) fails closed instead of throwing, naming
-  // the first problem the typed reader (results/pca_result.h) met.
+  // the first problem the typed reader (methods/pca/pca_result.h) met.
   const json v =
       JudgeWith("pca", {{"method", "pca"}, {"diagnostics", {{"degrees_of_freedom", "x"}}}},
                 {{"method", "pca"}});
@@ -456,7 +457,7 @@ TEST(Gate, ParametersThatAreNotFiniteAreNeverServed) {
 // ---- noise ----
 
 TEST(Gate, NoiseNeedsAStationaryLogAndAPreciseWhiteNoise) {
-  // A complete noise result (results/noise_result.h) of one channel.
+  // A complete noise result (methods/noise/noise_result.h) of one channel.
   auto result = [](bool stationary, double rel_std, double density) {
     results::NoiseResult r;
     r.envelope.method = "noise";

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <string>
 
-#include "server/array_method.h"
+#include "methods/array/array_method.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {

@@ -18,7 +18,7 @@
 
 #include "core/array_full_simulation.h"
 #include "core/array_simulation.h"
-#include "server/array_method.h"
+#include "methods/array/array_method.h"
 #include "tests/lib/sanitizer.h"
 
 namespace calibd::server {

@@ -1,5 +1,5 @@
-// Tests of the array method's JSON glue (server/array_method.h).
-#include "server/array_method.h"
+// Tests of the array method's JSON glue (methods/array/array_method.h).
+#include "methods/array/array_method.h"
 
 #include <gtest/gtest.h>
 
@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "core/array_simulation.h"
-#include "server/recording.h"
+#include "formats/recording.h"
 
 namespace calibd::server {
 namespace {
@@ -277,7 +277,7 @@ json PcaResult(const std::vector<core::AccelerometerTriadModel>& models) {
       stds.push_back(
           {{"name", name}, {"scale_std", 1e-4}, {"axis_std_rad", 1e-4}, {"bias_std", 1e-4}});
     }
-  // Every key of the typed pca result (results/pca_result.h), which the chain reads.
+  // Every key of the typed pca result (methods/pca/pca_result.h), which the chain reads.
   return {{"method", "pca"},
           {"model", "r_i = a_i^T v + b_i"},
           {"parameters",

@@ -1,4 +1,4 @@
-// The typed array result (results/array_result.h) has every key the real adapter writes: results
+// The typed array result (methods/array/array_result.h) has every key the real adapter writes: results
 // of RunArray on simulated recordings (both models, several option combinations, failing runs'
 // partial documents) read with FromJson and write back with ToJson to exactly the same JSON.
 #include <gtest/gtest.h>
@@ -9,14 +9,15 @@
 
 #include "core/array_simulation.h"
 #include "core/pca.h"
-#include "results/array_result.h"
-#include "server/acceptance.h"
-#include "server/array_method.h"
-#include "server/export_util.h"
-#include "server/pca_method.h"
-#include "server/recording.h"
+#include "methods/array/array_result.h"
+#include "methods/acceptance.h"
+#include "methods/array/array_method.h"
+#include "methods/export_util.h"
+#include "methods/pca/pca_method.h"
+#include "formats/recording.h"
 #include "web/method_report.h"
 #include "web/pages.h"
+#include "methods/registry.h"
 
 namespace calibd::server {
 namespace {

@@ -13,13 +13,13 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "results/array_result.h"
-#include "results/pca_result.h"
-#include "server/array_method.h"
-#include "server/exports.h"
-#include "server/imu_method.h"
-#include "server/noise_method.h"
-#include "server/pca_method.h"
+#include "methods/array/array_result.h"
+#include "methods/pca/pca_result.h"
+#include "methods/array/array_method.h"
+#include "methods/exports.h"
+#include "methods/imu/imu_method.h"
+#include "methods/noise/noise_method.h"
+#include "methods/pca/pca_method.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {
@@ -276,7 +276,7 @@ int main(void) {
 // Two jobs of the same device and method are different calibrations: including both is a
 // compile error, never one silently shadowing the other.
 
-// A pca result (results/pca_result.h, every key) of one sensor in a 1-d field: sensitivity 2,
+// A pca result (methods/pca/pca_result.h, every key) of one sensor in a 1-d field: sensitivity 2,
 // the given bias, an undefined σ(scale).
 json OneSensorPcaResult(const std::string& name, bool magnitude_known, double bias) {
   results::PcaResult r;
@@ -358,7 +358,7 @@ TEST(CHeader, HostileSerialAndSensorNamesCannotBreakTheHeader) {
 // An array result of the full model (per-IMU intrinsics beside the positions, SPEC §7) gets the
 // imu apply function too, without clashing with the positions' names.
 TEST(CHeader, ArrayResultWithIntrinsicsAppliesThemToAReading) {
-  // A full-model result (results/array_result.h) whose two triads read y -> matrix (y - bias),
+  // A full-model result (methods/array/array_result.h) whose two triads read y -> matrix (y - bias),
   // the position sigma undefined.
   results::SensorTriad triad;
   triad.bias = {0.1, -0.2, 0.3};

@@ -1,7 +1,7 @@
-// The export functions (server/exports.h) called directly on results of real calibrations of
+// The export functions (methods/exports.h) called directly on results of real calibrations of
 // simulated recordings: the CSV round-trips every number exactly, an undefined σ is an empty cell
 // (never 0), and Kalibr's imu.yaml has Kalibr's keys with each figure in Kalibr's unit.
-#include "server/exports.h"
+#include "methods/exports.h"
 
 #include <gtest/gtest.h>
 
@@ -16,10 +16,10 @@
 #include <vector>
 
 #include "core/pca_simulation.h"
-#include "server/array_method.h"
+#include "methods/array/array_method.h"
 #include "server/config.h"
-#include "server/noise_method.h"
-#include "server/pca_method.h"
+#include "methods/noise/noise_method.h"
+#include "methods/pca/pca_method.h"
 
 namespace calibd::server {
 namespace {

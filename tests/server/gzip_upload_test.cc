@@ -11,7 +11,7 @@
 #include <string>
 
 #include "server/gzip_stream.h"
-#include "server/noise_method.h"
+#include "methods/noise/noise_method.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {

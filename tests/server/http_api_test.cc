@@ -6,8 +6,8 @@
 #include <nlohmann/json.hpp>
 #include <regex>
 
-#include "server/array_method.h"
-#include "server/pca_method.h"
+#include "methods/array/array_method.h"
+#include "methods/pca/pca_method.h"
 #include "tests/lib/sanitizer.h"
 #include "tests/server/http_test_util.h"
 

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "server/config.h"
-#include "server/imu_method.h"
+#include "methods/imu/imu_method.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {

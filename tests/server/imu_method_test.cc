@@ -1,7 +1,7 @@
 // The `imu` method through the real server (upload, queue, job, SPEC §7 result JSON, exports) and
 // offline: a simulated hand-held log is calibrated to within its reported uncertainty, readings
 // in counts are converted, and every bad-input path names its key.
-#include "server/imu_method.h"
+#include "methods/imu/imu_method.h"
 
 #include <gtest/gtest.h>
 

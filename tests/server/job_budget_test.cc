@@ -8,9 +8,10 @@
 
 #include <string>
 
-#include "server/array_method.h"
+#include "methods/array/array_method.h"
 #include "storage/store.h"
 #include "tests/server/http_test_util.h"
+#include "methods/registry.h"
 
 namespace calibd::server {
 namespace {

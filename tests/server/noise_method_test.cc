@@ -1,7 +1,7 @@
 // The `noise` method through the real server (upload, queue, job, result JSON of SPEC §7) and
 // offline: recovery of the simulated terms, SI units after the reading-unit conversion, and every
 // bad-input path with the key or column it names.
-#include "server/noise_method.h"
+#include "methods/noise/noise_method.h"
 
 #include <gtest/gtest.h>
 

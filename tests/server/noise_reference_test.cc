@@ -3,7 +3,7 @@
 // (N · √rate, SI), recorded in the job's config and in the result (diagnostics.noise_jobs), used
 // by the method, linked from the report; bad references are refused at once naming the key, and
 // offline a reference is an error saying it needs the server.
-#include "server/noise_reference.h"
+#include "methods/noise/noise_reference.h"
 
 #include <gtest/gtest.h>
 
@@ -11,10 +11,10 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
-#include "server/array_method.h"
+#include "methods/array/array_method.h"
 #include "server/config.h"
-#include "server/imu_method.h"
-#include "server/noise_method.h"
+#include "methods/imu/imu_method.h"
+#include "methods/noise/noise_method.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {

@@ -1,4 +1,4 @@
-// The typed noise result (results/noise_result.h) holds every key the real adapter writes:
+// The typed noise result (methods/noise/noise_result.h) holds every key the real adapter writes:
 // results of `noise` runs on small simulated logs (several option combinations, and a failed
 // run's partial diagnostics) read with FromJson and write back with ToJson to the same document;
 // Judge and the exports refuse a result that does not read, naming the path.
@@ -10,12 +10,13 @@
 #include <string>
 #include <vector>
 
-#include "results/noise_result.h"
+#include "methods/noise/noise_result.h"
 #include "server/config.h"
-#include "server/exports.h"
+#include "methods/exports.h"
 #include "server/failure_reasons.h"
-#include "server/method.h"
-#include "server/noise_method.h"
+#include "methods/method.h"
+#include "methods/registry.h"
+#include "methods/noise/noise_method.h"
 #include "tests/server/result_schema_util.h"
 #include "web/method_report.h"
 #include "web/pages.h"

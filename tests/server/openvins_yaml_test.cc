@@ -1,9 +1,9 @@
 // format=yaml for imu results: OpenVINS's kalibr_imu_chain.yaml. The intrinsics it writes
 // predict, for any raw reading, the same specific force and rate as calibd's model up to one
-// common rotation of the frame (the convention mapping of server/openvins_yaml.h), in OpenVINS's
+// common rotation of the frame (the convention mapping of methods/imu/openvins_yaml.h), in OpenVINS's
 // `calibrated` (kalibr) form: Da, Dw lower triangular, R_IMUtoACC = I, Tg = 0; and the route serves
 // it for a real imu job.
-#include "server/openvins_yaml.h"
+#include "methods/imu/openvins_yaml.h"
 
 #include <gtest/gtest.h>
 
@@ -13,8 +13,8 @@
 #include <random>
 #include <sstream>
 
-#include "results/imu_result.h"
-#include "server/imu_method.h"
+#include "methods/imu/imu_result.h"
+#include "methods/imu/imu_method.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {
@@ -23,7 +23,7 @@ namespace {
 using nlohmann::json;
 using testing::TestServer;
 
-// A stored imu result (results/imu_result.h) of one IMU with these matrices, biases, reading
+// A stored imu result (methods/imu/imu_result.h) of one IMU with these matrices, biases, reading
 // units, rate and per-sample noise of the statics; the rest as a run would leave it by default.
 json ImuResult(const Eigen::Matrix3d& ma, const Eigen::Vector3d& ba, const Eigen::Matrix3d& mg,
                const Eigen::Vector3d& bg, double ua, double ug, double rate,

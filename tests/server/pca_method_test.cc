@@ -1,6 +1,6 @@
-// Tests of the pca JSON glue (server/pca_method.h): config keys, the SPEC §4 result keys, raw vs
+// Tests of the pca JSON glue (methods/pca/pca_method.h): config keys, the SPEC §4 result keys, raw vs
 // averaged layouts, and `simulate pca`.
-#include "server/pca_method.h"
+#include "methods/pca/pca_method.h"
 
 #include <gtest/gtest.h>
 
@@ -10,7 +10,7 @@
 #include <string>
 
 #include "core/pca_simulation.h"
-#include "server/recording.h"
+#include "formats/recording.h"
 
 namespace calibd::server {
 namespace {

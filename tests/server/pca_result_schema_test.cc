@@ -1,4 +1,4 @@
-// The typed pca result (results/pca_result.h) holds every key the real adapter (RunPca) writes:
+// The typed pca result (methods/pca/pca_result.h) holds every key the real adapter (RunPca) writes:
 // ToJson(FromJson(j)) == j for results of simulated recordings under several option combinations
 // and for a failed run's partial document.
 #include <gtest/gtest.h>
@@ -7,13 +7,14 @@
 #include <string>
 
 #include "core/pca_simulation.h"
-#include "results/pca_result.h"
-#include "server/acceptance.h"
-#include "server/exports.h"
-#include "server/pca_method.h"
-#include "server/recording.h"
+#include "methods/pca/pca_result.h"
+#include "methods/acceptance.h"
+#include "methods/exports.h"
+#include "methods/pca/pca_method.h"
+#include "formats/recording.h"
 #include "web/method_report.h"
 #include "web/pages.h"
+#include "methods/registry.h"
 
 namespace calibd::server {
 namespace {

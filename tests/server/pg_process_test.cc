@@ -17,8 +17,8 @@
 #include <set>
 #include <thread>
 
-#include "server/array_method.h"
-#include "server/pca_method.h"
+#include "methods/array/array_method.h"
+#include "methods/pca/pca_method.h"
 #include "storage/pg_conn.h"
 #include "storage/store.h"
 #include "tests/lib/sanitizer.h"

@@ -13,8 +13,8 @@
 #include <random>
 #include <thread>
 
-#include "server/array_method.h"
-#include "server/pca_method.h"
+#include "methods/array/array_method.h"
+#include "methods/pca/pca_method.h"
 #include "storage/store.h"
 #include "tests/lib/sanitizer.h"
 #include "tests/lib/server_process.h"

@@ -9,7 +9,7 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 
-#include "server/imu_method.h"
+#include "methods/imu/imu_method.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {

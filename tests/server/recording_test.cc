@@ -1,6 +1,6 @@
 // Tests of the strict CSV reader for SPEC §2 recordings: both pca layouts, the array layout,
 // chunk boundaries, and every bad-input case naming line and column.
-#include "server/recording.h"
+#include "formats/recording.h"
 
 #include <gtest/gtest.h>
 

@@ -12,9 +12,9 @@
 
 #include "core/array_simulation.h"
 #include "core/imu_simulation.h"
-#include "server/array_method.h"
+#include "methods/array/array_method.h"
 #include "server/config.h"
-#include "server/imu_method.h"
+#include "methods/imu/imu_method.h"
 
 namespace calibd::server {
 namespace {

@@ -12,7 +12,7 @@
 
 #include "base/utf8.h"
 #include "server/device_lookup.h"
-#include "server/pca_method.h"
+#include "methods/pca/pca_method.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {

@@ -20,7 +20,7 @@
 #include <tuple>
 #include <utility>
 
-#include "server/array_method.h"
+#include "methods/array/array_method.h"
 #include "storage/store.h"
 #include "tests/lib/sanitizer.h"
 #include "tests/lib/server_process.h"

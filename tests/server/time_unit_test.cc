@@ -17,10 +17,10 @@
 #include <vector>
 
 #include "server/config.h"
-#include "server/imu_method.h"
-#include "server/inertial_log.h"
-#include "server/noise_method.h"
-#include "server/recording.h"
+#include "methods/imu/imu_method.h"
+#include "formats/inertial_log.h"
+#include "methods/noise/noise_method.h"
+#include "formats/recording.h"
 #include "tests/lib/sanitizer.h"
 #include "tests/server/http_test_util.h"
 

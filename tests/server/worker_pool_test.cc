@@ -21,9 +21,9 @@
 
 #include "core/pca_simulation.h"
 #include "core/task_pool.h"
-#include "server/array_method.h"
+#include "methods/array/array_method.h"
 #include "server/metrics.h"
-#include "server/pca_method.h"
+#include "methods/pca/pca_method.h"
 #include "storage/db.h"
 #include "storage/store.h"
 #include "tests/lib/sanitizer.h"

@@ -25,7 +25,7 @@
 #include <string>
 #include <vector>
 
-#include "server/pca_method.h"
+#include "methods/pca/pca_method.h"
 #include "storage/db.h"
 #include "storage/pg_conn.h"
 #include "storage/pg_store.h"

@@ -1,7 +1,7 @@
-// The job-page sections of an `array` result with model full (web/array_full_report.h, issue
+// The job-page sections of an `array` result with model full (methods/array/array_full_report.h, issue
 // #18): the numbers of the result appear, at the precision of their σ; values beyond the
 // acceptance limits are marked; names are escaped; 32 triads give 32 rows; odd results render.
-#include "web/array_full_report.h"
+#include "methods/array/array_full_report.h"
 
 #include <gtest/gtest.h>
 
@@ -9,7 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "results/array_result.h"
+#include "methods/array/array_result.h"
 #include "web/html.h"
 #include "web/pages.h"
 
@@ -27,7 +27,7 @@ Eigen::Matrix3d Mat(double off, double diag = 1) {
   return m;
 }
 
-// A model-full result (results/array_result.h, every key server/array_method.cc writes): K triads
+// A model-full result (methods/array/array_result.h, every key methods/array/array_method.cc writes): K triads
 // named `prefix`K, the gyroscopes in deg/s, gains 1 + 0.0123 (accelerometers) and 1 + 0.01
 // (gyroscopes), biases 0.0217 m/s^2 and -0.5 deg/s, misalignment entries of 2 mrad, position
 // shift (10, 0, -4) µm at σ 2 µm, residuals at the noise.

@@ -1,7 +1,9 @@
-// The device page's drift of the raw-log methods (web/device_drift.h): the noise terms and the
+// The device page's drift of the raw-log methods (methods/noise/noise_drift.h, methods/imu/imu_drift.h): the noise terms and the
 // IMU intrinsics per calibration, their changes against the previous calibration in standard
 // deviations, and the device page that shows them for accepted results only.
-#include "web/device_drift.h"
+#include "methods/imu/imu_drift.h"
+#include "methods/noise/noise_drift.h"
+#include "web/drift_table.h"
 
 #include <gtest/gtest.h>
 
@@ -11,8 +13,8 @@
 #include <string>
 #include <vector>
 
-#include "results/imu_result.h"
-#include "results/noise_result.h"
+#include "methods/imu/imu_result.h"
+#include "methods/noise/noise_result.h"
 
 namespace calibd::web {
 namespace {
@@ -29,7 +31,7 @@ size_t Count(const std::string& page, const std::string& needle) {
   return n;
 }
 
-// A noise result (SPEC §7, results/noise_result.h) of one IMU: white noise `n_gyro` on the
+// A noise result (SPEC §7, methods/noise/noise_result.h) of one IMU: white noise `n_gyro` on the
 // gyroscopes (1σ 1 %), K visible on the gyroscopes only when `gyro_k` > 0, B visible everywhere.
 json NoiseResult(double n_gyro, double gyro_k, const std::string& extra_channel = "") {
   results::NoiseResult r;
@@ -49,7 +51,7 @@ json NoiseResult(double n_gyro, double gyro_k, const std::string& extra_channel 
   return results::ToJson(r);
 }
 
-// An imu result (SPEC §7, results/imu_result.h) of IMU `name`: accelerometer x scale `ax_scale`
+// An imu result (SPEC §7, methods/imu/imu_result.h) of IMU `name`: accelerometer x scale `ax_scale`
 // (1σ 1e-6), bias x `bias_x` (1σ 0.5), misalignment T_a(0,1) = `t01`.
 json ImuResult(const std::string& name, double ax_scale, double bias_x, double t01) {
   results::ImuResult r;

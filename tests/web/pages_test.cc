@@ -13,9 +13,9 @@
 #include <string>
 #include <vector>
 
-#include "results/array_result.h"
-#include "results/imu_result.h"
-#include "results/noise_result.h"
+#include "methods/array/array_result.h"
+#include "methods/imu/imu_result.h"
+#include "methods/noise/noise_result.h"
 
 namespace calibd::web {
 namespace {
@@ -67,7 +67,7 @@ json PcaResult(const std::string& sensor_prefix = "g", double scale_shift = 0) {
   for (int i = 0; i < 9; ++i) sv.push_back(0.052 - 0.003 * i);
   json mag = json::array();
   for (int j = 0; j < 24; ++j) mag.push_back(Wiggle(j, 0.012));
-  // Every key of the typed result (results/pca_result.h): the report reads it through FromJson.
+  // Every key of the typed result (methods/pca/pca_result.h): the report reads it through FromJson.
   return {{"method", "pca"},
           {"schema_version", 1},
           {"model", "r_i = a_i^T v + b_i"},
@@ -111,7 +111,7 @@ json PcaConfig() {
   return {{"method", "pca"}, {"device", "IMU-0042"}, {"magnitude", 1.0}, {"nominal", nominal}};
 }
 
-// An array result (results/array_result.h, every key the server writes): 32 triads on a 4x4 grid,
+// An array result (methods/array/array_result.h, every key the server writes): 32 triads on a 4x4 grid,
 // top and underside, 6.3 mm pitch, 2 mm apart; |omega| and |omega_dot| of `excitation_samples`
 // samples, kept as the server does (at most 2000 points, every stride-th sample).
 json ArrayResult(size_t excitation_samples = 1000, double shift = 0) {
@@ -344,7 +344,7 @@ TEST(JobPage, PcaReflectionIsExplainedWhereShown) {
   EXPECT_TRUE(Has(page, "either value is normal"));
 }
 
-// A stored pca result the typed reader (results/pca_result.h) refuses: the report says "not
+// A stored pca result the typed reader (methods/pca/pca_result.h) refuses: the report says "not
 // available" with the reader's message naming the path; the key figures say so too.
 TEST(JobPage, PcaResultThatDoesNotReadShowsNotAvailableNamingThePath) {
   JobView v;
@@ -433,7 +433,7 @@ TEST(JobPage, FailedImuJobShowsTheStaticsFoundOnTheTimelineAndTheCoverage) {
   v.job.error_reason = "too_few_statics";
   v.job.error_title = "Too few static intervals";
   v.job.error_advice = "Hold the device still in more orientations.";
-  // The partial diagnostics as the imu adapter writes them (results/imu_result.h).
+  // The partial diagnostics as the imu adapter writes them (methods/imu/imu_result.h).
   results::ImuResult partial;
   partial.envelope.method = "imu";
   partial.envelope.usable = false;
@@ -459,7 +459,7 @@ TEST(JobPage, FailedNoiseAndArrayJobsShowWhatWasFound) {
   JobView noise;
   noise.job = Job(37, "IMU-0042", "noise", "failed", "2026-11-20T09:20:00Z", json());
   noise.job.error = "the log is not stationary";
-  // The partial diagnostics as the noise adapter writes them (results/noise_result.h).
+  // The partial diagnostics as the noise adapter writes them (methods/noise/noise_result.h).
   results::NoiseResult partial;
   partial.envelope.method = "noise";
   partial.envelope.usable = false;
@@ -476,7 +476,7 @@ TEST(JobPage, FailedNoiseAndArrayJobsShowWhatWasFound) {
   JobView array;
   array.job = Job(38, "ARRAY-1", "array", "failed", "2026-11-20T09:20:00Z", json());
   array.job.error = "the motion does not determine the positions";
-  results::ArrayResult array_partial;  // as the server keeps it (results/array_result.h)
+  results::ArrayResult array_partial;  // as the server keeps it (methods/array/array_result.h)
   array_partial.envelope.method = "array";
   array_partial.envelope.usable = false;
   array_partial.diagnostics.solver = "joint";
@@ -496,8 +496,8 @@ TEST(JobPage, FailedNoiseAndArrayJobsShowWhatWasFound) {
   EXPECT_TRUE(Has(page, "100 dropped for gyroscope saturation"));
 }
 
-// An imu or noise result that does not read as its typed result (results/imu_result.h,
-// results/noise_result.h) shows "not available" with the reader's message naming the path.
+// An imu or noise result that does not read as its typed result (methods/imu/imu_result.h,
+// methods/noise/noise_result.h) shows "not available" with the reader's message naming the path.
 TEST(JobPage, AnImuOrNoiseResultThatDoesNotReadSaysWhereItIsDamaged) {
   results::NoiseResult noise;
   noise.envelope.method = "noise";
