@@ -1,7 +1,13 @@
 // The parts of Store common to both backends: the choice of backend, timestamps, helpers.
 #include "storage/store.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <cctype>
 #include <chrono>
 #include <ctime>
@@ -55,6 +61,21 @@ GateVerdict VerdictOf(const std::string& result_json) {
 }
 
 int PageLimit(const JobFilter& f) { return std::clamp(f.limit <= 0 ? 50 : f.limit, 1, 500); }
+
+StagedFile::~StagedFile() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+Status StagedFile::Open(const std::string& path) {
+  fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd_ < 0) return Status::IoError("storage: cannot open " + path + ": " + std::strerror(errno));
+  struct stat st;
+  if (::fstat(fd_, &st) != 0) {
+    return Status::IoError("storage: cannot stat " + path + ": " + std::strerror(errno));
+  }
+  size_ = static_cast<int64_t>(st.st_size);
+  return Status::Ok();
+}
 
 Status CheckRecordingDigest(const RecordingInfo& info, int64_t bytes, const std::string& sha) {
   if (bytes == info.bytes && sha == info.sha256) return Status::Ok();
