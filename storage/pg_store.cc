@@ -22,6 +22,7 @@ constexpr const char* kJobsChannel = "calibd_jobs";
 namespace pg {
 
 const SqlDialect kDialect = {
+    /*ping=*/"SELECT 1",
     /*lock_job=*/" FOR UPDATE OF j",
     /*skip_locked=*/" FOR UPDATE SKIP LOCKED",
     /*db_now_ms=*/CALIBD_PG_NOW_MS,  // hosts whose clocks disagree measure leases on one clock
@@ -116,7 +117,14 @@ std::string RedactConnectionTarget(const std::string& target) {
 
 PgStore::PgStore(std::string target, StoreOptions options)
     : SqlStore(RedactConnectionTarget(target), std::move(options), pg::kDialect),
-      target_(std::move(target)) {}
+      target_(std::move(target)),
+      pool_(
+          options_.max_idle_connections,
+          [this](std::unique_ptr<PgConn>* out) { return NewConnection(out); },
+          [](PgConn* conn) {
+            if (!conn->broken() && conn->InTransaction()) (void)conn->ExecScript("ROLLBACK");
+            return !conn->broken();
+          }) {}
 
 PgStore::~PgStore() { SetJobListener(nullptr); }
 
@@ -133,34 +141,6 @@ Status PgStore::NewConnection(std::unique_ptr<PgConn>* out) {
   if (!s.ok()) return s;
   *out = std::move(c);
   return Status::Ok();
-}
-
-Status PgStore::Acquire(std::unique_ptr<PgConn>* out, bool* pooled) {
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (!idle_.empty()) {
-      *out = std::move(idle_.back());
-      idle_.pop_back();
-      *pooled = true;
-      return Status::Ok();
-    }
-  }
-  *pooled = false;
-  return NewConnection(out);
-}
-
-void PgStore::Return(std::unique_ptr<PgConn> conn) {
-  if (!conn->broken() && conn->InTransaction()) (void)conn->ExecScript("ROLLBACK");
-  std::lock_guard<std::mutex> lock(mu_);
-  if (conn->broken()) {
-    // The server went away or restarted: the idle connections are most likely dead too. Drop
-    // them, so the next calls connect afresh instead of failing one by one.
-    idle_.clear();
-    return;
-  }
-  if (static_cast<int>(idle_.size()) < options_.max_idle_connections) {
-    idle_.push_back(std::move(conn));
-  }
 }
 
 Status PgStore::Connect(const std::string& target, StoreOptions options,
@@ -225,10 +205,6 @@ Status PgStore::Read(const SqlOp& op) {
     // Reads change nothing: one that met a connection that died in the pool runs again.
     if (s.ok() || !lease.StaleFromPool() || attempt > 1) return s;
   }
-}
-
-Status PgStore::Ping() {
-  return Read([](SqlConn* c) { return c->Run("SELECT 1", {}); });
 }
 
 // ---- maintenance -------------------------------------------------------------------------------

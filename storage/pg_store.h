@@ -51,6 +51,8 @@
 #include <thread>
 #include <vector>
 
+#include "storage/conn_pool.h"
+#include "storage/pg_conn.h"
 #include "storage/sql_store.h"
 
 namespace calibd::storage {
@@ -60,8 +62,6 @@ inline constexpr int kPgSchemaVersion = 5;
 
 // `target` with the password of a URI or keyword string replaced by "***" (for logs, /healthz).
 std::string RedactConnectionTarget(const std::string& target);
-
-class PgConn;  // one libpq connection (pg_conn.h)
 
 class PgStore final : public SqlStore {
  public:
@@ -73,7 +73,6 @@ class PgStore final : public SqlStore {
   ~PgStore() override;
 
   const char* backend() const override { return "postgresql"; }
-  Status Ping() override;
   bool SetJobListener(std::function<void()> on_job) override;
 
   Status ReadRecordingData(int64_t id,
@@ -87,8 +86,6 @@ class PgStore final : public SqlStore {
   class Lease;  // a pooled connection, returned on destruction (pg_store_internal.h)
   PgStore(std::string target, StoreOptions options);
   Status NewConnection(std::unique_ptr<PgConn>* out);
-  Status Acquire(std::unique_ptr<PgConn>* out, bool* pooled);
-  void Return(std::unique_ptr<PgConn> conn);
   // Runs `op` in one transaction (BEGIN ... COMMIT, ROLLBACK on error). A deadlock or
   // serialization failure runs it again (up to 3 times), so `op` must set its outputs afresh.
   // Listeners are woken after the commit when `op` asked for it (NotifyJobsAfterCommit).
@@ -98,8 +95,8 @@ class PgStore final : public SqlStore {
   // A staged file without its hash is hashed first: the hash is the key of the recording row.
   Status HashUpload(const NewRecording& r, std::string* sha) override;
   // The bytes as chunk rows (recording_chunks), deduplicated across hosts.
-  Status StoreRecordingBytes(SqlConn* c, const NewRecording& r, const std::string& sha,
-                             int64_t now, int64_t* id, bool* duplicate) override;
+  Status StoreRecordingBytes(SqlConn* c, const NewRecording& r, const std::string& sha, int64_t now,
+                             int64_t* id, bool* duplicate) override;
   // Writes the upload's bytes as recording `id`'s chunk rows, checking they hash to `sha`. `fd`:
   // the staged file (r.path, at its start) or -1 for r.data.
   Status WriteChunks(PgConn* c, const NewRecording& r, int64_t id, int fd, int64_t size,
@@ -110,8 +107,7 @@ class PgStore final : public SqlStore {
   void ListenLoop();
 
   std::string target_;  // with the password: never logged
-  std::mutex mu_;
-  std::vector<std::unique_ptr<PgConn>> idle_;  // guarded by mu_
+  ConnectionPool<PgConn> pool_;
 
   std::mutex listen_mu_;  // serialises SetJobListener
   std::function<void()> on_job_;

@@ -24,22 +24,12 @@
 namespace calibd::storage {
 
 // A pooled connection, returned on destruction.
-class PgStore::Lease {
+class PgStore::Lease : public Borrowed<PgConn> {
  public:
-  explicit Lease(PgStore* store) : store_(store) {}
-  ~Lease() {
-    if (conn_) store_->Return(std::move(conn_));
-  }
-  Status Open() { return store_->Acquire(&conn_, &pooled_); }
-  PgConn* get() { return conn_.get(); }
+  explicit Lease(PgStore* store) : Borrowed(&store->pool_) {}
   // The connection was idle in the pool (it may have died there: server restarted) and is
   // broken now: the call may run again on a fresh one, once, if nothing of it took effect.
-  bool StaleFromPool() const { return pooled_ && conn_ && conn_->broken(); }
-
- private:
-  PgStore* store_;
-  std::unique_ptr<PgConn> conn_;
-  bool pooled_ = false;
+  bool StaleFromPool() const { return pooled() && get() != nullptr && get()->broken(); }
 };
 
 namespace pg {

@@ -71,17 +71,13 @@ Status PgStore::StoreRecordingBytes(SqlConn* c, const NewRecording& r, const std
   *duplicate = *id != 0;
   if (!*duplicate) {
     internal::StagedFile file;
-    int64_t size = static_cast<int64_t>(r.data.size());
-    if (!r.path.empty()) {
-      s = file.Open(r.path);
-      if (!s.ok()) return s;
-      size = file.size();
-    }
+    s = file.OpenUpload(r);
+    if (!s.ok()) return s;
     // A concurrent identical upload (another host) holds the key until it commits; then no row
     // is inserted and the SELECT below (a fresh snapshot) finds its row.
-    s = InsertRecording(c, r, sha, size, now, id);
+    s = InsertRecording(c, r, sha, file.size(), now, id);
     if (!s.ok()) return s;
-    if (*id != 0) return WriteChunks(conn, r, *id, file.fd(), size, sha);
+    if (*id != 0) return WriteChunks(conn, r, *id, file.fd(), file.size(), sha);
     s = FindRecording(c, sha, id);
     if (!s.ok()) return s;
     if (*id == 0) return Status::Busy("storage: a concurrent upload vanished; retry");
@@ -112,13 +108,9 @@ Status PgStore::RepairIfDamaged(PgConn* c, const NewRecording& r, int64_t id,
   s = c->Exec("DELETE FROM recording_chunks WHERE recording_id = $1", {PgInt(id)});
   if (!s.ok()) return s;
   internal::StagedFile file;
-  int64_t size = static_cast<int64_t>(r.data.size());
-  if (!r.path.empty()) {
-    s = file.Open(r.path);
-    if (!s.ok()) return s;
-    size = file.size();
-  }
-  s = WriteChunks(c, r, id, file.fd(), size, sha);
+  s = file.OpenUpload(r);
+  if (!s.ok()) return s;
+  s = WriteChunks(c, r, id, file.fd(), file.size(), sha);
   if (!s.ok()) return s;
   std::cerr << "calibd: recording " << id
             << ": the stored copy was damaged; repaired from a new upload of the same bytes\n";

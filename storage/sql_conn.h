@@ -56,6 +56,8 @@ class SqlConn {
 
 // The statement fragments in which the dialects differ. Each is "" where a dialect needs none.
 struct SqlDialect {
+  // A cheap statement that reads the database (Store::Ping).
+  const char* ping;
   // Appended to the SELECT of one job that locks its row until the transaction ends
   // (PostgreSQL: " FOR UPDATE OF j"; SQLite's write transaction already excludes other writers).
   const char* lock_job;

@@ -38,6 +38,7 @@ Status InsertRecording(SqlConn* c, const NewRecording& r, const std::string& sha
 
 class SqlStore : public Store {
  public:
+  Status Ping() override;
   Status PutRecording(const NewRecording& r, RecordingInfo* out, bool* existed) override;
   Status GetRecording(int64_t id, RecordingInfo* out) override;
   Status EnqueueJob(int64_t recording_id, const std::string& method, const std::string& device,
@@ -109,8 +110,8 @@ class SqlStore : public Store {
   // Whether any job is claimable now (a cheap read, so that idle workers polling do not write).
   Status AnyClaimable(bool* any);
   // The job loaded and locked, checked to be held by `worker_id` (internal::CheckHolder).
-  Status RequireHolder(SqlConn* c, int64_t job_id, const std::string& worker_id,
-                       const char* action, JobInfo* job);
+  Status RequireHolder(SqlConn* c, int64_t job_id, const std::string& worker_id, const char* action,
+                       JobInfo* job);
   // Stores a result: its row (with the gate's verdict), the job succeeded, the device's latest.
   Status StoreResult(SqlConn* c, const JobInfo& job, const std::string& result_json,
                      const std::string& sha);

@@ -40,6 +40,10 @@ Status SqlStore::TxnNow(SqlConn* c, int64_t* now) {
                 [&](const internal::Row& row) { *now = row.Int(0); });
 }
 
+Status SqlStore::Ping() {
+  return Read([&](SqlConn* c) { return c->Run(dialect_.ping, {}); });
+}
+
 // ---- recordings ---------------------------------------------------------------------------------
 
 Status sql::LoadRecording(SqlConn* c, int64_t id, RecordingInfo* out) {
@@ -63,7 +67,7 @@ Status sql::FindRecording(SqlConn* c, const std::string& sha, int64_t* id) {
 }
 
 Status sql::InsertRecording(SqlConn* c, const NewRecording& r, const std::string& sha,
-                                 int64_t bytes, int64_t now, int64_t* id) {
+                            int64_t bytes, int64_t now, int64_t* id) {
   // A concurrent identical upload (another host) holds the key until it commits; then DO NOTHING
   // returns no row (*id = 0) and the caller finds its row instead.
   *id = 0;
@@ -166,14 +170,14 @@ Status SqlStore::ListDevices(const DeviceFilter& filter, std::vector<DeviceInfo>
       "SELECT d.serial, d.first_seen, c.method, c.job_id, c.calibrated_at "
       "FROM (SELECT serial, first_seen FROM devices WHERE serial" +
       bytes + (filter.from ? " >= $1" : " > $1") + " AND ($2 = '' OR serial = $2) ORDER BY serial" +
-      bytes + " LIMIT $3) d LEFT JOIN device_calibrations c ON c.device = d.serial ORDER BY d.serial" +
+      bytes +
+      " LIMIT $3) d LEFT JOIN device_calibrations c ON c.device = d.serial ORDER BY d.serial" +
       bytes + ", c.method" + bytes;
   return Read([&](SqlConn* c) {
     out->clear();
-    return c->Run(sql,
-                  {SqlText(filter.after), SqlText(filter.serial),
-                   SqlInt(internal::PageLimit(filter))},
-                  [&](const internal::Row& row) { internal::AddDeviceRow(row, out); });
+    return c->Run(
+        sql, {SqlText(filter.after), SqlText(filter.serial), SqlInt(internal::PageLimit(filter))},
+        [&](const internal::Row& row) { internal::AddDeviceRow(row, out); });
   });
 }
 

@@ -15,8 +15,8 @@ using internal::Backoff;
 using sql::LoadRecording;
 
 Status SqlStore::LoadJob(SqlConn* c, int64_t id, bool with_result, JobInfo* out, bool lock) {
-  const std::string sql = internal::JobSelect(with_result) + "WHERE j.id = $1" +
-                          (lock ? dialect_.lock_job : "");
+  const std::string sql =
+      internal::JobSelect(with_result) + "WHERE j.id = $1" + (lock ? dialect_.lock_job : "");
   bool found = false;
   Status s = c->Run(sql, {SqlInt(id)}, [&](const internal::Row& row) {
     internal::ReadJob(row, out);

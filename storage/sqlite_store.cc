@@ -20,6 +20,7 @@ namespace calibd::storage {
 namespace sqlite {
 
 const SqlDialect kDialect = {
+    /*ping=*/"PRAGMA user_version",  // reads the file's header
     /*lock_job=*/"",  // a write transaction holds SQLite's write lock (BEGIN IMMEDIATE)
     /*skip_locked=*/"",
     /*db_now_ms=*/nullptr,  // every process on the file runs on one host's clock
@@ -87,33 +88,20 @@ std::string CountJobsSql(const JobFilter& filter) {
 // ---- connection pool ----------------------------------------------------------------------------
 
 SqliteStore::SqliteStore(std::string path, StoreOptions options)
-    : SqlStore(std::move(path), std::move(options), sqlite::kDialect) {
+    : SqlStore(std::move(path), std::move(options), sqlite::kDialect),
+      pool_(
+          options_.max_idle_connections,
+          [this](std::unique_ptr<Db>* db) { return Db::Open(path_, db_options_, db); },
+          [](Db* db) {
+            if (db->InTransaction()) (void)db->Exec("ROLLBACK");  // never hand one out mid-txn
+            return true;
+          }) {
   db_options_.busy_timeout_ms = options_.busy_timeout_ms;
   db_options_.read_only = options_.read_only;
   db_options_.max_page_count = options_.max_page_count;
 }
 
 SqliteStore::~SqliteStore() = default;
-
-Status SqliteStore::Acquire(std::unique_ptr<Db>* db) {
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (!idle_.empty()) {
-      *db = std::move(idle_.back());
-      idle_.pop_back();
-      return Status::Ok();
-    }
-  }
-  return Db::Open(path_, db_options_, db);
-}
-
-void SqliteStore::Return(std::unique_ptr<Db> db) {
-  if (db->InTransaction()) (void)db->Exec("ROLLBACK");  // never hand out a connection mid-txn
-  std::lock_guard<std::mutex> lock(mu_);
-  if (static_cast<int>(idle_.size()) < options_.max_idle_connections) {
-    idle_.push_back(std::move(db));
-  }
-}
 
 Status SqliteStore::OpenFile(const std::string& path, StoreOptions options,
                              std::unique_ptr<Store>* out) {
@@ -248,14 +236,6 @@ Status SqliteStore::Read(const SqlOp& op) {
   if (!s.ok()) return s;
   sqlite::SqliteConn sql(conn.db());
   return op(&sql);
-}
-
-Status SqliteStore::Ping() {
-  Conn conn(this);
-  Status s = conn.Open();
-  if (!s.ok()) return s;
-  int64_t version = 0;
-  return SchemaVersion(conn.db(), &version);
 }
 
 // ---- maintenance -------------------------------------------------------------------------------

@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "storage/conn_pool.h"
 #include "storage/db.h"
 #include "storage/sql_store.h"
 
@@ -37,7 +38,6 @@ class SqliteStore final : public SqlStore {
   ~SqliteStore() override;
 
   const char* backend() const override { return "sqlite"; }
-  Status Ping() override;
   Status ReadRecordingData(int64_t id,
                            const std::function<bool(std::string_view chunk)>& sink) override;
   Status IntegrityCheck(std::string* result) override;
@@ -56,14 +56,11 @@ class SqliteStore final : public SqlStore {
   // Runs `op` on a pooled connection (WAL: reads never wait for writers).
   Status Read(const SqlOp& op) override;
   // The bytes as one blob (recording_data), streamed from a staged file through a blob handle.
-  Status StoreRecordingBytes(SqlConn* c, const NewRecording& r, const std::string& sha,
-                             int64_t now, int64_t* id, bool* duplicate) override;
-  Status Acquire(std::unique_ptr<Db>* db);
-  void Return(std::unique_ptr<Db> db);
+  Status StoreRecordingBytes(SqlConn* c, const NewRecording& r, const std::string& sha, int64_t now,
+                             int64_t* id, bool* duplicate) override;
 
   Db::Options db_options_;
-  std::mutex mu_;
-  std::vector<std::unique_ptr<Db>> idle_;  // guarded by mu_
+  ConnectionPool<Db> pool_;
   std::mutex write_mu_;
   std::deque<Writer*> writers_;  // guarded by write_mu_; the front one is the leader
 };

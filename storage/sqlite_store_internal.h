@@ -13,25 +13,17 @@
 #include <string_view>
 
 #include "storage/db.h"
-#include "storage/sqlite_store.h"
 #include "storage/sql_conn.h"
+#include "storage/sqlite_store.h"
 #include "storage/store_internal.h"
 
 namespace calibd::storage {
 
 // A pooled connection, returned to the pool on destruction.
-class SqliteStore::Conn {
+class SqliteStore::Conn : public Borrowed<Db> {
  public:
-  explicit Conn(SqliteStore* store) : store_(store) {}
-  ~Conn() {
-    if (db_) store_->Return(std::move(db_));
-  }
-  Status Open() { return store_->Acquire(&db_); }
-  Db* db() { return db_.get(); }
-
- private:
-  SqliteStore* store_;
-  std::unique_ptr<Db> db_;
+  explicit Conn(SqliteStore* store) : Borrowed(&store->pool_) {}
+  Db* db() const { return get(); }
 };
 
 namespace sqlite {

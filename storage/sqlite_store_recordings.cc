@@ -31,6 +31,11 @@ struct Blob {
   ~Blob() {
     if (blob != nullptr) sqlite3_blob_close(blob);
   }
+  // Opens recording `id`'s bytes (recording_data.data).
+  int Open(Db* db, int64_t id, bool write) {
+    return sqlite3_blob_open(db->handle(), "main", "recording_data", "data", id, write ? 1 : 0,
+                             &blob);
+  }
   int Close() {
     int rc = blob != nullptr ? sqlite3_blob_close(blob) : SQLITE_OK;
     blob = nullptr;
@@ -38,20 +43,12 @@ struct Blob {
   }
 };
 
-// Streams the staged file into recording `id`'s new blob (inside the caller's transaction). On
-// return *sha is the bytes' hash.
-Status StreamFileIntoNewRow(Db* db, int64_t id, const NewRecording& r, int fd, int64_t size,
-                            std::string* sha) {
-  Stmt st;
-  Status s = db->Prepare("INSERT INTO recording_data (recording_id, data) VALUES (?1, ?2)", &st);
-  if (!s.ok()) return s;
-  st.BindInt(1, id).BindZeroBlob(2, size);  // zeros are not materialised in memory
-  s = st.Run();
-  if (!s.ok()) return s;
-
+// Writes the staged file, from where `fd` stands, into recording `id`'s blob of `size` zeros
+// (inside the caller's transaction). On return *sha is the bytes' hash.
+Status WriteFileIntoBlob(Db* db, int64_t id, const NewRecording& r, int fd, int64_t size,
+                         std::string* sha) {
   Blob blob;
-  int rc = sqlite3_blob_open(db->handle(), "main", "recording_data", "data", id, /*write=*/1,
-                             &blob.blob);
+  int rc = blob.Open(db, id, /*write=*/true);
   if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "open recording blob");
   std::vector<char> buffer(kChunkBytes);
   Sha256 hasher;
@@ -82,11 +79,23 @@ Status StreamFileIntoNewRow(Db* db, int64_t id, const NewRecording& r, int fd, i
   return Status::Ok();
 }
 
+// Streams the staged file into recording `id`'s new blob (inside the caller's transaction). On
+// return *sha is the bytes' hash.
+Status StreamFileIntoNewRow(Db* db, int64_t id, const NewRecording& r, int fd, int64_t size,
+                            std::string* sha) {
+  Stmt st;
+  Status s = db->Prepare("INSERT INTO recording_data (recording_id, data) VALUES (?1, ?2)", &st);
+  if (!s.ok()) return s;
+  st.BindInt(1, id).BindZeroBlob(2, size);  // zeros are not materialised in memory
+  s = st.Run();
+  if (!s.ok()) return s;
+  return WriteFileIntoBlob(db, id, r, fd, size, sha);
+}
+
 // The SHA-256 of recording `id`'s stored bytes (inside the caller's transaction).
 Status HashStoredBlob(Db* db, int64_t id, std::string* sha) {
   Blob blob;
-  int rc = sqlite3_blob_open(db->handle(), "main", "recording_data", "data", id, /*write=*/0,
-                             &blob.blob);
+  int rc = blob.Open(db, id, /*write=*/false);
   if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "open recording blob");
   const int64_t size = sqlite3_blob_bytes(blob.blob);
   std::vector<char> buffer(static_cast<size_t>(std::min<int64_t>(size, kChunkBytes)));
@@ -119,32 +128,10 @@ Status RewriteStoredBlob(Db* db, int64_t id, const NewRecording& r, int fd, int6
   if (::lseek(fd, 0, SEEK_SET) != 0) {
     return Status::IoError("storage: cannot rewind " + r.path + ": " + std::strerror(errno));
   }
-  Blob blob;
-  int rc = sqlite3_blob_open(db->handle(), "main", "recording_data", "data", id, /*write=*/1,
-                             &blob.blob);
-  if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "open recording blob");
-  std::vector<char> buffer(kChunkBytes);
-  Sha256 hasher;
-  int64_t offset = 0;
-  while (offset < size) {
-    ssize_t n = ::read(fd, buffer.data(),
-                       static_cast<size_t>(std::min<int64_t>(size - offset, kChunkBytes)));
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      return Status::IoError("storage: reading " + r.path + ": " +
-                             (n < 0 ? std::strerror(errno) : "it shrank while being stored"));
-    }
-    hasher.Update(std::string_view(buffer.data(), static_cast<size_t>(n)));
-    rc =
-        sqlite3_blob_write(blob.blob, buffer.data(), static_cast<int>(n), static_cast<int>(offset));
-    if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "write recording blob");
-    offset += n;
-  }
-  rc = blob.Close();
-  if (rc != SQLITE_OK) return StatusFromSqlite(rc, db->handle(), "close recording blob");
-  if (hasher.HexDigest() != sha) {
-    return Status::IoError("storage: " + r.path + " changed while being stored");
-  }
+  std::string written;
+  s = WriteFileIntoBlob(db, id, r, fd, size, &written);
+  if (!s.ok()) return s;
+  if (written != sha) return Status::IoError("storage: " + r.path + " changed while being stored");
   return Status::Ok();
 }
 
@@ -174,7 +161,8 @@ Status StreamNewRecording(SqlConn* c, Db* db, const NewRecording& r, int fd, int
     *duplicate = true;
     return db->Exec("ROLLBACK TO put_recording; RELEASE put_recording");
   }
-  s = c->Run("UPDATE recordings SET sha256 = $1 WHERE id = $2", {SqlText(streamed_sha), SqlInt(*id)});
+  s = c->Run("UPDATE recordings SET sha256 = $1 WHERE id = $2",
+             {SqlText(streamed_sha), SqlInt(*id)});
   if (!s.ok()) return s;
   return db->Exec("RELEASE put_recording");
 }
@@ -199,25 +187,20 @@ Status RepairIfDamaged(SqlConn* c, Db* db, int64_t id, const NewRecording& r, in
 
 }  // namespace
 
-
 Status SqliteStore::StoreRecordingBytes(SqlConn* c, const NewRecording& r,
                                         const std::string& known_sha, int64_t now, int64_t* out_id,
                                         bool* duplicate) {
   Db* db = static_cast<sqlite::SqliteConn*>(c)->db();
   internal::StagedFile file;
-  int64_t size = static_cast<int64_t>(r.data.size());
-  if (!r.path.empty()) {
-    Status s = file.Open(r.path);
-    if (!s.ok()) return s;
-    size = file.size();
-  }
+  Status s = file.OpenUpload(r);
+  if (!s.ok()) return s;
+  const int64_t size = file.size();
   const int64_t limit = sqlite3_limit(db->handle(), SQLITE_LIMIT_LENGTH, -1);
   if (size > limit) {
     return Status(StatusCode::kTooLarge, "storage: recording of " + std::to_string(size) +
                                              " bytes exceeds the limit of " +
                                              std::to_string(limit));
   }
-  Status s;
   int64_t id = 0;
   if (!known_sha.empty()) {
     s = FindRecording(c, known_sha, &id);
@@ -254,8 +237,7 @@ Status SqliteStore::ReadRecordingData(int64_t id,
   sqlite::SqliteConn sql(db);
   // The open blob handle keeps one read transaction (snapshot) for the whole stream.
   Blob blob;
-  int rc = sqlite3_blob_open(db->handle(), "main", "recording_data", "data", id, /*write=*/0,
-                             &blob.blob);
+  int rc = blob.Open(db, id, /*write=*/false);
   if (rc != SQLITE_OK) {
     Status open_error = StatusFromSqlite(rc, db->handle(), "open recording blob");
     RecordingInfo unused;

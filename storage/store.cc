@@ -6,10 +6,10 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <cerrno>
-#include <cstring>
 #include <cctype>
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <ctime>
 #include <nlohmann/json.hpp>
 #include <utility>
@@ -75,6 +75,11 @@ Status StagedFile::Open(const std::string& path) {
   }
   size_ = static_cast<int64_t>(st.st_size);
   return Status::Ok();
+}
+
+Status StagedFile::OpenUpload(const NewRecording& r) {
+  size_ = static_cast<int64_t>(r.data.size());
+  return r.path.empty() ? Status::Ok() : Open(r.path);
 }
 
 Status CheckRecordingDigest(const RecordingInfo& info, int64_t bytes, const std::string& sha) {

@@ -49,7 +49,9 @@ class StagedFile {
   StagedFile& operator=(const StagedFile&) = delete;
   // Opens `path` and reads its size: kIoError naming the path when it cannot.
   Status Open(const std::string& path);
-  int fd() const { return fd_; }         // -1 until opened
+  // The upload's bytes: r.path opened as Open does, else r.data's size (fd() stays -1).
+  Status OpenUpload(const NewRecording& r);
+  int fd() const { return fd_; }          // -1 until opened
   int64_t size() const { return size_; }  // bytes when opened
 
  private:
