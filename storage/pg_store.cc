@@ -1,6 +1,6 @@
-// PgStore (pg_store.h): connections and their pool, transactions, LISTEN/NOTIFY. The other
-// parts are in pg_store_recordings.cc, pg_store_jobs.cc and pg_store_catalog.cc (see
-// pg_store_internal.h).
+// PgStore (pg_store.h): SqlStore's connection over libpq (PgSqlConn, the dialect), connections
+// and their pool, transactions, LISTEN/NOTIFY, maintenance. Recordings' bytes are in
+// pg_store_recordings.cc (see pg_store_internal.h).
 #include "storage/pg_store.h"
 
 #include <libpq-fe.h>
@@ -21,9 +21,70 @@ constexpr const char* kJobsChannel = "calibd_jobs";
 
 namespace pg {
 
-Status NotifyJobs(PgConn* c) {
-  c->notify_after_commit = true;
+const SqlDialect kDialect = {
+    /*ping=*/"SELECT 1",
+    /*lock_job=*/" FOR UPDATE OF j",
+    /*skip_locked=*/" FOR UPDATE SKIP LOCKED",
+    /*db_now_ms=*/CALIBD_PG_NOW_MS,  // hosts whose clocks disagree measure leases on one clock
+    /*result_seq_column=*/"",        // its default: the sequence results_seq
+    /*result_seq_value=*/"",
+    // Concurrent completions on several hosts each see the other's committed result (READ
+    // COMMITTED: every statement after the lock takes a fresh snapshot) and never insert the
+    // same key twice.
+    /*lock_latest=*/"SELECT pg_advisory_xact_lock(hashtextextended($1 || chr(31) || $2, 0))",
+    // Byte order, as SQLite sorts, whatever the database's locale (the page is a range scan of
+    // index devices_by_serial_bytes).
+    /*byte_order=*/" COLLATE \"C\"",
+    // An inner join, so the planner may start from index results_by_state. PostgreSQL keeps a
+    // LEFT JOIN whose WHERE tests COALESCE(r...) (it cannot tell the test rejects a missing
+    // result), and then can only scan the jobs: every succeeded job for a rare verdict.
+    /*state_from=*/" FROM jobs j JOIN results r ON r.job_id = j.id ",
+    /*state_from_with_device=*/true,
+    /*state_id_column=*/"j.id",
+};
+
+std::vector<PgParam> PgParams(const SqlParams& params) {
+  std::vector<PgParam> out;
+  for (const SqlValue& v : params) {
+    switch (v.kind) {
+      case SqlValue::Kind::kNull:
+        out.push_back(PgTextOrNull(""));
+        break;
+      case SqlValue::Kind::kInt:
+        out.push_back(PgInt(v.integer));
+        break;
+      case SqlValue::Kind::kText:
+        out.push_back(PgText(v.text));
+        break;
+    }
+  }
+  return out;
+}
+
+Status PgSqlConn::Run(std::string_view sql, const SqlParams& params, const SqlRowFn& on_row,
+                      int64_t* changed) {
+  PgResult res;
+  Status s = c_->Exec(std::string(sql).c_str(), PgParams(params), &res);
+  if (!s.ok()) return s;
+  if (on_row) {
+    for (int i = 0; i < res.rows(); ++i) on_row(PgRow(res, i));
+  }
+  if (changed != nullptr) *changed = res.Affected();
   return Status::Ok();
+}
+
+std::string ListJobsSql(const JobFilter& filter, std::vector<PgParam>* params) {
+  SqlParams sql_params;
+  std::string sql = internal::ListJobsSql(kDialect, filter, &sql_params);
+  *params = PgParams(sql_params);
+  return sql;
+}
+
+std::string CountJobsSql(const JobFilter& filter, std::vector<PgParam>* params) {
+  SqlParams sql_params;
+  std::string sql = internal::CountJobsSql(kDialect, filter, &sql_params);
+  *params = PgParams(sql_params);
+  return sql;
 }
 
 }  // namespace pg
@@ -55,7 +116,15 @@ std::string RedactConnectionTarget(const std::string& target) {
 // ---- connections ----------------------------------------------------------------------------
 
 PgStore::PgStore(std::string target, StoreOptions options)
-    : Store(RedactConnectionTarget(target), std::move(options)), target_(std::move(target)) {}
+    : SqlStore(RedactConnectionTarget(target), std::move(options), pg::kDialect),
+      target_(std::move(target)),
+      pool_(
+          options_.max_idle_connections,
+          [this](std::unique_ptr<PgConn>* out) { return NewConnection(out); },
+          [](PgConn* conn) {
+            if (!conn->broken() && conn->InTransaction()) (void)conn->ExecScript("ROLLBACK");
+            return !conn->broken();
+          }) {}
 
 PgStore::~PgStore() { SetJobListener(nullptr); }
 
@@ -72,34 +141,6 @@ Status PgStore::NewConnection(std::unique_ptr<PgConn>* out) {
   if (!s.ok()) return s;
   *out = std::move(c);
   return Status::Ok();
-}
-
-Status PgStore::Acquire(std::unique_ptr<PgConn>* out, bool* pooled) {
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (!idle_.empty()) {
-      *out = std::move(idle_.back());
-      idle_.pop_back();
-      *pooled = true;
-      return Status::Ok();
-    }
-  }
-  *pooled = false;
-  return NewConnection(out);
-}
-
-void PgStore::Return(std::unique_ptr<PgConn> conn) {
-  if (!conn->broken() && conn->InTransaction()) (void)conn->ExecScript("ROLLBACK");
-  std::lock_guard<std::mutex> lock(mu_);
-  if (conn->broken()) {
-    // The server went away or restarted: the idle connections are most likely dead too. Drop
-    // them, so the next calls connect afresh instead of failing one by one.
-    idle_.clear();
-    return;
-  }
-  if (static_cast<int>(idle_.size()) < options_.max_idle_connections) {
-    idle_.push_back(std::move(conn));
-  }
 }
 
 Status PgStore::Connect(const std::string& target, StoreOptions options,
@@ -119,19 +160,20 @@ Status PgStore::Connect(const std::string& target, StoreOptions options,
   return Status::Ok();
 }
 
-Status PgStore::Txn(const std::function<Status(PgConn*)>& op) {
+Status PgStore::Write(const SqlOp& op) {
   for (int attempt = 1;; ++attempt) {
     Lease lease(this);
     Status s = lease.Open();
     if (!s.ok()) return s;
     PgConn* c = lease.get();
+    pg::PgSqlConn sql(c);
     c->notify_after_commit = false;
     s = c->ExecScript("BEGIN");
     // A connection that died in the pool (server restarted): nothing was done, run it afresh.
     if (!s.ok() && lease.StaleFromPool() && attempt < 3) continue;
     if (s.ok()) {
       try {
-        s = op(c);
+        s = op(&sql);
       } catch (const std::exception& e) {
         s = Status::Internal(std::string("storage: unexpected exception: ") + e.what());
       }
@@ -153,32 +195,38 @@ Status PgStore::Txn(const std::function<Status(PgConn*)>& op) {
   }
 }
 
-Status PgStore::DbNow(PgConn* c, int64_t* now) {
-  if (clock_injected()) {
-    *now = Now();
-    return Status::Ok();
-  }
-  PgResult res;
-  Status s = c->Exec("SELECT " CALIBD_PG_NOW_MS, {}, &res);
-  if (!s.ok()) return s;
-  *now = res.Int(0, 0);
-  return Status::Ok();
-}
-
-Status PgStore::Read(const std::function<Status(PgConn*)>& op) {
+Status PgStore::Read(const SqlOp& op) {
   for (int attempt = 1;; ++attempt) {
     Lease lease(this);
     Status s = lease.Open();
     if (!s.ok()) return s;
-    s = op(lease.get());
+    pg::PgSqlConn sql(lease.get());
+    s = op(&sql);
     // Reads change nothing: one that met a connection that died in the pool runs again.
     if (s.ok() || !lease.StaleFromPool() || attempt > 1) return s;
   }
 }
 
-Status PgStore::Ping() {
-  return Read([](PgConn* c) { return c->ExecScript("SELECT 1"); });
+// ---- maintenance -------------------------------------------------------------------------------
+
+Status PgStore::IntegrityCheck(std::string* result) {
+  std::vector<std::string> damaged;
+  Status s = Read([&](SqlConn* c) {
+    damaged.clear();
+    return c->Run(
+        "SELECT r.id FROM recordings r LEFT JOIN (SELECT recording_id, SUM(length(data)) AS n, "
+        "COUNT(*) AS k, MAX(seq) AS last FROM recording_chunks GROUP BY recording_id) c "
+        "ON c.recording_id = r.id WHERE r.bytes <> COALESCE(c.n, 0) "
+        "OR COALESCE(c.k, 0) <> COALESCE(c.last + 1, 0) ORDER BY r.id LIMIT 100",
+        {}, [&](const internal::Row& row) { damaged.push_back(row.Text(0)); });
+  });
+  if (!s.ok()) return s;
+  *result = damaged.empty() ? "ok" : "recordings whose stored bytes do not add up to their size:";
+  for (const std::string& id : damaged) *result += " " + id;
+  return Status::Ok();
 }
+
+Status PgStore::Checkpoint() { return Status::Ok(); }
 
 // ---- LISTEN/NOTIFY ---------------------------------------------------------------------------
 

@@ -51,7 +51,9 @@
 #include <thread>
 #include <vector>
 
-#include "storage/store.h"
+#include "storage/conn_pool.h"
+#include "storage/pg_conn.h"
+#include "storage/sql_store.h"
 
 namespace calibd::storage {
 
@@ -61,9 +63,7 @@ inline constexpr int kPgSchemaVersion = 5;
 // `target` with the password of a URI or keyword string replaced by "***" (for logs, /healthz).
 std::string RedactConnectionTarget(const std::string& target);
 
-class PgConn;  // one libpq connection (pg_conn.h)
-
-class PgStore final : public Store {
+class PgStore final : public SqlStore {
  public:
   // Connects, then creates or migrates the schema (see above). Fails with kBusy (server not
   // reachable, with libpq's reason), kConflict (schema newer than this build), kInvalidInput
@@ -73,35 +73,10 @@ class PgStore final : public Store {
   ~PgStore() override;
 
   const char* backend() const override { return "postgresql"; }
-  Status Ping() override;
   bool SetJobListener(std::function<void()> on_job) override;
 
-  Status PutRecording(const NewRecording& r, RecordingInfo* out, bool* existed) override;
-  Status GetRecording(int64_t id, RecordingInfo* out) override;
   Status ReadRecordingData(int64_t id,
                            const std::function<bool(std::string_view chunk)>& sink) override;
-  Status EnqueueJob(int64_t recording_id, const std::string& method, const std::string& device,
-                    const std::string& config_json, JobInfo* out) override;
-  Status ClaimJob(const std::string& worker_id, int64_t lease_ms, JobInfo* out,
-                  bool* claimed) override;
-  Status RenewLease(int64_t job_id, const std::string& worker_id, int64_t lease_ms) override;
-  Status CompleteJob(int64_t job_id, const std::string& worker_id,
-                     const std::string& result_json) override;
-  Status FailJob(int64_t job_id, const std::string& worker_id, const JobFailure& failure,
-                 bool transient) override;
-  Status ReleaseJob(int64_t job_id, const std::string& worker_id, ReleaseKind kind) override;
-  Status CancelRequests(const std::vector<int64_t>& job_ids,
-                        std::vector<int64_t>* requested) override;
-  Status RecoverExpiredLeases(int64_t* recovered) override;
-  Status ExpireLeasesOf(const std::string& owner_prefix, int64_t* taken_back) override;
-  Status GetJob(int64_t id, JobInfo* out) override;
-  Status ListJobs(const JobFilter& filter, std::vector<JobInfo>* out) override;
-  Status CountJobs(const JobFilter& filter, int64_t* count) override;
-  using Store::ListDevices;
-  Status ListDevices(const DeviceFilter& filter, std::vector<DeviceInfo>* out) override;
-  Status LatestResult(const std::string& device, const std::string& method, JobInfo* out) override;
-  Status QueueDepth(QueueCounts* out) override;
-  Status ListJobEvents(int64_t job_id, std::vector<JobEvent>* out) override;
   // Checks that every recording's chunks add up to its size: "ok", or the ids that do not.
   Status IntegrityCheck(std::string* result) override;
   // Nothing to do (the server checkpoints its own write-ahead log): OK.
@@ -111,20 +86,17 @@ class PgStore final : public Store {
   class Lease;  // a pooled connection, returned on destruction (pg_store_internal.h)
   PgStore(std::string target, StoreOptions options);
   Status NewConnection(std::unique_ptr<PgConn>* out);
-  Status Acquire(std::unique_ptr<PgConn>* out, bool* pooled);
-  void Return(std::unique_ptr<PgConn> conn);
   // Runs `op` in one transaction (BEGIN ... COMMIT, ROLLBACK on error). A deadlock or
   // serialization failure runs it again (up to 3 times), so `op` must set its outputs afresh.
-  Status Txn(const std::function<Status(PgConn*)>& op);
+  // Listeners are woken after the commit when `op` asked for it (NotifyJobsAfterCommit).
+  Status Write(const SqlOp& op) override;
   // Runs `op` on a pooled connection outside any explicit transaction (reads).
-  Status Read(const std::function<Status(PgConn*)>& op);
-  // The time for the statements of the caller's transaction: the injected clock (tests), else
-  // the database server's clock (clock_timestamp()), never this host's (issue 27: hosts whose
-  // clocks disagree took each other's live leases).
-  Status DbNow(PgConn* c, int64_t* now);
-
-  Status PutRecordingLocked(PgConn* c, const NewRecording& r, const std::string& sha,
-                            RecordingInfo* out, bool* existed);
+  Status Read(const SqlOp& op) override;
+  // A staged file without its hash is hashed first: the hash is the key of the recording row.
+  Status HashUpload(const NewRecording& r, std::string* sha) override;
+  // The bytes as chunk rows (recording_chunks), deduplicated across hosts.
+  Status StoreRecordingBytes(SqlConn* c, const NewRecording& r, const std::string& sha, int64_t now,
+                             int64_t* id, bool* duplicate) override;
   // Writes the upload's bytes as recording `id`'s chunk rows, checking they hash to `sha`. `fd`:
   // the staged file (r.path, at its start) or -1 for r.data.
   Status WriteChunks(PgConn* c, const NewRecording& r, int64_t id, int fd, int64_t size,
@@ -132,24 +104,10 @@ class PgStore final : public Store {
   // A re-upload of recording `id`'s bytes: when the stored chunks do not hash to `sha` (damaged),
   // replaces them with the upload's.
   Status RepairIfDamaged(PgConn* c, const NewRecording& r, int64_t id, const std::string& sha);
-  Status EnqueueJobLocked(PgConn* c, int64_t recording_id, const std::string& method,
-                          const std::string& device, const std::string& config_json, int64_t now,
-                          JobInfo* out, bool inherit_device);
-  Status RecoverLocked(PgConn* c, int64_t now, int64_t* recovered);
-  // Fails a running job whose cancel was requested as cancelled, with `message` (in the
-  // caller's transaction).
-  Status FailCancelledLocked(PgConn* c, int64_t job_id, const std::string& message);
-  Status RequireHolder(PgConn* c, int64_t job_id, const std::string& worker_id, const char* action,
-                       JobInfo* job);
-  Status Cancel(int64_t job_id, const std::string& reason, const std::string& actor, JobInfo* out,
-                JobEvent* event) override;
-  Status Decide(int64_t job_id, bool revoke, const std::string& reason, const std::string& actor,
-                JobEvent* out) override;
   void ListenLoop();
 
   std::string target_;  // with the password: never logged
-  std::mutex mu_;
-  std::vector<std::unique_ptr<PgConn>> idle_;  // guarded by mu_
+  ConnectionPool<PgConn> pool_;
 
   std::mutex listen_mu_;  // serialises SetJobListener
   std::function<void()> on_job_;

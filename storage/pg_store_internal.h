@@ -1,10 +1,9 @@
-// What the files of PgStore share (not a public interface). PgStore is one class in four files
-// along its seams, as SqliteStore:
-//   pg_store.cc             connections, transactions (Txn, Read), LISTEN/NOTIFY, Ping
-//   pg_store_recordings.cc  recordings: storing as chunk rows (deduplicated across hosts), reading
-//   pg_store_jobs.cc        the job queue: enqueue, claim, leases, complete, fail, release
-//   pg_store_catalog.cc     jobs and results listed, devices, decisions, maintenance
-// The rules that do not depend on SQL are in store_internal.h, shared with SqliteStore.
+// What the files of PgStore share (not a public interface). PgStore is SqlStore (sql_store.h: the
+// job queue, catalog and decisions, written once for both backends) over libpq, in two files:
+//   pg_store.cc             the connection (PgSqlConn, the dialect), pool, transactions (Write,
+//                           Read), LISTEN/NOTIFY, maintenance
+//   pg_store_recordings.cc  recordings' bytes: stored as chunk rows (deduplicated across hosts),
+//                           read back
 #ifndef CALIBD_STORAGE_PG_STORE_INTERNAL_H_
 #define CALIBD_STORAGE_PG_STORE_INTERNAL_H_
 
@@ -15,6 +14,7 @@
 
 #include "storage/pg_conn.h"
 #include "storage/pg_store.h"
+#include "storage/sql_conn.h"
 #include "storage/store_internal.h"
 
 // The database server's clock in milliseconds since the Unix epoch, as an SQL expression
@@ -24,22 +24,12 @@
 namespace calibd::storage {
 
 // A pooled connection, returned on destruction.
-class PgStore::Lease {
+class PgStore::Lease : public Borrowed<PgConn> {
  public:
-  explicit Lease(PgStore* store) : store_(store) {}
-  ~Lease() {
-    if (conn_) store_->Return(std::move(conn_));
-  }
-  Status Open() { return store_->Acquire(&conn_, &pooled_); }
-  PgConn* get() { return conn_.get(); }
+  explicit Lease(PgStore* store) : Borrowed(&store->pool_) {}
   // The connection was idle in the pool (it may have died there: server restarted) and is
   // broken now: the call may run again on a fresh one, once, if nothing of it took effect.
-  bool StaleFromPool() const { return pooled_ && conn_ && conn_->broken(); }
-
- private:
-  PgStore* store_;
-  std::unique_ptr<PgConn> conn_;
-  bool pooled_ = false;
+  bool StaleFromPool() const { return pooled() && get() != nullptr && get()->broken(); }
 };
 
 namespace pg {
@@ -57,21 +47,27 @@ class PgRow final : public internal::Row {
   int row_;
 };
 
-// The job (internal::ReadJob); kNotFound. for_update: lock the job row (SELECT ... FOR UPDATE
-// OF j) until the transaction ends. (pg_store_jobs.cc)
-Status LoadJob(PgConn* c, int64_t id, bool with_result, JobInfo* out, bool for_update = false);
-// The recording's metadata (internal::ReadRecording); kNotFound. (pg_store_recordings.cc)
-Status LoadRecording(PgConn* c, int64_t id, RecordingInfo* out);
-// Adds the serial to devices unless empty or known. (pg_store_catalog.cc)
-Status RememberDevice(PgConn* c, const std::string& serial, int64_t now);
-// Makes device_calibrations hold the device's latest served result for the method, serialised
-// per (device, method) across hosts. (pg_store_catalog.cc)
-Status RefreshLatest(PgConn* c, const std::string& device, const std::string& method);
-// Listeners are woken after the transaction commits (PgStore::Txn). (pg_store.cc)
-Status NotifyJobs(PgConn* c);
+// A PgConn as SqlStore's connection (sql_conn.h), inside the caller's transaction.
+class PgSqlConn final : public SqlConn {
+ public:
+  explicit PgSqlConn(PgConn* c) : c_(c) {}
+  Status Run(std::string_view sql, const SqlParams& params, const SqlRowFn& on_row = {},
+             int64_t* changed = nullptr) override;
+  // Listeners are woken after the transaction commits (PgStore::Write).
+  void NotifyJobsAfterCommit() override { c_->notify_after_commit = true; }
+  PgConn* conn() const { return c_; }
+
+ private:
+  PgConn* c_;
+};
+
+// PostgreSQL's statement fragments (sql_conn.h).
+extern const SqlDialect kDialect;
+// The parameters of SqlParams as libpq's.
+std::vector<PgParam> PgParams(const SqlParams& params);
 
 // The statements ListJobs and CountJobs run for `filter`, with their parameters in order (a
-// test EXPLAINs them: ?verdict= must read index results_by_state). (pg_store_catalog.cc)
+// test EXPLAINs them: ?verdict= must read index results_by_state).
 std::string ListJobsSql(const JobFilter& filter, std::vector<PgParam>* params);
 std::string CountJobsSql(const JobFilter& filter, std::vector<PgParam>* params);
 

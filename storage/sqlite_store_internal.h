@@ -1,36 +1,29 @@
-// What the files of SqliteStore share (not a public interface). SqliteStore is one class in four
-// files along its seams:
-//   sqlite_store.cc             connection pool, opening, the group-commit write queue, Ping
-//   sqlite_store_recordings.cc  recordings: storing (streamed, deduplicated), reading
-//   sqlite_store_jobs.cc        the job queue: enqueue, claim, leases, complete, fail, release
-//   sqlite_store_catalog.cc     jobs and results listed, devices, decisions, maintenance
-// The rules that do not depend on SQL are in store_internal.h, shared with PgStore.
+// What the files of SqliteStore share (not a public interface). SqliteStore is SqlStore
+// (sql_store.h: the job queue, catalog and decisions, written once for both backends) over an
+// SQLite connection, in two files:
+//   sqlite_store.cc             the connection (SqliteConn, the dialect), pool, opening, the
+//                               group-commit write queue, maintenance
+//   sqlite_store_recordings.cc  recordings' bytes: stored as one blob (streamed), read back
 #ifndef CALIBD_STORAGE_SQLITE_STORE_INTERNAL_H_
 #define CALIBD_STORAGE_SQLITE_STORE_INTERNAL_H_
 
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <string_view>
 
 #include "storage/db.h"
+#include "storage/sql_conn.h"
 #include "storage/sqlite_store.h"
 #include "storage/store_internal.h"
 
 namespace calibd::storage {
 
 // A pooled connection, returned to the pool on destruction.
-class SqliteStore::Conn {
+class SqliteStore::Conn : public Borrowed<Db> {
  public:
-  explicit Conn(SqliteStore* store) : store_(store) {}
-  ~Conn() {
-    if (db_) store_->Return(std::move(db_));
-  }
-  Status Open() { return store_->Acquire(&db_); }
-  Db* db() { return db_.get(); }
-
- private:
-  SqliteStore* store_;
-  std::unique_ptr<Db> db_;
+  explicit Conn(SqliteStore* store) : Borrowed(&store->pool_) {}
+  Db* db() const { return get(); }
 };
 
 namespace sqlite {
@@ -47,16 +40,25 @@ class StmtRow final : public internal::Row {
   const Stmt& st_;
 };
 
-// The recording's metadata (internal::ReadRecording). kNotFound. (sqlite_store_recordings.cc)
-Status LoadRecording(Db* db, int64_t id, RecordingInfo* out);
-// Adds the serial to devices unless empty or known. (sqlite_store_catalog.cc)
-Status RememberDevice(Db* db, const std::string& serial, int64_t now);
-// Makes device_calibrations hold the device's latest served result for the method (succeeded,
-// accepted by the gate or a person, not revoked), or nothing. (sqlite_store_catalog.cc)
-Status RefreshLatest(Db* db, const std::string& device, const std::string& method);
+// A Db as SqlStore's connection (sql_conn.h), inside the caller's transaction.
+class SqliteConn final : public SqlConn {
+ public:
+  explicit SqliteConn(Db* db) : db_(db) {}
+  Status Run(std::string_view sql, const SqlParams& params, const SqlRowFn& on_row = {},
+             int64_t* changed = nullptr) override;
+  Db* db() const { return db_; }
+
+ private:
+  Db* db_;
+};
+
+// SQLite's statement fragments (sql_conn.h).
+extern const SqlDialect kDialect;
+// `sql` with PostgreSQL's placeholders $1..$n written as SQLite's ?1..?n.
+std::string SqliteText(std::string_view sql);
 
 // The statements ListJobs and CountJobs prepare for `filter` (a test EXPLAINs them: ?verdict=
-// must read index results_by_state). (sqlite_store_catalog.cc)
+// must read index results_by_state).
 std::string ListJobsSql(const JobFilter& filter);
 std::string CountJobsSql(const JobFilter& filter);
 

@@ -1,9 +1,15 @@
 // The parts of Store common to both backends: the choice of backend, timestamps, helpers.
 #include "storage/store.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <ctime>
 #include <nlohmann/json.hpp>
 #include <utility>
@@ -55,6 +61,26 @@ GateVerdict VerdictOf(const std::string& result_json) {
 }
 
 int PageLimit(const JobFilter& f) { return std::clamp(f.limit <= 0 ? 50 : f.limit, 1, 500); }
+
+StagedFile::~StagedFile() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+Status StagedFile::Open(const std::string& path) {
+  fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd_ < 0) return Status::IoError("storage: cannot open " + path + ": " + std::strerror(errno));
+  struct stat st;
+  if (::fstat(fd_, &st) != 0) {
+    return Status::IoError("storage: cannot stat " + path + ": " + std::strerror(errno));
+  }
+  size_ = static_cast<int64_t>(st.st_size);
+  return Status::Ok();
+}
+
+Status StagedFile::OpenUpload(const NewRecording& r) {
+  size_ = static_cast<int64_t>(r.data.size());
+  return r.path.empty() ? Status::Ok() : Open(r.path);
+}
 
 Status CheckRecordingDigest(const RecordingInfo& info, int64_t bytes, const std::string& sha) {
   if (bytes == info.bytes && sha == info.sha256) return Status::Ok();

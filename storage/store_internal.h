@@ -40,6 +40,24 @@ Status ValidateNewRecording(const NewRecording& r);
 // bytes read (`bytes`, their SHA-256 `sha`) are not the ones stored (`info`), with how to repair
 // it.
 Status CheckRecordingDigest(const RecordingInfo& info, int64_t bytes, const std::string& sha);
+// An upload's staged file (NewRecording::path) open for reading, closed on destruction.
+class StagedFile {
+ public:
+  StagedFile() = default;
+  ~StagedFile();
+  StagedFile(const StagedFile&) = delete;
+  StagedFile& operator=(const StagedFile&) = delete;
+  // Opens `path` and reads its size: kIoError naming the path when it cannot.
+  Status Open(const std::string& path);
+  // The upload's bytes: r.path opened as Open does, else r.data's size (fd() stays -1).
+  Status OpenUpload(const NewRecording& r);
+  int fd() const { return fd_; }          // -1 until opened
+  int64_t size() const { return size_; }  // bytes when opened
+
+ private:
+  int fd_ = -1;
+  int64_t size_ = 0;
+};
 // ClaimJob's argument checks (kInvalidInput): a worker id, a positive lease.
 Status ValidateClaim(const std::string& worker_id, int64_t lease_ms);
 
