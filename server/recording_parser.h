@@ -21,6 +21,7 @@ namespace calibd::server {
 
 namespace recording_internal {
 
+// `s` without its leading and trailing spaces and tabs.
 inline std::string_view TrimSpaces(std::string_view s) {
   while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
   while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
@@ -143,6 +144,8 @@ struct RecordingParser::Impl {
   }
 
   // --- The general path (recording_fields.cc).
+  // The kInvalidInput `message` at the current line and 1-based `column` (0: none), naming the
+  // header `field` when given; it becomes the sticky `error`.
   Status Fail(std::string message, int64_t column = 0, std::string field = {});
 
   // Splits `line` at commas into `fields`, honouring RFC 4180 double quotes within the line.
@@ -151,6 +154,8 @@ struct RecordingParser::Impl {
   // The common case: no quotes anywhere in the line, so fields end at commas.
   Status SplitUnquoted(std::string_view line);
 
+  // The finite number in field `text` of column `column` (header name `name`), a leading '+'
+  // allowed; else Fail naming a spreadsheet's separator or decimal comma when it looks like one.
   Status ParseNumber(std::string_view text, int64_t column, const std::string& name, double* value);
 
   // A row with the wrong number of fields; names a foreign separator or a decimal comma, the
@@ -202,6 +207,7 @@ struct RecordingParser::Impl {
   // goes through Fail). A bool, not a Status, because this runs once per row.
   bool Line(std::string_view line);
 
+  // RecordingParser::Feed and RecordingParser::Finish.
   Status Feed(std::string_view chunk);
   Status Finish();
 };
