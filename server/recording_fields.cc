@@ -286,35 +286,41 @@ Status RecordingParser::Impl::Header() {
   }
   summary.columns.assign(f.begin(), f.end());
   if (f.size() == 1 && f[0].empty()) return Fail("empty header line");
-  if (f[0] == "position") {
-    const bool raw = f.size() > 1 && f[1] == "phase";
-    summary.layout = raw ? Layout::kPcaRaw : Layout::kPcaAveraged;
-    first_sensor_col = raw ? 2 : 1;
-    std::unordered_map<std::string_view, size_t> seen;
-    for (size_t i = first_sensor_col; i < f.size(); ++i) {
-      const int64_t col = static_cast<int64_t>(i) + 1;
-      if (f[i].empty()) return Fail("empty sensor name in the header", col);
-      if (f[i] == "position" || f[i] == "phase") {
-        return Fail("'" + std::string(f[i]) + "' may only be the first" +
-                        (f[i] == "phase" ? std::string(" or second") : std::string()) + " column",
-                    col);
-      }
-      auto [it, inserted] = seen.emplace(f[i], i);
-      if (!inserted) {
-        return Fail("duplicate sensor name '" + Excerpt(f[i]) + "' (also column " +
-                        std::to_string(it->second + 1) + ")",
-                    col, std::string(f[i]));
-      }
-      summary.sensors.emplace_back(f[i]);
+  return f[0] == "position" ? PcaHeader() : ArrayHeader();
+}
+
+Status RecordingParser::Impl::PcaHeader() {
+  const auto& f = fields;
+  const bool raw = f.size() > 1 && f[1] == "phase";
+  summary.layout = raw ? Layout::kPcaRaw : Layout::kPcaAveraged;
+  first_sensor_col = raw ? 2 : 1;
+  std::unordered_map<std::string_view, size_t> seen;
+  for (size_t i = first_sensor_col; i < f.size(); ++i) {
+    const int64_t col = static_cast<int64_t>(i) + 1;
+    if (f[i].empty()) return Fail("empty sensor name in the header", col);
+    if (f[i] == "position" || f[i] == "phase") {
+      return Fail("'" + std::string(f[i]) + "' may only be the first" +
+                      (f[i] == "phase" ? std::string(" or second") : std::string()) + " column",
+                  col);
     }
-    sensor_count = summary.sensors.size();
-    if (sensor_count == 0) {
-      return Fail(std::string("no sensor columns after '") + (raw ? "phase" : "position") + "'");
+    auto [it, inserted] = seen.emplace(f[i], i);
+    if (!inserted) {
+      return Fail("duplicate sensor name '" + Excerpt(f[i]) + "' (also column " +
+                      std::to_string(it->second + 1) + ")",
+                  col, std::string(f[i]));
     }
-    row_values.resize(sensor_count);
-    return Status::Ok();
+    summary.sensors.emplace_back(f[i]);
   }
-  // array layout: t and triad columns in any order.
+  sensor_count = summary.sensors.size();
+  if (sensor_count == 0) {
+    return Fail(std::string("no sensor columns after '") + (raw ? "phase" : "position") + "'");
+  }
+  row_values.resize(sensor_count);
+  return Status::Ok();
+}
+
+Status RecordingParser::Impl::ArrayHeader() {
+  const auto& f = fields;
   summary.layout = Layout::kArray;
   std::vector<std::array<int64_t, 3>> accel_cols, gyro_cols;  // file column per axis, 0 = none
   int64_t t_col = 0;
@@ -381,6 +387,11 @@ Status RecordingParser::Impl::Header() {
   for (int k = 0; k < accel_triads; ++k) summary.sensors.push_back("a" + std::to_string(k));
   for (int j = 0; j < gyro_triads; ++j) summary.sensors.push_back("g" + std::to_string(j));
   row_values.resize(3 * (accel_triads + gyro_triads));
+  StartDirectCollection();
+  return Status::Ok();
+}
+
+void RecordingParser::Impl::StartDirectCollection() {
   const int64_t width = static_cast<int64_t>(row_values.size());
   // At most 2^30 values (8 GiB) up front, whatever the hint says (the job budget of
   // server/job_budget.h bounds real jobs far below that).
@@ -395,7 +406,6 @@ Status RecordingParser::Impl::Header() {
     }
     if (has_t) direct_t.resize(expected_rows);
   }
-  return Status::Ok();
 }
 
 Status RecordingParser::Impl::PcaRow() {

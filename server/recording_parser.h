@@ -166,6 +166,13 @@ struct RecordingParser::Impl {
   bool ForeignHeader(std::string_view line);
   // The header line in `fields`: the layout, its sensors or triads, and the row layout.
   Status Header();
+  // The header of the pca layouts (first field "position"), and of the array layout: t and
+  // triad columns in any order.
+  Status PcaHeader();
+  Status ArrayHeader();
+  // With a row hint (ExpectRows) on a collecting parser: the array's matrices allocated for the
+  // announced rows, at most 2^30 values (direct collection).
+  void StartDirectCollection();
   // A data row in `fields` of the pca layouts, and of the array layout.
   Status PcaRow();
   Status ArrayRow();
