@@ -363,14 +363,9 @@ Status CheckServedResult(const storage::JobInfo& job, bool any_state) {
       .WithReason(Reason::kStorageDamaged);
 }
 
-}  // namespace
-
-void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response& res) {
-  // Serials are stored in NFC: a decomposed "CAFE\u0301" in the URL finds "CAF\u00c9".
-  const std::string serial = ToNfc(std::string(req.matches[1]));
-  std::string method = req.get_param_value("method");
-  const std::string format = req.has_param("format") ? req.get_param_value("format") : "json";
-  // json, or a format some method exports (Method::ExportFormats).
+// kInvalidInput (field "format") unless `format` is json or a format some method exports
+// (Method::ExportFormats).
+Status CheckServedFormat(const std::string& format) {
   std::vector<std::string> formats = {"json"};
   for (const Method* m : AllMethods()) {
     for (const ExportFormat& f : m->ExportFormats()) {
@@ -379,140 +374,138 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
       }
     }
   }
-  if (std::find(formats.begin(), formats.end(), format) == formats.end()) {
-    std::string list;
-    for (size_t i = 0; i < formats.size(); ++i) {
-      list += (i == 0 ? "" : i + 1 == formats.size() ? " or " : ", ") + formats[i];
-    }
-    return (void)SendStatus(res,
-                            Status::InvalidInput("format must be " + list).WithField("format"));
+  if (std::find(formats.begin(), formats.end(), format) != formats.end()) return Status::Ok();
+  std::string list;
+  for (size_t i = 0; i < formats.size(); ++i) {
+    list += (i == 0 ? "" : i + 1 == formats.size() ? " or " : ", ") + formats[i];
   }
-  storage::JobInfo job;
-  Status s;
-  if (req.has_param("job")) {
-    // One job's result, whatever its verdict (the response says it in X-Calibd-State), but only
-    // for this device: a job id never reaches another device's calibration.
-    int64_t id = 0;
-    if (!ParseId(req.get_param_value("job"), &id)) {
-      return (void)SendStatus(
-          res, Status::InvalidInput("job must be a job id (a positive integer)").WithField("job"));
-    }
-    s = store->GetJob(id, &job);
-    if (s.code() != StatusCode::kNotFound && !s.ok()) return (void)SendStatus(res, s);
-    if (s.code() == StatusCode::kNotFound || job.device != serial) {
-      SendError(res, 404, "not_found",
-                "device '" + serial + "' has no job " + std::to_string(id) +
-                    (s.ok() ? " (that job is " +
-                                  (job.device.empty() ? std::string("of no device")
-                                                      : "another device's") +
-                                  ")"
-                            : std::string()));
-      return;
-    }
-    if (job.status != JobStatus::kSucceeded) {
-      SendError(res, 404, "not_found",
-                "job " + std::to_string(id) + " is " + Name(job.status) + ": it has no result");
-      return;
-    }
-    if (!method.empty() && method != job.method) {
-      SendError(
-          res, 404, "not_found",
-          "job " + std::to_string(id) + " is a " + job.method + " calibration, not " + method);
-      return;
-    }
-    method = job.method;
-  } else if (method.empty()) {
-    std::vector<storage::DeviceInfo> devices;
-    storage::DeviceFilter one;
-    one.serial = serial;
-    Status s = store->ListDevices(one, &devices);
-    if (!s.ok()) return (void)SendStatus(res, s);
-    std::vector<std::string> methods;
-    for (const auto& d : devices) {
-      if (d.serial != serial) continue;
-      for (const auto& c : d.latest) methods.push_back(c.method);
-    }
-    if (methods.size() > 1) {
-      return (void)SendStatus(res, Status::InvalidInput("device '" + serial +
-                                                        "' has calibrations of several "
-                                                        "methods: add ?method=NAME")
-                                       .WithField("method"));
-    }
-    if (methods.empty()) {
-      const std::string hint = SimilarDeviceMessage(store.get(), serial);
-      SendError(res, 404, "not_found",
-                hint.empty()
-                    ? "no accepted calibration for device '" + serial +
-                          "' (rejected and revoked results are never served; see /devices/" +
-                          UrlEncode(serial) + ")"
-                    : hint);
-      return;
-    }
-    method = methods[0];
-  } else if (FindMethod(method) == nullptr) {
-    return (void)SendStatus(
-        res, Status::InvalidInput("method must be " + MethodNamesForMessage()).WithField("method"));
+  return Status::InvalidInput("format must be " + list).WithField("format");
+}
+
+// The job of `?job=ID` (`id_text`) into *job and its method into *method: one job's result,
+// whatever its verdict (the response says it in X-Calibd-State), but only for this device: a
+// job id never reaches another device's calibration. false after answering 400 or 404 (or the
+// store's error); `method`, when given, must be the job's.
+bool FindRequestedJob(storage::Store* store, const std::string& id_text, const std::string& serial,
+                      std::string* method, storage::JobInfo* job, httplib::Response& res) {
+  int64_t id = 0;
+  if (!ParseId(id_text, &id)) {
+    SendStatus(res,
+               Status::InvalidInput("job must be a job id (a positive integer)").WithField("job"));
+    return false;
   }
-  if (!req.has_param("job")) {
-    s = store->LatestResult(serial, method, &job);
-    if (s.code() == StatusCode::kNotFound) {
-      const std::string hint = SimilarDeviceMessage(store.get(), serial);
-      SendError(res, 404, "not_found",
-                hint.empty()
-                    ? "no accepted " + method + " calibration for device '" + serial +
-                          "' (rejected and revoked results are never served; see /devices/" +
-                          UrlEncode(serial) + ")"
-                    : hint);
-      return;
-    }
-    if (!s.ok()) return (void)SendStatus(res, s);
+  const Status s = store->GetJob(id, job);
+  if (s.code() != StatusCode::kNotFound && !s.ok()) {
+    SendStatus(res, s);
+    return false;
   }
-  // Never a 200 without a sound, served result: a damaged database can hand back a row whose
-  // result is empty, cut or changed, or whose standing is unreadable (README "Storage damage").
-  if (s = CheckServedResult(job, /*any_state=*/req.has_param("job")); !s.ok()) {
-    health.Note(s, "the result of job " + std::to_string(job.id), false);
-    std::cerr << "calibd: " << s.message() << "\n";
-    return (void)SendStatus(res, s);
+  if (s.code() == StatusCode::kNotFound || job->device != serial) {
+    SendError(
+        res, 404, "not_found",
+        "device '" + serial + "' has no job " + std::to_string(id) +
+            (s.ok() ? " (that job is " +
+                          (job->device.empty() ? std::string("of no device") : "another device's") +
+                          ")"
+                    : std::string()));
+    return false;
   }
-  // One ETag per answer: the body holds the job, its time and standing besides the result (and
-  // the C header's guard the job id), so two jobs with the same result, or one result before and
-  // after a revoke, never share an ETag (a flashing script's If-None-Match must not keep a revoked
-  // calibration).
-  const std::string etag =
-      "\"" +
-      Sha256Hex(job.result_sha256 + "\n" + std::to_string(job.id) + "\n" + Name(job.state) + "\n" +
-                job.finished_at + "\n" + serial + "\n" + format)
-          .substr(0, 32) +
-      "-" + format + "\"";
-  res.set_header("ETag", etag);
-  res.set_header("Cache-Control", "no-cache");
-  res.set_header("X-Calibd-Job", std::to_string(job.id));
-  res.set_header("X-Calibd-State", Name(job.state));
-  if (IfNoneMatchHits(req.get_header_value("If-None-Match"), etag)) {
-    res.status = 304;
-    return;
+  if (job->status != JobStatus::kSucceeded) {
+    SendError(res, 404, "not_found",
+              "job " + std::to_string(id) + " is " + Name(job->status) + ": it has no result");
+    return false;
   }
-  if (format == "json") {
-    // The hot path of production tooling: the stored result is valid JSON text already (the
-    // worker wrote it with json::dump), so it is embedded as is, without parsing it again.
-    json head = {{"device", serial},         {"method", method},
-                 {"job_id", job.id},         {"calibrated_at", job.finished_at},
-                 {"state", Name(job.state)}, {"result", nullptr}};
-    std::string body = head.dump(-1, ' ', false, json::error_handler_t::replace);
-    const std::string placeholder = "\"result\":null";
-    const size_t at = body.rfind(placeholder);
-    body.replace(at, placeholder.size(), "\"result\":" + job.result_json);
-    body += "\n";
-    res.set_content(std::move(body), "application/json");
-    return;
+  if (!method->empty() && *method != job->method) {
+    SendError(
+        res, 404, "not_found",
+        "job " + std::to_string(id) + " is a " + job->method + " calibration, not " + *method);
+    return false;
   }
+  *method = job->method;
+  return true;
+}
+
+// 404 "no accepted calibration" for `serial` (`what`: "" or "pca ", ...), or the message naming
+// a similar serial when there is one.
+void AnswerNoCalibration(storage::Store* store, const std::string& serial, const std::string& what,
+                         httplib::Response& res) {
+  const std::string hint = SimilarDeviceMessage(store, serial);
+  SendError(res, 404, "not_found",
+            hint.empty() ? "no accepted " + what + "calibration for device '" + serial +
+                               "' (rejected and revoked results are never served; see /devices/" +
+                               UrlEncode(serial) + ")"
+                         : hint);
+}
+
+// The one method the device has calibrations of, when no ?method= is given; false after
+// answering 400 (several) or 404 (none), or the store's error.
+bool OnlyMethodOfDevice(storage::Store* store, const std::string& serial, std::string* method,
+                        httplib::Response& res) {
+  std::vector<storage::DeviceInfo> devices;
+  storage::DeviceFilter one;
+  one.serial = serial;
+  Status s = store->ListDevices(one, &devices);
+  if (!s.ok()) {
+    SendStatus(res, s);
+    return false;
+  }
+  std::vector<std::string> methods;
+  for (const auto& d : devices) {
+    if (d.serial != serial) continue;
+    for (const auto& c : d.latest) methods.push_back(c.method);
+  }
+  if (methods.size() > 1) {
+    SendStatus(res, Status::InvalidInput("device '" + serial +
+                                         "' has calibrations of several "
+                                         "methods: add ?method=NAME")
+                        .WithField("method"));
+    return false;
+  }
+  if (methods.empty()) {
+    AnswerNoCalibration(store, serial, "", res);
+    return false;
+  }
+  *method = methods[0];
+  return true;
+}
+
+// One ETag per answer: the body holds the job, its time and standing besides the result (and
+// the C header's guard the job id), so two jobs with the same result, or one result before and
+// after a revoke, never share an ETag (a flashing script's If-None-Match must not keep a revoked
+// calibration).
+std::string CalibrationETag(const storage::JobInfo& job, const std::string& serial,
+                            const std::string& format) {
+  return "\"" +
+         Sha256Hex(job.result_sha256 + "\n" + std::to_string(job.id) + "\n" + Name(job.state) +
+                   "\n" + job.finished_at + "\n" + serial + "\n" + format)
+             .substr(0, 32) +
+         "-" + format + "\"";
+}
+
+// The hot path of production tooling: the stored result is valid JSON text already (the worker
+// wrote it with json::dump), so it is embedded as is, without parsing it again.
+void AnswerCalibrationJson(const storage::JobInfo& job, const std::string& serial,
+                           const std::string& method, httplib::Response& res) {
+  json head = {{"device", serial},         {"method", method},
+               {"job_id", job.id},         {"calibrated_at", job.finished_at},
+               {"state", Name(job.state)}, {"result", nullptr}};
+  std::string body = head.dump(-1, ' ', false, json::error_handler_t::replace);
+  const std::string placeholder = "\"result\":null";
+  const size_t at = body.rfind(placeholder);
+  body.replace(at, placeholder.size(), "\"result\":" + job.result_json);
+  body += "\n";
+  res.set_content(std::move(body), "application/json");
+}
+
+// The result in one of the method's own formats (Method::Export), as an attachment.
+void AnswerCalibrationExport(const storage::JobInfo& job, const std::string& serial,
+                             const std::string& method, const std::string& format,
+                             httplib::Response& res) {
   json result;
-  s = ParseJsonText(job.result_json, "stored result", &result);
+  Status s = ParseJsonText(job.result_json, "stored result", &result);
   if (!s.ok()) {
     std::cerr << "calibd: job " << job.id << ": " << s.ToString() << "\n";  // where it broke
     return (void)SendStatus(res, Status::Internal("stored result is not JSON"));
   }
-  // The method writes its own formats (Method::Export).
   const Method* exporter = FindMethod(method);
   if (exporter == nullptr) return (void)SendStatus(res, Status::Internal("unknown stored method"));
   const std::vector<ExportFormat> exports = exporter->ExportFormats();
@@ -535,6 +528,54 @@ void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response&
       f->file_name.empty() ? "calibration-" + std::to_string(job.id) + "." + format : f->file_name;
   res.set_header("Content-Disposition", "attachment; filename=\"" + file_name + "\"");
   res.set_content(text, f->content_type);
+}
+
+}  // namespace
+
+void Service::Impl::HandleLatest(const httplib::Request& req, httplib::Response& res) {
+  // Serials are stored in NFC: a decomposed "CAFE\u0301" in the URL finds "CAF\u00c9".
+  const std::string serial = ToNfc(std::string(req.matches[1]));
+  std::string method = req.get_param_value("method");
+  const std::string format = req.has_param("format") ? req.get_param_value("format") : "json";
+  if (Status s = CheckServedFormat(format); !s.ok()) return (void)SendStatus(res, s);
+  storage::JobInfo job;
+  const bool by_job = req.has_param("job");
+  if (by_job) {
+    if (!FindRequestedJob(store.get(), req.get_param_value("job"), serial, &method, &job, res)) {
+      return;
+    }
+  } else {
+    if (method.empty()) {
+      if (!OnlyMethodOfDevice(store.get(), serial, &method, res)) return;
+    } else if (FindMethod(method) == nullptr) {
+      return (void)SendStatus(
+          res,
+          Status::InvalidInput("method must be " + MethodNamesForMessage()).WithField("method"));
+    }
+    const Status s = store->LatestResult(serial, method, &job);
+    if (s.code() == StatusCode::kNotFound) {
+      return AnswerNoCalibration(store.get(), serial, method + " ", res);
+    }
+    if (!s.ok()) return (void)SendStatus(res, s);
+  }
+  // Never a 200 without a sound, served result: a damaged database can hand back a row whose
+  // result is empty, cut or changed, or whose standing is unreadable (README "Storage damage").
+  if (Status s = CheckServedResult(job, /*any_state=*/by_job); !s.ok()) {
+    health.Note(s, "the result of job " + std::to_string(job.id), false);
+    std::cerr << "calibd: " << s.message() << "\n";
+    return (void)SendStatus(res, s);
+  }
+  const std::string etag = CalibrationETag(job, serial, format);
+  res.set_header("ETag", etag);
+  res.set_header("Cache-Control", "no-cache");
+  res.set_header("X-Calibd-Job", std::to_string(job.id));
+  res.set_header("X-Calibd-State", Name(job.state));
+  if (IfNoneMatchHits(req.get_header_value("If-None-Match"), etag)) {
+    res.status = 304;
+    return;
+  }
+  if (format == "json") return AnswerCalibrationJson(job, serial, method, res);
+  AnswerCalibrationExport(job, serial, method, format, res);
 }
 
 void Service::Impl::HandleRecording(const httplib::Request& req, httplib::Response& res) {

@@ -38,80 +38,36 @@ json PathParam(const std::string& name, const std::string& type, const std::stri
           {"schema", {{"type", type}}}};
 }
 
-json Build() {
-  json method_names = json::array();
-  for (const Method* m : AllMethods()) method_names.push_back(m->name());
-  json doc;
-  doc["openapi"] = "3.0.3";
-  doc["info"] = {{"title", "calibd"},
-                 {"version", "0.1.0"},
-                 {"description",
-                  "Calibration server for multi-sensor inertial systems (SPEC.md). Writes need "
-                  "'Authorization: Bearer TOKEN' when the server runs with --token-file."}};
-  doc["servers"] = json::array({{{"url", "/api/v1"}}});
-  doc["components"]["securitySchemes"]["bearer"] = {{"type", "http"}, {"scheme", "bearer"}};
-  auto& schemas = doc["components"]["schemas"];
-  {
-    // A job's last failure (SPEC §5 extended: reason, title, advice, diagnostics).
-    json reasons = json::array();
-    for (const FailureReason& r : AllFailureReasons()) reasons.push_back(r.code);
-    schemas["JobFailure"] = {
-        {"type", "object"},
-        {"required", {"code", "reason", "message", "advice"}},
-        {"properties",
-         {{"code",
-           {{"type", "string"},
-            {"description",
-             "the kind of failure: invalid_input, not_determinable, lease_expired, ..."}}},
-          {"reason",
-           {{"type", "string"},
-            {"enum", reasons},
-            {"description", "why, as a stable snake_case code (README, Failure reasons)"}}},
-          {"title", {{"type", "string"}, {"description", "the reason in a few words"}}},
-          {"message", {{"type", "string"}, {"description", "the method's own account"}}},
-          {"advice",
-           {{"type", "string"},
-            {"description", "what to record or set instead (looked up by reason)"}}},
-          {"diagnostics",
-           {{"type", "object"},
-            {"nullable", true},
-            {"description",
-             "what the method found before failing: {method, usable: false, diagnostics, "
-             "warnings}, at most 1 MiB (trimmed says what was left out); null in job lists without "
-             "include_results"}}}}}};
-  }
-  schemas["Error"] = {
+// The schemas of a job and of its failure (components/schemas).
+void AddJobSchemas(json* out) {
+  json& schemas = *out;
+  // A job's last failure (SPEC §5 extended: reason, title, advice, diagnostics).
+  json reasons = json::array();
+  for (const FailureReason& r : AllFailureReasons()) reasons.push_back(r.code);
+  schemas["JobFailure"] = {
       {"type", "object"},
-      {"required", {"error"}},
+      {"required", {"code", "reason", "message", "advice"}},
       {"properties",
-       {{"error",
-         {{"type", "object"},
-          {"required", {"code", "message"}},
-          {"properties",
-           {{"code", {{"type", "string"}}},
-            {"message", {{"type", "string"}}},
-            {"line", {{"type", "integer"}, {"description", "1-based line of the fault"}}},
-            {"column", {{"type", "integer"}, {"description", "1-based field number"}}},
-            {"field", {{"type", "string"}, {"description", "config key or column name"}}}}}}}}}};
-  schemas["Result"] = {
-      {"type", "object"},
-      {"description", "SPEC §4 result"},
-      {"required", {"method", "parameters", "uncertainty", "diagnostics", "warnings"}},
-      {"properties",
-       {{"method", {{"type", "string"}, {"enum", method_names}}},
-        {"schema_version",
-         {{"type", "integer"},
-          {"minimum", 1},
-          {"description",
-           "version of the method's typed result schema (results/<method>_result.h); absent in "
-           "results stored before it existed, which are version 1"}}},
-        {"model",
+       {{"code",
          {{"type", "string"},
-          {"description", "the equation that maps a raw reading to the calibrated quantity"}}},
-        {"parameters", {{"type", "object"}}},
-        {"uncertainty", {{"type", "object"}}},
-        {"diagnostics", {{"type", "object"}}},
-        {"warnings", {{"type", "array"}, {"items", {{"type", "string"}}}}}}}};
+          {"description",
+           "the kind of failure: invalid_input, not_determinable, lease_expired, ..."}}},
+        {"reason",
+         {{"type", "string"},
+          {"enum", reasons},
+          {"description", "why, as a stable snake_case code (README, Failure reasons)"}}},
+        {"title", {{"type", "string"}, {"description", "the reason in a few words"}}},
+        {"message", {{"type", "string"}, {"description", "the method's own account"}}},
+        {"advice",
+         {{"type", "string"},
+          {"description", "what to record or set instead (looked up by reason)"}}},
+        {"diagnostics",
+         {{"type", "object"},
+          {"nullable", true},
+          {"description",
+           "what the method found before failing: {method, usable: false, diagnostics, "
+           "warnings}, at most 1 MiB (trimmed says what was left out); null in job lists without "
+           "include_results"}}}}}};
   schemas["Job"] = {
       {"type", "object"},
       {"required", {"id", "status", "method", "created_at", "attempts"}},
@@ -158,6 +114,43 @@ json Build() {
               {"at", {{"type", "string"}, {"format", "date-time"}}}}}}}}},
         {"url", {{"type", "string"}}},
         {"report_url", {{"type", "string"}}}}}};
+}
+
+// The schemas of an error, a result (of the methods named) and a recording.
+void AddSchemas(const json& method_names, json* out) {
+  json& schemas = *out;
+  schemas["Error"] = {
+      {"type", "object"},
+      {"required", {"error"}},
+      {"properties",
+       {{"error",
+         {{"type", "object"},
+          {"required", {"code", "message"}},
+          {"properties",
+           {{"code", {{"type", "string"}}},
+            {"message", {{"type", "string"}}},
+            {"line", {{"type", "integer"}, {"description", "1-based line of the fault"}}},
+            {"column", {{"type", "integer"}, {"description", "1-based field number"}}},
+            {"field", {{"type", "string"}, {"description", "config key or column name"}}}}}}}}}};
+  schemas["Result"] = {
+      {"type", "object"},
+      {"description", "SPEC §4 result"},
+      {"required", {"method", "parameters", "uncertainty", "diagnostics", "warnings"}},
+      {"properties",
+       {{"method", {{"type", "string"}, {"enum", method_names}}},
+        {"schema_version",
+         {{"type", "integer"},
+          {"minimum", 1},
+          {"description",
+           "version of the method's typed result schema (results/<method>_result.h); absent in "
+           "results stored before it existed, which are version 1"}}},
+        {"model",
+         {{"type", "string"},
+          {"description", "the equation that maps a raw reading to the calibrated quantity"}}},
+        {"parameters", {{"type", "object"}}},
+        {"uncertainty", {{"type", "object"}}},
+        {"diagnostics", {{"type", "object"}}},
+        {"warnings", {{"type", "array"}, {"items", {{"type", "string"}}}}}}}};
   schemas["Recording"] = {
       {"type", "object"},
       {"properties",
@@ -174,8 +167,11 @@ json Build() {
         {"created_at", {{"type", "string"}}},
         {"columns", {{"type", "array"}, {"items", {{"type", "string"}}}}},
         {"sensors", {{"type", "array"}, {"items", {{"type", "string"}}}}}}}};
+}
 
-  auto& paths = doc["paths"];
+// POST /recordings (with its config parameters) and a stored recording's paths.
+void AddRecordingPaths(json* out) {
+  json& paths = *out;
   json config_params = json::array(
       {QueryParam("method", "string", "pca | array; without it the recording is only stored"),
        QueryParam("device", "string", "serial number"),
@@ -223,6 +219,41 @@ json Build() {
         {"503", ErrorResponse("database busy")},
         {"507", ErrorResponse("the disk (or quota) of the database or staging folder is full "
                               "(reason disk_full); nothing was stored")}}}};
+  paths["/recordings/{id}"]["get"] = {
+      {"summary", "Recording metadata"},
+      {"parameters", json::array({PathParam("id", "integer", "recording id")})},
+      {"responses",
+       {{"200", JsonResponse("metadata", Ref("Recording"))},
+        {"404", ErrorResponse("no such recording")}}}};
+  paths["/recordings/{id}/data"]["get"] = {
+      {"summary", "The original bytes"},
+      {"parameters", json::array({PathParam("id", "integer", "recording id")})},
+      {"responses",
+       {{"200",
+         {{"description", "the CSV as uploaded"},
+          {"content", {{"text/csv", {{"schema", {{"type", "string"}}}}}}}}},
+        {"404", ErrorResponse("no such recording")}}}};
+  paths["/recordings/{id}/segments"]["get"] = {
+      {"summary", "The static intervals of a stored inertial log (SPEC section 7)"},
+      {"parameters",
+       json::array({PathParam("id", "integer", "recording id"),
+                    QueryParam("static_window", "number", "s, default 1"),
+                    QueryParam("min_static", "number", "s, default 1"),
+                    QueryParam("static_threshold", "string",
+                               "{\"accelerometer\": x, \"gyroscope\": y}, reading units"),
+                    QueryParam("accel_unit", "string", "m/s^2 per reading unit"),
+                    QueryParam("gyro_unit", "string", "rad/s per reading unit"),
+                    QueryParam("time_unit", "string", "unit of t: s (default) | ms | us | ns")})},
+      {"responses",
+       {{"200", JsonResponse("intervals, thresholds, gaps", {{"type", "object"}})},
+        {"400", ErrorResponse("bad option (field)")},
+        {"404", ErrorResponse("no such recording")},
+        {"422", ErrorResponse("not an inertial log")}}}};
+}
+
+// The jobs: queue, list, one job, and the decisions (revoke, accept, cancel) on it.
+void AddJobPaths(json* out) {
+  json& paths = *out;
   paths["/jobs"]["post"] = {
       {"summary", "Queue a calibration of a stored recording with another config"},
       {"security", json::array({{{"bearer", json::array()}}})},
@@ -318,6 +349,11 @@ json Build() {
         {"404", ErrorResponse("no such job")},
         {"409", ErrorResponse("the job already finished (the message names its status)")},
         {"415", ErrorResponse("neither application/json nor a form")}}}};
+}
+
+// The devices and their served calibration.
+void AddDevicePaths(json* out) {
+  json& paths = *out;
   paths["/devices"]["get"] = {
       {"summary",
        "Devices with their latest calibration time per method, a page at a time in byte order "
@@ -356,36 +392,11 @@ json Build() {
         {"404", ErrorResponse("no accepted calibration, or job not this device's")},
         {"409", ErrorResponse("csv, h or yaml of a stored result this calibd cannot read (e.g. "
                               "a schema_version from a newer calibd), naming the path")}}}};
-  paths["/recordings/{id}"]["get"] = {
-      {"summary", "Recording metadata"},
-      {"parameters", json::array({PathParam("id", "integer", "recording id")})},
-      {"responses",
-       {{"200", JsonResponse("metadata", Ref("Recording"))},
-        {"404", ErrorResponse("no such recording")}}}};
-  paths["/recordings/{id}/data"]["get"] = {
-      {"summary", "The original bytes"},
-      {"parameters", json::array({PathParam("id", "integer", "recording id")})},
-      {"responses",
-       {{"200",
-         {{"description", "the CSV as uploaded"},
-          {"content", {{"text/csv", {{"schema", {{"type", "string"}}}}}}}}},
-        {"404", ErrorResponse("no such recording")}}}};
-  paths["/recordings/{id}/segments"]["get"] = {
-      {"summary", "The static intervals of a stored inertial log (SPEC section 7)"},
-      {"parameters",
-       json::array({PathParam("id", "integer", "recording id"),
-                    QueryParam("static_window", "number", "s, default 1"),
-                    QueryParam("min_static", "number", "s, default 1"),
-                    QueryParam("static_threshold", "string",
-                               "{\"accelerometer\": x, \"gyroscope\": y}, reading units"),
-                    QueryParam("accel_unit", "string", "m/s^2 per reading unit"),
-                    QueryParam("gyro_unit", "string", "rad/s per reading unit"),
-                    QueryParam("time_unit", "string", "unit of t: s (default) | ms | us | ns")})},
-      {"responses",
-       {{"200", JsonResponse("intervals, thresholds, gaps", {{"type", "object"}})},
-        {"400", ErrorResponse("bad option (field)")},
-        {"404", ErrorResponse("no such recording")},
-        {"422", ErrorResponse("not an inertial log")}}}};
+}
+
+// Liveness, metrics and this document.
+void AddServicePaths(json* out) {
+  json& paths = *out;
   paths["/healthz"]["get"] = {
       {"summary", "Liveness (also at /healthz)"},
       {"responses",
@@ -402,6 +413,27 @@ json Build() {
   paths["/openapi.json"]["get"] = {
       {"summary", "This document"},
       {"responses", {{"200", JsonResponse("OpenAPI 3", {{"type", "object"}})}}}};
+}
+
+json Build() {
+  json method_names = json::array();
+  for (const Method* m : AllMethods()) method_names.push_back(m->name());
+  json doc;
+  doc["openapi"] = "3.0.3";
+  doc["info"] = {{"title", "calibd"},
+                 {"version", "0.1.0"},
+                 {"description",
+                  "Calibration server for multi-sensor inertial systems (SPEC.md). Writes need "
+                  "'Authorization: Bearer TOKEN' when the server runs with --token-file."}};
+  doc["servers"] = json::array({{{"url", "/api/v1"}}});
+  doc["components"]["securitySchemes"]["bearer"] = {{"type", "http"}, {"scheme", "bearer"}};
+  AddJobSchemas(&doc["components"]["schemas"]);
+  AddSchemas(method_names, &doc["components"]["schemas"]);
+  json& paths = doc["paths"];
+  AddRecordingPaths(&paths);
+  AddJobPaths(&paths);
+  AddDevicePaths(&paths);
+  AddServicePaths(&paths);
   return doc;
 }
 

@@ -370,120 +370,132 @@ bool Service::Impl::Authorized(const httplib::Request& req) const {
   return ConstantTimeEquals(header.substr(prefix.size()), token);
 }
 
-void Service::Impl::SetupRoutes() {
-  httplib::Server& http = *this->http;
-  http.set_payload_max_length(static_cast<size_t>(options.max_upload_bytes));
+namespace {
 
-  // Runs before the body is read (also before "100 Continue"): authentication, size and encoding
-  // limits. A refused request's connection is closed, so its body is never read as a request.
-  this->http->SetRequestFilter([this](const httplib::Request& req, httplib::Response& res) {
-    t_request_start = std::chrono::steady_clock::now();
-    const bool write = req.method != "GET" && req.method != "HEAD" && req.method != "OPTIONS";
-    const bool is_upload = req.path == "/api/v1/recordings" && req.method == "POST";
-    // Only uploads may be compressed, and only with gzip (decoded by HandleUpload under the
-    // upload and ratio limits); httplib never decodes bodies (server/http_server.h).
-    if (req.has_header(kBodyEncodingHeader)) {
-      const std::string enc = req.get_header_value(kBodyEncodingHeader);
-      if (ToLower(enc) != "identity" && !(is_upload && IsGzipEncoding(enc))) {
-        res.set_header("Connection", "close");
-        SendError(res, 415, "unsupported_media_type",
-                  "compressed request bodies (Content-Encoding: " + enc.substr(0, 32) +
-                      ") are not accepted; " +
-                      (is_upload ? "send the recording uncompressed or with Content-Encoding: gzip"
-                                 : "send the body uncompressed"));
-        return httplib::Server::HandlerResponse::Handled;
-      }
-    }
-    if (write && req.has_header("Content-Length")) {
-      const std::string text = req.get_header_value("Content-Length");
-      const int64_t limit = is_upload ? options.max_upload_bytes : options.max_json_body_bytes;
-      int64_t length = -1;
-      if (!text.empty() && text.find_first_not_of("0123456789") == std::string::npos) {
-        // Over 18 digits: beyond any limit (and std::stoll's range from 19 on).
-        length = text.size() <= 18 ? std::stoll(text) : INT64_MAX;
-      }
-      if (length < 0) {
-        res.set_header("Connection", "close");
-        SendError(res, 400, "invalid_input", "invalid Content-Length");
-        return httplib::Server::HandlerResponse::Handled;
-      }
-      if (length > limit) {
-        res.set_header("Connection", "close");
-        SendError(res, 413, "too_large",
-                  "the body has " + text + " bytes; the limit is " + std::to_string(limit));
-        return httplib::Server::HandlerResponse::Handled;
-      }
-    }
-    // Only uploads may stream a chunked body (cut off at the upload limit by our reader);
-    // cpp-httplib would buffer any other chunked body whole, so those need a Content-Length.
-    const bool chunked = ToLower(req.get_header_value("Transfer-Encoding")) == "chunked";
-    if (write && !req.has_header("Content-Length") && (!chunked || !is_upload) &&
-        req.method != "DELETE") {
+// The error handler: a JSON error for an answer httplib made without a body (404, 413, 414, 400).
+httplib::Server::HandlerResponse AnswerHttpError(const httplib::Request& req,
+                                                 httplib::Response& res) {
+  if (!res.body.empty()) return httplib::Server::HandlerResponse::Handled;
+  switch (res.status) {
+    case 404:
+      SendError(res, 404, "not_found", "no such resource: " + req.path.substr(0, 200));
+      break;
+    case 413:
+      SendError(res, 413, "too_large", "request body too large");
+      break;
+    case 414:
+      SendError(res, 414, "uri_too_long", "request URI too long");
+      break;
+    case 400:
+      SendError(res, 400, "invalid_input", "malformed request");
+      break;
+    default:
+      SendError(res, res.status, "error", "request failed");
+      break;
+  }
+  return httplib::Server::HandlerResponse::Handled;
+}
+
+// Known paths with another method: 405 with Allow; everything else: 404.
+void AnswerNotAllowed(const httplib::Request& req, httplib::Response& res) {
+  const std::string allow = AllowedMethods(req.path);
+  if (allow.empty()) {
+    SendError(res, 404, "not_found", "no such resource: " + req.path.substr(0, 200));
+    return;
+  }
+  res.set_header("Allow", allow);
+  SendError(res, 405, "method_not_allowed",
+            req.method + " is not allowed on " + req.path.substr(0, 200) + "; allowed: " + allow);
+}
+
+}  // namespace
+
+httplib::Server::HandlerResponse Service::Impl::FilterRequest(const httplib::Request& req,
+                                                              httplib::Response& res) {
+  t_request_start = std::chrono::steady_clock::now();
+  const bool write = req.method != "GET" && req.method != "HEAD" && req.method != "OPTIONS";
+  const bool is_upload = req.path == "/api/v1/recordings" && req.method == "POST";
+  // Only uploads may be compressed, and only with gzip (decoded by HandleUpload under the
+  // upload and ratio limits); httplib never decodes bodies (server/http_server.h).
+  if (req.has_header(kBodyEncodingHeader)) {
+    const std::string enc = req.get_header_value(kBodyEncodingHeader);
+    if (ToLower(enc) != "identity" && !(is_upload && IsGzipEncoding(enc))) {
       res.set_header("Connection", "close");
-      // A decision (revoke, accept, cancel) sent without a body: what it lacks is its reason.
-      if (const std::string decision = DecisionOfPath(req.path); !decision.empty()) {
-        SendError(res, 411, "length_required",
-                  "a " + decision +
-                      " needs a reason: send {\"reason\": \"...\"} as "
-                      "application/json (with its Content-Length)");
-        return httplib::Server::HandlerResponse::Handled;
-      }
+      SendError(res, 415, "unsupported_media_type",
+                "compressed request bodies (Content-Encoding: " + enc.substr(0, 32) +
+                    ") are not accepted; " +
+                    (is_upload ? "send the recording uncompressed or with Content-Encoding: gzip"
+                               : "send the body uncompressed"));
+      return httplib::Server::HandlerResponse::Handled;
+    }
+  }
+  if (write && req.has_header("Content-Length")) {
+    const std::string text = req.get_header_value("Content-Length");
+    const int64_t limit = is_upload ? options.max_upload_bytes : options.max_json_body_bytes;
+    int64_t length = -1;
+    if (!text.empty() && text.find_first_not_of("0123456789") == std::string::npos) {
+      // Over 18 digits: beyond any limit (and std::stoll's range from 19 on).
+      length = text.size() <= 18 ? std::stoll(text) : INT64_MAX;
+    }
+    if (length < 0) {
+      res.set_header("Connection", "close");
+      SendError(res, 400, "invalid_input", "invalid Content-Length");
+      return httplib::Server::HandlerResponse::Handled;
+    }
+    if (length > limit) {
+      res.set_header("Connection", "close");
+      SendError(res, 413, "too_large",
+                "the body has " + text + " bytes; the limit is " + std::to_string(limit));
+      return httplib::Server::HandlerResponse::Handled;
+    }
+  }
+  // Only uploads may stream a chunked body (cut off at the upload limit by our reader);
+  // cpp-httplib would buffer any other chunked body whole, so those need a Content-Length.
+  const bool chunked = ToLower(req.get_header_value("Transfer-Encoding")) == "chunked";
+  if (write && !req.has_header("Content-Length") && (!chunked || !is_upload) &&
+      req.method != "DELETE") {
+    res.set_header("Connection", "close");
+    // A decision (revoke, accept, cancel) sent without a body: what it lacks is its reason.
+    if (const std::string decision = DecisionOfPath(req.path); !decision.empty()) {
       SendError(res, 411, "length_required",
-                "a request body needs Content-Length or chunked "
-                "Transfer-Encoding");
+                "a " + decision +
+                    " needs a reason: send {\"reason\": \"...\"} as "
+                    "application/json (with its Content-Length)");
       return httplib::Server::HandlerResponse::Handled;
     }
-    // The job page's cancel form carries its token in the form (HandleCancel checks it).
-    if (write && !Authorized(req) && !IsCancelForm(req)) {
-      res.set_header("WWW-Authenticate", "Bearer");
-      res.set_header("Connection", "close");
-      SendError(res, 401, "unauthorized", "writes need the header 'Authorization: Bearer TOKEN'");
-      return httplib::Server::HandlerResponse::Handled;
-    }
-    return httplib::Server::HandlerResponse::Unhandled;
-  });
+    SendError(res, 411, "length_required",
+              "a request body needs Content-Length or chunked "
+              "Transfer-Encoding");
+    return httplib::Server::HandlerResponse::Handled;
+  }
+  // The job page's cancel form carries its token in the form (HandleCancel checks it).
+  if (write && !Authorized(req) && !IsCancelForm(req)) {
+    res.set_header("WWW-Authenticate", "Bearer");
+    res.set_header("Connection", "close");
+    SendError(res, 401, "unauthorized", "writes need the header 'Authorization: Bearer TOKEN'");
+    return httplib::Server::HandlerResponse::Handled;
+  }
+  return httplib::Server::HandlerResponse::Unhandled;
+}
 
-  http.set_exception_handler(AnswerException);
+void Service::Impl::LogAccess(const httplib::Request& req, const httplib::Response& res) {
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t_request_start).count();
+  metrics.ObserveRequest(req.method, RouteLabel(req.path), res.status, seconds);
+  if (options.access_log) {
+    char tail[96];
+    std::snprintf(tail, sizeof tail, " %d %zu %.3fms\n", res.status, res.body.size(),
+                  seconds * 1e3);
+    // One write per line, so lines from concurrent requests never interleave.
+    const std::string line = SanitizeForLog(req.remote_addr.empty() ? "-" : req.remote_addr) + " " +
+                             SanitizeForLog(req.method.empty() ? "-" : req.method) + " " +
+                             SanitizeForLog(req.path.empty() ? "-" : req.path) + tail;
+    [[maybe_unused]] ssize_t n = ::write(STDERR_FILENO, line.data(), line.size());
+  }
+}
 
-  http.set_error_handler(
-      httplib::Server::HandlerWithResponse([](const httplib::Request& req, httplib::Response& res) {
-        if (!res.body.empty()) return httplib::Server::HandlerResponse::Handled;
-        switch (res.status) {
-          case 404:
-            SendError(res, 404, "not_found", "no such resource: " + req.path.substr(0, 200));
-            break;
-          case 413:
-            SendError(res, 413, "too_large", "request body too large");
-            break;
-          case 414:
-            SendError(res, 414, "uri_too_long", "request URI too long");
-            break;
-          case 400:
-            SendError(res, 400, "invalid_input", "malformed request");
-            break;
-          default:
-            SendError(res, res.status, "error", "request failed");
-            break;
-        }
-        return httplib::Server::HandlerResponse::Handled;
-      }));
-
-  this->http->SetAccessLogger([this](const httplib::Request& req, const httplib::Response& res) {
-    const double seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t_request_start).count();
-    metrics.ObserveRequest(req.method, RouteLabel(req.path), res.status, seconds);
-    if (options.access_log) {
-      char tail[96];
-      std::snprintf(tail, sizeof tail, " %d %zu %.3fms\n", res.status, res.body.size(),
-                    seconds * 1e3);
-      // One write per line, so lines from concurrent requests never interleave.
-      const std::string line = SanitizeForLog(req.remote_addr.empty() ? "-" : req.remote_addr) +
-                               " " + SanitizeForLog(req.method.empty() ? "-" : req.method) + " " +
-                               SanitizeForLog(req.path.empty() ? "-" : req.path) + tail;
-      [[maybe_unused]] ssize_t n = ::write(STDERR_FILENO, line.data(), line.size());
-    }
-  });
-
+void Service::Impl::RegisterApiRoutes(httplib::Server* server) {
+  httplib::Server& http = *server;
   http.Post("/api/v1/recordings",
             [this](const httplib::Request& req, httplib::Response& res,
                    const httplib::ContentReader& reader) { HandleUpload(req, res, reader); });
@@ -533,24 +545,27 @@ void Service::Impl::SetupRoutes() {
   });
   RegisterRecordingRoutes(&http, store.get());  // /segments and the recording page
   RegisterHtmlRoutes(&http, store.get(), !token.empty());
+}
 
+void Service::Impl::SetupRoutes() {
+  httplib::Server& http = *this->http;
+  http.set_payload_max_length(static_cast<size_t>(options.max_upload_bytes));
+  // Authentication, size and encoding limits, before the body is read (FilterRequest).
+  this->http->SetRequestFilter([this](const httplib::Request& req, httplib::Response& res) {
+    return FilterRequest(req, res);
+  });
+  http.set_exception_handler(AnswerException);
+  http.set_error_handler(httplib::Server::HandlerWithResponse(AnswerHttpError));
+  this->http->SetAccessLogger(
+      [this](const httplib::Request& req, const httplib::Response& res) { LogAccess(req, res); });
+  RegisterApiRoutes(&http);
   // Known paths with another method: 405 with Allow; everything else: 404.
-  auto not_allowed = [](const httplib::Request& req, httplib::Response& res) {
-    const std::string allow = AllowedMethods(req.path);
-    if (allow.empty()) {
-      SendError(res, 404, "not_found", "no such resource: " + req.path.substr(0, 200));
-      return;
-    }
-    res.set_header("Allow", allow);
-    SendError(res, 405, "method_not_allowed",
-              req.method + " is not allowed on " + req.path.substr(0, 200) + "; allowed: " + allow);
-  };
-  http.Get(".*", not_allowed);
-  http.Post(".*", not_allowed);
-  http.Put(".*", not_allowed);
-  http.Patch(".*", not_allowed);
-  http.Delete(".*", not_allowed);
-  http.Options(".*", not_allowed);
+  http.Get(".*", AnswerNotAllowed);
+  http.Post(".*", AnswerNotAllowed);
+  http.Put(".*", AnswerNotAllowed);
+  http.Patch(".*", AnswerNotAllowed);
+  http.Delete(".*", AnswerNotAllowed);
+  http.Options(".*", AnswerNotAllowed);
 }
 
 void Service::Impl::HandleHealth(const httplib::Request&, httplib::Response& res) {

@@ -77,7 +77,17 @@ struct Service::Impl {
   std::condition_variable checker_cv;
   bool checker_stop = false;
 
+  // The routes of the HTTP API and pages, with the request filter, error handler and access log.
   void SetupRoutes();
+  // The request filter: runs before the body is read (also before "100 Continue") and refuses
+  // what authentication, the size limits and the encoding rules do not allow (Handled: answered,
+  // the connection closed so the body is never read as a request).
+  httplib::Server::HandlerResponse FilterRequest(const httplib::Request& req,
+                                                 httplib::Response& res);
+  // Notes the request in the metrics and, with options.access_log, one line on stderr.
+  void LogAccess(const httplib::Request& req, const httplib::Response& res);
+  // The /api/v1 routes, the recording routes and the HTML pages.
+  void RegisterApiRoutes(httplib::Server* server);
   // Takes back at once the jobs of calibd processes of this host that died (kill -9, crash)
   // while holding them, instead of waiting for their leases to expire (ProcessInstance).
   void ReapDeadProcesses();
@@ -88,6 +98,12 @@ struct Service::Impl {
   bool TokenMatches(const std::string& given) const;
   void HandleUpload(const httplib::Request& req, httplib::Response& res,
                     const httplib::ContentReader& reader);
+  // The job an upload's config (with a method) asks for, checked against the recording read
+  // (`summary`; `file_name`, the client's, names it in messages) before anything is stored:
+  // references resolved, the config validated (*common), the time column and the job budget
+  // checked. Sets rec->job; *config gets the stored (NFC) serial.
+  Status CheckUploadJob(const RecordingSummary& summary, const std::string& file_name,
+                        nlohmann::json* config, CommonConfig* common, storage::NewRecording* rec);
   void HandleCreateJob(const httplib::Request& req, httplib::Response& res);
   void HandleGetJob(const httplib::Request& req, httplib::Response& res);
   void HandleDecision(const httplib::Request& req, httplib::Response& res, bool revoke);

@@ -83,26 +83,20 @@ Status ResolveJobReferences(storage::Store* store, json* config) {
   return method == nullptr ? Status::Ok() : method->ResolveReferences(store, config);
 }
 
-void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response& res,
-                                 const httplib::ContentReader& reader) {
-  int64_t received = 0;
-  auto finish = [&](int status) { metrics.ObserveUpload(received, status); };
+namespace {
 
-  // Config from the query string (text/csv bodies) — validated before the body is read.
-  json config;
-  Status s = ConfigFromQuery(req.params, &config);
-  if (!s.ok()) return finish(SendStatus(res, s));
-
+// 415 for a body HandleUpload does not read: a gzip-compressed multipart body, or a media type
+// that is neither CSV nor multipart. Returns the status sent, or 0 when the body is acceptable.
+int RefuseUploadMedia(const httplib::Request& req, bool body_gzip, httplib::Response& res) {
   const std::string content_type = req.get_header_value("Content-Type");
   const std::string media = ToLower(content_type.substr(0, content_type.find(';')));
   const bool multipart = req.is_multipart_form_data();
-  const bool body_gzip = IsGzipEncoding(req.get_header_value(kBodyEncodingHeader));
   if (multipart && body_gzip) {
     res.set_header("Connection", "close");
     SendError(res, 415, "unsupported_media_type",
               "a gzip-compressed multipart body is not accepted; compress the 'recording' part "
               "instead (a .csv.gz file)");
-    return finish(415);
+    return 415;
   }
   if (!multipart && media != "text/csv" && media != "text/plain" && media != "application/csv" &&
       media != "application/octet-stream" && media != "application/gzip" &&
@@ -112,166 +106,333 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
               "send the recording as text/csv, or as multipart/form-data with parts 'recording' "
               "and 'config'; not '" +
                   content_type.substr(0, 64) + "'");
-    return finish(415);
+    return 415;
+  }
+  return 0;
+}
+
+// An upload's body as it streams in. The recording may be gzip-compressed (Content-Encoding:
+// gzip, or a body or part that starts with the gzip magic bytes, e.g. a .csv.gz file): it is
+// decompressed as it arrives, and the decompressed CSV is what is parsed, hashed and staged on
+// disk, chunk by chunk under the upload limits; the same log sent compressed or not is one
+// recording, and GET /recordings/{id}/data returns the CSV. A multipart body's config part is
+// merged into the query's config. One per request; not thread-safe.
+class UploadBody {
+ public:
+  // `options`: the upload limits (kept by reference: must outlive this); `body_gzip`: the
+  // request's Content-Encoding is gzip.
+  UploadBody(const ServeOptions& options, bool body_gzip)
+      : options_(options), body_gzip_(body_gzip), parser_("upload", /*collect=*/false) {
+    gzip_limits_.max_output_bytes = options.max_upload_bytes;
+    gzip_limits_.max_ratio = options.max_gzip_ratio;
   }
 
-  StagingFile staged;
-  s = staged.Create(staging_dir);
-  if (!s.ok()) return finish(SendStatus(res, s));
-  Sha256 sha;
-  RecordingParser parser("upload", /*collect=*/false);
-  Status parse_status;  // first CSV error
-  Status body_status;   // first other error (size, I/O, multipart shape)
-  std::string file_name;
+  // Creates the staging file in `dir`.
+  Status Stage(const fs::path& dir) { return staged_.Create(dir); }
 
-  // The recording may be gzip-compressed (Content-Encoding: gzip, or a body or part that starts
-  // with the gzip magic bytes, e.g. a .csv.gz file). It is decompressed as it arrives, and the
-  // decompressed CSV is what is parsed, hashed and stored: the same log sent compressed or not
-  // is one recording, and GET /recordings/{id}/data returns the CSV.
-  GzipLimits gzip_limits;
-  gzip_limits.max_output_bytes = options.max_upload_bytes;
-  gzip_limits.max_ratio = options.max_gzip_ratio;
-  std::unique_ptr<GzipInflater> inflater;  // set when the recording is compressed
-  std::string head;                        // the first bytes, until the magic can be seen
-  bool decided = false;                    // compressed or not is known
-  int64_t csv_bytes = 0;
+  // Reads the whole body through `reader` (multipart: the parts 'recording' and 'config', whose
+  // keys are added to *config; else the recording alone) and ends the recording when all went
+  // well. false when the body could not be read completely (the connection broke, the body was
+  // malformed, or a limit or error stopped it: body_status() or parse_status() then says why).
+  bool Read(const httplib::ContentReader& reader, bool multipart, json* config) {
+    bool read_ok;
+    if (multipart) {
+      read_ok = reader([&](const httplib::MultipartFormData& header) { return StartPart(header); },
+                       [&](const char* data, size_t len) { return TakePartBytes(data, len); });
+      if (read_ok && body_status_.ok() && parse_status_.ok()) MergeParts(config);
+    } else {
+      read_ok = reader([&](const char* data, size_t len) { return TakeRecordingBytes(data, len); });
+    }
+    if (read_ok && body_status_.ok() && parse_status_.ok()) EndRecording();
+    return read_ok;
+  }
 
-  auto take_csv_bytes = [&](const char* data, size_t len) {
-    csv_bytes += static_cast<int64_t>(len);
-    if (csv_bytes > options.max_upload_bytes) {
-      body_status =
+  int64_t received() const { return received_; }  // body bytes so far (as sent)
+  // The first error other than the CSV's (size, I/O, gzip, multipart shape).
+  const Status& body_status() const { return body_status_; }
+  const Status& parse_status() const { return parse_status_; }  // the first CSV error
+  RecordingParser& parser() { return parser_; }
+  StagingFile& staged() { return staged_; }
+  // The recording's row as storage takes it, from the CSV read (after parser().Finish()).
+  storage::NewRecording Recording() {
+    const RecordingSummary& summary = parser_.summary();
+    storage::NewRecording rec;
+    rec.path = staged_.path();
+    rec.sha256 = sha_.HexDigest();
+    rec.layout = LayoutName(summary.layout);
+    rec.rows = summary.rows;
+    rec.columns_json = json(summary.columns).dump();
+    rec.sensors_json = json(summary.sensors).dump();
+    rec.file_name = file_name_;
+    return rec;
+  }
+  const std::string& file_name() const { return file_name_; }  // the client's, or ""
+  // The compressed size of a gzip'd recording; null when it was not compressed.
+  json compressed_bytes() const { return inflater_ ? json(inflater_->compressed_bytes()) : json(); }
+
+ private:
+  // Decompressed (or plain) CSV bytes: counted against the limit, hashed, staged, parsed.
+  bool TakeCsvBytes(const char* data, size_t len) {
+    csv_bytes_ += static_cast<int64_t>(len);
+    if (csv_bytes_ > options_.max_upload_bytes) {
+      body_status_ =
           Status(StatusCode::kTooLarge, "the recording is larger than the limit of " +
-                                            std::to_string(options.max_upload_bytes) + " bytes");
+                                            std::to_string(options_.max_upload_bytes) + " bytes");
       return false;
     }
-    sha.Update(std::string_view(data, len));
-    if (!staged.Write(data, len)) {
-      body_status = staged.WriteError();
+    sha_.Update(std::string_view(data, len));
+    if (!staged_.Write(data, len)) {
+      body_status_ = staged_.WriteError();
       return false;
     }
-    parse_status = parser.Feed(std::string_view(data, len));
-    return parse_status.ok();
-  };
-  auto feed_recording = [&](const char* data, size_t len) {
-    if (!inflater) return take_csv_bytes(data, len);
-    Status st = inflater->Feed(data, len, take_csv_bytes);
-    if (!st.ok() && !GzipInflater::IsSinkStopped(st)) body_status = st;
+    parse_status_ = parser_.Feed(std::string_view(data, len));
+    return parse_status_.ok();
+  }
+
+  bool FeedRecording(const char* data, size_t len) {
+    if (!inflater_) return TakeCsvBytes(data, len);
+    Status st =
+        inflater_->Feed(data, len, [this](const char* d, size_t n) { return TakeCsvBytes(d, n); });
+    if (!st.ok() && !GzipInflater::IsSinkStopped(st)) body_status_ = st;
     return st.ok();
-  };
-  auto take_recording_bytes = [&](const char* data, size_t len) {
-    received += static_cast<int64_t>(len);
-    if (received > options.max_upload_bytes) {
-      body_status =
+  }
+
+  // The recording's bytes as sent: the first two decide whether it is gzip'd.
+  bool TakeRecordingBytes(const char* data, size_t len) {
+    received_ += static_cast<int64_t>(len);
+    if (received_ > options_.max_upload_bytes) {
+      body_status_ =
           Status(StatusCode::kTooLarge, "the upload is larger than the limit of " +
-                                            std::to_string(options.max_upload_bytes) + " bytes");
+                                            std::to_string(options_.max_upload_bytes) + " bytes");
       return false;
     }
-    if (!decided) {
-      const size_t take = std::min(len, 2 - head.size());
-      head.append(data, take);
+    if (!decided_) {
+      const size_t take = std::min(len, 2 - head_.size());
+      head_.append(data, take);
       data += take;
       len -= take;
-      if (head.size() < 2 && !body_gzip) return true;
-      decided = true;
-      if (body_gzip || LooksLikeGzip(head.data(), head.size())) {
-        inflater = std::make_unique<GzipInflater>(gzip_limits, "the recording");
+      if (head_.size() < 2 && !body_gzip_) return true;
+      decided_ = true;
+      if (body_gzip_ || LooksLikeGzip(head_.data(), head_.size())) {
+        inflater_ = std::make_unique<GzipInflater>(gzip_limits_, "the recording");
       }
-      if (!feed_recording(head.data(), head.size())) return false;
+      if (!FeedRecording(head_.data(), head_.size())) return false;
     }
-    return len == 0 || feed_recording(data, len);
-  };
+    return len == 0 || FeedRecording(data, len);
+  }
+
   // After the last byte: a recording of one byte, and the end of a gzip stream.
-  auto end_recording = [&] {
-    if (!decided && !head.empty()) {
-      decided = true;
-      if (!feed_recording(head.data(), head.size())) return;
+  void EndRecording() {
+    if (!decided_ && !head_.empty()) {
+      decided_ = true;
+      if (!FeedRecording(head_.data(), head_.size())) return;
     }
-    if (inflater) {
-      Status st = inflater->Finish();
-      if (!st.ok()) body_status = st;
+    if (inflater_) {
+      Status st = inflater_->Finish();
+      if (!st.ok()) body_status_ = st;
     }
-  };
+  }
 
-  bool read_ok;
-  if (multipart) {
-    std::string part;  // name of the current part
-    std::string config_text;
-    bool have_recording = false, have_config = false;
-    read_ok = reader(
-        [&](const httplib::MultipartFormData& header) {
-          part = header.name;
-          if (part == "recording") {
-            if (have_recording) {
-              body_status =
-                  Status::InvalidInput("more than one 'recording' part").WithField("recording");
-              return false;
-            }
-            have_recording = true;
-            file_name = header.filename;
-          } else if (part == "config") {
-            if (have_config) {
-              body_status = Status::InvalidInput("more than one 'config' part").WithField("config");
-              return false;
-            }
-            have_config = true;
-          } else {
-            body_status = Status::InvalidInput("unknown multipart part '" + part.substr(0, 64) +
-                                               "': expected 'recording' and 'config'")
-                              .WithField(part.substr(0, 64));
-            return false;
-          }
-          return true;
-        },
-        [&](const char* data, size_t len) {
-          if (part == "recording") return take_recording_bytes(data, len);
-          received += static_cast<int64_t>(len);
-          if (static_cast<int64_t>(config_text.size() + len) > options.max_json_body_bytes) {
-            body_status = Status(StatusCode::kTooLarge,
-                                 "the config part is larger than " +
-                                     std::to_string(options.max_json_body_bytes) + " bytes");
-            return false;
-          }
-          config_text.append(data, len);
-          return true;
-        });
-    if (read_ok && body_status.ok() && parse_status.ok()) {
-      if (!have_recording) {
-        body_status = Status::InvalidInput("no 'recording' part in the multipart body")
-                          .WithField("recording");
-      } else if (have_config) {
-        json part_config;
-        Status cs = ParseJsonText(config_text, "config", &part_config);
-        if (!cs.ok()) {
-          body_status = cs.WithField("config");
-        } else if (!part_config.is_object()) {
-          body_status =
-              Status::InvalidInput("the config part must be a JSON object").WithField("config");
-        } else {
-          for (auto& [key, value] : part_config.items()) {
-            if (config.contains(key)) {
-              body_status = Status::InvalidInput("key '" + key +
-                                                 "' given both in the query and the config part")
-                                .WithField(key);
-              break;
-            }
-            config[key] = value;
-          }
+  // A multipart part begins: 'recording' or 'config', each at most once.
+  bool StartPart(const httplib::MultipartFormData& header) {
+    part_ = header.name;
+    if (part_ == "recording") {
+      if (have_recording_) {
+        body_status_ =
+            Status::InvalidInput("more than one 'recording' part").WithField("recording");
+        return false;
+      }
+      have_recording_ = true;
+      file_name_ = header.filename;
+    } else if (part_ == "config") {
+      if (have_config_) {
+        body_status_ = Status::InvalidInput("more than one 'config' part").WithField("config");
+        return false;
+      }
+      have_config_ = true;
+    } else {
+      body_status_ = Status::InvalidInput("unknown multipart part '" + part_.substr(0, 64) +
+                                          "': expected 'recording' and 'config'")
+                         .WithField(part_.substr(0, 64));
+      return false;
+    }
+    return true;
+  }
+
+  bool TakePartBytes(const char* data, size_t len) {
+    if (part_ == "recording") return TakeRecordingBytes(data, len);
+    received_ += static_cast<int64_t>(len);
+    if (static_cast<int64_t>(config_text_.size() + len) > options_.max_json_body_bytes) {
+      body_status_ = Status(StatusCode::kTooLarge,
+                            "the config part is larger than " +
+                                std::to_string(options_.max_json_body_bytes) + " bytes");
+      return false;
+    }
+    config_text_.append(data, len);
+    return true;
+  }
+
+  // After a multipart body: a 'recording' part is required; the config part's keys join
+  // *config (a key given in both is refused).
+  void MergeParts(json* config) {
+    if (!have_recording_) {
+      body_status_ =
+          Status::InvalidInput("no 'recording' part in the multipart body").WithField("recording");
+      return;
+    }
+    if (!have_config_) return;
+    json part_config;
+    Status cs = ParseJsonText(config_text_, "config", &part_config);
+    if (!cs.ok()) {
+      body_status_ = cs.WithField("config");
+    } else if (!part_config.is_object()) {
+      body_status_ =
+          Status::InvalidInput("the config part must be a JSON object").WithField("config");
+    } else {
+      for (auto& [key, value] : part_config.items()) {
+        if (config->contains(key)) {
+          body_status_ =
+              Status::InvalidInput("key '" + key + "' given both in the query and the config part")
+                  .WithField(key);
+          break;
         }
+        (*config)[key] = value;
       }
     }
-  } else {
-    read_ok = reader([&](const char* data, size_t len) { return take_recording_bytes(data, len); });
   }
-  if (read_ok && body_status.ok() && parse_status.ok()) end_recording();
 
-  if (!body_status.ok()) {
-    if (body_status.reason() == Reason::kDiskFull) health.Note(body_status, "an upload", true);
-    res.set_header("Connection", "close");
-    return finish(SendStatus(res, body_status));
+  const ServeOptions& options_;
+  const bool body_gzip_;
+  StagingFile staged_;
+  Sha256 sha_;
+  RecordingParser parser_;
+  Status parse_status_;  // first CSV error
+  Status body_status_;   // first other error (size, I/O, multipart shape)
+  std::string file_name_;
+  int64_t received_ = 0;  // body bytes as sent
+  GzipLimits gzip_limits_;
+  std::unique_ptr<GzipInflater> inflater_;  // set when the recording is compressed
+  std::string head_;                        // the first bytes, until the magic can be seen
+  bool decided_ = false;                    // compressed or not is known
+  int64_t csv_bytes_ = 0;
+  // Multipart: the current part's name, the config part's text, which parts came.
+  std::string part_;
+  std::string config_text_;
+  bool have_recording_ = false, have_config_ = false;
+};
+
+// The answer to a stored upload: 201 with the recording (and its job), Location naming the job
+// when one was queued, else the recording.
+void AnswerStoredUpload(const storage::RecordingInfo& info, bool existed,
+                        const json& compressed_bytes, httplib::Response& res) {
+  json body = {{"recording",
+                {{"id", info.id},
+                 {"sha256", info.sha256},
+                 {"bytes", info.bytes},
+                 {"rows", info.rows},
+                 {"layout", info.layout},
+                 {"existed", existed},
+                 {"compressed_bytes", compressed_bytes},
+                 {"url", "/api/v1/recordings/" + std::to_string(info.id)}}}};
+  if (info.job) {
+    body["job"] = {{"id", info.job->id},
+                   {"status", info.job->status},
+                   {"url", "/api/v1/jobs/" + std::to_string(info.job->id)},
+                   {"report_url", "/jobs/" + std::to_string(info.job->id)}};
+    res.set_header("Location", "/api/v1/jobs/" + std::to_string(info.job->id));
+  } else {
+    res.set_header("Location", "/api/v1/recordings/" + std::to_string(info.id));
   }
-  if (!parse_status.ok()) {
+  res.status = 201;
+  res.set_content(JsonBody(body), "application/json");
+}
+
+// A config without a method names at most the device (a string, stored in NFC).
+Status CheckDeviceOnlyConfig(const json& config, CommonConfig* common) {
+  if (!config.contains("device")) return Status::Ok();
+  if (!config["device"].is_string()) {
+    return Status::InvalidInput("'device' must be a string").WithField("device");
+  }
+  Status s = NormalizeSerial(config["device"].get_ref<const std::string&>(), &common->device);
+  if (!s.ok()) return s;
+  for (auto& [key, value] : config.items()) {
+    if (key != "device") {
+      return Status::InvalidInput("config key '" + key + "' given without 'method'").WithField(key);
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status Service::Impl::CheckUploadJob(const RecordingSummary& summary, const std::string& file_name,
+                                     json* config, CommonConfig* common,
+                                     storage::NewRecording* rec) {
+  Status s = ResolveJobReferences(store.get(), config);
+  if (!s.ok()) return s;
+  s = ValidateConfig(*config, common);
+  if (!s.ok()) return s;
+  if (!common->device.empty()) (*config)["device"] = common->device;  // the stored (NFC) serial
+  s = CheckJobSeconds(*common, static_cast<double>(job_seconds));
+  if (!s.ok()) return s;
+  const Method& method = *FindMethod(common->method);
+  TimeUnit time_unit = TimeUnit::kSeconds;
+  bool time_unit_given = false;
+  s = ParseTimeUnit(*config, &time_unit, &time_unit_given);  // validated above
+  if (!s.ok()) return s;
+  if (method.NeedsIncreasingTime()) {  // raw-log methods
+    s = CheckTimesIncrease(summary, common->method, time_unit);
+    if (!s.ok()) return s;
+  }
+  if (!method.Reads(summary.layout)) {
+    return Status::InvalidInput(std::string("method '") + common->method +
+                                "' cannot read the recording's " + LayoutName(summary.layout) +
+                                " layout")
+        .WithField("method");
+  }
+  // A time column in ms or ns read as seconds would make the job compute for hours on a
+  // nonsense rate: refused now, nothing stored (the summary's figures are in the file's unit,
+  // whatever unit the config names; the worker checks the same for jobs on stored logs).
+  if (!time_unit_given && method.ReadsTime(WithoutAcceptance(*config))) {
+    s = CheckTimeUnit(summary, file_name.empty() ? "upload" : file_name);
+    if (!s.ok()) return s;
+  }
+  const RecordingShape shape{summary.rows, static_cast<int64_t>(summary.columns.size())};
+  s = CheckJobBudget(*FindMethod(common->method), shape, WithoutAcceptance(*config),
+                     job_memory_bytes);
+  if (!s.ok()) return s;
+  rec->job = storage::NewJob{common->method, common->device,
+                             config->dump(-1, ' ', false, json::error_handler_t::replace)};
+  return Status::Ok();
+}
+
+void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response& res,
+                                 const httplib::ContentReader& reader) {
+  const bool body_gzip = IsGzipEncoding(req.get_header_value(kBodyEncodingHeader));
+  UploadBody body(options, body_gzip);
+  auto finish = [&](int status) { metrics.ObserveUpload(body.received(), status); };
+
+  // Config from the query string (text/csv bodies) — validated before the body is read.
+  json config;
+  Status s = ConfigFromQuery(req.params, &config);
+  if (!s.ok()) return finish(SendStatus(res, s));
+  if (const int refused = RefuseUploadMedia(req, body_gzip, res); refused != 0) {
+    return finish(refused);
+  }
+  s = body.Stage(staging_dir);
+  if (!s.ok()) return finish(SendStatus(res, s));
+
+  const bool read_ok = body.Read(reader, req.is_multipart_form_data(), &config);
+  if (!body.body_status().ok()) {
+    if (body.body_status().reason() == Reason::kDiskFull) {
+      health.Note(body.body_status(), "an upload", true);
+    }
     res.set_header("Connection", "close");
-    return finish(SendStatus(res, parse_status));
+    return finish(SendStatus(res, body.body_status()));
+  }
+  if (!body.parse_status().ok()) {
+    res.set_header("Connection", "close");
+    return finish(SendStatus(res, body.parse_status()));
   }
   if (!read_ok) {
     // The connection broke or the body was malformed (e.g. bad chunk sizes, truncated multipart).
@@ -279,73 +440,17 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     SendError(res, 400, "invalid_input", "the request body could not be read completely");
     return finish(400);
   }
-  s = parser.Finish();
+  s = body.parser().Finish();
   if (!s.ok()) return finish(SendStatus(res, s));
-  const RecordingSummary& summary = parser.summary();
 
-  storage::NewRecording rec;
-  rec.path = staged.path();
-  rec.sha256 = sha.HexDigest();
-  rec.layout = LayoutName(summary.layout);
-  rec.rows = summary.rows;
-  rec.columns_json = json(summary.columns).dump();
-  rec.sensors_json = json(summary.sensors).dump();
-  rec.file_name = file_name;
+  storage::NewRecording rec = body.Recording();
   CommonConfig common;
-  const bool has_method = config.contains("method");
-  if (has_method) {
-    s = ResolveJobReferences(store.get(), &config);
-    if (!s.ok()) return finish(SendStatus(res, s));
-    s = ValidateConfig(config, &common);
-    if (!s.ok()) return finish(SendStatus(res, s));
-    if (!common.device.empty()) config["device"] = common.device;  // the stored (NFC) serial
-    s = CheckJobSeconds(common, static_cast<double>(job_seconds));
-    if (!s.ok()) return finish(SendStatus(res, s));
-    const Method& method = *FindMethod(common.method);
-    TimeUnit time_unit = TimeUnit::kSeconds;
-    bool time_unit_given = false;
-    s = ParseTimeUnit(config, &time_unit, &time_unit_given);  // validated above
-    if (!s.ok()) return finish(SendStatus(res, s));
-    if (method.NeedsIncreasingTime()) {  // raw-log methods
-      s = CheckTimesIncrease(summary, common.method, time_unit);
-      if (!s.ok()) return finish(SendStatus(res, s));
-    }
-    if (!method.Reads(summary.layout)) {
-      return finish(SendStatus(res, Status::InvalidInput(std::string("method '") + common.method +
-                                                         "' cannot read the recording's " +
-                                                         LayoutName(summary.layout) + " layout")
-                                        .WithField("method")));
-    }
-    // A time column in ms or ns read as seconds would make the job compute for hours on a
-    // nonsense rate: refused now, nothing stored (the summary's figures are in the file's unit,
-    // whatever unit the config names; the worker checks the same for jobs on stored logs).
-    if (!time_unit_given && method.ReadsTime(WithoutAcceptance(config))) {
-      s = CheckTimeUnit(summary, file_name.empty() ? "upload" : file_name);
-      if (!s.ok()) return finish(SendStatus(res, s));
-    }
-    const RecordingShape shape{summary.rows, static_cast<int64_t>(summary.columns.size())};
-    s = CheckJobBudget(*FindMethod(common.method), shape, WithoutAcceptance(config),
-                       job_memory_bytes);
-    if (!s.ok()) return finish(SendStatus(res, s));
-    rec.job = storage::NewJob{common.method, common.device,
-                              config.dump(-1, ' ', false, json::error_handler_t::replace)};
-  } else if (config.contains("device")) {
-    if (!config["device"].is_string()) {
-      return finish(
-          SendStatus(res, Status::InvalidInput("'device' must be a string").WithField("device")));
-    }
-    s = NormalizeSerial(config["device"].get_ref<const std::string&>(), &common.device);
-    if (!s.ok()) return finish(SendStatus(res, s));
-    for (auto& [key, value] : config.items()) {
-      if (key != "device") {
-        return finish(
-            SendStatus(res, Status::InvalidInput("config key '" + key + "' given without 'method'")
-                                .WithField(key)));
-      }
-    }
-  }
+  s = config.contains("method")
+          ? CheckUploadJob(body.parser().summary(), body.file_name(), &config, &common, &rec)
+          : CheckDeviceOnlyConfig(config, &common);
+  if (!s.ok()) return finish(SendStatus(res, s));
   rec.device = common.device;
-  s = staged.Close();
+  s = body.staged().Close();
   if (!s.ok()) return finish(SendStatus(res, s));
 
   storage::RecordingInfo info;
@@ -355,27 +460,8 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
   // same bytes (Store::PutRecording).
   health.Note(s, s.ok() ? "recording " + std::to_string(info.id) : "an upload", true);
   if (!s.ok()) return finish(SendStatus(res, s));
-  json body = {{"recording",
-                {{"id", info.id},
-                 {"sha256", info.sha256},
-                 {"bytes", info.bytes},
-                 {"rows", info.rows},
-                 {"layout", info.layout},
-                 {"existed", existed},
-                 {"compressed_bytes", inflater ? json(inflater->compressed_bytes()) : json()},
-                 {"url", "/api/v1/recordings/" + std::to_string(info.id)}}}};
-  if (info.job) {
-    body["job"] = {{"id", info.job->id},
-                   {"status", info.job->status},
-                   {"url", "/api/v1/jobs/" + std::to_string(info.job->id)},
-                   {"report_url", "/jobs/" + std::to_string(info.job->id)}};
-    res.set_header("Location", "/api/v1/jobs/" + std::to_string(info.job->id));
-    workers->Notify();
-  } else {
-    res.set_header("Location", "/api/v1/recordings/" + std::to_string(info.id));
-  }
-  res.status = 201;
-  res.set_content(JsonBody(body), "application/json");
+  AnswerStoredUpload(info, existed, body.compressed_bytes(), res);
+  if (info.job) workers->Notify();
   finish(201);
 }
 
