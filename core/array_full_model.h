@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/array_full.h"
+#include "core/array_model.h"
 #include "core/block_lm.h"
 
 namespace calibd::core::array_full_model {
@@ -28,16 +29,9 @@ constexpr int kP = kArrayFullTriadParameters;
 // Offsets in a triad's 27 parameters.
 constexpr int kTa = 0, kBa = 9, kTg = 12, kBg = 21, kR = 24;
 
-inline Mat3 Skew(const Vec3& v) {
-  Mat3 m;
-  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-  return m;
-}
-
-// A = Omega_omega^2 + Omega_omega_dot: u = A r + s.
-inline Mat3 MatrixA(const Vec3& w, const Vec3& wd) {
-  return w * w.transpose() - w.squaredNorm() * Mat3::Identity() + Skew(wd);
-}
+// [v]x and A = Omega_omega^2 + Omega_omega_dot (u = A r + s), as the rigid-body model's.
+using array_model::MatrixA;
+using array_model::Skew;
 
 // d/d omega [omega x (omega x r)] = (omega . r) I + omega r^T - 2 r omega^T.
 inline Mat3 CentripetalJacobian(const Vec3& w, const Vec3& r) {
