@@ -6,9 +6,9 @@
 #include <set>
 #include <sstream>
 
-#include "results/json_text.h"
 #include "methods/method.h"
 #include "methods/registry.h"
+#include "results/json_text.h"
 
 namespace calibd::server {
 

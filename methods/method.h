@@ -24,9 +24,9 @@
 #include "base/status.h"
 #include "core/block_lm.h"
 #include "core/stop_token.h"
+#include "formats/recording.h"
 #include "methods/acceptance.h"
 #include "methods/exports.h"
-#include "formats/recording.h"
 
 namespace CLI {
 class App;  // CLI11 (server/cli.cc)

@@ -1,8 +1,8 @@
 // The per-IMU sensor blocks that `imu` and `array` with model full share (SPEC §7):
 // parameters.imus[] = {"name", "accelerometer": SensorTriad, "gyroscope": SensorTriad, ...} and
 // uncertainty.imus[] = {"name", "accelerometer": SensorTriadStd, "gyroscope": SensorTriadStd, ...}.
-// Each method's result (methods/imu/imu_result.h, methods/array/array_result.h) holds these and adds its
-// own members (array full: position, position_std); the judges (methods/acceptance.h
+// Each method's result (methods/imu/imu_result.h, methods/array/array_result.h) holds these and
+// adds its own members (array full: position, position_std); the judges (methods/acceptance.h
 // JudgeImuTriads) and the drift tables read them typed.
 #ifndef CALIBD_RESULTS_TRIAD_H_
 #define CALIBD_RESULTS_TRIAD_H_

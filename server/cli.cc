@@ -11,10 +11,10 @@
 
 #include "core/stop_token.h"
 #include "methods/acceptance.h"
-#include "server/config.h"
-#include "server/failure_reasons.h"
 #include "methods/method.h"
 #include "methods/registry.h"
+#include "server/config.h"
+#include "server/failure_reasons.h"
 #include "server/serve.h"
 
 namespace calibd::server {

@@ -3,10 +3,10 @@
 #include <cctype>
 #include <cstdio>
 
-#include "server/device_lookup.h"
 #include "formats/inertial_log.h"
 #include "methods/method.h"
 #include "methods/registry.h"
+#include "server/device_lookup.h"
 
 namespace calibd::server {
 

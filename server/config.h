@@ -12,8 +12,8 @@
 #include "base/status.h"
 #include "core/block_lm.h"
 #include "core/stop_token.h"
-#include "results/json_text.h"
 #include "formats/recording.h"
+#include "results/json_text.h"
 
 namespace calibd::server {
 

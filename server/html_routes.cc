@@ -7,12 +7,12 @@
 #include <string>
 #include <vector>
 
+#include "methods/method.h"
+#include "methods/registry.h"
 #include "server/config.h"
 #include "server/device_lookup.h"
 #include "server/failure_reasons.h"
 #include "server/http_util.h"
-#include "methods/method.h"
-#include "methods/registry.h"
 #include "storage/store.h"
 #include "web/pages.h"
 

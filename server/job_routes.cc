@@ -1,8 +1,8 @@
 // The API's jobs, decisions, devices, exports and recordings (server/service_impl.h).
 #include <iostream>
 
-#include "server/service_impl.h"
 #include "methods/registry.h"
+#include "server/service_impl.h"
 
 namespace calibd::server {
 

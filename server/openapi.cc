@@ -1,9 +1,9 @@
 // The OpenAPI 3 description of the HTTP API (GET /api/v1/openapi.json). Kept true by
 // tests/server/http_api_test.cc, which checks every documented path against the running server.
-#include "server/failure_reasons.h"
-#include "server/http_util.h"
 #include "methods/method.h"
 #include "methods/registry.h"
+#include "server/failure_reasons.h"
+#include "server/http_util.h"
 
 namespace calibd::server {
 
@@ -151,22 +151,21 @@ void AddSchemas(const json& method_names, json* out) {
         {"uncertainty", {{"type", "object"}}},
         {"diagnostics", {{"type", "object"}}},
         {"warnings", {{"type", "array"}, {"items", {{"type", "string"}}}}}}}};
-  schemas["Recording"] = {
-      {"type", "object"},
-      {"properties",
-       {{"id", {{"type", "integer"}}},
-        {"sha256", {{"type", "string"}}},
-        {"bytes", {{"type", "integer"}}},
-        {"rows", {{"type", "integer"}}},
-        {"layout",
-         {{"type", "string"},
-          {"enum",
-           {LayoutName(Layout::kPcaAveraged), LayoutName(Layout::kPcaRaw),
-            LayoutName(Layout::kArray)}}}},
-        {"device", {{"type", "string"}, {"nullable", true}}},
-        {"created_at", {{"type", "string"}}},
-        {"columns", {{"type", "array"}, {"items", {{"type", "string"}}}}},
-        {"sensors", {{"type", "array"}, {"items", {{"type", "string"}}}}}}}};
+  schemas["Recording"] = {{"type", "object"},
+                          {"properties",
+                           {{"id", {{"type", "integer"}}},
+                            {"sha256", {{"type", "string"}}},
+                            {"bytes", {{"type", "integer"}}},
+                            {"rows", {{"type", "integer"}}},
+                            {"layout",
+                             {{"type", "string"},
+                              {"enum",
+                               {LayoutName(Layout::kPcaAveraged), LayoutName(Layout::kPcaRaw),
+                                LayoutName(Layout::kArray)}}}},
+                            {"device", {{"type", "string"}, {"nullable", true}}},
+                            {"created_at", {{"type", "string"}}},
+                            {"columns", {{"type", "array"}, {"items", {{"type", "string"}}}}},
+                            {"sensors", {{"type", "array"}, {"items", {{"type", "string"}}}}}}}};
 }
 
 // POST /recordings (with its config parameters) and a stored recording's paths.

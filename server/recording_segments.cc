@@ -3,10 +3,10 @@
 #include <cmath>
 #include <mutex>
 
-#include "server/config.h"
-#include "methods/imu/imu_method.h"
 #include "formats/inertial_log.h"
 #include "formats/recording.h"
+#include "methods/imu/imu_method.h"
+#include "server/config.h"
 #include "web/svg_plot.h"
 
 namespace calibd::server {

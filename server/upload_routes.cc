@@ -1,6 +1,6 @@
 // POST /api/v1/recordings and POST /api/v1/jobs (server/service_impl.h).
-#include "server/service_impl.h"
 #include "methods/registry.h"
+#include "server/service_impl.h"
 
 namespace calibd::server {
 

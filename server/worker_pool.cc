@@ -6,12 +6,12 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 
+#include "formats/recording.h"
+#include "methods/method.h"
+#include "methods/registry.h"
 #include "server/config.h"
 #include "server/failure_reasons.h"
 #include "server/job_budget.h"
-#include "methods/method.h"
-#include "methods/registry.h"
-#include "formats/recording.h"
 
 namespace calibd::server {
 

@@ -126,8 +126,6 @@ std::string CalibrationCell(const JobSummary& j, size_t rows) {
          when + "</span></td>";
 }
 
-
-
 // The calibrations whose result does not read, one line each ("" when every one reads).
 std::string UnreadableNote(const std::vector<const JobSummary*>& jobs,
                            const std::vector<std::string>& problems) {

@@ -165,7 +165,7 @@ struct DevicesView {
     std::string first_seen;      // timestamp as stored; may be empty
     std::vector<Latest> latest;  // one per method with a calibration, any order
   };
-  std::vector<Device> devices;  // rendered in the given order
+  std::vector<Device> devices;       // rendered in the given order
   std::vector<std::string> methods;  // one column each (the registry's)
   std::string next_after;  // "" = the last page; else the next page is /devices?after=<this>
 };

@@ -21,8 +21,8 @@
 
 namespace calibd::web {
 
-// The IMU intrinsics of `jobs` (accepted imu results of one device, oldest first) over time, as HTML. ""
-// when jobs is empty.
+// The IMU intrinsics of `jobs` (accepted imu results of one device, oldest first) over time, as
+// HTML. "" when jobs is empty.
 std::string ImuDriftHtml(const std::vector<const JobSummary*>& jobs);
 
 }  // namespace calibd::web

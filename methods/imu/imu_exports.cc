@@ -1,15 +1,15 @@
 // Exports of an imu result (methods/imu/imu_method.h): CSV, the C header (ImuHeader also writes
-// the per-IMU intrinsics of a full array result); the YAML is methods/imu/openvins_yaml.cc. Each reads
-// the stored result once into results::ImuResult; one that does not read is kInternal with the
-// reader's message.
+// the per-IMU intrinsics of a full array result); the YAML is methods/imu/openvins_yaml.cc. Each
+// reads the stored result once into results::ImuResult; one that does not read is kInternal with
+// the reader's message.
 #include <Eigen/Dense>
 #include <sstream>
 #include <string>
 #include <utility>
 
-#include "methods/imu/imu_result.h"
 #include "methods/export_util.h"
 #include "methods/imu/imu_method.h"
+#include "methods/imu/imu_result.h"
 
 namespace calibd::server {
 

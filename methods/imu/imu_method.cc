@@ -7,10 +7,10 @@
 #include <set>
 #include <tuple>
 
-#include "methods/imu/imu_result.h"
 #include "formats/inertial_log.h"
-#include "methods/noise/noise_reference.h"
+#include "methods/imu/imu_result.h"
 #include "methods/imu/openvins_yaml.h"
+#include "methods/noise/noise_reference.h"
 #include "methods/saturation_report.h"
 
 namespace calibd::server {

@@ -36,8 +36,8 @@
 
 #include "core/imu.h"
 #include "core/imu_simulation.h"
-#include "results/triad.h"
 #include "methods/method.h"
+#include "results/triad.h"
 
 namespace calibd::server {
 

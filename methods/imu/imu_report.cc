@@ -1,5 +1,7 @@
 // The imu report section (methods/imu/imu_report.h): reads the result once as results::ImuResult
 // (methods/imu/imu_result.h); a result that does not read shows "not available" with the reason.
+#include "methods/imu/imu_report.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -12,11 +14,10 @@
 #include <utility>
 #include <vector>
 
-#include "methods/imu/imu_result.h"
 #include "methods/imu/imu_drift.h"
+#include "methods/imu/imu_result.h"
 #include "web/html.h"
 #include "web/report_common.h"
-#include "methods/imu/imu_report.h"
 #include "web/svg_plot.h"
 
 namespace calibd::web::internal {

@@ -1,5 +1,5 @@
-// The typed result of the `imu` method (SPEC §4, §7): what methods/imu/imu_method.cc writes and what
-// Judge, the exports (CSV, C header, OpenVINS yaml), the web report and the drift tables read.
+// The typed result of the `imu` method (SPEC §4, §7): what methods/imu/imu_method.cc writes and
+// what Judge, the exports (CSV, C header, OpenVINS yaml), the web report and the drift tables read.
 // ToJson writes exactly the document the adapter has always written (plus "schema_version");
 // FromJson reads it back, naming the path of the first problem
 // ("imu result: diagnostics.imus[0].coverage.sufficient: expected a boolean, found a string").

@@ -5,9 +5,9 @@
 #include <cstdio>
 #include <sstream>
 
-#include "methods/imu/imu_result.h"
 #include "methods/acceptance.h"
 #include "methods/export_util.h"
+#include "methods/imu/imu_result.h"
 
 namespace calibd::server {
 

@@ -54,7 +54,6 @@ std::vector<NoiseChannel> ReadNoise(const json& result, std::string* problem) {
   return out;
 }
 
-
 const NoiseChannel* FindChannel(const std::vector<NoiseChannel>& list, const std::string& name) {
   for (const NoiseChannel& c : list) {
     if (c.name == name) return &c;

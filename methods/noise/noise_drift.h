@@ -21,8 +21,8 @@
 
 namespace calibd::web {
 
-// The noise terms of `jobs` (accepted noise results of one device, oldest first) over time, as HTML. ""
-// when jobs is empty.
+// The noise terms of `jobs` (accepted noise results of one device, oldest first) over time, as
+// HTML. "" when jobs is empty.
 std::string NoiseDriftHtml(const std::vector<const JobSummary*>& jobs);
 
 }  // namespace calibd::web

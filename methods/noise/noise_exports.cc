@@ -1,13 +1,13 @@
-// Exports of a noise result (methods/noise/noise_method.h): CSV, Kalibr's imu.yaml and the C header.
-// Each reads the stored result once into results::NoiseResult; a result that does not read is
-// kInternal with the reader's message.
+// Exports of a noise result (methods/noise/noise_method.h): CSV, Kalibr's imu.yaml and the C
+// header. Each reads the stored result once into results::NoiseResult; a result that does not read
+// is kInternal with the reader's message.
 #include <cmath>
 #include <sstream>
 #include <string>
 
-#include "methods/noise/noise_result.h"
 #include "methods/export_util.h"
 #include "methods/noise/noise_method.h"
+#include "methods/noise/noise_result.h"
 
 namespace calibd::server {
 

@@ -8,8 +8,8 @@
 #include <set>
 #include <vector>
 
-#include "methods/noise/noise_result.h"
 #include "formats/inertial_log.h"
+#include "methods/noise/noise_result.h"
 #include "methods/saturation_report.h"
 
 namespace calibd::server {

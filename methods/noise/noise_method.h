@@ -25,8 +25,8 @@
 
 #include "core/noise.h"
 #include "core/noise_simulation.h"
-#include "methods/noise/noise_result.h"
 #include "methods/method.h"
+#include "methods/noise/noise_result.h"
 
 namespace calibd::server {
 
@@ -49,8 +49,8 @@ struct NoiseSimulationFileOptions {
 Status SimulateNoiseFiles(const NoiseSimulationFileOptions& options, std::string* csv,
                           nlohmann::json* config, nlohmann::json* truth);
 
-// The typed result (methods/noise/noise_result.h) of a core result, and its JSON (used by the method;
-// exposed for tests). The adapter adds diagnostics.units.
+// The typed result (methods/noise/noise_result.h) of a core result, and its JSON (used by the
+// method; exposed for tests). The adapter adds diagnostics.units.
 results::NoiseResult NoiseResultOf(const core::NoiseResult& result, int taus_per_decade);
 nlohmann::json NoiseResultToJson(const core::NoiseResult& result, int taus_per_decade);
 

@@ -27,11 +27,11 @@
 namespace calibd::server {
 
 // kInvalidInput naming the key: not an integer id, no such job, not a succeeded noise job, a job
-// whose stored result does not read as results::NoiseResult (methods/noise/noise_result.h: the message
-// names the path of the problem, e.g. a newer schema_version), or a job whose log does not show
-// the white noise of that sensor type; storage errors as they are.
-// Leaves numbers and already-resolved references alone. Called by the methods that take noise
-// levels (imu and array: their Method::ResolveReferences); `config` not yet validated.
+// whose stored result does not read as results::NoiseResult (methods/noise/noise_result.h: the
+// message names the path of the problem, e.g. a newer schema_version), or a job whose log does not
+// show the white noise of that sensor type; storage errors as they are. Leaves numbers and
+// already-resolved references alone. Called by the methods that take noise levels (imu and array:
+// their Method::ResolveReferences); `config` not yet validated.
 Status ResolveNoiseReferences(storage::Store* store, nlohmann::json* config);
 
 struct NoiseLevel {

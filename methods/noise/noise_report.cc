@@ -1,5 +1,8 @@
-// The noise report section (methods/noise/noise_report.h): reads the result once as results::NoiseResult
-// (methods/noise/noise_result.h); a result that does not read shows "not available" with the reason.
+// The noise report section (methods/noise/noise_report.h): reads the result once as
+// results::NoiseResult (methods/noise/noise_result.h); a result that does not read shows "not
+// available" with the reason.
+#include "methods/noise/noise_report.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -12,11 +15,10 @@
 #include <utility>
 #include <vector>
 
-#include "methods/noise/noise_result.h"
 #include "methods/noise/noise_drift.h"
+#include "methods/noise/noise_result.h"
 #include "web/html.h"
 #include "web/report_common.h"
-#include "methods/noise/noise_report.h"
 #include "web/svg_plot.h"
 
 namespace calibd::web::internal {

@@ -1,5 +1,5 @@
-// The typed result of the `noise` method (SPEC §4, §7): what methods/noise/noise_method.cc writes and
-// what Judge, the exports, the web report, the drift tables and the noise chain
+// The typed result of the `noise` method (SPEC §4, §7): what methods/noise/noise_method.cc writes
+// and what Judge, the exports, the web report, the drift tables and the noise chain
 // (methods/noise/noise_reference.h) read. ToJson writes exactly the document the adapter has always
 // written (plus "schema_version"); FromJson reads it back, naming the path of the first problem
 // ("noise result: parameters.channels[2].white_noise: expected a number, found a string").

@@ -4,9 +4,9 @@
 #include <sstream>
 #include <string>
 
-#include "methods/pca/pca_result.h"
 #include "methods/export_util.h"
 #include "methods/pca/pca_method.h"
+#include "methods/pca/pca_result.h"
 
 namespace calibd::server {
 

@@ -9,9 +9,9 @@
 #include "base/status.h"
 #include "core/pca.h"
 #include "core/pca_simulation.h"
-#include "methods/pca/pca_result.h"
-#include "methods/method.h"
 #include "formats/recording.h"
+#include "methods/method.h"
+#include "methods/pca/pca_result.h"
 
 namespace calibd::server {
 

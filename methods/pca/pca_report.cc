@@ -1,4 +1,6 @@
 // The pca report section, key figures and drift (methods/pca/pca_report.h).
+#include "methods/pca/pca_report.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -14,7 +16,6 @@
 #include "methods/pca/pca_result.h"
 #include "web/html.h"
 #include "web/report_common.h"
-#include "methods/pca/pca_report.h"
 #include "web/svg_plot.h"
 
 namespace calibd::web::internal {

@@ -1,7 +1,7 @@
 // The typed result document of the `pca` method (SPEC §4, Rupniewski's PCA-aided calibration of
-// m single-axis sensors in a d-dimensional field): written in one place (methods/pca/pca_method.cc, the
-// adapter, through ToJson) and read in one place (FromJson) by the acceptance gate, the exports,
-// the web report and the pca -> array chain.
+// m single-axis sensors in a d-dimensional field): written in one place (methods/pca/pca_method.cc,
+// the adapter, through ToJson) and read in one place (FromJson) by the acceptance gate, the
+// exports, the web report and the pca -> array chain.
 //
 // The JSON is exactly what the adapter wrote before this type existed, plus "schema_version":
 //   {"method": "pca", "schema_version": 1, "model": "...",

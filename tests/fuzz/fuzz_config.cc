@@ -16,9 +16,9 @@
 #include <string>
 #include <string_view>
 
-#include "server/config.h"
 #include "methods/method.h"
 #include "methods/registry.h"
+#include "server/config.h"
 
 namespace {
 

@@ -1,5 +1,5 @@
-// methods/array/array_result.h: the typed array result (both models) round-trips through JSON, and a
-// document that does not fit is refused naming the path of the problem.
+// methods/array/array_result.h: the typed array result (both models) round-trips through JSON, and
+// a document that does not fit is refused naming the path of the problem.
 #include "methods/array/array_result.h"
 
 #include <gtest/gtest.h>

@@ -1,5 +1,5 @@
-// The typed pca result (methods/pca/pca_result.h): round trip, the path of the first problem, schema
-// versions and failed runs' partial documents.
+// The typed pca result (methods/pca/pca_result.h): round trip, the path of the first problem,
+// schema versions and failed runs' partial documents.
 #include "methods/pca/pca_result.h"
 
 #include <gtest/gtest.h>

@@ -15,10 +15,10 @@
 #include "core/pca_simulation.h"
 #include "methods/array/array_result.h"
 #include "methods/imu/imu_result.h"
-#include "methods/noise/noise_result.h"
-#include "server/config.h"
 #include "methods/method.h"
+#include "methods/noise/noise_result.h"
 #include "methods/registry.h"
+#include "server/config.h"
 
 namespace calibd::server {
 namespace {
@@ -338,9 +338,9 @@ TEST(Gate, ImuUnitMixUpsNameTheProbableCause) {
 
 // ---- array ----
 
-// A positions-model array result (methods/array/array_result.h, every key the adapter writes): triads
-// a1, a2 at `offset` from their nominal positions with 1 sigma `std`, the accelerometer residual
-// RMS `accel_rms` against a configured noise of 0.04 m/s^2.
+// A positions-model array result (methods/array/array_result.h, every key the adapter writes):
+// triads a1, a2 at `offset` from their nominal positions with 1 sigma `std`, the accelerometer
+// residual RMS `accel_rms` against a configured noise of 0.04 m/s^2.
 results::ArrayResult TypedArrayResult(double offset, double std, double accel_rms) {
   results::ArrayResult r;
   r.envelope.method = "array";

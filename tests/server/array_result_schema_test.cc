@@ -1,6 +1,6 @@
-// The typed array result (methods/array/array_result.h) has every key the real adapter writes: results
-// of RunArray on simulated recordings (both models, several option combinations, failing runs'
-// partial documents) read with FromJson and write back with ToJson to exactly the same JSON.
+// The typed array result (methods/array/array_result.h) has every key the real adapter writes:
+// results of RunArray on simulated recordings (both models, several option combinations, failing
+// runs' partial documents) read with FromJson and write back with ToJson to exactly the same JSON.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -9,15 +9,15 @@
 
 #include "core/array_simulation.h"
 #include "core/pca.h"
-#include "methods/array/array_result.h"
+#include "formats/recording.h"
 #include "methods/acceptance.h"
 #include "methods/array/array_method.h"
+#include "methods/array/array_result.h"
 #include "methods/export_util.h"
 #include "methods/pca/pca_method.h"
-#include "formats/recording.h"
+#include "methods/registry.h"
 #include "web/method_report.h"
 #include "web/pages.h"
-#include "methods/registry.h"
 
 namespace calibd::server {
 namespace {

@@ -13,13 +13,13 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "methods/array/array_result.h"
-#include "methods/pca/pca_result.h"
 #include "methods/array/array_method.h"
+#include "methods/array/array_result.h"
 #include "methods/exports.h"
 #include "methods/imu/imu_method.h"
 #include "methods/noise/noise_method.h"
 #include "methods/pca/pca_method.h"
+#include "methods/pca/pca_result.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {
@@ -358,8 +358,8 @@ TEST(CHeader, HostileSerialAndSensorNamesCannotBreakTheHeader) {
 // An array result of the full model (per-IMU intrinsics beside the positions, SPEC §7) gets the
 // imu apply function too, without clashing with the positions' names.
 TEST(CHeader, ArrayResultWithIntrinsicsAppliesThemToAReading) {
-  // A full-model result (methods/array/array_result.h) whose two triads read y -> matrix (y - bias),
-  // the position sigma undefined.
+  // A full-model result (methods/array/array_result.h) whose two triads read y -> matrix (y -
+  // bias), the position sigma undefined.
   results::SensorTriad triad;
   triad.bias = {0.1, -0.2, 0.3};
   triad.matrix << 2.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.5, 4.0;

@@ -10,9 +10,9 @@
 #include <cstdio>
 #include <string>
 
+#include "formats/recording.h"
 #include "methods/array/array_method.h"
 #include "methods/pca/pca_method.h"
-#include "formats/recording.h"
 
 namespace calibd::server {
 namespace {

@@ -17,9 +17,9 @@
 
 #include "core/pca_simulation.h"
 #include "methods/array/array_method.h"
-#include "server/config.h"
 #include "methods/noise/noise_method.h"
 #include "methods/pca/pca_method.h"
+#include "server/config.h"
 
 namespace calibd::server {
 namespace {

@@ -19,10 +19,10 @@
 #include "core/imu_simulation.h"
 #include "core/pca_simulation.h"
 #include "methods/array/array_method.h"
-#include "server/config.h"
 #include "methods/imu/imu_method.h"
 #include "methods/noise/noise_method.h"
 #include "methods/pca/pca_method.h"
+#include "server/config.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {

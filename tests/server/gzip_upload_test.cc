@@ -10,8 +10,8 @@
 #include <random>
 #include <string>
 
-#include "server/gzip_stream.h"
 #include "methods/noise/noise_method.h"
+#include "server/gzip_stream.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {

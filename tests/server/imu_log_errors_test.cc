@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "server/config.h"
 #include "methods/imu/imu_method.h"
+#include "server/config.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {

@@ -1,7 +1,7 @@
-// The typed imu result (methods/imu/imu_result.h) holds every key the real adapter writes: results of
-// `imu` runs on small simulated logs (gyro_bias statics and estimate, counts with nominal biases,
-// a gap in t, resolved noise-job references, and a failed run's partial diagnostics) read with
-// FromJson and write back with ToJson to the same document; the consumers refuse a result that
+// The typed imu result (methods/imu/imu_result.h) holds every key the real adapter writes: results
+// of `imu` runs on small simulated logs (gyro_bias statics and estimate, counts with nominal
+// biases, a gap in t, resolved noise-job references, and a failed run's partial diagnostics) read
+// with FromJson and write back with ToJson to the same document; the consumers refuse a result that
 // does not read, naming the path.
 #include <gtest/gtest.h>
 
@@ -11,13 +11,13 @@
 #include <string>
 #include <vector>
 
-#include "methods/imu/imu_result.h"
-#include "server/config.h"
 #include "methods/exports.h"
-#include "server/failure_reasons.h"
 #include "methods/imu/imu_method.h"
+#include "methods/imu/imu_result.h"
 #include "methods/method.h"
 #include "methods/registry.h"
+#include "server/config.h"
+#include "server/failure_reasons.h"
 #include "tests/server/result_schema_util.h"
 #include "web/method_report.h"
 #include "web/pages.h"
@@ -145,7 +145,8 @@ TEST(ImuResultSchema, AdapterResultsRoundTripExactly) {
   }
   {
     SCOPED_TRACE("a gap in t during a rotation, noise levels from noise jobs");
-    // Resolved references (methods/noise/noise_reference.h), as the server leaves them in the config.
+    // Resolved references (methods/noise/noise_reference.h), as the server leaves them in the
+    // config.
     const json extra = {{"accel_noise",
                          {{"job", 3},
                           {"sigma", 0.01},

@@ -9,9 +9,9 @@
 #include <string>
 
 #include "methods/array/array_method.h"
+#include "methods/registry.h"
 #include "storage/store.h"
 #include "tests/server/http_test_util.h"
-#include "methods/registry.h"
 
 namespace calibd::server {
 namespace {

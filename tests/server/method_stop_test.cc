@@ -13,11 +13,11 @@
 #include "core/array_full_simulation.h"
 #include "core/imu_simulation.h"
 #include "core/stop_token.h"
+#include "formats/recording.h"
 #include "methods/array/array_method.h"
-#include "server/config.h"
 #include "methods/imu/imu_method.h"
 #include "methods/noise/noise_method.h"
-#include "formats/recording.h"
+#include "server/config.h"
 #include "tests/lib/sanitizer.h"
 
 namespace calibd::server {

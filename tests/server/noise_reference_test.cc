@@ -12,9 +12,9 @@
 #include <nlohmann/json.hpp>
 
 #include "methods/array/array_method.h"
-#include "server/config.h"
 #include "methods/imu/imu_method.h"
 #include "methods/noise/noise_method.h"
+#include "server/config.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {

@@ -10,13 +10,13 @@
 #include <string>
 #include <vector>
 
-#include "methods/noise/noise_result.h"
-#include "server/config.h"
 #include "methods/exports.h"
-#include "server/failure_reasons.h"
 #include "methods/method.h"
-#include "methods/registry.h"
 #include "methods/noise/noise_method.h"
+#include "methods/noise/noise_result.h"
+#include "methods/registry.h"
+#include "server/config.h"
+#include "server/failure_reasons.h"
 #include "tests/server/result_schema_util.h"
 #include "web/method_report.h"
 #include "web/pages.h"

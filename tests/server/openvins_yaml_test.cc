@@ -1,8 +1,8 @@
 // format=yaml for imu results: OpenVINS's kalibr_imu_chain.yaml. The intrinsics it writes
 // predict, for any raw reading, the same specific force and rate as calibd's model up to one
-// common rotation of the frame (the convention mapping of methods/imu/openvins_yaml.h), in OpenVINS's
-// `calibrated` (kalibr) form: Da, Dw lower triangular, R_IMUtoACC = I, Tg = 0; and the route serves
-// it for a real imu job.
+// common rotation of the frame (the convention mapping of methods/imu/openvins_yaml.h), in
+// OpenVINS's `calibrated` (kalibr) form: Da, Dw lower triangular, R_IMUtoACC = I, Tg = 0; and the
+// route serves it for a real imu job.
 #include "methods/imu/openvins_yaml.h"
 
 #include <gtest/gtest.h>
@@ -13,8 +13,8 @@
 #include <random>
 #include <sstream>
 
-#include "methods/imu/imu_result.h"
 #include "methods/imu/imu_method.h"
+#include "methods/imu/imu_result.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {

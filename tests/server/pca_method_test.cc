@@ -1,5 +1,5 @@
-// Tests of the pca JSON glue (methods/pca/pca_method.h): config keys, the SPEC §4 result keys, raw vs
-// averaged layouts, and `simulate pca`.
+// Tests of the pca JSON glue (methods/pca/pca_method.h): config keys, the SPEC §4 result keys, raw
+// vs averaged layouts, and `simulate pca`.
 #include "methods/pca/pca_method.h"
 
 #include <gtest/gtest.h>

@@ -7,14 +7,14 @@
 #include <string>
 
 #include "core/pca_simulation.h"
-#include "methods/pca/pca_result.h"
+#include "formats/recording.h"
 #include "methods/acceptance.h"
 #include "methods/exports.h"
 #include "methods/pca/pca_method.h"
-#include "formats/recording.h"
+#include "methods/pca/pca_result.h"
+#include "methods/registry.h"
 #include "web/method_report.h"
 #include "web/pages.h"
-#include "methods/registry.h"
 
 namespace calibd::server {
 namespace {

@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "base/utf8.h"
-#include "server/device_lookup.h"
 #include "methods/pca/pca_method.h"
+#include "server/device_lookup.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {

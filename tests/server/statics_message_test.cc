@@ -8,8 +8,8 @@
 
 #include "core/imu_simulation.h"
 #include "methods/array/array_method.h"
-#include "server/config.h"
 #include "methods/imu/imu_method.h"
+#include "server/config.h"
 
 namespace calibd::server {
 namespace {

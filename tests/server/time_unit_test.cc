@@ -16,11 +16,11 @@
 #include <string>
 #include <vector>
 
-#include "server/config.h"
-#include "methods/imu/imu_method.h"
 #include "formats/inertial_log.h"
-#include "methods/noise/noise_method.h"
 #include "formats/recording.h"
+#include "methods/imu/imu_method.h"
+#include "methods/noise/noise_method.h"
+#include "server/config.h"
 #include "tests/lib/sanitizer.h"
 #include "tests/server/http_test_util.h"
 

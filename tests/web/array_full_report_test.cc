@@ -1,5 +1,5 @@
-// The job-page sections of an `array` result with model full (methods/array/array_full_report.h, issue
-// #18): the numbers of the result appear, at the precision of their σ; values beyond the
+// The job-page sections of an `array` result with model full (methods/array/array_full_report.h,
+// issue #18): the numbers of the result appear, at the precision of their σ; values beyond the
 // acceptance limits are marked; names are escaped; 32 triads give 32 rows; odd results render.
 #include "methods/array/array_full_report.h"
 
@@ -27,10 +27,10 @@ Eigen::Matrix3d Mat(double off, double diag = 1) {
   return m;
 }
 
-// A model-full result (methods/array/array_result.h, every key methods/array/array_method.cc writes): K triads
-// named `prefix`K, the gyroscopes in deg/s, gains 1 + 0.0123 (accelerometers) and 1 + 0.01
-// (gyroscopes), biases 0.0217 m/s^2 and -0.5 deg/s, misalignment entries of 2 mrad, position
-// shift (10, 0, -4) µm at σ 2 µm, residuals at the noise.
+// A model-full result (methods/array/array_result.h, every key methods/array/array_method.cc
+// writes): K triads named `prefix`K, the gyroscopes in deg/s, gains 1 + 0.0123 (accelerometers) and
+// 1 + 0.01 (gyroscopes), biases 0.0217 m/s^2 and -0.5 deg/s, misalignment entries of 2 mrad,
+// position shift (10, 0, -4) µm at σ 2 µm, residuals at the noise.
 json FullResult(int K, const std::string& prefix = "", bool with_limits = true) {
   results::ArrayResult r;
   r.envelope.method = "array";

@@ -1,10 +1,7 @@
-// The device page's drift of the raw-log methods (methods/noise/noise_drift.h, methods/imu/imu_drift.h): the noise terms and the
-// IMU intrinsics per calibration, their changes against the previous calibration in standard
-// deviations, and the device page that shows them for accepted results only.
-#include "methods/imu/imu_drift.h"
-#include "methods/noise/noise_drift.h"
-#include "web/drift_table.h"
-
+// The device page's drift of the raw-log methods (methods/noise/noise_drift.h,
+// methods/imu/imu_drift.h): the noise terms and the IMU intrinsics per calibration, their changes
+// against the previous calibration in standard deviations, and the device page that shows them for
+// accepted results only.
 #include <gtest/gtest.h>
 
 #include <Eigen/Core>
@@ -13,8 +10,11 @@
 #include <string>
 #include <vector>
 
+#include "methods/imu/imu_drift.h"
 #include "methods/imu/imu_result.h"
+#include "methods/noise/noise_drift.h"
 #include "methods/noise/noise_result.h"
+#include "web/drift_table.h"
 
 namespace calibd::web {
 namespace {

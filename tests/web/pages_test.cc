@@ -111,9 +111,10 @@ json PcaConfig() {
   return {{"method", "pca"}, {"device", "IMU-0042"}, {"magnitude", 1.0}, {"nominal", nominal}};
 }
 
-// An array result (methods/array/array_result.h, every key the server writes): 32 triads on a 4x4 grid,
-// top and underside, 6.3 mm pitch, 2 mm apart; |omega| and |omega_dot| of `excitation_samples`
-// samples, kept as the server does (at most 2000 points, every stride-th sample).
+// An array result (methods/array/array_result.h, every key the server writes): 32 triads on a 4x4
+// grid, top and underside, 6.3 mm pitch, 2 mm apart; |omega| and |omega_dot| of
+// `excitation_samples` samples, kept as the server does (at most 2000 points, every stride-th
+// sample).
 json ArrayResult(size_t excitation_samples = 1000, double shift = 0) {
   results::ArrayResult r;
   r.envelope.method = "array";

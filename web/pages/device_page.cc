@@ -11,11 +11,11 @@
 #include <utility>
 #include <vector>
 
+#include "methods/registry.h"
 #include "web/html.h"
 #include "web/method_report.h"
 #include "web/pages.h"
 #include "web/report_common.h"
-#include "methods/registry.h"
 #include "web/svg_plot.h"
 
 namespace calibd::web::internal {
