@@ -10,8 +10,9 @@
 // and uncertainty are then absent (nullopt), and of the diagnostics only the members commented
 // "[partial]" are present (the others keep their defaults and are not written).
 //
-// The JSON is exactly what methods/array/array_method.cc has always written (plus "schema_version"):
-// ToJson(FromJson(j)) == j for every document the adapter writes.
+// The JSON is exactly what the array adapter has always written (plus "schema_version"; the runs
+// are methods/array/array_positions.cc and array_full_method.cc): ToJson(FromJson(j)) == j for
+// every document the adapter writes.
 //
 // Results stored by an earlier calibd lack members added since. FromJson requires only what
 // SPEC §4/§7 requires (commented "SPEC"); every other member (our extensions) keeps its default

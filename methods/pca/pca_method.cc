@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <set>
 #include <utility>
 
@@ -287,36 +288,29 @@ void JudgePca(const json& result, const json& config, const AcceptanceLimits& li
   JudgePca(typed, options, limits, verdict);
 }
 
-void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
-              const AcceptanceLimits& limits, Verdict* verdict) {
-  if (!result.parameters || !result.uncertainty) {
-    verdict->Reject(
-        "the result cannot be judged: it is a failed run's partial diagnostics (no parameters)");
-    return;
-  }
-  const results::PcaParameters& params = *result.parameters;
-  const results::PcaDiagnostics& diag = result.diagnostics;
-  const std::vector<results::PcaSensor>& sensors = params.sensors;
-  // FromJson checked: one entry per sensor, in the same order.
-  const std::vector<results::PcaSensorStd>& stds = result.uncertainty->sensors;
-  const bool magnitude_known = params.magnitude_known;
-  const double magnitude = params.magnitude;
-  auto defined = [](double x) {
-    return std::isfinite(x) ? std::optional<double>(x) : std::nullopt;
-  };
+namespace {
 
-  // Orientation coverage first: it is the real cause of most of the other failures. A result
-  // stored before calibd measured the coverage has none: this rule does not apply to it (the
-  // precision the spread gives is still judged below, by the uncertainty limits).
-  const results::PcaCoverage no_coverage;
-  const bool has_coverage = diag.coverage.has_value();
-  const results::PcaCoverage& coverage = has_coverage ? *diag.coverage : no_coverage;
-  const auto scatter = defined(coverage.scatter_min);
-  const auto design = defined(coverage.design_min);
+std::optional<double> Defined(double x) {
+  return std::isfinite(x) ? std::optional<double>(x) : std::nullopt;
+}
+
+bool AllFinite(const std::vector<double>& v) {
+  return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
+}
+
+// Rule: orientation coverage. It is judged first: it is the real cause of most of the other
+// failures. A result stored before calibd measured the coverage has none: this rule does not
+// apply to it (the precision the spread gives is still judged by the uncertainty limits).
+void JudgePcaCoverage(const results::PcaDiagnostics& diag, const AcceptanceLimits& limits,
+                      Verdict* verdict) {
+  if (!diag.coverage.has_value()) return;
+  const results::PcaCoverage& coverage = *diag.coverage;
+  const auto scatter = Defined(coverage.scatter_min);
+  const auto design = Defined(coverage.design_min);
   const auto min_scatter = limits.Get("min_scatter");
   const auto min_design = limits.Get("min_design");
-  if (has_coverage && ((min_scatter && (!scatter || *scatter < *min_scatter)) ||
-                       (min_design && (!design || *design < *min_design)))) {
+  if ((min_scatter && (!scatter || *scatter < *min_scatter)) ||
+      (min_design && (!design || *design < *min_design))) {
     const std::string& advice = coverage.advice;
     verdict->Reject(
         "the orientations are poorly spread (spread " +
@@ -326,17 +320,53 @@ void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
         (min_design ? Fmt(*min_design) : std::string("none")) + ")" +
         (advice.empty() ? std::string(": add positions between the axes") : ": " + advice));
   }
+}
 
-  // Nominal scale per sensor: |nominal_i| when given, else 1 when the magnitude is known (readings
-  // in the field's unit); nothing to compare with when the magnitude is unknown (relative scales).
-  std::vector<double> nominal_scale(sensors.size(), magnitude_known ? 1.0 : NAN);
-  const bool has_nominal = options.nominal.has_value();
-  if (has_nominal) {
+// Nominal scale per sensor: |nominal_i| when given, else 1 when the magnitude is known (readings
+// in the field's unit); NaN (nothing to compare with) when the magnitude is unknown (relative
+// scales).
+std::vector<double> NominalScales(const results::PcaParameters& params,
+                                  const core::PcaOptions& options) {
+  const std::vector<results::PcaSensor>& sensors = params.sensors;
+  std::vector<double> nominal_scale(sensors.size(), params.magnitude_known ? 1.0 : NAN);
+  if (options.nominal.has_value()) {
     for (size_t i = 0; i < sensors.size() && static_cast<Eigen::Index>(i) < options.nominal->cols();
          ++i) {
       nominal_scale[i] = options.nominal->col(static_cast<Eigen::Index>(i)).norm();
     }
   }
+  return nominal_scale;
+}
+
+// The likely cause of physically implausible scale factors (`ratio`: one offender's scale against
+// its nominal): a unit mix-up between the readings and `magnitude` is the usual one.
+std::string ImplausibleScaleCause(bool has_nominal, double ratio, double magnitude) {
+  constexpr double kG = 9.80665;
+  auto near = [](double x, double target) { return std::abs(x / target - 1) < 0.15; };
+  if (!has_nominal && near(ratio, 1 / kG) && near(magnitude, kG)) {
+    return "readings look like g but magnitude is " + Fmt(magnitude) +
+           ": units? (give magnitude 1 for readings in g, or convert them to m/s^2)";
+  }
+  if (!has_nominal && near(ratio, kG) && near(magnitude, 1)) {
+    return "readings look like m/s^2 but magnitude is " + Fmt(magnitude) +
+           ": units? (give magnitude 9.80665 for readings in m/s^2)";
+  }
+  return std::string("are the readings and magnitude (") + Fmt(magnitude) + ") in the same unit" +
+         (has_nominal ? ", and is nominal right?"
+                      : "? (readings in another unit need nominal sensitivities)");
+}
+
+// Rules per sensor: finite numbers, a plausible scale factor near its nominal, and the scale,
+// axis and bias uncertainties within their limits.
+void JudgePcaSensors(const results::PcaResult& result, const core::PcaOptions& options,
+                     const AcceptanceLimits& limits, Verdict* verdict) {
+  const results::PcaParameters& params = *result.parameters;
+  const std::vector<results::PcaSensor>& sensors = params.sensors;
+  // FromJson checked: one entry per sensor, in the same order.
+  const std::vector<results::PcaSensorStd>& stds = result.uncertainty->sensors;
+  const double magnitude = params.magnitude;
+  const bool has_nominal = options.nominal.has_value();
+  const std::vector<double> nominal_scale = NominalScales(params, options);
   const auto range = limits.Get("scale_range");
   const auto implausible = limits.Get("implausible_factor");
   const auto scale_std_max = limits.Get("max_scale_std");
@@ -344,14 +374,11 @@ void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
   const auto bias_std_max = limits.Get("max_bias_std");
   Offenders out_of_range, absurd, scale_std, axis_std, bias_std, undefined, not_finite;
   double absurd_ratio = NAN;
-  auto all_finite = [](const std::vector<double>& v) {
-    return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
-  };
   for (size_t i = 0; i < sensors.size(); ++i) {
     const results::PcaSensor& sensor = sensors[i];
     const std::string& name = sensor.name;
     const double scale = sensor.scale;
-    if (!all_finite(sensor.sensitivity) || !all_finite(sensor.axis) || !std::isfinite(scale) ||
+    if (!AllFinite(sensor.sensitivity) || !AllFinite(sensor.axis) || !std::isfinite(scale) ||
         !std::isfinite(sensor.bias)) {
       not_finite.Add(name);
     }
@@ -375,7 +402,7 @@ void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
         axis_std.Add(name + " " + Fmt(axis * 1e3) + " mrad");
     }
     // Biases: estimated (or removed from a raw log) ones have a std; relative to the magnitude.
-    const auto b_std = defined(sd.bias_std);
+    const auto b_std = Defined(sd.bias_std);
     if (params.bias == results::PcaBias::kEstimate && !b_std) {
       undefined.Add(name + " bias");
     } else if (b_std && bias_std_max && std::isfinite(magnitude) && magnitude > 0 &&
@@ -387,23 +414,8 @@ void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
   }
   not_finite.RejectInto(verdict, kNotFiniteRule);
   if (!absurd.empty()) {
-    // A unit mix-up between the readings and `magnitude` is the usual cause.
-    std::string cause;
-    constexpr double kG = 9.80665;
-    auto near = [](double x, double target) { return std::abs(x / target - 1) < 0.15; };
-    if (!has_nominal && near(absurd_ratio, 1 / kG) && near(magnitude, kG)) {
-      cause = "readings look like g but magnitude is " + Fmt(magnitude) +
-              ": units? (give magnitude 1 for readings in g, or convert them to m/s^2)";
-    } else if (!has_nominal && near(absurd_ratio, kG) && near(magnitude, 1)) {
-      cause = "readings look like m/s^2 but magnitude is " + Fmt(magnitude) +
-              ": units? (give magnitude 9.80665 for readings in m/s^2)";
-    } else {
-      cause = std::string("are the readings and magnitude (") + Fmt(magnitude) +
-              ") in the same unit" +
-              (has_nominal ? ", and is nominal right?"
-                           : "? (readings in another unit need nominal sensitivities)");
-    }
-    absurd.RejectInto(verdict, "scale factors physically implausible, " + cause);
+    absurd.RejectInto(verdict, "scale factors physically implausible, " +
+                                   ImplausibleScaleCause(has_nominal, absurd_ratio, magnitude));
   }
   if (range) {
     out_of_range.RejectInto(
@@ -427,12 +439,16 @@ void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
     bias_std.RejectInto(verdict, "bias too uncertain (1 sigma above " + Fmt(*bias_std_max * 100) +
                                      " % of the field): record more positions");
   }
-  // Residual against the noise: only meaningful when sigma was given (an estimated sigma is the
-  // residual itself).
+}
+
+// Rule: the residual against the noise. Only meaningful when sigma was given (an estimated sigma
+// is the residual itself).
+void JudgePcaResiduals(const results::PcaDiagnostics& diag, const AcceptanceLimits& limits,
+                       Verdict* verdict) {
   const auto chi2_max = limits.Get("max_chi2");
-  const auto cost = defined(diag.cost);
+  const auto cost = Defined(diag.cost);
   const int dof = diag.degrees_of_freedom;
-  const auto sigma = defined(diag.noise_std);
+  const auto sigma = Defined(diag.noise_std);
   if (chi2_max && diag.noise_std_given && cost && sigma && *sigma > 0 && dof > 0) {
     const double chi2 = 2 * *cost / dof / (*sigma * *sigma);
     if (chi2 > *chi2_max) {
@@ -442,6 +458,20 @@ void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
                       "noise_std is wrong");
     }
   }
+}
+
+}  // namespace
+
+void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
+              const AcceptanceLimits& limits, Verdict* verdict) {
+  if (!result.parameters || !result.uncertainty) {
+    verdict->Reject(
+        "the result cannot be judged: it is a failed run's partial diagnostics (no parameters)");
+    return;
+  }
+  JudgePcaCoverage(result.diagnostics, limits, verdict);
+  JudgePcaSensors(result, options, limits, verdict);
+  JudgePcaResiduals(result.diagnostics, limits, verdict);
 }
 
 namespace {

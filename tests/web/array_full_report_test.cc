@@ -27,7 +27,7 @@ Eigen::Matrix3d Mat(double off, double diag = 1) {
   return m;
 }
 
-// A model-full result (methods/array/array_result.h, every key methods/array/array_method.cc
+// A model-full result (methods/array/array_result.h, every key methods/array/array_full_method.cc
 // writes): K triads named `prefix`K, the gyroscopes in deg/s, gains 1 + 0.0123 (accelerometers) and
 // 1 + 0.01 (gyroscopes), biases 0.0217 m/s^2 and -0.5 deg/s, misalignment entries of 2 mrad,
 // position shift (10, 0, -4) µm at σ 2 µm, residuals at the noise.
