@@ -3,8 +3,8 @@
 #include <sstream>
 #include <string>
 
-#include "methods/array/array_result.h"
 #include "methods/array/array_method.h"
+#include "methods/array/array_result.h"
 #include "methods/export_util.h"
 #include "methods/imu/imu_method.h"
 

@@ -13,8 +13,8 @@
 #include "core/array.h"
 #include "core/array_full.h"
 #include "core/stop_token.h"
-#include "methods/method.h"
 #include "formats/recording.h"
+#include "methods/method.h"
 
 namespace calibd::server {
 
@@ -211,8 +211,8 @@ Status SimulateArrayStaticFiles(const ArraySimulationFileOptions& options, int p
 Status SimulateArrayFullFiles(const ArraySimulationFileOptions& options, std::string* csv,
                               nlohmann::json* config, nlohmann::json* truth);
 
-// Exports of a array result (methods/array/array_exports.cc; formats in methods/exports.h), read typed
-// (results::FromJson): a result that does not read is kInternal with the reader's message. An
+// Exports of a array result (methods/array/array_exports.cc; formats in methods/exports.h), read
+// typed (results::FromJson): a result that does not read is kInternal with the reader's message. An
 // offset the result does not give (a full-model result stored without parameters.positions) is
 // an empty CSV field, and the header leaves OFFSET out saying so.
 Status ArrayResultToCsv(const nlohmann::json& result, std::string* out);

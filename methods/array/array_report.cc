@@ -1,4 +1,6 @@
 // The array report section, key figures and drift (methods/array/array_report.h).
+#include "methods/array/array_report.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -12,18 +14,18 @@
 #include <utility>
 #include <vector>
 
-#include "methods/array/array_result.h"
 #include "methods/array/array_full_report.h"
+#include "methods/array/array_result.h"
 #include "web/html.h"
 #include "web/report_common.h"
-#include "methods/array/array_report.h"
 #include "web/svg_plot.h"
 
 namespace calibd::web::internal {
 
 namespace {
 
-// Reads an array result typed (methods/array/array_result.h); false with *message when it does not read.
+// Reads an array result typed (methods/array/array_result.h); false with *message when it does not
+// read.
 bool ReadResult(const json& doc, results::ArrayResult* r, std::string* message) {
   const Status s = results::FromJson(doc, r);
   if (!s.ok()) *message = s.message();
