@@ -8,6 +8,7 @@
 #define CALIBD_BASE_STATUS_H_
 
 #include <cstdint>
+#include <cstring>
 #include <string>
 #include <utility>
 
@@ -32,56 +33,86 @@ enum class StatusCode {
 const char* StatusCodeName(StatusCode code);
 
 // Why a calibration failed, finer than the StatusCode: what in the data (or the set-up) made it
-// fail, so that advice can be looked up by it (server/failure_reasons.h holds the catalog: its
-// stable snake_case code, a title and the generic advice). A failing method sets it with
-// Status::WithReason at the site that decides; kUnspecified when the site has none (the server
-// then derives one from the StatusCode). Adding one: a value here and an entry in the catalog
-// (a unit test checks that every value has one).
-enum class Reason {
-  kUnspecified = 0,
+// fail, so that advice can be looked up by it. A reason is its stable snake_case code, stored with
+// a failed job and answered in GET /api/v1/jobs/{id} "error.reason" (README "Failure reasons").
+// An open set: base/ defines the reasons any method or the server may meet (below); a method
+// defines its own beside its numerics (core/<name>.h, e.g. core::kNoRankGap) and lists their
+// catalog entries (title, advice) in its Method::FailureReasons() (methods/method.h). The catalog
+// (server/failure_reasons.h) holds both; scripts/check_structure.py checks that every reason
+// defined in product code has an entry. A failing method sets it with Status::WithReason at the
+// site that decides; kUnspecified when the site has none (the server then derives one from the
+// StatusCode). Compared by code. Trivially copyable value type.
+class Reason {
+ public:
+  constexpr Reason() = default;  // kUnspecified
+  // `code`: a string literal (static storage), snake_case, unique across calibd.
+  explicit constexpr Reason(const char* code) : code_(code) {}
+  // "" for kUnspecified.
+  constexpr const char* code() const { return code_; }
+  friend bool operator==(Reason a, Reason b) { return std::strcmp(a.code_, b.code_) == 0; }
+  friend bool operator!=(Reason a, Reason b) { return !(a == b); }
+
+  static const Reason kUnspecified;
   // The input as given cannot be used.
-  kInvalidConfig,        // a config key or option is wrong
-  kInvalidRecording,     // the recording parses but holds values that cannot be used (NaN, ...)
-  kRecordingUnreadable,  // the recording does not parse (stored bytes not in a SPEC §2 layout)
-  kOverMemoryBudget,     // the job would exceed the server's memory budget per job
-  kProblemTooLarge,      // the problem exceeds the method's own size limits (pca max_flops)
+  static const Reason kInvalidConfig;        // a config key or option is wrong
+  static const Reason kInvalidRecording;     // the recording parses but holds values that cannot be
+                                             // used (NaN, ...)
+  static const Reason kRecordingUnreadable;  // the recording does not parse (not a SPEC §2 layout)
+  static const Reason kOverMemoryBudget;     // the job would exceed the server's memory budget
+  static const Reason kProblemTooLarge;      // the problem exceeds the method's own size limits
+  static const Reason kImplausibleTimeUnit;  // the time column's period is implausible in seconds
   // The data cannot determine the parameters (kNotDeterminable).
-  kNotDeterminable,          // generic: a kNotDeterminable failure without a finer reason
-  kNoSignal,                 // all readings equal or zero
-  kTooFewSensors,            // fewer sensors than the dimension
-  kTooFewPositions,          // fewer static positions than the unknowns need
-  kPoorOrientationCoverage,  // orientations too few directions / on a plane, cone or quadric
-  kNoRankGap,                // no clear gap between the singular values d and d+1 (pca)
-  kNotAnEllipsoid,           // the readings lie on no ellipsoid (biases, field changed, noise)
-  kDeadSensor,               // a sensor whose readings do not change with the orientation
-  kIllConditioned,           // computed values not finite in double precision
-  kTooFewStatics,            // too few static intervals found in a log
-  kTooFewRotations,          // too few rotations between statics for the gyroscope
-  kNoDynamicPhase,           // no motion after the statics (array full model)
-  kUnknownNoise,             // noise levels zero / unknown (noise-free readings)
-  kSingularInformation,      // the Fisher information is singular: some parameter undetermined
-  kImplausibleEstimate,      // an estimate far from the nominal (wrong unit?)
-  kLogTooShort,              // fewer samples than the method needs
-  kIrregularSampling,        // sample times jitter too much for the Allan deviation
-  kNotStationary,            // a noise log that moves
-  kNoGyroscope,              // array: no gyroscope triad
-  kTooFewTriads,             // array: fewer than 3 accelerometer triads
-  kTriadsCollinear,          // array: the triads lie on one line
-  kTooFewSamples,            // array: fewer usable samples than needed
-  kWeakExcitation,           // array: the motion does not excite every direction
-  kNumericalFailure,         // the solver found no finite step
-  kImplausibleTimeUnit,      // the time column's sample period is implausible in seconds
+  static const Reason kNotDeterminable;  // generic: a kNotDeterminable failure without a finer one
+  static const Reason kNoSignal;         // all readings equal or zero
+  static const Reason kTooFewPositions;  // fewer static positions than the unknowns need
+  static const Reason kPoorOrientationCoverage;  // orientations too few directions / on a plane,
+                                                 // cone or quadric
+  static const Reason kTooFewStatics;            // too few static intervals found in a log
+  static const Reason kUnknownNoise;         // noise levels zero / unknown (noise-free readings)
+  static const Reason kSingularInformation;  // the Fisher information is singular
+  static const Reason kImplausibleEstimate;  // an estimate far from the nominal (wrong unit?)
+  static const Reason kIllConditioned;       // computed values not finite in double precision
+  static const Reason kLogTooShort;          // fewer samples than the method needs
+  static const Reason kNumericalFailure;     // the solver found no finite step
   // The job was stopped before it ended (core/stop_token.h); never retried automatically.
-  kDeadline,   // its time limit (--job-seconds, config job_seconds) ran out
-  kCancelled,  // POST /jobs/{id}/cancel
+  static const Reason kDeadline;   // its time limit (--job-seconds, config job_seconds) ran out
+  static const Reason kCancelled;  // POST /jobs/{id}/cancel
   // The server's side.
-  kLeaseExpired,    // the job ran out of attempts because its worker's lease lapsed
-  kStorageError,    // busy database or I/O error past the retries
-  kDiskFull,        // the disk (or quota) holding the database or the staging folder is full
-  kStorageDamaged,  // stored bytes are damaged (SHA-256 mismatch, a corrupt database page)
-  kInternal,        // a bug: never the user's fault
-  kCount,           // sentinel: the number of values
+  static const Reason kLeaseExpired;    // the job ran out of attempts: its worker's lease lapsed
+  static const Reason kStorageError;    // busy database or I/O error past the retries
+  static const Reason kDiskFull;        // the disk (or quota) holding the database is full
+  static const Reason kStorageDamaged;  // stored bytes are damaged (SHA-256 mismatch, bad page)
+  static const Reason kInternal;        // a bug: never the user's fault
+
+ private:
+  const char* code_ = "";
 };
+
+inline constexpr Reason Reason::kUnspecified{};
+inline constexpr Reason Reason::kInvalidConfig{"invalid_config"};
+inline constexpr Reason Reason::kInvalidRecording{"invalid_recording"};
+inline constexpr Reason Reason::kRecordingUnreadable{"recording_unreadable"};
+inline constexpr Reason Reason::kOverMemoryBudget{"over_memory_budget"};
+inline constexpr Reason Reason::kProblemTooLarge{"problem_too_large"};
+inline constexpr Reason Reason::kImplausibleTimeUnit{"implausible_time_unit"};
+inline constexpr Reason Reason::kNotDeterminable{"not_determinable"};
+inline constexpr Reason Reason::kNoSignal{"no_signal"};
+inline constexpr Reason Reason::kTooFewPositions{"too_few_positions"};
+inline constexpr Reason Reason::kPoorOrientationCoverage{"poor_orientation_coverage"};
+inline constexpr Reason Reason::kTooFewStatics{"too_few_statics"};
+inline constexpr Reason Reason::kUnknownNoise{"unknown_noise"};
+inline constexpr Reason Reason::kSingularInformation{"singular_information"};
+inline constexpr Reason Reason::kImplausibleEstimate{"implausible_estimate"};
+inline constexpr Reason Reason::kIllConditioned{"ill_conditioned"};
+inline constexpr Reason Reason::kLogTooShort{"log_too_short"};
+inline constexpr Reason Reason::kNumericalFailure{"numerical_failure"};
+inline constexpr Reason Reason::kDeadline{"deadline"};
+inline constexpr Reason Reason::kCancelled{"cancelled"};
+inline constexpr Reason Reason::kLeaseExpired{"lease_expired"};
+inline constexpr Reason Reason::kStorageError{"storage_error"};
+inline constexpr Reason Reason::kDiskFull{"disk_full"};
+inline constexpr Reason Reason::kStorageDamaged{"storage_damaged"};
+inline constexpr Reason Reason::kInternal{"internal"};
 
 class Status {
  public:

@@ -75,7 +75,7 @@ Status InsufficientExcitation(const ArrayExcitation& ex) {
   char dir[96];
   std::snprintf(dir, sizeof dir, "(%.2f, %.2f, %.2f)", u.x(), u.y(), u.z());
   return Status::NotDeterminable(
-      Reason::kWeakExcitation,
+      array_reason::kWeakExcitation,
       "the motion does not determine the positions along the direction " + std::string(dir) +
           ": the smallest eigenvalue of sum A_n^T A_n is " + Fmt(ex.min_eigenvalue) +
           ", not above what noise alone gives (" + Fmt(ex.noise_floor) +
@@ -134,12 +134,12 @@ Status CheckGeometry(const ArrayProblem& problem, int G, ArrayResult* result) {
   const int K = static_cast<int>(problem.nominal_positions.cols());
   if (G == 0)
     return NotDeterminable(
-        Reason::kNoGyroscope,
+        array_reason::kNoGyroscope,
         "no gyroscope triad: the array's angular velocity cannot be separated from the positions; "
         "record with at least one gyroscope triad (columns g0_x, g0_y, g0_z)",
         result);
   if (K < 3)
-    return NotDeterminable(Reason::kTooFewTriads,
+    return NotDeterminable(array_reason::kTooFewTriads,
                            "only " + std::to_string(K) +
                                " accelerometer triad(s): at least 3 triads that are not on one "
                                "line are needed to determine the motion",
@@ -149,7 +149,7 @@ Status CheckGeometry(const ArrayProblem& problem, int G, ArrayResult* result) {
   const Eigen::Vector3d ev = es.eigenvalues();
   if (!model.ok || ev(1) <= 1e-12 * ev(2))
     return NotDeterminable(
-        Reason::kTriadsCollinear,
+        array_reason::kTriadsCollinear,
         "the accelerometer triads' nominal positions lie on one line: the angular acceleration "
         "about that line cannot be determined; mount at least 3 triads that span a plane",
         result);
@@ -198,7 +198,7 @@ Status CollectSamples(const ArrayProblem& problem, const ArrayOptions& options, 
              " dropped because a sensor reached its saturation limit: " + limits + ")";
     }
     return NotDeterminable(
-        Reason::kTooFewSamples,
+        array_reason::kTooFewSamples,
         why + "; at least 3 are needed: " + kRecordAdvice +
             (result->samples_dropped > 0 ? ", turning below the gyroscopes' range" : ""),
         result);

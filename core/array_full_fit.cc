@@ -128,7 +128,7 @@ Status SelectDynamicSamples(FullFit* f) {
   d.Nd = static_cast<int64_t>(d.dyn_index.size());
   res.dynamic_samples = d.Nd;
   if (d.Nd < 10)
-    return f->NotDeterminable(Reason::kNoDynamicPhase,
+    return f->NotDeterminable(array_reason::kNoDynamicPhase,
                               "the full array model needs a dynamic phase (rotation) after the "
                               "statics; the log has " +
                                   std::to_string(d.Nd) + " usable samples outside the statics");
@@ -316,7 +316,7 @@ Status CheckRotationExcitation(FullFit* f) {
   const std::string axis_text = "(" + c2(ax.x()) + ", " + c2(ax.y()) + ", " + c2(ax.z()) + ")";
   if (res.rotation_verdict == "insufficient")
     return f->NotDeterminable(
-        Reason::kWeakExcitation,
+        array_reason::kWeakExcitation,
         "too little rotation about the body axis " + axis_text + " (sum of squared rates " +
             Fmt("%.3g", res.rotation_eigenvalues(0)) +
             " (rad/s)^2 against the gyroscope noise floor " +

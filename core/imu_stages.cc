@@ -174,7 +174,7 @@ Status CollectRotations(const ImuStageInput& in, ImuFit* fit, ImuResult* res) {
   if (static_cast<int>(pr.rotations.size()) < needed_rotations) {
     return Fail(
         Status::NotDeterminable(
-            Reason::kTooFewRotations,
+            imu_reason::kTooFewRotations,
             "the gyroscope needs at least " + std::to_string(needed_rotations) +
                 " rotations between consecutive statics, " + std::to_string(pr.rotations.size()) +
                 " are usable: record more static orientations joined by rotations"),

@@ -629,7 +629,7 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
       result->sample_period = tau0;
       return Fail(
           Status::NotDeterminable(
-              Reason::kIrregularSampling,
+              noise_reason::kIrregularSampling,
               "irregular sample times: " + where + " (jitter " + Format("%.0f", 100 * worst) +
                   "% of the period, at most " + Format("%.0f", 100 * options.max_jitter) +
                   "% is accepted); the Allan deviation needs uniform sampling: split the log "
@@ -672,7 +672,7 @@ Status EstimateNoise(const NoiseProblem& problem, const NoiseOptions& options,
     }
   }
   if (!result->stationary) {
-    return Fail(Status::NotDeterminable(Reason::kNotStationary,
+    return Fail(Status::NotDeterminable(noise_reason::kNotStationary,
                                         "the log is not stationary (" + moved +
                                             "); record the sensor at rest, untouched"),
                 result);

@@ -74,6 +74,14 @@
 
 namespace calibd::core {
 
+// The failure reasons only noise meets (base/status.h Reason; their catalog entries are in
+// methods/noise/noise_method.cc FailureReasons()).
+namespace noise_reason {
+inline constexpr Reason kIrregularSampling{
+    "irregular_sampling"};  // sample times jitter too much for the Allan deviation
+inline constexpr Reason kNotStationary{"not_stationary"};  // a noise log that moves
+}  // namespace noise_reason
+
 struct NoiseOptions {
   // Cluster-time spacing of the Allan curve: 0 = octaves, k = k per decade (SPEC
   // `taus_per_decade`). 0..100.

@@ -34,6 +34,18 @@
 
 namespace calibd::core {
 
+// The failure reasons only pca meets (base/status.h Reason; their catalog entries are in
+// methods/pca/pca_method.cc FailureReasons()).
+namespace pca_reason {
+inline constexpr Reason kTooFewSensors{"too_few_sensors"};  // fewer sensors than the dimension d
+inline constexpr Reason kNoRankGap{
+    "no_rank_gap"};  // no clear gap between the singular values d and d+1
+inline constexpr Reason kNotAnEllipsoid{
+    "not_an_ellipsoid"};  // the readings lie on no ellipsoid (biases, field changed, noise)
+inline constexpr Reason kDeadSensor{
+    "dead_sensor"};  // a sensor whose readings do not change with the orientation
+}  // namespace pca_reason
+
 enum class BiasModel {
   kNone,      // readings are bias-free (or biases were removed beforehand): the paper's model
   kEstimate,  // unknown constant biases b_i are estimated with the sensitivities (issue #8)

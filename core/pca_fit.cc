@@ -70,7 +70,7 @@ Status CheckRank(const VectorXd& sv, int d, const PcaOptions& options, bool affi
   }
   if (result->rank_gap < options.min_rank_gap) {
     return Status::NotDeterminable(
-        Reason::kNoRankGap,
+        pca_reason::kNoRankGap,
         "no clear gap between singular values " + std::to_string(d) + " and " +
             std::to_string(d + 1) + " of " + readings + " (ratio " + Num(result->rank_gap) +
             ", at least " + Num(options.min_rank_gap) +
@@ -155,7 +155,7 @@ Status ClosedFormBiasFree(const MatrixXd& mm, int d, double c, const PcaOptions&
   result->g_eigenvalues = lambda;
   if (!(lambda(0) > 1e-12 * std::abs(lambda(d - 1)))) {
     return Status::NotDeterminable(
-        Reason::kNotAnEllipsoid,
+        pca_reason::kNotAnEllipsoid,
         "g is not positive definite (eigenvalues " + Num(lambda(0)) + " ... " + Num(lambda(d - 1)) +
             "): the readings are not those of bias-free linear sensors in a field of constant "
             "magnitude. Likely causes: sensor biases not removed (use bias: estimate, or record "
@@ -236,13 +236,13 @@ Status ClosedFormAffine(const MatrixXd& mm, int d, double c, const PcaOptions& o
   if (!(mu(0) > 1e-12 * mu(d - 1))) {
     result->g_eigenvalues = mu;
     return Status::NotDeterminable(
-        Reason::kNotAnEllipsoid,
+        pca_reason::kNotAnEllipsoid,
         not_ellipsoid + ", eigenvalues " + Num(mu(0)) + " ... " + Num(mu(d - 1)) + causes);
   }
   const VectorXd y0h = mh.llt().solve(wh);
   const double rho = y0h.dot(mh * y0h) - kh;
   if (!(rho > 0)) {
-    return Status::NotDeterminable(Reason::kNotAnEllipsoid,
+    return Status::NotDeterminable(pca_reason::kNotAnEllipsoid,
                                    not_ellipsoid + ": an empty ellipsoid" + causes);
   }
   const MatrixXd shape = (c * c / (rho * scale * scale)) * mh;  // (y−y0)ᵀ shape (y−y0) = c²

@@ -125,7 +125,7 @@ Status ValidateProblem(const PcaSetup& setup, PcaResult* result) {
   }
   if (m < d) {
     return Fail(Status::NotDeterminable(
-                    Reason::kTooFewSensors,
+                    pca_reason::kTooFewSensors,
                     std::to_string(m) + " sensor" + (m == 1 ? "" : "s") + " cannot determine " +
                         std::to_string(d) +
                         "-dimensional sensitivity vectors: at least d = " + std::to_string(d) +
@@ -447,7 +447,7 @@ Status CheckFinite(PcaResult* result) {
       if (!(std::isfinite(se.scale) && se.scale > 0) || !se.axis.allFinite()) {
         return Fail(
             Status::NotDeterminable(
-                Reason::kDeadSensor,
+                pca_reason::kDeadSensor,
                 "sensor " + se.name + "'s axis is undefined: its sensitivity is " + Num(se.scale) +
                     " (its readings do not change with the orientation: a dead or "
                     "disconnected sensor?); check it, or remove it from the recording"),

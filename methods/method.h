@@ -27,6 +27,7 @@
 #include "formats/recording.h"
 #include "methods/acceptance.h"
 #include "methods/exports.h"
+#include "methods/failure_reason.h"
 
 namespace CLI {
 class App;  // CLI11 (server/cli.cc)
@@ -81,7 +82,8 @@ class Method {
   // Takes the recording from a finished, collecting parser of a layout it Reads(), and writes the
   // SPEC §4 result. kInvalidInput (config or data that cannot be used as given),
   // kNotDeterminable (the data cannot determine the parameters; the message says what to record).
-  // A failure carries its Reason (Status::reason(), catalog in server/failure_reasons.h:
+  // A failure carries its Reason (Status::reason(), catalog in server/failure_reasons.h and
+  // FailureReasons():
   // kInvalidConfig for a config key) and, once the numerics have run, leaves the partial
   // diagnostics in `result`: {"method", "usable": false, "diagnostics": {what was found before
   // failing}, "warnings"}, which the worker keeps with the failed job and the method's report
@@ -122,6 +124,10 @@ class Method {
   // keys: any other is refused naming it. The order is the one error messages list them in.
   // Never empty; the vector lives for the process.
   virtual const std::vector<AcceptanceKey>& AcceptanceKeys() const = 0;
+  // The catalog entries (title, generic advice) of the failure reasons it defines itself beside its
+  // numerics (core/<name>.h <name>_reason::); the generic ones (base/status.h) are the server's.
+  // Every reason a method's Run can set has an entry here or there (scripts/check_structure.py).
+  virtual std::vector<FailureReason> FailureReasons() const { return {}; }
   // The formats its results export to besides JSON, in the order the pages offer them.
   virtual std::vector<ExportFormat> ExportFormats() const = 0;
   // Writes a result this method's Run wrote (as stored) in one of its ExportFormats().

@@ -3,7 +3,11 @@
 
 Rules: no product file over 800 lines, no function over 150 lines, no product file outside
 methods/<name>/ and the registry (methods/registry.*) that names a method (a string literal "pca",
-"array", ..., comments included), base/ free of method vocabulary. Today's offenders are recorded in scripts/structure_baseline.json with their sizes;
+"array", ..., comments included), base/ free of method vocabulary, and every failure Reason defined
+in product code (base/status.h's generic ones, a method's own `<name>_reason::` beside its
+numerics) with a catalog entry (CatalogEntry / E(...) in server/failure_reasons.cc or a method's
+FailureReasons()). Today's offenders are recorded in scripts/structure_baseline.json with their
+sizes;
 the check fails when a new offender appears or a recorded one grows, so the tree only moves
 towards the rules. After a refactor shrinks an offender, `--update` records the smaller figures.
 
@@ -72,11 +76,38 @@ def functions(lines):
             start = None
 
 
+# A reason's definition: `inline constexpr Reason Reason::kName{"code"}` (generic) or, inside
+# `namespace <name>_reason {`, `inline constexpr Reason kName{"code"}`.
+REASON_DEFINITION = re.compile(r'constexpr Reason (Reason::)?(k\w+)\{"')
+REASON_NAMESPACE = re.compile(r'namespace (\w+_reason) \{')
+# A catalog entry: `E(R::kName,` (server/failure_reasons.cc, R = Reason) or
+# `CatalogEntry(core::<name>_reason::kName,` / `CatalogEntry(Reason::kName,`.
+REASON_ENTRY = re.compile(r'(?:\bE\(R::|CatalogEntry\(\s*(?:\w+::)*?(?:(\w+_reason)::|Reason::))(k\w+)')
+
+
+def reasons(text):
+    """(defined, catalogued): qualified names (Reason::kX, <name>_reason::kX) in this file."""
+    defined, catalogued = set(), set()
+    for m in REASON_DEFINITION.finditer(text):
+        if m.group(1):
+            defined.add("Reason::" + m.group(2))
+        else:
+            ns = REASON_NAMESPACE.findall(text[:m.start()])
+            defined.add("%s::%s" % (ns[-1] if ns else "?", m.group(2)))
+    for m in REASON_ENTRY.finditer(text):
+        catalogued.add("%s::%s" % (m.group(1) or "Reason", m.group(2)))
+    return defined, catalogued
+
+
 def measure(root):
     files, funcs, mentions = {}, {}, defaultdict(list)
+    defined, catalogued = {}, set()
     for f in product_files(root):
         with open(os.path.join(root, f), encoding="utf-8") as fh:
             text = fh.read()
+        d, c = reasons(text)
+        defined.update({r: f for r in d})
+        catalogued |= c
         lines = text.split("\n")
         if len(lines) > MAX_FILE_LINES:
             files[f] = len(lines)
@@ -91,7 +122,9 @@ def measure(root):
         for m in METHODS:
             if '"%s"' % m in text and (f, m) not in NOT_THE_METHOD:
                 mentions[m].append(f)
-    return files, funcs, {m: sorted(mentions[m]) for m in METHODS}
+    defined.pop("Reason::kUnspecified", None)
+    uncatalogued = {r: f for r, f in defined.items() if r not in catalogued}
+    return files, funcs, {m: sorted(mentions[m]) for m in METHODS}, uncatalogued
 
 
 def main():
@@ -102,7 +135,7 @@ def main():
     ap.add_argument("--report", action="store_true")
     ap.add_argument("--update", action="store_true")
     args = ap.parse_args()
-    files, funcs, mentions = measure(args.root)
+    files, funcs, mentions, uncatalogued = measure(args.root)
     counts = {m: len(v) for m, v in mentions.items()}
     if args.update:
         with open(args.baseline, "w") as fh:
@@ -118,6 +151,8 @@ def main():
             print("function %5d  %s" % (n, f))
         for m, fs in mentions.items():
             print('"%s" named outside methods/ in %d files: %s' % (m, len(fs), " ".join(fs)))
+        for r, f in sorted(uncatalogued.items()):
+            print("reason without a catalog entry: %s (%s)" % (r, f))
     with open(args.baseline) as fh:
         base = json.load(fh)
     problems = []
@@ -140,6 +175,9 @@ def main():
     base_files = sorted({f for fs in mentions.values() for f in fs if f.startswith("base/")})
     if base_files:
         problems.append("base/ names a method: %s" % " ".join(base_files))
+    for r, f in sorted(uncatalogued.items()):
+        problems.append("failure reason %s (%s) has no catalog entry: add one to "
+                        "server/failure_reasons.cc or its method's FailureReasons()" % (r, f))
     for p in problems:
         print("structure: " + p)
     if problems:

@@ -4,118 +4,91 @@
 #include <cstddef>
 #include <utility>
 
+#include "methods/method.h"
+#include "methods/registry.h"
+
 namespace calibd::server {
 namespace {
 
 std::vector<FailureReason> MakeCatalog() {
   using R = Reason;
+  const auto E = CatalogEntry;
   // Advice says what to record or set instead; the method's message (kept beside it) says what
   // it found. Keep the codes stable: they are stored with jobs and read by clients.
   std::vector<FailureReason> c = {
-      {R::kInvalidConfig, "invalid_config", "Invalid config",
-       "Correct the config key the message names (SPEC §3 lists the keys of each method) and "
-       "upload again."},
-      {R::kInvalidRecording, "invalid_recording", "The recording cannot be used as given",
-       "Check the recording against the config: its columns, units, number of sensors and "
-       "time column (SPEC §2), then upload it again."},
-      {R::kRecordingUnreadable, "recording_unreadable", "The recording does not parse",
-       "Upload the recording in one of the SPEC §2 layouts: a header line, then one number per "
-       "column on every row."},
-      {R::kOverMemoryBudget, "over_memory_budget", "Over the memory budget per job",
-       "Upload a shorter recording (fewer rows or columns), or ask the operator to raise "
-       "--job-memory-mb."},
-      {R::kProblemTooLarge, "problem_too_large", "The problem is too large",
-       "Calibrate fewer sensors or positions per job, or raise the method's size limits "
-       "(pca: max_memory_bytes, max_flops) if the server can afford it."},
-      {R::kNotDeterminable, "not_determinable", "The data do not determine the parameters",
-       "Record again following the method's recording instructions (README), with more "
-       "positions or motion than the minimum."},
-      {R::kNoSignal, "no_signal", "No signal",
-       "Check that the sensors were powered and the field (gravity, magnetic field) applied "
-       "while recording; all readings are equal."},
-      {R::kTooFewSensors, "too_few_sensors", "Too few sensors",
-       "Record with at least as many sensors as the dimension d of the field."},
-      {R::kTooFewPositions, "too_few_positions", "Too few positions",
-       "Record more static positions: at least the minimum the message names, and better twice "
-       "as many, spread over the sphere."},
-      {R::kPoorOrientationCoverage, "poor_orientation_coverage",
-       "Orientations do not cover the sphere",
-       "Hold the device still in orientations spread over the whole sphere (the six faces and "
-       "the diagonals between them), not only about one axis or in one plane."},
-      {R::kNoRankGap, "no_rank_gap", "No clear rank gap",
-       "Record positions whose field directions differ more (spread over the sphere), and "
-       "average longer per position to lower the noise."},
-      {R::kNotAnEllipsoid, "not_an_ellipsoid", "The readings lie on no ellipsoid",
-       "Estimate the sensor biases (bias: estimate, or record the static/moving layout), keep "
-       "the field constant between positions, and average longer per position."},
-      {R::kDeadSensor, "dead_sensor", "A sensor does not respond",
-       "Check the sensor the message names (power, wiring, channel mapping), or remove it from "
-       "the recording."},
-      {R::kIllConditioned, "ill_conditioned", "Numbers out of range",
-       "Check the units and range of the readings (convert raw counts to a sensible unit) and "
-       "that the field was applied."},
-      {R::kTooFewStatics, "too_few_statics", "Too few static intervals",
-       "Hold the device still for a few seconds in more orientations (12 or more, spread over "
-       "the sphere), turning it between them."},
-      {R::kTooFewRotations, "too_few_rotations", "Too few rotations",
-       "Join the static orientations by rotations: turn the device between every two statics, "
-       "about every axis, and hold it still again."},
-      {R::kNoDynamicPhase, "no_dynamic_phase", "No dynamic phase",
-       "After the statics, rotate the board for a while (about every axis) before stopping the "
-       "log."},
-      {R::kUnknownNoise, "unknown_noise", "Noise levels unknown",
-       "Set accel_noise and gyro_noise in the config (the statics show no noise)."},
-      {R::kSingularInformation, "singular_information", "Some parameters are not determined",
-       "Record statics spread over the sphere and rotate about every axis, so every parameter "
-       "shows in the data."},
-      {R::kImplausibleEstimate, "implausible_estimate", "Implausible estimate",
-       "Check the config's units (accel_unit, gyro_unit: deg/s or rad/s), the time column and "
-       "saturation; raise max_scale_deviation only for gains known roughly."},
-      {R::kLogTooShort, "log_too_short", "The log is too short",
-       "Record longer: the longest cluster time is a quarter of the log, so record four times "
-       "the longest averaging time of interest."},
-      {R::kIrregularSampling, "irregular_sampling", "Irregular sample times",
-       "Split the log at its gaps or resample it to a uniform rate before uploading."},
-      {R::kNotStationary, "not_stationary", "The sensor moved",
-       "Record the sensor at rest and untouched (on a stable surface, away from vibration) for "
-       "the whole log."},
-      {R::kNoGyroscope, "no_gyroscope", "No gyroscope",
-       "Record with at least one gyroscope triad (columns g0_x, g0_y, g0_z)."},
-      {R::kTooFewTriads, "too_few_triads", "Too few accelerometer triads",
-       "Mount at least 3 accelerometer triads that are not on one line."},
-      {R::kTriadsCollinear, "triads_collinear", "Triads on one line",
-       "Mount at least 3 triads that span a plane and give their nominal positions."},
-      {R::kTooFewSamples, "too_few_samples", "Too few usable samples",
-       "Record longer while rotating, below the gyroscopes' range."},
-      {R::kWeakExcitation, "weak_excitation", "Weak excitation",
-       "Rotate the array about every axis, briskly and in changing directions, not about one "
-       "fixed axis only."},
-      {R::kNumericalFailure, "numerical_failure", "The solver failed",
-       "Check the noise settings and the recording's units; record with more motion."},
-      {R::kImplausibleTimeUnit, "implausible_time_unit", "The time column is not in seconds",
-       "Give the time column's unit in the config (time_unit: s, ms, us or ns), or convert it "
-       "to seconds before uploading."},
-      {R::kDeadline, "deadline", "The job ran out of time",
-       "The job took longer than its time limit (--job-seconds, config job_seconds). Check that "
-       "the recording is what the method expects (time unit, layout); shorten it, or ask the "
-       "operator for a longer limit."},
-      {R::kCancelled, "cancelled", "The job was cancelled",
-       "Someone cancelled the job (POST /api/v1/jobs/{id}/cancel); rerun it if that was a "
-       "mistake."},
-      {R::kLeaseExpired, "lease_expired", "The job's worker stopped",
-       "Upload again; if it recurs, the job may be too large for the server (ask the "
-       "operator)."},
-      {R::kStorageError, "storage_error", "Storage error",
-       "Upload again later; the server could not read or write its database."},
-      {R::kDiskFull, "disk_full", "The server's disk is full",
-       "Ask the operator to free space where the database and its staging folder are; then "
-       "upload again. Nothing of the failed request was stored."},
-      {R::kStorageDamaged, "storage_damaged", "Stored data is damaged",
-       "The database holds damaged bytes (see /healthz). Upload the original recording again to "
-       "repair a damaged recording; the operator should restore the database from a backup."},
-      {R::kInternal, "internal", "Internal error",
-       "Report it to the operator with the job id: this is calibd's fault, not the data's."},
+      E(R::kInvalidConfig, "Invalid config",
+        "Correct the config key the message names (SPEC §3 lists the keys of each method) and "
+        "upload again."),
+      E(R::kInvalidRecording, "The recording cannot be used as given",
+        "Check the recording against the config: its columns, units, number of sensors and "
+        "time column (SPEC §2), then upload it again."),
+      E(R::kRecordingUnreadable, "The recording does not parse",
+        "Upload the recording in one of the SPEC §2 layouts: a header line, then one number per "
+        "column on every row."),
+      E(R::kOverMemoryBudget, "Over the memory budget per job",
+        "Upload a shorter recording (fewer rows or columns), or ask the operator to raise "
+        "--job-memory-mb."),
+      E(R::kProblemTooLarge, "The problem is too large",
+        "Calibrate fewer sensors or positions per job, or raise the size limits the message "
+        "names if the server can afford it."),
+      E(R::kNotDeterminable, "The data do not determine the parameters",
+        "Record again following the method's recording instructions (README), with more "
+        "positions or motion than the minimum."),
+      E(R::kNoSignal, "No signal",
+        "Check that the sensors were powered and the field (gravity, magnetic field) applied "
+        "while recording; all readings are equal."),
+      E(R::kTooFewPositions, "Too few positions",
+        "Record more static positions: at least the minimum the message names, and better twice "
+        "as many, spread over the sphere."),
+      E(R::kPoorOrientationCoverage, "Orientations do not cover the sphere",
+        "Hold the device still in orientations spread over the whole sphere (the six faces and "
+        "the diagonals between them), not only about one axis or in one plane."),
+      E(R::kIllConditioned, "Numbers out of range",
+        "Check the units and range of the readings (convert raw counts to a sensible unit) and "
+        "that the field was applied."),
+      E(R::kTooFewStatics, "Too few static intervals",
+        "Hold the device still for a few seconds in more orientations (12 or more, spread over "
+        "the sphere), turning it between them."),
+      E(R::kUnknownNoise, "Noise levels unknown",
+        "Set accel_noise and gyro_noise in the config (the statics show no noise)."),
+      E(R::kSingularInformation, "Some parameters are not determined",
+        "Record statics spread over the sphere and rotate about every axis, so every parameter "
+        "shows in the data."),
+      E(R::kImplausibleEstimate, "Implausible estimate",
+        "Check the config's units (accel_unit, gyro_unit: deg/s or rad/s), the time column and "
+        "saturation; raise max_scale_deviation only for gains known roughly."),
+      E(R::kLogTooShort, "The log is too short",
+        "Record longer: the longest cluster time is a quarter of the log, so record four times "
+        "the longest averaging time of interest."),
+      E(R::kNumericalFailure, "The solver failed",
+        "Check the noise settings and the recording's units; record with more motion."),
+      E(R::kImplausibleTimeUnit, "The time column is not in seconds",
+        "Give the time column's unit in the config (time_unit: s, ms, us or ns), or convert it "
+        "to seconds before uploading."),
+      E(R::kDeadline, "The job ran out of time",
+        "The job took longer than its time limit (--job-seconds, config job_seconds). Check that "
+        "the recording is what the method expects (time unit, layout); shorten it, or ask the "
+        "operator for a longer limit."),
+      E(R::kCancelled, "The job was cancelled",
+        "Someone cancelled the job (POST /api/v1/jobs/{id}/cancel); rerun it if that was a "
+        "mistake."),
+      E(R::kLeaseExpired, "The job's worker stopped",
+        "Upload again; if it recurs, the job may be too large for the server (ask the "
+        "operator)."),
+      E(R::kStorageError, "Storage error",
+        "Upload again later; the server could not read or write its database."),
+      E(R::kDiskFull, "The server's disk is full",
+        "Ask the operator to free space where the database and its staging folder are; then "
+        "upload again. Nothing of the failed request was stored."),
+      E(R::kStorageDamaged, "Stored data is damaged",
+        "The database holds damaged bytes (see /healthz). Upload the original recording again to "
+        "repair a damaged recording; the operator should restore the database from a backup."),
+      E(R::kInternal, "Internal error",
+        "Report it to the operator with the job id: this is calibd's fault, not the data's."),
   };
+  for (const Method* m : AllMethods()) {
+    for (const FailureReason& r : m->FailureReasons()) c.push_back(r);
+  }
   return c;
 }
 

@@ -1,8 +1,9 @@
-// The catalog of failure reasons: for every calibd::Reason (base/status.h) its stable snake_case
-// code (stored with a failed job and answered in GET /api/v1/jobs/{id} "error.reason", a SPEC §5
-// extension: README "Failure reasons"), a short title and the generic advice (what to record or
-// set instead). The one place advice comes from: the API, the CLI and the job page look it up
-// here by code, and show the method's own message (what it found) beside it.
+// The catalog of failure reasons: for every calibd::Reason (base/status.h: the generic ones; a
+// method's own through its Method::FailureReasons()) its stable snake_case code (stored with a
+// failed job and answered in GET /api/v1/jobs/{id} "error.reason", a SPEC §5 extension: README
+// "Failure reasons"), a short title and the generic advice (what to record or set instead). The one
+// place advice comes from: the API, the CLI and the job page look it up here by code, and show the
+// method's own message (what it found) beside it.
 #ifndef CALIBD_SERVER_FAILURE_REASONS_H_
 #define CALIBD_SERVER_FAILURE_REASONS_H_
 
@@ -13,17 +14,12 @@
 #include <vector>
 
 #include "base/status.h"
+#include "methods/failure_reason.h"
 
 namespace calibd::server {
 
-struct FailureReason {
-  Reason reason = Reason::kUnspecified;
-  const char* code = "";    // "too_few_positions": stable, documented, snake_case
-  const char* title = "";   // "Too few positions": a heading, no final period
-  const char* advice = "";  // what to record or set instead: one or two sentences
-};
-
-// Every entry, in the order of the Reason enum (kUnspecified excluded). Never empty.
+// Every entry: the generic reasons in base/status.h's order, then each method's own in the
+// registry's order (kUnspecified excluded). Codes are unique. Never empty.
 const std::vector<FailureReason>& AllFailureReasons();
 
 // The entry of `reason`; for kUnspecified (or an out-of-range value) the entry of `internal`.

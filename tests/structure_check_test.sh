@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # scripts/check_structure.py on a made-up tree: it fails on a new long file, a long function and a
 # method named outside its folder methods/<name>/ and the registry, passes once they are recorded,
-# and fails when a recorded one grows.
+# and fails when a recorded one grows or a failure reason has no catalog entry.
 set -euo pipefail
 check=$1/scripts/check_structure.py
 tree=$(mktemp -d)
@@ -30,4 +30,11 @@ python3 "$check" --root "$tree" --baseline "$tree/baseline.json" --update >/dev/
 expect 0 "no rule broken beyond the recorded offenders (1 files, 1 functions)"
 echo '// one more line' >>"$tree/core/f.cc"
 expect 1 "core/f.cc has 864 lines, over the limit of 800 and its recorded 863: split it"
+# A method's own failure reason needs a catalog entry (its FailureReasons()).
+mkdir -p "$tree/methods/imu"
+printf 'namespace imu_reason {\ninline constexpr Reason kSpin{"spin"};\n}\n' >"$tree/core/imu.h"
+expect 1 "failure reason imu_reason::kSpin (core/imu.h) has no catalog entry"
+echo 'CatalogEntry(core::imu_reason::kSpin, "Spin", "Hold it.")' >"$tree/methods/imu/imu_method.cc"
+python3 "$check" --root "$tree" --baseline "$tree/baseline.json" --update >/dev/null
+expect 0 "no rule broken beyond the recorded offenders"
 echo "structure_check_test: ok"

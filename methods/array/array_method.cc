@@ -405,6 +405,26 @@ class Array : public Method {
       return s;
     };
   }
+  std::vector<FailureReason> FailureReasons() const override {
+    return {
+        CatalogEntry(core::array_reason::kNoDynamicPhase, "No dynamic phase",
+                     "After the statics, rotate the board for a while (about every axis) before "
+                     "stopping the "
+                     "log."),
+        CatalogEntry(core::array_reason::kNoGyroscope, "No gyroscope",
+                     "Record with at least one gyroscope triad (columns g0_x, g0_y, g0_z)."),
+        CatalogEntry(core::array_reason::kTooFewTriads, "Too few accelerometer triads",
+                     "Mount at least 3 accelerometer triads that are not on one line."),
+        CatalogEntry(core::array_reason::kTriadsCollinear, "Triads on one line",
+                     "Mount at least 3 triads that span a plane and give their nominal positions."),
+        CatalogEntry(core::array_reason::kTooFewSamples, "Too few usable samples",
+                     "Record longer while rotating, below the gyroscopes' range."),
+        CatalogEntry(
+            core::array_reason::kWeakExcitation, "Weak excitation",
+            "Rotate the array about every axis, briskly and in changing directions, not about one "
+            "fixed axis only."),
+    };
+  }
   std::vector<ExportFormat> ExportFormats() const override {
     return {CsvFormat(), CHeaderFormat()};
   }

@@ -311,6 +311,14 @@ class Imu : public Method {
       return SimulateImuFiles(*options, &files->csv, &files->config, &files->truth);
     };
   }
+  std::vector<FailureReason> FailureReasons() const override {
+    return {
+        CatalogEntry(
+            core::imu_reason::kTooFewRotations, "Too few rotations",
+            "Join the static orientations by rotations: turn the device between every two statics, "
+            "about every axis, and hold it still again."),
+    };
+  }
   std::vector<ExportFormat> ExportFormats() const override {
     return {CsvFormat(), CHeaderFormat(),
             ExportFormat{"yaml", "OpenVINS kalibr_imu_chain.yaml", "application/yaml",

@@ -86,6 +86,17 @@ class Noise : public Method {
       return SimulateNoiseFiles(*options, &files->csv, &files->config, &files->truth);
     };
   }
+  std::vector<FailureReason> FailureReasons() const override {
+    return {
+        CatalogEntry(
+            core::noise_reason::kIrregularSampling, "Irregular sample times",
+            "Split the log at its gaps or resample it to a uniform rate before uploading."),
+        CatalogEntry(core::noise_reason::kNotStationary, "The sensor moved",
+                     "Record the sensor at rest and untouched (on a stable surface, away from "
+                     "vibration) for "
+                     "the whole log."),
+    };
+  }
   std::vector<ExportFormat> ExportFormats() const override {
     return {CsvFormat(), CHeaderFormat(),
             ExportFormat{"yaml", "Kalibr imu.yaml", "application/yaml", "imu.yaml"}};
@@ -245,7 +256,7 @@ class Noise : public Method {
         typed.diagnostics.units = results::NoiseUnits{units.accel_text, units.gyro_text};
         *result = results::ToJson(typed);
         return Status::NotDeterminable(
-            Reason::kNotStationary,
+            core::noise_reason::kNotStationary,
             PinnedList(report) +
                 ": a noise log recorded at rest never reaches its sensor's full scale, so the "
                 "sensor was knocked or moved (or its range is too small); the Allan deviation of "

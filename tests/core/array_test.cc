@@ -418,7 +418,8 @@ TEST(ArrayNotDeterminable, NoGyroscope) {
   sim.problem.gyro.resize(50, 0);
   ExpectNotDeterminable(sim.problem, PaperOptions(), {"no gyroscope", "at least one gyroscope"});
   ArrayResult r;
-  EXPECT_EQ(CalibrateArray(sim.problem, PaperOptions(), &r).reason(), Reason::kNoGyroscope);
+  EXPECT_EQ(CalibrateArray(sim.problem, PaperOptions(), &r).reason(),
+            core::array_reason::kNoGyroscope);
 }
 
 TEST(ArrayNotDeterminable, RotationAboutOneFixedAxis) {
@@ -434,7 +435,7 @@ TEST(ArrayNotDeterminable, RotationAboutOneFixedAxis) {
   ArrayResult r;
   const Status s = CalibrateArray(sim.problem, PaperOptions(), &r);
   ASSERT_EQ(s.code(), StatusCode::kNotDeterminable) << s.message();
-  EXPECT_EQ(s.reason(), Reason::kWeakExcitation);
+  EXPECT_EQ(s.reason(), core::array_reason::kWeakExcitation);
   EXPECT_NE(s.message().find("one fixed axis"), std::string::npos);
   EXPECT_NE(s.message().find("all three axes"), std::string::npos);
   EXPECT_EQ(r.excitation.verdict, "insufficient");

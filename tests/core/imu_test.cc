@@ -247,7 +247,7 @@ TEST(ImuCalibration, SaturatedRotationsFailWithTooFewRotationsAndSayWhy) {
   ImuResult r;
   const Status s = CalibrateImu(sim.t, sim.accel, sim.gyro, o, &r);
   ASSERT_EQ(s.code(), StatusCode::kNotDeterminable) << s.message();
-  EXPECT_EQ(s.reason(), Reason::kTooFewRotations);
+  EXPECT_EQ(s.reason(), core::imu_reason::kTooFewRotations);
   EXPECT_EQ(r.termination, ImuTermination::kTooFewRotations);
   EXPECT_FALSE(r.usable);
   EXPECT_NE(s.message().find("at least 5 rotations"), std::string::npos) << s.message();

@@ -12,6 +12,7 @@
 
 #include "core/array_simulation.h"
 #include "core/imu_simulation.h"
+#include "core/noise.h"
 #include "methods/array/array_method.h"
 #include "methods/imu/imu_method.h"
 #include "server/config.h"
@@ -262,7 +263,7 @@ TEST(SaturationMethod, NoiseRefusesAClippedLogAndSaysWhy) {
   json result;
   Status s = Calibrate(NoiseCsv(true), "noise.csv", json{{"method", "noise"}}, &result);
   ASSERT_EQ(s.code(), StatusCode::kNotDeterminable) << s.message();
-  EXPECT_EQ(s.reason(), Reason::kNotStationary);
+  EXPECT_EQ(s.reason(), core::noise_reason::kNotStationary);
   EXPECT_NE(s.message().find("samples pinned at"), std::string::npos) << s.message();
   EXPECT_NE(s.message().find("knocked"), std::string::npos) << s.message();
   ASSERT_TRUE(result.contains("diagnostics")) << result.dump().substr(0, 300);
