@@ -58,14 +58,18 @@ namespace calibd::core {
 // The failure reasons only array meets (base/status.h Reason; their catalog entries are in
 // methods/array/array_method.cc FailureReasons()).
 namespace array_reason {
-inline constexpr Reason kNoGyroscope{"no_gyroscope"};          // no gyroscope triad
-inline constexpr Reason kTooFewTriads{"too_few_triads"};       // fewer than 3 accelerometer triads
-inline constexpr Reason kTriadsCollinear{"triads_collinear"};  // the triads lie on one line
-inline constexpr Reason kTooFewSamples{"too_few_samples"};     // fewer usable samples than needed
-inline constexpr Reason kWeakExcitation{
-    "weak_excitation"};  // the motion does not excite every direction
-inline constexpr Reason kNoDynamicPhase{
-    "no_dynamic_phase"};  // no motion after the statics (full model)
+// No gyroscope triad
+inline constexpr Reason kNoGyroscope{"no_gyroscope"};
+// Fewer than 3 accelerometer triads
+inline constexpr Reason kTooFewTriads{"too_few_triads"};
+// The triads lie on one line
+inline constexpr Reason kTriadsCollinear{"triads_collinear"};
+// Fewer usable samples than needed
+inline constexpr Reason kTooFewSamples{"too_few_samples"};
+// The motion does not excite every direction
+inline constexpr Reason kWeakExcitation{"weak_excitation"};
+// No motion after the statics (full model)
+inline constexpr Reason kNoDynamicPhase{"no_dynamic_phase"};
 }  // namespace array_reason
 
 enum class ArraySolver { kJoint, kBcd };

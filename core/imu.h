@@ -76,8 +76,8 @@ namespace calibd::core {
 // The failure reasons only imu meets (base/status.h Reason; their catalog entries are in
 // methods/imu/imu_method.cc FailureReasons()).
 namespace imu_reason {
-inline constexpr Reason kTooFewRotations{
-    "too_few_rotations"};  // too few rotations between statics for the gyroscope
+// Too few rotations between statics for the gyroscope
+inline constexpr Reason kTooFewRotations{"too_few_rotations"};
 }  // namespace imu_reason
 
 inline constexpr double kImuStandardGravity = 9.80665;  // m/s²

@@ -77,9 +77,10 @@ namespace calibd::core {
 // The failure reasons only noise meets (base/status.h Reason; their catalog entries are in
 // methods/noise/noise_method.cc FailureReasons()).
 namespace noise_reason {
-inline constexpr Reason kIrregularSampling{
-    "irregular_sampling"};  // sample times jitter too much for the Allan deviation
-inline constexpr Reason kNotStationary{"not_stationary"};  // a noise log that moves
+// Sample times jitter too much for the Allan deviation
+inline constexpr Reason kIrregularSampling{"irregular_sampling"};
+// A noise log that moves
+inline constexpr Reason kNotStationary{"not_stationary"};
 }  // namespace noise_reason
 
 struct NoiseOptions {

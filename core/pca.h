@@ -37,13 +37,14 @@ namespace calibd::core {
 // The failure reasons only pca meets (base/status.h Reason; their catalog entries are in
 // methods/pca/pca_method.cc FailureReasons()).
 namespace pca_reason {
-inline constexpr Reason kTooFewSensors{"too_few_sensors"};  // fewer sensors than the dimension d
-inline constexpr Reason kNoRankGap{
-    "no_rank_gap"};  // no clear gap between the singular values d and d+1
-inline constexpr Reason kNotAnEllipsoid{
-    "not_an_ellipsoid"};  // the readings lie on no ellipsoid (biases, field changed, noise)
-inline constexpr Reason kDeadSensor{
-    "dead_sensor"};  // a sensor whose readings do not change with the orientation
+// Fewer sensors than the dimension d
+inline constexpr Reason kTooFewSensors{"too_few_sensors"};
+// No clear gap between the singular values d and d+1
+inline constexpr Reason kNoRankGap{"no_rank_gap"};
+// The readings lie on no ellipsoid (biases, field changed, noise)
+inline constexpr Reason kNotAnEllipsoid{"not_an_ellipsoid"};
+// A sensor whose readings do not change with the orientation
+inline constexpr Reason kDeadSensor{"dead_sensor"};
 }  // namespace pca_reason
 
 enum class BiasModel {
