@@ -67,8 +67,10 @@ class Reason {
   static const Reason kTooFewPositions;  // fewer static positions than the unknowns need
   static const Reason kPoorOrientationCoverage;  // orientations too few directions / on a plane,
                                                  // cone or quadric
-  static const Reason kTooFewStatics;            // too few static intervals found in a log
-  static const Reason kUnknownNoise;         // noise levels zero / unknown (noise-free readings)
+  static const Reason kNotAnEllipsoid;  // the readings lie on no ellipsoid (biases, field changed)
+  static const Reason kFieldDisturbed;  // the field changed during the log (iron, motors)
+  static const Reason kTooFewStatics;   // too few static intervals found in a log
+  static const Reason kUnknownNoise;    // noise levels zero / unknown (noise-free readings)
   static const Reason kSingularInformation;  // the Fisher information is singular
   static const Reason kImplausibleEstimate;  // an estimate far from the nominal (wrong unit?)
   static const Reason kIllConditioned;       // computed values not finite in double precision
@@ -99,6 +101,8 @@ inline constexpr Reason Reason::kNotDeterminable{"not_determinable"};
 inline constexpr Reason Reason::kNoSignal{"no_signal"};
 inline constexpr Reason Reason::kTooFewPositions{"too_few_positions"};
 inline constexpr Reason Reason::kPoorOrientationCoverage{"poor_orientation_coverage"};
+inline constexpr Reason Reason::kNotAnEllipsoid{"not_an_ellipsoid"};
+inline constexpr Reason Reason::kFieldDisturbed{"field_disturbed"};
 inline constexpr Reason Reason::kTooFewStatics{"too_few_statics"};
 inline constexpr Reason Reason::kUnknownNoise{"unknown_noise"};
 inline constexpr Reason Reason::kSingularInformation{"singular_information"};

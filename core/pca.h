@@ -41,8 +41,6 @@ namespace pca_reason {
 inline constexpr Reason kTooFewSensors{"too_few_sensors"};
 // No clear gap between the singular values d and d+1
 inline constexpr Reason kNoRankGap{"no_rank_gap"};
-// The readings lie on no ellipsoid (biases, field changed, noise)
-inline constexpr Reason kNotAnEllipsoid{"not_an_ellipsoid"};
 // A sensor whose readings do not change with the orientation
 inline constexpr Reason kDeadSensor{"dead_sensor"};
 }  // namespace pca_reason

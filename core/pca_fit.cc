@@ -155,7 +155,7 @@ Status ClosedFormBiasFree(const MatrixXd& mm, int d, double c, const PcaOptions&
   result->g_eigenvalues = lambda;
   if (!(lambda(0) > 1e-12 * std::abs(lambda(d - 1)))) {
     return Status::NotDeterminable(
-        pca_reason::kNotAnEllipsoid,
+        Reason::kNotAnEllipsoid,
         "g is not positive definite (eigenvalues " + Num(lambda(0)) + " ... " + Num(lambda(d - 1)) +
             "): the readings are not those of bias-free linear sensors in a field of constant "
             "magnitude. Likely causes: sensor biases not removed (use bias: estimate, or record "
@@ -236,13 +236,13 @@ Status ClosedFormAffine(const MatrixXd& mm, int d, double c, const PcaOptions& o
   if (!(mu(0) > 1e-12 * mu(d - 1))) {
     result->g_eigenvalues = mu;
     return Status::NotDeterminable(
-        pca_reason::kNotAnEllipsoid,
+        Reason::kNotAnEllipsoid,
         not_ellipsoid + ", eigenvalues " + Num(mu(0)) + " ... " + Num(mu(d - 1)) + causes);
   }
   const VectorXd y0h = mh.llt().solve(wh);
   const double rho = y0h.dot(mh * y0h) - kh;
   if (!(rho > 0)) {
-    return Status::NotDeterminable(pca_reason::kNotAnEllipsoid,
+    return Status::NotDeterminable(Reason::kNotAnEllipsoid,
                                    not_ellipsoid + ": an empty ellipsoid" + causes);
   }
   const MatrixXd shape = (c * c / (rho * scale * scale)) * mh;  // (y−y0)ᵀ shape (y−y0) = c²

@@ -6,7 +6,7 @@
 #
 # Left out, because their subject is statistics or timing, which the normal build checks, while
 # the code they run is run here by other tests:
-#   - Monte-Carlo sweeps and exact-recovery runs of the array, full-model and imu numerics: they
+#   - Monte-Carlo sweeps and exact-recovery runs of the array, full-model, imu and mag numerics: they
 #     repeat the same arithmetic hundreds of times (together about 10 minutes of CPU under ASan);
 #     every other array, array-full and imu test runs here, including one Monte-Carlo test of the
 #     array at N = 100, and the method tests run the same code through the adapters;
@@ -39,6 +39,8 @@ slow+='|PaperHeadlineMicrometreErrorsWithFig4Dynamics)'
 slow+='|CalibrationChain\.ArrayReachesTheCramerRaoBoundOnlyWithTheCalibration'
 slow+='|ArrayFull\.(RecoversThe32TriadArrayExactlyWithoutNoise|IsEfficientAndItsSigmaMatchesTheSpreadOnAnEightImuBoard'
 slow+='|ResidualAwareSigmaMatchesTheSpreadWhenTheNoiseIsUnderstated|ResidualWeightingFindsTheNoiseWhenTheModelFits)'
+slow+='|Mag\.(ThePrimarySigmaMatchesMonteCarloErrorsUnderWhiteNoise|UnderColouredNoiseThePrimaryIsTheSandwichAndStaysHonest'
+slow+='|DisturbedSpansAreDownWeightedReportedAndBeatALeastSquaresFit|OnCleanLogsTheErrorIsNoLargerThanTheLeastSquaresFits)'
 slow+='|ImuCalibration\.(ReportedSigmaMatchesMonteCarloSpread|ReportedSigmaMatchesMonteCarloSpreadWithGyroBiasEstimated)'
 slow+='|StopToken\.(ArrayPositionsStopAtTheirDeadlineForBothSolvers|ArrayFullModelStopsAtItsDeadline'
 slow+='|ImuStopsAtItsDeadlineBeforeItStartsAndChangesNothingWhenSilent)'

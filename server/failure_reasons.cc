@@ -43,6 +43,13 @@ std::vector<FailureReason> MakeCatalog() {
       E(R::kPoorOrientationCoverage, "Orientations do not cover the sphere",
         "Hold the device still in orientations spread over the whole sphere (the six faces and "
         "the diagonals between them), not only about one axis or in one plane."),
+      E(R::kNotAnEllipsoid, "The readings lie on no ellipsoid",
+        "Keep the field constant while recording (away from iron, motors and cables), spread the "
+        "orientations over the sphere, and let the fit estimate the biases where the method "
+        "allows it (the message says how)."),
+      E(R::kFieldDisturbed, "The field was disturbed",
+        "Record again away from iron, motors, cables and vehicles, keeping the device in one "
+        "place while turning it; the message names the disturbed spans."),
       E(R::kIllConditioned, "Numbers out of range",
         "Check the units and range of the readings (convert raw counts to a sensible unit) and "
         "that the field was applied."),

@@ -519,14 +519,9 @@ class Pca : public Method {
             core::pca_reason::kNoRankGap, "No clear rank gap",
             "Record positions whose field directions differ more (spread over the sphere), and "
             "average longer per position to lower the noise."),
-        CatalogEntry(
-            core::pca_reason::kNotAnEllipsoid, "The readings lie on no ellipsoid",
-            "Estimate the sensor biases (bias: estimate, or record the static/moving layout), keep "
-            "the field constant between positions, and average longer per position."),
         CatalogEntry(core::pca_reason::kDeadSensor, "A sensor does not respond",
                      "Check the sensor the message names (power, wiring, channel mapping), or "
-                     "remove it from "
-                     "the recording."),
+                     "remove it from the recording."),
     };
   }
   std::vector<ExportFormat> ExportFormats() const override {

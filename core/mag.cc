@@ -1,0 +1,445 @@
+#include "core/mag.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "core/mag_internal.h"
+
+namespace calibd::core {
+namespace {
+
+using Eigen::Matrix3d;
+using Eigen::MatrixXd;
+using Eigen::Vector3d;
+using Eigen::VectorXd;
+using mag_internal::Ellipsoid;
+using mag_internal::Matrix9d;
+using mag_internal::Sym;
+using mag_internal::Vector6d;
+using mag_internal::Vector9d;
+
+std::string Fmt(const char* format, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, format, v);
+  return buf;
+}
+
+Status Invalid(const std::string& what) { return Status::InvalidInput("mag: " + what); }
+
+// An orthonormal basis (columns) of the plane orthogonal to the unit vector u.
+Eigen::Matrix<double, 3, 2> Tangent(const Vector3d& u) {
+  const Vector3d a = std::abs(u.x()) < 0.9 ? Vector3d::UnitX() : Vector3d::UnitY();
+  const Vector3d b1 = u.cross(a).normalized();
+  Eigen::Matrix<double, 3, 2> b;
+  b << b1, u.cross(b1);
+  return b;
+}
+
+// Stage 1: the algebraic ellipsoid fit (see core/mag.h), on readings centred on their mean and
+// scaled by their RMS spread so that the design matrix is well conditioned.
+Status StartFit(const Eigen::Matrix3Xd& y, Ellipsoid* e) {
+  const Vector3d mean = y.rowwise().mean();
+  const double scale = std::sqrt((y.colwise() - mean).squaredNorm() / y.cols());
+  if (!(scale > 0)) {
+    return Status::NotDeterminable(Reason::kNoSignal, "mag: all magnetometer readings are equal");
+  }
+  Eigen::Matrix<double, 10, 10> dtd = Eigen::Matrix<double, 10, 10>::Zero();
+  for (Eigen::Index i = 0; i < y.cols(); ++i) {
+    const Vector3d z = (y.col(i) - mean) / scale;
+    Eigen::Matrix<double, 10, 1> row;
+    row << z.x() * z.x(), z.y() * z.y(), z.z() * z.z(), 2 * z.x() * z.y(), 2 * z.x() * z.z(),
+        2 * z.y() * z.z(), z.x(), z.y(), z.z(), 1;
+    dtd.selfadjointView<Eigen::Lower>().rankUpdate(row);
+  }
+  dtd = dtd.selfadjointView<Eigen::Lower>();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 10, 10>> es(dtd);
+  const Eigen::Matrix<double, 10, 1> v = es.eigenvectors().col(0);
+  Matrix3d q;
+  q << v(0), v(3), v(4), v(3), v(1), v(5), v(4), v(5), v(2);
+  const Vector3d l = v.segment<3>(6);
+  Eigen::SelfAdjointEigenSolver<Matrix3d> qe(q);
+  if (qe.eigenvalues()(0) * qe.eigenvalues()(2) <= 0) {
+    return Status::NotDeterminable(
+        Reason::kNotAnEllipsoid,
+        "mag: the magnetometer readings lie on no ellipsoid (the field changed while recording, "
+        "or the device was not turned through enough orientations)");
+  }
+  const Vector3d hz = -0.5 * q.ldlt().solve(l);
+  const double k = hz.dot(q * hz) - v(9);
+  const Matrix3d m = q / k;  // (z − hz)ᵀ m (z − hz) = 1
+  Eigen::SelfAdjointEigenSolver<Matrix3d> me(m);
+  if (!(me.eigenvalues()(0) > 0)) {
+    return Status::NotDeterminable(Reason::kNotAnEllipsoid,
+                                   "mag: the magnetometer readings lie on no ellipsoid");
+  }
+  const Matrix3d a_z = me.eigenvectors() *
+                       me.eigenvalues().cwiseSqrt().cwiseInverse().asDiagonal() *
+                       me.eigenvectors().transpose();
+  e->h = mean + scale * hz;
+  e->a = scale * a_z;
+  const Matrix3d a_inv = e->a.inverse();
+  e->u.resize(3, y.cols());
+  for (Eigen::Index i = 0; i < y.cols(); ++i)
+    e->u.col(i) = (a_inv * (y.col(i) - e->h)).normalized();
+  return Status::Ok();
+}
+
+// The per-sample pieces of one linearisation (see MaximumLikelihood).
+struct Linearized {
+  std::vector<Eigen::Matrix2d> huu;
+  std::vector<Eigen::Matrix<double, 2, 9>> hut;
+  std::vector<Eigen::Vector2d> gu;
+  std::vector<Eigen::Matrix<double, 3, 2>> tangent;
+  std::vector<Vector9d> score;  // w Jθᵀ r per sample (for the sandwich)
+  Matrix9d htt = Matrix9d::Zero();
+  Vector9d gt = Vector9d::Zero();
+};
+
+void Linearize(const Eigen::Matrix3Xd& y, const VectorXd& w, const Ellipsoid& e, Linearized* l) {
+  const Eigen::Index n = y.cols();
+  l->huu.resize(n);
+  l->hut.resize(n);
+  l->gu.resize(n);
+  l->tangent.resize(n);
+  l->score.resize(n);
+  l->htt.setZero();
+  l->gt.setZero();
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Vector3d u = e.u.col(i);
+    const Vector3d r = y.col(i) - e.h - e.a * u;
+    Eigen::Matrix<double, 3, 9> jt;
+    jt.leftCols<3>() = -Matrix3d::Identity();
+    for (int k = 0; k < 6; ++k) {
+      Vector6d ek = Vector6d::Zero();
+      ek(k) = 1;
+      jt.col(3 + k) = -Sym(ek) * u;
+    }
+    l->tangent[i] = Tangent(u);
+    const Eigen::Matrix<double, 3, 2> ju = -e.a * l->tangent[i];
+    l->huu[i] = w(i) * ju.transpose() * ju;
+    l->hut[i] = w(i) * ju.transpose() * jt;
+    l->gu[i] = w(i) * ju.transpose() * r;
+    l->score[i] = w(i) * jt.transpose() * r;
+    l->htt += w(i) * jt.transpose() * jt;
+    l->gt += l->score[i];
+  }
+}
+
+double Cost(const Eigen::Matrix3Xd& y, const VectorXd& w, const Ellipsoid& e) {
+  double c = 0;
+  for (Eigen::Index i = 0; i < y.cols(); ++i) {
+    c += w(i) * (y.col(i) - e.h - e.a * e.u.col(i)).squaredNorm();
+  }
+  return c;
+}
+
+// The reduced (Schur) system of a linearisation with Marquardt damping λ on every block.
+void Reduce(const Linearized& l, double lambda, Matrix9d* h, Vector9d* g) {
+  *h = l.htt;
+  h->diagonal() *= 1 + lambda;
+  *g = l.gt;
+  for (size_t i = 0; i < l.huu.size(); ++i) {
+    Eigen::Matrix2d huu = l.huu[i];
+    huu.diagonal() *= 1 + lambda;
+    const Eigen::Matrix2d inv = huu.inverse();
+    *h -= l.hut[i].transpose() * inv * l.hut[i];
+    *g -= l.hut[i].transpose() * inv * l.gu[i];
+  }
+}
+
+// Stage 2: Levenberg-Marquardt with the weights w. Returns the iterations used.
+Status MaximumLikelihood(const Eigen::Matrix3Xd& y, const VectorXd& w, const MagOptions& options,
+                         Ellipsoid* e, int* iterations) {
+  Linearized l;
+  double lambda = 1e-6;
+  double cost = Cost(y, w, *e);
+  for (int it = 0; it < options.max_iterations; ++it) {
+    if (StopRequested(options.stop)) return StoppedStatus(*options.stop, "mag: fit");
+    ++*iterations;
+    Linearize(y, w, *e, &l);
+    bool accepted = false;
+    while (!accepted && lambda < 1e12) {
+      Matrix9d h;
+      Vector9d g;
+      Reduce(l, lambda, &h, &g);
+      const Vector9d dt = -h.ldlt().solve(g);
+      if (!dt.allFinite()) {
+        lambda *= 10;
+        continue;
+      }
+      Ellipsoid next = *e;
+      next.h += dt.head<3>();
+      next.a += Sym(dt.tail<6>());
+      for (Eigen::Index i = 0; i < y.cols(); ++i) {
+        Eigen::Matrix2d huu = l.huu[i];
+        huu.diagonal() *= 1 + lambda;
+        const Eigen::Vector2d du = -huu.inverse() * (l.gu[i] + l.hut[i] * dt);
+        next.u.col(i) = (e->u.col(i) + l.tangent[i] * du).normalized();
+      }
+      const double next_cost = Cost(y, w, next);
+      if (next_cost < cost) {
+        const double decrease = (cost - next_cost) / std::max(cost, 1e-300);
+        *e = std::move(next);
+        cost = next_cost;
+        lambda = std::max(lambda / 3, 1e-12);
+        accepted = true;
+        if (decrease < options.tolerance) return Status::Ok();
+      } else {
+        lambda *= 4;
+      }
+    }
+    if (!accepted) return Status::Ok();  // no step lowers the cost: a minimum
+  }
+  return Status::Ok();
+}
+
+VectorXd ResidualNorms(const Eigen::Matrix3Xd& y, const Ellipsoid& e) {
+  VectorXd r(y.cols());
+  for (Eigen::Index i = 0; i < y.cols(); ++i) r(i) = (y.col(i) - e.h - e.a * e.u.col(i)).norm();
+  return r;
+}
+
+double Median(VectorXd v) {
+  if (v.size() == 0) return 0;
+  const Eigen::Index mid = v.size() / 2;
+  std::nth_element(v.data(), v.data() + mid, v.data() + v.size());
+  return v(mid);
+}
+
+// The two covariances of θ = (h, a) (stage 3).
+struct Covariances {
+  Matrix9d crb = Matrix9d::Zero();
+  Matrix9d sandwich = Matrix9d::Zero();
+  double sigma = 0;  // σ̂, reading units
+  bool ok = false;
+};
+
+Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const VectorXd& w,
+                        const Ellipsoid& e, const MagOptions& options) {
+  Covariances c;
+  Linearized l;
+  Linearize(y, w, e, &l);
+  Matrix9d h;
+  Vector9d g;
+  Reduce(l, 0, &h, &g);
+  Eigen::LDLT<Matrix9d> ldlt(h);
+  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return c;
+  const Matrix9d h_inv = ldlt.solve(Matrix9d::Identity());
+  const double weight_sum = w.sum();
+  c.sigma = std::sqrt(Cost(y, w, e) / std::max(weight_sum - 9, 1.0));
+  c.crb = c.sigma * c.sigma * h_inv;
+  // Batches of consecutive samples: their reduced scores.
+  // Newey-West with lag one batch (Bartlett weight ½): noise correlated across a batch boundary
+  // counts too (positive semi-definite by construction).
+  Matrix9d meat = Matrix9d::Zero();
+  int64_t batches = 0;
+  Vector9d s = Vector9d::Zero(), previous = Vector9d::Zero();
+  double batch_start = t.size() ? t(0) : 0;
+  auto close_batch = [&] {
+    meat += s * s.transpose() + 0.5 * (s * previous.transpose() + previous * s.transpose());
+    ++batches;
+    previous = s;
+    s.setZero();
+  };
+  for (Eigen::Index i = 0; i < y.cols(); ++i) {
+    if (t(i) - batch_start >= options.batch_seconds) {
+      close_batch();
+      batch_start = t(i);
+    }
+    s += l.score[i] - l.hut[i].transpose() * l.huu[i].inverse() * l.gu[i];
+  }
+  close_batch();
+  if (batches > 9) {
+    c.sandwich = h_inv * meat * h_inv * (static_cast<double>(batches) / (batches - 9));
+  } else {
+    c.sandwich = c.crb;  // too few batches for a sandwich: the bound alone
+  }
+  c.ok = c.crb.allFinite() && c.sandwich.allFinite();
+  return c;
+}
+
+// ∂P/∂a_k for P = F A⁻¹ (k < 6).
+std::vector<Matrix3d> SoftIronDirections(const Matrix3d& a, double field) {
+  const Matrix3d a_inv = a.inverse();
+  std::vector<Matrix3d> d(6);
+  for (int k = 0; k < 6; ++k) {
+    Vector6d ek = Vector6d::Zero();
+    ek(k) = 1;
+    d[k] = -field * a_inv * Sym(ek) * a_inv;
+  }
+  return d;
+}
+
+MagStd StdOf(const Matrix9d& cov, const std::vector<Matrix3d>& dp) {
+  MagStd s;
+  s.hard_iron = cov.diagonal().head<3>().cwiseMax(0).cwiseSqrt();
+  s.soft_iron = mag_internal::EntryStd(dp, cov.bottomRightCorner<6, 6>());
+  return s;
+}
+
+// Residual norms in µT (|m_i| − F) for the RMS figures.
+double FieldResidualRms(const Eigen::Matrix3Xd& y, const Eigen::Vector3d& h, const Matrix3d& s,
+                        double field, double scale_ut, const VectorXd* mask) {
+  double sum = 0;
+  int64_t n = 0;
+  for (Eigen::Index i = 0; i < y.cols(); ++i) {
+    if (mask != nullptr && (*mask)(i) == 0) continue;
+    const double d = ((s * (y.col(i) - h)).norm() - field) * scale_ut;
+    sum += d * d;
+    ++n;
+  }
+  return n ? std::sqrt(sum / n) : 0;
+}
+
+Status CheckProblem(const MagProblem& p) {
+  if (p.y.cols() < 20) return Invalid("fewer than 20 magnetometer samples");
+  if (p.t.size() != p.y.cols())
+    return Invalid("the time and magnetometer columns differ in length");
+  if (!p.y.allFinite()) return Invalid("a magnetometer reading is not finite");
+  for (Eigen::Index i = 1; i < p.t.size(); ++i) {
+    if (!(p.t(i) > p.t(i - 1))) return Invalid("sample times do not increase");
+  }
+  for (const MagStatic& s : p.statics) {
+    if (s.first < 0 || s.last < s.first || s.last >= p.y.cols()) {
+      return Invalid("a static's sample range lies outside the log");
+    }
+  }
+  return Status::Ok();
+}
+
+// The primary σ (stage 3's rule) and its warning.
+void ChoosePrimary(const Covariances& c, const std::vector<Matrix3d>& dp, const MagOptions& options,
+                   MagResult* r) {
+  r->crb = StdOf(c.crb, dp);
+  const MagStd sandwich = StdOf(c.sandwich, dp);
+  double sum = 0;
+  for (int k = 0; k < 9; ++k) sum += c.sandwich(k, k) / std::max(c.crb(k, k), 1e-300);
+  r->sandwich_ratio = std::sqrt(sum / 9);
+  if (r->sandwich_ratio > options.sandwich_margin) {
+    r->basis = "sandwich";
+    r->std = sandwich;
+    r->warnings.push_back("σ is the residual-aware sandwich, " + Fmt("%.2g", r->sandwich_ratio) +
+                          "× the white-noise bound: the residuals are correlated in time "
+                          "(disturbances, vibration or a model error)");
+  } else {
+    r->basis = "crb";
+    r->std = r->crb;
+  }
+}
+
+}  // namespace
+
+Status MagOptions::Validate() const {
+  if (!(field >= 0) || !std::isfinite(field)) return Invalid("field must be >= 0 µT");
+  if (!(microtesla_per_unit > 0) || !std::isfinite(microtesla_per_unit)) {
+    return Invalid("microtesla_per_unit must be > 0");
+  }
+  if (max_iterations < 1) return Invalid("max_iterations must be >= 1");
+  if (!(tolerance > 0)) return Invalid("tolerance must be > 0");
+  if (!(robust_scale >= 0)) return Invalid("robust_scale must be >= 0");
+  if (robust_passes < 0) return Invalid("robust_passes must be >= 0");
+  if (!(disturbed_weight > 0 && disturbed_weight < 1)) {
+    return Invalid("disturbed_weight must lie in (0, 1)");
+  }
+  if (!(max_disturbed_fraction > 0 && max_disturbed_fraction <= 1)) {
+    return Invalid("max_disturbed_fraction must lie in (0, 1]");
+  }
+  if (!(batch_seconds > 0)) return Invalid("batch_seconds must be > 0");
+  if (!(span_merge_seconds >= 0)) return Invalid("span_merge_seconds must be >= 0");
+  if (!(sandwich_margin >= 1)) return Invalid("sandwich_margin must be >= 1");
+  if (!(min_coverage_eigenvalue > 0 && min_coverage_eigenvalue <= 1)) {
+    return Invalid("min_coverage_eigenvalue must lie in (0, 1]");
+  }
+  if (min_alignment_statics < 4) return Invalid("min_alignment_statics must be >= 4");
+  return Status::Ok();
+}
+
+Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagResult* result) {
+  *result = MagResult();
+  if (Status s = options.Validate(); !s.ok()) return s;
+  if (Status s = CheckProblem(problem); !s.ok()) return s;
+  const Eigen::Matrix3Xd& y = problem.y;
+  const Eigen::Index n = y.cols();
+  result->samples = n;
+  Ellipsoid e;
+  if (Status s = StartFit(y, &e); !s.ok()) return s;
+  VectorXd w = VectorXd::Ones(n);
+  result->coverage = mag_internal::AssessCoverage(e.u, w, options);
+  if (result->coverage.eigenvalues(0) < options.min_coverage_eigenvalue / 10) {
+    return Status::NotDeterminable(
+        Reason::kPoorOrientationCoverage,
+        "mag: the field directions lie close to a plane, which does not determine the soft iron: " +
+            result->coverage.verdict);
+  }
+  // Stage 2: plain maximum likelihood, then the robust passes.
+  if (Status s = MaximumLikelihood(y, w, options, &e, &result->iterations); !s.ok()) return s;
+  for (int pass = 0; options.robust_scale > 0 && pass < options.robust_passes; ++pass) {
+    const VectorXd r = ResidualNorms(y, e);
+    const double sigma = Median(r) / 0.6745;
+    if (!(sigma > 1e-9 * e.a.norm())) break;  // noise-free (rounding only): nothing to weigh
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double z = r(i) / (options.robust_scale * sigma);
+      w(i) = 1 / (1 + z * z);
+    }
+    if (Status s = MaximumLikelihood(y, w, options, &e, &result->iterations); !s.ok()) return s;
+  }
+  const VectorXd residual = ResidualNorms(y, e) * options.microtesla_per_unit;
+  result->disturbed_spans = mag_internal::DisturbedSpans(problem.t, w, residual, options);
+  for (const MagSpan& s : result->disturbed_spans) result->disturbed_samples += s.samples;
+  result->coverage = mag_internal::AssessCoverage(e.u, w, options);
+  // The model's parameters.
+  result->field = options.field > 0 ? options.field : 1;
+  result->field_estimate = std::cbrt(e.a.determinant()) * options.microtesla_per_unit;
+  result->hard_iron = e.h;
+  result->soft_iron_symmetric = result->field * e.a.inverse();
+  result->soft_iron = result->soft_iron_symmetric;
+  if (!result->soft_iron.allFinite() || !e.h.allFinite()) {
+    return Status::NotDeterminable(
+        Reason::kIllConditioned, "mag: the fit's values are not finite (check the readings' unit)");
+  }
+  // Stage 3.
+  const Covariances c = Uncertainty(y, problem.t, w, e, options);
+  if (!c.ok) {
+    return Status::NotDeterminable(Reason::kSingularInformation,
+                                   "mag: the log does not determine every soft-iron entry");
+  }
+  result->noise_std = c.sigma;
+  const std::vector<Matrix3d> dp = SoftIronDirections(e.a, result->field);
+  ChoosePrimary(c, dp, options, result);
+  // Residual RMS before (identity, no offset, against the data's own field) and after.
+  const double f_ut = options.field > 0 ? options.field : result->field_estimate;
+  result->residual_rms_before =
+      FieldResidualRms(y, Vector3d::Zero(), Matrix3d::Identity(),
+                       f_ut / options.microtesla_per_unit, options.microtesla_per_unit, nullptr);
+  const double to_ut = options.field > 0 ? 1 : result->field_estimate;
+  result->residual_rms_after =
+      FieldResidualRms(y, e.h, result->soft_iron_symmetric, result->field, to_ut, nullptr);
+  const VectorXd clean = (w.array() >= options.disturbed_weight).cast<double>();
+  result->residual_rms_clean =
+      FieldResidualRms(y, e.h, result->soft_iron_symmetric, result->field, to_ut, &clean);
+  // Stage 4.
+  const Eigen::MatrixXd cov_a =
+      (result->basis == "sandwich" ? c.sandwich : c.crb).bottomRightCorner<6, 6>();
+  mag_internal::EstimateAlignment(problem, options, e, dp, cov_a, c.crb.bottomRightCorner<6, 6>(),
+                                  result);
+  const double disturbed = static_cast<double>(result->disturbed_samples) / n;
+  if (disturbed > options.max_disturbed_fraction) {
+    return Status::NotDeterminable(Reason::kFieldDisturbed,
+                                   "mag: " + Fmt("%.0f", 100 * disturbed) +
+                                       " % of the samples are disturbed (over " +
+                                       Fmt("%.0f", 100 * options.max_disturbed_fraction) +
+                                       " %): record again away from iron, motors and cables");
+  }
+  if (result->disturbed_samples > 0) {
+    result->warnings.push_back(std::to_string(result->disturbed_spans.size()) +
+                               " disturbed span(s), " + std::to_string(result->disturbed_samples) +
+                               " samples, were down-weighted (diagnostics list them)");
+  }
+  return Status::Ok();
+}
+
+}  // namespace calibd::core

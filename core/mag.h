@@ -1,0 +1,172 @@
+// The `mag` calibration numerics (SPEC §8, issue #26): a magnetometer's hard and soft iron from a
+// log turned by hand through many orientations, its rotation to the accelerometer frame and the
+// field's dip from the log's still holds, each with 1σ.
+//
+// Model (Vasconcelos, Elkaim, Silvestre, Oliveira, Cardeira, IEEE TAES 2011, "Geometric approach
+// to strapdown magnetometer calibration in sensor frame"; alignment as Kok & Schön, IFAC 2016):
+//   m_i = S (y_i − h),   |m_i| = F,   S = R P,
+// y_i the readings (reading units), h the hard iron (reading units), P symmetric positive definite
+// (the soft iron in the magnetometer's own axes, with the scale to µT), R the rotation of the
+// magnetometer frame to the accelerometer frame, F the local field (µT; 1 when unknown). The
+// readings are y_i = h + A u_i + ε_i with A = F P⁻¹ (symmetric) and u_i the field's direction in
+// the magnetometer frame, a unit-vector nuisance per sample; ε_i white, isotropic, σ unknown.
+//
+// Steps (CalibrateMag):
+//  1. Start: the algebraic ellipsoid fit yᵀQy + lᵀy + c = 0 (the singular vector of the design
+//     matrix with the smallest singular value, the readings centred and scaled first), centre
+//     h = −Q⁻¹l/2, A = (Q/k)^(-1/2) with k = hᵀQh − c; u_i = A⁻¹(y_i − h) normalised. Q not
+//     definite: the readings lie on no ellipsoid (kNotAnEllipsoid).
+//  2. Maximum likelihood: Levenberg-Marquardt over (h, the 6 entries of A) and every u_i (2
+//     tangent unknowns each), the u_i blocks eliminated per sample (Schur complement onto the 9
+//     shared unknowns): O(N) per iteration. Robust passes (iteratively reweighted): Cauchy
+//     weights w_i = 1/(1 + (|e_i|/(c σ̂))²) on each sample's residual norm, σ̂ from the median
+//     residual, so that spans disturbed by nearby iron weigh little; samples with w_i below
+//     `disturbed_weight` are reported as disturbed spans.
+//  3. Uncertainty: the white-noise bound σ̂² (Σ w J̃ᵀJ̃)⁻¹ (J̃ the reduced Jacobian, σ̂ from the
+//     weighted residuals) and the residual-aware sandwich over batches of consecutive samples
+//     (`batch_seconds`), Newey-West with lag one batch: H⁻¹ M H⁻¹ · n_b/(n_b − 9),
+//     M = Σ_b s_b s_bᵀ + ½ Σ_b (s_b s_{b−1}ᵀ + s_{b−1} s_bᵀ), s_b the batch's reduced score.
+//     The sandwich holds when the noise is coloured (a hand-held log's disturbances and
+//     vibration are) or the weights matter; the primary σ is the sandwich where it exceeds the
+//     white-noise bound by more than `sandwich_margin` (RMS over the parameters' σ ratios),
+//     else the bound (SPEC §7's uncertainty rule; basis named in the result).
+//  4. Alignment (with accelerometer statics): the down direction d_j (−specific force, unit) and
+//     the calibrated field direction n_j = P(ȳ_j − h)/|·| of each static satisfy
+//     d_jᵀ R n_j = sin δ (δ the dip, positive down); Gauss-Newton over R (left perturbation) and
+//     sin δ, 1σ from the residual scatter. Too few statics, or statics about one axis only: not
+//     estimated, with the reason in `alignment_note`.
+//  5. Coverage of orientations: the calibrated field directions' scatter (3/N) Σ u_i u_iᵀ and the
+//     magnetometer axes (±x, ±y, ±z) the field never came within 45° of (SPEC §8: "judged as for
+//     imu"). Nearly planar coverage (smallest eigenvalue under `min_coverage_eigenvalue` / 10)
+//     does not determine the ellipsoid: kPoorOrientationCoverage naming the missing directions.
+//
+// Cost: O(N · iterations) time, O(N) memory (24 doubles a sample). `options.stop` is polled
+// every iteration. Pure numerics: Eigen in, result structs out. Thread-compatible.
+#ifndef CALIBD_CORE_MAG_H_
+#define CALIBD_CORE_MAG_H_
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "base/status.h"
+#include "core/stop_token.h"
+
+namespace calibd::core {
+
+struct MagOptions {
+  // Local field magnitude F, µT (the readings' unit scaled by `microtesla_per_unit`); 0: unknown,
+  // then |m| = 1 and the result's field_estimate gives F from the data. >= 0.
+  double field = 0;
+  // µT per reading unit (the caller's mag_unit). > 0.
+  double microtesla_per_unit = 1;
+  // Levenberg-Marquardt iterations per robust pass. >= 1.
+  int max_iterations = 100;
+  // Relative cost decrease under which a pass has converged. > 0.
+  double tolerance = 1e-10;
+  // Cauchy scale c of the robust weights, in σ̂; 0: plain maximum likelihood (no reweighting).
+  // >= 0 (values under 2 down-weight clean samples too).
+  double robust_scale = 3;
+  // Reweighting passes after the first (unweighted) fit. >= 0.
+  int robust_passes = 3;
+  // A sample weighs less than this: it is counted as disturbed. In (0, 1).
+  double disturbed_weight = 0.25;
+  // More than this fraction of samples disturbed: kFieldDisturbed. In (0, 1].
+  double max_disturbed_fraction = 0.3;
+  // Length of the sandwich's batches of consecutive samples, s (several correlation times of the
+  // disturbances a hand-held log holds). > 0.
+  double batch_seconds = 2;
+  // Disturbed samples closer than this merge into one span, s. >= 0.
+  double span_merge_seconds = 0.5;
+  // The sandwich becomes the primary σ when the RMS of its σ over the bound's exceeds this. >= 1.
+  double sandwich_margin = 1.15;
+  // Coverage: the smallest eigenvalue of (3/N) Σ u uᵀ for a "good" verdict (all 1 when the field
+  // directions are spread evenly). In (0, 1].
+  double min_coverage_eigenvalue = 0.2;
+  // Alignment: at least this many statics. >= 4.
+  int min_alignment_statics = 6;
+  // Asks the fit to stop early (kStopped). May be null.
+  const StopToken* stop = nullptr;
+
+  // kInvalidInput naming the violated constraint.
+  Status Validate() const;
+};
+
+// A still hold of the device (found by the caller's static detection on the accelerometer).
+struct MagStatic {
+  int64_t first = 0;  // first and last sample index of the hold, into MagProblem::y
+  int64_t last = 0;
+  Eigen::Vector3d specific_force = Eigen::Vector3d::Zero();  // accelerometer mean, any unit
+};
+
+struct MagProblem {
+  Eigen::VectorXd t;               // sample times, s, increasing (N)
+  Eigen::Matrix3Xd y;              // magnetometer readings, reading units (3×N)
+  std::vector<MagStatic> statics;  // for the alignment; empty: not estimated
+};
+
+struct MagCoverage {
+  Eigen::Vector3d eigenvalues = Eigen::Vector3d::Zero();  // ascending, of (3/N) Σ u uᵀ
+  Eigen::Vector3d least_covered_direction = Eigen::Vector3d::Zero();
+  std::vector<std::string> missing;  // magnetometer axes the field never came within 45° of
+  bool sufficient = false;
+  std::string verdict;  // "good: ..." or what to add
+};
+
+// A time span of disturbed samples.
+struct MagSpan {
+  double start = 0, end = 0;  // s
+  int64_t samples = 0;
+  double max_residual = 0;  // µT, the largest residual norm in the span
+};
+
+// The σ of every parameter, in the result's units (see MagResult).
+struct MagStd {
+  Eigen::Vector3d hard_iron = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d soft_iron = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d alignment = Eigen::Vector3d::Zero();    // rad, small angles about the accel axes
+  double dip = std::numeric_limits<double>::quiet_NaN();  // degrees
+};
+
+struct MagResult {
+  Eigen::Vector3d hard_iron = Eigen::Vector3d::Zero();  // h, reading units
+  // S = R P (µT per reading unit when F is known, else unit field per reading unit).
+  Eigen::Matrix3d soft_iron = Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d soft_iron_symmetric = Eigen::Matrix3d::Identity();  // P
+  std::optional<Eigen::Matrix3d> alignment;  // R; nullopt: not estimated (alignment_note says why)
+  std::optional<double> dip;                 // degrees, positive down
+  std::string alignment_note;
+  double field = 1;           // F the model used: options.field, or 1
+  double field_estimate = 0;  // µT: the ellipsoid's geometric-mean radius × µT per unit
+
+  MagStd std;         // primary σ (basis says which)
+  MagStd crb;         // the white-noise bound
+  std::string basis;  // "crb" or "sandwich"
+  // RMS over the parameters of σ(sandwich) / σ(bound): about 1 for white noise. (No χ²/dof: σ̂
+  // comes from the residuals themselves.)
+  double sandwich_ratio = std::numeric_limits<double>::quiet_NaN();
+  double noise_std = 0;  // σ̂, reading units (white, from the residuals)
+
+  // |m| − F over all samples, µT (RMS): the nominal (identity, no offset) and calibrated.
+  double residual_rms_before = 0;
+  double residual_rms_after = 0;  // unweighted, all samples
+  double residual_rms_clean = 0;  // samples not disturbed
+  int64_t samples = 0;
+  int64_t disturbed_samples = 0;
+  std::vector<MagSpan> disturbed_spans;
+  MagCoverage coverage;
+  int iterations = 0;
+  std::vector<std::string> warnings;
+};
+
+// kInvalidInput: options invalid, y not finite, t not increasing or sizes that differ, fewer than
+// 20 samples; kNotDeterminable: kNotAnEllipsoid, kPoorOrientationCoverage, Reason::kFieldDisturbed,
+// kIllConditioned; kStopped when options.stop asked. On failure `result` holds what was found.
+Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagResult* result);
+
+}  // namespace calibd::core
+
+#endif  // CALIBD_CORE_MAG_H_
