@@ -111,13 +111,11 @@ void Linearize(const Eigen::Matrix3Xd& y, const VectorXd& w, const Ellipsoid& e,
   for (Eigen::Index i = 0; i < n; ++i) {
     const Vector3d u = e.u.col(i);
     const Vector3d r = y.col(i) - e.h - e.a * u;
+    // ∂r/∂θ: −I for h; −E_k u for the entries a_k of A (E_k the symmetric basis matrices).
     Eigen::Matrix<double, 3, 9> jt;
-    jt.leftCols<3>() = -Matrix3d::Identity();
-    for (int k = 0; k < 6; ++k) {
-      Vector6d ek = Vector6d::Zero();
-      ek(k) = 1;
-      jt.col(3 + k) = -Sym(ek) * u;
-    }
+    jt << -1, 0, 0, -u(0), -u(1), -u(2), 0, 0, 0,  //
+        0, -1, 0, 0, -u(0), 0, -u(1), -u(2), 0,    //
+        0, 0, -1, 0, 0, -u(0), 0, -u(1), -u(2);
     l->tangent[i] = Tangent(u);
     const Eigen::Matrix<double, 3, 2> ju = -e.a * l->tangent[i];
     l->huu[i] = w(i) * ju.transpose() * ju;
@@ -153,11 +151,11 @@ void Reduce(const Linearized& l, double lambda, Matrix9d* h, Vector9d* g) {
 
 // Stage 2: Levenberg-Marquardt with the weights w. Returns the iterations used.
 Status MaximumLikelihood(const Eigen::Matrix3Xd& y, const VectorXd& w, const MagOptions& options,
-                         Ellipsoid* e, int* iterations) {
+                         int max_iterations, Ellipsoid* e, int* iterations) {
   Linearized l;
   double lambda = 1e-6;
   double cost = Cost(y, w, *e);
-  for (int it = 0; it < options.max_iterations; ++it) {
+  for (int it = 0; it < max_iterations; ++it) {
     if (StopRequested(options.stop)) return StoppedStatus(*options.stop, "mag: fit");
     ++*iterations;
     Linearize(y, w, *e, &l);
@@ -311,6 +309,27 @@ Status CheckProblem(const MagProblem& p) {
   return Status::Ok();
 }
 
+// Readings on a plane (a circle: the device turned about one axis only, e.g. flat on a table) do
+// not determine an ellipsoid: kPoorOrientationCoverage naming the axis to bring along the field.
+// The spread across the plane against along it, from the readings' covariance (its smallest over
+// its largest eigenvalue: about 1 for a sphere's worth of orientations, 0 for a circle).
+Status CheckNotPlanar(const Eigen::Matrix3Xd& y, const MagOptions& options) {
+  const Eigen::Matrix3Xd c = y.colwise() - y.rowwise().mean();
+  Eigen::SelfAdjointEigenSolver<Matrix3d> es(c * c.transpose() / static_cast<double>(y.cols()));
+  const double ratio = es.eigenvalues()(0) / std::max(es.eigenvalues()(2), 1e-300);
+  if (ratio >= options.min_coverage_eigenvalue / 10) return Status::Ok();
+  int axis = 0;
+  es.eigenvectors().col(0).cwiseAbs().maxCoeff(&axis);
+  const std::string a(1, "xyz"[axis]);
+  return Status::NotDeterminable(
+      Reason::kPoorOrientationCoverage,
+      "mag: the readings lie close to a plane (spread across it " + Fmt("%.2g", std::sqrt(ratio)) +
+          " of the spread along it): the device was turned about its " + a +
+          " axis only, which does not determine the soft iron; tilt it and turn it over so that "
+          "the field also comes along its +" +
+          a + " and -" + a + " axes");
+}
+
 // The primary σ (stage 3's rule) and its warning.
 void ChoosePrimary(const Covariances& c, const std::vector<Matrix3d>& dp, const MagOptions& options,
                    MagResult* r) {
@@ -365,19 +384,25 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
   const Eigen::Matrix3Xd& y = problem.y;
   const Eigen::Index n = y.cols();
   result->samples = n;
+  if (Status s = CheckNotPlanar(y, options); !s.ok()) return s;
   Ellipsoid e;
   if (Status s = StartFit(y, &e); !s.ok()) return s;
   VectorXd w = VectorXd::Ones(n);
-  result->coverage = mag_internal::AssessCoverage(e.u, w, options);
-  if (result->coverage.eigenvalues(0) < options.min_coverage_eigenvalue / 10) {
-    return Status::NotDeterminable(
-        Reason::kPoorOrientationCoverage,
-        "mag: the field directions lie close to a plane, which does not determine the soft iron: " +
-            result->coverage.verdict);
+  // Stage 2: plain maximum likelihood, then the robust passes. A pass whose weights the next one
+  // replaces runs at most kPassIterations (enough for the residuals the weights come from: a log
+  // with disturbances converges only linearly before it is weighted); the last runs to convergence.
+  constexpr int kPassIterations = 5;
+  const int passes = options.robust_scale > 0 ? options.robust_passes : 0;
+  auto pass_iterations = [&](int pass) {
+    return pass < passes ? std::min(kPassIterations, options.max_iterations)
+                         : options.max_iterations;
+  };
+  if (Status s = MaximumLikelihood(y, w, options, pass_iterations(0), &e, &result->iterations);
+      !s.ok()) {
+    return s;
   }
-  // Stage 2: plain maximum likelihood, then the robust passes.
-  if (Status s = MaximumLikelihood(y, w, options, &e, &result->iterations); !s.ok()) return s;
-  for (int pass = 0; options.robust_scale > 0 && pass < options.robust_passes; ++pass) {
+  int pass = 0;
+  for (; pass < passes; ++pass) {
     const VectorXd r = ResidualNorms(y, e);
     const double sigma = Median(r) / 0.6745;
     if (!(sigma > 1e-9 * e.a.norm())) break;  // noise-free (rounding only): nothing to weigh
@@ -385,7 +410,18 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
       const double z = r(i) / (options.robust_scale * sigma);
       w(i) = 1 / (1 + z * z);
     }
-    if (Status s = MaximumLikelihood(y, w, options, &e, &result->iterations); !s.ok()) return s;
+    if (Status s =
+            MaximumLikelihood(y, w, options, pass_iterations(pass + 1), &e, &result->iterations);
+        !s.ok()) {
+      return s;
+    }
+  }
+  if (pass < passes) {  // weighting ended early (a noise-free log): converge as weighted so far
+    if (Status s =
+            MaximumLikelihood(y, w, options, options.max_iterations, &e, &result->iterations);
+        !s.ok()) {
+      return s;
+    }
   }
   const VectorXd residual = ResidualNorms(y, e) * options.microtesla_per_unit;
   result->disturbed_spans = mag_internal::DisturbedSpans(problem.t, w, residual, options);
@@ -422,10 +458,8 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
   result->residual_rms_clean =
       FieldResidualRms(y, e.h, result->soft_iron_symmetric, result->field, to_ut, &clean);
   // Stage 4.
-  const Eigen::MatrixXd cov_a =
-      (result->basis == "sandwich" ? c.sandwich : c.crb).bottomRightCorner<6, 6>();
-  mag_internal::EstimateAlignment(problem, options, e, dp, cov_a, c.crb.bottomRightCorner<6, 6>(),
-                                  result);
+  mag_internal::EstimateAlignment(problem, options, e,
+                                  result->basis == "sandwich" ? c.sandwich : c.crb, c.crb, result);
   const double disturbed = static_cast<double>(result->disturbed_samples) / n;
   if (disturbed > options.max_disturbed_fraction) {
     return Status::NotDeterminable(Reason::kFieldDisturbed,

@@ -37,8 +37,9 @@
 //     estimated, with the reason in `alignment_note`.
 //  5. Coverage of orientations: the calibrated field directions' scatter (3/N) Σ u_i u_iᵀ and the
 //     magnetometer axes (±x, ±y, ±z) the field never came within 45° of (SPEC §8: "judged as for
-//     imu"). Nearly planar coverage (smallest eigenvalue under `min_coverage_eigenvalue` / 10)
-//     does not determine the ellipsoid: kPoorOrientationCoverage naming the missing directions.
+//     imu"). Readings close to a plane (turned about one axis only: the smallest eigenvalue of
+//     their covariance under `min_coverage_eigenvalue` / 10 of the largest, checked first) do not
+//     determine the ellipsoid: kPoorOrientationCoverage naming the axis to bring along the field.
 //
 // Cost: O(N · iterations) time, O(N) memory (24 doubles a sample). `options.stop` is polled
 // every iteration. Pure numerics: Eigen in, result structs out. Thread-compatible.
@@ -66,7 +67,7 @@ struct MagOptions {
   // Levenberg-Marquardt iterations per robust pass. >= 1.
   int max_iterations = 100;
   // Relative cost decrease under which a pass has converged. > 0.
-  double tolerance = 1e-10;
+  double tolerance = 1e-8;
   // Cauchy scale c of the robust weights, in σ̂; 0: plain maximum likelihood (no reweighting).
   // >= 0 (values under 2 down-weight clean samples too).
   double robust_scale = 3;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "core/mag_internal.h"
@@ -25,18 +26,48 @@ std::string JoinAnd(const std::vector<std::string>& v) {
   return s;
 }
 
-// The statics' down directions d_j and calibrated field directions n_j (unit vectors).
-void StaticDirections(const MagProblem& problem, const Ellipsoid& fit, const Matrix3d& p,
+// The statics' down directions d_j and calibrated field directions n_j = P(ȳ_j − h)/|·|.
+void StaticDirections(const MagProblem& problem, const Vector3d& h, const Matrix3d& p,
                       std::vector<Vector3d>* d, std::vector<Vector3d>* n) {
+  d->clear();
+  n->clear();
   for (const MagStatic& s : problem.statics) {
     const double f = s.specific_force.norm();
     if (!(f > 0)) continue;
     const Vector3d mean = problem.y.middleCols(s.first, s.last - s.first + 1).rowwise().mean();
-    const Vector3d m = p * (mean - fit.h);
+    const Vector3d m = p * (mean - h);
     if (!(m.norm() > 0)) continue;
     d->push_back(-s.specific_force / f);
     n->push_back(m.normalized());
   }
+}
+
+// Gauss-Newton for d_jᵀ R n_j = sin δ from (r, s) as given; the normal matrix and the residuals'
+// sum of squares at the solution. False when the normal matrix is singular (statics tilted about
+// one axis only).
+bool SolveAlignment(const std::vector<Vector3d>& d, const std::vector<Vector3d>& n, Matrix3d* r,
+                    double* s, Eigen::Matrix4d* h, double* ss) {
+  for (int it = 0; it < 30; ++it) {
+    h->setZero();
+    Eigen::Vector4d g = Eigen::Vector4d::Zero();
+    *ss = 0;
+    for (size_t j = 0; j < d.size(); ++j) {
+      const Vector3d rn = *r * n[j];
+      Eigen::Vector4d jac;
+      jac << rn.cross(d[j]), -1;
+      const double rho = d[j].dot(rn) - *s;
+      *h += jac * jac.transpose();
+      g += jac * rho;
+      *ss += rho * rho;
+    }
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> es(*h);
+    if (!(es.eigenvalues()(0) > 1e-6 * es.eigenvalues()(3))) return false;
+    const Eigen::Vector4d step = -h->ldlt().solve(g);
+    *r = ExpRotation(step.head<3>()) * *r;
+    *s += step(3);
+    if (step.norm() < 1e-13) break;
+  }
+  return true;
 }
 
 }  // namespace
@@ -79,11 +110,12 @@ Matrix3d EntryStd(const std::vector<Matrix3d>& d, const Eigen::MatrixXd& cov) {
 }
 
 void EstimateAlignment(const MagProblem& problem, const MagOptions& options, const Ellipsoid& fit,
-                       const std::vector<Matrix3d>& dp, const Eigen::MatrixXd& cov_a_primary,
-                       const Eigen::MatrixXd& cov_a_crb, MagResult* result) {
+                       const Eigen::MatrixXd& cov_primary, const Eigen::MatrixXd& cov_crb,
+                       MagResult* result) {
+  const double field = result->field;
   const Matrix3d p = result->soft_iron_symmetric;
   std::vector<Vector3d> d, n;
-  StaticDirections(problem, fit, p, &d, &n);
+  StaticDirections(problem, fit.h, p, &d, &n);
   const int count = static_cast<int>(d.size());
   if (count < options.min_alignment_statics) {
     result->alignment_note =
@@ -96,54 +128,74 @@ void EstimateAlignment(const MagProblem& problem, const MagOptions& options, con
   Matrix3d r = Matrix3d::Identity();
   double s = 0;
   for (int j = 0; j < count; ++j) s += d[j].dot(n[j]) / count;
-  Eigen::Matrix4d h = Eigen::Matrix4d::Zero();
+  Eigen::Matrix4d h;
   double ss = 0;
-  for (int it = 0; it < 30; ++it) {
-    h.setZero();
-    Eigen::Vector4d g = Eigen::Vector4d::Zero();
-    ss = 0;
-    for (int j = 0; j < count; ++j) {
-      const Vector3d rn = r * n[j];
-      Eigen::Vector4d jac;
-      jac << rn.cross(d[j]), -1;
-      const double rho = d[j].dot(rn) - s;
-      h += jac * jac.transpose();
-      g += jac * rho;
-      ss += rho * rho;
-    }
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> es(h);
-    if (!(es.eigenvalues()(0) > 1e-6 * es.eigenvalues()(3))) {
-      result->alignment_note =
-          "not estimated: the statics' orientations do not determine the rotation (tilted about "
-          "one axis only): hold the device still in orientations tilted about different axes";
-      return;
-    }
-    const Eigen::Vector4d step = -h.ldlt().solve(g);
-    r = ExpRotation(step.head<3>()) * r;
-    s += step(3);
-    if (step.norm() < 1e-12) break;
+  if (!SolveAlignment(d, n, &r, &s, &h, &ss)) {
+    result->alignment_note =
+        "not estimated: the statics' orientations do not determine the rotation (tilted about "
+        "one axis only): hold the device still in orientations tilted about different axes";
+    return;
   }
   if (!(std::abs(s) < 1)) {
     result->alignment_note = "not estimated: the dip's sine came out at " + std::to_string(s);
     return;
   }
-  const Eigen::Matrix4d cov = ss / std::max(count - 4, 1) * h.inverse();
+  // σ: the statics' scatter, plus the ellipsoid's own uncertainty carried through n_j (an error
+  // of h or P moves every n_j alike, which the scatter does not show): ∂(φ, sin δ)/∂θ by central
+  // differences of the solution over θ = (h, a), a the entries of A = F P⁻¹.
+  const Eigen::Matrix4d scatter = ss / std::max(count - 4, 1) * h.inverse();
+  Eigen::Matrix<double, 4, 9> jac;
+  const Matrix3d a = field * p.inverse();
+  for (int k = 0; k < 9; ++k) {
+    Eigen::Vector4d side[2];
+    for (int sign = 0; sign < 2; ++sign) {
+      const double eps = (sign ? -1 : 1) * 1e-6 * std::max(1.0, a.norm());
+      Vector3d hk = fit.h;
+      Matrix3d ak = a;
+      if (k < 3) {
+        hk(k) += eps;
+      } else {
+        Vector6d e = Vector6d::Zero();
+        e(k - 3) = eps;
+        ak += Sym(e);
+      }
+      std::vector<Vector3d> dk, nk;
+      StaticDirections(problem, hk, field * ak.inverse(), &dk, &nk);
+      Matrix3d rk = r;
+      double sk = s;
+      Eigen::Matrix4d hh;
+      double ssk = 0;
+      SolveAlignment(dk, nk, &rk, &sk, &hh, &ssk);
+      const Eigen::AngleAxisd delta(rk * r.transpose());
+      side[sign] << delta.angle() * delta.axis(), sk;
+    }
+    jac.col(k) = (side[0] - side[1]) / (2e-6 * std::max(1.0, a.norm()));
+  }
+  const Eigen::Matrix4d cov = scatter + jac * cov_primary * jac.transpose();
+  const Eigen::Matrix4d cov_bound = scatter + jac * cov_crb * jac.transpose();
   result->alignment = r;
   result->dip = std::asin(s) * kDegPerRad;
+  const double dip_scale = kDegPerRad / std::sqrt(1 - s * s);
   result->std.alignment = cov.diagonal().head<3>().cwiseMax(0).cwiseSqrt();
-  result->std.dip = std::sqrt(std::max(0.0, cov(3, 3))) / std::sqrt(1 - s * s) * kDegPerRad;
-  result->crb.alignment = result->std.alignment;  // the statics' scatter is the only noise model
-  result->crb.dip = result->std.dip;
+  result->std.dip = std::sqrt(std::max(0.0, cov(3, 3))) * dip_scale;
+  result->crb.alignment = cov_bound.diagonal().head<3>().cwiseMax(0).cwiseSqrt();
+  result->crb.dip = std::sqrt(std::max(0.0, cov_bound(3, 3))) * dip_scale;
   result->soft_iron = r * p;
-  // σ of S = R P: P's entries through R, and R's small angles through [δφ]× R P.
+  // σ of S = R P: P's entries (∂P/∂a_k = −F A⁻¹ E_k A⁻¹) through R, and R's small angles through
+  // [δφ]× R P.
   std::vector<Matrix3d> ds;
-  for (const Matrix3d& dpk : dp) ds.push_back(r * dpk);
+  const Matrix3d a_inv = a.inverse();
+  for (int k = 0; k < 6; ++k) {
+    Vector6d e = Vector6d::Zero();
+    e(k) = 1;
+    ds.push_back(-field * r * a_inv * Sym(e) * a_inv);
+  }
   for (int k = 0; k < 3; ++k) ds.push_back(Skew(Vector3d::Unit(k)) * r * p);
-  for (const auto& [cov_a, out] :
-       {std::pair{&cov_a_primary, &result->std}, std::pair{&cov_a_crb, &result->crb}}) {
+  for (const auto& [theta, align, out] : {std::tuple{&cov_primary, &cov, &result->std},
+                                          std::tuple{&cov_crb, &cov_bound, &result->crb}}) {
     Eigen::MatrixXd c = Eigen::MatrixXd::Zero(9, 9);
-    c.topLeftCorner(6, 6) = *cov_a;
-    c.bottomRightCorner(3, 3) = cov.topLeftCorner<3, 3>();
+    c.topLeftCorner(6, 6) = theta->bottomRightCorner(6, 6);
+    c.bottomRightCorner(3, 3) = align->topLeftCorner<3, 3>();
     out->soft_iron = EntryStd(ds, c);
   }
   result->alignment_note = "from " + std::to_string(count) + " statics";

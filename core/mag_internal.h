@@ -34,12 +34,11 @@ struct Ellipsoid {
 // d[k] = ∂M/∂p_k. Returns the 3×3 matrix of sqrt(Σ_kl d[k]_ij cov_kl d[l]_ij).
 Eigen::Matrix3d EntryStd(const std::vector<Eigen::Matrix3d>& d, const Eigen::MatrixXd& cov);
 
-// Stage 4: R and the dip from the statics (fills alignment, dip, their σ, alignment_note;
-// multiplies soft_iron by R). `p` the symmetric soft iron, `cov_p` the σ directions of P
-// (∂P/∂a_k, k < 6) with the covariance of a, for S = R P's σ.
+// Stage 4: R and the dip from the statics (fills alignment, dip, their σ, alignment_note; makes
+// soft_iron R P with its σ). `cov_primary` and `cov_crb`: the covariances of θ = (h, a) (9×9).
 void EstimateAlignment(const MagProblem& problem, const MagOptions& options, const Ellipsoid& fit,
-                       const std::vector<Eigen::Matrix3d>& dp, const Eigen::MatrixXd& cov_a_primary,
-                       const Eigen::MatrixXd& cov_a_crb, MagResult* result);
+                       const Eigen::MatrixXd& cov_primary, const Eigen::MatrixXd& cov_crb,
+                       MagResult* result);
 
 // Stage 5: coverage of the field directions u_i with weight >= options.disturbed_weight.
 MagCoverage AssessCoverage(const Eigen::Matrix3Xd& u, const Eigen::VectorXd& w,

@@ -27,6 +27,7 @@ Status Check(const MagSimulationOptions& o) {
   if (!(std::abs(o.dip) < 90)) return Invalid("dip must lie in (-90, 90)");
   if (!(o.noise >= 0) || !(o.accel_noise >= 0)) return Invalid("noise must be >= 0");
   if (!(o.ar1 >= 0 && o.ar1 < 1)) return Invalid("ar1 must lie in [0, 1)");
+  if (!(o.max_tilt > 0 && o.max_tilt <= 180)) return Invalid("max_tilt must lie in (0, 180]");
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(o.soft_iron);
   if (!o.soft_iron.isApprox(o.soft_iron.transpose()) || !(es.eigenvalues()(0) > 0)) {
     return Invalid("soft_iron must be symmetric positive definite");
@@ -34,10 +35,15 @@ Status Check(const MagSimulationOptions& o) {
   return Status::Ok();
 }
 
-Eigen::Quaterniond RandomOrientation(bool yaw_only, GaussianRng* rng) {
-  if (yaw_only) {
-    return Eigen::Quaterniond(
-        Eigen::AngleAxisd(2 * 3.14159265358979323846 * rng->Uniform(), Eigen::Vector3d::UnitZ()));
+Eigen::Quaterniond RandomOrientation(const MagSimulationOptions& o, GaussianRng* rng) {
+  constexpr double kPi = 3.14159265358979323846;
+  const Eigen::AngleAxisd yaw(2 * kPi * rng->Uniform(), Eigen::Vector3d::UnitZ());
+  if (o.yaw_only) return Eigen::Quaterniond(yaw);
+  if (o.max_tilt < 180) {
+    const double azimuth = 2 * kPi * rng->Uniform();
+    const Eigen::AngleAxisd tilt(o.max_tilt * kRadPerDeg * rng->Uniform(),
+                                 Eigen::Vector3d(std::cos(azimuth), std::sin(azimuth), 0));
+    return Eigen::Quaterniond(tilt * yaw);
   }
   Eigen::Vector4d v;
   for (int k = 0; k < 4; ++k) v(k) = rng->Normal();
@@ -62,7 +68,7 @@ Status SimulateMag(const MagSimulationOptions& o, MagSimulation* out) {
   out->problem.y.resize(3, n);
   out->problem.statics.clear();
   out->accel.resize(3, n);
-  Eigen::Quaterniond from = RandomOrientation(o.yaw_only, &rng);
+  Eigen::Quaterniond from = RandomOrientation(o, &rng);
   Eigen::Vector3d coloured = Eigen::Vector3d::Zero();
   const double innovation = std::sqrt(1 - o.ar1 * o.ar1);
   int64_t i = 0;
@@ -84,7 +90,7 @@ Status SimulateMag(const MagSimulationOptions& o, MagSimulation* out) {
   const int every = o.statics > 0 ? o.turns / o.statics : 0;
   int holds = 0;
   for (int turn = 0; turn < o.turns; ++turn) {
-    const Eigen::Quaterniond to = RandomOrientation(o.yaw_only, &rng);
+    const Eigen::Quaterniond to = RandomOrientation(o, &rng);
     for (int64_t k = 0; k < per_turn; ++k) {
       const double x = static_cast<double>(k + 1) / per_turn;
       sample(from.slerp(0.5 * (1 - std::cos(3.14159265358979323846 * x)), to));

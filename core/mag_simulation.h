@@ -45,6 +45,9 @@ struct MagSimulationOptions {
   double accel_noise = 0.02;  // σ of ν per axis, m/s², >= 0
   // Turn only about the vertical (yaw), the board flat: the field sweeps a cone (poor coverage).
   bool yaw_only = false;
+  // Otherwise: orientations with the board's z axis within this angle of down (degrees; 180: any
+  // orientation), yaw uniform: below 90° the device is never turned over.
+  double max_tilt = 180;
   std::vector<MagDisturbance> disturbances;
 };
 
