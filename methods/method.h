@@ -128,6 +128,12 @@ class Method {
   // numerics (core/<name>.h <name>_reason::); the generic ones (base/status.h) are the server's.
   // Every reason a method's Run can set has an entry here or there (scripts/check_structure.py).
   virtual std::vector<FailureReason> FailureReasons() const { return {}; }
+  // The parameters that characterise a unit, compared across a product's fleet (server/fleet.h):
+  // paths into the result's `parameters` (objects by key, named array entries by name, other
+  // arrays by index), '*' matching one segment. Derived values (unit-vector components, products
+  // of others) are left out: their fleet distribution is skewed and flags units falsely. Empty:
+  // every number.
+  virtual std::vector<std::string> FleetParameters() const { return {}; }
   // The formats its results export to besides JSON, in the order the pages offer them.
   virtual std::vector<ExportFormat> ExportFormats() const = 0;
   // Writes a result this method's Run wrote (as stored) in one of its ExportFormats().

@@ -7,6 +7,7 @@
 #include "methods/method.h"
 #include "methods/registry.h"
 #include "server/device_lookup.h"
+#include "server/fleet.h"
 
 namespace calibd::server {
 
@@ -18,7 +19,7 @@ namespace {
 // (device=123 is the serial "123"). Keys that take a number or a name (accel_unit, gyro_unit,
 // accel_noise, ...) are not here: "0.0001598" becomes the number, "deg/s" stays the name.
 bool IsStringKey(const std::string& key) {
-  return key == "method" || key == "device" || key == "bias" || key == "solver";
+  return key == "method" || key == "device" || key == "product" || key == "bias" || key == "solver";
 }
 
 }  // namespace
@@ -75,6 +76,15 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
     Status s = NormalizeSerial(device->get_ref<const std::string&>(), &common->device);
     if (!s.ok()) return s;
   }
+  common->product.clear();
+  if (auto product = config.find("product"); product != config.end()) {
+    if (!product->is_string()) {
+      return Status::InvalidInput("'product' must be a string (the product's name)")
+          .WithField("product");
+    }
+    Status s = NormalizeProduct(product->get_ref<const std::string&>(), &common->product);
+    if (!s.ok()) return s;
+  }
   common->job_seconds = 0;
   if (auto limit = config.find("job_seconds"); limit != config.end()) {
     if (!limit->is_number() || !(limit->get<double>() > 0) || limit->get<double>() > 1e9) {
@@ -111,10 +121,11 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
 
 json WithoutAcceptance(const json& config) {
   if (!config.is_object() || (!config.contains("acceptance") && !config.contains("time_unit") &&
-                              !config.contains("job_seconds"))) {
+                              !config.contains("job_seconds") && !config.contains("product"))) {
     return config;
   }
   json out = config;
+  out.erase("product");
   out.erase("acceptance");
   out.erase("time_unit");
   out.erase("job_seconds");

@@ -33,21 +33,25 @@ Status ConfigFromQuery(const std::multimap<std::string, std::string>& params,
 struct CommonConfig {
   std::string method;  // a registered method's name (methods/registry.h)
   std::string device;  // serial number; empty when not given
+  // The product the device is a unit of (server/fleet.h), as stored; empty when not given.
+  std::string product;
   // The config's own time limit (`job_seconds`, > 0); 0 when not given: the server's
   // --job-seconds (or the CLI's) applies. It may only lower the server's limit
   // (CheckJobSeconds).
   double job_seconds = 0;
 };
 
-// Checks the whole config: an object, `method` known, `device` a non-empty string of at most
-// 128 printable characters when present, `acceptance` (limits of the method's acceptance gate,
-// methods/acceptance.h) when present, `time_unit` (s, ms, us, ns; only for methods reading the
-// array layout) when present, and the method's own keys (unknown keys are errors).
-// Errors name the key (Status::field(), "acceptance.<limit>" for a limit).
+// Checks the whole config: an object, `method` known, `device` and `product` non-empty strings
+// of at most 128 printable characters when present (server/device_lookup.h NormalizeSerial),
+// `acceptance` (limits of the method's acceptance gate, methods/acceptance.h) when present,
+// `time_unit` (s, ms, us, ns; only for methods reading the array layout) when present, and the
+// method's own keys (unknown keys are errors). Errors name the key (Status::field(),
+// "acceptance.<limit>" for a limit).
 Status ValidateConfig(const nlohmann::json& config, CommonConfig* common);
 
-// The config without the keys the server handles for every method, `acceptance`, `job_seconds`
-// and `time_unit` (the parser applies it): what a Method's ValidateConfig, Run and Judge see.
+// The config without the keys the server handles for every method, `acceptance`, `job_seconds`,
+// `product` and `time_unit` (the parser applies it): what a Method's ValidateConfig, Run and
+// Judge see.
 nlohmann::json WithoutAcceptance(const nlohmann::json& config);
 
 // OK when the config's job_seconds (common.job_seconds, 0: none) does not ask for more than the

@@ -174,6 +174,7 @@ void AddRecordingPaths(json* out) {
   json config_params = json::array(
       {QueryParam("method", "string", "pca | array; without it the recording is only stored"),
        QueryParam("device", "string", "serial number"),
+       QueryParam("product", "string", "the product the device is a unit of (fleets)"),
        QueryParam("dimension", "integer", "pca: d"),
        QueryParam("magnitude", "number", "pca: the field's magnitude c"),
        QueryParam("refine", "boolean", "pca: ML refinement"),
@@ -391,6 +392,20 @@ void AddDevicePaths(json* out) {
         {"404", ErrorResponse("no accepted calibration, or job not this device's")},
         {"409", ErrorResponse("csv, h or yaml of a stored result this calibd cannot read (e.g. "
                               "a schema_version from a newer calibd), naming the path")}}}};
+  paths["/products/{product}/fleet"]["get"] = {
+      {"summary",
+       "A product's fleet for one method (SPEC §10): per parameter the distribution over the "
+       "devices' served calibrations uploaded with config key product (median, robust spread, "
+       "histogram), the outlier units by robust z, and the monthly medians"},
+      {"parameters",
+       json::array({PathParam("product", "string", "the product's name"),
+                    QueryParam("method", "string", "the method (required)"),
+                    QueryParam("outlier_z", "number", "|robust z| that flags a unit, default 5")})},
+      {"responses",
+       {{"200",
+         JsonResponse("the fleet (an unknown product is an empty fleet)", {{"type", "object"}})},
+        {"400", ErrorResponse("product not a valid name, method missing or unknown, outlier_z "
+                              "not > 0, or an unknown query parameter")}}}};
 }
 
 // Liveness, metrics and this document.

@@ -523,6 +523,8 @@ void Service::Impl::RegisterApiRoutes(httplib::Server* server) {
   });
   http.Get(R"(/api/v1/devices/([^/]+)/calibration)",
            [this](const httplib::Request& req, httplib::Response& res) { HandleLatest(req, res); });
+  http.Get(R"(/api/v1/products/([^/]+)/fleet)",
+           [this](const httplib::Request& req, httplib::Response& res) { HandleFleet(req, res); });
   http.Get(
       R"(/api/v1/recordings/([^/]+))",
       [this](const httplib::Request& req, httplib::Response& res) { HandleRecording(req, res); });

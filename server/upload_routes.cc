@@ -373,6 +373,7 @@ Status Service::Impl::CheckUploadJob(const RecordingSummary& summary, const std:
   s = ValidateConfig(*config, common);
   if (!s.ok()) return s;
   if (!common->device.empty()) (*config)["device"] = common->device;  // the stored (NFC) serial
+  if (!common->product.empty()) (*config)["product"] = common->product;
   s = CheckJobSeconds(*common, static_cast<double>(job_seconds));
   if (!s.ok()) return s;
   const Method& method = *FindMethod(common->method);
@@ -500,6 +501,7 @@ void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Respon
   s = ValidateConfig(config, &common);
   if (!s.ok()) return (void)SendStatus(res, s);
   if (!common.device.empty()) config["device"] = common.device;  // the stored (NFC) serial
+  if (!common.product.empty()) config["product"] = common.product;
   s = CheckJobSeconds(common, static_cast<double>(job_seconds));
   if (!s.ok()) return (void)SendStatus(res, s);
   storage::RecordingInfo recording;

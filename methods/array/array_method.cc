@@ -405,6 +405,16 @@ class Array : public Method {
       return s;
     };
   }
+  std::vector<std::string> FleetParameters() const override {
+    return {"imus/*/position/*",
+            "imus/*/accelerometer/bias/*",
+            "imus/*/accelerometer/scale/*",
+            "imus/*/accelerometer/misalignment/*/*",
+            "imus/*/gyroscope/bias/*",
+            "imus/*/gyroscope/scale/*",
+            "imus/*/gyroscope/misalignment/*/*",
+            "positions/*/position/*"};
+  }
   std::vector<FailureReason> FailureReasons() const override {
     return {
         CatalogEntry(core::array_reason::kNoDynamicPhase, "No dynamic phase",

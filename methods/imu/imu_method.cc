@@ -311,6 +311,14 @@ class Imu : public Method {
       return SimulateImuFiles(*options, &files->csv, &files->config, &files->truth);
     };
   }
+  std::vector<std::string> FleetParameters() const override {
+    return {"imus/*/accelerometer/bias/*",
+            "imus/*/accelerometer/scale/*",
+            "imus/*/accelerometer/misalignment/*/*",
+            "imus/*/gyroscope/bias/*",
+            "imus/*/gyroscope/scale/*",
+            "imus/*/gyroscope/misalignment/*/*"};
+  }
   std::vector<FailureReason> FailureReasons() const override {
     return {
         CatalogEntry(

@@ -86,6 +86,9 @@ class Noise : public Method {
       return SimulateNoiseFiles(*options, &files->csv, &files->config, &files->truth);
     };
   }
+  std::vector<std::string> FleetParameters() const override {
+    return {"channels/*/white_noise", "channels/*/bias_instability", "channels/*/random_walk"};
+  }
   std::vector<FailureReason> FailureReasons() const override {
     return {
         CatalogEntry(

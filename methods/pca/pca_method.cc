@@ -511,6 +511,9 @@ class Pca : public Method {
       return s;
     };
   }
+  std::vector<std::string> FleetParameters() const override {
+    return {"sensors/*/scale", "sensors/*/bias"};
+  }
   std::vector<FailureReason> FailureReasons() const override {
     return {
         CatalogEntry(core::pca_reason::kTooFewSensors, "Too few sensors",

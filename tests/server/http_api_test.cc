@@ -617,6 +617,7 @@ TEST_F(HttpApi, OpenApiDocumentsEveryRouteTheServerHas) {
       if (method == "get") {
         std::string concrete = std::regex_replace(path, std::regex(R"(\{id\})"), "1");
         concrete = std::regex_replace(concrete, std::regex(R"(\{serial\})"), "X");
+        concrete = std::regex_replace(concrete, std::regex(R"(\{product\})"), "P");
         auto res = client.Get(("/api/v1" + concrete).c_str());
         ASSERT_TRUE(res) << path;
         EXPECT_NE(res->status, 405) << path;
@@ -636,6 +637,7 @@ TEST_F(HttpApi, OpenApiDocumentsEveryRouteTheServerHas) {
                                         "post /jobs/{id}/cancel",
                                         "get /devices",
                                         "get /devices/{serial}/calibration",
+                                        "get /products/{product}/fleet",
                                         "get /recordings/{id}",
                                         "get /recordings/{id}/data",
                                         "get /recordings/{id}/segments",

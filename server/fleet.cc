@@ -1,0 +1,201 @@
+#include "server/fleet.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <utility>
+#include <vector>
+
+#include "core/fleet_stats.h"
+#include "methods/method.h"
+#include "methods/registry.h"
+#include "results/json_text.h"
+#include "server/device_lookup.h"
+
+namespace calibd::server {
+namespace {
+
+using nlohmann::json;
+using results::ParseJsonText;
+
+struct Member {
+  std::string device;
+  int64_t job_id = 0;
+  std::string calibrated_at;  // ISO 8601, UTC
+  std::map<std::string, double> values;
+};
+
+// Every finite number under `j`, named by its path (see server/fleet.h).
+void Flatten(const json& j, const std::string& path, std::map<std::string, double>* out) {
+  if (j.is_number()) {
+    const double v = j.get<double>();
+    if (std::isfinite(v)) (*out)[path] = v;
+  } else if (j.is_object()) {
+    for (const auto& [key, value] : j.items())
+      Flatten(value, path.empty() ? key : path + "/" + key, out);
+  } else if (j.is_array()) {
+    for (size_t i = 0; i < j.size(); ++i) {
+      const json& e = j[i];
+      std::string key = std::to_string(i);
+      if (e.is_object() && e.contains("name") && e["name"].is_string()) {
+        key = e["name"].get<std::string>();
+      }
+      Flatten(e, path.empty() ? key : path + "/" + key, out);
+    }
+  }
+}
+
+// Whether `path` matches one of `patterns` ('*' one segment); every path when there are none.
+bool Selected(const std::string& path, const std::vector<std::string>& patterns) {
+  if (patterns.empty()) return true;
+  auto split = [](const std::string& text) {
+    std::vector<std::string> parts;
+    size_t start = 0;
+    for (size_t slash; (slash = text.find('/', start)) != std::string::npos; start = slash + 1) {
+      parts.push_back(text.substr(start, slash - start));
+    }
+    parts.push_back(text.substr(start));
+    return parts;
+  };
+  const std::vector<std::string> segments = split(path);
+  for (const std::string& pattern : patterns) {
+    const std::vector<std::string> want = split(pattern);
+    if (want.size() != segments.size()) continue;
+    bool match = true;
+    for (size_t i = 0; match && i < want.size(); ++i)
+      match = want[i] == "*" || want[i] == segments[i];
+    if (match) return true;
+  }
+  return false;
+}
+
+Status CollectMembers(storage::Store* store, const std::string& product, const std::string& method,
+                      const FleetOptions& options, std::vector<Member>* members, int64_t* scanned,
+                      bool* complete) {
+  storage::DeviceFilter filter;
+  filter.limit = 1000;
+  *scanned = 0;
+  *complete = true;
+  while (true) {
+    std::vector<storage::DeviceInfo> page;
+    if (Status s = store->ListDevices(filter, &page); !s.ok()) return s;
+    for (const storage::DeviceInfo& d : page) {
+      if (*scanned >= options.max_devices) {
+        *complete = false;
+        return Status::Ok();
+      }
+      ++*scanned;
+      const bool has =
+          std::any_of(d.latest.begin(), d.latest.end(),
+                      [&](const storage::DeviceCalibration& c) { return c.method == method; });
+      if (!has) continue;
+      storage::JobInfo job;
+      Status s = store->LatestResult(d.serial, method, &job);
+      if (s.code() == StatusCode::kNotFound) continue;  // none served (rejected or revoked)
+      if (!s.ok()) return s;
+      json config, result;
+      if (!ParseJsonText(job.config_json, "config", &config).ok() || !config.is_object()) continue;
+      const auto p = config.find("product");
+      if (p == config.end() || !p->is_string() || p->get_ref<const std::string&>() != product) {
+        continue;
+      }
+      if (!ParseJsonText(job.result_json, "result", &result).ok()) continue;
+      Member m{d.serial, job.id, job.finished_at, {}};
+      std::map<std::string, double> all;
+      if (result.contains("parameters")) Flatten(result["parameters"], "", &all);
+      const std::vector<std::string> patterns = FindMethod(method)->FleetParameters();
+      for (const auto& [name, v] : all) {
+        if (Selected(name, patterns)) m.values[name] = v;
+      }
+      members->push_back(std::move(m));
+    }
+    if (static_cast<int>(page.size()) < filter.limit) return Status::Ok();
+    filter.after = page.back().serial;
+  }
+}
+
+json ZValue(double z) { return std::isfinite(z) ? json(z) : json(z > 0 ? "inf" : "-inf"); }
+
+}  // namespace
+
+Status NormalizeProduct(std::string_view raw, std::string* out) {
+  Status s = NormalizeSerial(raw, out);
+  if (s.ok()) return s;
+  std::string message = s.message();
+  if (message.rfind("'device'", 0) == 0) message = "'product'" + message.substr(8);
+  return Status::InvalidInput(message).WithField("product");
+}
+
+Status FleetJson(storage::Store* store, const std::string& product, const std::string& method,
+                 const FleetOptions& options, json* out) {
+  std::vector<Member> members;
+  int64_t scanned = 0;
+  bool complete = true;
+  if (Status s = CollectMembers(store, product, method, options, &members, &scanned, &complete);
+      !s.ok()) {
+    return s;
+  }
+  // Every parameter name any member has, in name order.
+  std::map<std::string, std::vector<std::pair<const Member*, double>>> by_name;
+  for (const Member& m : members) {
+    for (const auto& [name, v] : m.values) by_name[name].push_back({&m, v});
+  }
+  json parameters = json::array();
+  std::map<const Member*, std::pair<std::vector<std::string>, double>> flagged;
+  for (const auto& [name, entries] : by_name) {
+    std::vector<double> values;
+    for (const auto& e : entries) values.push_back(e.second);
+    const core::RobustSummary s = core::Summarize(values, options.bins);
+    json outliers = json::array();
+    for (const auto& [m, v] : entries) {
+      const double z = core::RobustZ(v, s);
+      if (s.n < options.min_devices || !(std::abs(z) > options.outlier_z)) continue;
+      outliers.push_back(
+          {{"device", m->device}, {"job_id", m->job_id}, {"value", v}, {"z", ZValue(z)}});
+      auto& f = flagged[m];
+      f.first.push_back(name);
+      f.second = std::max(f.second, std::abs(z));
+    }
+    parameters.push_back({{"name", name},
+                          {"n", s.n},
+                          {"median", s.median},
+                          {"spread", s.spread},
+                          {"min", s.min},
+                          {"max", s.max},
+                          {"histogram", {{"edges", s.edges}, {"counts", s.counts}}},
+                          {"outliers", outliers}});
+  }
+  json device_outliers = json::array();
+  json member_list = json::array();
+  std::map<std::string, std::vector<const Member*>> by_month;
+  for (const Member& m : members) {
+    member_list.push_back(
+        {{"device", m.device}, {"job_id", m.job_id}, {"calibrated_at", m.calibrated_at}});
+    by_month[m.calibrated_at.substr(0, 7)].push_back(&m);
+    if (auto f = flagged.find(&m); f != flagged.end()) {
+      device_outliers.push_back({{"device", m.device},
+                                 {"job_id", m.job_id},
+                                 {"parameters", f->second.first},
+                                 {"max_abs_z", ZValue(f->second.second)}});
+    }
+  }
+  json drift = json::array();
+  for (const auto& [month, ms] : by_month) {
+    json medians = json::object();
+    for (const auto& [name, entries] : by_name) {
+      std::vector<double> values;
+      for (const Member* m : ms) {
+        if (auto v = m->values.find(name); v != m->values.end()) values.push_back(v->second);
+      }
+      if (!values.empty()) medians[name] = core::Summarize(values, 1).median;
+    }
+    drift.push_back({{"month", month}, {"devices", ms.size()}, {"median", medians}});
+  }
+  *out = {{"product", product},     {"method", method},         {"devices", members.size()},
+          {"scanned", scanned},     {"complete", complete},     {"outlier_z", options.outlier_z},
+          {"members", member_list}, {"parameters", parameters}, {"outliers", device_outliers},
+          {"drift", drift}};
+  return Status::Ok();
+}
+
+}  // namespace calibd::server
