@@ -12,6 +12,7 @@
 #include "server/config.h"
 #include "server/device_lookup.h"
 #include "server/failure_reasons.h"
+#include "server/fleet.h"
 #include "server/http_util.h"
 #include "storage/store.h"
 #include "web/pages.h"
@@ -261,6 +262,22 @@ void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store, bool token
     }
     for (const auto& job : jobs) view.jobs.push_back(SummarizeWithEvents(store, job, false));
     SendPage(res, 200, web::RenderDevicePage(view));
+  });
+
+  http->Get(R"(/products/([^/]+))", [store](const httplib::Request& req, httplib::Response& res) {
+    web::FleetView view;
+    if (Status s = NormalizeProduct(std::string(req.matches[1]), &view.product); !s.ok()) {
+      return SendErrorPage(res, s);
+    }
+    for (const Method* m : AllMethods()) view.methods.push_back(m->name());
+    const std::string method = req.get_param_value("method");
+    if (FindMethod(method) != nullptr) {
+      view.method = method;
+      if (Status s = FleetJson(store, view.product, method, FleetOptions(), &view.fleet); !s.ok()) {
+        return SendErrorPage(res, s);
+      }
+    }
+    SendPage(res, 200, web::RenderFleetPage(view));
   });
 }
 

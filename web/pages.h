@@ -175,6 +175,20 @@ struct DevicesView {
 // UTC, said in the column heads.
 std::string RenderDevicesPage(const DevicesView& view);
 
+// `/products/{product}?method=M` — a product's fleet (server/fleet.h's JSON, SPEC §10).
+struct FleetView {
+  std::string product;
+  std::string method;
+  std::vector<std::string> methods;  // the registry's, one link each
+  nlohmann::json fleet;              // FleetJson's document
+};
+
+// The fleet page: the units flagged as outliers (device links, parameters, |z|), then
+// table.table-fleet, one row per parameter (name, units, median, robust spread, range, a
+// histogram as an inline SVG, the outlier units with their z), the members and the monthly
+// medians' count. Every user-controlled string is escaped.
+std::string RenderFleetPage(const FleetView& view);
+
 // The history page: filter form (GET, works without JS), table.table-history (device link,
 // method, status badge, created time, key figures, warnings flag), "older" pagination link.
 std::string RenderHistoryPage(const HistoryView& view);

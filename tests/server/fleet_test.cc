@@ -101,6 +101,17 @@ TEST_F(Fleet, NamesTheOutlierUnitAndItsParameterAmongTheProductsDevices) {
   EXPECT_EQ(Get("/api/v1/products/IMU-100/fleet?method=pca&outlier_z=1000")["outliers"].size(), 0u);
   EXPECT_EQ(Get("/api/v1/products/IMU-200/fleet?method=pca")["devices"], 1);
   EXPECT_EQ(Get("/api/v1/products/NOBODY/fleet?method=pca")["devices"], 0);
+  // The page: the flagged unit linked, one row per parameter.
+  auto page = server_.Client().Get("/products/IMU-100?method=pca");
+  ASSERT_TRUE(page);
+  EXPECT_EQ(page->status, 200);
+  EXPECT_NE(page->body.find("href=\"/devices/U-7\""), std::string::npos);
+  EXPECT_NE(page->body.find("table-fleet"), std::string::npos);
+  EXPECT_NE(page->body.find("sensors/a0_x/scale"), std::string::npos);
+  auto choose = server_.Client().Get("/products/IMU-100");
+  ASSERT_TRUE(choose);
+  EXPECT_EQ(choose->status, 200);
+  EXPECT_NE(choose->body.find("Choose a method"), std::string::npos);
 }
 
 TEST_F(Fleet, BadRequestsNameWhatIsWrong) {

@@ -128,6 +128,13 @@ render devices /devices
 render recording "/recordings/$r7"
 render full "/jobs/$j8"
 render device-drift /devices/IMU-DRIFT
+# A product's fleet (issue #27): three units of the product "P-<b>" (escaped on the page).
+for k in 1 2 3; do
+  jf=$(curl -sf -F "recording=@$tmp/pca/recording.csv" -F "config=@$tmp/pca/config.json" \
+    "$base/api/v1/recordings?device=FLEET-$k&product=P-%3Cb%3E" | job_id)
+  wait_job "$jf"
+done
+render fleet '/products/P-%3Cb%3E?method=pca'
 
 # A running job's page: its elapsed time and the Cancel form (issue #20); then it is cancelled.
 python3 - "$tmp/array/config.json" "$tmp/endless.json" <<'PY'
@@ -177,6 +184,7 @@ expect revoked 'Revoked' 'table-events' 'board &lt;b&gt;dropped'
 expect rejected 'Rejected by the acceptance gate' 'scale factor too uncertain'
 expect missing 'class="page-error'
 expect devices 'class="page-devices' 'table-devices' 'first seen (UTC)'
+expect fleet 'class="page-fleet' 'table-fleet' 'href="/devices/FLEET-1"' 'P-&lt;b&gt;' 'class="hist"'
 expect pca 'class="model"'
 expect array 'class="model"'
 reject failed 'class="advice"'
@@ -186,7 +194,7 @@ expect recording 'class="page-recording' 'plot-timeline-accel' 'plot-timeline-gy
 expect device-drift 'imu (2 accepted calibrations' 'noise (2 accepted calibrations' \
   'table-drift-imu' 'table-drift-noise' 'data-sensor="accelerometer"' 'data-sensor="gyroscope"' \
   'plot-drift-imu-scale' 'plot-drift-noise-accel' 'plot-drift-noise-gyro'
-for page in history pca array failed failed-imu device devices revoked rejected recording full device-drift running; do
+for page in history pca array failed failed-imu device devices revoked rejected recording full device-drift running fleet; do
   reject "$page" '<script' '<img'
   if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"
@@ -197,7 +205,7 @@ done
 if python3 "$(dirname "$0")/table_widths.py" "$chromium" "$tmp/profile-widths" "$base/" \
   "$base/jobs/$j2" "$base/jobs/$j3" "$base/jobs/$j4" "$base/jobs/$j5" "$base/jobs/$j8" \
   "$base/devices" "$base/devices/$hostile" "$base/devices/IMU-DRIFT" "$base/recordings/$r7" \
-  >"$tmp/widths.log" 2>&1; then
+  "$base/products/P-%3Cb%3E?method=pca" >"$tmp/widths.log" 2>&1; then
   passed=$((passed + 1))
 else
   failed=$((failed + 1)); echo "FAIL: a table is wider than 1280 px allows:"; cat "$tmp/widths.log"
