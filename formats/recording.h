@@ -61,6 +61,11 @@ struct ArrayRecording {
   // N seconds (the `t` column in the parser's time unit converted to seconds, counted from
   // RecordingSummary::time_origin), or empty when there is no `t` column.
   Eigen::VectorXd t;
+  // Temperature columns (°C, SPEC §8): `temp` (one for all IMUs) and/or `tempK` (IMU K), in
+  // file order, N × their number; empty when the log has none. Methods that do not use
+  // temperature ignore them.
+  std::vector<std::string> temp_names;
+  Eigen::MatrixXd temperature;
 };
 
 // An array recording held as floats (RecordingParser::CollectArrayAsFloat): what the raw-log
@@ -73,6 +78,8 @@ struct ArrayRecordingFloat {
   Eigen::MatrixXf accel;                 // N × 3K: a0_x a0_y a0_z a1_x ... times accel_scale
   Eigen::MatrixXf gyro;                  // N × 3G: g0_x ... times gyro_scale
   Eigen::VectorXd t;                     // as ArrayRecording::t
+  std::vector<std::string> temp_names;   // as ArrayRecording (kept in double)
+  Eigen::MatrixXd temperature;
   double accel_scale = 1, gyro_scale = 1;
 };
 

@@ -102,6 +102,18 @@ std::string ControlName(int c) {
 }
 
 // Parses "a12_x" style names. kind is 'a' or 'g'; returns false if the name has another form.
+// `temp` or `tempK` (K a triad index without leading zeros): a temperature column (SPEC §8).
+bool IsTemperatureColumn(std::string_view name) {
+  if (name.substr(0, 4) != "temp") return false;
+  const std::string_view digits = name.substr(4);
+  if (digits.empty()) return true;
+  if (digits.size() > 1 && digits[0] == '0') return false;
+  for (char c : digits) {
+    if (c < '0' || c > '9') return false;
+  }
+  return digits.size() <= 6;
+}
+
 bool ParseTriadColumn(std::string_view name, char* kind, int* index, int* axis) {
   if (name.size() < 4 || (name[0] != 'a' && name[0] != 'g')) return false;
   const size_t underscore = name.find('_');
@@ -323,6 +335,8 @@ Status RecordingParser::Impl::ArrayHeader() {
   const auto& f = fields;
   summary.layout = Layout::kArray;
   std::vector<std::array<int64_t, 3>> accel_cols, gyro_cols;  // file column per axis, 0 = none
+  std::vector<int64_t> temp_cols;                             // file column of temp_names[j]
+  temp_names.clear();
   int64_t t_col = 0;
   for (size_t i = 0; i < f.size(); ++i) {
     const int64_t col = static_cast<int64_t>(i) + 1;
@@ -333,13 +347,25 @@ Status RecordingParser::Impl::ArrayHeader() {
       t_col = col;
       continue;
     }
+    if (IsTemperatureColumn(f[i])) {
+      for (size_t j = 0; j < temp_cols.size(); ++j) {
+        if (temp_names[j] == name) {
+          return Fail(
+              "duplicate column '" + name + "' (also column " + std::to_string(temp_cols[j]) + ")",
+              col, name);
+        }
+      }
+      temp_cols.push_back(col);
+      temp_names.push_back(name);
+      continue;
+    }
     char kind;
     int index, axis;
     if (!ParseTriadColumn(f[i], &kind, &index, &axis)) {
       return Fail("unknown column '" + Excerpt(f[i]) +
                       "': an array recording has columns t, aK_x, aK_y, aK_z (accelerometer "
-                      "triad K) and gJ_x, gJ_y, gJ_z (gyroscope triad J); a pca recording "
-                      "starts with 'position'",
+                      "triad K), gJ_x, gJ_y, gJ_z (gyroscope triad J) and temp or tempK "
+                      "(temperature, °C); a pca recording starts with 'position'",
                   col, name);
     }
     if (index >= limits.max_columns) {
@@ -386,7 +412,10 @@ Status RecordingParser::Impl::ArrayHeader() {
   }
   for (int k = 0; k < accel_triads; ++k) summary.sensors.push_back("a" + std::to_string(k));
   for (int j = 0; j < gyro_triads; ++j) summary.sensors.push_back("g" + std::to_string(j));
-  row_values.resize(3 * (accel_triads + gyro_triads));
+  for (size_t j = 0; j < temp_cols.size(); ++j) {
+    column_target[temp_cols[j] - 1] = 3 * (accel_triads + gyro_triads) + static_cast<int>(j);
+  }
+  row_values.resize(3 * (accel_triads + gyro_triads) + temp_names.size());
   StartDirectCollection();
   return Status::Ok();
 }
@@ -405,6 +434,7 @@ void RecordingParser::Impl::StartDirectCollection() {
       direct_gyro.resize(expected_rows, 3 * gyro_triads);
     }
     if (has_t) direct_t.resize(expected_rows);
+    direct_temp.resize(expected_rows, static_cast<Eigen::Index>(temp_names.size()));
   }
 }
 

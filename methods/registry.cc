@@ -9,6 +9,8 @@
 #include "methods/noise/noise_report.h"
 #include "methods/pca/pca_method.h"
 #include "methods/pca/pca_report.h"
+#include "methods/thermal/thermal_method.h"
+#include "methods/thermal/thermal_report.h"
 
 namespace calibd::server {
 
@@ -20,6 +22,7 @@ const std::vector<MethodDescriptor>& AllMethodDescriptors() {
       {&ArrayMethod(), &web::internal::ArrayMethodReport()},
       {&ImuMethod(), &web::internal::ImuMethodReport()},
       {&NoiseMethod(), &web::internal::NoiseMethodReport()},
+      {&ThermalMethod(), &web::internal::ThermalMethodReport()},
   };
   return methods;
 }

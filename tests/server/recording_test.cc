@@ -238,7 +238,7 @@ INSTANTIATE_TEST_SUITE_P(
                 "position 'p' has no moving rows"},
         BadCase{"missing static", "position,phase,s1\np,moving,1\n", 2, 1, "no static rows"},
         BadCase{"empty label", "position,s1\n,1\n", 2, 1, "empty position label"},
-        BadCase{"unknown array column", "a0_x,a0_y,a0_z,temp\n", 1, 4, "unknown column 'temp'"},
+        BadCase{"unknown array column", "a0_x,a0_y,a0_z,pressure\n", 1, 4, "unknown column 'pressure'"},
         BadCase{"incomplete triad", "a0_x,a0_y,a0_z,a1_x,a1_y\n", 1, 0, "missing column 'a1_z'"},
         BadCase{"triad gap", "a0_x,a0_y,a0_z,a2_x,a2_y,a2_z\n", 1, 0, "missing column 'a1_x'"},
         BadCase{"duplicate array column", "a0_x,a0_y,a0_z,a0_x\n", 1, 4, "duplicate column"},

@@ -1,0 +1,310 @@
+// Stages 1 and 4 of core/thermal.h and the per-IMU run: averaging windows inside the statics,
+// orientation groups, the six channel fits and the heating/cooling comparison.
+#include "core/thermal.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+namespace calibd::core {
+namespace {
+
+const char* const kChannelNames[6] = {"accelerometer.x", "accelerometer.y", "accelerometer.z",
+                                      "gyroscope.x",     "gyroscope.y",     "gyroscope.z"};
+
+std::string Format(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3g", v);
+  return buf;
+}
+
+// Stage 1 for one range of samples [first, last].
+ThermalWindow MakeWindow(const Eigen::VectorXd& t, const ThermalImuInput& imu, int64_t first,
+                         int64_t last, double min_rate) {
+  ThermalWindow w;
+  const int64_t n = last - first + 1;
+  w.start = t(first);
+  w.end = t(last);
+  w.samples = n;
+  Eigen::Matrix<double, 6, 1> sum = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::Matrix<double, 6, 1> sq = Eigen::Matrix<double, 6, 1>::Zero();
+  double t_mean = 0, temp_mean = 0;
+  for (int64_t i = first; i <= last; ++i) {
+    t_mean += t(i);
+    temp_mean += (*imu.temp)(i);
+  }
+  t_mean /= n;
+  temp_mean /= n;
+  // Centre on the first sample so the sums of squares keep their precision.
+  Eigen::Matrix<double, 6, 1> origin;
+  origin << imu.accel->row(first).transpose(), imu.gyro->row(first).transpose();
+  double stt = 0, sty = 0;
+  for (int64_t i = first; i <= last; ++i) {
+    Eigen::Matrix<double, 6, 1> v;
+    v << imu.accel->row(i).transpose(), imu.gyro->row(i).transpose();
+    v -= origin;
+    sum += v;
+    sq += v.cwiseProduct(v);
+    const double dt = t(i) - t_mean;
+    stt += dt * dt;
+    sty += dt * ((*imu.temp)(i)-temp_mean);
+  }
+  const Eigen::Matrix<double, 6, 1> mean = sum / static_cast<double>(n);
+  const Eigen::Matrix<double, 6, 1> var =
+      ((sq - static_cast<double>(n) * mean.cwiseProduct(mean)) / static_cast<double>(n - 1))
+          .cwiseMax(0.0);
+  w.mean = origin + mean;
+  w.mean_std = (var / static_cast<double>(n)).cwiseSqrt();
+  w.temperature = temp_mean;
+  w.rate = stt > 0 ? sty / stt : 0;
+  w.phase = w.rate > min_rate ? 1 : (w.rate < -min_rate ? -1 : 0);
+  return w;
+}
+
+std::vector<ThermalWindow> CutWindows(const Eigen::VectorXd& t, const ThermalImuInput& imu,
+                                      const StaticDetection& statics,
+                                      const ThermalOptions& options) {
+  std::vector<ThermalWindow> windows;
+  const int64_t per = std::max<int64_t>(
+      3, static_cast<int64_t>(std::llround(options.window / statics.sample_period)));
+  for (const StaticInterval& s : statics.intervals) {
+    const int64_t count = std::max<int64_t>(1, (s.samples + per / 2) / per);
+    for (int64_t j = 0; j < count; ++j) {
+      const int64_t first = s.first + j * per;
+      const int64_t last = j + 1 == count ? s.last : first + per - 1;
+      if (last - first + 1 >= 3)
+        windows.push_back(MakeWindow(t, imu, first, last, options.min_rate));
+    }
+  }
+  return windows;
+}
+
+// Groups windows by gravity direction (greedy, against each group's first window).
+int GroupOrientations(double tolerance, std::vector<ThermalWindow>* windows) {
+  std::vector<Eigen::Vector3d> heads;
+  for (ThermalWindow& w : *windows) {
+    const Eigen::Vector3d d = w.mean.head<3>().normalized();
+    int found = -1;
+    for (size_t g = 0; g < heads.size() && found < 0; ++g) {
+      if (std::acos(std::clamp(d.dot(heads[g]), -1.0, 1.0)) <= tolerance)
+        found = static_cast<int>(g);
+    }
+    if (found < 0) {
+      found = static_cast<int>(heads.size());
+      heads.push_back(d);
+    }
+    w.orientation = found;
+  }
+  return static_cast<int>(heads.size());
+}
+
+// The windows of one phase (0: all) as fit inputs for channel c; groups re-indexed densely.
+struct ChannelData {
+  Eigen::VectorXd x, y, sigma;
+  std::vector<int> group;
+  std::vector<int> group_of_orientation;  // orientation -> dense group, −1 absent
+  int groups = 0;
+  double t_lo = 0, t_hi = 0;
+};
+
+ChannelData Select(const std::vector<ThermalWindow>& windows, int c, int phase, double t_ref,
+                   int orientations) {
+  ChannelData d;
+  const bool gyro = c >= 3;
+  d.group_of_orientation.assign(static_cast<size_t>(gyro ? 1 : orientations), -1);
+  std::vector<int> rows;
+  for (size_t i = 0; i < windows.size(); ++i) {
+    if (phase == 0 || windows[i].phase == phase) rows.push_back(static_cast<int>(i));
+  }
+  d.x.resize(static_cast<Eigen::Index>(rows.size()));
+  d.y.resize(d.x.size());
+  d.sigma.resize(d.x.size());
+  d.t_lo = std::numeric_limits<double>::infinity();
+  d.t_hi = -d.t_lo;
+  for (size_t r = 0; r < rows.size(); ++r) {
+    const ThermalWindow& w = windows[static_cast<size_t>(rows[r])];
+    const int o = gyro ? 0 : w.orientation;
+    int& g = d.group_of_orientation[static_cast<size_t>(o)];
+    if (g < 0) g = d.groups++;
+    d.group.push_back(g);
+    d.x(static_cast<Eigen::Index>(r)) = w.temperature - t_ref;
+    d.y(static_cast<Eigen::Index>(r)) = w.mean(c);
+    // A window without noise (a noise-free simulation) still needs a positive weight.
+    d.sigma(static_cast<Eigen::Index>(r)) = std::max(w.mean_std(c), 1e-15);
+    d.t_lo = std::min(d.t_lo, w.temperature);
+    d.t_hi = std::max(d.t_hi, w.temperature);
+  }
+  return d;
+}
+
+// Bias at x = T − t_ref (intercept of dense group g plus the curve) and its 1σ.
+void BiasAt(const ThermalPolyFit& f, int g, double x, double* value, double* var) {
+  const int groups = static_cast<int>(f.intercepts.size());
+  const int p = f.order;
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(groups + p);
+  v(g) = 1;
+  double power = 1;
+  for (int k = 0; k < p; ++k) {
+    power *= x;
+    v(groups + k) = power;
+  }
+  *value = f.intercepts(g) + ThermalCurve(f.coefficients, x);
+  *var = v.dot(f.full_covariance * v);
+}
+
+// Stage 4 for one channel: heating and cooling apart at the chosen order.
+void CompareHeatingCooling(const std::vector<ThermalWindow>& windows, int c, double t_ref,
+                           int orientations, double scale, int grid_points, double critical_z,
+                           ThermalChannel* ch) {
+  const ChannelData h = Select(windows, c, 1, t_ref, orientations);
+  const ChannelData k = Select(windows, c, -1, t_ref, orientations);
+  int common = -1;  // an orientation both phases saw
+  for (size_t o = 0; o < h.group_of_orientation.size() && common < 0; ++o) {
+    if (h.group_of_orientation[o] >= 0 && k.group_of_orientation[o] >= 0)
+      common = static_cast<int>(o);
+  }
+  const double lo = std::max(h.t_lo, k.t_lo), hi = std::min(h.t_hi, k.t_hi);
+  if (common < 0 || !(hi > lo)) return;
+  const int order = ch->fit.order;
+  ThermalPolyFit fh, fk;
+  if (!FitThermalPolynomial(h.x, h.y, h.sigma, h.group, h.groups, order, order, scale, &fh).ok() ||
+      !FitThermalPolynomial(k.x, k.y, k.sigma, k.group, k.groups, order, order, scale, &fk).ok() ||
+      fh.dof < 1 || fk.dof < 1) {
+    return;
+  }
+  ch->hysteresis_tested = true;
+  ch->hysteresis_temperatures.resize(grid_points);
+  ch->hysteresis_difference.resize(grid_points);
+  ch->hysteresis_z.resize(grid_points);
+  for (int i = 0; i < grid_points; ++i) {
+    const double temp = lo + (hi - lo) * i / (grid_points - 1);
+    double vh, varh, vk, vark;
+    BiasAt(fh, h.group_of_orientation[static_cast<size_t>(common)], temp - t_ref, &vh, &varh);
+    BiasAt(fk, k.group_of_orientation[static_cast<size_t>(common)], temp - t_ref, &vk, &vark);
+    const double sd = std::sqrt(varh + vark);
+    ch->hysteresis_temperatures(i) = temp;
+    ch->hysteresis_difference(i) = vh - vk;
+    ch->hysteresis_z(i) = sd > 0 ? (vh - vk) / sd : 0;
+    ch->max_abs_z = std::max(ch->max_abs_z, std::abs(ch->hysteresis_z(i)));
+  }
+  ch->hysteresis_flagged = ch->max_abs_z > critical_z;
+}
+
+Status CalibrateImu(const Eigen::VectorXd& t, const ThermalImuInput& imu,
+                    const ThermalOptions& options, ThermalImuResult* r) {
+  r->name = imu.name;
+  const std::vector<TriadSeries> triads = {{"a" + imu.name, TriadKind::kAccelerometer, imu.accel},
+                                           {"g" + imu.name, TriadKind::kGyroscope, imu.gyro}};
+  Status st = DetectStatics(t, triads, options.statics, &r->statics);
+  if (!st.ok()) return st;
+  r->windows = CutWindows(t, imu, r->statics, options);
+  if (r->windows.size() < 3) {
+    return Status::NotDeterminable("IMU " + imu.name + ": " + std::to_string(r->windows.size()) +
+                                   " averaging windows of " + Format(options.window) +
+                                   " s in the statics; " + StaticShortfall(r->statics));
+  }
+  r->orientations = GroupOrientations(options.orientation_tolerance, &r->windows);
+  r->t_min = r->t_max = r->windows[0].temperature;
+  for (const ThermalWindow& w : r->windows) {
+    r->t_min = std::min(r->t_min, w.temperature);
+    r->t_max = std::max(r->t_max, w.temperature);
+    r->heating_windows += w.phase > 0;
+    r->cooling_windows += w.phase < 0;
+  }
+  const double range = r->t_max - r->t_min;
+  if (range < options.min_range) {
+    return Status::NotDeterminable(
+        "IMU " + imu.name + ": the statics span " + Format(range) + " °C (" + Format(r->t_min) +
+        " to " + Format(r->t_max) + " °C), below min_range " + Format(options.min_range) +
+        " °C: the temperature dependence is not determinable; record a warm-up or chamber ramp "
+        "over a wider range");
+  }
+  r->t_ref = options.t_ref.value_or(0.5 * (r->t_min + r->t_max));
+  const double scale = 0.5 * range;
+  r->grid.resize(options.grid_points);
+  for (int i = 0; i < options.grid_points; ++i) {
+    r->grid(i) = r->t_min + range * i / (options.grid_points - 1);
+  }
+  r->hysteresis_threshold_z =
+      BonferroniCriticalZ(options.hysteresis_alpha, 6 * options.grid_points);
+  Eigen::Vector3d gyro_bias, gyro_std;
+  for (int c = 0; c < 6; ++c) {
+    ThermalChannel ch;
+    ch.name = kChannelNames[c];
+    const ChannelData d = Select(r->windows, c, 0, r->t_ref, r->orientations);
+    st = FitThermalPolynomial(d.x, d.y, d.sigma, d.group, d.groups, 0, options.max_order, scale,
+                              &ch.fit);
+    if (!st.ok())
+      return Status::NotDeterminable("IMU " + imu.name + ", " + ch.name + ": " + st.message());
+    ch.grid_value.resize(options.grid_points);
+    ch.grid_std.resize(options.grid_points);
+    ch.grid_crb_std.resize(options.grid_points);
+    for (int i = 0; i < options.grid_points; ++i) {
+      const double x = r->grid(i) - r->t_ref;
+      ch.grid_value(i) = ThermalCurve(ch.fit.coefficients, x);
+      ch.grid_std(i) = ThermalCurveStd(ch.fit.covariance, x);
+      ch.grid_crb_std(i) = ThermalCurveStd(ch.fit.crb, x);
+    }
+    CompareHeatingCooling(r->windows, c, r->t_ref, r->orientations, scale, options.grid_points,
+                          r->hysteresis_threshold_z, &ch);
+    if (c >= 3) {
+      gyro_bias(c - 3) = ch.fit.intercepts(0);
+      gyro_std(c - 3) = ch.fit.intercept_std;
+    }
+    r->channels.push_back(std::move(ch));
+  }
+  r->gyro_at_t_ref = gyro_bias;
+  r->gyro_at_t_ref_std = gyro_std;
+  return Status::Ok();
+}
+
+}  // namespace
+
+bool ThermalOptions::IsValid(std::string* error) const {
+  auto fail = [&](const char* what) {
+    *error = what;
+    return false;
+  };
+  if (!(window > 0)) return fail("window must be > 0 s");
+  if (max_order < 1 || max_order > 8) return fail("max_order must be in [1, 8]");
+  if (t_ref && !std::isfinite(*t_ref)) return fail("t_ref must be finite");
+  if (!(min_range >= 0)) return fail("min_range must be >= 0 °C");
+  if (!(min_rate >= 0)) return fail("min_rate must be >= 0 °C/s");
+  if (grid_points < 2) return fail("grid_points must be >= 2");
+  if (!(hysteresis_alpha > 0 && hysteresis_alpha < 1)) return fail("hysteresis_alpha in (0, 1)");
+  if (!(orientation_tolerance > 0)) return fail("orientation_tolerance must be > 0");
+  return statics.IsValid(error);
+}
+
+Status CalibrateThermal(const Eigen::VectorXd& t, const std::vector<ThermalImuInput>& imus,
+                        const ThermalOptions& options, ThermalResult* out) {
+  std::string error;
+  if (!options.IsValid(&error)) return Status::InvalidInput("thermal options: " + error);
+  if (imus.empty()) return Status::InvalidInput("thermal: no IMU in the log");
+  *out = ThermalResult();
+  for (const ThermalImuInput& imu : imus) {
+    if (!imu.accel || !imu.gyro || !imu.temp || imu.accel->rows() != t.size() ||
+        imu.gyro->rows() != t.size() || imu.temp->size() != t.size()) {
+      return Status::InvalidInput("IMU " + imu.name +
+                                  ": accelerometer, gyroscope and temperature need one row per t");
+    }
+    for (Eigen::Index i = 0; i < t.size(); ++i) {
+      if (!std::isfinite((*imu.temp)(i))) {
+        return Status::InvalidInput("IMU " + imu.name + ": temperature not finite at sample " +
+                                    std::to_string(i));
+      }
+    }
+    ThermalImuResult r;
+    const Status st = CalibrateImu(t, imu, options, &r);
+    if (!st.ok()) return st;
+    if (r.orientations > 1) {
+      out->warnings.push_back("IMU " + imu.name + ": " + std::to_string(r.orientations) +
+                              " orientations found; the accelerometer bias at t_ref and the scale "
+                              "curves are not estimated yet (null)");
+    }
+    out->imus.push_back(std::move(r));
+  }
+  return Status::Ok();
+}
+
+}  // namespace calibd::core

@@ -1,0 +1,161 @@
+// Thermal calibration (SPEC §8 `thermal`): each IMU's accelerometer and gyroscope bias as a
+// function of temperature, from a log recorded while the device warms or cools at rest (or in a few
+// orientations).
+//
+// Stages (core/thermal.cc, core/thermal_fit.cc):
+//  1. Statics: core/static_detection on the IMU's two triads; each static interval is cut into
+//     consecutive averaging windows of `window` seconds (a remainder shorter than half a window
+//     joins the last one). Per window: the mean of every channel, its σ from the window's own
+//     samples (sample std / √n, white noise), the mean temperature and the temperature rate (least
+//     squares slope of T over the window); the window's phase is heating (rate > min_rate), cooling
+//     (rate < −min_rate) or steady. Windows are grouped by orientation (gravity directions within
+//     `orientation_tolerance` of each other).
+//  2. Per channel, weighted least squares of the window means
+//       y_w = b_g(w) + Σ_{k=1..p} c_k (T_w − t_ref)^k,      weights 1/σ_w²,
+//     with one intercept b_g per orientation group for accelerometers (gravity is part of it) and
+//     one for gyroscopes. Solved by Householder QR on (T − t_ref)/h, h = half the range, so order 5
+//     over 60 °C stays well conditioned. The order p ∈ [0, max_order] minimises AICc with the
+//     noise scale estimated (n ln(χ²/n) + 2k + 2k(k+1)/(n−k−1), k the regression parameters plus
+//     the scale), so σ_w that are uniformly too small do not inflate the order; the table of every
+//     order is kept.
+//  3. Uncertainty (SPEC §7 σ convention): crb = (AᵀWA)⁻¹; when χ²/dof exceeds its one-sided 1 %
+//     quantile under the white-noise model (1 + 2.326 √(2/dof)), the primary is chi2_scaled (crb ×
+//     χ²/dof), else crb. The 1σ band of the curve c(T) = Σ c_k (T − t_ref)^k on a grid across
+//     [t_min, t_max] is √(vᵀ C v), v_k = (T − t_ref)^k.
+//  4. Hysteresis: heating and cooling windows fitted apart at the chosen order (each with its own
+//     intercepts); their difference on the grid across the temperatures both cover, z = Δ/σ_Δ,
+//     flagged when |z| > Φ⁻¹(1 − α/(2 m)), m = channels × grid points (Bonferroni: the false-alarm
+//     rate over all channels and temperatures is at most α, default 1 %; the grid points are
+//     correlated, so it is below α).
+// Not done (the result says so): the accelerometer bias at t_ref (`at_t_ref`) is null even with
+// several orientations (separating it from gravity needs the imu model's scale; left for later),
+// scale curves are null, `lag: estimate` is refused by the caller.
+//
+// Pure numerics, thread-compatible. Units: SI readings (m/s², rad/s), °C, s.
+#ifndef CALIBD_CORE_THERMAL_H_
+#define CALIBD_CORE_THERMAL_H_
+
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "base/status.h"
+#include "core/static_detection.h"
+
+namespace calibd::core {
+
+struct ThermalOptions {
+  double window = 10;              // s, > 0: averaging window inside the statics
+  int max_order = 5;               // in [1, 8]: highest polynomial order offered
+  std::optional<double> t_ref;     // °C; nullopt: the middle of [t_min, t_max]
+  double min_range = 10;           // °C, >= 0: a smaller range of window temperatures is refused
+  double min_rate = 0.001;         // °C/s, >= 0: |rate| above it is heating or cooling
+  int grid_points = 21;            // >= 2: band and hysteresis grid across [t_min, t_max]
+  double hysteresis_alpha = 0.01;  // in (0, 1): false-alarm rate over all channels
+  double orientation_tolerance = 0.17453;  // rad (10°): same orientation group
+  StaticDetectionOptions statics;          // static detection (stop token included)
+
+  bool IsValid(std::string* error) const;
+};
+
+// One IMU's log. Non-owning: the arrays must outlive the call.
+struct ThermalImuInput {
+  std::string name;                         // e.g. "0"
+  const Eigen::MatrixX3d* accel = nullptr;  // N×3, m/s²
+  const Eigen::MatrixX3d* gyro = nullptr;   // N×3, rad/s
+  const Eigen::VectorXd* temp = nullptr;    // N, °C
+};
+
+// One averaging window (stage 1).
+struct ThermalWindow {
+  double start = 0, end = 0;  // s
+  int64_t samples = 0;
+  double temperature = 0;                // °C, mean
+  double rate = 0;                       // °C/s
+  int phase = 0;                         // +1 heating, −1 cooling, 0 steady
+  int orientation = 0;                   // group index
+  Eigen::Matrix<double, 6, 1> mean;      // ax ay az gx gy gz, SI
+  Eigen::Matrix<double, 6, 1> mean_std;  // σ of the mean, SI
+};
+
+// One row of the order-selection table.
+struct ThermalOrderRow {
+  int order = 0;
+  double chi2 = 0;
+  double aicc = 0;  // +inf where n − k − 1 <= 0
+};
+
+// One weighted polynomial fit (one channel, one set of windows).
+struct ThermalPolyFit {
+  int order = 0;
+  Eigen::VectorXd coefficients;     // c_1..c_p, SI per °C^k
+  Eigen::VectorXd intercepts;       // per orientation group (gyro: one), SI
+  Eigen::MatrixXd covariance;       // p×p, primary
+  Eigen::MatrixXd crb;              // p×p, white-noise bound
+  Eigen::MatrixXd full_covariance;  // (groups + p)², primary (intercepts first)
+  double intercept_std = 0;         // primary σ of intercepts(0)
+  double chi2 = 0;
+  int dof = 0;
+  std::string basis;        // "crb" | "chi2_scaled"
+  double residual_rms = 0;  // SI, unweighted
+  double noise_rms = 0;     // SI, RMS of the windows' σ of the mean
+  std::vector<ThermalOrderRow> table;
+};
+
+struct ThermalChannel {
+  std::string name;  // "accelerometer.x" ... "gyroscope.z"
+  ThermalPolyFit fit;
+  Eigen::VectorXd grid_value;  // curve on the grid, SI
+  Eigen::VectorXd grid_std;    // primary 1σ on the grid
+  Eigen::VectorXd grid_crb_std;
+  // Hysteresis (empty when heating or cooling has too few windows).
+  bool hysteresis_tested = false;
+  Eigen::VectorXd hysteresis_temperatures;
+  Eigen::VectorXd hysteresis_difference;  // heating − cooling, SI
+  Eigen::VectorXd hysteresis_z;
+  double max_abs_z = 0;
+  bool hysteresis_flagged = false;
+};
+
+struct ThermalImuResult {
+  std::string name;
+  double t_ref = 0, t_min = 0, t_max = 0;
+  std::vector<ThermalWindow> windows;
+  int orientations = 0;
+  Eigen::VectorXd grid;                  // °C
+  std::vector<ThermalChannel> channels;  // 6: accelerometer x,y,z, gyroscope x,y,z
+  std::optional<Eigen::Vector3d> gyro_at_t_ref, gyro_at_t_ref_std;  // rad/s
+  int heating_windows = 0, cooling_windows = 0;
+  double hysteresis_threshold_z = 0;  // Bonferroni critical |z|
+  StaticDetection statics;
+};
+
+struct ThermalResult {
+  std::vector<ThermalImuResult> imus;
+  std::vector<std::string> warnings;
+};
+
+// kInvalidInput: options invalid, arrays of different lengths, non-finite values (names IMU and
+// sample). kNotDeterminable: too few statics/windows (names what was found) or a temperature range
+// below min_range (names the range found). kStopped when options.statics.stop asked for a stop.
+Status CalibrateThermal(const Eigen::VectorXd& t, const std::vector<ThermalImuInput>& imus,
+                        const ThermalOptions& options, ThermalResult* out);
+
+// Stage 2 and 3 for one channel, exposed for tests: x = T − t_ref (°C), group per window (in
+// [0, groups)), the order chosen in [min_order, max_order] (equal: a fixed order). `scale` (> 0)
+// is the unit of x the design uses internally (half the range).
+Status FitThermalPolynomial(const Eigen::VectorXd& x, const Eigen::VectorXd& y,
+                            const Eigen::VectorXd& sigma, const std::vector<int>& group, int groups,
+                            int min_order, int max_order, double scale, ThermalPolyFit* out);
+
+// The curve Σ c_k x^k and its 1σ √(vᵀ C v) at x = T − t_ref.
+double ThermalCurve(const Eigen::VectorXd& coefficients, double x);
+double ThermalCurveStd(const Eigen::MatrixXd& covariance, double x);
+
+// Φ⁻¹(1 − α/(2m)): the two-sided Bonferroni critical |z| for m tests at family rate α.
+double BonferroniCriticalZ(double alpha, int tests);
+
+}  // namespace calibd::core
+
+#endif  // CALIBD_CORE_THERMAL_H_

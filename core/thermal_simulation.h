@@ -1,0 +1,54 @@
+// Simulated thermal-calibration logs with a known truth (`calibd simulate thermal`, tests):
+// one IMU at rest while it warms up along T(t) = t0 + Δ (1 − e^{−t/τ}), optionally followed by a
+// cool-down T(t) = T_end − Δ_c (1 − e^{−(t − t_w)/τ}); per channel the bias
+//   b(T) = b0 + Σ_{k=1..p} c_k (T − t_ref)^k  (+ hysteresis offset on cooling),
+// white noise per channel, a temperature reading with white noise, and optionally several
+// orientations held for equal parts of the log (an instant change between them: the windows
+// around it are not static). Deterministic per seed. Thread-compatible.
+#ifndef CALIBD_CORE_THERMAL_SIMULATION_H_
+#define CALIBD_CORE_THERMAL_SIMULATION_H_
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <vector>
+
+namespace calibd::core {
+
+struct ThermalSimulationOptions {
+  double rate = 100;          // Hz
+  double warmup = 1800;       // s, duration of the warm-up
+  double cooldown = 0;        // s, duration of the cool-down after it (0: none)
+  double t0 = 20;             // °C at the start
+  double delta = 40;          // °C, asymptotic rise of the warm-up
+  double cool_delta = 30;     // °C, asymptotic fall of the cool-down
+  double tau = 600;           // s, time constant of both
+  double t_ref = 35;          // °C, reference of the truth's polynomials
+  double accel_noise = 0.02;  // m/s² per sample
+  double gyro_noise = 0.002;  // rad/s per sample
+  double temp_noise = 0.01;   // °C per sample
+  double gravity = 9.80665;
+  int orientations = 1;  // gravity along +z, then −z, +x, −x, +y, −y
+  // Truth: per channel (ax ay az gx gy gz) the coefficients c_1..c_p (SI per °C^k) and b0.
+  std::vector<Eigen::VectorXd> coefficients;  // 6 entries; empty: DefaultThermalTruth(3)
+  Eigen::Matrix<double, 6, 1> b0 = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::Matrix<double, 6, 1> hysteresis = Eigen::Matrix<double, 6, 1>::Zero();  // on cooling
+  uint64_t seed = 1;
+};
+
+struct ThermalSimulation {
+  Eigen::VectorXd t;               // s
+  Eigen::MatrixX3d accel;          // m/s²
+  Eigen::MatrixX3d gyro;           // rad/s
+  Eigen::VectorXd temp;            // °C, as read
+  ThermalSimulationOptions truth;  // with the coefficients filled in
+};
+
+// A plausible truth of order `order` (1..5): MEMS-sized drifts (accelerometer ~1e-3 m/s²/°C,
+// gyroscope ~1e-4 rad/s/°C at first order; each further order contributes ~3× less at ±15 °C).
+std::vector<Eigen::VectorXd> DefaultThermalTruth(int order);
+
+ThermalSimulation SimulateThermal(const ThermalSimulationOptions& options);
+
+}  // namespace calibd::core
+
+#endif  // CALIBD_CORE_THERMAL_SIMULATION_H_

@@ -1,0 +1,117 @@
+// The thermal report section (methods/thermal/thermal_report.h), read from the result JSON; a
+// result of an unexpected shape shows "not available" (web::Guard).
+#include "methods/thermal/thermal_report.h"
+
+#include <string>
+#include <vector>
+
+#include "web/html.h"
+#include "web/report_common.h"
+#include "web/svg_plot.h"
+
+namespace calibd::web::internal {
+
+namespace {
+
+// One channel's plot: the curve ± 1σ on the grid, the window means (heating and cooling in two
+// colours, steady in a third).
+std::string ChannelPlot(const json& pimu, const json& uimu, const json& ch, int c) {
+  const char* sensor = c < 3 ? "accelerometer" : "gyroscope";
+  const json& unc = uimu.at(sensor).at("bias");
+  const std::vector<double> grid = unc.at("temperatures").get<std::vector<double>>();
+  const std::vector<double> curve = ch.at("curve").get<std::vector<double>>();
+  const std::vector<double> sd =
+      unc.at("std").at(static_cast<size_t>(c % 3)).get<std::vector<double>>();
+  Series mid{"curve", grid, curve};
+  Series hi{"curve + 1 sigma", grid, curve}, lo{"", grid, curve};
+  hi.dashed = lo.dashed = true;
+  hi.color = lo.color = mid.color = 0;
+  for (size_t i = 0; i < grid.size(); ++i) {
+    hi.y[i] += sd[i];
+    lo.y[i] -= sd[i];
+  }
+  const json& pts = ch.at("points");
+  Series phases[3] = {{"cooling"}, {"steady"}, {"heating"}};
+  for (size_t i = 0; i < pts.at("temperature").size(); ++i) {
+    Series& s = phases[pts.at("phase")[i].get<int>() + 1];
+    s.x.push_back(pts.at("temperature")[i].get<double>());
+    s.y.push_back(pts.at("deviation")[i].get<double>());
+    s.y_err.push_back(pts.at("std")[i].get<double>());
+  }
+  std::vector<Series> series = {mid, hi, lo};
+  for (int k = 0; k < 3; ++k) {
+    phases[k].line = false;
+    phases[k].marker = Marker::kCircle;
+    phases[k].color = k + 1;
+    if (!phases[k].x.empty()) series.push_back(phases[k]);
+  }
+  PlotOptions o;
+  o.name = "thermal";
+  o.title = "IMU " + pimu.at("name").get<std::string>() + " " + ch.at("name").get<std::string>();
+  o.x.title = "temperature (degC)";
+  o.y.title = std::string("bias - bias(t_ref) (") + (c < 3 ? "m/s^2" : "rad/s") + ")";
+  return Figure(RenderXYPlot(o, series), o.title + ": order " +
+                                             std::to_string(ch.at("order").get<int>()) +
+                                             ", basis " + ch.at("basis").get<std::string>());
+}
+
+std::string OrderTable(const json& d) {
+  std::string h =
+      "<table><tr><th>channel</th><th>order</th><th>chi2/dof</th><th>residual RMS</th>"
+      "<th>noise RMS</th><th>AICc by order</th><th>hysteresis max |z|</th></tr>";
+  for (const json& ch : d.at("channels")) {
+    std::string aicc;
+    for (const json& row : ch.at("order_table")) {
+      aicc +=
+          std::to_string(row.at("order").get<int>()) + ": " + ScalarText(&row.at("aicc"), 4) + " ";
+    }
+    const json& hy = ch.at("hysteresis");
+    const std::string z = hy.at("tested").get<bool>()
+                              ? FormatSig(hy.at("max_abs_z").get<double>(), 3) +
+                                    (hy.at("flagged").get<bool>() ? " (flagged)" : "")
+                              : "not tested";
+    h += "<tr><td>" + E(ch.at("name").get<std::string>()) + "</td>" +
+         NumCell(std::to_string(ch.at("order").get<int>())) +
+         NumCell(ScalarText(&ch.at("chi2_per_dof"), 3)) +
+         NumCell(ScalarText(&ch.at("residual_rms"), 3)) +
+         NumCell(ScalarText(&ch.at("noise_rms"), 3)) + "<td class=\"small\">" + E(aicc) +
+         "</td><td>" + E(z) + "</td></tr>";
+  }
+  return h + "</table><p class=\"muted small\">Hysteresis flagged above |z| " +
+         E(FormatSig(d.at("hysteresis_critical_z").get<double>(), 3)) +
+         " (Bonferroni over 6 channels and the grid).</p>";
+}
+
+class ThermalReport : public MethodReport {
+ public:
+  const char* method() const override { return "thermal"; }
+  std::string Section(const JobView& view) const override {
+    return Guard("thermal curves", [&] {
+      const json& r = view.job.result;
+      const json& p = r.at("parameters").at("imus");
+      const json& u = r.at("uncertainty").at("imus");
+      const json& d = r.at("diagnostics").at("imus");
+      std::string body;
+      for (size_t i = 0; i < p.size(); ++i) {
+        body += "<h3>IMU " + E(p[i].at("name").get<std::string>()) + ": " +
+                E(FormatSig(p[i].at("t_min").get<double>(), 4)) + " to " +
+                E(FormatSig(p[i].at("t_max").get<double>(), 4)) + " degC, t_ref " +
+                E(FormatSig(p[i].at("t_ref").get<double>(), 4)) + "</h3>";
+        body += OrderTable(d[i]);
+        for (int c = 0; c < 6; ++c) {
+          body += ChannelPlot(p[i], u[i], d[i].at("channels").at(static_cast<size_t>(c)), c);
+        }
+      }
+      return internal::Section("thermal", "Bias against temperature", body);
+    });
+  }
+};
+
+}  // namespace
+
+const MethodReport& ThermalMethodReport() {
+  static const ThermalReport& report = *new ThermalReport;
+  return report;
+}
+
+}  // namespace calibd::web::internal

@@ -1,0 +1,186 @@
+// Tests of the thermal calibration (core/thermal.h) on simulated warm-up logs with a known
+// polynomial truth: exact recovery without noise, Monte-Carlo honesty of the curve's band (also
+// with a too-high max_order offered), the order AICc picks, the min_range refusal, and the
+// hysteresis test's false-alarm rate and power.
+#include "core/thermal.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include "core/thermal_simulation.h"
+
+namespace calibd::core {
+namespace {
+
+ThermalSimulationOptions Warmup(uint64_t seed) {
+  ThermalSimulationOptions o;
+  o.rate = 50;
+  o.warmup = 1800;
+  o.seed = seed;
+  return o;
+}
+
+Status Calibrate(const ThermalSimulation& sim, const ThermalOptions& options, ThermalResult* out) {
+  const std::vector<ThermalImuInput> imus = {{"0", &sim.accel, &sim.gyro, &sim.temp}};
+  return CalibrateThermal(sim.t, imus, options, out);
+}
+
+// The true deviation of channel c at T, relative to its value at the result's t_ref.
+double TrueDeviation(const ThermalSimulation& sim, int c, double temp, double t_ref) {
+  const Eigen::VectorXd& coef = sim.truth.coefficients[static_cast<size_t>(c)];
+  return ThermalCurve(coef, temp - sim.truth.t_ref) - ThermalCurve(coef, t_ref - sim.truth.t_ref);
+}
+
+TEST(ThermalTest, RecoversTheCurveWithoutNoise) {
+  ThermalSimulationOptions o = Warmup(1);
+  o.accel_noise = o.gyro_noise = 0;
+  o.temp_noise = 0;
+  const ThermalSimulation sim = SimulateThermal(o);
+  // Without noise the drift itself sets the spread: a fixed static threshold says the log is at
+  // rest throughout.
+  ThermalOptions options;
+  options.window = 1;  // the window mean of a curved bias departs from the curve by ~c2 var(T)
+  options.statics.accel_threshold = options.statics.gyro_threshold = 1.0;
+  ThermalResult r;
+  const Status st = Calibrate(sim, options, &r);
+  ASSERT_TRUE(st.ok()) << st.message();
+  const ThermalImuResult& imu = r.imus.at(0);
+  EXPECT_GT(imu.t_max - imu.t_min, 30);
+  for (int c = 0; c < 6; ++c) {
+    const ThermalChannel& ch = imu.channels[static_cast<size_t>(c)];
+    EXPECT_GE(ch.fit.order, 3) << ch.name;
+    for (Eigen::Index i = 0; i < imu.grid.size(); ++i) {
+      // The window mean of a curved bias differs from the bias at the window's mean temperature
+      // by ~c2 × var(T within a window): ~1e-8 with 1 s windows.
+      EXPECT_NEAR(ch.grid_value(i), TrueDeviation(sim, c, imu.grid(i), imu.t_ref), 1e-7)
+          << ch.name << " at " << imu.grid(i) << " °C";
+    }
+  }
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_NEAR((*imu.gyro_at_t_ref)(a),
+                ThermalCurve(sim.truth.coefficients[static_cast<size_t>(3 + a)],
+                             imu.t_ref - sim.truth.t_ref),
+                1e-8);
+  }
+}
+
+// z of the curve against the truth over the grid (t_ref excluded: there σ = 0), per channel, over
+// `trials` seeds; also counts how often each channel's order equals `true_order`.
+struct Honesty {
+  double z_rms[6] = {0};
+  int right_order[6] = {0};
+};
+
+Honesty MonteCarlo(int trials, int max_order, int true_order) {
+  Honesty h;
+  double sum[6] = {0};
+  int count[6] = {0};
+  for (int trial = 0; trial < trials; ++trial) {
+    ThermalSimulationOptions o = Warmup(100 + static_cast<uint64_t>(trial));
+    o.coefficients = DefaultThermalTruth(true_order);
+    const ThermalSimulation sim = SimulateThermal(o);
+    ThermalOptions options;
+    options.max_order = max_order;
+    options.grid_points = 11;
+    ThermalResult r;
+    const Status st = Calibrate(sim, options, &r);
+    EXPECT_TRUE(st.ok()) << st.message();
+    if (!st.ok()) continue;
+    const ThermalImuResult& imu = r.imus[0];
+    for (int c = 0; c < 6; ++c) {
+      const ThermalChannel& ch = imu.channels[static_cast<size_t>(c)];
+      h.right_order[c] += ch.fit.order == true_order;
+      for (Eigen::Index i = 0; i < imu.grid.size(); ++i) {
+        if (std::abs(imu.grid(i) - imu.t_ref) < 1e-6) continue;  // σ = 0 there (up to rounding)
+        const double z =
+            (ch.grid_value(i) - TrueDeviation(sim, c, imu.grid(i), imu.t_ref)) / ch.grid_std(i);
+        sum[c] += z * z;
+        ++count[c];
+      }
+    }
+  }
+  for (int c = 0; c < 6; ++c) h.z_rms[c] = std::sqrt(sum[c] / std::max(1, count[c]));
+  return h;
+}
+
+// 100 trials × 10 grid points: a z RMS estimated from 100 independent trials has a relative σ of
+// ~1/√200 = 7 % (the grid points of one trial are correlated, so not less); 0.7–1.4 is > 4σ
+// either side, while a σ off by 1.5× (e.g. a missing χ² scaling) falls outside.
+TEST(ThermalTest, BandIsHonestInMonteCarlo) {
+  const Honesty h = MonteCarlo(100, 5, 3);
+  for (int c = 0; c < 6; ++c) {
+    std::printf("channel %d: z RMS %.3f, order 3 chosen in %d/100\n", c, h.z_rms[c],
+                h.right_order[c]);
+    EXPECT_GT(h.z_rms[c], 0.7);
+    EXPECT_LT(h.z_rms[c], 1.4);
+    // AICc picks the true order in most trials (measured: see the printout; the rest are mostly
+    // one order higher, which stays unbiased).
+    EXPECT_GE(h.right_order[c], 50);
+  }
+}
+
+TEST(ThermalTest, BandStaysHonestWithTooHighMaxOrder) {
+  const Honesty h = MonteCarlo(100, 8, 2);
+  for (int c = 0; c < 6; ++c) {
+    std::printf("channel %d (max_order 8, truth 2): z RMS %.3f, order 2 in %d/100\n", c, h.z_rms[c],
+                h.right_order[c]);
+    EXPECT_GT(h.z_rms[c], 0.7);
+    EXPECT_LT(h.z_rms[c], 1.4);
+    EXPECT_GE(h.right_order[c], 50);
+  }
+}
+
+TEST(ThermalTest, RefusesARangeBelowMinRange) {
+  ThermalSimulationOptions o = Warmup(3);
+  o.delta = 4;
+  const ThermalSimulation sim = SimulateThermal(o);
+  // Without noise the drift itself sets the spread: a fixed static threshold says the log is at
+  // rest throughout.
+  ThermalOptions options;
+  options.window = 1;  // the window mean of a curved bias departs from the curve by ~c2 var(T)
+  options.statics.accel_threshold = options.statics.gyro_threshold = 1.0;
+  ThermalResult r;
+  const Status st = Calibrate(sim, options, &r);
+  ASSERT_EQ(st.code(), StatusCode::kNotDeterminable);
+  EXPECT_NE(st.message().find("min_range 10"), std::string::npos) << st.message();
+  EXPECT_NE(st.message().find("span 3."), std::string::npos) << st.message();
+}
+
+// Heating then cooling without hysteresis: the Bonferroni test at α = 1 % over 6 channels × 11
+// points flags at most ~1 % of logs. 200 trials: under a true rate of 1 % more than 7 flags has
+// probability < 0.5 %; a test without the multiplicity correction (α per point) flags far more.
+// With a hysteresis of 10σ of a window mean on one gyroscope axis it is flagged every time.
+TEST(ThermalTest, HysteresisFalseAlarmRateAndPower) {
+  int false_alarms = 0, detections = 0;
+  const int trials = 200;
+  for (int trial = 0; trial < trials; ++trial) {
+    for (int with = 0; with < 2; ++with) {
+      if (with && trial >= 20) continue;
+      ThermalSimulationOptions o = Warmup(1000 + static_cast<uint64_t>(trial));
+      o.warmup = 1200;
+      o.cooldown = 1200;
+      o.rate = 20;
+      if (with) o.hysteresis(4) = 1e-3;  // rad/s, ~20× σ of one window mean (0.002/√200)
+      const ThermalSimulation sim = SimulateThermal(o);
+      ThermalOptions options;
+      options.grid_points = 11;
+      ThermalResult r;
+      ASSERT_TRUE(Calibrate(sim, options, &r).ok());
+      bool flagged = false;
+      for (const ThermalChannel& ch : r.imus[0].channels) {
+        EXPECT_TRUE(ch.hysteresis_tested) << ch.name;
+        flagged = flagged || ch.hysteresis_flagged;
+      }
+      (with ? detections : false_alarms) += flagged;
+    }
+  }
+  std::printf("hysteresis: %d false alarms in %d logs, %d/20 detected\n", false_alarms, trials,
+              detections);
+  EXPECT_LE(false_alarms, 7);
+  EXPECT_EQ(detections, 20);
+}
+
+}  // namespace
+}  // namespace calibd::core

@@ -1,0 +1,153 @@
+// The thermal method through the CSV reader (temp0 column) and server::Calibrate, and its
+// firmware exports evaluated as each firmware evaluates them (ArduPilot
+// AP_InertialSensor_tempcal.cpp correct_sensor, PX4 calc_thermal_offsets_3D): the correction
+// each applies between two temperatures equals the simulated bias change within calibd's σ.
+#include "methods/thermal/thermal_method.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <sstream>
+
+#include "core/thermal.h"
+#include "server/config.h"
+
+namespace calibd::server {
+namespace {
+
+using nlohmann::json;
+
+json Simulated(std::string* csv, json* truth) {
+  core::ThermalSimulationOptions o;
+  o.rate = 50;
+  o.seed = 7;
+  json config;
+  EXPECT_TRUE(SimulateThermalFiles(o, csv, &config, truth).ok());
+  json result;
+  const Status s = Calibrate(*csv, "log.csv", config, &result);
+  EXPECT_TRUE(s.ok()) << s.message();
+  return result;
+}
+
+double TrueBias(const json& truth, int s, int a, double temp) {
+  const char* sensor = s ? "gyroscope" : "accelerometer";
+  const auto c = truth.at(sensor).at("coefficients").at(a).get<std::vector<double>>();
+  Eigen::VectorXd v =
+      Eigen::Map<const Eigen::VectorXd>(c.data(), static_cast<Eigen::Index>(c.size()));
+  return core::ThermalCurve(v, temp - truth.at("t_ref").get<double>());
+}
+
+std::map<std::string, double> Params(const std::string& text, char sep, int name_field,
+                                     int value_field) {
+  std::map<std::string, double> out;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::vector<std::string> f;
+    std::string cell;
+    std::istringstream ls(line);
+    while (std::getline(ls, cell, sep)) f.push_back(cell);
+    out[f.at(static_cast<size_t>(name_field))] = std::stod(f.at(static_cast<size_t>(value_field)));
+  }
+  return out;
+}
+
+TEST(ThermalMethodTest, CalibratesThroughTheReaderAndAccepts) {
+  std::string csv;
+  json truth;
+  const json r = Simulated(&csv, &truth);
+  EXPECT_EQ(r.at("verdict").at("status"), "accepted") << r.at("verdict").dump();
+  // AICc picks the true order 3 on most axes (one order higher on ~1 in 5: tests/core).
+  const int order = r.at("parameters").at("imus").at(0).at("gyroscope").at("bias").at("order");
+  EXPECT_GE(order, 3);
+  EXPECT_LE(order, 5);
+}
+
+TEST(ThermalMethodTest, RefusesAFourDegreeRangeNamingIt) {
+  core::ThermalSimulationOptions o;
+  o.rate = 20;
+  o.delta = 4;
+  std::string csv;
+  json config, truth, result;
+  ASSERT_TRUE(SimulateThermalFiles(o, &csv, &config, &truth).ok());
+  const Status s = Calibrate(csv, "log.csv", config, &result);
+  EXPECT_EQ(s.code(), StatusCode::kNotDeterminable);
+  EXPECT_NE(s.message().find("below min_range 10"), std::string::npos) << s.message();
+}
+
+TEST(ThermalMethodTest, LagEstimateIsRefusedNamingTheKey) {
+  const Status s = ThermalMethod().ValidateConfig({{"method", "thermal"}, {"lag", "estimate"}});
+  EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+  EXPECT_EQ(s.field(), "lag");
+}
+
+// Both firmwares correct by the difference of their polynomial between the flight temperature and
+// a reference (ArduPilot: the calibration temperature; PX4: X0 holds the absolute bias at TREF,
+// so the difference P(T) − P(TREF) is the deviation). Checked at 9 temperatures across the range
+// against the truth, with the tolerance 4 × calibd's 1σ band at T plus float rounding.
+TEST(ThermalMethodTest, FirmwareFilesReproduceTheCurveAsTheFirmwareEvaluatesIt) {
+  std::string csv;
+  json truth;
+  const json r = Simulated(&csv, &truth);
+  ExportContext context;
+  context.device = "unit-1";
+  std::string ap, px4;
+  ASSERT_TRUE(ThermalResultToArduPilot(r, context, &ap).ok());
+  ASSERT_TRUE(ThermalResultToPx4(r, context, &px4).ok());
+  const auto apm = Params(ap, ',', 0, 1);
+  const auto pxm = Params(px4, '\t', 2, 3);
+  const json& imu = r.at("parameters").at("imus").at(0);
+  const json& unc = r.at("uncertainty").at("imus").at(0);
+  const double t_ref = imu.at("t_ref"), lo = apm.at("INS_TCAL1_TMIN"),
+               hi = apm.at("INS_TCAL1_TMAX");
+  EXPECT_EQ(apm.at("INS_TCAL1_ENABLE"), 1);
+  const auto grid =
+      unc.at("accelerometer").at("bias").at("temperatures").get<std::vector<double>>();
+  for (int s = 0; s < 2; ++s) {
+    const char* sensor = s ? "gyroscope" : "accelerometer";
+    for (int a = 0; a < 3; ++a) {
+      const auto sd = unc.at(sensor).at("bias").at("std").at(a).get<std::vector<double>>();
+      for (size_t g = 0; g < grid.size(); g += 2) {
+        const double temp = grid[g];
+        const double truth_dev = TrueBias(truth, s, a, temp) - TrueBias(truth, s, a, t_ref);
+        const double tol = 4 * sd[g] + (s ? 1e-7 : 1e-6);
+        // ArduPilot: P(d) = (c1 + (c2 + c3 d) d) d × 1e-6, d = clamp(T) − 35.
+        auto ap_poly = [&](double t) {
+          const double d = std::clamp(t, lo, hi) - 35.0;
+          const std::string base = std::string("INS_TCAL1_") + (s ? "GYR" : "ACC");
+          const std::string ax(1, static_cast<char>('X' + a));
+          const double c1 = apm.at(base + "1_" + ax), c2 = apm.at(base + "2_" + ax),
+                       c3 = apm.at(base + "3_" + ax);
+          return (c1 + (c2 + c3 * d) * d) * d * 1e-6;
+        };
+        EXPECT_NEAR(ap_poly(temp) - ap_poly(t_ref), truth_dev, tol)
+            << "ardupilot " << sensor << " " << a << " at " << temp;
+        // PX4: offset = X0 + X1 dT + X2 dT² + X3 dT³, dT = clamp(T) − TREF.
+        const std::string base = std::string("TC_") + (s ? "G" : "A") + "0_";
+        const double tref = pxm.at(base + "TREF");
+        auto px_poly = [&](double t) {
+          const double d = std::clamp(t, pxm.at(base + "TMIN"), pxm.at(base + "TMAX")) - tref;
+          const std::string ax = "_" + std::to_string(a);
+          return pxm.at(base + "X0" + ax) + pxm.at(base + "X1" + ax) * d +
+                 pxm.at(base + "X2" + ax) * d * d + pxm.at(base + "X3" + ax) * d * d * d;
+        };
+        EXPECT_NEAR(px_poly(temp) - px_poly(tref), truth_dev, tol)
+            << "px4 " << sensor << " " << a << " at " << temp;
+      }
+    }
+  }
+  // PX4's gyroscope X0 is the absolute bias at TREF (truth b0 = 0 plus the curve at TREF), within
+  // 4 σ of calibd's bias at t_ref.
+  const auto at_std = unc.at("gyroscope").at("bias").at("at_t_ref_std").get<std::vector<double>>();
+  for (int a = 0; a < 3; ++a) {
+    const double expected = TrueBias(truth, 1, a, t_ref);
+    EXPECT_NEAR(pxm.at("TC_G0_X0_" + std::to_string(a)), expected, 4 * at_std[a] + 1e-7)
+        << "axis " << a << " sigma " << at_std[a];
+  }
+}
+
+}  // namespace
+}  // namespace calibd::server
