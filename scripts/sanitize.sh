@@ -6,7 +6,8 @@
 #
 # Left out, because their subject is statistics or timing, which the normal build checks, while
 # the code they run is run here by other tests:
-#   - Monte-Carlo sweeps and exact-recovery runs of the array, full-model, imu and mag numerics: they
+#   - Monte-Carlo sweeps and exact-recovery runs of the array, full-model, imu, mag and thermal
+#     numerics: they
 #     repeat the same arithmetic hundreds of times (together about 10 minutes of CPU under ASan);
 #     every other array, array-full and imu test runs here, including one Monte-Carlo test of the
 #     array at N = 100, and the method tests run the same code through the adapters;
@@ -41,6 +42,7 @@ slow+='|ArrayFull\.(RecoversThe32TriadArrayExactlyWithoutNoise|IsEfficientAndIts
 slow+='|ResidualAwareSigmaMatchesTheSpreadWhenTheNoiseIsUnderstated|ResidualWeightingFindsTheNoiseWhenTheModelFits)'
 slow+='|Mag\.(ThePrimarySigmaMatchesMonteCarloErrorsUnderWhiteNoise|UnderColouredNoiseThePrimaryIsTheSandwichAndStaysHonest'
 slow+='|DisturbedSpansAreDownWeightedReportedAndBeatALeastSquaresFit|OnCleanLogsTheErrorIsNoLargerThanTheLeastSquaresFits)'
+slow+='|ThermalTest\.(BandIsHonestInMonteCarlo|BandStaysHonestWithTooHighMaxOrder|HysteresisFalseAlarmRateAndPower)'
 slow+='|ImuCalibration\.(ReportedSigmaMatchesMonteCarloSpread|ReportedSigmaMatchesMonteCarloSpreadWithGyroBiasEstimated)'
 slow+='|StopToken\.(ArrayPositionsStopAtTheirDeadlineForBothSolvers|ArrayFullModelStopsAtItsDeadline'
 slow+='|ImuStopsAtItsDeadlineBeforeItStartsAndChangesNothingWhenSilent)'
