@@ -7,8 +7,8 @@
 # Left out, because their subject is statistics or timing, which the normal build checks, while
 # the code they run is run here by other tests:
 #   - Monte-Carlo sweeps and exact-recovery runs of the array, full-model, imu, mag and thermal
-#     numerics: they
-#     repeat the same arithmetic hundreds of times (together about 10 minutes of CPU under ASan);
+#     numerics: they repeat the same arithmetic hundreds of times (together about 10 minutes of
+#     CPU under ASan);
 #     every other array, array-full and imu test runs here, including one Monte-Carlo test of the
 #     array at N = 100, and the method tests run the same code through the adapters;
 #   - three of the core stop-token timing tests (array, full model, imu: 235 s of CPU under ASan;
