@@ -279,8 +279,8 @@ Status FromJson(const json& doc, ImuResult* out) {
     u.ReadExtension("basis", &unc.basis);
     u.ReadExtension("chi2_per_dof", &unc.chi2_per_dof);
     if (r.ok() && !unc.crb.empty() && unc.crb.size() != unc.imus.size()) {
-      u.Fail("crb in " + std::to_string(unc.crb.size()) + " of " +
-                 std::to_string(unc.imus.size()) + " IMUs",
+      u.Fail("crb in " + std::to_string(unc.crb.size()) + " of " + std::to_string(unc.imus.size()) +
+                 " IMUs",
              "imus");
     }
     if (r.ok() && unc.imus.size() != v.parameters->imus.size()) {
