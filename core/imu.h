@@ -148,7 +148,7 @@ struct TriadCalibration {
   Eigen::Matrix3d misalignment =
       Eigen::Matrix3d::Constant(std::numeric_limits<double>::quiet_NaN());
   Eigen::Matrix3d matrix = Eigen::Matrix3d::Constant(std::numeric_limits<double>::quiet_NaN());
-  // 1σ (Fisher information at the estimate); 0 for entries fixed by the model (T diagonal, T_a
+  // 1σ (ImuResult::uncertainty_basis); 0 for entries fixed by the model (T diagonal, T_a
   // below the diagonal). misalignment_std in radians (T's entries are small angles).
   Eigen::Vector3d bias_std = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
   Eigen::Vector3d scale_std = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
@@ -235,9 +235,18 @@ struct ImuResult {
   int accel_iterations = 0, gyro_iterations = 0, joint_iterations = 0;
   std::vector<double> cost;  // ½χ² (whitened) at the start and after each accepted iteration
                              // of the last stage run (joint, or the gyroscope fit)
-  // Covariance (from the inverse Fisher information) of the 21 reported parameters, in order
-  // b_a(3), K_a(3), T_a01, T_a02, T_a12, b_g(3), K_g(3), T_g01, T_g02, T_g10, T_g12, T_g20, T_g21.
+  // Covariance of the 21 reported parameters, in order b_a(3), K_a(3), T_a01, T_a02, T_a12,
+  // b_g(3), K_g(3), T_g01, T_g02, T_g10, T_g12, T_g20, T_g21: the primary one (uncertainty_basis),
+  // from which accelerometer/gyroscope *_std come.
   Eigen::MatrixXd covariance;
+  // "crb": the white-noise Cramér–Rao bound (inverse Fisher information), χ²/dof consistent with
+  // the noise model; "chi2_scaled": the CRB × crb_scale² where χ²/dof exceeds it significantly
+  // (the residuals are the static means and rotation ends, so bias wander, coloured noise and an
+  // understated noise inflate them and the σ with them).
+  std::string uncertainty_basis = "crb";
+  double crb_scale = 1;  // primary σ / CRB σ (√(χ²/dof) when chi2_scaled, else 1)
+  // The CRB's σ in the *_std members (the other members unset).
+  TriadCalibration accelerometer_crb, gyroscope_crb;
   std::vector<std::string> warnings;
 
   // One line for logs and tests, in the style of every method's result: usable (or why not),

@@ -60,12 +60,16 @@ Status FitGyroscope(const ImuStageInput& in, const NominalTriads& nominal, ImuFi
 // options.joint_refinement is off, for the uncertainty). Fills joint_iterations and cost.
 Status RefineJointly(const ImuStageInput& in, ImuFit* fit, ImuResult* res);
 
-// Step 5: the covariance of the 21 reported quantities (inverse Fisher information, directions
-// marginalised), degrees_of_freedom and chi2_per_dof; *sd their standard deviations.
-Status EstimateCovariance(const ImuStageInput& in, const ImuFit& fit, ImuResult* res, VectorXd* sd);
+// Step 5: the covariance of the 21 reported quantities: the CRB (inverse Fisher information,
+// directions marginalised), *crb_sd its standard deviations; degrees_of_freedom, chi2_per_dof,
+// uncertainty_basis, crb_scale and the primary covariance (the CRB × crb_scale²), with a warning
+// when the primary is not the CRB.
+Status EstimateCovariance(const ImuStageInput& in, const ImuFit& fit, ImuResult* res,
+                          VectorXd* crb_sd);
 
-// The accelerometer and gyroscope triads of x with their σ from sd.
-void ReportParameters(const State& x, const VectorXd& sd, ImuResult* res);
+// The accelerometer and gyroscope triads of x with their primary σ (crb_sd × crb_scale) and the
+// CRB's in accelerometer_crb / gyroscope_crb.
+void ReportParameters(const State& x, const VectorXd& crb_sd, ImuResult* res);
 
 // One diagnostic per static (gravity norm before and after) and their RMS.
 void DiagnoseStatics(const ImuStageInput& in, const NominalTriads& nominal, const State& x,

@@ -499,6 +499,9 @@ class Imu : public Method {
     for (const core::ImuResult& r : results) {
       params.imus.push_back({r.name, Triad(r.accelerometer), Triad(r.gyroscope)});
       stds.imus.push_back({r.name, TriadStd(r.accelerometer), TriadStd(r.gyroscope)});
+      stds.crb.push_back({r.name, TriadStd(r.accelerometer_crb), TriadStd(r.gyroscope_crb)});
+      if (stds.basis != "chi2_scaled") stds.basis = r.uncertainty_basis;
+      if (!(r.chi2_per_dof <= stds.chi2_per_dof)) stds.chi2_per_dof = r.chi2_per_dof;
       diag.imus.push_back(FitDiagnostics(r));
       for (const std::string& w : r.warnings) warnings.push_back("IMU " + r.name + ": " + w);
     }

@@ -194,13 +194,22 @@ json ToJson(const ImuResult& r) {
     out["parameters"] = std::move(params);
   }
   if (r.uncertainty) {
+    const ImuUncertainty& u = *r.uncertainty;
     json imus = json::array();
-    for (const ImuTriadsStd& t : r.uncertainty->imus) {
+    for (size_t i = 0; i < u.imus.size(); ++i) {
       json e = json::object();
-      WriteImuTriads(t, &e);
+      WriteImuTriads(u.imus[i], &e);
+      if (i < u.crb.size()) {
+        e["crb"] = {{"accelerometer", ToJson(u.crb[i].accelerometer)},
+                    {"gyroscope", ToJson(u.crb[i].gyroscope)}};
+      }
       imus.push_back(std::move(e));
     }
     out["uncertainty"] = {{"imus", std::move(imus)}};
+    if (u.basis != "crb_only") {
+      out["uncertainty"]["basis"] = u.basis;
+      out["uncertainty"]["chi2_per_dof"] = Num(u.chi2_per_dof);
+    }
   }
   const ImuDiagnostics& d = r.diagnostics;
   json statics = json::array(), fits = json::array();
@@ -257,8 +266,23 @@ Status FromJson(const json& doc, ImuResult* out) {
     v.parameters = std::move(params);
     const JsonReader u = r.Object("uncertainty");
     ImuUncertainty unc;
-    u.ReadArray("imus", &unc.imus,
-                [](const JsonReader& e, ImuTriadsStd* t) { ReadImuTriads(e, t); });
+    u.ReadArray("imus", &unc.imus, [&unc](const JsonReader& e, ImuTriadsStd* t) {
+      ReadImuTriads(e, t);
+      if (!e.Has("crb")) return;
+      const JsonReader c = e.Object("crb");
+      ImuTriadsStd crb{t->name, {}, {}};
+      ReadTriad(c, "accelerometer", &crb.accelerometer);
+      ReadTriad(c, "gyroscope", &crb.gyroscope);
+      unc.crb.push_back(std::move(crb));
+    });
+    // Without basis: stored by an earlier calibd, its σ the CRB ("crb_only", the default).
+    u.ReadExtension("basis", &unc.basis);
+    u.ReadExtension("chi2_per_dof", &unc.chi2_per_dof);
+    if (r.ok() && !unc.crb.empty() && unc.crb.size() != unc.imus.size()) {
+      u.Fail("crb in " + std::to_string(unc.crb.size()) + " of " + std::to_string(unc.imus.size()) +
+                 " IMUs",
+             "imus");
+    }
     if (r.ok() && unc.imus.size() != v.parameters->imus.size()) {
       u.Fail(std::to_string(v.parameters->imus.size()) + " IMUs in parameters but " +
                  std::to_string(unc.imus.size()) + " here",

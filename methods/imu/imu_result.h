@@ -59,8 +59,17 @@ struct ImuParameters {
   std::vector<ImuTriads> imus;  // one per IMU, in the log's order
 };
 
+// uncertainty: {"basis", "chi2_per_dof", "imus": [{"name", "accelerometer", "gyroscope",
+// "crb": {"accelerometer", "gyroscope"}}]}. The *_std of each entry are the primary σ, named by
+// basis; crb holds the white-noise Cramér–Rao bound's.
 struct ImuUncertainty {
+  // "crb" (every IMU's residuals consistent with its noise), "chi2_scaled" (at least one IMU's σ
+  // is its CRB × √(χ²/dof); its warning says by how much) or "crb_only" (read from a result of an
+  // earlier calibd, without basis: the σ are the CRB, nothing known of the residuals).
+  std::string basis = "crb_only";
+  double chi2_per_dof = std::numeric_limits<double>::quiet_NaN();  // largest over the IMUs
   std::vector<ImuTriadsStd> imus;  // the same IMUs in the same order
+  std::vector<ImuTriadsStd> crb;   // per IMU (same order), the CRB; empty when crb_only
 };
 
 // diagnostics.statics[] (the shared detection) : one static interval.
