@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <set>
 #include <string>
 #include <vector>
@@ -22,6 +23,8 @@
 
 namespace calibd::server {
 namespace {
+
+constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
 
 using nlohmann::json;
 
@@ -272,7 +275,8 @@ json ImuResult(double accel_scale, double scale_std, double misalignment_std, do
   r.envelope.model = "a = T_a K_a (y_a - b_a), omega = T_g K_g (y_g - b_g)";
   r.parameters =
       results::ImuParameters{9.80665, "statics", 1.0, 1.0, {{"0", triad(accel_scale), triad(1.0)}}};
-  r.uncertainty = results::ImuUncertainty{{{"0", triad_std(accel_scale), triad_std(1.0)}}};
+  r.uncertainty =
+      results::ImuUncertainty{"crb", kNan, {{"0", triad_std(accel_scale), triad_std(1.0)}}, {}};
   results::ImuFitDiagnostics fit;
   fit.name = "0";
   fit.usable = true;

@@ -9,6 +9,7 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <random>
 #include <sstream>
@@ -19,6 +20,8 @@
 
 namespace calibd::server {
 namespace {
+
+constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
 
 using nlohmann::json;
 using testing::TestServer;
@@ -46,7 +49,7 @@ json ImuResult(const Eigen::Matrix3d& ma, const Eigen::Vector3d& ba, const Eigen
   r.parameters = p;
   results::ImuTriadsStd sd;
   sd.name = "0";
-  r.uncertainty = results::ImuUncertainty{{sd}};
+  r.uncertainty = results::ImuUncertainty{"crb", kNan, {sd}, {}};
   r.diagnostics.rate = rate;
   results::ImuFitDiagnostics fit;
   fit.name = "0";

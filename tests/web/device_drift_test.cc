@@ -19,6 +19,8 @@
 namespace calibd::web {
 namespace {
 
+constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
+
 using json = nlohmann::json;
 
 bool Has(const std::string& page, const std::string& needle) {
@@ -68,7 +70,7 @@ json ImuResult(const std::string& name, double ax_scale, double bias_x, double t
   sd.bias_std = Eigen::Vector3d::Constant(0.5);
   sd.misalignment_std << 0, 1e-4, 1e-4, 0, 0, 1e-4, 0, 0, 0;
   r.parameters = results::ImuParameters{9.80665, "statics", 1.0, 1.0, {{name, accel, gyro}}};
-  r.uncertainty = results::ImuUncertainty{{{name, sd, sd}}};
+  r.uncertainty = results::ImuUncertainty{"crb", kNan, {{name, sd, sd}}, {}};
   return results::ToJson(r);
 }
 

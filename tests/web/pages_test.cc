@@ -20,6 +20,8 @@
 namespace calibd::web {
 namespace {
 
+constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
+
 using json = nlohmann::json;
 
 const char kScript[] = "<script>alert(1)</script>";
@@ -518,7 +520,7 @@ TEST(JobPage, AnImuOrNoiseResultThatDoesNotReadSaysWhereItIsDamaged) {
   imu.envelope.method = "imu";
   imu.envelope.model = "a = T_a K_a (y_a - b_a)";
   imu.parameters = results::ImuParameters{9.8, "statics", 1.0, 1.0, {{"0", {}, {}}}};
-  imu.uncertainty = results::ImuUncertainty{{{"0", {}, {}}}};
+  imu.uncertainty = results::ImuUncertainty{"crb", kNan, {{"0", {}, {}}}, {}};
   damaged = results::ToJson(imu);
   damaged["schema_version"] = 7;
   v.job = Job(42, "IMU-0042", "imu", "succeeded", "2026-11-20T09:20:00Z", damaged);
@@ -792,7 +794,7 @@ TEST(KeyFiguresTest, ImuAndNoiseSummaries) {
   imu.envelope.method = "imu";
   imu.envelope.model = "a = T_a K_a (y_a - b_a)";
   imu.parameters = results::ImuParameters{9.8, "statics", 1.0, 1.0, {{"0", {}, {}}, {"1", {}, {}}}};
-  imu.uncertainty = results::ImuUncertainty{{{"0", {}, {}}, {"1", {}, {}}}};
+  imu.uncertainty = results::ImuUncertainty{"crb", kNan, {{"0", {}, {}}, {"1", {}, {}}}, {}};
   for (int i = 0; i < 24; ++i) imu.diagnostics.statics.push_back({10.0 * i, 10.0 * i + 4, 400});
   imu.diagnostics.threshold_choice = "best of 3";
   for (const double rms : {1.2e-3, 3.4e-3}) {
