@@ -281,6 +281,7 @@ tbody tr:hover{background:#fafbfc}
 .num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
 td.name{overflow-wrap:anywhere}
 td.time{white-space:nowrap}
+table.table-devices td.time,table.table-devices th{white-space:normal}
 table.table-diagnostics td{overflow-wrap:anywhere}
 table.table-diagnostics th{white-space:normal}
 code,pre,.mono{font-family:ui-monospace,SFMono-Regular,Menlo,Consolas,"DejaVu Sans Mono",monospace;

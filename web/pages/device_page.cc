@@ -137,10 +137,10 @@ std::string RenderDevicesPage(const DevicesView& view) {
           continue;
         }
         out += "<td" + label + "><a class=\"time\" href=\"/jobs/" + std::to_string(latest->job_id) +
-               "\">" + TimeHtml(latest->calibrated_at) + "</a> (report #" +
-               std::to_string(latest->job_id) + ") \xC2\xB7 <a href=\"" +
+               "\">" + TimeHtml(latest->calibrated_at) + "</a><br><span class=\"small\">#" +
+               std::to_string(latest->job_id) + " \xC2\xB7 <a href=\"" +
                A("/api/v1/devices/" + UrlEncode(d.serial) + "/calibration?method=" + UrlEncode(m)) +
-               "\">JSON</a></td>";
+               "\">JSON</a></span></td>";
       }
       out += "</tr>";
     }
