@@ -88,8 +88,8 @@ RecordingParser::RecordingParser(std::string file_name, bool collect, RecordingL
 
 RecordingParser::~RecordingParser() = default;
 
-Status RecordingParser::Feed(std::string_view chunk) { return impl_->Feed(chunk); }
-Status RecordingParser::Finish() { return impl_->Finish(); }
+Status RecordingParser::Feed(std::string_view chunk) { return impl_->FeedAny(chunk); }
+Status RecordingParser::Finish() { return impl_->FinishAny(); }
 const RecordingSummary& RecordingParser::summary() const { return impl_->summary; }
 
 Status RecordingParser::TakePca(PcaRecording* out) {
@@ -151,6 +151,10 @@ Status RecordingParser::TakeArray(ArrayRecording* out) {
   }
   if (d.summary.layout != Layout::kArray) return NotArray(d.file_name);
   if (d.as_float) return Status::Internal("the array was collected as float: TakeArrayFloat");
+  if (d.log_format != LogFormat::kUnknown) {
+    *out = std::move(d.log_recording);
+    return Status::Ok();
+  }
   d.HandOverArray(&d.direct_accel, &d.direct_gyro, &d.array_values, out);
   return Status::Ok();
 }
@@ -175,6 +179,10 @@ void RecordingParser::SetTimeUnit(TimeUnit unit) {
 
 TimeUnit RecordingParser::time_unit() const { return impl_->time_unit; }
 
+void RecordingParser::SetLogStreams(const LogStreamSelection& streams) {
+  impl_->log_streams = streams;
+}
+
 bool RecordingParser::collects_float(double* accel_scale, double* gyro_scale) const {
   if (!impl_->as_float) return false;
   if (accel_scale != nullptr) *accel_scale = impl_->float_scale_accel;
@@ -191,6 +199,18 @@ Status RecordingParser::TakeArrayFloat(ArrayRecordingFloat* out) {
   if (d.summary.layout != Layout::kArray) return NotArray(d.file_name);
   out->accel_scale = d.float_scale_accel;
   out->gyro_scale = d.float_scale_gyro;
+  if (d.log_format != LogFormat::kUnknown) {
+    ArrayRecording& r = d.log_recording;
+    out->accel_names = std::move(r.accel_names);
+    out->gyro_names = std::move(r.gyro_names);
+    out->accel = (r.accel * d.float_scale_accel).cast<float>();
+    out->gyro = (r.gyro * d.float_scale_gyro).cast<float>();
+    out->t = std::move(r.t);
+    out->temp_names = std::move(r.temp_names);
+    out->temperature = std::move(r.temperature);
+    r = {};
+    return Status::Ok();
+  }
   d.HandOverArray(&d.direct_accel_f, &d.direct_gyro_f, &d.array_values_f, out);
   return Status::Ok();
 }

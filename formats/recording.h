@@ -19,6 +19,8 @@
 
 namespace calibd::server {
 
+struct LogStreamSelection;  // formats/log_assembly.h
+
 enum class Layout {
   kPcaAveraged,  // position,s1,...,sm
   kPcaRaw,       // position,phase,s1,...,sm   (phase: static | moving)
@@ -112,6 +114,13 @@ struct RecordingSummary {
   int64_t time_origin = 0;
   // The parser's time unit (RecordingParser::SetTimeUnit), for messages about t.
   TimeUnit time_unit = TimeUnit::kSeconds;
+  // "csv", or the sensor log's format ("ulog", "dataflash", "rosbag1", "mcap", "rosbag2";
+  // SPEC §9), whose units and time stamps its reader defines (config time_unit and the unit keys
+  // are for CSV only). A log's rows are its first IMU's samples and its columns those of the
+  // equivalent CSV (t, aK_*, gK_*, tempK).
+  std::string format = "csv";
+  // A log only: what was read (AssembledLog::description) as JSON text; empty for CSV.
+  std::string log_description;
 };
 
 // The rows whose time steps RecordingSummary::t_median_step is taken over (bounded work: the
@@ -131,6 +140,8 @@ struct RecordingLimits {
   // false sends every row through the general path; the outcome is identical either way (the
   // tests and the fuzz_recording target compare the two), only slower.
   bool one_pass_rows = true;
+  // A binary sensor log (SPEC §9) is held whole until it is read: more bytes is an error.
+  int64_t max_log_bytes = int64_t{4} << 30;
 };
 
 class RecordingParser {
@@ -141,7 +152,9 @@ class RecordingParser {
   RecordingParser(const RecordingParser&) = delete;
   RecordingParser& operator=(const RecordingParser&) = delete;
 
-  // Feed the next chunk. After the first error every call returns it again.
+  // Feed the next chunk. After the first error every call returns it again. The first bytes
+  // decide the format: calibd's CSV, or a binary sensor log (formats/sensor_log.h), which is
+  // held whole and read at Finish.
   Status Feed(std::string_view chunk);
   // Optional, before the first Feed of a collecting parser: the number of data rows the input
   // has (e.g. a stored recording's row count). An array recording's numbers then go straight
@@ -162,6 +175,9 @@ class RecordingParser {
   // nothing once the header has been read.
   void SetTimeUnit(TimeUnit unit);
   TimeUnit time_unit() const;
+  // Optional, before the first Feed: which streams of a binary sensor log form the IMUs (config
+  // `streams`, SPEC §9; default every IMU). Does nothing to a CSV recording.
+  void SetLogStreams(const LogStreamSelection& streams);
   // End of input: checks the last line and the whole-file rules (e.g. every raw position has
   // static and moving rows). Must be called once after the last Feed.
   Status Finish();

@@ -15,7 +15,9 @@
 #include <vector>
 
 #include "base/status.h"
+#include "formats/log_assembly.h"
 #include "formats/recording.h"
+#include "formats/sensor_log.h"
 
 namespace calibd::server {
 
@@ -226,9 +228,25 @@ struct RecordingParser::Impl {
   // goes through Fail). A bool, not a Status, because this runs once per row.
   bool Line(std::string_view line);
 
-  // RecordingParser::Feed and RecordingParser::Finish.
+  // RecordingParser::Feed and RecordingParser::Finish, for CSV.
   Status Feed(std::string_view chunk);
   Status Finish();
+
+  // --- Binary sensor logs (recording_log.cc; SPEC §9). The first kSniffBytes bytes decide
+  // (SniffLogFormat): a log is held whole until Finish, then read by its format's reader and
+  // assembled (formats/log_assembly.h); anything else goes to the CSV stages above.
+  static constexpr size_t kSniffBytes = 16;
+  bool sniffed = false;
+  std::string head;  // the first bytes, until sniffed
+  LogFormat log_format = LogFormat::kUnknown;
+  std::string log_bytes;           // the whole log, until Finish
+  LogStreamSelection log_streams;  // config `streams` (SetLogStreams)
+  ArrayRecording log_recording;    // after Finish of a collecting parser
+
+  Status FeedAny(std::string_view chunk);
+  Status FinishAny();
+  Status EndSniff();
+  Status FinishLog();
 };
 
 }  // namespace calibd::server

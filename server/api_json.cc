@@ -74,6 +74,14 @@ json RecordingJson(const storage::RecordingInfo& r) {
   json columns, sensors;
   if (ParseJsonText(r.columns_json, "columns", &columns).ok()) j["columns"] = columns;
   if (ParseJsonText(r.sensors_json, "sensors", &sensors).ok()) j["sensors"] = sensors;
+  // SPEC §9 "What was read": a sensor log's format, time base, streams, IMUs and warnings.
+  j["format"] = "csv";
+  json log;
+  if (!r.log_json.empty() && ParseJsonText(r.log_json, "log", &log).ok() && log.is_object()) {
+    for (const char* key : {"format", "time_base", "streams", "imus", "warnings"}) {
+      if (log.contains(key)) j[key] = log[key];
+    }
+  }
   return j;
 }
 

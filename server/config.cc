@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "formats/inertial_log.h"
+#include "formats/log_assembly.h"
 #include "methods/method.h"
 #include "methods/registry.h"
 #include "server/device_lookup.h"
@@ -116,15 +117,28 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
     Status s = ParseTimeUnit(config, &unit, &given);
     if (!s.ok()) return s;
   }
+  // streams: which streams of a sensor log form the IMUs (SPEC §9); the parser applies it.
+  if (config.contains("streams")) {
+    if (!m->Reads(Layout::kArray)) {
+      return Status::InvalidInput("'streams' chooses a sensor log's IMUs; method '" +
+                                  common->method + "' reads no inertial log")
+          .WithField("streams");
+    }
+    LogStreamSelection streams;
+    Status s = ParseLogStreams(config, &streams);
+    if (!s.ok()) return s;
+  }
   return m->ValidateConfig(WithoutAcceptance(config));
 }
 
 json WithoutAcceptance(const json& config) {
   if (!config.is_object() || (!config.contains("acceptance") && !config.contains("time_unit") &&
-                              !config.contains("job_seconds") && !config.contains("product"))) {
+                              !config.contains("job_seconds") && !config.contains("product") &&
+                              !config.contains("streams"))) {
     return config;
   }
   json out = config;
+  out.erase("streams");
   out.erase("product");
   out.erase("acceptance");
   out.erase("time_unit");
@@ -157,6 +171,22 @@ void JudgeResult(const Method& method, const json& config, const json& acceptanc
   (*result)["verdict"] = verdict.ToJson(limits);
 }
 
+Status CheckLogConfig(const RecordingSummary& summary, const json& config,
+                      const std::string& file_name) {
+  if (summary.format == "csv" || !config.is_object()) return Status::Ok();
+  for (const char* key : {"time_unit", "accel_unit", "gyro_unit", "mag_unit"}) {
+    if (config.contains(key)) {
+      return Status::InvalidInput(Reason::kInvalidConfig,
+                                  std::string("'") + key + "' is for CSV recordings; this " +
+                                      summary.format +
+                                      " log defines its own units (SI; µT for magnetic field)")
+          .WithFile(file_name)
+          .WithField(key);
+    }
+  }
+  return Status::Ok();
+}
+
 void PrepareParser(const json& config, RecordingParser* parser) {
   if (!config.is_object()) return;
   const auto it = config.find("method");
@@ -164,6 +194,8 @@ void PrepareParser(const json& config, RecordingParser* parser) {
   TimeUnit unit;
   bool given;
   if (ParseTimeUnit(config, &unit, &given).ok()) parser->SetTimeUnit(unit);
+  LogStreamSelection streams;
+  if (ParseLogStreams(config, &streams).ok()) parser->SetLogStreams(streams);
   const Method* method = FindMethod(it->get_ref<const std::string&>());
   if (method != nullptr) method->PrepareParser(WithoutAcceptance(config), parser);
 }
@@ -184,6 +216,9 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
         .WithFile(file_name)
         .WithField("method");
   }
+  const bool log = parser->summary().format != "csv";
+  s = CheckLogConfig(parser->summary(), config, file_name);
+  if (!s.ok()) return s;
   // The time column's unit: as configured (the parser was told, PrepareParser; one that was not
   // is refused rather than read in the wrong unit), or, when not configured, seconds that must
   // look like seconds (CheckTimeUnit) for a method that reads the times.
@@ -196,7 +231,7 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
                             std::string(TimeUnitName(parser->time_unit())) + ", the config says " +
                             TimeUnitName(unit) + " (PrepareParser not called)");
   }
-  if (!unit_given && method->ReadsTime(WithoutAcceptance(config))) {
+  if (!log && !unit_given && method->ReadsTime(WithoutAcceptance(config))) {
     s = CheckTimeUnit(parser->summary(), file_name);
     if (!s.ok()) return s;
   }
@@ -224,6 +259,22 @@ Status CalibrateParsed(RecordingParser* parser, const std::string& file_name, co
   if (time_origin != 0 && result->is_object() && result->contains("diagnostics") &&
       (*result)["diagnostics"].is_object()) {
     (*result)["diagnostics"]["time_origin"] = time_origin;
+  }
+  // A sensor log: the job says what it read (format, time base and time source, the streams of
+  // each IMU, what was resampled or dropped), and the log's warnings join the result's.
+  if (log && result->is_object()) {
+    json read = json::parse(parser->summary().log_description, nullptr, false);
+    if (read.is_object()) {
+      if (result->contains("diagnostics") && (*result)["diagnostics"].is_object()) {
+        (*result)["diagnostics"]["log"] = {{"format", read.value("format", "")},
+                                           {"time_base", read.value("time_base", "")},
+                                           {"imus", read.value("imus", json::array())}};
+      }
+      if (read.contains("warnings") && read["warnings"].is_array() &&
+          result->contains("warnings") && (*result)["warnings"].is_array()) {
+        for (const json& w : read["warnings"]) (*result)["warnings"].push_back(w);
+      }
+    }
   }
   if (!s.ok()) return s;
   JudgeResult(*method, config, acceptance_defaults, result);

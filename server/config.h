@@ -78,6 +78,12 @@ Status Calibrate(std::string_view recording, const std::string& file_name,
                  const core::StopToken* stop = nullptr,
                  const nlohmann::json& acceptance_defaults = nlohmann::json());
 
+// A sensor log (summary.format other than "csv") defines its units and time stamps (SPEC §9):
+// the CSV keys time_unit, accel_unit, gyro_unit and mag_unit would rescale what is already SI,
+// so they are kInvalidInput naming the key. OK for CSV.
+Status CheckLogConfig(const RecordingSummary& summary, const nlohmann::json& config,
+                      const std::string& file_name);
+
 // Before feeding a collecting parser for CalibrateParsed: sets the parser's time unit from the
 // config's `time_unit` (RecordingParser::SetTimeUnit), then lets the config's method choose how
 // the numbers are held (Method::PrepareParser). Does nothing for an unknown method or a config

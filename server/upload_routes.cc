@@ -1,4 +1,5 @@
 // POST /api/v1/recordings and POST /api/v1/jobs (server/service_impl.h).
+#include "formats/log_assembly.h"
 #include "methods/registry.h"
 #include "server/service_impl.h"
 
@@ -163,6 +164,7 @@ class UploadBody {
     rec.rows = summary.rows;
     rec.columns_json = json(summary.columns).dump();
     rec.sensors_json = json(summary.sensors).dump();
+    rec.log_json = summary.log_description;
     rec.file_name = file_name_;
     return rec;
   }
@@ -377,6 +379,9 @@ Status Service::Impl::CheckUploadJob(const RecordingSummary& summary, const std:
   s = CheckJobSeconds(*common, static_cast<double>(job_seconds));
   if (!s.ok()) return s;
   const Method& method = *FindMethod(common->method);
+  s = CheckLogConfig(summary, *config, file_name.empty() ? "upload" : file_name);
+  if (!s.ok()) return s;
+  const bool log = summary.format != "csv";
   TimeUnit time_unit = TimeUnit::kSeconds;
   bool time_unit_given = false;
   s = ParseTimeUnit(*config, &time_unit, &time_unit_given);  // validated above
@@ -394,7 +399,7 @@ Status Service::Impl::CheckUploadJob(const RecordingSummary& summary, const std:
   // A time column in ms or ns read as seconds would make the job compute for hours on a
   // nonsense rate: refused now, nothing stored (the summary's figures are in the file's unit,
   // whatever unit the config names; the worker checks the same for jobs on stored logs).
-  if (!time_unit_given && method.ReadsTime(WithoutAcceptance(*config))) {
+  if (!log && !time_unit_given && method.ReadsTime(WithoutAcceptance(*config))) {
     s = CheckTimeUnit(summary, file_name.empty() ? "upload" : file_name);
     if (!s.ok()) return s;
   }
@@ -441,6 +446,11 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
     SendError(res, 400, "invalid_input", "the request body could not be read completely");
     return finish(400);
   }
+  // A sensor log is read at Finish: the config's `streams` (query or multipart) chooses its IMUs.
+  LogStreamSelection streams;
+  s = ParseLogStreams(config, &streams);
+  if (!s.ok()) return finish(SendStatus(res, s));
+  body.parser().SetLogStreams(streams);
   s = body.parser().Finish();
   if (!s.ok()) return finish(SendStatus(res, s));
 

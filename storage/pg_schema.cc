@@ -139,9 +139,14 @@ CREATE INDEX results_by_state ON results ((COALESCE(decision, verdict)), job_id)
 CREATE INDEX devices_by_serial_bytes ON devices (serial COLLATE "C");
 )sql";
 
+// Sensor logs (SQLite's version 8).
+constexpr const char* kPgV6 = R"sql(
+ALTER TABLE recordings ADD COLUMN log_json TEXT NOT NULL DEFAULT '';
+)sql";
+
 const std::vector<const char*>& PgSteps() {
   static const std::vector<const char*>& steps =
-      *new std::vector<const char*>{kPgV1, kPgV2, kPgV3, kPgV4, kPgV5};
+      *new std::vector<const char*>{kPgV1, kPgV2, kPgV3, kPgV4, kPgV5, kPgV6};
   return steps;
 }
 

@@ -58,7 +58,7 @@
 namespace calibd::storage {
 
 // The newest schema version of the PostgreSQL backend (pg_schema.cc).
-inline constexpr int kPgSchemaVersion = 5;
+inline constexpr int kPgSchemaVersion = 6;
 
 // `target` with the password of a URI or keyword string replaced by "***" (for logs, /healthz).
 std::string RedactConnectionTarget(const std::string& target);

@@ -180,6 +180,12 @@ constexpr const char* kV7 = R"sql(
 CREATE INDEX results_by_state ON results(COALESCE(decision, verdict), job_id);
 )sql";
 
+// Version 8: sensor logs (issue #24, SPEC §9). What was read from a binary log (format, time base,
+// streams, IMUs, warnings: formats/log_assembly.h) as JSON; '' for calibd's CSV.
+constexpr const char* kV8 = R"sql(
+ALTER TABLE recordings ADD COLUMN log_json TEXT NOT NULL DEFAULT '';
+)sql";
+
 // The hashes of results carried over from v1 are computed here (SQLite has no sha256()).
 Status HashCarriedOverResults(Db* db) {
   Stmt select;
@@ -215,7 +221,7 @@ const std::vector<Step>& Steps() {
       {kV1, nullptr}, {kV2, &HashCarriedOverResults},
       {kV3, nullptr}, {kV4, nullptr},
       {kV5, nullptr}, {kV6, nullptr},
-      {kV7, nullptr},
+      {kV7, nullptr}, {kV8, nullptr},
   };
   return steps;
 }

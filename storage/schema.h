@@ -28,7 +28,7 @@
 
 namespace calibd::storage {
 
-inline constexpr int kSchemaVersion = 7;
+inline constexpr int kSchemaVersion = 8;
 
 // Reads PRAGMA user_version.
 Status SchemaVersion(Db* db, int64_t* version);

@@ -50,7 +50,7 @@ Status sql::LoadRecording(SqlConn* c, int64_t id, RecordingInfo* out) {
   bool found = false;
   Status s = c->Run(
       "SELECT id, sha256, bytes, rows, layout, device, file_name, created_at, columns_json, "
-      "sensors_json FROM recordings WHERE id = $1",
+      "sensors_json, log_json FROM recordings WHERE id = $1",
       {SqlInt(id)}, [&](const internal::Row& row) {
         internal::ReadRecording(row, out);
         found = true;
@@ -73,11 +73,12 @@ Status sql::InsertRecording(SqlConn* c, const NewRecording& r, const std::string
   *id = 0;
   return c->Run(
       "INSERT INTO recordings (sha256, bytes, device, layout, rows, columns_json, sensors_json, "
-      "file_name, created_at) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) "
+      "file_name, created_at, log_json) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10) "
       "ON CONFLICT (sha256) DO NOTHING RETURNING id",
       {SqlText(sha), SqlInt(bytes), SqlText(r.device), SqlText(r.layout), SqlInt(r.rows),
        SqlText(r.columns_json.empty() ? "[]" : r.columns_json),
-       SqlText(r.sensors_json.empty() ? "[]" : r.sensors_json), SqlText(r.file_name), SqlInt(now)},
+       SqlText(r.sensors_json.empty() ? "[]" : r.sensors_json), SqlText(r.file_name), SqlInt(now),
+       SqlText(r.log_json)},
       [&](const internal::Row& row) { *id = row.Int(0); });
 }
 

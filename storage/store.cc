@@ -176,6 +176,7 @@ void ReadRecording(const Row& row, RecordingInfo* out) {
   info.created_at = FormatTimestamp(info.created_at_ms);
   info.columns_json = row.Text(8);
   info.sensors_json = row.Text(9);
+  info.log_json = row.Text(10);
   nlohmann::json summary;
   summary["layout"] = info.layout;
   summary["rows"] = info.rows;

@@ -131,7 +131,9 @@ struct NewRecording {
   std::string columns_json = "[]";  // JSON array of header names
   std::string sensors_json = "[]";  // JSON array of sensor / triad names
   std::string file_name;            // the client's file name, for display only
-  std::optional<NewJob> job;        // enqueued in the same transaction when set
+  // A binary sensor log: what was read (RecordingSummary::log_description); "" for CSV.
+  std::string log_json;
+  std::optional<NewJob> job;  // enqueued in the same transaction when set
 };
 
 // A failed run as the worker records it (Store::FailJob).
@@ -212,6 +214,7 @@ struct RecordingInfo {
   std::string created_at;
   int64_t created_at_ms = 0;
   std::string columns_json, sensors_json;  // JSON arrays as stored
+  std::string log_json;                    // as NewRecording::log_json
   // {"layout": ..., "rows": ..., "columns": [...], "sensors": [...]}
   std::string summary_json;
   std::optional<JobInfo> job;  // PutRecording: the job enqueued with it, if any
