@@ -4,15 +4,11 @@
 # scripts/test.sh. Usage: scripts/sanitize.sh [extra ctest args]. Exits non-zero on any failure
 # or sanitizer report.
 #
-# Left out, because their subject is statistics or timing, which the normal build checks, while
+# Not built here: core's tests (scripts/build-sanitize.sh), every one of which CI runs in the
+# Release build; the core code runs here in the methods', server's and fuzz tests.
+# Left out, because their subject is statistics or timing, which the Release build checks, while
 # the code they run is run here by other tests:
-#   - Monte-Carlo sweeps and exact-recovery runs of the array, full-model, imu, mag and thermal
-#     numerics: they repeat the same arithmetic hundreds of times (together about 10 minutes of
-#     CPU under ASan);
-#     every other array, array-full and imu test runs here, including one Monte-Carlo test of the
-#     array at N = 100, and the method tests run the same code through the adapters;
-#   - three of the core stop-token timing tests (array, full model, imu: 235 s of CPU under ASan;
-#     the noise and pca ones, and every adapter's stop test in MethodStop, run here);
+#   - the Monte-Carlo chain over boards (CalibrationChain.ArrayReachesTheCramerRaoBound...);
 #   - browser_pages (its time is Chromium's; every page's rendering runs here in the web tests)
 #     and the StopProcess timing test (a job of several seconds made of BCD sweeps, 143 s under
 #     ASan; the other StopProcess tests run the same shutdown code here).
@@ -34,18 +30,7 @@ export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:strict_string_checks=1:detec
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 # Readable stack traces in reports (Debian installs the symbolizer under a versioned name).
 [ -x /usr/lib/llvm-14/bin/llvm-symbolizer ] && export ASAN_SYMBOLIZER_PATH=/usr/lib/llvm-14/bin/llvm-symbolizer
-slow='^(ArrayCalibration\.(EfficientAtTheCramerRaoBoundForN1000|BothSolversReachTheSameEstimate'
-slow+='|RmseFallsAsInverseSquareRootOfN|BcdRecoversPositionsExactlyWithoutNoise'
-slow+='|PaperHeadlineMicrometreErrorsWithFig4Dynamics)'
-slow+='|CalibrationChain\.ArrayReachesTheCramerRaoBoundOnlyWithTheCalibration'
-slow+='|ArrayFull\.(RecoversThe32TriadArrayExactlyWithoutNoise|IsEfficientAndItsSigmaMatchesTheSpreadOnAnEightImuBoard'
-slow+='|ResidualAwareSigmaMatchesTheSpreadWhenTheNoiseIsUnderstated|ResidualWeightingFindsTheNoiseWhenTheModelFits)'
-slow+='|Mag\.(ThePrimarySigmaMatchesMonteCarloErrorsUnderWhiteNoise|UnderColouredNoiseThePrimaryIsTheSandwichAndStaysHonest'
-slow+='|DisturbedSpansAreDownWeightedReportedAndBeatALeastSquaresFit|OnCleanLogsTheErrorIsNoLargerThanTheLeastSquaresFits)'
-slow+='|ThermalTest\.(BandIsHonestInMonteCarlo|BandStaysHonestWithTooHighMaxOrder|HysteresisFalseAlarmRateAndPower)'
-slow+='|ImuCalibration\.(ReportedSigmaMatchesMonteCarloSpread|ReportedSigmaMatchesMonteCarloSpreadWithGyroBiasEstimated)'
-slow+='|StopToken\.(ArrayPositionsStopAtTheirDeadlineForBothSolvers|ArrayFullModelStopsAtItsDeadline'
-slow+='|ImuStopsAtItsDeadlineBeforeItStartsAndChangesNothingWhenSilent)'
+slow='^(CalibrationChain\.ArrayReachesTheCramerRaoBoundOnlyWithTheCalibration'
 slow+='|StopProcess\.SigtermPastTheGraceStopsTheJobExitsWithinOneSecondAndTheRestartCompletesIt'
 slow+='|browser_pages)$'
 [ "${CALIBD_FUZZ_FOLLOWS:-0}" = 1 ] && slow+='|^fuzz_corpus\.'

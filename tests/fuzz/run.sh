@@ -2,7 +2,7 @@
 # Builds the libFuzzer targets (clang, ASan + UBSan) in build-sanitize/ (scripts/build-sanitize.sh)
 # and runs each, $CALIBD_FUZZ_JOBS at a time (default: the number of cores), on a temporary copy
 # of its committed corpus (tests/fuzz/corpus/<target>), so the repository is never modified.
-#   Without DURATION (CI): a fixed budget of inputs per target (about a minute each on this
+#   Without DURATION (CI): a fixed budget of inputs per target (about 30 s each on this
 #   machine) from a fixed seed, so two CI runs of one commit try the same inputs: CI cannot pass
 #   or fail by luck. (fuzz_multipart's server threads make its coverage feedback, and so its later
 #   inputs, depend a little on timing.)
@@ -26,14 +26,14 @@ scripts/setup.sh
 # shellcheck disable=SC2086
 scripts/build-sanitize.sh --target $targets
 
-# Per target, for the fixed budget: inputs to run (about 60 s each at the speeds measured in
+# Per target, for the fixed budget: inputs to run (about 30 s each at the speeds measured in
 # bench/README.md, two targets at a time on 2 cores) and the seed.
 runs() {
   case $1 in
-    fuzz_recording) echo 300000 ;;
-    fuzz_config) echo 500000 ;;
-    fuzz_calibrate) echo 40000 ;;
-    fuzz_multipart) echo 15000 ;;
+    fuzz_recording) echo 150000 ;;
+    fuzz_config) echo 250000 ;;
+    fuzz_calibrate) echo 20000 ;;
+    fuzz_multipart) echo 7500 ;;
   esac
 }
 
