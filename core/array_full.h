@@ -51,10 +51,9 @@
 // corrects the residuals' shrinking by the fit): every static is a batch, the dynamic samples in
 // batches of robust_batch seconds (the residuals of real recordings are correlated in time, e.g.
 // by sampling-time errors between the IMUs). The primary σ (report_std, theta_covariance) is the
-// sandwich, with a warning, when chi^2/dof > robust_ratio, when the dynamic samples were
-// reweighted, or when the sandwich's variances exceed the CRB's by robust_ratio on average
-// (residuals correlated in time leave chi^2/dof near 1); else the CRB. report_std_crb and
-// theta_covariance_crb always hold the CRB.
+// sandwich, with a warning, when chi^2/dof > robust_ratio or the dynamic samples were
+// reweighted; else the CRB (sigma_ratio, the sandwich over the CRB, is computed either way).
+// report_std_crb and theta_covariance_crb always hold the CRB.
 //
 // Identifiability checks: (1) rotation excitation: the eigenvalues of sum_n omega_n omega_n^T
 // over the dynamic samples against what gyroscope noise alone gives (N sigma_g^2 / K): too
@@ -123,8 +122,7 @@ struct ArrayFullOptions {
   // Worker threads (0 = hardware concurrency) or an executor (core/block_lm.h). >= 0.
   int threads = 0;
   TaskExecutor executor;
-  // The residual-aware covariance is the primary σ when chi^2 / dof, or the mean ratio of its
-  // variances to the CRB's, exceeds this. >= 1.
+  // The residual-aware covariance is the primary σ when chi^2 / dof exceeds this. >= 1.
   double robust_ratio = 1.5;
   // Length of the batches of consecutive dynamic samples whose scores are summed in the
   // sandwich covariance, seconds. > 0.
