@@ -13,6 +13,7 @@
 
 #include "core/array_model.h"
 #include "core/block_lm.h"
+#include "core/stop_token.h"
 
 namespace calibd::core {
 namespace {
@@ -306,6 +307,97 @@ SolverRun RunJoint(const PositionsProblem& joint, const BlockLmOptions& lm_optio
   return run;
 }
 
+// The residual-aware (HC3/jackknife-type sandwich) covariance of the free positions (core/array.h)
+// over batches of options.robust_batch_samples consecutive samples. Per sample the reduced score
+// is g_r - H_rx H_xx^-1 g_x and the reduced information H_rr - H_rx H_xx^-1 H_xr, with
+// H_xr = wa C lift (core/array_model.h), so a batch needs only its 12-vector sum_n C^T H^-1 g,
+// its 12x12 sum_n C^T H^-1 C and its sums of A^T e and A^T A. Each batch score s_b is mapped by
+// (S - I_b)^-1 (Neumann series t = Cov s + Cov I_b t) to undo the fit's shrinking of the batch's
+// residuals. *not_converged counts batches whose series did not converge (leverage ~ 1).
+Eigen::MatrixXd PositionsSandwich(const Data& d, const PositionsProblem& joint, double wa,
+                                  const std::vector<int>& free, const Eigen::Matrix3Xd& r,
+                                  const MotionStates& x, int64_t batch_samples,
+                                  const Eigen::MatrixXd& crb, const StopToken* stop,
+                                  int64_t* batches, int* not_converged) {
+  const int m = static_cast<int>(free.size());
+  const PositionsProblem::Context ctx = joint.MakeContext(r);
+  Eigen::MatrixXd lift = Eigen::MatrixXd::Zero(12, 3 * m);
+  for (int j = 0; j < m; ++j)
+    for (int a = 0; a < 4; ++a)
+      lift.block<3, 3>(3 * a, 3 * j) = ctx.c(a, free[j]) * Mat3::Identity();
+  Eigen::MatrixXd sandwich = Eigen::MatrixXd::Zero(3 * m, 3 * m);
+  *batches = 0;
+  *not_converged = 0;
+  PositionsProblem::Normal b;
+  for (int64_t start = 0; start < d.N; start += batch_samples) {
+    if (StopRequested(stop)) return sandwich;
+    PositionsProblem::Sums sums = joint.MakeSums();
+    Eigen::Matrix<double, 12, 1> v = Eigen::Matrix<double, 12, 1>::Zero();
+    Eigen::Matrix<double, 12, 12> w = Eigen::Matrix<double, 12, 12>::Zero();
+    for (int64_t n = start; n < std::min(d.N, start + batch_samples); ++n) {
+      joint.Linearize(n, x.col(n), ctx, &b, &sums);
+      const Eigen::LLT<Eigen::Matrix<double, 9, 9>> llt(b.H);
+      v.noalias() += b.C.transpose() * llt.solve(b.g);
+      w.noalias() += b.C.transpose() * llt.solve(b.C);
+    }
+    Eigen::VectorXd score = -wa * (lift.transpose() * v);
+    Eigen::MatrixXd info = -wa * wa * (lift.transpose() * w * lift);
+    for (int j = 0; j < m; ++j) {
+      score.segment<3>(3 * j) += wa * sums.br.col(free[j]);
+      info.block<3, 3>(3 * j, 3 * j) += wa * sums.AtA;
+    }
+    const Eigen::VectorXd t0 = crb * score;
+    Eigen::VectorXd t = t0;
+    bool done = false;
+    for (int it = 0; it < 100 && !done; ++it) {
+      const Eigen::VectorXd next = t0 + crb * (info * t);
+      done = (next - t).norm() <= 1e-10 * next.norm();
+      t = next;
+    }
+    if (!done || !t.allFinite()) {
+      ++*not_converged;
+      t = t0;
+    }
+    sandwich.selfadjointView<Eigen::Lower>().rankUpdate(t);
+    ++*batches;
+  }
+  return sandwich.selfadjointView<Eigen::Lower>();
+}
+
+// Chooses the primary σ (core/array.h): the sandwich when chi^2/dof or its mean variance ratio
+// to the CRB exceeds options.robust_ratio, and says so in a warning.
+void ChooseSigma(const ArrayOptions& options, const std::vector<int>& free,
+                 const Eigen::MatrixXd& sandwich, int not_converged, ArrayResult* result) {
+  double ratio2 = 0;
+  int counted = 0;
+  for (Eigen::Index i = 0; i < sandwich.rows(); ++i)
+    if (result->position_covariance_crb(i, i) > 0) {
+      ratio2 += sandwich(i, i) / result->position_covariance_crb(i, i);
+      ++counted;
+    }
+  result->sigma_ratio = counted > 0 ? std::sqrt(ratio2 / counted) : 1;
+  if (!(result->chi2_per_dof > options.robust_ratio) &&
+      !(result->sigma_ratio * result->sigma_ratio > options.robust_ratio))
+    return;
+  result->sigma_basis = "sandwich";
+  result->position_covariance = sandwich;
+  for (size_t j = 0; j < free.size(); ++j)
+    result->position_std.col(free[j]) =
+        sandwich.diagonal().segment<3>(3 * j).cwiseMax(0).cwiseSqrt();
+  result->warnings.push_back(
+      "σ is the residual-aware sandwich, " + Format("%.2g", result->sigma_ratio) +
+      "× the white-noise bound (uncertainty.positions[].crb): the residuals exceed the noise "
+      "model (χ²/dof " +
+      Format("%.3g", result->chi2_per_dof) +
+      (result->chi2_per_dof > options.robust_ratio
+           ? ")"
+           : "; the residuals are correlated in time, so χ² alone does not show it)"));
+  if (not_converged > 0)
+    result->warnings.push_back(std::to_string(not_converged) +
+                               " batches of the residual-aware σ alone determine some position "
+                               "(leverage ~ 1): their scores are not leverage-corrected");
+}
+
 // Everything the result reports at the estimate (r, x) except warnings: motion summaries,
 // residuals, noise estimates, excitation and the CRB of the positions from the reduced Fisher
 // information.
@@ -357,6 +449,19 @@ Status Diagnose(const ArrayProblem& problem, const ArrayOptions& options, const 
   for (size_t j = 0; j < free.size(); ++j)
     result->position_std.col(free[j]) =
         result->position_covariance.diagonal().segment<3>(3 * j).cwiseMax(0).cwiseSqrt();
+  result->position_std_crb = result->position_std;
+  result->position_covariance_crb = result->position_covariance;
+  const double dof = n_accel + n_gyro - 9.0 * d.N - 3.0 * (K - 1);
+  result->chi2_per_dof = dof > 0 ? (L.ssr_a / (options.accel_noise * options.accel_noise) +
+                                    L.ssr_g / (options.gyro_noise * options.gyro_noise)) /
+                                       dof
+                                 : 0;
+  int not_converged = 0;
+  const Eigen::MatrixXd sandwich =
+      PositionsSandwich(d, joint, 1 / (options.accel_noise * options.accel_noise), free, r, x,
+                        options.robust_batch_samples, result->position_covariance_crb, options.stop,
+                        &result->sigma_batches, &not_converged);
+  ChooseSigma(options, free, sandwich, not_converged, result);
   return Status::Ok();
 }
 
@@ -385,8 +490,11 @@ void AddWarnings(const ArrayOptions& options, int64_t samples_in, int max_iterat
       warnings.push_back(std::string(what) + " noise estimated from the residuals (" +
                          Fmt(estimate) + " " + unit + ") differs from the configured " +
                          Fmt(configured) + " " + unit +
-                         " by more than 2x: the reported uncertainties assume the configured "
-                         "value; check the noise setting, the units and the sensors");
+                         " by more than 2x: " +
+                         (result->sigma_basis == "sandwich"
+                              ? "the reported σ is the residual-aware one; "
+                              : "the reported uncertainties assume the configured value; ") +
+                         "check the noise setting, the units and the sensors");
   };
   check_noise("accelerometer", result->noise_estimate_accel, options.accel_noise, "m/s^2");
   if (gyro_dof > 0.5)
@@ -447,6 +555,9 @@ bool ArrayOptions::IsValid(std::string* error) const {
   if (max_iterations < 0) return fail("max_iterations must be >= 0 (0: solver default)");
   if (!(tolerance >= 0 && tolerance < 1)) return fail("tolerance must be >= 0 and < 1");
   if (threads < 0) return fail("threads must be >= 0 (0: hardware concurrency)");
+  if (!(robust_ratio >= 1) || !std::isfinite(robust_ratio))
+    return fail("robust_ratio must be >= 1");
+  if (robust_batch_samples < 1) return fail("robust_batch_samples must be >= 1");
   return true;
 }
 
@@ -532,11 +643,16 @@ Status CalibrateArray(const ArrayProblem& problem, const ArrayOptions& options,
         result);
 
   double gyro_dof = 0;
+  const auto sigma_warnings_from = static_cast<std::ptrdiff_t>(result->warnings.size());
   if (Status s = Diagnose(problem, options, d, joint, lm_options, free, r, x, &gyro_dof, result);
       !s.ok())
     return StopRequested(options.stop) ? stopped("uncertainty") : s;
   if (StopRequested(options.stop)) return stopped("uncertainty");
+  const auto sigma_warnings_to = static_cast<std::ptrdiff_t>(result->warnings.size());
   AddWarnings(options, problem.accel.rows(), max_iterations, gyro_dof, result);
+  // The σ warnings (Diagnose) after the others, which say first what happened to the run.
+  std::rotate(result->warnings.begin() + sigma_warnings_from,
+              result->warnings.begin() + sigma_warnings_to, result->warnings.end());
   result->usable = true;
   result->reason = result->converged
                        ? std::string("converged (") + ArrayTerminationName(run.termination) + ")"

@@ -27,7 +27,16 @@
 // Both start from the nominal positions and the per-sample ML motion there.
 //
 // Uncertainty: the inverse of the reduced (Schur) Fisher information at the estimate, i.e. the
-// Cramer-Rao bound of the positions given the configured sigma_a, sigma_g.
+// Cramer-Rao bound (CRB) of the positions given the configured sigma_a, sigma_g, and a
+// residual-aware (HC3/jackknife-type sandwich) covariance sum_b t_b t_b^T, t_b = (S - I_b)^-1 s_b,
+// over batches b of robust_batch_samples consecutive samples (s_b: the batch's reduced score of
+// the positions, I_b its own reduced information, S the total). The sandwich and not the
+// chi^2-scaled CRB, because the misfits of real arrays are not a uniformly larger white noise:
+// noise correlated in time (which leaves chi^2/dof at 1 and the CRB too small) and sampling-time
+// jitter (residuals growing with the motion) are what the batches' scores see and chi^2 does not.
+// The primary position_std is the sandwich when chi^2/dof > robust_ratio or the sandwich's
+// variances exceed the CRB's by robust_ratio on average (sigma_basis "sandwich"), else the CRB
+// ("crb"; the sandwich is then noisier and no more right); position_std_crb is always the CRB.
 //
 // Cost: O(I · N · K · g) time, O(N · K) memory (the data) + O(N) (motion), for N samples, K
 // accelerometer triads, I iterations (joint: max_iterations LM iterations, default 50; bcd:
@@ -100,6 +109,12 @@ struct ArrayOptions {
   double tolerance = 1e-10;
   // Worker threads; 0 = std::thread::hardware_concurrency(). >= 0.
   int threads = 0;
+  // The residual-aware σ becomes the primary when chi^2/dof, or the mean ratio of its variances
+  // to the CRB's, exceeds this. >= 1.
+  double robust_ratio = 1.5;
+  // Consecutive samples per batch of the residual-aware σ (longer than the residuals'
+  // correlation time; the array method sets 1 s of samples when it knows the rate). >= 1.
+  int64_t robust_batch_samples = 100;
   // Optional: runs the solver's parallel chunks instead of `threads` new threads (e.g. a pool
   // shared by all jobs; core/block_lm.h). The result does not depend on it.
   TaskExecutor executor;
@@ -154,11 +169,20 @@ struct ArrayResult {
   std::string reason;
 
   int reference = 0;
-  std::vector<std::string> names;       // K triad names
-  Eigen::Matrix3Xd positions;           // 3 x K estimates, metres (reference = nominal)
-  Eigen::Matrix3Xd offsets;             // positions - nominal
-  Eigen::Matrix3Xd position_std;        // 3 x K, sqrt(diag(CRB)); 0 for the reference
-  Eigen::MatrixXd position_covariance;  // 3(K-1) square CRB, triads in order without reference
+  std::vector<std::string> names;  // K triad names
+  Eigen::Matrix3Xd positions;      // 3 x K estimates, metres (reference = nominal)
+  Eigen::Matrix3Xd offsets;        // positions - nominal
+  // The primary σ (sigma_basis: the sandwich or the CRB): 3 x K, 0 for the reference, and its
+  // 3(K-1) square covariance, triads in order without the reference.
+  Eigen::Matrix3Xd position_std;
+  Eigen::MatrixXd position_covariance;
+  Eigen::Matrix3Xd position_std_crb;        // the Cramér-Rao bound, same layout
+  Eigen::MatrixXd position_covariance_crb;  // CRB
+  std::string sigma_basis = "crb";          // "crb" | "sandwich"
+  double chi2_per_dof = 0;                  // final cost / (residuals - unknowns)
+  // sqrt(mean over the free coordinates of sandwich variance / CRB variance).
+  double sigma_ratio = 1;
+  int64_t sigma_batches = 0;  // batches of the sandwich
 
   ArraySolver solver = ArraySolver::kJoint;
   ArrayTermination termination = ArrayTermination::kNotRun;

@@ -45,12 +45,15 @@
 //
 // Uncertainty: the Cramér-Rao bound from the reduced information at the estimate, with the
 // configured (or, when not configured, the statics' within-interval) noise. When the residuals
-// exceed that noise (chi^2/dof > robust_ratio), also a residual-aware "sandwich" covariance
+// exceed that noise, a residual-aware "sandwich" covariance (always computed)
 // sum_b t_b t_b^T, t_b = (S - I_b)^-1 s_b, over batches b of consecutive blocks (s_b: the summed
 // scores of the batch, I_b its own reduced information; the (S - I_b)^-1 of the jackknife/HC3
 // corrects the residuals' shrinking by the fit): every static is a batch, the dynamic samples in
 // batches of robust_batch seconds (the residuals of real recordings are correlated in time, e.g.
-// by sampling-time errors between the IMUs). Plus a warning.
+// by sampling-time errors between the IMUs). The primary σ (report_std, theta_covariance) is the
+// sandwich, with a warning, when chi^2/dof > robust_ratio or the dynamic samples were
+// reweighted; else the CRB (sigma_ratio, the sandwich over the CRB, is computed either way).
+// report_std_crb and theta_covariance_crb always hold the CRB.
 //
 // Identifiability checks: (1) rotation excitation: the eigenvalues of sum_n omega_n omega_n^T
 // over the dynamic samples against what gyroscope noise alone gives (N sigma_g^2 / K): too
@@ -119,7 +122,7 @@ struct ArrayFullOptions {
   // Worker threads (0 = hardware concurrency) or an executor (core/block_lm.h). >= 0.
   int threads = 0;
   TaskExecutor executor;
-  // The residual-aware covariance is reported when chi^2 / dof exceeds this. >= 1.
+  // The residual-aware covariance is the primary σ when chi^2 / dof exceeds this. >= 1.
   double robust_ratio = 1.5;
   // Length of the batches of consecutive dynamic samples whose scores are summed in the
   // sandwich covariance, seconds. > 0.
@@ -205,15 +208,17 @@ struct ArrayFullResult {
   int reference = 0;
   std::vector<ArrayFullTriad> triads;  // estimates (paper convention)
   std::vector<ArrayFullTriadReport> report;
-  std::vector<ArrayFullTriadStd> report_std;         // CRB
-  std::vector<ArrayFullTriadStd> report_std_robust;  // sandwich; empty unless robust
-  bool robust = false;
-  Eigen::VectorXd theta;                    // 27K, the estimate
-  Eigen::MatrixXd theta_covariance;         // 27K x 27K, CRB (singular along the gauges)
-  Eigen::MatrixXd theta_covariance_robust;  // empty unless robust
-  int64_t robust_batches = 0;               // batches of the sandwich
-  Eigen::MatrixXd gauge_basis;              // E, 27K x (27K - 7), orthonormal columns
-  std::string gauge;                        // "sum_trace_gyroscope" (sum_k trace T_g,k = 3K)
+  std::vector<ArrayFullTriadStd> report_std;      // the primary σ (sigma_basis)
+  std::vector<ArrayFullTriadStd> report_std_crb;  // the Cramér-Rao bound
+  std::string sigma_basis = "crb";                // "crb" | "sandwich"
+  // sqrt(mean over the free parameters of sandwich variance / CRB variance).
+  double sigma_ratio = 1;
+  Eigen::VectorXd theta;                 // 27K, the estimate
+  Eigen::MatrixXd theta_covariance;      // 27K x 27K, primary (singular along the gauges)
+  Eigen::MatrixXd theta_covariance_crb;  // 27K x 27K, CRB
+  int64_t robust_batches = 0;            // batches of the sandwich
+  Eigen::MatrixXd gauge_basis;           // E, 27K x (27K - 7), orthonormal columns
+  std::string gauge;                     // "sum_trace_gyroscope" (sum_k trace T_g,k = 3K)
   std::string gauge_description;
 
   // The start (closed forms + positions-only fit), for "what the full model changed".

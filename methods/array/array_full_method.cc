@@ -82,16 +82,12 @@ void WriteFullResult(const core::ArrayFullResult& r, const core::ArrayFullProble
     u.triads.accelerometer = SensorTriadStdOf(sd.accelerometer, 1);
     u.triads.gyroscope = SensorTriadStdOf(sd.gyroscope, gyro_unit);
     u.position_std = sd.position_std;
-    if (r.robust) {
-      results::ArrayImuRobustStd robust;
-      robust.accelerometer = SensorTriadStdOf(r.report_std_robust[k].accelerometer, 1);
-      robust.gyroscope = SensorTriadStdOf(r.report_std_robust[k].gyroscope, gyro_unit);
-      robust.position_std = r.report_std_robust[k].position_std;
-      u.robust = std::move(robust);
-    }
+    const core::ArrayFullTriadStd& crb = r.report_std_crb[k];
+    u.crb = results::ArrayImuCrbStd{SensorTriadStdOf(crb.accelerometer, 1),
+                                    SensorTriadStdOf(crb.gyroscope, gyro_unit), crb.position_std};
     unc.imus.push_back(std::move(u));
     params.positions.push_back({p.name, p.position, p.position - problem.nominal_positions.col(k)});
-    unc.positions.push_back({p.name, sd.position_std});
+    unc.positions.push_back({p.name, sd.position_std, crb.position_std});
     const core::ArrayFullResidualStats& rs = r.residuals[k];
     d.residual_rms_imus.push_back({p.name,
                                    {rs.static_accel, rs.static_gyro / gyro_unit},
@@ -115,6 +111,8 @@ void WriteFullResult(const core::ArrayFullResult& r, const core::ArrayFullProble
     d.changed_from_positions_only.push_back(std::move(change));
   }
   out->parameters = std::move(params);
+  unc.basis = r.sigma_basis;
+  unc.chi2_per_dof = r.chi2_per_dof;
   out->uncertainty = std::move(unc);
   d.gauge = {r.gauge, r.reference, r.gauge_description};
   d.solver = "joint";
@@ -143,7 +141,8 @@ void WriteFullResult(const core::ArrayFullResult& r, const core::ArrayFullProble
       "diagnostic, not part of the model: per IMU the constant sampling-time offset "
       "(relative to their mean) that best explains its gyroscope residual by omega_dot, "
       "and the same free per sample (jitter)";
-  d.robust = {r.robust, r.robust_batches, options.robust_batch, options.robust_ratio};
+  d.robust = {r.sigma_basis == "sandwich", r.robust_batches, options.robust_batch,
+              options.robust_ratio};
   d.positions_only_start = r.initial_positions_from_array;
 }
 

@@ -53,9 +53,8 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-// The σ the tables show of one entry of uncertainty.imus: the residual-aware one (`robust`) when
-// the result has it (the residuals exceed the noise: the Cramér–Rao bound is then too small),
-// else the Cramér–Rao bound. `k` beyond the entries: every σ undefined.
+// The σ the tables show of one entry of uncertainty.imus: the primary (uncertainty.basis).
+// `k` beyond the entries: every σ undefined.
 struct Shown {
   const results::SensorTriadStd* accelerometer;
   const results::SensorTriadStd* gyroscope;
@@ -69,13 +68,7 @@ Shown ShownSigma(const results::ArrayUncertainty& u, size_t k) {
   static const Eigen::Vector3d kUndefined3 = Eigen::Vector3d::Constant(kNaN);
   if (k >= u.imus.size()) return {&kUndefined, &kUndefined, &kUndefined3};
   const results::ArrayImuStd& s = u.imus[k];
-  if (s.robust) return {&s.robust->accelerometer, &s.robust->gyroscope, &s.robust->position_std};
   return {&s.triads.accelerometer, &s.triads.gyroscope, &s.position_std};
-}
-bool HasRobustSigma(const results::ArrayUncertainty& u) {
-  for (const auto& s : u.imus)
-    if (s.robust) return true;
-  return false;
 }
 
 // A value cell with its σ in small print beside it; `beyond` (non-empty: why) marks it.
@@ -304,12 +297,7 @@ std::string TriadsSection(const results::ArrayResult& result) {
   s += "<dt>\xCF\x87\xC2\xB2 / degrees of freedom</dt><dd>" + FormatSig(diag.chi2_per_dof, 3) +
        "</dd>";
   s += "<dt>\xCF\x83 shown</dt><dd class=\"sigma-shown\">" +
-       std::string(HasRobustSigma(*result.uncertainty)
-                       ? "residual-aware (the residuals exceed the noise, so the "
-                         "Cram\xC3\xA9r\xE2\x80\x93Rao bound, in uncertainty.imus[] of the JSON, "
-                         "is too small); the limits are marked against it"
-                       : "Cram\xC3\xA9r\xE2\x80\x93Rao bound at the estimate") +
-       "</dd></dl>";
+       ArraySigmaBasisText(*result.uncertainty) + "; the limits are marked against it</dd></dl>";
   if (result.parameters->imus.empty())
     return Section("triads", "Triads (model full)",
                    s + "<p class=\"muted\">Not available: the result has no triads.</p>");
@@ -386,7 +374,7 @@ std::string ChangeSection(const results::ArrayResult& result) {
   const results::ArrayFullDiagnostics& diag = result.full_diagnostics;
   const std::vector<results::ArrayPositionChange>& ch = diag.changed_from_positions_only;
   if (ch.empty()) return "";
-  const bool robust = HasRobustSigma(*result.uncertainty);
+  const bool robust = result.uncertainty->basis == "sandwich";
   std::vector<std::string> names;
   BarSeries sx{"\xCE\x94x / \xCF\x83x", {}, {}, 0}, sy{"\xCE\x94y / \xCF\x83y", {}, {}, 1},
       sz{"\xCE\x94z / \xCF\x83z", {}, {}, 2};
@@ -400,18 +388,13 @@ std::string ChangeSection(const results::ArrayResult& result) {
     names.push_back(name);
     const Eigen::Vector3d& d = c.position_change;
     const Eigen::Vector3d& po = c.positions_only;
-    // The shift in σ: the result's (the full model's Cramér–Rao bound), or with a residual-aware
-    // σ the shift against it (as the tables above).
-    const bool by_robust =
-        robust && k < result.uncertainty->imus.size() && result.uncertainty->imus[k].robust;
-    const Eigen::Vector3d* robust_sd =
-        by_robust ? &result.uncertainty->imus[k].robust->position_std : nullptr;
+    // The shift in the full model's primary σ (as the tables above).
     double ratio[3];
     std::string row = "<tr><td class=\"name\">" + E(name) + "</td>";
     for (int a = 0; a < 3; ++a) row += "<td class=\"num\">" + FormatFixed(1e3 * po(a), 4) + "</td>";
     double n2 = 0;
     for (int a = 0; a < 3; ++a) {
-      ratio[a] = robust_sd == nullptr ? c.position_change_sigma(a) : d(a) / (*robust_sd)(a);
+      ratio[a] = c.position_change_sigma(a);
       if (!std::isfinite(ratio[a])) ratio[a] = kNaN;
       n2 += d(a) * d(a);
       row += std::string("<td class=\"num") + (a == 0 ? " gs" : "") + "\">" +
@@ -479,6 +462,19 @@ std::string ChangeSection(const results::ArrayResult& result) {
 }
 
 }  // namespace
+
+std::string ArraySigmaBasisText(const results::ArrayUncertainty& u) {
+  const std::string chi2 = std::isfinite(u.chi2_per_dof)
+                               ? ", \xCF\x87\xC2\xB2/dof " + FormatSig(u.chi2_per_dof, 3)
+                               : std::string();
+  if (u.basis == "sandwich")
+    return "residual-aware sandwich (the residuals exceed the noise model" + chi2 +
+           "; the Cram\xC3\xA9r\xE2\x80\x93Rao bound, too small here, is in "
+           "uncertainty.*.crb of the JSON)";
+  if (u.basis == "crb")
+    return "Cram\xC3\xA9r\xE2\x80\x93Rao bound (the residuals match the noise model" + chi2 + ")";
+  return "Cram\xC3\xA9r\xE2\x80\x93Rao \xCF\x83 only (stored by an earlier calibd)";
+}
 
 std::string ArrayFullSections(const results::ArrayResult& result) {
   if (!result.full || !result.parameters || !result.uncertainty)

@@ -9,9 +9,9 @@
 // values beyond them are marked, class "beyond", with the limit in the cell's title; a result not
 // yet judged marks nothing). Undefined numbers (null) show as "–". Every name is escaped.
 //
-// σ shown: the residual-aware one (uncertainty.imus[].robust) when the result has it (real
-// hardware, residuals above the noise), else the Cramér–Rao bound; limits and the shift in σ are
-// judged against the σ shown.
+// σ shown: the primary (uncertainty.basis: the residual-aware sandwich when the residuals exceed
+// the noise model, else the Cramér–Rao bound; the bound itself is in uncertainty.imus[].crb);
+// limits and the shift in σ are judged against it.
 //
 // Layout (32 triads stay readable): one table per sensor kind, one row per triad, column groups
 // gain − 1 (%), axis misalignment (mrad), bias (reading units), each value with its σ in small
@@ -30,6 +30,11 @@
 #include "methods/array/array_result.h"
 
 namespace calibd::web {
+
+// What the σ of an array result is (HTML, safe), both models, from uncertainty.basis and
+// chi2_per_dof: "residual-aware sandwich (...)", "Cramér–Rao bound (...)", or, for a result
+// stored by an earlier calibd, "Cramér–Rao σ only (stored by an earlier calibd)".
+std::string ArraySigmaBasisText(const results::ArrayUncertainty& u);
 
 // The sections (HTML, safe): section#triads (table.table-array-full-accelerometer,
 // table.table-array-full-gyroscope, table.table-array-full-misalignment), section#triad-residuals

@@ -390,8 +390,10 @@ Status RunArrayPositions(ArrayRecording recording, const json& config, json* res
   params.reference = r.reference;
   for (int k = 0; k < K; ++k) {
     params.positions.push_back({r.names[k], r.positions.col(k), r.offsets.col(k)});
-    unc.positions.push_back({r.names[k], r.position_std.col(k)});
+    unc.positions.push_back({r.names[k], r.position_std.col(k), r.position_std_crb.col(k)});
   }
+  unc.basis = r.sigma_basis;
+  unc.chi2_per_dof = r.chi2_per_dof;
   unc.std_rms = K > 1 ? std::sqrt(r.position_std.squaredNorm() / (3.0 * (K - 1))) : 0.0;
   out.parameters = std::move(params);
   out.uncertainty = std::move(unc);

@@ -367,14 +367,20 @@ std::string ArrayReport(const JobView& view) {
     const ArrayFigures f = Figures(result);
     s += "<dt>RMS offset from nominal</dt><dd>" + FormatMicrometres(f.rms_offset) + "</dd>";
     s += "<dt>worst position " + std::string(kSigma) + "</dt><dd>" +
-         FormatMicrometres(f.worst_sigma) + "</dd></dl>";
+         FormatMicrometres(f.worst_sigma) + "</dd>";
+    s += "<dt>" + std::string(kSigma) + " shown</dt><dd class=\"sigma-basis\">" +
+         ArraySigmaBasisText(result.uncertainty ? *result.uncertainty
+                                                : results::ArrayUncertainty()) +
+         "</dd></dl>";
     if (triads.empty()) {
       s += NotAvailable("Triad positions");
     } else {
       s += ArrayParametersTable(triads);
       s += "<p class=\"muted small\">Positions in the nominal geometry's frame; \xCE\x94 is the "
-           "offset from the nominal position; \xCF\x83 is one standard deviation (Cram\xC3\xA9r"
-           "\xE2\x80\x93Rao bound at the estimate).</p>";
+           "offset from the nominal position; \xCF\x83 is one standard deviation: " +
+           ArraySigmaBasisText(result.uncertainty ? *result.uncertainty
+                                                  : results::ArrayUncertainty()) +
+           ".</p>";
     }
     return Section("parameters", "Parameters", s);
   });

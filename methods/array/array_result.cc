@@ -78,7 +78,11 @@ json PositionsJson(const std::vector<ArrayPosition>& positions) {
 
 json PositionStdsJson(const std::vector<ArrayPositionStd>& stds) {
   json out = json::array();
-  for (const auto& s : stds) out.push_back({{"name", s.name}, {"std", Nums(s.std)}});
+  for (const auto& s : stds) {
+    json e = {{"name", s.name}, {"std", Nums(s.std)}};
+    if (s.crb) e["crb"] = {{"std", Nums(*s.crb)}};
+    out.push_back(std::move(e));
+  }
   return out;
 }
 
@@ -99,7 +103,9 @@ json ParametersJson(const ArrayParameters& p, bool full) {
 }
 
 json UncertaintyJson(const ArrayUncertainty& u, bool full) {
-  json out = {{"positions", PositionStdsJson(u.positions)}};
+  json out = {{"basis", u.basis},
+              {"chi2_per_dof", Num(u.chi2_per_dof)},
+              {"positions", PositionStdsJson(u.positions)}};
   if (!full) {
     out["std_rms"] = Num(u.std_rms);
     return out;
@@ -109,10 +115,10 @@ json UncertaintyJson(const ArrayUncertainty& u, bool full) {
     json e = json::object();
     WriteImuTriads(s.triads, &e);
     e["position_std"] = Nums(s.position_std);
-    if (s.robust) {
-      e["robust"] = {{"accelerometer", ToJson(s.robust->accelerometer)},
-                     {"gyroscope", ToJson(s.robust->gyroscope)},
-                     {"position_std", Nums(s.robust->position_std)}};
+    if (s.crb) {
+      e["crb"] = {{"accelerometer", ToJson(s.crb->accelerometer)},
+                  {"gyroscope", ToJson(s.crb->gyroscope)},
+                  {"position_std", Nums(s.crb->position_std)}};
     }
     imus.push_back(std::move(e));
   }
@@ -153,7 +159,16 @@ void ReadUncertainty(const JsonReader& r, bool full, ArrayUncertainty* out) {
   auto read_std = [](const JsonReader& e, ArrayPositionStd* s) {
     e.Read("name", &s->name);
     e.Read("std", &s->std);
+    if (std::optional<JsonReader> crb = e.OptionalObject("crb")) {
+      Eigen::Vector3d v = array_internal::kNaN3;
+      crb->Read("std", &v);
+      if (crb->ok()) s->crb = v;
+    }
   };
+  Ext(r, "basis", &out->basis);
+  if (r.ok() && out->basis != "crb" && out->basis != "sandwich" && out->basis != kArrayBasisCrbOnly)
+    r.Fail("expected \"crb\", \"sandwich\" or \"crb_only\", found \"" + out->basis + "\"", "basis");
+  Ext(r, "chi2_per_dof", &out->chi2_per_dof);
   if (!full) {
     r.ReadArray("positions", &out->positions, read_std);
     Ext(r, "std_rms", &out->std_rms);
@@ -162,19 +177,21 @@ void ReadUncertainty(const JsonReader& r, bool full, ArrayUncertainty* out) {
   r.ReadArray("imus", &out->imus, [](const JsonReader& e, ArrayImuStd* s) {
     ReadImuTriads(e, &s->triads);
     e.Read("position_std", &s->position_std);
-    if (std::optional<JsonReader> robust = e.OptionalObject("robust")) {
-      ArrayImuRobustStd v;
-      ReadTriad(*robust, "accelerometer", &v.accelerometer);
-      ReadTriad(*robust, "gyroscope", &v.gyroscope);
-      robust->Read("position_std", &v.position_std);
-      if (robust->ok()) s->robust = std::move(v);
+    if (std::optional<JsonReader> crb = e.OptionalObject("crb")) {
+      ArrayImuCrbStd v;
+      ReadTriad(*crb, "accelerometer", &v.accelerometer);
+      ReadTriad(*crb, "gyroscope", &v.gyroscope);
+      crb->Read("position_std", &v.position_std);
+      if (crb->ok()) s->crb = std::move(v);
     }
   });
   if (r.Has("positions")) {
     r.ReadArray("positions", &out->positions, read_std);
   } else {
     for (const ArrayImuStd& s : out->imus)
-      out->positions.push_back({s.triads.name, s.position_std});
+      out->positions.push_back(
+          {s.triads.name, s.position_std,
+           s.crb ? std::optional<Eigen::Vector3d>(s.crb->position_std) : std::nullopt});
   }
 }
 

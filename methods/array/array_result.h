@@ -64,10 +64,12 @@ struct ArrayPosition {
   Eigen::Vector3d offset = array_internal::kNaN3;    // r_k − nominal, metres
 };
 
-// uncertainty.positions[]: {"name", "std"}.
+// uncertainty.positions[]: {"name", "std", "crb": {"std"}}.
 struct ArrayPositionStd {
   std::string name;
-  Eigen::Vector3d std = array_internal::kNaN3;  // 1σ per axis (Cramér–Rao bound), metres
+  Eigen::Vector3d std = array_internal::kNaN3;  // 1σ per axis (uncertainty.basis), metres
+  // The white-noise Cramér–Rao bound of the same; absent in results stored by an earlier calibd.
+  std::optional<Eigen::Vector3d> crb;
 };
 
 // parameters.imus[] (full): the two triads and the accelerometer's position.
@@ -76,8 +78,8 @@ struct ArrayImu {
   Eigen::Vector3d position = array_internal::kNaN3;  // metres
 };
 
-// uncertainty.imus[].robust (full): the residual-aware (sandwich) σ of the same entries.
-struct ArrayImuRobustStd {
+// uncertainty.imus[].crb (full): the white-noise Cramér–Rao bound of the same entries.
+struct ArrayImuCrbStd {
   SensorTriadStd accelerometer;
   SensorTriadStd gyroscope;
   Eigen::Vector3d position_std = array_internal::kNaN3;  // metres
@@ -87,8 +89,9 @@ struct ArrayImuRobustStd {
 struct ArrayImuStd {
   ImuTriadsStd triads;                                   // "name", "accelerometer", "gyroscope"
   Eigen::Vector3d position_std = array_internal::kNaN3;  // metres
-  // Present when the residuals exceed the noise (the Cramér–Rao bound is then too small).
-  std::optional<ArrayImuRobustStd> robust;
+  // The Cramér–Rao bound; absent in results stored by an earlier calibd (whose "robust" member,
+  // the residual-aware σ, is not read: it is what the primary σ now is when basis is "sandwich").
+  std::optional<ArrayImuCrbStd> crb;
 };
 
 struct ArrayParameters {
@@ -97,10 +100,17 @@ struct ArrayParameters {
   std::vector<ArrayImu> imus;            // SPEC (full)
 };
 
+// What the primary σ is (SPEC §7 "Uncertainty, every method", README changelog): "crb" (the
+// residuals match the noise model), "sandwich" (residual-aware), or "crb_only" (absent: a
+// result stored by an earlier calibd, whose σ is the Cramér–Rao bound whatever the residuals).
+inline constexpr char kArrayBasisCrbOnly[] = "crb_only";
+
 struct ArrayUncertainty {
-  std::vector<ArrayPositionStd> positions;  // SPEC (positions); (full) as parameters.positions
-  double std_rms = array_internal::kNaN;    // (positions) RMS of the K−1 free triads' σ, metres
-  std::vector<ArrayImuStd> imus;            // SPEC (full)
+  std::string basis = kArrayBasisCrbOnly;      // "crb" | "sandwich" | "crb_only"
+  double chi2_per_dof = array_internal::kNaN;  // the fit's χ²/dof; NaN when absent
+  std::vector<ArrayPositionStd> positions;     // SPEC (positions); (full) as parameters.positions
+  double std_rms = array_internal::kNaN;  // (positions) RMS of the K−1 free triads' σ, metres
+  std::vector<ArrayImuStd> imus;          // SPEC (full)
 };
 
 // ---- diagnostics ----
@@ -217,7 +227,7 @@ struct ArrayTimeOffsets {
 
 // diagnostics.robust (full): the residual-aware σ.
 struct ArrayRobust {
-  bool used = false;
+  bool used = false;  // it is the primary σ (uncertainty.basis "sandwich")
   int64_t batches = 0;
   double batch_seconds = array_internal::kNaN;
   double ratio = array_internal::kNaN;

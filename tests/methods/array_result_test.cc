@@ -2,6 +2,8 @@
 // a document that does not fit is refused naming the path of the problem.
 #include "methods/array/array_result.h"
 
+#include "methods/array/array_full_report.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -78,10 +80,10 @@ ArrayResult FullResult() {
     s.triads.accelerometer.bias_std = {1e-3, 2e-3, 3e-3};
     s.position_std = u.positions[k].std;
     if (k == 1) {
-      ArrayImuRobustStd robust;
-      robust.accelerometer.scale_std = {1e-4, 1e-4, 2e-4};
-      robust.position_std = {2e-5, 3e-5, 4e-5};
-      s.robust = robust;
+      ArrayImuCrbStd crb;
+      crb.accelerometer.scale_std = {1e-4, 1e-4, 2e-4};
+      crb.position_std = {2e-5, 3e-5, 4e-5};
+      s.crb = crb;
     }
     u.imus.push_back(s);
   }
@@ -207,8 +209,8 @@ TEST(ArrayResult, FullModelRoundTripsWithEveryField) {
   EXPECT_EQ(j["parameters"]["model"], "full");
   EXPECT_EQ(j["diagnostics"]["model"], "full");
   EXPECT_FALSE(j["uncertainty"].contains("std_rms"));
-  EXPECT_FALSE(j["uncertainty"]["imus"][0].contains("robust"));
-  EXPECT_TRUE(j["uncertainty"]["imus"][1].contains("robust"));
+  EXPECT_FALSE(j["uncertainty"]["imus"][0].contains("crb"));
+  EXPECT_TRUE(j["uncertainty"]["imus"][1].contains("crb"));
   EXPECT_FALSE(j["diagnostics"]["changed_from_positions_only"][0].contains("positions_only_std"));
   ArrayResult back;
   const Status s = FromJson(j, &back);
@@ -217,9 +219,9 @@ TEST(ArrayResult, FullModelRoundTripsWithEveryField) {
   ASSERT_EQ(back.parameters->imus.size(), 2u);
   EXPECT_DOUBLE_EQ(back.parameters->imus[1].triads.accelerometer.bias.x(), 0.1);
   EXPECT_DOUBLE_EQ(back.parameters->imus[0].triads.gyroscope.misalignment(0, 1), 0.01);
-  EXPECT_FALSE(back.uncertainty->imus[0].robust.has_value());
-  ASSERT_TRUE(back.uncertainty->imus[1].robust.has_value());
-  EXPECT_DOUBLE_EQ(back.uncertainty->imus[1].robust->position_std.z(), 4e-5);
+  EXPECT_FALSE(back.uncertainty->imus[0].crb.has_value());
+  ASSERT_TRUE(back.uncertainty->imus[1].crb.has_value());
+  EXPECT_DOUBLE_EQ(back.uncertainty->imus[1].crb->position_std.z(), 4e-5);
   EXPECT_EQ(back.full_diagnostics.gauge.scale, "sum_trace_gyroscope");
   EXPECT_EQ(back.full_diagnostics.robust.batches, 12);
   EXPECT_TRUE(std::isnan(back.full_diagnostics.residual_rms_imus[1].dynamic_rms.gyroscope));
@@ -266,10 +268,10 @@ TEST(ArrayResult, WrongTypeIsRefusedNamingThePath) {
   EXPECT_NE(s.message().find("parameters.positions[1].offset"), std::string::npos) << s.message();
 
   json f = ToJson(FullResult());
-  f["uncertainty"]["imus"][1]["robust"]["gyroscope"]["bias_std"] = {1, 2};
+  f["uncertainty"]["imus"][1]["crb"]["gyroscope"]["bias_std"] = {1, 2};
   const Status sf = FromJson(f, &r);
   ASSERT_FALSE(sf.ok());
-  EXPECT_NE(sf.message().find("uncertainty.imus[1].robust.gyroscope.bias_std"), std::string::npos)
+  EXPECT_NE(sf.message().find("uncertainty.imus[1].crb.gyroscope.bias_std"), std::string::npos)
       << sf.message();
 }
 
@@ -463,6 +465,46 @@ TEST(ArrayResult, AnotherMethodsResultIsRefused) {
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("method"), std::string::npos) << s.message();
   EXPECT_FALSE(FromJson(json::array(), &r).ok());
+}
+
+}  // namespace
+}  // namespace calibd::results
+
+namespace calibd::results {
+namespace {
+
+// A result stored by an earlier calibd (no uncertainty.basis, no crb) reads with basis
+// "crb_only", and the pages say its σ is the Cramér–Rao bound only.
+TEST(ArrayResultTest, StoredWithoutBasisReadsAsCrbOnly) {
+  const nlohmann::json doc = {
+      {"method", "array"},
+      {"usable", true},
+      {"model", "y_a,k = s + A r_k"},
+      {"warnings", nlohmann::json::array()},
+      {"parameters",
+       {{"reference", 0},
+        {"positions", {{{"name", "a0"}, {"position", {0, 0, 0}}, {"offset", {0, 0, 0}}}}}}},
+      {"uncertainty", {{"positions", {{{"name", "a0"}, {"std", {0, 0, 0}}}}}, {"std_rms", 0}}},
+      {"diagnostics",
+       {{"solver", "joint"},
+        {"iterations", 3},
+        {"samples", 100},
+        {"samples_dropped", 0},
+        {"converged", true},
+        {"cost", {1.0}},
+        {"excitation", {{"min_eigenvalue", 1.0}, {"verdict", "good"}}},
+        {"residual_rms", {{"accelerometer", 0.1}, {"gyroscope", 0.01}}},
+        {"noise_estimate", {{"accelerometer", 0.1}, {"gyroscope", 0.01}}}}}};
+  ArrayResult r;
+  const Status s = FromJson(doc, &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(r.uncertainty->basis, "crb_only");
+  EXPECT_FALSE(r.uncertainty->positions[0].crb.has_value());
+  EXPECT_NE(web::ArraySigmaBasisText(*r.uncertainty).find("stored by an earlier calibd"),
+            std::string::npos);
+  nlohmann::json bad = doc;
+  bad["uncertainty"]["basis"] = "guess";
+  EXPECT_FALSE(FromJson(bad, &r).ok());
 }
 
 }  // namespace

@@ -135,14 +135,15 @@ TEST(ArrayResultSchema, FullModelWithResidualAwareSigmaInDegreesRoundTrips) {
   json config, truth, result;
   ASSERT_TRUE(SimulateArrayFullFiles(so, &csv, &config, &truth).ok());
   // A configured accelerometer noise a tenth of the true one: the residuals exceed it, so the
-  // result carries the residual-aware σ (uncertainty.imus[].robust).
+  // result carries the residual-aware σ (uncertainty.imus[].crb).
   config["accel_noise"] = so.accel_noise / 10;
   config["dynamic_weighting"] = "residual";
   const Status s = RunArray(RecordingFromCsv(csv), config, &result);
   ASSERT_TRUE(s.ok()) << s.ToString();
   EXPECT_EQ(result["diagnostics"]["gyro_unit"], "deg/s");
   EXPECT_TRUE(result["diagnostics"]["robust"]["used"].get<bool>()) << result["diagnostics"].dump();
-  EXPECT_TRUE(result["uncertainty"]["imus"][1].contains("robust"));
+  EXPECT_EQ(result["uncertainty"]["basis"], "sandwich");
+  EXPECT_TRUE(result["uncertainty"]["imus"][1].contains("crb"));
   ExpectRoundTrip(result, true, true);
 }
 
@@ -189,7 +190,7 @@ TEST(ArrayResultSchema, ExportsReadTheTypedResultAndNameWhatDoesNotRead) {
 // The paths SPEC requires of an array result ("[]": every element of an array): the envelope
 // (§4), parameters, uncertainty and the diagnostics "at least" list of §4 (positions model), and
 // for `model: full` §7's parameters.imus / uncertainty.imus (as for imu, plus position /
-// position_std, the residual-aware σ under robust with the same keys), its diagnostics.gauge,
+// position_std, the Cramér–Rao bound under crb with the same keys), its diagnostics.gauge,
 // and the §4 diagnostics it has (solver, iterations, converged, cost, samples_dropped).
 const std::set<std::string>& SpecPaths(bool full) {
   static const std::set<std::string> common = {"method",
@@ -216,7 +217,7 @@ const std::set<std::string>& SpecPaths(bool full) {
   static const std::set<std::string> full_model = [] {
     std::set<std::string> p = common;
     p.insert({"parameters.imus[].name", "parameters.imus[].position", "uncertainty.imus[].name",
-              "uncertainty.imus[].position_std", "uncertainty.imus[].robust.position_std",
+              "uncertainty.imus[].position_std", "uncertainty.imus[].crb.position_std",
               "diagnostics.gauge.scale"});
     for (const char* sensor : {"accelerometer", "gyroscope"}) {
       const std::string s = sensor;
@@ -224,7 +225,7 @@ const std::set<std::string>& SpecPaths(bool full) {
         p.insert("parameters.imus[]." + s + "." + key);
       for (const char* key : {"bias_std", "scale_std", "misalignment_std"}) {
         p.insert("uncertainty.imus[]." + s + "." + key);
-        p.insert("uncertainty.imus[].robust." + s + "." + key);
+        p.insert("uncertainty.imus[].crb." + s + "." + key);
       }
     }
     return p;
@@ -339,7 +340,7 @@ TEST(ArrayResultSchema, FullModelResultWithOnlyTheSpecsKeysStillReadsExportsAndR
   ASSERT_TRUE(SimulateArrayFullFiles(so, &csv, &config, &truth).ok());
   config["accel_noise"] = so.accel_noise / 10;  // the residual-aware σ too (robust)
   ASSERT_TRUE(RunArray(RecordingFromCsv(csv), config, &result).ok());
-  ASSERT_TRUE(result["uncertainty"]["imus"][1].contains("robust"));
+  ASSERT_EQ(result["uncertainty"]["basis"], "sandwich");
   ExpectSpecOnlyResultServes(result, config);
 }
 

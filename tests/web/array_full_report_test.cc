@@ -243,17 +243,21 @@ TEST(ArrayFullReport, ChangeFromThePositionsOnlyFitInMicrometresAndSigma) {
   EXPECT_TRUE(Has(damaged, "not available"));
 }
 
-// Real hardware: the residuals exceed the noise and the result carries the residual-aware σ
-// (uncertainty.imus[].robust); the tables show it, the limits and the shift are judged by it.
+// Real hardware: the residuals exceed the noise and the primary σ is the residual-aware one
+// (uncertainty.basis "sandwich"); the tables show it, the limits and the shift are judged by it.
 TEST(ArrayFullReport, ShowsTheResidualAwareSigmaWhenTheResultHasIt) {
   json r = FullResult(8);
+  r["uncertainty"]["basis"] = "sandwich";
   for (auto& u : r["uncertainty"]["imus"]) {
-    json robust = {{"accelerometer", u["accelerometer"]},
-                   {"gyroscope", u["gyroscope"]},
-                   {"position_std", Vec(5e-5, 5e-5, 5e-5)}};
-    robust["accelerometer"]["bias_std"] = Vec(0.07, 0.07, 0.07);  // beyond 0.05 m/s^2
-    u["robust"] = robust;
+    u["crb"] = {{"accelerometer", u["accelerometer"]},
+                {"gyroscope", u["gyroscope"]},
+                {"position_std", u["position_std"]}};
+    u["position_std"] = Vec(5e-5, 5e-5, 5e-5);
+    u["accelerometer"]["bias_std"] = Vec(0.07, 0.07, 0.07);  // beyond 0.05 m/s^2
   }
+  for (auto& c : r["diagnostics"]["changed_from_positions_only"])
+    for (int a = 0; a < 3; ++a)
+      c["position_change_sigma"][a] = c["position_change"][a].get<double>() / 5e-5;
   const std::string html = ArrayFullSections(r);
   const std::string accel = Table(html, "array-full-accelerometer");
   EXPECT_TRUE(Has(accel,
@@ -277,7 +281,9 @@ TEST(ArrayFullReport, ResultsOfAnyShapeRenderAndOnlyFullResultsGetTheSections) {
   typed.envelope.method = "array";
   typed.envelope.model = "y_a,k = s + (Omega(omega)^2 + Omega(omega_dot)) r_k";
   typed.parameters = results::ArrayParameters{0, {{"a0", {0, 0, 0}, {0, 0, 0}}}, {}};
-  typed.uncertainty = results::ArrayUncertainty{{{"a0", {0, 0, 0}}}, 0, {}};
+  typed.uncertainty = results::ArrayUncertainty();
+  typed.uncertainty->positions = {{"a0", {0, 0, 0}}};
+  typed.uncertainty->std_rms = 0;
   const json positions = results::ToJson(typed);
   ASSERT_TRUE(results::FromJson(positions, &typed).ok());
   EXPECT_FALSE(Has(ArrayFullSections(positions), "id=\"triads\""));
