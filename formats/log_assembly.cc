@@ -322,7 +322,7 @@ Status AssembleLog(const SensorLog& log, const LogStreamSelection& selection,
   int a = 0, g = 0, c = 0;
   for (size_t k = 0; k < K; ++k) {
     const ImuStreams& imu = kept[k];
-    json d = {{"name", "imu" + std::to_string(k)},
+    json d = {{"index", k},
               {"accel", imu.accel ? json(imu.accel->Name()) : json(nullptr)},
               {"gyro", imu.gyro ? json(imu.gyro->Name()) : json(nullptr)},
               {"temp", imu.temp ? json(imu.temp->Name()) : json(nullptr)},

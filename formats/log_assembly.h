@@ -50,7 +50,7 @@ struct AssembledLog {
   ArrayRecording recording;  // aK/gK per IMU K, tempK where the IMU has a temperature stream
   int64_t time_origin = 0;   // whole seconds subtracted from every t (0: none)
   // What was read, for the recording's JSON and page (SPEC §9 "What was read"):
-  // {"format", "time_base", "streams": [...], "imus": [{"name", "accel", "gyro", "temp",
+  // {"format", "time_base", "streams": [...], "imus": [{"index", "accel", "gyro", "temp",
   //   "samples", "dropped", "resampled", "temperature"}], "warnings": [...]}.
   nlohmann::json description;
 };

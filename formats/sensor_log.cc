@@ -6,15 +6,15 @@ namespace calibd::server {
 const char* StreamKindName(StreamKind kind) {
   switch (kind) {
     case StreamKind::kAccel:
-      return "accel";
+      return "accelerometer";
     case StreamKind::kGyro:
-      return "gyro";
+      return "gyroscope";
     case StreamKind::kMag:
-      return "mag";
+      return "magnetometer";
     case StreamKind::kTemperature:
       return "temperature";
   }
-  return "accel";
+  return "accelerometer";
 }
 
 int StreamDimension(StreamKind kind) { return kind == StreamKind::kTemperature ? 1 : 3; }

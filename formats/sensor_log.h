@@ -28,7 +28,8 @@
 namespace calibd::server {
 
 enum class StreamKind { kAccel, kGyro, kMag, kTemperature };
-const char* StreamKindName(StreamKind kind);  // "accel", "gyro", "mag", "temperature"
+// "accelerometer", "gyroscope", "magnetometer", "temperature"
+const char* StreamKindName(StreamKind kind);
 // Values per sample: 3, or 1 for kTemperature.
 int StreamDimension(StreamKind kind);
 

@@ -100,6 +100,10 @@ void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store) {
         if (c.is_string()) view.columns.push_back(c.get<std::string>());
       }
     }
+    if (!info.log_json.empty()) {
+      view.log = json::parse(info.log_json, nullptr, /*allow_exceptions=*/false);
+      if (!view.log.is_object()) view.log = nullptr;
+    }
     SegmentsOptions options;
     options.timeline_points = kTimelinePoints;
     s = ParseSegmentsQuery(req.params, &options);

@@ -2,7 +2,9 @@
 // and to the jobs that used it, and, for an inertial log, a timeline of the accelerometer norm
 // and the gyroscope norm against time with the static intervals the detector found shaded and
 // numbered (1, 2, ... as in the segments answer and the imu diagnostics), plus the table of
-// intervals and the thresholds used. Pure rendering; every user string is escaped.
+// intervals and the thresholds used; for a sensor log (ULog, DataFlash, bags) what was read: its
+// streams with their rates, spans and gaps, the streams of each IMU, and the log's warnings.
+// Pure rendering; every user string is escaped.
 #ifndef CALIBD_WEB_RECORDING_PAGE_H_
 #define CALIBD_WEB_RECORDING_PAGE_H_
 
@@ -36,6 +38,9 @@ struct RecordingPageView {
   // accelerometer norm at rest is about 1 g (RestNorm), else "reading units", saying why and
   // which accel_unit would convert them.
   bool accel_unit_given = false, gyro_unit_given = false;
+  // A sensor log (SPEC §9): what was read, as stored (formats/log_assembly.h
+  // AssembledLog::description: format, time_base, streams, imus, warnings); null for CSV.
+  nlohmann::json log;
 };
 
 // The accelerometer norm at rest: the median of the accelerometer norms inside the static

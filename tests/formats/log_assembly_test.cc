@@ -169,7 +169,7 @@ TEST(LogAssembly, AChoiceTheLogCannotSatisfyNamesTheKeyAndListsTheStreams) {
   const Status s = AssembleLog(log, pick, "f.ulg", &out);
   EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
   EXPECT_NE(s.message().find("streams.imus[0].gyro"), std::string::npos) << s.message();
-  EXPECT_NE(s.message().find("sensor_accel:0 (accel)"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("sensor_accel:0 (accelerometer)"), std::string::npos) << s.message();
 
   SensorLog empty;
   empty.format = "ulog";

@@ -493,8 +493,10 @@ TEST_F(PgClock, Version3ResultsAreNumberedByFinishTimeAndTheSequenceContinues) {
   }
   std::unique_ptr<PgConn> c;
   ASSERT_TRUE(PgConn::Connect(uri_, "test", &c).ok());
-  // As v3 left it: no seq (nor v5's indexes); job 1 finished after job 2 by the hosts' clocks.
+  // As v3 left it: no seq (nor v5's indexes, nor v6's log_json); job 1 finished after job 2 by
+  // the hosts' clocks.
   ASSERT_TRUE(c->ExecScript("DROP INDEX results_by_state; DROP INDEX devices_by_serial_bytes;"
+                            "ALTER TABLE recordings DROP COLUMN log_json;"
                             "ALTER TABLE results DROP COLUMN seq;"
                             "UPDATE jobs SET finished_at = 3000 WHERE id = 1;"
                             "UPDATE jobs SET finished_at = 2000 WHERE id = 2;"

@@ -150,5 +150,44 @@ TEST(RecordingPage, WithoutSegmentsTheNoteSaysWhy) {
   EXPECT_EQ(html.find("plot-timeline-accel"), std::string::npos);
 }
 
+TEST(RecordingPage, ASensorLogShowsItsStreamsImusAndWarningsEscaped) {
+  RecordingPageView v = View();
+  v.log = {{"format", "ulog"},
+           {"time_base", "sensor_gyro:0 (timestamp_sample)"},
+           {"warnings", {"log cut at byte 1234 <b>"}},
+           {"streams",
+            {{{"name", "sensor_accel:0"},
+              {"kind", "accel"},
+              {"device_id", 2490378},
+              {"samples", 12000},
+              {"rate", 1000.0},
+              {"start", 1.5},
+              {"end", 13.499},
+              {"gaps", 2},
+              {"unit", "m/s^2"},
+              {"time_source", "timestamp_sample"},
+              {"note", "<script>x</script>"}}}},
+           {"imus",
+            {{{"index", 0},
+              {"accel", "sensor_accel:0"},
+              {"gyro", "sensor_gyro:0"},
+              {"temp", nullptr},
+              {"samples", 12000},
+              {"dropped", 0},
+              {"resampled", json::array()}}}}};
+  const std::string html = RenderRecordingPage(v);
+  EXPECT_NE(html.find("<section id=\"log\">"), std::string::npos);
+  EXPECT_NE(html.find("A ulog log"), std::string::npos);
+  EXPECT_NE(html.find("sensor_gyro:0 (timestamp_sample)"), std::string::npos);
+  EXPECT_NE(html.find("log cut at byte 1234 &lt;b&gt;"), std::string::npos);
+  EXPECT_EQ(html.find("<script>x</script>"), std::string::npos);
+  EXPECT_NE(html.find("2490378"), std::string::npos);
+  EXPECT_NE(html.find("the log as uploaded"), std::string::npos);
+  EXPECT_EQ(Count(html, "<tr><td>sensor_accel:0</td>"), 1u);
+
+  v.log = nullptr;  // CSV: no such section
+  EXPECT_EQ(RenderRecordingPage(v).find("id=\"log\""), std::string::npos);
+}
+
 }  // namespace
 }  // namespace calibd::web

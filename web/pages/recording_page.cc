@@ -207,6 +207,60 @@ std::string SegmentsSection(const RecordingPageView& v) {
   return s + "</section>";
 }
 
+std::string Cell(const json& j, const char* key, int digits = 6) {
+  if (!j.is_object() || !j.contains(key) || j[key].is_null()) {
+    return "<span class=\"muted\">\xE2\x80\x94</span>";
+  }
+  const json& v = j[key];
+  if (v.is_number_integer()) return std::to_string(v.get<long long>());
+  if (v.is_number()) return E(FormatSig(v.get<double>(), digits));
+  if (v.is_string()) return E(v.get<std::string>());
+  return E(v.dump());
+}
+
+// SPEC §9 "What was read": the log's streams, the IMUs formed from them, its warnings.
+std::string LogSection(const json& log) {
+  std::string s = "<section id=\"log\"><h2>What was read</h2><p>A " +
+                  E(log.value("format", std::string("sensor"))) +
+                  " log. Time base: " + E(log.value("time_base", std::string("?"))) +
+                  ". Values in SI (magnetic field in \xC2\xB5T) as the format defines them.</p>";
+  if (log.contains("warnings") && log["warnings"].is_array()) {
+    for (const json& w : log["warnings"]) {
+      if (w.is_string()) s += "<p class=\"warning\">" + E(w.get<std::string>()) + "</p>";
+    }
+  }
+  if (log.contains("streams") && log["streams"].is_array()) {
+    s += "<div class=\"table-wrap\"><table class=\"table-streams\"><thead><tr><th>stream</th>"
+         "<th>kind</th><th>device id</th><th>samples</th><th>rate (Hz)</th><th>start (s)</th>"
+         "<th>end (s)</th><th>gaps</th><th>unit in the log</th><th>time</th><th>note</th>"
+         "</tr></thead><tbody>";
+    for (const json& st : log["streams"]) {
+      s += "<tr><td>" + Cell(st, "name") + "</td><td>" + Cell(st, "kind") + "</td><td>" +
+           Cell(st, "device_id") + "</td><td>" + Cell(st, "samples") + "</td><td>" +
+           Cell(st, "rate", 5) + "</td><td>" + Cell(st, "start", 9) + "</td><td>" +
+           Cell(st, "end", 9) + "</td><td>" + Cell(st, "gaps") + "</td><td>" + Cell(st, "unit") +
+           "</td><td>" + Cell(st, "time_source") + "</td><td>" + Cell(st, "note") + "</td></tr>";
+    }
+    s += "</tbody></table></div>";
+  }
+  if (log.contains("imus") && log["imus"].is_array()) {
+    s += "<div class=\"table-wrap\"><table class=\"table-log-imus\"><thead><tr><th>IMU</th>"
+         "<th>accelerometer</th><th>gyroscope</th><th>temperature</th><th>samples</th>"
+         "<th>dropped</th><th>resampled</th></tr></thead><tbody>";
+    for (const json& imu : log["imus"]) {
+      const json resampled = imu.value("resampled", json::array());
+      s += "<tr><td>" + Cell(imu, "index") + "</td><td>" + Cell(imu, "accel") + "</td><td>" +
+           Cell(imu, "gyro") + "</td><td>" + Cell(imu, "temp") + "</td><td>" +
+           Cell(imu, "samples") + "</td><td>" + Cell(imu, "dropped") + "</td><td>" +
+           (resampled.empty() ? std::string("none") : E(resampled.dump())) + "</td></tr>";
+    }
+    s += "</tbody></table></div><p class=\"muted\">Choose other streams with the config key "
+         "<code>streams</code>, e.g. <code>{\"imus\": [{\"accel\": \"sensor_accel:1\", "
+         "\"gyro\": \"sensor_gyro:1\"}]}</code>.</p>";
+  }
+  return s + "</section>";
+}
+
 }  // namespace
 
 double RestNorm(const RecordingPageView& view) {
@@ -256,10 +310,12 @@ std::string RenderRecordingPage(const RecordingPageView& v) {
           Dd("file name", v.file_name.empty() ? std::string("<span class=\"muted\">none</span>")
                                               : E(v.file_name)) +
           Dd("uploaded", E(v.created_at)) + Dd("columns", columns) +
-          Dd("data", "<a href=\"/api/v1/recordings/" + id +
-                         "/data\">the CSV</a> \xC2\xB7 <a href=\"/api/v1/recordings/" + id +
+          Dd("data", "<a href=\"/api/v1/recordings/" + id + "/data\">" +
+                         (v.log.is_object() ? "the log as uploaded" : "the CSV") +
+                         "</a> \xC2\xB7 <a href=\"/api/v1/recordings/" + id +
                          "\">metadata as JSON</a>") +
           "</dl></section>";
+  if (v.log.is_object()) body += LogSection(v.log);
   body += SegmentsSection(v);
   body += JobsSection(v);
   return RenderPage("Recording " + id, "page-recording", body);
