@@ -109,10 +109,13 @@ struct TypeReader {
 struct StreamState {
   SensorStream stream;
   int spec = 0;
-  uint8_t type = 0;               // the message type that defined it (FMTU lookup)
-  std::array<int, 3> field{};     // its fields' indices in that type (FMTU lookup)
-  std::vector<int64_t> fallback;  // TimeUS/TimeMS when t_ns holds SampleUS
-  int64_t zero_sample_times = 0;  // SampleUS == 0 seen
+  uint8_t type = 0;            // the message type that defined it (FMTU lookup)
+  std::array<int, 3> field{};  // its fields' indices in that type (FMTU lookup)
+  // The logging times (TimeUS or TimeMS, as stream.time_source says) once a sample came with a
+  // SampleUS: t_ns then holds SampleUS where there was one, and the stream falls back to these
+  // when any sample lacked it (zero, or a message type without it).
+  std::vector<int64_t> fallback;
+  int64_t without_sample_time = 0;
 };
 
 // Times in a message: sample time (when the type has SampleUS) and the logging time, in ns.
@@ -262,22 +265,25 @@ Status Reader::HandleFmt(const uint8_t* p, int64_t offset) {
 // Decides the role of a newly defined type and the fields it reads.
 void Reader::Bind(TypeReader* reader) const {
   const MessageFormat& f = reader->format;
-  const auto field = [&](const char* label, bool scalar) {
+  // The index of field `label` when its format character is one of `chars`, else -1.
+  const auto field = [&](const char* label, const char* chars) {
     const int i = f.FieldIndex(label);
-    if (i < 0) return -1;
-    const char c = f.format[i];
-    return (scalar ? dataflash::IsScalarField(c) : (c == 'N' || c == 'Z' || c == 'n')) ? i : -1;
+    return i >= 0 && std::strchr(chars, f.format[i]) != nullptr ? i : -1;
   };
-  const auto metadata = [&](Role role, const char* a, bool a_scalar, const char* b, bool b_scalar,
-                            const char* c, bool c_scalar) {
-    reader->meta = {field(a, a_scalar), field(b, b_scalar), c ? field(c, c_scalar) : 0};
-    if (reader->meta[0] >= 0 && reader->meta[1] >= 0 && reader->meta[2] >= 0) reader->role = role;
+  constexpr const char* kId = "bBM";  // a char or uint8 id
+  constexpr const char* kText = "nNZ";
+  constexpr const char* kNumber = "bBMhHiIqQcCeELfdg";
+  const auto metadata = [&](Role role, int a, int b, int c) {
+    reader->meta = {a, b, c};
+    if (a >= 0 && b >= 0 && c >= 0) reader->role = role;
   };
   if (f.name == "FMTU")
-    return metadata(Role::kFmtu, "FmtType", true, "UnitIds", false, "MultIds", false);
-  if (f.name == "UNIT") return metadata(Role::kUnit, "Id", true, "Label", false, nullptr, true);
-  if (f.name == "MULT") return metadata(Role::kMult, "Id", true, "Mult", true, nullptr, true);
-  if (f.name == "PARM") return metadata(Role::kParm, "Name", false, "Value", true, nullptr, true);
+    return metadata(Role::kFmtu, field("FmtType", kId), field("UnitIds", kText),
+                    field("MultIds", kText));
+  if (f.name == "UNIT") return metadata(Role::kUnit, field("Id", kId), field("Label", kText), 0);
+  if (f.name == "MULT") return metadata(Role::kMult, field("Id", kId), field("Mult", kNumber), 0);
+  if (f.name == "PARM")
+    return metadata(Role::kParm, field("Name", kText), field("Value", kNumber), 0);
 
   for (int s = 0; s < kSpecCount; ++s) {
     const std::string base = kSpecs[s].message;
@@ -292,7 +298,7 @@ void Reader::Bind(TypeReader* reader) const {
     bound.spec = s;
     bool complete = true;
     for (int k = 0; k < StreamDimension(kSpecs[s].kind); ++k)
-      complete = complete && (bound.field[k] = field(kSpecs[s].fields[k], true)) >= 0;
+      complete = complete && (bound.field[k] = field(kSpecs[s].fields[k], kNumber)) >= 0;
     if (!complete) continue;
     bound.state_of.fill(-1);
     reader->streams.push_back(bound);
@@ -320,15 +326,16 @@ void Reader::HandleMetadata(const TypeReader& reader, const uint8_t* p) {
   const auto text = [&](int k) {
     return dataflash::ReadText(p + f.offsets[reader.meta[k]], f.format[reader.meta[k]]);
   };
+  const auto id = [&] { return p[f.offsets[reader.meta[0]]]; };  // one byte (Bind)
   switch (reader.role) {
     case Role::kFmtu:
-      fmtu_[static_cast<uint8_t>(scalar(0))] = {text(1), text(2)};
+      fmtu_[id()] = {text(1), text(2)};
       break;
     case Role::kUnit:
-      unit_labels_[static_cast<char>(scalar(0))] = text(1);
+      unit_labels_[static_cast<char>(id())] = text(1);
       break;
     case Role::kMult:
-      multipliers_[static_cast<char>(scalar(0))] = SnapToPowerOfTen(scalar(1));
+      multipliers_[static_cast<char>(id())] = SnapToPowerOfTen(scalar(1));
       break;
     default:  // kParm
       params_[text(0)] = scalar(1);
@@ -369,9 +376,8 @@ int Reader::StateFor(const TypeReader& reader, BoundStream* bound, int instance)
     state.stream.kind = spec.kind;
     state.stream.topic = spec.message;
     state.stream.instance = instance;
-    state.stream.time_source = reader.sample_us >= 0 ? "SampleUS"
-                               : reader.time_us >= 0 ? "TimeUS"
-                                                     : "TimeMS";
+    // The logging time's name; Finish() makes it SampleUS when every sample had one.
+    state.stream.time_source = reader.time_us >= 0 ? "TimeUS" : "TimeMS";
     if (reader.older_name)
       state.stream.note =
           "logged as " + reader.format.name + " (older ArduPilot: one message name per instance)";
@@ -398,10 +404,14 @@ Status Reader::HandleSensor(TypeReader& reader, const uint8_t* p, int64_t offset
     if (++samples_ > limits_.max_samples)
       return Damage(offset, "more than " + std::to_string(limits_.max_samples) +
                                 " samples (the limit on samples per log)");
-    if (times.has_sample) {
-      stream.t_ns.push_back(times.sample);
+    if (times.has_sample || !state.fallback.empty()) {
+      if (state.fallback.empty()) {  // the samples before had only their logging time
+        state.fallback = stream.t_ns;
+        state.without_sample_time += stream.samples();
+      }
+      state.without_sample_time += !times.has_sample || times.sample == 0;
+      stream.t_ns.push_back(times.has_sample ? times.sample : times.logged);
       state.fallback.push_back(times.logged);
-      state.zero_sample_times += times.sample == 0;
     } else {
       stream.t_ns.push_back(times.logged);
     }
@@ -464,13 +474,13 @@ void Reader::Finish(SensorLog* log) {
             [&](const StreamState& a, const StreamState& b) { return key(a) < key(b); });
   for (StreamState& state : states_) {
     SensorStream& stream = state.stream;
-    if (!state.fallback.empty() && state.zero_sample_times > 0) {
+    if (!state.fallback.empty() && state.without_sample_time == 0) {
+      stream.time_source = "SampleUS";
+    } else if (!state.fallback.empty()) {
       stream.t_ns = std::move(state.fallback);
-      stream.time_source =
-          stream.time_source == "SampleUS" && types_[state.type].time_us >= 0 ? "TimeUS" : "TimeMS";
       if (!stream.note.empty()) stream.note += "; ";
-      stream.note += "SampleUS is zero in " + std::to_string(state.zero_sample_times) + " of " +
-                     std::to_string(stream.samples()) + " samples: the logging time " +
+      stream.note += "SampleUS is zero or absent in " + std::to_string(state.without_sample_time) +
+                     " of " + std::to_string(stream.samples()) + " samples: the logging time " +
                      stream.time_source + " is used";
     }
     if (!ApplyUnits(&state, &log->warnings)) continue;

@@ -40,10 +40,6 @@ int FieldBytes(char c) {
   }
 }
 
-bool IsScalarField(char c) {
-  return FieldBytes(c) > 0 && c != 'n' && c != 'N' && c != 'Z' && c != 'a';
-}
-
 bool IsIntegerField(char c) { return std::strchr("bBMhHiIqQ", c) != nullptr && c != '\0'; }
 
 int MessageFormat::FieldIndex(std::string_view label) const {

@@ -30,8 +30,6 @@ inline constexpr int kFmtLength =
 //   latitude or longitude), f float, q int64, Q uint64, d double, n char[4], N char[16],
 //   Z char[64], a int16[32].
 int FieldBytes(char c);
-// True for the characters that hold one number (all but n, N, Z and a).
-bool IsScalarField(char c);
 // True for the characters that hold an integer without a scale (b B M h H i I q Q).
 bool IsIntegerField(char c);
 
@@ -54,7 +52,8 @@ struct MessageFormat {
 // labels different from the number of format characters.
 bool ParseFmt(const uint8_t* payload, MessageFormat* format, std::string* why);
 
-// The value of scalar field `c` (IsScalarField) at `p`, scaled (c/C/e/E ×0.01, L ×1e-7).
+// The value of a field `c` holding one number (all but n, N, Z and a) at `p`, scaled (c/C/e/E
+// ×0.01, L ×1e-7).
 double ReadScalar(const uint8_t* p, char c);
 // The value of integer field `c` (IsIntegerField) at `p`; uint64 values above INT64_MAX come back
 // negative (callers range-check).
