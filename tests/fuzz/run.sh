@@ -34,6 +34,7 @@ runs() {
     fuzz_config) echo 500000 ;;
     fuzz_calibrate) echo 40000 ;;
     fuzz_multipart) echo 15000 ;;
+    fuzz_dataflash) echo 60000 ;;
   esac
 }
 
