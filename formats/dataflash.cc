@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <iterator>
 #include <limits>
 #include <map>
 #include <memory>
@@ -33,6 +34,9 @@ struct StreamSpec {
   // instance 0), suffix: INS_ACC_ID, INS_ACC2_ID, ...; COMPASS_DEV_ID, COMPASS_DEV_ID2, ...
   const char* device_param_prefix;
   const char* device_param_suffix;
+  // The batch sampler's ISBD: kind and instance from its ISBH, values in SI after dividing by
+  // the ISBH's multiplier; its FMTU ("o" for gyro batches too) is not used.
+  bool batch = false;
 };
 
 constexpr StreamSpec kSpecs[] = {
@@ -43,8 +47,14 @@ constexpr StreamSpec kSpecs[] = {
     {"GYR", StreamKind::kGyro, {"GyrX", "GyrY", "GyrZ"}, "rad/s", 1, 1, "INS_GYR", "_ID"},
     // 1 gauss = 100 µT; ArduPilot logs milligauss.
     {"MAG", StreamKind::kMag, {"MagX", "MagY", "MagZ"}, "Gauss", 100, 1e-3, "COMPASS_DEV_ID", ""},
+    {"ISBD", StreamKind::kAccel, {"x", "y", "z"}, "m/s/s", 1, 1, "INS_ACC", "_ID", true},
+    {"ISBD", StreamKind::kGyro, {"x", "y", "z"}, "rad/s", 1, 1, "INS_GYR", "_ID", true},
 };
 constexpr int kSpecCount = sizeof(kSpecs) / sizeof(kSpecs[0]);
+// The ISBD accel and gyro specs, by an ISBH's sensor type (0 accel, 1 gyro).
+constexpr int kBatchSpec[2] = {kSpecCount - 2, kSpecCount - 1};
+static_assert(kSpecs[kBatchSpec[0]].batch && kSpecs[kBatchSpec[0]].kind == StreamKind::kAccel &&
+              kSpecs[kBatchSpec[1]].batch && kSpecs[kBatchSpec[1]].kind == StreamKind::kGyro);
 
 // ArduPilot's unit and multiplier ids (LogStructure.h log_Units, log_Multipliers) for a log whose
 // FMTU names them without UNIT or MULT messages.
@@ -80,7 +90,23 @@ double SnapToPowerOfTen(double m) {
 }
 
 // The metadata messages calibd reads, and the fields it reads from them.
-enum class Role { kSkip, kFmt, kFmtu, kUnit, kMult, kParm, kSensor };
+enum class Role { kSkip, kFmt, kFmtu, kUnit, kMult, kParm, kSensor, kBatchHeader, kBatchData };
+
+// ISBH (one batch of the batch sampler) and ISBD (32 samples of it): the fields read, in order.
+constexpr const char* kBatchHeaderFields[] = {"N",       "type",     "instance", "mul",
+                                              "smp_cnt", "SampleUS", "smp_rate"};
+constexpr const char* kBatchDataFields[] = {"N", "seqno", "x", "y", "z"};
+constexpr int kBatchSamplesPerMessage = 32;
+
+// A batch as its ISBH describes it.
+struct Batch {
+  int spec = 0;  // the ISBD accel or gyro spec
+  int instance = 0;
+  double multiplier = 1;  // stored value = reading × multiplier
+  int64_t samples = 0;    // in the batch
+  int64_t first_ns = 0;   // time of its first sample
+  double rate_hz = 0;     // sample k at first_ns + k / rate_hz
+};
 
 // One stream a sensor message type feeds.
 struct BoundStream {
@@ -103,6 +129,8 @@ struct TypeReader {
   // Metadata roles: the field indices they read (kFmtu: FmtType, UnitIds, MultIds; kUnit: Id,
   // Label; kMult: Id, Mult; kParm: Name, Value).
   std::array<int, 3> meta{};
+  // kBatchHeader, kBatchData: the indices of kBatchHeaderFields or kBatchDataFields.
+  std::array<int, 7> batch{};
 };
 
 // A stream being read, with what its finishing needs.
@@ -150,6 +178,9 @@ class Reader {
                    MessageTimes* times) const;
   void Bind(TypeReader* reader) const;
   int StateFor(const TypeReader& reader, BoundStream* bound, int instance);
+  int StateIndex(const TypeReader& reader, int spec, int instance, const std::array<int, 3>& field);
+  void HandleBatchHeader(const TypeReader& reader, const uint8_t* p);
+  Status HandleBatchData(const TypeReader& reader, const uint8_t* p, int64_t offset);
   void Finish(SensorLog* log);
   bool ApplyUnits(StreamState* state, std::vector<std::string>* warnings) const;
   Status Damage(int64_t offset, const std::string& what) const;
@@ -169,6 +200,8 @@ class Reader {
   std::map<char, std::string> unit_labels_;
   std::map<char, double> multipliers_;
   std::map<std::string, double> params_;
+  std::map<int64_t, Batch> batches_;  // by ISBH N
+  int64_t unread_batch_data_ = 0;     // ISBD without a valid ISBH
 };
 
 Status Reader::Damage(int64_t offset, const std::string& what) const {
@@ -235,6 +268,11 @@ Status Reader::HandleMessage(TypeReader& reader, const uint8_t* p, int64_t offse
       return HandleSensor(reader, p, offset);
     case Role::kSkip:
       return Status::Ok();
+    case Role::kBatchHeader:
+      HandleBatchHeader(reader, p);
+      return Status::Ok();
+    case Role::kBatchData:
+      return HandleBatchData(reader, p, offset);
     default:
       HandleMetadata(reader, p);
       return Status::Ok();
@@ -284,8 +322,21 @@ void Reader::Bind(TypeReader* reader) const {
   if (f.name == "MULT") return metadata(Role::kMult, field("Id", kId), field("Mult", kNumber), 0);
   if (f.name == "PARM")
     return metadata(Role::kParm, field("Name", kText), field("Value", kNumber), 0);
+  const auto batch = [&](Role role, const auto& labels) {
+    bool complete = true;
+    for (size_t k = 0; k < std::size(labels); ++k) {
+      const bool array = role == Role::kBatchData && k >= 2;
+      const bool rate = role == Role::kBatchHeader && k == 6;
+      reader->batch[k] = field(labels[k], array ? "a" : rate ? kNumber : "bBMhHiIqQ");
+      complete = complete && reader->batch[k] >= 0;
+    }
+    if (complete) reader->role = role;
+  };
+  if (f.name == "ISBH") return batch(Role::kBatchHeader, kBatchHeaderFields);
+  if (f.name == "ISBD") return batch(Role::kBatchData, kBatchDataFields);
 
   for (int s = 0; s < kSpecCount; ++s) {
+    if (kSpecs[s].batch) continue;
     const std::string base = kSpecs[s].message;
     int fixed_instance = 0;
     if (f.name.size() == base.size() + 1 && f.name.compare(0, base.size(), base) == 0 &&
@@ -364,27 +415,34 @@ Status Reader::ReadTimes(const TypeReader& reader, const uint8_t* p, int64_t off
 // The states_ index of the stream `bound` feeds for `instance`, created on first use.
 int Reader::StateFor(const TypeReader& reader, BoundStream* bound, int instance) {
   int& cached = bound->state_of[instance];
-  if (cached >= 0) return cached;
-  auto [it, inserted] = state_index_.try_emplace({bound->spec, instance}, 0);
+  if (cached < 0) cached = StateIndex(reader, bound->spec, instance, bound->field);
+  return cached;
+}
+
+// The states_ index of the stream of (spec, instance), created on first use from `reader`'s
+// message type and `field`.
+int Reader::StateIndex(const TypeReader& reader, int spec_index, int instance,
+                       const std::array<int, 3>& field) {
+  auto [it, inserted] = state_index_.try_emplace({spec_index, instance}, 0);
   if (inserted) {
-    const StreamSpec& spec = kSpecs[bound->spec];
+    const StreamSpec& spec = kSpecs[spec_index];
     it->second = static_cast<int>(states_.size());
     StreamState state;
-    state.spec = bound->spec;
+    state.spec = spec_index;
     state.type = reader.format.type;
-    state.field = bound->field;
+    state.field = field;
     state.stream.kind = spec.kind;
     state.stream.topic = spec.message;
     state.stream.instance = instance;
-    // The logging time's name; Finish() makes it SampleUS when every sample had one.
-    state.stream.time_source = reader.time_us >= 0 ? "TimeUS" : "TimeMS";
+    // The logging time's name; Finish() makes it SampleUS when every sample had one. A batch's
+    // samples are timed from its ISBH's SampleUS.
+    state.stream.time_source = spec.batch ? "SampleUS" : reader.time_us >= 0 ? "TimeUS" : "TimeMS";
     if (reader.older_name)
       state.stream.note =
           "logged as " + reader.format.name + " (older ArduPilot: one message name per instance)";
     states_.push_back(std::move(state));
   }
-  cached = it->second;
-  return cached;
+  return it->second;
 }
 
 Status Reader::HandleSensor(TypeReader& reader, const uint8_t* p, int64_t offset) {
@@ -422,13 +480,71 @@ Status Reader::HandleSensor(TypeReader& reader, const uint8_t* p, int64_t offset
   return Status::Ok();
 }
 
+// Remembers the batch an ISBH describes; one that cannot be read (an unknown sensor type, a
+// multiplier or rate that is not positive, a time out of range) is forgotten, so that its ISBD
+// count as unread.
+void Reader::HandleBatchHeader(const TypeReader& reader, const uint8_t* p) {
+  const MessageFormat& f = reader.format;
+  const auto value = [&](int k) {
+    return dataflash::ReadScalar(p + f.offsets[reader.batch[k]], f.format[reader.batch[k]]);
+  };
+  const auto integer = [&](int k) {
+    return dataflash::ReadInteger(p + f.offsets[reader.batch[k]], f.format[reader.batch[k]]);
+  };
+  const int64_t n = integer(0), type = integer(1), instance = integer(2), samples = integer(4),
+                sample_us = integer(5);
+  const double multiplier = value(3), rate = value(6);
+  // Room for a batch's last offset (65 535 samples at 1 Hz) after its first time.
+  constexpr int64_t kMaxFirstUs = (std::numeric_limits<int64_t>::max() - (int64_t{1} << 47)) / 1000;
+  if ((type != 0 && type != 1) || instance < 0 || instance > 255 || !(multiplier > 0) ||
+      !(rate >= 1 && rate <= 1e6) || samples <= 0 || samples > 65535 || sample_us < 0 ||
+      sample_us > kMaxFirstUs) {
+    batches_.erase(n);
+    return;
+  }
+  Batch& batch = batches_[n];
+  batch.spec = kBatchSpec[type];
+  batch.instance = static_cast<int>(instance);
+  batch.multiplier = multiplier;
+  batch.samples = samples;
+  batch.first_ns = sample_us * 1000;
+  batch.rate_hz = rate;
+}
+
+// Appends the (up to) 32 samples of an ISBD to its batch's stream.
+Status Reader::HandleBatchData(const TypeReader& reader, const uint8_t* p, int64_t offset) {
+  const MessageFormat& f = reader.format;
+  const auto& at = reader.batch;
+  const auto found = batches_.find(dataflash::ReadInteger(p + f.offsets[at[0]], f.format[at[0]]));
+  const int64_t first =
+      kBatchSamplesPerMessage * dataflash::ReadInteger(p + f.offsets[at[1]], f.format[at[1]]);
+  if (found == batches_.end() || first < 0 || first >= found->second.samples) {
+    ++unread_batch_data_;
+    return Status::Ok();
+  }
+  const Batch& batch = found->second;
+  StreamState& state =
+      states_[StateIndex(reader, batch.spec, batch.instance, {at[2], at[3], at[4]})];
+  for (int j = 0; j < kBatchSamplesPerMessage && first + j < batch.samples; ++j) {
+    if (++samples_ > limits_.max_samples)
+      return Damage(offset, "more than " + std::to_string(limits_.max_samples) +
+                                " samples (the limit on samples per log)");
+    state.stream.t_ns.push_back(batch.first_ns +
+                                std::llround(static_cast<double>(first + j) * 1e9 / batch.rate_hz));
+    for (int k = 2; k < 5; ++k)
+      state.stream.values.push_back(dataflash::ReadArrayElement(p + f.offsets[at[k]], j) /
+                                    batch.multiplier);
+  }
+  return Status::Ok();
+}
+
 // Converts a stream's values to SI from the unit and multiplier its FMTU gives (else the
 // defaults), and sets its unit. False when the FMTU gives another unit than the stream's.
 bool Reader::ApplyUnits(StreamState* state, std::vector<std::string>* warnings) const {
   const StreamSpec& spec = kSpecs[state->spec];
   std::string label = spec.unit_label;
   double multiplier = spec.default_multiplier;
-  const auto found = fmtu_.find(state->type);
+  const auto found = spec.batch ? fmtu_.end() : fmtu_.find(state->type);
   const auto field = static_cast<size_t>(state->field[0]);
   if (found != fmtu_.end() && field < found->second.first.size() &&
       field < found->second.second.size()) {
@@ -495,8 +611,12 @@ void Reader::Finish(SensorLog* log) {
       stream.device_id = static_cast<int64_t>(id->second);
     log->streams.push_back(std::move(stream));
   }
+  if (unread_batch_data_ > 0)
+    log->warnings.push_back(std::to_string(unread_batch_data_) +
+                            " ISBD messages (batch sampler) not read: their ISBH was lost, "
+                            "unreadable, or describes fewer samples");
   if (log->streams.empty())
-    log->warnings.push_back("no IMU, ACC, GYR or MAG messages with their fields in the log");
+    log->warnings.push_back("no IMU, ACC, GYR, MAG or ISBD messages with their fields in the log");
 }
 
 }  // namespace

@@ -10,14 +10,19 @@
 //   - ACC and GYR (the raw per-sample messages, INS_RAW_LOG_OPT) per instance `I`: kAccel, kGyro.
 //   - MAG per instance `I` (older MAG2, MAG3 as above): MagX/MagY/MagZ (kMag), written in
 //     milligauss, converted to µT (×0.1).
+//   - ISBD, the batch sampler's high-rate batches (INS_LOG_BAT_MASK): per ISBH sensor type and
+//     instance, kAccel or kGyro, named "ISBD:instance"; sample k of a batch at the ISBH's
+//     SampleUS + k / smp_rate, values the stored integers / mul. Batches are seconds apart (the
+//     stream has gaps); post-filter batches appear as instances after the sensors' own, as
+//     ArduPilot numbers them. An ISBD whose ISBH is missing or unreadable is not read (warning).
 //   Where the log has FMTU (units and multipliers per field) with UNIT and MULT, the unit and
 //   multiplier come from them (a field whose unit is not the one above is not read: warning);
 //   else the defaults above. device_id: the ArduPilot device id parameter of the instance where
 //   the log's PARM messages give it (INS_ACC_ID, INS_ACC2_ID, INS_ACC3_ID for accel and
 //   temperature, INS_GYR*_ID for gyro, COMPASS_DEV_ID, COMPASS_DEV_ID2, ... for mag), else -1.
-//   The batch sampler's ISBH/ISBD messages are not read.
-// Time: `SampleUS` where the message has it and it is non-zero in every sample of the stream,
-// else `TimeUS` (`TimeMS` in the oldest logs); µs or ms to ns exactly; time_source says which.
+// Time (but ISBD, above): `SampleUS` where the message has it and it is non-zero in every sample of
+// the stream, else `TimeUS` (`TimeMS` in the oldest logs); µs or ms to ns exactly; time_source says
+// which.
 //
 // Damage: bytes that do not start a message of a defined type (junk between messages, as real
 // logs have) are skipped to the next 0xA3 0x95 as ArduPilot's tools do, counted in a warning. A

@@ -44,14 +44,58 @@ SPECS = [
 ]
 
 
+def add(streams, key, times, values):
+    """times: (sample time, logging time, whether the sample time is there), in ns."""
+    s = streams.setdefault(key, {"samples": 0, "first": times, "all_sampled": True,
+                                 "sums": [0.0] * len(values)})
+    s["samples"] += 1
+    s["last"] = times
+    s["all_sampled"] = s["all_sampled"] and times[2]
+    for k, v in enumerate(values):
+        s["sums"][k] += v
+
+
+def finish(s):
+    """calibd's rule (formats/dataflash.h): SampleUS where every sample of the stream has one."""
+    which = 0 if s.pop("all_sampled") else 1
+    s["first_ns"] = s.pop("first")[which]
+    s["last_ns"] = s.pop("last")[which]
+    s["means"] = [v / s["samples"] for v in s.pop("sums")]
+
+
+def logged_ns(m):
+    """The logging time: TimeUS, or TimeMS in the oldest logs."""
+    return m.TimeUS * 1000 if hasattr(m, "TimeUS") else m.TimeMS * 1000000
+
+
+def add_batch(streams, batches, m):
+    """The samples of one ISBD of the batch sampler, timed and scaled by its ISBH."""
+    h = batches.get(m.N)
+    if h is None:
+        return
+    kind = {0: "accel", 1: "gyro"}[h.type]
+    for j in range(32):
+        k = 32 * m.seqno + j
+        if k >= h.smp_cnt:
+            break
+        t_ns = h.SampleUS * 1000 + round(k * 1e9 / h.smp_rate)
+        add(streams, "ISBD:%d %s" % (h.instance, kind), (t_ns, t_ns, True),
+            [m.x[j] / h.mul, m.y[j] / h.mul, m.z[j] / h.mul])
+
+
 def main(path):
     log = DFReader.DFReader_binary(path, zero_time_base=True)
     streams = {}
+    batches = {}
     while True:
         m = log.recv_msg()
         if m is None:
             break
         name = m.get_type()
+        if name == "ISBH":
+            batches[m.N] = m
+        elif name == "ISBD":
+            add_batch(streams, batches, m)
         for base, kind, fields, factor in SPECS:
             if name == base:
                 instance = getattr(m, "I", 0)
@@ -61,15 +105,13 @@ def main(path):
                 continue
             if not all(hasattr(m, f) for f in fields):
                 continue
-            us = getattr(m, "SampleUS", 0) or m.TimeUS
-            s = streams.setdefault("%s:%d %s" % (base, instance, kind),
-                                   {"samples": 0, "first_ns": us * 1000, "sums": [0.0] * len(fields)})
-            s["samples"] += 1
-            s["last_ns"] = us * 1000
-            for k, f in enumerate(fields):
-                s["sums"][k] += getattr(m, f) * factor
+            # Both times; a stream uses SampleUS only where every sample has one (finish()).
+            sample_us = getattr(m, "SampleUS", 0)
+            add(streams, "%s:%d %s" % (base, instance, kind),
+                (sample_us * 1000, logged_ns(m), sample_us != 0),
+                [getattr(m, f) * factor for f in fields])
     for s in streams.values():
-        s["means"] = [v / s["samples"] for v in s.pop("sums")]
+        finish(s)
     json.dump(streams, sys.stdout, indent=1, sort_keys=True)
 
 

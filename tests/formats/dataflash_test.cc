@@ -26,6 +26,8 @@ using calibd::testing::DataFlashWriter;
 using calibd::testing::kDfAcc;
 using calibd::testing::kDfFmtu;
 using calibd::testing::kDfImu;
+using calibd::testing::kDfIsbd;
+using calibd::testing::kDfIsbh;
 using calibd::testing::kDfMag;
 using calibd::testing::kDfMult;
 using calibd::testing::kDfParm;
@@ -203,6 +205,51 @@ TEST(DataFlashTest, SampleTimeWhereEverySampleHasOneElseLoggingTime) {
   }
 }
 
+// The batch sampler: an ISBH per batch (sensor type, instance, multiplier, sample count, first
+// sample's time, rate), then its samples 32 per ISBD.
+TEST(DataFlashTest, ReadsBatchSamplerBatches) {
+  DataFlashWriter w;
+  calibd::testing::WriteArduPilotFormats(&w);
+  // Row j of ISBD seqno q holds sample 32 q + j: x = 10 (32 q + j), y = -x, z = 7.
+  const auto data = [&](int batch, int seqno) {
+    std::vector<int16_t> x(32), y(32), z(32, 7);
+    for (int j = 0; j < 32; ++j) x[j] = static_cast<int16_t>(10 * (32 * seqno + j)), y[j] = -x[j];
+    w.Message(kDfIsbd, {5'000'000 + seqno, batch, seqno, x, y, z});
+  };
+  // Batch 7: accelerometer 1, 40 samples at 1 kHz from 2 s, multiplier 100.
+  w.Message(kDfIsbh, {4'000'000, 7, 0, 1, 100, 40, 2'000'000, 1000.0});
+  data(7, 0);
+  data(7, 1);  // 8 of its 32 rows are samples
+  data(7, 2);  // past the batch: not read
+  data(9, 0);  // no ISBH 9: not read
+  // Batch 8: gyroscope 0, 32 samples at 3 kHz (a period of 333.3 µs) from 3 s, multiplier 1000.
+  w.Message(kDfIsbh, {6'000'000, 8, 1, 0, 1000, 32, 3'000'000, 3000.0});
+  data(8, 0);
+  SensorLog log;
+  ASSERT_TRUE(Read(w.bytes(), &log).ok());
+  const SensorStream* accel = Find(log, "ISBD:1", StreamKind::kAccel);
+  const SensorStream* gyro = Find(log, "ISBD:0", StreamKind::kGyro);
+  ASSERT_NE(accel, nullptr);
+  ASSERT_NE(gyro, nullptr);
+  EXPECT_EQ(log.streams.size(), 2u);
+  ASSERT_EQ(accel->samples(), 40);
+  EXPECT_EQ(accel->time_source, "SampleUS");
+  EXPECT_EQ(accel->unit, "m/s/s");
+  for (int k = 0; k < 40; ++k) {
+    EXPECT_EQ(accel->t_ns[k], 2'000'000'000 + int64_t{1'000'000} * k);
+    EXPECT_DOUBLE_EQ(accel->values[3 * k], 10.0 * k / 100);
+    EXPECT_DOUBLE_EQ(accel->values[3 * k + 1], -10.0 * k / 100);
+    EXPECT_DOUBLE_EQ(accel->values[3 * k + 2], 0.07);
+  }
+  ASSERT_EQ(gyro->samples(), 32);
+  EXPECT_EQ(gyro->unit, "rad/s");
+  EXPECT_EQ(gyro->t_ns[1], 3'000'333'333);  // rounded to the ns
+  EXPECT_EQ(gyro->t_ns[3], 3'001'000'000);
+  EXPECT_DOUBLE_EQ(gyro->values[3 * 5], 0.05);
+  ASSERT_EQ(log.warnings.size(), 1u);
+  EXPECT_NE(log.warnings[0].find("2 ISBD messages"), std::string::npos) << log.warnings[0];
+}
+
 // A log cut at every byte reads to its last whole message, with a warning naming the cut's
 // offset exactly when the cut is inside a message; before the first FMT is whole there is nothing
 // to read.
@@ -272,14 +319,14 @@ TEST(DataFlashTest, DamagedFmtIsAnErrorNamingTheOffsetAndMessage) {
   };
   for (const Case& c : cases) {
     DataFlashWriter w;
-    calibd::testing::WriteArduPilotFormats(&w);  // 8 FMT messages
+    calibd::testing::WriteArduPilotFormats(&w);  // 10 FMT messages
     const size_t offset = w.size();
     w.Fmt(171, "GYR", c.format, c.columns, c.length);
     SensorLog log;
     log.warnings.push_back("stale");
     const Status s = Read(w.bytes(), &log);
     ASSERT_EQ(s.code(), StatusCode::kInvalidInput) << c.says;
-    EXPECT_NE(s.message().find("byte " + std::to_string(offset) + ", message 9:"),
+    EXPECT_NE(s.message().find("byte " + std::to_string(offset) + ", message 11:"),
               std::string::npos)
         << s.message();
     EXPECT_NE(s.message().find(c.says), std::string::npos) << s.message();
@@ -349,45 +396,76 @@ nlohmann::json ReferenceReading(const std::string& path, const std::string& pyma
   return nlohmann::json::parse(out, nullptr, /*allow_exceptions=*/false);
 }
 
-TEST(DataFlashTest, PublicLogAgreesWithPymavlink) {
-  const std::string dir = EnvOr("CALIBD_DATAFLASH_DATA", "/work/data/dataflash");
+// The pymavlink source to run, or "" with *why when pymavlink or python3 is absent.
+std::string Pymavlink(std::string* why) {
   const std::string pymavlink = EnvOr("CALIBD_PYMAVLINK", "/work/data/pymavlink-src");
-  if (!std::filesystem::is_directory(dir)) GTEST_SKIP() << "no DataFlash logs in " << dir;
-  if (!std::filesystem::exists(pymavlink + "/pymavlink/DFReader.py"))
-    GTEST_SKIP() << "no pymavlink source at " << pymavlink << " (its pymavlink/DFReader.py)";
-  if (std::system("python3 -c '' >/dev/null 2>&1") != 0) GTEST_SKIP() << "no python3";
-  int logs = 0;
-  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
-    const std::string path = entry.path().string();
-    std::ifstream in(path, std::ios::binary);
-    std::stringstream bytes;
-    bytes << in.rdbuf();
-    SensorLog log;
-    const Status s = ReadDataFlash(bytes.str(), path, {}, &log);
-    if (SniffLogFormat(bytes.str()) != LogFormat::kDataFlash) continue;
-    ASSERT_TRUE(s.ok()) << path << ": " << s.ToString();
-    const nlohmann::json ref = ReferenceReading(path, pymavlink);
-    ASSERT_TRUE(ref.is_object()) << "pymavlink's DFReader did not read " << path;
-    ++logs;
-    EXPECT_EQ(ref.size(), log.streams.size()) << path;
-    for (const SensorStream& stream : log.streams) {
-      const std::string key = stream.Name() + " " + StreamKindName(stream.kind);
-      ASSERT_TRUE(ref.contains(key)) << path << ": " << key;
-      const nlohmann::json& r = ref[key];
-      EXPECT_EQ(stream.samples(), r["samples"].get<int64_t>()) << key;
-      EXPECT_EQ(stream.t_ns.front(), r["first_ns"].get<int64_t>()) << key;
-      EXPECT_EQ(stream.t_ns.back(), r["last_ns"].get<int64_t>()) << key;
-      const int dim = StreamDimension(stream.kind);
-      for (int k = 0; k < dim; ++k) {
-        double sum = 0;
-        for (int64_t n = 0; n < stream.samples(); ++n) sum += stream.values[n * dim + k];
-        const double mean = sum / stream.samples(), expected = r["means"][k].get<double>();
-        // Same float32 values summed in another order: agreement to rounding.
-        EXPECT_NEAR(mean, expected, 1e-12 * (1 + std::fabs(expected))) << key << " " << k;
-      }
+  if (!std::filesystem::exists(pymavlink + "/pymavlink/DFReader.py")) {
+    *why = "no pymavlink source at " + pymavlink + " (its pymavlink/DFReader.py)";
+    return "";
+  }
+  if (std::system("python3 -c '' >/dev/null 2>&1") != 0) {
+    *why = "no python3";
+    return "";
+  }
+  return pymavlink;
+}
+
+// Reads the log at `path` and compares every stream with DFReader's reading of it: count, first
+// and last time, channel means.
+void ExpectAgreesWithPymavlink(const std::string& path, const std::string& pymavlink) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream bytes;
+  bytes << in.rdbuf();
+  SensorLog log;
+  const Status s = ReadDataFlash(bytes.str(), path, {}, &log);
+  ASSERT_TRUE(s.ok()) << path << ": " << s.ToString();
+  const nlohmann::json ref = ReferenceReading(path, pymavlink);
+  ASSERT_TRUE(ref.is_object()) << "pymavlink's DFReader did not read " << path;
+  EXPECT_EQ(ref.size(), log.streams.size()) << path;
+  for (const SensorStream& stream : log.streams) {
+    const std::string key = stream.Name() + " " + StreamKindName(stream.kind);
+    ASSERT_TRUE(ref.contains(key)) << path << ": " << key;
+    const nlohmann::json& r = ref[key];
+    EXPECT_EQ(stream.samples(), r["samples"].get<int64_t>()) << key;
+    EXPECT_EQ(stream.t_ns.front(), r["first_ns"].get<int64_t>()) << key;
+    EXPECT_EQ(stream.t_ns.back(), r["last_ns"].get<int64_t>()) << key;
+    const int dim = StreamDimension(stream.kind);
+    for (int k = 0; k < dim; ++k) {
+      double sum = 0;
+      for (int64_t n = 0; n < stream.samples(); ++n) sum += stream.values[n * dim + k];
+      const double mean = sum / stream.samples(), expected = r["means"][k].get<double>();
+      // The same values summed in another order: agreement to rounding.
+      EXPECT_NEAR(mean, expected, 1e-12 * (1 + std::fabs(expected))) << key << " " << k;
     }
   }
+}
+
+TEST(DataFlashTest, PublicLogsAgreeWithPymavlink) {
+  const std::string dir = EnvOr("CALIBD_DATAFLASH_DATA", "/work/data/dataflash");
+  std::string why;
+  const std::string pymavlink = Pymavlink(&why);
+  if (pymavlink.empty()) GTEST_SKIP() << why;
+  if (!std::filesystem::is_directory(dir)) GTEST_SKIP() << "no DataFlash logs in " << dir;
+  int logs = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    std::ifstream in(entry.path(), std::ios::binary);
+    char head[3] = {};
+    in.read(head, 3);
+    if (SniffLogFormat(std::string_view(head, 3)) != LogFormat::kDataFlash) continue;
+    ++logs;
+    ExpectAgreesWithPymavlink(entry.path().string(), pymavlink);
+  }
   if (logs == 0) GTEST_SKIP() << "no DataFlash log (0xA3 0x95 0x80 ...) in " << dir;
+}
+
+// Our writer's logs (every stream kind, the batch sampler, an older log) read alike by DFReader.
+TEST(DataFlashTest, WrittenLogsAgreeWithPymavlink) {
+  std::string why;
+  const std::string pymavlink = Pymavlink(&why);
+  if (pymavlink.empty()) GTEST_SKIP() << why;
+  const std::string dir = std::string(CALIBD_SOURCE_DIR) + "/tests/fuzz/corpus/fuzz_dataflash/";
+  for (const char* seed : {"modern.bin", "batch.bin", "older.bin"})
+    ExpectAgreesWithPymavlink(dir + seed, pymavlink);
 }
 
 }  // namespace

@@ -10,7 +10,8 @@
 //
 // Seeds (tests/fuzz/corpus/fuzz_dataflash/): small logs of tests/lib/dataflash_writer.h — three
 // IMUs with FMTU/UNIT/MULT/PARM and two MAGs, an older log (IMU2, TimeMS), ACC with SampleUS,
-// junk between messages, and a cut log.
+// batch sampler batches (ISBH/ISBD), junk between messages, and a cut log; and the reproducers
+// of earlier findings (crash-*).
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>

@@ -116,7 +116,7 @@ class DataFlashWriter {
 
 // Message types and formats as ArduPilot 4.x logs them.
 inline constexpr uint8_t kDfImu = 163, kDfMag = 113, kDfFmtu = 118, kDfUnit = 119, kDfMult = 120,
-                         kDfParm = 32, kDfAcc = 170;
+                         kDfParm = 32, kDfAcc = 170, kDfIsbh = 164, kDfIsbd = 165;
 inline void WriteArduPilotFormats(DataFlashWriter* w) {
   w->FmtOfFmt();
   w->Fmt(kDfFmtu, "FMTU", "QBNN", "TimeUS,FmtType,UnitIds,MultIds");
@@ -128,6 +128,8 @@ inline void WriteArduPilotFormats(DataFlashWriter* w) {
   w->Fmt(kDfMag, "MAG", "QBhhhhhhhhhBI",
          "TimeUS,I,MagX,MagY,MagZ,OfsX,OfsY,OfsZ,MOX,MOY,MOZ,Health,S");
   w->Fmt(kDfAcc, "ACC", "QBQfff", "TimeUS,I,SampleUS,AccX,AccY,AccZ");
+  w->Fmt(kDfIsbh, "ISBH", "QHBBHHQf", "TimeUS,N,type,instance,mul,smp_cnt,SampleUS,smp_rate");
+  w->Fmt(kDfIsbd, "ISBD", "QHHaaa", "TimeUS,N,seqno,x,y,z");
 }
 // IMU: gyro, accel (m/s²), temperature.
 inline void WriteImu(DataFlashWriter* w, uint64_t time_us, int instance, const double gyro[3],
