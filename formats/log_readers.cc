@@ -1,6 +1,8 @@
 // The sensor-log readers by format (formats/log_readers.h).
 #include "formats/log_readers.h"
 
+#include "formats/dataflash.h"
+
 namespace calibd::server {
 
 const char* LogFormatName(LogFormat format) {
@@ -23,9 +25,13 @@ const char* LogFormatName(LogFormat format) {
 
 Status ReadSensorLog(LogFormat format, std::string_view bytes, const std::string& file_name,
                      const SensorLogLimits& limits, SensorLog* log) {
-  (void)bytes;
-  (void)limits;
   *log = {};
+  switch (format) {
+    case LogFormat::kDataFlash:
+      return ReadDataFlash(bytes, file_name, limits, log);
+    default:
+      break;
+  }
   return Status::InvalidInput(std::string("this looks like a ") + LogFormatName(format) +
                               " log (by its first bytes), which this calibd cannot read yet")
       .WithFile(file_name);

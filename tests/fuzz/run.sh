@@ -19,7 +19,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 duration=${1:-}
 build=${CALIBD_SANITIZE_BUILD_DIR:-build-sanitize}
-targets=${CALIBD_FUZZ_TARGETS:-fuzz_recording fuzz_config fuzz_calibrate fuzz_multipart}
+targets=${CALIBD_FUZZ_TARGETS:-fuzz_recording fuzz_config fuzz_calibrate fuzz_multipart fuzz_dataflash}
 jobs=${CALIBD_FUZZ_JOBS:-$(nproc)}
 
 scripts/setup.sh
@@ -34,6 +34,7 @@ runs() {
     fuzz_config) echo 250000 ;;
     fuzz_calibrate) echo 20000 ;;
     fuzz_multipart) echo 7500 ;;
+    fuzz_dataflash) echo 60000 ;;
   esac
 }
 
