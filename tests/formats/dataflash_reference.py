@@ -35,12 +35,12 @@ from pymavlink import DFReader  # noqa: E402
 
 # (message base name, kind, fields, factor to SI)
 SPECS = [
-    ("IMU", "accel", ("AccX", "AccY", "AccZ"), 1.0),
-    ("IMU", "gyro", ("GyrX", "GyrY", "GyrZ"), 1.0),
+    ("IMU", "accelerometer", ("AccX", "AccY", "AccZ"), 1.0),
+    ("IMU", "gyroscope", ("GyrX", "GyrY", "GyrZ"), 1.0),
     ("IMU", "temperature", ("T",), 1.0),
-    ("ACC", "accel", ("AccX", "AccY", "AccZ"), 1.0),
-    ("GYR", "gyro", ("GyrX", "GyrY", "GyrZ"), 1.0),
-    ("MAG", "mag", ("MagX", "MagY", "MagZ"), 0.1),  # milligauss -> uT
+    ("ACC", "accelerometer", ("AccX", "AccY", "AccZ"), 1.0),
+    ("GYR", "gyroscope", ("GyrX", "GyrY", "GyrZ"), 1.0),
+    ("MAG", "magnetometer", ("MagX", "MagY", "MagZ"), 0.1),  # milligauss -> uT
 ]
 
 
@@ -73,7 +73,7 @@ def add_batch(streams, batches, m):
     h = batches.get(m.N)
     if h is None:
         return
-    kind = {0: "accel", 1: "gyro"}[h.type]
+    kind = {0: "accelerometer", 1: "gyroscope"}[h.type]
     for j in range(32):
         k = 32 * m.seqno + j
         if k >= h.smp_cnt:
