@@ -151,21 +151,36 @@ void AddSchemas(const json& method_names, json* out) {
         {"uncertainty", {{"type", "object"}}},
         {"diagnostics", {{"type", "object"}}},
         {"warnings", {{"type", "array"}, {"items", {{"type", "string"}}}}}}}};
-  schemas["Recording"] = {{"type", "object"},
-                          {"properties",
-                           {{"id", {{"type", "integer"}}},
-                            {"sha256", {{"type", "string"}}},
-                            {"bytes", {{"type", "integer"}}},
-                            {"rows", {{"type", "integer"}}},
-                            {"layout",
-                             {{"type", "string"},
-                              {"enum",
-                               {LayoutName(Layout::kPcaAveraged), LayoutName(Layout::kPcaRaw),
-                                LayoutName(Layout::kArray)}}}},
-                            {"device", {{"type", "string"}, {"nullable", true}}},
-                            {"created_at", {{"type", "string"}}},
-                            {"columns", {{"type", "array"}, {"items", {{"type", "string"}}}}},
-                            {"sensors", {{"type", "array"}, {"items", {{"type", "string"}}}}}}}};
+  schemas["Recording"] = {
+      {"type", "object"},
+      {"properties",
+       {{"id", {{"type", "integer"}}},
+        {"sha256", {{"type", "string"}}},
+        {"bytes", {{"type", "integer"}}},
+        {"rows", {{"type", "integer"}}},
+        {"layout",
+         {{"type", "string"},
+          {"enum",
+           {LayoutName(Layout::kPcaAveraged), LayoutName(Layout::kPcaRaw),
+            LayoutName(Layout::kArray)}}}},
+        {"device", {{"type", "string"}, {"nullable", true}}},
+        {"created_at", {{"type", "string"}}},
+        {"columns", {{"type", "array"}, {"items", {{"type", "string"}}}}},
+        {"sensors", {{"type", "array"}, {"items", {{"type", "string"}}}}},
+        // SPEC §9 "What was read" (sensor logs; format "csv" otherwise).
+        {"format",
+         {{"type", "string"},
+          {"enum", {"csv", "ulog", "dataflash", "rosbag1", "rosbag2", "mcap"}}}},
+        {"time_base", {{"type", "string"}}},
+        {"streams",
+         {{"type", "array"},
+          {"items",
+           {{"type", "object"},
+            {"description",
+             "name, instance, device_id, kind, samples, rate (Hz), start, end "
+             "(s on the log's clock), gaps, unit, time_source, note"}}}}},
+        {"imus", {{"type", "array"}, {"items", {{"type", "object"}}}}},
+        {"warnings", {{"type", "array"}, {"items", {{"type", "string"}}}}}}}};
 }
 
 // POST /recordings (with its config parameters) and a stored recording's paths.
@@ -188,7 +203,10 @@ void AddRecordingPaths(json* out) {
        QueryParam("accel_unit", "string", "imu, noise: m/s^2 | g | m/s^2 per reading unit"),
        QueryParam("time_unit", "string",
                   "imu, noise, array: unit of the time column t, s (default) | ms | us | ns"),
-       QueryParam("solver", "string", "array: joint | bcd")});
+       QueryParam("solver", "string", "array: joint | bcd"),
+       QueryParam("streams", "string",
+                  "sensor logs (ULog, DataFlash, bags): JSON {\"imus\": [{\"accel\", \"gyro\", "
+                  "\"temp\"}], \"mags\": [...]}, stream names as the recording lists them")});
   paths["/recordings"]["post"] = {
       {"summary", "Upload a recording (and queue a calibration when a method is given)"},
       {"security", json::array({{{"bearer", json::array()}}})},
