@@ -3,6 +3,8 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <map>
+#include <mutex>
 #include <set>
 #include <sstream>
 
@@ -37,8 +39,16 @@ std::string MethodNameList() {
 
 const std::vector<AcceptanceKey>& AcceptanceKeys(const std::string& method) {
   static const std::vector<AcceptanceKey>& kNone = *new std::vector<AcceptanceKey>();
+  static std::mutex& mu = *new std::mutex;
+  static auto& cache = *new std::map<std::string, std::vector<AcceptanceKey>>;
   const Method* m = FindMethod(method);
-  return m == nullptr ? kNone : m->AcceptanceKeys();
+  if (m == nullptr) return kNone;
+  std::lock_guard<std::mutex> lock(mu);
+  auto it = cache.find(method);
+  if (it == cache.end()) {
+    it = cache.emplace(method, JoinKeys({m->AcceptanceKeys(), {limit_keys::kMaxFleetZ}})).first;
+  }
+  return it->second;  // map nodes do not move
 }
 
 const std::vector<AcceptanceKey>& ImuTriadKeys() {

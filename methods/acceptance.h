@@ -65,6 +65,14 @@ inline constexpr AcceptanceKey kAccelBias = {
     "max_accel_bias", "largest accelerometer bias (beyond the nominal bias), m/s^2", 2.0};
 inline constexpr AcceptanceKey kGyroBias = {
     "max_gyro_bias", "largest gyroscope bias (beyond the nominal bias), rad/s", 0.2};  // 11 deg/s
+// Every method (added by AcceptanceKeys(method)); judged by the worker against the store
+// (server/fleet.h ApplyFleetGate). No limit by default: a line opts in once its fleet is known.
+inline constexpr AcceptanceKey kMaxFleetZ = {
+    "max_fleet_z",
+    "largest robust |z| of a parameter against the accepted calibrations of the other devices "
+    "of the upload's product (applies when the config names a product and a parameter is known "
+    "for at least 8 of its devices)",
+    std::nullopt};
 }  // namespace limit_keys
 
 // The keys JudgeImuTriads reads, in this order: kMaxScaleStd, kMaxAxisStd, kScaleRange,
@@ -74,8 +82,9 @@ const std::vector<AcceptanceKey>& ImuTriadKeys();
 // The parts one after the other: a method's table built from shared runs of keys.
 std::vector<AcceptanceKey> JoinKeys(std::initializer_list<std::vector<AcceptanceKey>> parts);
 
-// The keys of the registered method `method` (its Method::AcceptanceKeys); empty for a name the
-// registry (methods/registry.cc) does not know.
+// The keys of the registered method `method`: its Method::AcceptanceKeys, then the keys every
+// method has (limit_keys::kMaxFleetZ); empty for a name the registry (methods/registry.cc) does
+// not know. Thread-safe; the reference stays valid.
 const std::vector<AcceptanceKey>& AcceptanceKeys(const std::string& method);
 
 // The limits in force for one result: every key of the method, nullopt = no limit.

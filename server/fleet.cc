@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/fleet_stats.h"
+#include "methods/acceptance.h"
 #include "methods/method.h"
 #include "methods/registry.h"
 #include "results/json_text.h"
@@ -69,6 +70,8 @@ bool Selected(const std::string& path, const std::vector<std::string>& patterns)
   return false;
 }
 
+std::map<std::string, double> FleetValues(const json& result, const std::string& method);
+
 Status CollectMembers(storage::Store* store, const std::string& product, const std::string& method,
                       const FleetOptions& options, std::vector<Member>* members, int64_t* scanned,
                       bool* complete) {
@@ -100,14 +103,7 @@ Status CollectMembers(storage::Store* store, const std::string& product, const s
         continue;
       }
       if (!ParseJsonText(job.result_json, "result", &result).ok()) continue;
-      Member m{d.serial, job.id, job.finished_at, {}};
-      std::map<std::string, double> all;
-      if (result.contains("parameters")) Flatten(result["parameters"], "", &all);
-      const std::vector<std::string> patterns = FindMethod(method)->FleetParameters();
-      for (const auto& [name, v] : all) {
-        if (Selected(name, patterns)) m.values[name] = v;
-      }
-      members->push_back(std::move(m));
+      members->push_back({d.serial, job.id, job.finished_at, FleetValues(result, method)});
     }
     if (static_cast<int>(page.size()) < filter.limit) return Status::Ok();
     filter.after = page.back().serial;
@@ -115,6 +111,17 @@ Status CollectMembers(storage::Store* store, const std::string& product, const s
 }
 
 json ZValue(double z) { return std::isfinite(z) ? json(z) : json(z > 0 ? "inf" : "-inf"); }
+
+// The parameters of `result` the method's FleetParameters select, by their fleet names.
+std::map<std::string, double> FleetValues(const json& result, const std::string& method) {
+  std::map<std::string, double> all, selected;
+  if (result.contains("parameters")) Flatten(result["parameters"], "", &all);
+  const std::vector<std::string> patterns = FindMethod(method)->FleetParameters();
+  for (const auto& [name, v] : all) {
+    if (Selected(name, patterns)) selected[name] = v;
+  }
+  return selected;
+}
 
 }  // namespace
 
@@ -195,6 +202,75 @@ Status FleetJson(storage::Store* store, const std::string& product, const std::s
           {"scanned", scanned},     {"complete", complete},     {"outlier_z", options.outlier_z},
           {"members", member_list}, {"parameters", parameters}, {"outliers", device_outliers},
           {"drift", drift}};
+  return Status::Ok();
+}
+
+Status ApplyFleetGate(storage::Store* store, const std::string& method, const std::string& device,
+                      const json& config, const json& acceptance_defaults,
+                      const FleetOptions& options, json* result) {
+  if (!result->is_object() || !result->contains("verdict") || !config.is_object()) {
+    return Status::Ok();
+  }
+  const std::optional<double> max_z =
+      EffectiveAcceptance(method, acceptance_defaults, config).Get(limit_keys::kMaxFleetZ.name);
+  const auto product = config.find("product");
+  if (!max_z || product == config.end() || !product->is_string()) return Status::Ok();
+  std::vector<Member> members;
+  int64_t scanned = 0;
+  bool complete = true;
+  if (Status s = CollectMembers(store, product->get<std::string>(), method, options, &members,
+                                &scanned, &complete);
+      !s.ok()) {
+    return s;
+  }
+  members.erase(std::remove_if(members.begin(), members.end(),
+                               [&](const Member& m) { return m.device == device; }),
+                members.end());
+  json judged = json::array();
+  Offenders offenders;
+  for (const auto& [name, value] : FleetValues(*result, method)) {
+    std::vector<double> values;
+    for (const Member& m : members) {
+      if (auto v = m.values.find(name); v != m.values.end()) values.push_back(v->second);
+    }
+    if (static_cast<int64_t>(values.size()) < options.min_devices) continue;
+    const core::RobustSummary s = core::Summarize(values, 1);
+    const double z = core::RobustZ(value, s);
+    judged.push_back({{"name", name},
+                      {"value", value},
+                      {"median", s.median},
+                      {"spread", s.spread},
+                      {"n", s.n},
+                      {"z", ZValue(z)}});
+    if (std::abs(z) > *max_z) {
+      offenders.Add(name + " (z " +
+                    (std::isfinite(z) ? Fmt(z) : std::string(z > 0 ? "+inf" : "-inf")) + ")");
+    }
+  }
+  json& verdict = (*result)["verdict"];
+  Verdict fleet;
+  offenders.RejectInto(&fleet, "outside the fleet of product '" + product->get<std::string>() +
+                                   "' (" + std::to_string(members.size()) +
+                                   " other devices; max_fleet_z " + Fmt(*max_z) + ")");
+  if (!fleet.accepted()) {
+    verdict["status"] = "rejected";
+    if (!verdict.contains("reasons") || !verdict["reasons"].is_array()) {
+      verdict["reasons"] = json::array();
+    }
+    for (const std::string& r : fleet.reasons()) verdict["reasons"].push_back(r);
+  }
+  if (result->contains("diagnostics") && (*result)["diagnostics"].is_object()) {
+    json d = {{"product", *product},
+              {"devices", members.size()},
+              {"max_fleet_z", *max_z},
+              {"judged", !judged.empty()},
+              {"parameters", judged}};
+    if (judged.empty()) {
+      d["note"] = "not judged: no parameter is known for " + std::to_string(options.min_devices) +
+                  " or more other devices of the product";
+    }
+    (*result)["diagnostics"]["fleet"] = d;
+  }
   return Status::Ok();
 }
 

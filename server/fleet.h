@@ -48,6 +48,21 @@ struct FleetOptions {
 Status FleetJson(storage::Store* store, const std::string& product, const std::string& method,
                  const FleetOptions& options, nlohmann::json* out);
 
+// The gate's fleet rule (acceptance key max_fleet_z, SPEC §10), for a result the method has judged
+// (result["verdict"] set). When the limits in force (EffectiveAcceptance of `method` with
+// `acceptance_defaults` and the config) set max_fleet_z and the config names a `product`, each
+// parameter of the result that Method::FleetParameters selects is compared with the accepted
+// calibrations of the product's other devices (`device`'s own is left out): robust z = (value −
+// median) / spread over them, judged only where the parameter is known for at least
+// options.min_devices devices. Any |z| above the limit rejects the result, one reason naming the
+// parameters, their z, the product and the fleet's size; diagnostics.fleet gets {"product",
+// "devices", "max_fleet_z", "judged", "parameters": [{"name", "value", "median", "spread", "n",
+// "z"}]} (judged false, saying why, when the fleet is too small). Storage errors are returned
+// as they are and change nothing (the worker retries the job).
+Status ApplyFleetGate(storage::Store* store, const std::string& method, const std::string& device,
+                      const nlohmann::json& config, const nlohmann::json& acceptance_defaults,
+                      const FleetOptions& options, nlohmann::json* result);
+
 }  // namespace calibd::server
 
 #endif  // CALIBD_SERVER_FLEET_H_

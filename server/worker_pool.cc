@@ -11,6 +11,7 @@
 #include "methods/registry.h"
 #include "server/config.h"
 #include "server/failure_reasons.h"
+#include "server/fleet.h"
 #include "server/job_budget.h"
 
 namespace calibd::server {
@@ -302,6 +303,21 @@ bool WorkerPool::StoreFailure(const std::string& worker_id, const storage::JobIn
   return false;
 }
 
+Status WorkerPool::StoreResult(const std::string& worker_id, const storage::JobInfo& job,
+                               const nlohmann::json& result) {
+  Status s = store_->CompleteJob(
+      job.id, worker_id, result.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+  if (options_.storage_outcome && s.code() != StatusCode::kConflict &&
+      s.code() != StatusCode::kNotFound) {
+    options_.storage_outcome(s, "job " + std::to_string(job.id), true);
+  }
+  if (!s.ok()) {
+    std::cerr << "calibd: " << worker_id << ": storing the result of job " << job.id
+              << " failed: " << s.ToString() << "\n";
+  }
+  return s;
+}
+
 void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& job,
                         core::StopToken& stop) {
   const auto start = std::chrono::steady_clock::now();
@@ -427,24 +443,19 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       return;
   }
   if (!s.ok()) return fail(s, s.IsTransient());
-  s = store_->CompleteJob(job.id, worker_id,
-                          result.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
-  if (options_.storage_outcome && s.code() != StatusCode::kConflict &&
-      s.code() != StatusCode::kNotFound) {
-    options_.storage_outcome(s, "job " + std::to_string(job.id), true);
+  // The gate's fleet rule needs the store (the product's other devices), so it is judged here.
+  s = ApplyFleetGate(store_, job.method, job.device, config, options_.acceptance, FleetOptions{},
+                     &result);
+  if (!s.ok()) return fail(s, s.IsTransient());
+  s = StoreResult(worker_id, job, result);
+  // Taken back (the lease was lost) or gone: another worker owns the outcome. Anything else
+  // (the result too large for the store, corruption) fails the job with its reason instead of
+  // leaving it running until its lease lapses and it is recomputed.
+  if (s.code() == StatusCode::kConflict || s.code() == StatusCode::kNotFound) {
+    metrics_->ObserveJob(job.method, "released", seconds());
+    return;
   }
-  if (!s.ok()) {
-    std::cerr << "calibd: " << worker_id << ": storing the result of job " << job.id
-              << " failed: " << s.ToString() << "\n";
-    // Taken back (the lease was lost) or gone: another worker owns the outcome. Anything else
-    // (the result too large for the store, corruption) fails the job with its reason instead of
-    // leaving it running until its lease lapses and it is recomputed.
-    if (s.code() == StatusCode::kConflict || s.code() == StatusCode::kNotFound) {
-      metrics_->ObserveJob(job.method, "released", seconds());
-      return;
-    }
-    return fail(s, s.IsTransient());
-  }
+  if (!s.ok()) return fail(s, s.IsTransient());
   metrics_->ObserveJob(job.method, "succeeded", seconds());
   if (result.contains("verdict") && result["verdict"].is_object()) {
     metrics_->ObserveVerdict(job.method, result["verdict"].value("status", std::string("?")));

@@ -112,6 +112,10 @@ class WorkerPool {
   // computation stopped (`run`, when kStopped).
   Status CancelledStatus(int64_t job_id, const Status& run);
   void RunJob(const std::string& worker_id, const storage::JobInfo& job, core::StopToken& stop);
+  // Stores a finished job's result (Store::CompleteJob), telling options_.storage_outcome and
+  // logging a failure; kConflict / kNotFound when the job is no longer this worker's.
+  Status StoreResult(const std::string& worker_id, const storage::JobInfo& job,
+                     const nlohmann::json& result);
   // Stores the failure of the holder's run. When that fails (other than "not yours": kConflict,
   // kNotFound), e.g. on a full disk: the failure without its diagnostics and with a shortened
   // message, else the job is released as kStoreFailed (its attempt counts, it backs off); only

@@ -196,15 +196,18 @@ TEST(Gate, InvalidAcceptanceKeysAreErrorsNamingThem) {
             "imu.max_offset");
 }
 
-// Every method of the registry names its own limits (Method::AcceptanceKeys): each with a
-// meaning, a default that is a number >= 0 or none, no key twice. They are the limits in force
-// when nothing overrides them, and a config may set each of them.
+// Every method of the registry names its own limits (Method::AcceptanceKeys), and the generic
+// lookup adds the keys every method has (max_fleet_z): each with a meaning, a default that is a
+// number >= 0 or none, no key twice. They are the limits in force when nothing overrides them,
+// and a config may set each of them.
 TEST(Gate, EveryRegisteredMethodSuppliesItsLimitsWithTheirDefaults) {
   for (const Method* m : AllMethods()) {
     SCOPED_TRACE(m->name());
-    const std::vector<AcceptanceKey>& keys = m->AcceptanceKeys();
-    ASSERT_FALSE(keys.empty());
-    EXPECT_EQ(&AcceptanceKeys(m->name()), &keys);  // the generic lookup asks the method
+    ASSERT_FALSE(m->AcceptanceKeys().empty());
+    const std::vector<AcceptanceKey>& keys = AcceptanceKeys(m->name());
+    ASSERT_EQ(keys.size(), m->AcceptanceKeys().size() + 1);
+    EXPECT_STREQ(keys.back().name, limit_keys::kMaxFleetZ.name);
+    EXPECT_EQ(&AcceptanceKeys(m->name()), &keys);  // one list per method, kept
     std::set<std::string> names;
     json defaults = json::object();
     for (const AcceptanceKey& k : keys) {

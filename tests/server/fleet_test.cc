@@ -55,6 +55,18 @@ class Fleet : public ::testing::Test {
     ASSERT_EQ(job["status"], "succeeded") << job.dump();
   }
 
+  // One calibration with the gate key max_fleet_z: the finished job.
+  json CalibrateGated(const std::string& device, double scale_x, uint64_t seed, double max_z) {
+    const std::string path =
+        "/api/v1/recordings?method=pca&magnitude=9.80665&bias=estimate"
+        "&product=IMU-300&device=" +
+        device + "&acceptance=%7B%22max_fleet_z%22:" + std::to_string(max_z) + "%7D";
+    auto res = server_.Client().Post(path.c_str(), TriadCsv(seed, scale_x), "text/csv");
+    EXPECT_TRUE(res && res->status == 201) << (res ? res->body : "no answer");
+    if (!res || res->status != 201) return nullptr;
+    return server_.WaitForJob(json::parse(res->body)["job"]["id"].get<int64_t>());
+  }
+
   json Get(const std::string& path, int expected_status = 200) {
     auto res = server_.Client().Get(path.c_str());
     EXPECT_TRUE(res);
@@ -112,6 +124,33 @@ TEST_F(Fleet, NamesTheOutlierUnitAndItsParameterAmongTheProductsDevices) {
   ASSERT_TRUE(choose);
   EXPECT_EQ(choose->status, 200);
   EXPECT_NE(choose->body.find("Choose a method"), std::string::npos);
+}
+
+TEST_F(Fleet, MaxFleetZRejectsAUnitOutsideTheFleetOnceTheFleetIsLargeEnough) {
+  // Fewer than 8 other devices: the rule does not judge, and says so.
+  for (int d = 0; d < 6; ++d) Calibrate("F-" + std::to_string(d), "IMU-300", 1.01, 400 + d);
+  json job = CalibrateGated("EARLY-1", 1.06, 500, 5);
+  ASSERT_EQ(job["status"], "succeeded") << job.dump();
+  EXPECT_EQ(job["result"]["verdict"]["status"], "accepted") << job["result"]["verdict"].dump();
+  EXPECT_EQ(job["result"]["diagnostics"]["fleet"]["judged"], false);
+  EXPECT_EQ(job["result"]["verdict"]["limits"]["max_fleet_z"], 5);
+  // 30 devices (EARLY-1 among them): a normal unit passes, a 5 % scale error is rejected.
+  for (int d = 6; d < 29; ++d) Calibrate("F-" + std::to_string(d), "IMU-300", 1.01, 400 + d);
+  job = CalibrateGated("GOOD-1", 1.01, 600, 5);
+  ASSERT_EQ(job["status"], "succeeded") << job.dump();
+  EXPECT_EQ(job["result"]["verdict"]["status"], "accepted") << job["result"]["verdict"].dump();
+  EXPECT_EQ(job["result"]["diagnostics"]["fleet"]["judged"], true);
+  job = CalibrateGated("BAD-1", 1.06, 601, 5);
+  ASSERT_EQ(job["status"], "succeeded") << job.dump();
+  const json& verdict = job["result"]["verdict"];
+  EXPECT_EQ(verdict["status"], "rejected") << verdict.dump();
+  EXPECT_NE(verdict["reasons"].dump().find("outside the fleet of product 'IMU-300'"),
+            std::string::npos)
+      << verdict.dump();
+  // Rejected: never served.
+  Get("/api/v1/devices/BAD-1/calibration?method=pca", 404);
+  // A config without max_fleet_z is not judged against the fleet.
+  Calibrate("FREE-1", "IMU-300", 1.06, 602);
 }
 
 TEST_F(Fleet, BadRequestsNameWhatIsWrong) {
