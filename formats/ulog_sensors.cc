@@ -350,9 +350,11 @@ void SensorStreams::Finish(SensorLog* log) {
       const double rate = span > 0 ? (s.samples() - 1) * 1e9 / span : 0;
       char hz[32];
       std::snprintf(hz, sizeof hz, "%.3g", rate);
+      const std::string logged = span > 0 ? "logged at " + std::string(hz) + " Hz"
+                                          : "logged " + std::to_string(s.samples()) + " time(s)";
       if ((topic == Topic::kAccel || topic == Topic::kGyro) && kind != StreamKind::kTemperature &&
           rate <= kLowRateHz)
-        s.note = "logged at " + std::string(hz) + " Hz: PX4 logs " + s.topic +
+        s.note = logged + ": PX4 logs " + s.topic +
                  " at 1–10 Hz unless the logging profile is raised (SDLOG_PROFILE high rate or "
                  "sensor comparison)";
       if (topic == Topic::kCombined)

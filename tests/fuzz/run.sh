@@ -19,7 +19,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 duration=${1:-}
 build=${CALIBD_SANITIZE_BUILD_DIR:-build-sanitize}
-targets=${CALIBD_FUZZ_TARGETS:-fuzz_recording fuzz_config fuzz_calibrate fuzz_multipart}
+targets=${CALIBD_FUZZ_TARGETS:-fuzz_recording fuzz_config fuzz_calibrate fuzz_multipart fuzz_ulog}
 jobs=${CALIBD_FUZZ_JOBS:-$(nproc)}
 
 scripts/setup.sh
@@ -34,6 +34,7 @@ runs() {
     fuzz_config) echo 500000 ;;
     fuzz_calibrate) echo 40000 ;;
     fuzz_multipart) echo 15000 ;;
+    fuzz_ulog) echo 300000 ;;
   esac
 }
 
