@@ -204,13 +204,13 @@ Status ULogReader::AddLogged(const uint8_t* payload, size_t size) {
   name = name.substr(0, name.find('\0'));
   Subscription s;
   s.topic = std::string(name);
-  ulog::Layout layout;
-  Status status = definitions_.MakeLayout(s.topic, &layout);
+  const ulog::Layout* layout = nullptr;
+  Status status = definitions_.GetLayout(s.topic, &layout);
   if (!status.ok())
     return Fail("subscription of msg_id " + std::to_string(msg_id) + ": " + status.message());
-  s.min_size = layout.min_size;
-  s.size = layout.size;
-  s.handle = sensors_.Subscribe(s.topic, multi_id, layout, &warnings_);
+  s.min_size = layout->min_size;
+  s.size = layout->size;
+  s.handle = sensors_.Subscribe(s.topic, multi_id, *layout, &warnings_);
   subscriptions_[msg_id] = std::move(s);
   return Status::Ok();
 }

@@ -114,8 +114,10 @@ Status Definitions::AddFormat(std::string_view text) {
                                   status.message());
     fields.push_back(std::move(field));
   }
-  formats_[std::string(text.substr(0, colon))] = std::move(fields);
-  sizes_.clear();  // a redefinition may change any nested size
+  const std::string name(text.substr(0, colon));
+  auto [it, added] = formats_.try_emplace(name, Format{std::string(text), std::move(fields)});
+  if (!added && it->second.text != text)
+    return Status::InvalidInput("format " + Quoted(name) + " is defined twice, differently");
   return Status::Ok();
 }
 
@@ -135,7 +137,7 @@ Status Definitions::SizeOf(const std::string& name, int depth, int64_t* size) {
     return Status::InvalidInput("type " + Quoted(name) + " is not defined (no 'F' message)");
   sizes_[name] = -1;
   int64_t total = 0;
-  for (const FormatField& field : format->second) {
+  for (const FormatField& field : format->second.fields) {
     int64_t element = BasicTypeSize(field.type);
     if (field.type == BasicType::kNested) {
       Status status = SizeOf(field.type_name, depth + 1, &element);
@@ -151,28 +153,30 @@ Status Definitions::SizeOf(const std::string& name, int depth, int64_t* size) {
   return Status::Ok();
 }
 
-Status Definitions::MakeLayout(const std::string& name, Layout* layout) {
-  *layout = Layout();
+Status Definitions::GetLayout(const std::string& name, const Layout** layout) {
+  auto cached = layouts_.find(name);
+  if (cached != layouts_.end()) {
+    *layout = &cached->second;
+    return Status::Ok();
+  }
   int64_t size = 0;
   Status status = SizeOf(name, 0, &size);
   if (!status.ok()) return status;
-  const std::vector<FormatField>& fields = formats_.find(name)->second;
+  Layout made;
   int64_t offset = 0;
   int64_t padding_from = -1;  // offset where the trailing run of _padding fields starts
-  for (const FormatField& field : fields) {
+  for (const FormatField& field : formats_.find(name)->second.fields) {
     int64_t element = BasicTypeSize(field.type);
-    if (field.type == BasicType::kNested) {
-      status = SizeOf(field.type_name, 1, &element);  // memoised by the call above
-      if (!status.ok()) return status;
-    }
+    if (field.type == BasicType::kNested) element = sizes_.find(field.type_name)->second;
     const bool padding = field.name.rfind("_padding", 0) == 0;
-    if (!padding) layout->fields[field.name] = FieldSlot{field.type, offset, field.array};
+    if (!padding) made.fields[field.name] = FieldSlot{field.type, offset, field.array};
     if (padding && padding_from < 0) padding_from = offset;
     if (!padding) padding_from = -1;
     offset += element * (field.array == 0 ? 1 : field.array);
   }
-  layout->size = size;
-  layout->min_size = padding_from < 0 ? size : padding_from;
+  made.size = size;
+  made.min_size = padding_from < 0 ? size : padding_from;
+  *layout = &layouts_.emplace(name, std::move(made)).first->second;
   return Status::Ok();
 }
 

@@ -62,19 +62,28 @@ inline constexpr int64_t kMaxArray = 65535;  // larger arrays cannot fit in a me
 // The formats seen so far, by name. Not thread-safe.
 class Definitions {
  public:
-  // Parses an 'F' payload "name:type field;type field;..." and stores it (a redefinition
-  // replaces the earlier one). kInvalidInput (without location) for a malformed text.
+  // Parses an 'F' payload "name:type field;type field;..." and stores it. A second definition
+  // of a name is ignored when it is the same text, else kInvalidInput (a layout already used
+  // could not change). kInvalidInput (without location) for a malformed text.
   Status AddFormat(std::string_view text);
-  // The layout of format `name`, nested formats resolved. kInvalidInput naming the type for an
-  // undefined type, a cycle of nested types, or a size beyond any message. Work is bounded by
-  // the number of formats and fields (each nested format's size is computed once).
-  Status MakeLayout(const std::string& name, Layout* layout);
+  // The layout of format `name`, nested formats resolved; computed once per name, the pointer
+  // valid for the Definitions' life. kInvalidInput naming the type for an undefined type, a cycle
+  // of nested types, nesting deeper than 32 or a size beyond any message. Work: each format's
+  // size and each layout is computed once.
+  Status GetLayout(const std::string& name, const Layout** layout);
 
  private:
+  struct Format {
+    std::string text;  // as written, to compare a redefinition
+    std::vector<FormatField> fields;
+  };
   Status SizeOf(const std::string& name, int depth, int64_t* size);
 
-  std::map<std::string, std::vector<FormatField>, std::less<>> formats_;
-  std::map<std::string, int64_t, std::less<>> sizes_;  // memo of SizeOf; -1 while in progress
+  std::map<std::string, Format, std::less<>> formats_;
+  // Memo of SizeOf (-1 while in progress: met again, a cycle) and of GetLayout. Entries stay
+  // valid: formats are never redefined.
+  std::map<std::string, int64_t, std::less<>> sizes_;
+  std::map<std::string, Layout, std::less<>> layouts_;
 };
 
 }  // namespace calibd::server::ulog

@@ -314,8 +314,9 @@ Status SensorStreams::AddCombined(const Decoder& d, const uint8_t* data, Message
     d.values->stream.values.push_back(ReadReal(data + d.gyro.offset + k * size, d.gyro.type));
   if (!accel_valid) return Status::Ok();
   const int accel_size = BasicTypeSize(d.accel.type);
-  int64_t t = 0;  // relative is an int32 of µs at most; the sum may overflow only near 2^63 ns
-  if (__builtin_add_overflow(published, relative * 1000, &t))
+  int64_t relative_ns = 0, t = 0;  // PX4 writes an int32, a format may declare any integer
+  if (__builtin_mul_overflow(relative, 1000, &relative_ns) ||
+      __builtin_add_overflow(published, relative_ns, &t))
     return Status::InvalidInput("accelerometer_timestamp_relative puts the sample beyond 2^63 ns");
   d.accel_values->stream.t_ns.push_back(t);
   d.accel_values->fallback_ns.push_back(t);

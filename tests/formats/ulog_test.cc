@@ -217,6 +217,7 @@ TEST(ULogTest, NestedTypesArraysAndPaddingAreLaidOut) {
 TEST(ULogTest, UnknownTypesSyncDropoutsAndRemovalsAreHandled) {
   ULogWriter w(1000, 2);  // a newer version: read with a warning
   w.Format(testing::kSensorAccelFormat).Subscribe(0, 1, "sensor_accel");
+  w.Format(testing::kSensorAccelFormat);  // the same definition again: ignored
   w.Message('Z', "a future message type").Sync().Dropout(20);
   w.Data(1, TriadData(10, 10, 1, 0, 0, 9.8f, 30));
   w.Unsubscribe(1).Subscribe(0, 1, "sensor_accel");  // resubscribed: the same stream continues
@@ -340,6 +341,8 @@ TEST(ULogTest, DamageIsAnErrorNamingOffsetAndMessage) {
        "larger than a message can hold"},
       {"array size", [](ULogWriter* w) { w->Format("t:float[99999999999999999999] v;"); },
        "malformed array size"},
+      {"redefined", [](ULogWriter* w) { w->Format("sensor_accel:uint64_t timestamp;"); },
+       "defined twice, differently"},
       {"flags", [](ULogWriter* w) { w->FlagBits(2); }, "must be the first message"},
       {"type 0", [](ULogWriter* w) { w->Message('\0', "xyz"); }, "type 0"},
       {"bad key",
