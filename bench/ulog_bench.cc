@@ -6,6 +6,7 @@
 #include <benchmark/benchmark.h>
 
 #include <cstdint>
+#include <cstring>
 #include <random>
 #include <string>
 #include <vector>
@@ -21,13 +22,22 @@ using calibd::testing::ULogWriter;
 
 constexpr size_t kTargetBytes = size_t{50} << 20;
 
+// A log with the two formats subscribed as instances 0 and 1 each: msg_ids 1, 2 (accelerometers)
+// and 3, 4 (gyroscopes).
+ULogWriter TwoImus(const char* accel_format, const char* gyro_format) {
+  ULogWriter w;
+  w.FlagBits(0).Format(accel_format).Format(gyro_format);
+  for (const char* format : {accel_format, gyro_format}) {
+    const std::string topic(format, std::strchr(format, ':'));
+    const uint16_t id = format == accel_format ? 1 : 3;
+    w.Subscribe(0, id, topic).Subscribe(1, id + 1, topic);
+  }
+  return w;
+}
+
 const std::string& TriadLog() {
   static const std::string bytes = [] {
-    ULogWriter w;
-    w.FlagBits(0).Format(calibd::testing::kSensorAccelFormat);
-    w.Format(calibd::testing::kSensorGyroFormat);
-    w.Subscribe(0, 1, "sensor_accel").Subscribe(1, 2, "sensor_accel");
-    w.Subscribe(0, 3, "sensor_gyro").Subscribe(1, 4, "sensor_gyro");
+    ULogWriter w = TwoImus(calibd::testing::kSensorAccelFormat, calibd::testing::kSensorGyroFormat);
     std::mt19937 rng(1);
     std::normal_distribution<float> noise(0, 0.01f);
     for (uint64_t t = 1'000'000; w.bytes().size() < kTargetBytes; t += 1000) {
@@ -44,11 +54,8 @@ const std::string& TriadLog() {
 
 const std::string& FifoLog() {
   static const std::string bytes = [] {
-    ULogWriter w;
-    w.FlagBits(0).Format(calibd::testing::kSensorAccelFifoFormat);
-    w.Format(calibd::testing::kSensorGyroFifoFormat);
-    w.Subscribe(0, 1, "sensor_accel_fifo").Subscribe(1, 2, "sensor_accel_fifo");
-    w.Subscribe(0, 3, "sensor_gyro_fifo").Subscribe(1, 4, "sensor_gyro_fifo");
+    ULogWriter w =
+        TwoImus(calibd::testing::kSensorAccelFifoFormat, calibd::testing::kSensorGyroFifoFormat);
     std::mt19937 rng(1);
     std::uniform_int_distribution<int> counts(-40, 40);
     std::vector<std::vector<int16_t>> burst(8, std::vector<int16_t>(3));
