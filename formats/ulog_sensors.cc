@@ -83,8 +83,11 @@ int64_t ReadInteger(const uint8_t* p, BasicType type) {
       return v > uint64_t{std::numeric_limits<int64_t>::max()} ? std::numeric_limits<int64_t>::max()
                                                                : static_cast<int64_t>(v);
     }
-    default:
-      return static_cast<int64_t>(ReadReal(p, type));
+    default: {
+      // Integers of 32 bits or less convert exactly; a floating type (never passed) saturates.
+      const double v = ReadReal(p, type);
+      return std::isfinite(v) && std::abs(v) < 9e18 ? static_cast<int64_t>(v) : 0;
+    }
   }
 }
 
@@ -172,7 +175,7 @@ int SensorStreams::Subscribe(const std::string& topic_name, int multi_id, const 
   d.topic = found->topic;
   std::string missing;
   d.timestamp = Require(layout, "timestamp", 0, &missing);
-  if (Present(d.timestamp) && !IsInteger(d.timestamp.type)) missing += "timestamp (an integer)";
+  if (Present(d.timestamp) && !IsInteger(d.timestamp.type)) missing = "an integer timestamp";
   d.timestamp_sample = Optional(layout, "timestamp_sample");
   if (!IsInteger(d.timestamp_sample.type)) d.timestamp_sample = FieldSlot{};
   d.device_id = Optional(layout, "device_id");
@@ -194,6 +197,8 @@ int SensorStreams::Subscribe(const std::string& topic_name, int multi_id, const 
     d.dt = Require(layout, "dt", 0, &missing);
     d.scale = Require(layout, "scale", 0, &missing);
     d.samples = Require(layout, "samples", 0, &missing);
+    if (Present(d.samples) && !IsInteger(d.samples.type))
+      missing += std::string(missing.empty() ? "" : ", ") + "an integer samples";
   }
   if (!missing.empty()) {
     if (!warned_[topic_name])
@@ -347,7 +352,8 @@ void SensorStreams::Finish(SensorLog* log) {
       s.time_source = sample_time ? "timestamp_sample" : "timestamp";
       if (topic == Topic::kCombined && kind == StreamKind::kAccel)
         s.time_source = "timestamp + accelerometer_timestamp_relative";
-      const int64_t span = s.t_ns.back() - s.t_ns.front();
+      // In double: times of a damaged log may span more than int64 holds.
+      const double span = static_cast<double>(s.t_ns.back()) - static_cast<double>(s.t_ns.front());
       const double rate = span > 0 ? (s.samples() - 1) * 1e9 / span : 0;
       char hz[32];
       std::snprintf(hz, sizeof hz, "%.3g", rate);

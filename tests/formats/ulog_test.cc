@@ -228,6 +228,24 @@ TEST(ULogTest, UnknownTypesSyncDropoutsAndRemovalsAreHandled) {
   EXPECT_NE(log.warnings[0].find("version 2"), std::string::npos);
 }
 
+TEST(ULogTest, ASensorFormatWithoutTheFieldsNeededIsSkippedWithAWarning) {
+  ULogWriter w;
+  w.Format("sensor_gyro:uint64_t timestamp;float x;float y;");
+  w.Format(
+      "sensor_accel_fifo:uint64_t timestamp;float dt;float scale;float samples;"
+      "int16_t[4] x;int16_t[4] y;int16_t[4] z;");
+  w.Subscribe(0, 1, "sensor_gyro").Subscribe(1, 2, "sensor_gyro");
+  w.Subscribe(0, 3, "sensor_accel_fifo");
+  w.Data(1, testing::Packer().Put(uint64_t{5}).Put(1.f).Put(2.f).str());
+  const SensorLog log = ReadOk(w.bytes());
+  EXPECT_TRUE(log.streams.empty());
+  ASSERT_EQ(log.warnings.size(), 2u);  // once per topic
+  EXPECT_NE(log.warnings[0].find("sensor_gyro not read: its format (sensor_gyro) lacks z"),
+            std::string::npos)
+      << log.warnings[0];
+  EXPECT_NE(log.warnings[1].find("lacks an integer samples"), std::string::npos) << log.warnings[1];
+}
+
 TEST(ULogTest, AppendedDataIsReadAfterACutMainLog) {
   ULogWriter w;
   w.FlagBits(1, {0});  // offset patched below
