@@ -36,7 +36,8 @@ namespace calibd::server {
 // flags) is kInvalidInput naming the byte offset and the message index (0 = the first message
 // after the 16-byte header), with `file_name` as the Status file; *log is then left empty.
 // More samples than limits.max_samples is kInvalidInput naming the limit. Work is linear in the
-// size of the input; memory is the streams plus O(number of definitions). Thread-compatible.
+// size of the input; memory is the streams plus the definitions (at most 250 000 fields in
+// all formats, else kInvalidInput). Thread-compatible.
 Status ReadULog(std::string_view bytes, const std::string& file_name, const SensorLogLimits& limits,
                 SensorLog* log);
 

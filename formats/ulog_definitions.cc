@@ -9,6 +9,9 @@ namespace {
 
 // The largest data a 'D' message can hold: a uint16 payload size less the 2-byte msg_id.
 constexpr int64_t kMaxDataBytes = 65535 - 2;
+// More fields over all formats are refused: bounds the memory of the definitions (~100 B per
+// field with its layout) whatever the log's size.
+constexpr int64_t kMaxFields = 250'000;
 // Nesting deeper than this is refused (PX4's messages nest two or three levels).
 constexpr int kMaxNesting = 32;
 
@@ -114,6 +117,10 @@ Status Definitions::AddFormat(std::string_view text) {
                                   status.message());
     fields.push_back(std::move(field));
   }
+  total_fields_ += static_cast<int64_t>(fields.size());
+  if (total_fields_ > kMaxFields)
+    return Status::InvalidInput("the formats define more than " + std::to_string(kMaxFields) +
+                                " fields (PX4 logs define a few thousand)");
   const std::string name(text.substr(0, colon));
   auto [it, added] = formats_.try_emplace(name, Format{std::string(text), std::move(fields)});
   if (!added && it->second.text != text)

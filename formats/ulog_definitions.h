@@ -64,7 +64,8 @@ class Definitions {
  public:
   // Parses an 'F' payload "name:type field;type field;..." and stores it. A second definition
   // of a name is ignored when it is the same text, else kInvalidInput (a layout already used
-  // could not change). kInvalidInput (without location) for a malformed text.
+  // could not change). kInvalidInput (without location) for a malformed text, or when the
+  // formats define more than 250 000 fields in all (memory bound).
   Status AddFormat(std::string_view text);
   // The layout of format `name`, nested formats resolved; computed once per name, the pointer
   // valid for the Definitions' life. kInvalidInput naming the type for an undefined type, a cycle
@@ -84,6 +85,7 @@ class Definitions {
   // valid: formats are never redefined.
   std::map<std::string, int64_t, std::less<>> sizes_;
   std::map<std::string, Layout, std::less<>> layouts_;
+  int64_t total_fields_ = 0;  // over all 'F' messages, at most kMaxFields
 };
 
 }  // namespace calibd::server::ulog

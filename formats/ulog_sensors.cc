@@ -171,6 +171,9 @@ int SensorStreams::Subscribe(const std::string& topic_name, int multi_id, const 
   for (const TopicName& t : kTopics)
     if (topic_name == t.name) found = &t;
   if (found == nullptr) return -1;
+  // The layout of a name never changes (ulog::Definitions): one decoder per topic and instance.
+  auto known = handles_.find({found->topic, multi_id});
+  if (known != handles_.end()) return known->second;
   Decoder d;
   d.topic = found->topic;
   std::string missing;
@@ -205,6 +208,7 @@ int SensorStreams::Subscribe(const std::string& topic_name, int multi_id, const 
       warnings->push_back(topic_name + " not read: its format (" + topic_name + ") lacks " +
                           missing);
     warned_[topic_name] = true;
+    handles_[{found->topic, multi_id}] = -1;
     return -1;
   }
   const bool sample_time = Present(d.timestamp_sample);
@@ -214,7 +218,9 @@ int SensorStreams::Subscribe(const std::string& topic_name, int multi_id, const 
   if (Present(d.temperature))
     d.temperatures = BuilderFor(d.topic, multi_id, StreamKind::kTemperature, sample_time);
   decoders_.push_back(d);
-  return static_cast<int>(decoders_.size()) - 1;
+  const int handle = static_cast<int>(decoders_.size()) - 1;
+  handles_[{found->topic, multi_id}] = handle;
+  return handle;
 }
 
 Status SensorStreams::Count(int64_t samples) {
@@ -373,6 +379,7 @@ void SensorStreams::Finish(SensorLog* log) {
   }
   builders_.clear();
   decoders_.clear();
+  handles_.clear();
 }
 
 }  // namespace calibd::server::ulog

@@ -8,6 +8,7 @@
 #include <map>
 #include <string>
 #include <tuple>
+#include <utility>
 #include <vector>
 
 #include "base/status.h"
@@ -75,6 +76,7 @@ class SensorStreams {
 
   SensorLogLimits limits_;
   std::vector<Decoder> decoders_;
+  std::map<std::pair<Topic, int>, int> handles_;  // decoders_ index by (topic, multi_id)
   // By (topic, instance, kind); std::map keeps the Builder addresses stable.
   std::map<std::tuple<Topic, int, StreamKind>, Builder> builders_;
   std::map<std::string, bool> warned_;

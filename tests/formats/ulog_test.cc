@@ -361,6 +361,13 @@ TEST(ULogTest, DamageIsAnErrorNamingOffsetAndMessage) {
        "malformed array size"},
       {"redefined", [](ULogWriter* w) { w->Format("sensor_accel:uint64_t timestamp;"); },
        "defined twice, differently"},
+      {"too many fields",
+       [](ULogWriter* w) {
+         std::string fields;
+         for (int i = 0; i < 5000; ++i) fields += "int8_t a" + std::to_string(i) + ";";
+         for (int k = 0; k < 60; ++k) w->Format("t" + std::to_string(k) + ":" + fields);
+       },
+       "more than 250000 fields"},
       {"flags", [](ULogWriter* w) { w->FlagBits(2); }, "must be the first message"},
       {"type 0", [](ULogWriter* w) { w->Message('\0', "xyz"); }, "type 0"},
       {"bad key",
