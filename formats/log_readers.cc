@@ -2,6 +2,7 @@
 #include "formats/log_readers.h"
 
 #include "formats/dataflash.h"
+#include "formats/ulog.h"
 
 namespace calibd::server {
 
@@ -29,6 +30,8 @@ Status ReadSensorLog(LogFormat format, std::string_view bytes, const std::string
   switch (format) {
     case LogFormat::kDataFlash:
       return ReadDataFlash(bytes, file_name, limits, log);
+    case LogFormat::kULog:
+      return ReadULog(bytes, file_name, limits, log);
     default:
       break;
   }

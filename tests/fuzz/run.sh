@@ -19,7 +19,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 duration=${1:-}
 build=${CALIBD_SANITIZE_BUILD_DIR:-build-sanitize}
-targets=${CALIBD_FUZZ_TARGETS:-fuzz_recording fuzz_config fuzz_calibrate fuzz_multipart fuzz_dataflash}
+targets=${CALIBD_FUZZ_TARGETS:-fuzz_recording fuzz_config fuzz_calibrate fuzz_multipart fuzz_dataflash fuzz_ulog}
 jobs=${CALIBD_FUZZ_JOBS:-$(nproc)}
 
 scripts/setup.sh
@@ -35,6 +35,7 @@ runs() {
     fuzz_calibrate) echo 20000 ;;
     fuzz_multipart) echo 7500 ;;
     fuzz_dataflash) echo 60000 ;;
+    fuzz_ulog) echo 150000 ;;
   esac
 }
 
