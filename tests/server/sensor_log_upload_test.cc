@@ -12,6 +12,7 @@
 #include "formats/recording.h"
 #include "methods/imu/imu_method.h"
 #include "tests/lib/dataflash_writer.h"
+#include "tests/lib/ulog_writer.h"
 #include "tests/server/http_test_util.h"
 
 namespace calibd::server {
@@ -31,6 +32,22 @@ std::string AsDataFlash(const ArrayRecording& rec) {
     const double accel[3] = {rec.accel(i, 0), rec.accel(i, 1), rec.accel(i, 2)};
     const auto time_us = static_cast<uint64_t>(std::llround(1e6 + rec.t(i) * 1e6));
     calibd::testing::WriteImu(&w, time_us, 0, gyro, accel, 35.0);
+  }
+  return w.bytes();
+}
+
+// The same as a PX4 ULog: sensor_accel and sensor_gyro (multi_id 0, one device id) at the
+// recording's times plus 1 s (timestamp_sample; timestamp 200 µs later, as the driver publishes).
+std::string AsULog(const ArrayRecording& rec) {
+  calibd::testing::ULogWriter w;
+  w.Format(calibd::testing::kSensorAccelFormat).Format(calibd::testing::kSensorGyroFormat);
+  w.Subscribe(0, 0, "sensor_accel").Subscribe(0, 1, "sensor_gyro");
+  for (Eigen::Index i = 0; i < rec.t.size(); ++i) {
+    const auto t = static_cast<uint64_t>(std::llround(1e6 + rec.t(i) * 1e6));
+    w.Data(0, calibd::testing::TriadData(t + 200, t, 2490378, rec.accel(i, 0), rec.accel(i, 1),
+                                         rec.accel(i, 2), 41.5f));
+    w.Data(1, calibd::testing::TriadData(t + 200, t, 2490378, rec.gyro(i, 0), rec.gyro(i, 1),
+                                         rec.gyro(i, 2), 41.5f));
   }
   return w.bytes();
 }
@@ -108,6 +125,36 @@ TEST(SensorLogUpload, AnImuJobOnADataFlashLogRecoversTheTruthAndSaysWhatWasRead)
       ("/recordings/" + std::to_string(job["recording_id"].get<int64_t>())).c_str());
   ASSERT_TRUE(page);
   EXPECT_NE(page->body.find("<section id=\"log\">"), std::string::npos);
+}
+
+TEST(SensorLogUpload, AnImuJobOnAULogPairsAccelAndGyroByDeviceAndRecoversTheTruth) {
+  core::ImuSimulationOptions sim;
+  sim.statics = 24;
+  sim.seed = 12;
+  std::string csv;
+  json config, truth;
+  ASSERT_TRUE(SimulateImuFiles(sim, &csv, &config, &truth).ok());
+  const ArrayRecording rec = Parse(csv);
+  for (const char* key : {"accel_unit", "gyro_unit", "time_unit"}) config.erase(key);
+  TestServer server;
+  ASSERT_EQ(server.error(), "");
+  const json job = server.UploadAndWait(AsULog(rec), config, "flight");
+  ASSERT_FALSE(job.is_null());
+  ASSERT_EQ(job["status"], "succeeded") << job.dump().substr(0, 2000);
+  const json& r = job["result"];
+  for (const char* sensor : {"accelerometer", "gyroscope"}) {
+    for (int k = 0; k < 3; ++k) {
+      const double est = r["parameters"]["imus"][0][sensor]["bias"][k];
+      const double s = r["uncertainty"]["imus"][0][sensor]["bias_std"][k];
+      EXPECT_LE(std::abs(est - truth[sensor]["bias"][k].get<double>()), 5 * s) << sensor << k;
+    }
+  }
+  const json& imu = r["diagnostics"]["log"]["imus"][0];
+  EXPECT_EQ(imu["accel"], "sensor_accel:0");
+  EXPECT_EQ(imu["gyro"], "sensor_gyro:0");
+  EXPECT_EQ(imu["temp"], "sensor_accel:0");
+  EXPECT_EQ(imu["time_source"], "timestamp_sample");
+  EXPECT_TRUE(imu["resampled"].empty());
 }
 
 TEST(SensorLogUpload, ANoiseJobOnADataFlashLogFindsTheWhiteNoiseDensity) {
