@@ -169,6 +169,9 @@ class Mag : public Method {
            "disturbances";
   }
   std::function<Status(SimulatedFiles*)> AddSimulateOptions(CLI::App* command) const override;
+  // Measured: the parser's doubles, the fit's 24 doubles a sample, the copies of the triads and
+  // the plot (bench/README.md, "Memory budget per job": 68 B a value).
+  double PeakBytesPerValue(const json&) const override { return 72; }
   std::vector<std::string> FleetParameters() const override {
     return {"mags/*/hard_iron/*", "mags/*/soft_iron_symmetric/*/*"};
   }

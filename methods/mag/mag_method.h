@@ -37,7 +37,7 @@ namespace calibd::server {
 const Method& MagMethod();
 
 // Samples of each triad's plot in diagnostics (evenly spaced over the log).
-inline constexpr int kMagPlotPoints = 1500;
+inline constexpr int kMagPlotPoints = 800;
 
 // One magnetometer's run, for the result JSON.
 struct MagRun {
