@@ -53,7 +53,7 @@ struct MagConfig {
 // µT per reading unit of a named mag_unit; 0 for an unknown name.
 double MicroteslaPerUnit(const std::string& name) {
   if (name == "uT" || name == "\xC2\xB5T" || name == "\xCE\xBCT") return 1;  // µ: micro or mu
-  if (name == "gauss" || name == "G") return 100;
+  if (name == "gauss") return 100;
   if (name == "mG") return 0.1;
   if (name == "nT") return 0.001;
   return 0;
