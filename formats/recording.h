@@ -24,7 +24,7 @@ struct LogStreamSelection;  // formats/log_assembly.h
 enum class Layout {
   kPcaAveraged,  // position,s1,...,sm
   kPcaRaw,       // position,phase,s1,...,sm   (phase: static | moving)
-  kArray,        // [t,]aK_x,aK_y,aK_z,...,gJ_x,gJ_y,gJ_z  (any column order)
+  kArray,        // [t,]aK_x,aK_y,aK_z,...,gJ_x,gJ_y,gJ_z,mJ_x,..  (any column order)
 };
 const char* LayoutName(Layout layout);  // pca_averaged, pca_raw, array (stored, SPEC §2)
 
@@ -68,6 +68,10 @@ struct ArrayRecording {
   // temperature ignore them.
   std::vector<std::string> temp_names;
   Eigen::MatrixXd temperature;
+  // Magnetometer triads `mK_x,mK_y,mK_z` (SPEC §8 mag): N × 3M, reading units as recorded (always
+  // double); empty when the log has none. Methods that do not use them ignore them.
+  std::vector<std::string> mag_names;  // "m0".., by index
+  Eigen::MatrixXd mag;
 };
 
 // An array recording held as floats (RecordingParser::CollectArrayAsFloat): what the raw-log
@@ -82,6 +86,8 @@ struct ArrayRecordingFloat {
   Eigen::VectorXd t;                     // as ArrayRecording::t
   std::vector<std::string> temp_names;   // as ArrayRecording (kept in double)
   Eigen::MatrixXd temperature;
+  std::vector<std::string> mag_names;  // as ArrayRecording (kept in double, not scaled)
+  Eigen::MatrixXd mag;
   double accel_scale = 1, gyro_scale = 1;
 };
 
@@ -90,7 +96,7 @@ struct RecordingSummary {
   Layout layout = Layout::kPcaAveraged;
   int64_t rows = 0;                  // data rows (comments and header excluded)
   std::vector<std::string> columns;  // header names in file order
-  // pca: sensor names; array: triad names (a0.., then g0..).
+  // pca: sensor names; array: triad names (a0.., then g0.., then m0..).
   std::vector<std::string> sensors;
   int64_t positions = 0;  // pca only: distinct position labels
   // array layout with `t`: the first row whose t is not greater than the previous row's (line

@@ -101,7 +101,6 @@ std::string ControlName(int c) {
   }
 }
 
-// Parses "a12_x" style names. kind is 'a' or 'g'; returns false if the name has another form.
 // `temp` or `tempK` (K a triad index without leading zeros): a temperature column (SPEC §8).
 bool IsTemperatureColumn(std::string_view name) {
   if (name.substr(0, 4) != "temp") return false;
@@ -114,8 +113,10 @@ bool IsTemperatureColumn(std::string_view name) {
   return digits.size() <= 6;
 }
 
+// Parses "a12_x" style names. kind is 'a', 'g' or 'm' (magnetometer); returns false if the name
+// has another form.
 bool ParseTriadColumn(std::string_view name, char* kind, int* index, int* axis) {
-  if (name.size() < 4 || (name[0] != 'a' && name[0] != 'g')) return false;
+  if (name.size() < 4 || (name[0] != 'a' && name[0] != 'g' && name[0] != 'm')) return false;
   const size_t underscore = name.find('_');
   if (underscore == std::string_view::npos || underscore < 2 || underscore + 2 != name.size()) {
     return false;
@@ -334,8 +335,8 @@ Status RecordingParser::Impl::PcaHeader() {
 Status RecordingParser::Impl::ArrayHeader() {
   const auto& f = fields;
   summary.layout = Layout::kArray;
-  std::vector<std::array<int64_t, 3>> accel_cols, gyro_cols;  // file column per axis, 0 = none
-  std::vector<int64_t> temp_cols;                             // file column of temp_names[j]
+  std::vector<std::array<int64_t, 3>> accel_cols, gyro_cols, mag_cols;  // file column per axis
+  std::vector<int64_t> temp_cols;  // file column of temp_names[j]
   temp_names.clear();
   int64_t t_col = 0;
   for (size_t i = 0; i < f.size(); ++i) {
@@ -364,14 +365,15 @@ Status RecordingParser::Impl::ArrayHeader() {
     if (!ParseTriadColumn(f[i], &kind, &index, &axis)) {
       return Fail("unknown column '" + Excerpt(f[i]) +
                       "': an array recording has columns t, aK_x, aK_y, aK_z (accelerometer "
-                      "triad K), gJ_x, gJ_y, gJ_z (gyroscope triad J) and temp or tempK "
-                      "(temperature, °C); a pca recording starts with 'position'",
+                      "triad K), gJ_x, gJ_y, gJ_z (gyroscope triad J), mJ_x, mJ_y, mJ_z "
+                      "(magnetometer triad J) and temp or tempK (temperature, °C); a pca "
+                      "recording starts with 'position'",
                   col, name);
     }
     if (index >= limits.max_columns) {
       return Fail("triad index " + std::to_string(index) + " is too large", col, name);
     }
-    auto& cols = kind == 'a' ? accel_cols : gyro_cols;
+    auto& cols = kind == 'a' ? accel_cols : (kind == 'g' ? gyro_cols : mag_cols);
     if (static_cast<int>(cols.size()) <= index) cols.resize(index + 1, {0, 0, 0});
     if (cols[index][axis]) {
       return Fail(
@@ -380,8 +382,8 @@ Status RecordingParser::Impl::ArrayHeader() {
     }
     cols[index][axis] = col;
   }
-  for (char kind : {'a', 'g'}) {
-    const auto& cols = kind == 'a' ? accel_cols : gyro_cols;
+  for (char kind : {'a', 'g', 'm'}) {
+    const auto& cols = kind == 'a' ? accel_cols : (kind == 'g' ? gyro_cols : mag_cols);
     for (size_t k = 0; k < cols.size(); ++k) {
       for (int axis = 0; axis < 3; ++axis) {
         if (!cols[k][axis]) {
@@ -393,11 +395,12 @@ Status RecordingParser::Impl::ArrayHeader() {
       }
     }
   }
-  if (accel_cols.empty()) {
-    return Fail("no accelerometer columns (a0_x, a0_y, a0_z, ...)");
+  if (accel_cols.empty() && mag_cols.empty()) {
+    return Fail("no accelerometer or magnetometer columns (a0_x, a0_y, a0_z, ... or m0_x, ...)");
   }
   accel_triads = static_cast<int>(accel_cols.size());
   gyro_triads = static_cast<int>(gyro_cols.size());
+  mag_triads = static_cast<int>(mag_cols.size());
   has_t = t_col != 0;
   t_column = t_col;
   summary.t_column = t_col;
@@ -412,10 +415,17 @@ Status RecordingParser::Impl::ArrayHeader() {
   }
   for (int k = 0; k < accel_triads; ++k) summary.sensors.push_back("a" + std::to_string(k));
   for (int j = 0; j < gyro_triads; ++j) summary.sensors.push_back("g" + std::to_string(j));
-  for (size_t j = 0; j < temp_cols.size(); ++j) {
-    column_target[temp_cols[j] - 1] = 3 * (accel_triads + gyro_triads) + static_cast<int>(j);
+  const int triads = accel_triads + gyro_triads + mag_triads;
+  for (int j = 0; j < mag_triads; ++j) {
+    for (int axis = 0; axis < 3; ++axis) {
+      column_target[mag_cols[j][axis] - 1] = 3 * (accel_triads + gyro_triads + j) + axis;
+    }
+    summary.sensors.push_back("m" + std::to_string(j));
   }
-  row_values.resize(3 * (accel_triads + gyro_triads) + temp_names.size());
+  for (size_t j = 0; j < temp_cols.size(); ++j) {
+    column_target[temp_cols[j] - 1] = 3 * triads + static_cast<int>(j);
+  }
+  row_values.resize(3 * triads + temp_names.size());
   StartDirectCollection();
   return Status::Ok();
 }
@@ -434,7 +444,8 @@ void RecordingParser::Impl::StartDirectCollection() {
       direct_gyro.resize(expected_rows, 3 * gyro_triads);
     }
     if (has_t) direct_t.resize(expected_rows);
-    direct_temp.resize(expected_rows, static_cast<Eigen::Index>(temp_names.size()));
+    direct_side.resize(expected_rows,
+                       static_cast<Eigen::Index>(3 * mag_triads + temp_names.size()));
   }
 }
 

@@ -71,7 +71,8 @@ struct RecordingParser::Impl {
   // a0_x..a{K-1}_z, g0_x..g{G-1}_z).
   std::vector<int> column_target;
   int accel_triads = 0, gyro_triads = 0;
-  std::vector<std::string> temp_names;  // temperature columns (row_values after the triads)
+  int mag_triads = 0;                   // magnetometer triads (row_values after the gyroscopes)
+  std::vector<std::string> temp_names;  // temperature columns (row_values after the magnetometers)
   bool has_t = false;
   int64_t t_column = 0;       // 1-based, when has_t
   double previous_t = 0;      // seconds (converted), as collected
@@ -105,9 +106,10 @@ struct RecordingParser::Impl {
   double float_scale_accel = 1, float_scale_gyro = 1;
   std::vector<float> array_values_f;  // row-major, as array_values
   Eigen::MatrixXf direct_accel_f, direct_gyro_f;
-  // Temperature columns, always double: row-major N × temp_names (or direct, column-major).
-  std::vector<double> temp_values;
-  Eigen::MatrixXd direct_temp;
+  // The side columns, always double: the magnetometers' 3M, then the temperatures; row-major
+  // N × (3M + temp_names) (or direct, column-major).
+  std::vector<double> side_values;
+  Eigen::MatrixXd direct_side;
 
   // Hands the collected array to `out` (an ArrayRecording or ArrayRecordingFloat: TakeArray,
   // TakeArrayFloat) from the members that collected it, `acc`, `gyr` and `values` (the double or
@@ -117,12 +119,17 @@ struct RecordingParser::Impl {
   template <typename Out, typename Matrix, typename Scalar>
   void HandOverArray(Matrix* acc, Matrix* gyr, std::vector<Scalar>* values, Out* out) {
     out->accel_names.assign(summary.sensors.begin(), summary.sensors.begin() + accel_triads);
-    out->gyro_names.assign(summary.sensors.begin() + accel_triads, summary.sensors.end());
+    out->gyro_names.assign(summary.sensors.begin() + accel_triads,
+                           summary.sensors.begin() + accel_triads + gyro_triads);
+    out->mag_names.assign(summary.sensors.begin() + accel_triads + gyro_triads,
+                          summary.sensors.end());
     out->temp_names = temp_names;
+    const auto nm = static_cast<Eigen::Index>(3 * mag_triads);
     const auto nt = static_cast<Eigen::Index>(temp_names.size());
     if (direct) {
-      out->temperature = direct_temp.topRows(direct_rows);
-      direct_temp.resize(0, 0);
+      out->mag = direct_side.topLeftCorner(direct_rows, nm);
+      out->temperature = direct_side.topRightCorner(direct_rows, nt);
+      direct_side.resize(0, 0);
       // Handed over without a copy when the hint was exact (fewer rows: the rows there are).
       if (direct_rows == acc->rows()) {
         out->accel = std::move(*acc);
@@ -144,10 +151,11 @@ struct RecordingParser::Impl {
         values->data(), summary.rows, width);
     out->accel = all.leftCols(3 * accel_triads);
     out->gyro = all.rightCols(3 * gyro_triads);
-    out->temperature =
-        Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
-            temp_values.data(), summary.rows, nt);
-    std::vector<double>().swap(temp_values);
+    const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>
+        side(side_values.data(), summary.rows, nm + nt);
+    out->mag = side.leftCols(nm);
+    out->temperature = side.rightCols(nt);
+    std::vector<double>().swap(side_values);
     if (has_t) {
       out->t = Eigen::Map<const Eigen::VectorXd>(t_values.data(), summary.rows);
     } else {

@@ -319,8 +319,8 @@ void RecordingParser::Impl::CommitArrayRow(double raw, std::string_view text) {
       for (int j = 0; j < kg; ++j) direct_gyro(direct_rows, j) = row_values[ka + j];
     }
     if (has_t) direct_t(direct_rows) = t;
-    for (size_t j = 0; j < temp_names.size(); ++j) {
-      direct_temp(direct_rows, static_cast<Eigen::Index>(j)) = row_values[ka + kg + j];
+    for (Eigen::Index j = 0; j < direct_side.cols(); ++j) {
+      direct_side(direct_rows, j) = row_values[ka + kg + static_cast<size_t>(j)];
     }
     ++direct_rows;
     return;
@@ -331,7 +331,7 @@ void RecordingParser::Impl::CommitArrayRow(double raw, std::string_view text) {
   } else {
     array_values.insert(array_values.end(), row_values.begin(), row_values.begin() + ka + kg);
   }
-  temp_values.insert(temp_values.end(), row_values.begin() + ka + kg, row_values.end());
+  side_values.insert(side_values.end(), row_values.begin() + ka + kg, row_values.end());
   if (has_t) t_values.push_back(t);
 }
 
@@ -351,9 +351,9 @@ void RecordingParser::Impl::LeaveDirectCollection() {
       for (int j = 0; j < kg; ++j) array_values.push_back(direct_gyro(n, j));
     }
     if (has_t) t_values.push_back(direct_t(n));
-    for (Eigen::Index j = 0; j < direct_temp.cols(); ++j) temp_values.push_back(direct_temp(n, j));
+    for (Eigen::Index j = 0; j < direct_side.cols(); ++j) side_values.push_back(direct_side(n, j));
   }
-  direct_temp.resize(0, 0);
+  direct_side.resize(0, 0);
   direct = false;
   direct_accel.resize(0, 0);
   direct_gyro.resize(0, 0);

@@ -5,6 +5,8 @@
 #include "methods/array/array_report.h"
 #include "methods/imu/imu_method.h"
 #include "methods/imu/imu_report.h"
+#include "methods/mag/mag_method.h"
+#include "methods/mag/mag_report.h"
 #include "methods/noise/noise_method.h"
 #include "methods/noise/noise_report.h"
 #include "methods/pca/pca_method.h"
@@ -23,6 +25,7 @@ const std::vector<MethodDescriptor>& AllMethodDescriptors() {
       {&ImuMethod(), &web::internal::ImuMethodReport()},
       {&NoiseMethod(), &web::internal::NoiseMethodReport()},
       {&ThermalMethod(), &web::internal::ThermalMethodReport()},
+      {&MagMethod(), &web::internal::MagMethodReport()},
   };
   return methods;
 }

@@ -186,6 +186,53 @@ TEST(RecordingParser, FloatCollectionHoldsEachReadingTimesItsScaleRoundedOnce) {
   EXPECT_EQ(doubles.TakeArrayFloat(&none).code(), StatusCode::kInternal);
 }
 
+// Magnetometer triads (SPEC §8 mag) in any column order among the other columns: held in
+// double (unscaled) on every collection path, named m0.. after the gyroscopes; a log of
+// magnetometers alone is an array recording too.
+TEST(RecordingParser, ReadsMagnetometerColumnsBesideTheOthersOnEveryPath) {
+  std::string text = "m0_y,t,a0_x,a0_y,a0_z,m1_x,m1_y,m1_z,temp0,g0_x,g0_y,g0_z,m0_z,m0_x\n";
+  for (int n = 0; n < 30; ++n) {
+    const std::string k = std::to_string(n);
+    text += "0." + k + "," + std::to_string(0.01 * n) + ",1,2,3,-" + k + ",5,6," + k +
+            ".5,7,8,9,1e-3,123456.789012" + k + "\n";
+  }
+  for (int64_t hint : {int64_t{30}, int64_t{7}, int64_t{0}}) {
+    for (bool as_float : {false, true}) {
+      SCOPED_TRACE(std::to_string(hint) + (as_float ? " float" : " double"));
+      RecordingParser parser("mag.csv", true);
+      parser.ExpectRows(hint);
+      if (as_float) parser.CollectArrayAsFloat(2, 3);
+      ASSERT_TRUE(ParseAll(text, &parser).ok());
+      EXPECT_EQ(parser.summary().sensors, (std::vector<std::string>{"a0", "g0", "m0", "m1"}));
+      ArrayRecording d;
+      ArrayRecordingFloat f;
+      ASSERT_TRUE(as_float ? parser.TakeArrayFloat(&f).ok() : parser.TakeArray(&d).ok());
+      const Eigen::MatrixXd& mag = as_float ? f.mag : d.mag;
+      const Eigen::MatrixXd& temp = as_float ? f.temperature : d.temperature;
+      EXPECT_EQ(as_float ? f.mag_names : d.mag_names, (std::vector<std::string>{"m0", "m1"}));
+      EXPECT_EQ(as_float ? f.gyro_names : d.gyro_names, (std::vector<std::string>{"g0"}));
+      ASSERT_EQ(mag.rows(), 30);
+      ASSERT_EQ(mag.cols(), 6);
+      ASSERT_EQ(temp.cols(), 1);
+      for (int n = 0; n < 30; ++n) {
+        const std::string k = std::to_string(n);
+        EXPECT_EQ(mag(n, 0), std::stod("123456.789012" + k));  // full double precision
+        EXPECT_EQ(mag(n, 1), std::stod("0." + k));
+        EXPECT_EQ(mag(n, 2), 1e-3);
+        EXPECT_EQ(mag(n, 3), -n);
+        EXPECT_EQ(temp(n, 0), n + 0.5);
+      }
+      if (!as_float) EXPECT_EQ(d.gyro(29, 2), 9);
+    }
+  }
+  RecordingParser alone("mag.csv", true);
+  ASSERT_TRUE(ParseAll("t,m0_x,m0_y,m0_z\n0,1,2,3\n0.1,4,5,6\n", &alone).ok());
+  ArrayRecording rec;
+  ASSERT_TRUE(alone.TakeArray(&rec).ok());
+  EXPECT_EQ(rec.accel.cols(), 0);
+  EXPECT_EQ(rec.mag(1, 2), 6);
+}
+
 TEST(RecordingParser, ArrayWithoutTimeColumnHasEmptyT) {
   RecordingParser parser("arr.csv", true);
   ASSERT_TRUE(ParseAll("a0_x,a0_y,a0_z\n1,2,3\n", &parser).ok());
@@ -243,7 +290,9 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{"incomplete triad", "a0_x,a0_y,a0_z,a1_x,a1_y\n", 1, 0, "missing column 'a1_z'"},
         BadCase{"triad gap", "a0_x,a0_y,a0_z,a2_x,a2_y,a2_z\n", 1, 0, "missing column 'a1_x'"},
         BadCase{"duplicate array column", "a0_x,a0_y,a0_z,a0_x\n", 1, 4, "duplicate column"},
-        BadCase{"gyro only", "g0_x,g0_y,g0_z\n", 1, 0, "no accelerometer columns"},
+        BadCase{"gyro only", "g0_x,g0_y,g0_z\n", 1, 0, "no accelerometer or magnetometer columns"},
+        BadCase{"incomplete magnetometer", "a0_x,a0_y,a0_z,m0_x,m0_y\n", 1, 0,
+                "missing column 'm0_z'"},
         BadCase{"unterminated quote", "position,\"s1\n", 1, 2, "unterminated quoted field"},
         BadCase{"no rows", "# only a comment\nposition,s1\n", 2, 0, "no data rows"},
         BadCase{"empty file", "", 0, 0, "no header line"},

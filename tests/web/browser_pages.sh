@@ -89,6 +89,13 @@ for d in imu5 imu6 noise3 noise4; do
   jd=$(upload "$tmp/$d" 'IMU-DRIFT')
   wait_job "$jd"
 done
+# Two accepted mag calibrations of one device (issue #26): the report's sphere projections,
+# residuals with a disturbed span and coverage map; the device page's hard-iron drift.
+for s in 3 4; do
+  "$bin" simulate mag --out "$tmp/mag$s" --seed "$s" --turns 40 --disturbances 1 2>/dev/null
+  jm=$(upload "$tmp/mag$s" 'MAG-1')
+  wait_job "$jm"
+done
 
 render() {  # render NAME PATH -> DOM dump in $tmp/NAME.html, screenshot in $shots/NAME.png
   local flags=(--headless --no-sandbox --disable-gpu --disable-background-networking
@@ -128,6 +135,8 @@ render devices /devices
 render recording "/recordings/$r7"
 render full "/jobs/$j8"
 render device-drift /devices/IMU-DRIFT
+render mag "/jobs/$jm"
+render mag-device /devices/MAG-1
 # A product's fleet (issue #27): three units of the product "P-<b>" (escaped on the page).
 for k in 1 2 3; do
   jf=$(curl -sf -F "recording=@$tmp/pca/recording.csv" -F "config=@$tmp/pca/config.json" \
@@ -194,7 +203,11 @@ expect recording 'class="page-recording' 'plot-timeline-accel' 'plot-timeline-gy
 expect device-drift 'imu (2 accepted calibrations' 'noise (2 accepted calibrations' \
   'table-drift-imu' 'table-drift-noise' 'data-sensor="accelerometer"' 'data-sensor="gyroscope"' \
   'plot-drift-imu-scale' 'plot-drift-noise-accel' 'plot-drift-noise-gyro'
-for page in history pca array failed failed-imu device devices revoked rejected recording full device-drift running fleet; do
+expect mag 'plot-mag-sphere' 'plot-mag-residuals' 'plot-mag-coverage' 'Hard and soft iron' \
+  'ArduPilot COMPASS parameters' 'PX4 CAL_MAG parameters'
+expect mag-device 'mag: hard-iron drift'
+for page in history pca array failed failed-imu device devices revoked rejected recording full \
+  device-drift running fleet mag mag-device; do
   reject "$page" '<script' '<img'
   if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"
@@ -205,6 +218,7 @@ done
 if python3 "$(dirname "$0")/table_widths.py" "$chromium" "$tmp/profile-widths" "$base/" \
   "$base/jobs/$j2" "$base/jobs/$j3" "$base/jobs/$j4" "$base/jobs/$j5" "$base/jobs/$j8" \
   "$base/devices" "$base/devices/$hostile" "$base/devices/IMU-DRIFT" "$base/recordings/$r7" \
+  "$base/jobs/$jm" "$base/devices/MAG-1" \
   "$base/products/P-%3Cb%3E?method=pca" >"$tmp/widths.log" 2>&1; then
   passed=$((passed + 1))
 else
