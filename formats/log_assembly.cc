@@ -135,6 +135,30 @@ void Interpolate(const SensorStream& s, const std::vector<size_t>& idx, int64_t 
   }
 }
 
+// Writes `s`'s values at the times t into columns [column, column + dim) of *m: sample by sample
+// when s has exactly those times, else interpolated (Interpolate), and then s's name is appended
+// to *resampled.
+void FillColumns(const SensorStream& s, const std::vector<int64_t>& t, Eigen::MatrixXd* m,
+                 int column, json* resampled) {
+  int64_t unused = 0;
+  const std::vector<size_t> idx = IncreasingSamples(s, &unused);
+  const size_t n = t.size();
+  bool same = idx.size() == n;
+  for (size_t i = 0; same && i < n; ++i) same = s.t_ns[idx[i]] == t[i];
+  if (!same) resampled->push_back(s.Name());
+  const int dim = StreamDimension(s.kind);
+  size_t cursor = 0;
+  double v[3];
+  for (size_t i = 0; i < n; ++i) {
+    if (same) {
+      for (int j = 0; j < dim; ++j) v[j] = s.values[idx[i] * dim + j];
+    } else {
+      Interpolate(s, idx, t[i], &cursor, v);
+    }
+    for (int j = 0; j < dim; ++j) (*m)(static_cast<Eigen::Index>(i), column + j) = v[j];
+  }
+}
+
 struct ImuStreams {
   const SensorStream* accel = nullptr;
   const SensorStream* gyro = nullptr;
@@ -160,6 +184,26 @@ Status Resolve(const SensorLog& log, const LogStreamSelection::Imu& imu, size_t 
   if (!s.ok()) return s;
   if (out->accel == nullptr && out->gyro == nullptr) {
     return StreamsError(path, "needs an accel or a gyro stream");
+  }
+  return Status::Ok();
+}
+
+// The magnetometers `selection` names, else every one of the log.
+Status ResolveMags(const SensorLog& log, const LogStreamSelection& selection,
+                   std::vector<const SensorStream*>* mags) {
+  for (size_t k = 0; k < selection.mags.size(); ++k) {
+    const SensorStream* m = FindStream(log, selection.mags[k], StreamKind::kMag);
+    if (m == nullptr) {
+      return StreamsError("streams.mags[" + std::to_string(k) + "]",
+                          "names '" + selection.mags[k] + "', which this " + log.format +
+                              " log has no magnetometer stream of; it has: " + StreamList(log));
+    }
+    mags->push_back(m);
+  }
+  if (selection.mags.empty()) {
+    for (const SensorStream& s : log.streams) {
+      if (s.kind == StreamKind::kMag) mags->push_back(&s);
+    }
   }
   return Status::Ok();
 }
@@ -263,19 +307,24 @@ Status AssembleLog(const SensorLog& log, const LogStreamSelection& selection,
     imus.push_back(imu);
   }
 
-  // The first IMU's base sets the time column; the others must share it.
+  std::vector<const SensorStream*> mags;
+  if (Status s = ResolveMags(log, selection, &mags); !s.ok()) return s.WithFile(file_name);
+  const bool on_mag = selection.mag_time_base && !mags.empty();
+  // The first IMU's base (or the first magnetometer's) sets the time column; the other IMUs
+  // must share it, unless they are all interpolated onto a magnetometer's times.
+  const SensorStream* base = on_mag ? mags[0] : imus[0].base();
   int64_t dropped = 0;
-  const std::vector<size_t> base_idx = IncreasingSamples(*imus[0].base(), &dropped);
+  const std::vector<size_t> base_idx = IncreasingSamples(*base, &dropped);
   std::vector<int64_t> t;
   t.reserve(base_idx.size());
-  for (size_t i : base_idx) t.push_back(imus[0].base()->t_ns[i]);
+  for (size_t i : base_idx) t.push_back(base->t_ns[i]);
   std::vector<ImuStreams> kept;
   for (size_t k = 0; k < imus.size(); ++k) {
     int64_t k_dropped = 0;
     const std::vector<size_t> idx = IncreasingSamples(*imus[k].base(), &k_dropped);
     bool same = idx.size() == t.size();
     for (size_t i = 0; same && i < idx.size(); ++i) same = imus[k].base()->t_ns[idx[i]] == t[i];
-    if (same) {
+    if (same || on_mag) {
       kept.push_back(imus[k]);
       continue;
     }
@@ -298,7 +347,7 @@ Status AssembleLog(const SensorLog& log, const LogStreamSelection& selection,
   const size_t n = t.size(), K = kept.size();
   if (n < 2) {
     return Status::InvalidInput("the " + log.format + " log has " + std::to_string(n) +
-                                " usable samples of " + imus[0].base()->Name())
+                                " usable samples of " + base->Name())
         .WithFile(file_name);
   }
   // Counted from the first sample's whole second when the clock is an epoch (as for CSV).
@@ -318,6 +367,7 @@ Status AssembleLog(const SensorLog& log, const LogStreamSelection& selection,
   r.accel.resize(static_cast<Eigen::Index>(n), 3 * accels);
   r.gyro.resize(static_cast<Eigen::Index>(n), 3 * gyros);
   r.temperature.resize(static_cast<Eigen::Index>(n), temps);
+  r.mag.resize(static_cast<Eigen::Index>(n), 3 * static_cast<Eigen::Index>(mags.size()));
   json imus_json = json::array();
   int a = 0, g = 0, c = 0;
   for (size_t k = 0; k < K; ++k) {
@@ -331,21 +381,10 @@ Status AssembleLog(const SensorLog& log, const LogStreamSelection& selection,
               {"time_source", imu.base()->time_source},
               {"resampled", json::array()}};
     auto fill = [&](const SensorStream* s, Eigen::MatrixXd* m, int column) {
-      int64_t unused = 0;
-      const std::vector<size_t> idx = IncreasingSamples(*s, &unused);
-      bool same = idx.size() == n;
-      for (size_t i = 0; same && i < n; ++i) same = s->t_ns[idx[i]] == t[i];
-      if (!same && s->kind != StreamKind::kTemperature) d["resampled"].push_back(s->Name());
-      const int dim = StreamDimension(s->kind);
-      size_t cursor = 0;
-      double v[3];
-      for (size_t i = 0; i < n; ++i) {
-        if (same) {
-          for (int j = 0; j < dim; ++j) v[j] = s->values[idx[i] * dim + j];
-        } else {
-          Interpolate(*s, idx, t[i], &cursor, v);
-        }
-        for (int j = 0; j < dim; ++j) (*m)(static_cast<Eigen::Index>(i), column + j) = v[j];
+      json resampled = json::array();
+      FillColumns(*s, t, m, column, &resampled);
+      if (s->kind != StreamKind::kTemperature) {
+        for (const json& name : resampled) d["resampled"].push_back(name);
       }
     };
     if (imu.accel != nullptr) {
@@ -363,19 +402,27 @@ Status AssembleLog(const SensorLog& log, const LogStreamSelection& selection,
     }
     if (!d["resampled"].empty()) {
       warnings.push_back("IMU " + std::to_string(k) + ": " + d["resampled"][0].get<std::string>() +
-                         " was interpolated onto " + imu.base()->Name() +
+                         " was interpolated onto " + base->Name() +
                          "'s time stamps (its white noise at the shortest averaging times reads "
                          "low)");
     }
     if (dropped > 0) {
       warnings.push_back("IMU " + std::to_string(k) + ": " + std::to_string(dropped) +
-                         " samples of " + imu.base()->Name() +
+                         " samples of " + base->Name() +
                          " were dropped: their time did not increase");
     }
     imus_json.push_back(d);
   }
-  description["time_base"] = kept[0].base()->Name() + " (" + kept[0].base()->time_source + ")";
+  json mags_json = json::array();
+  for (size_t j = 0; j < mags.size(); ++j) {
+    json d = {{"stream", mags[j]->Name()}, {"resampled", json::array()}};
+    r.mag_names.push_back("m" + std::to_string(j));
+    FillColumns(*mags[j], t, &r.mag, 3 * static_cast<int>(j), &d["resampled"]);
+    mags_json.push_back(d);
+  }
+  description["time_base"] = base->Name() + " (" + base->time_source + ")";
   description["imus"] = imus_json;
+  description["mags"] = mags_json;
   description["warnings"] = warnings;
   return Status::Ok();
 }

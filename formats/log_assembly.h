@@ -11,7 +11,9 @@
 //     averages neighbouring samples, so its white noise at short averaging times reads lower
 //     than it is (up to 1/√2 halfway between samples).
 //   - Temperature, slow, is interpolated onto the base (held at its first and last value
-//     outside its span), stated per IMU.
+//     outside its span), stated per IMU; so are the magnetometers (`mags`, SPEC §8), unless
+//     mag_time_base makes the first magnetometer's times the base: then every IMU stream is
+//     interpolated onto them instead.
 //   - The recording has one time column: IMUs after the first whose time base is not the first's
 //     are left out by default, with a warning naming them and the `streams` that calibrates them;
 //     asked for explicitly, that is an error (one job per IMU for now).
@@ -40,6 +42,10 @@ struct LogStreamSelection {
   std::vector<Imu> imus;          // empty: every IMU of the log, in order
   std::vector<std::string> mags;  // empty: every magnetometer of the log
   bool given = false;             // the config had `streams`
+  // The first magnetometer's times are the time base and the IMUs' streams are interpolated onto
+  // them (the mag method: its samples stay independent, not repeated 10× onto a 1 kHz IMU's
+  // times). Set by the method (RecordingParser::SetLogTimeBaseMag), not by the config.
+  bool mag_time_base = false;
 };
 
 // Reads config `streams` (absent: the defaults). kInvalidInput naming the key path
@@ -47,8 +53,9 @@ struct LogStreamSelection {
 Status ParseLogStreams(const nlohmann::json& config, LogStreamSelection* selection);
 
 struct AssembledLog {
-  ArrayRecording recording;  // aK/gK per IMU K, tempK where the IMU has a temperature stream
-  int64_t time_origin = 0;   // whole seconds subtracted from every t (0: none)
+  // aK/gK per IMU K, tempK where the IMU has a temperature stream, mK per magnetometer (µT).
+  ArrayRecording recording;
+  int64_t time_origin = 0;  // whole seconds subtracted from every t (0: none)
   // What was read, for the recording's JSON and page (SPEC §9 "What was read"):
   // {"format", "time_base", "streams": [...], "imus": [{"index", "accel", "gyro", "temp",
   //   "samples", "dropped", "resampled", "temperature"}], "warnings": [...]}.

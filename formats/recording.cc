@@ -180,8 +180,12 @@ void RecordingParser::SetTimeUnit(TimeUnit unit) {
 TimeUnit RecordingParser::time_unit() const { return impl_->time_unit; }
 
 void RecordingParser::SetLogStreams(const LogStreamSelection& streams) {
+  const bool mag = impl_->log_streams.mag_time_base;
   impl_->log_streams = streams;
+  impl_->log_streams.mag_time_base = mag;
 }
+
+void RecordingParser::SetLogTimeBaseMag() { impl_->log_streams.mag_time_base = true; }
 
 bool RecordingParser::collects_float(double* accel_scale, double* gyro_scale) const {
   if (!impl_->as_float) return false;
@@ -208,6 +212,8 @@ Status RecordingParser::TakeArrayFloat(ArrayRecordingFloat* out) {
     out->t = std::move(r.t);
     out->temp_names = std::move(r.temp_names);
     out->temperature = std::move(r.temperature);
+    out->mag_names = std::move(r.mag_names);
+    out->mag = std::move(r.mag);
     r = {};
     return Status::Ok();
   }

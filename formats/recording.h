@@ -184,6 +184,9 @@ class RecordingParser {
   // Optional, before the first Feed: which streams of a binary sensor log form the IMUs (config
   // `streams`, SPEC §9; default every IMU). Does nothing to a CSV recording.
   void SetLogStreams(const LogStreamSelection& streams);
+  // Optional, before Finish: a sensor log's time base is its first magnetometer's times (the mag
+  // method; LogStreamSelection::mag_time_base). Kept by a later SetLogStreams.
+  void SetLogTimeBaseMag();
   // End of input: checks the last line and the whole-file rules (e.g. every raw position has
   // static and moving rows). Must be called once after the last Feed.
   Status Finish();

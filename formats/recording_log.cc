@@ -84,6 +84,10 @@ Status RecordingParser::Impl::FinishLog() {
     for (const char* axis : {"_x", "_y", "_z"}) summary.columns.push_back(g + axis);
     summary.sensors.push_back(g);
   }
+  for (const std::string& m : r.mag_names) {
+    for (const char* axis : {"_x", "_y", "_z"}) summary.columns.push_back(m + axis);
+    summary.sensors.push_back(m);
+  }
   for (const std::string& c : r.temp_names) summary.columns.push_back(c);
   summary.t_column = 1;
   summary.t_first_line = 0;

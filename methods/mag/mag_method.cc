@@ -160,6 +160,11 @@ class Mag : public Method {
   }
   bool Reads(Layout layout) const override { return layout == Layout::kArray; }
   bool NeedsIncreasingTime() const override { return true; }
+  // A sensor log: the magnetometer's own times are the time base (formats/log_assembly.h), so
+  // its samples are not repeated onto a faster IMU's times (which would understate σ).
+  void PrepareParser(const json&, RecordingParser* parser) const override {
+    parser->SetLogTimeBaseMag();
+  }
   Status ValidateConfig(const json& config) const override {
     MagConfig c;
     return ParseMagConfig(config, &c);

@@ -176,6 +176,42 @@ TEST(LogAssembly, AChoiceTheLogCannotSatisfyNamesTheKeyAndListsTheStreams) {
   EXPECT_EQ(AssembleLog(empty, {}, "f.ulg", &out).code(), StatusCode::kInvalidInput);
 }
 
+TEST(LogAssembly, MagnetometersFollowTheImuOrBecomeTheTimeBase) {
+  SensorLog log;
+  log.format = "ulog";
+  log.streams.push_back(Stream(StreamKind::kAccel, "sensor_accel", 0, 0, 1000000, 1000, 0, 7));
+  log.streams.push_back(Stream(StreamKind::kGyro, "sensor_gyro", 0, 0, 1000000, 1000, 0, 7));
+  // 100 Hz, values linear in time: interpolation is exact.
+  SensorStream mag = Stream(StreamKind::kMag, "sensor_mag", 0, 500000, 10000000, 99, 0);
+  for (size_t i = 0; i < mag.t_ns.size(); ++i) {
+    for (int k = 0; k < 3; ++k) mag.values[3 * i + k] = 20 + 1e-9 * mag.t_ns[i] + k;
+  }
+  log.streams.push_back(mag);
+  AssembledLog out;
+  ASSERT_TRUE(AssembleLog(log, {}, "f.ulg", &out).ok());
+  EXPECT_EQ(out.recording.t.size(), 1000);  // the IMU's times
+  EXPECT_EQ(out.recording.mag_names, std::vector<std::string>{"m0"});
+  EXPECT_NEAR(out.recording.mag(100, 2), 22 + out.recording.t(100), 1e-12);
+  EXPECT_EQ(out.description["mags"][0]["resampled"], json::array({"sensor_mag:0"}));
+
+  LogStreamSelection on_mag;
+  on_mag.mag_time_base = true;
+  ASSERT_TRUE(AssembleLog(log, on_mag, "f.ulg", &out).ok());
+  ASSERT_EQ(out.recording.t.size(), 99);  // the magnetometer's times, each sample once
+  EXPECT_DOUBLE_EQ(out.recording.t(0), 0.0005);
+  EXPECT_DOUBLE_EQ(out.recording.mag(3, 0), mag.values[9]);
+  EXPECT_EQ(out.description["time_base"], "sensor_mag:0 (timestamp_sample)");
+  EXPECT_EQ(out.description["imus"][0]["resampled"].size(), 2u);
+  // Accel value at t = 30.5 ms lies between samples 30 and 31 (base + i + k/10).
+  EXPECT_NEAR(out.recording.accel(3, 0), 30.5, 1e-9);
+
+  LogStreamSelection unknown;
+  ASSERT_TRUE(
+      ParseLogStreams(json::parse(R"({"streams": {"mags": ["sensor_mag:4"]}})"), &unknown).ok());
+  const Status s = AssembleLog(log, unknown, "f.ulg", &out);
+  EXPECT_NE(s.message().find("streams.mags[0]"), std::string::npos) << s.message();
+}
+
 TEST(LogAssembly, StreamsConfigOfTheWrongShapeNamesThePath) {
   LogStreamSelection pick;
   for (const char* bad :
