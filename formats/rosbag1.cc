@@ -257,6 +257,8 @@ Status BagReader::ReadConnection(const Fields& header, std::string_view data, in
       !ParseFields(data, &conn_header)) {
     return Damage(offset, chunk_offset, "a connection record without conn, topic or header");
   }
+  // The index section repeats the connections of the chunks: the first record of an id holds.
+  if (connections_.count(U32(conn->second, 0)) != 0) return Status::Ok();
   Connection c;
   c.topic = std::string(topic->second);
   std::string_view type = conn_header["type"];
