@@ -1,15 +1,13 @@
 // ROS 1 bag 2.0 reader (formats/rosbag1.h).
 #include "formats/rosbag1.h"
 
-#include <bzlib.h>
-#include <lz4frame.h>
-
 #include <algorithm>
 #include <cstring>
 #include <map>
 #include <memory>
 #include <utility>
 
+#include "formats/chunk_codec.h"
 #include "formats/ros_topics.h"
 
 namespace calibd::server {
@@ -294,12 +292,6 @@ Status BagReader::ReadChunk(const Fields& header, std::string_view data, int64_t
   return ReadRecords(records, 0, offset);
 }
 
-// Grows *out towards `size` as the decompressor fills it: memory follows the real output, never
-// a stated size alone.
-void Grow(std::string* out, size_t used, size_t size) {
-  out->resize(std::min<size_t>(size, std::max<size_t>(used * 2, 64 << 10)));
-}
-
 Status BagReader::Decompress(std::string_view compression, std::string_view in, uint32_t size,
                              int64_t offset, std::string* out) {
   decompressed_ += size;
@@ -309,60 +301,20 @@ Status BagReader::Decompress(std::string_view compression, std::string_view in, 
                                 " bytes (max_decompressed_bytes)")
         .WithFile(file_name_);
   }
-  // Room for one byte more than stated, so that a chunk decompressing to more shows.
-  const size_t cap = size_t{size} + 1;
-  size_t used = 0;
-  bool ended = false;
+  ChunkCodec codec;
   if (compression == "bz2") {
-    bz_stream bz{};
-    if (BZ2_bzDecompressInit(&bz, 0, 0) != BZ_OK) return Status::Internal("bz2 init failed");
-    bz.next_in = const_cast<char*>(in.data());
-    bz.avail_in = static_cast<unsigned>(in.size());
-    for (;;) {
-      if (used == out->size()) {
-        if (used == cap) break;
-        Grow(out, used, cap);
-      }
-      bz.next_out = out->data() + used;
-      bz.avail_out = static_cast<unsigned>(out->size() - used);
-      int rc = BZ2_bzDecompress(&bz);
-      used = out->size() - bz.avail_out;
-      ended = rc == BZ_STREAM_END;
-      if (rc != BZ_OK || (bz.avail_in == 0 && bz.avail_out > 0)) break;  // end, error, cut
-    }
-    BZ2_bzDecompressEnd(&bz);
+    codec = ChunkCodec::kBz2;
   } else if (compression == "lz4") {
-    LZ4F_dctx* dctx = nullptr;
-    if (LZ4F_isError(LZ4F_createDecompressionContext(&dctx, LZ4F_VERSION))) {
-      return Status::Internal("lz4 init failed");
-    }
-    std::unique_ptr<LZ4F_dctx, decltype(&LZ4F_freeDecompressionContext)> owner(
-        dctx, &LZ4F_freeDecompressionContext);
-    size_t in_pos = 0;
-    for (;;) {
-      if (used == out->size()) {
-        if (used == cap) break;
-        Grow(out, used, cap);
-      }
-      size_t out_n = out->size() - used;
-      size_t in_n = in.size() - in_pos;
-      size_t hint =
-          LZ4F_decompress(dctx, out->data() + used, &out_n, in.data() + in_pos, &in_n, nullptr);
-      used += out_n;
-      in_pos += in_n;
-      ended = hint == 0;
-      if (ended || LZ4F_isError(hint) || (in_n == 0 && out_n == 0)) break;
-    }
+    codec = ChunkCodec::kLz4Frame;
   } else {
     return Damage(offset, -1,
                   "a chunk compressed with unknown \"" + std::string(compression) + "\"");
   }
-  if (!ended || used != size) {
+  if (!DecompressExactly(codec, in, size, out)) {
     return Damage(offset, -1,
                   "a " + std::string(compression) + " chunk that does not decompress to its " +
                       "stated size of " + std::to_string(size) + " bytes");
   }
-  out->resize(used);
   return Status::Ok();
 }
 
