@@ -19,7 +19,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 duration=${1:-}
 build=${CALIBD_SANITIZE_BUILD_DIR:-build-sanitize}
-targets=${CALIBD_FUZZ_TARGETS:-fuzz_recording fuzz_config fuzz_calibrate fuzz_multipart fuzz_rosbag1}
+targets=${CALIBD_FUZZ_TARGETS:-fuzz_recording fuzz_config fuzz_calibrate fuzz_multipart fuzz_bags}
 jobs=${CALIBD_FUZZ_JOBS:-$(nproc)}
 
 scripts/setup.sh
@@ -34,7 +34,7 @@ runs() {
     fuzz_config) echo 500000 ;;
     fuzz_calibrate) echo 40000 ;;
     fuzz_multipart) echo 15000 ;;
-    fuzz_rosbag1) echo 300000 ;;
+    fuzz_bags) echo 300000 ;;
   esac
 }
 
@@ -42,7 +42,7 @@ runs() {
 max_len() {
   case $1 in
     fuzz_config | fuzz_calibrate) echo 4096 ;;
-    fuzz_rosbag1) echo 32768 ;;  # a bag's connection headers carry message definitions (4 KB)
+    fuzz_bags) echo 32768 ;;  # a ROS 1 bag's connection headers carry message definitions (4 KB)
     *) echo 16384 ;;
   esac
 }
