@@ -216,7 +216,9 @@ TEST(Mcap, RandomDamageNeverCrashes) {
       for (int k = 0; k < 3; ++k) b[8 + rng() % (b.size() - 8)] = static_cast<char>(rng());
       SensorLog log;
       Status s = ReadMcap(b, "x.mcap", SensorLogLimits(), &log);
-      if (!s.ok()) EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+      if (!s.ok()) {
+        EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+      }
     }
   }
 }

@@ -36,7 +36,8 @@ struct CdrWriter {
 
 inline std::string ImuCdr(bool big_endian, int32_t sec, uint32_t nsec, const double accel[3],
                           const double gyro[3]) {
-  CdrWriter w{big_endian};
+  CdrWriter w;
+  w.big_endian = big_endian;
   w.Header(sec, nsec, "imu_link");
   for (int i = 0; i < 4; ++i) w.Put(i == 3 ? 1.0 : 0.0);
   for (int i = 0; i < 9; ++i) w.Put(i == 0 ? -1.0 : 0.0);
