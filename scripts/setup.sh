@@ -6,6 +6,7 @@ packages=(
   build-essential cmake pkg-config git ca-certificates ccache
   libeigen3-dev nlohmann-json3-dev libcpp-httplib-dev libcli11-dev
   libsqlite3-dev sqlite3 libssl-dev zlib1g-dev libbrotli-dev libicu-dev
+  libbz2-dev liblz4-dev libzstd-dev python3-rosbag python3-sensor-msgs
   libpq-dev postgresql-15
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-14-dev

@@ -19,7 +19,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 duration=${1:-}
 build=${CALIBD_SANITIZE_BUILD_DIR:-build-sanitize}
-targets=${CALIBD_FUZZ_TARGETS:-fuzz_recording fuzz_config fuzz_calibrate fuzz_multipart fuzz_dataflash fuzz_ulog}
+targets=${CALIBD_FUZZ_TARGETS:-fuzz_recording fuzz_config fuzz_calibrate fuzz_multipart fuzz_dataflash fuzz_ulog fuzz_bags}
 jobs=${CALIBD_FUZZ_JOBS:-$(nproc)}
 
 scripts/setup.sh
@@ -36,6 +36,7 @@ runs() {
     fuzz_multipart) echo 7500 ;;
     fuzz_dataflash) echo 60000 ;;
     fuzz_ulog) echo 150000 ;;
+    fuzz_bags) echo 150000 ;;
   esac
 }
 
@@ -43,6 +44,7 @@ runs() {
 max_len() {
   case $1 in
     fuzz_config | fuzz_calibrate) echo 4096 ;;
+    fuzz_bags) echo 32768 ;;  # a ROS 1 bag's connection headers carry message definitions (4 KB)
     *) echo 16384 ;;
   esac
 }
