@@ -39,8 +39,8 @@ namespace {
 Status ReadRosBag2Bytes(std::string_view bytes, const std::string& file_name,
                         const SensorLogLimits& limits, SensorLog* log) {
   const char* dir = std::getenv("TMPDIR");
-  std::string path = std::string(dir != nullptr && *dir != '\0' ? dir : "/tmp") +
-                     "/calibd-db3-XXXXXX";
+  std::string path =
+      std::string(dir != nullptr && *dir != '\0' ? dir : "/tmp") + "/calibd-db3-XXXXXX";
   const int fd = ::mkstemp(path.data());
   if (fd < 0) return Status::IoError("cannot create a temporary file to read the ROS 2 bag");
   size_t written = 0;
@@ -73,12 +73,10 @@ Status ReadSensorLog(LogFormat format, std::string_view bytes, const std::string
       return ReadMcap(bytes, file_name, limits, log);
     case LogFormat::kSqlite:
       return ReadRosBag2Bytes(bytes, file_name, limits, log);
-    default:
+    case LogFormat::kUnknown:
       break;
   }
-  return Status::InvalidInput(std::string("this looks like a ") + LogFormatName(format) +
-                              " log (by its first bytes), which this calibd cannot read yet")
-      .WithFile(file_name);
+  return Status::Internal("ReadSensorLog: not a sensor log (calibd's CSV goes to its parser)");
 }
 
 }  // namespace calibd::server

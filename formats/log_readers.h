@@ -14,8 +14,8 @@ namespace calibd::server {
 // "ulog", "dataflash", "rosbag1", "rosbag2" (the SQLite storage), "mcap"; "csv" for kUnknown.
 const char* LogFormatName(LogFormat format);
 
-// Reads a whole log of a recognised format (SniffLogFormat). kInvalidInput naming the file, the
-// byte offset and what is wrong for a damaged log, or for a format this calibd cannot read.
+// Reads a whole log of a recognised format (SniffLogFormat; not kUnknown). kInvalidInput naming
+// the file, the byte offset and what is wrong for a damaged log.
 Status ReadSensorLog(LogFormat format, std::string_view bytes, const std::string& file_name,
                      const SensorLogLimits& limits, SensorLog* log);
 
