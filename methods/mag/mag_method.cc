@@ -10,30 +10,13 @@
 
 #include "core/static_detection.h"
 #include "formats/inertial_log.h"
+#include "methods/config_keys.h"
 
 namespace calibd::server {
 
 using nlohmann::json;
 
 namespace {
-
-Status KeyError(const std::string& key, const std::string& what) {
-  return Status::InvalidInput("config key '" + key + "' " + what)
-      .WithField(key)
-      .WithReason(Reason::kInvalidConfig);
-}
-
-// A finite number at config[key] within [lo, hi], or the default; kInvalidInput naming the key.
-Status NumberKey(const json& config, const char* key, double lo, double hi, double* out) {
-  auto it = config.find(key);
-  if (it == config.end()) return Status::Ok();
-  if (!it->is_number() || !std::isfinite(it->get<double>()) || it->get<double>() < lo ||
-      it->get<double>() > hi) {
-    return KeyError(key, "must be a number in [" + Fmt(lo) + ", " + Fmt(hi) + "]");
-  }
-  *out = it->get<double>();
-  return Status::Ok();
-}
 
 core::StaticDetectionOptions HandHeldStatics() {
   core::StaticDetectionOptions o;
@@ -65,9 +48,9 @@ Status ParseMagConfig(const json& config, MagConfig* out) {
       "method", "device", "mag_unit", "field", "static_window", "min_static"};
   for (const auto& [key, value] : config.items()) {
     if (kKnown.count(key) == 0) {
-      return KeyError(key,
-                      "is not a mag config key (known: mag_unit, field, static_window, "
-                      "min_static, method, device)");
+      return ConfigKeyError(key,
+                            "is not a mag config key (known: mag_unit, field, static_window, "
+                            "min_static, method, device)");
     }
   }
   *out = MagConfig();
@@ -76,28 +59,31 @@ Status ParseMagConfig(const json& config, MagConfig* out) {
       out->unit_text = it->get<std::string>();
       out->options.microtesla_per_unit = MicroteslaPerUnit(out->unit_text);
       if (out->options.microtesla_per_unit == 0) {
-        return KeyError("mag_unit",
-                        "must be \"uT\", \"gauss\", \"mG\", \"nT\" or a number (µT per reading "
-                        "unit), not \"" +
-                            out->unit_text + "\"");
+        return ConfigKeyError(
+            "mag_unit",
+            "must be \"uT\", \"gauss\", \"mG\", \"nT\" or a number (µT per reading "
+            "unit), not \"" +
+                out->unit_text + "\"");
       }
     } else if (it->is_number() && std::isfinite(it->get<double>()) && it->get<double>() > 0) {
       out->options.microtesla_per_unit = it->get<double>();
       out->unit_text = Fmt(it->get<double>()) + " uT";
     } else {
-      return KeyError("mag_unit",
-                      "must be \"uT\", \"gauss\", \"mG\", \"nT\" or a positive number (µT per "
-                      "reading unit)");
+      return ConfigKeyError(
+          "mag_unit",
+          "must be \"uT\", \"gauss\", \"mG\", \"nT\" or a positive number (µT per "
+          "reading unit)");
     }
   }
   if (auto it = config.find("field"); it != config.end()) {
     if (!it->is_number() || !(it->get<double>() > 0) || it->get<double>() > 1e4) {
-      return KeyError("field", "must be the local field magnitude in µT, a number in (0, 10000]");
+      return ConfigKeyError("field",
+                            "must be the local field magnitude in µT, a number in (0, 10000]");
     }
     out->options.field = it->get<double>();
   }
-  Status s = NumberKey(config, "static_window", 0.05, 60, &out->statics.static_window);
-  if (s.ok()) s = NumberKey(config, "min_static", 0, 600, &out->statics.min_static);
+  Status s = ConfigNumber(config, "static_window", 0.05, 60, &out->statics.static_window);
+  if (s.ok()) s = ConfigNumber(config, "min_static", 0, 600, &out->statics.min_static);
   if (!s.ok()) return s;
   return out->options.Validate();
 }

@@ -8,30 +8,13 @@
 #include <vector>
 
 #include "formats/inertial_log.h"
+#include "methods/config_keys.h"
 
 namespace calibd::server {
 
 using nlohmann::json;
 
 namespace {
-
-Status KeyError(const std::string& key, const std::string& what) {
-  return Status::InvalidInput("config key '" + key + "' " + what)
-      .WithField(key)
-      .WithReason(Reason::kInvalidConfig);
-}
-
-// A finite number at config[key] within [lo, hi], or the default; kInvalidInput naming the key.
-Status NumberKey(const json& config, const char* key, double lo, double hi, double* out) {
-  auto it = config.find(key);
-  if (it == config.end()) return Status::Ok();
-  if (!it->is_number() || !std::isfinite(it->get<double>()) || it->get<double>() < lo ||
-      it->get<double>() > hi) {
-    return KeyError(key, "must be a number in [" + Fmt(lo) + ", " + Fmt(hi) + "]");
-  }
-  *out = it->get<double>();
-  return Status::Ok();
-}
 
 Status ParseThermalConfig(const json& config, core::ThermalOptions* options, InertialUnits* units) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
@@ -40,37 +23,39 @@ Status ParseThermalConfig(const json& config, core::ThermalOptions* options, Ine
       "min_range", "lag",    "device_id",  "window",    "grid_points", "hysteresis_alpha"};
   for (const auto& [key, value] : config.items()) {
     if (kKnown.count(key) == 0) {
-      return KeyError(key,
-                      "is not a thermal config key (known: accel_unit, gyro_unit, t_ref, "
-                      "max_order, min_range, lag, device_id, window, grid_points, "
-                      "hysteresis_alpha, method, device)");
+      return ConfigKeyError(key,
+                            "is not a thermal config key (known: accel_unit, gyro_unit, t_ref, "
+                            "max_order, min_range, lag, device_id, window, grid_points, "
+                            "hysteresis_alpha, method, device)");
     }
   }
   *options = core::ThermalOptions();
   double max_order = options->max_order, grid = options->grid_points, t_ref = NAN;
-  Status s = NumberKey(config, "max_order", 1, 8, &max_order);
-  if (s.ok() && max_order != std::floor(max_order)) s = KeyError("max_order", "must be an integer");
-  if (s.ok()) s = NumberKey(config, "grid_points", 2, 1000, &grid);
-  if (s.ok() && grid != std::floor(grid)) s = KeyError("grid_points", "must be an integer");
-  if (s.ok()) s = NumberKey(config, "t_ref", -100, 200, &t_ref);
-  if (s.ok()) s = NumberKey(config, "min_range", 0, 300, &options->min_range);
-  if (s.ok()) s = NumberKey(config, "window", 0.01, 3600, &options->window);
-  if (s.ok()) s = NumberKey(config, "hysteresis_alpha", 1e-9, 0.5, &options->hysteresis_alpha);
+  Status s = ConfigNumber(config, "max_order", 1, 8, &max_order);
+  if (s.ok() && max_order != std::floor(max_order))
+    s = ConfigKeyError("max_order", "must be an integer");
+  if (s.ok()) s = ConfigNumber(config, "grid_points", 2, 1000, &grid);
+  if (s.ok() && grid != std::floor(grid)) s = ConfigKeyError("grid_points", "must be an integer");
+  if (s.ok()) s = ConfigNumber(config, "t_ref", -100, 200, &t_ref);
+  if (s.ok()) s = ConfigNumber(config, "min_range", 0, 300, &options->min_range);
+  if (s.ok()) s = ConfigNumber(config, "window", 0.01, 3600, &options->window);
+  if (s.ok()) s = ConfigNumber(config, "hysteresis_alpha", 1e-9, 0.5, &options->hysteresis_alpha);
   if (!s.ok()) return s;
   options->max_order = static_cast<int>(max_order);
   options->grid_points = static_cast<int>(grid);
   if (std::isfinite(t_ref)) options->t_ref = t_ref;
   if (auto it = config.find("lag"); it != config.end()) {
     if (*it == "estimate") {
-      return KeyError("lag",
-                      "'estimate' is not implemented yet: calibd fits the temperature reading as "
-                      "the sensor's temperature (lag \"none\")");
+      return ConfigKeyError(
+          "lag",
+          "'estimate' is not implemented yet: calibd fits the temperature reading as "
+          "the sensor's temperature (lag \"none\")");
     }
-    if (*it != "none") return KeyError("lag", "must be \"none\" or \"estimate\"");
+    if (*it != "none") return ConfigKeyError("lag", "must be \"none\" or \"estimate\"");
   }
   if (auto it = config.find("device_id"); it != config.end()) {
     if (!it->is_number_integer() || it->get<int64_t>() < 0 || it->get<int64_t>() > 0xffffffffLL) {
-      return KeyError("device_id", "must be an integer 0..4294967295 (PX4's TC_*_ID)");
+      return ConfigKeyError("device_id", "must be an integer 0..4294967295 (PX4's TC_*_ID)");
     }
   }
   std::string error;
