@@ -19,7 +19,7 @@ using json = nlohmann::json;
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kPi = 3.14159265358979323846;
-constexpr const char* kPm = "\xC2\xB1";        // ±
+constexpr const char* kPm = "\xC2\xB1";  // ±
 
 std::string E(const std::string& s) { return EscapeText(s); }
 std::string A(const std::string& s) { return EscapeAttr(s); }
