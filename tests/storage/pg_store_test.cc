@@ -192,6 +192,7 @@ TEST_F(PgStoreTest, Version1FailuresMigrateAndNewOnesKeepTheirReason) {
   // The database as version 1 left it: without the v2 columns, the job failed.
   auto c = Sql();
   ASSERT_TRUE(c->ExecScript("DROP INDEX results_by_state; DROP INDEX devices_by_serial_bytes;"
+                            "ALTER TABLE recordings DROP COLUMN log_json;"
                             "ALTER TABLE jobs DROP COLUMN error_reason;"
                             "ALTER TABLE jobs DROP COLUMN error_detail_json;"
                             "ALTER TABLE jobs DROP COLUMN cancel_requested_at;"
@@ -244,6 +245,7 @@ TEST_F(PgStoreTest, Version2JobsAndEventsMigrateAndJobsCanBeCancelled) {
   // The database as version 2 left it: no cancel columns, events only revoke/accept.
   auto c = Sql();
   ASSERT_TRUE(c->ExecScript("DROP INDEX results_by_state; DROP INDEX devices_by_serial_bytes;"
+                            "ALTER TABLE recordings DROP COLUMN log_json;"
                             "ALTER TABLE jobs DROP COLUMN cancel_requested_at;"
                             "ALTER TABLE jobs DROP COLUMN cancel_reason;"
                             "ALTER TABLE jobs DROP COLUMN cancel_actor;"
