@@ -32,8 +32,8 @@ runs() {
   case $1 in
     fuzz_recording) echo 150000 ;;
     fuzz_config) echo 250000 ;;
-    fuzz_calibrate) echo 20000 ;;
-    fuzz_multipart) echo 7500 ;;
+    fuzz_calibrate) echo 10000 ;;
+    fuzz_multipart) echo 3000 ;;
     fuzz_dataflash) echo 60000 ;;
     fuzz_ulog) echo 150000 ;;
     fuzz_bags) echo 150000 ;;
