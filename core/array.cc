@@ -489,8 +489,7 @@ void AddWarnings(const ArrayOptions& options, int64_t samples_in, int max_iterat
     if (estimate > 2 * configured || estimate < configured / 2)
       warnings.push_back(std::string(what) + " noise estimated from the residuals (" +
                          Fmt(estimate) + " " + unit + ") differs from the configured " +
-                         Fmt(configured) + " " + unit +
-                         " by more than 2x: " +
+                         Fmt(configured) + " " + unit + " by more than 2x: " +
                          (result->sigma_basis == "sandwich"
                               ? "the reported σ is the residual-aware one; "
                               : "the reported uncertainties assume the configured value; ") +

@@ -370,7 +370,8 @@ TEST(DataFlashTest, FieldOfAnotherUnitIsNotRead) {
   ASSERT_TRUE(Read(w.bytes(), &log).ok());
   EXPECT_TRUE(log.streams.empty());
   ASSERT_GE(log.warnings.size(), 1u);
-  EXPECT_NE(log.warnings[0].find("MAG:0 magnetometer not read"), std::string::npos) << log.warnings[0];
+  EXPECT_NE(log.warnings[0].find("MAG:0 magnetometer not read"), std::string::npos)
+      << log.warnings[0];
 }
 
 // ---- A public ArduPilot log against pymavlink's DFReader --------------------------------------

@@ -2,12 +2,12 @@
 // a document that does not fit is refused naming the path of the problem.
 #include "methods/array/array_result.h"
 
-#include "methods/array/array_full_report.h"
-
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <string>
+
+#include "methods/array/array_full_report.h"
 
 namespace calibd::results {
 namespace {
