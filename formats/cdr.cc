@@ -66,30 +66,7 @@ bool DecodeCdrMessage(std::string_view data, RosMessageType type, RosSample* s) 
   if (data.size() < 4 || data[0] != 0 || (data[1] != 0 && data[1] != 1)) return false;
   CdrCursor c{data.substr(4), data[1] == 0};
   s->stamp_ns = c.Header();
-  double cov[9];
-  switch (type) {
-    case RosMessageType::kImu:
-      c.F64s(cov, 4);  // orientation
-      c.F64s(cov, 9);
-      c.F64s(s->gyro, 3);
-      c.F64s(cov, 9);
-      s->has_gyro = cov[0] != -1;
-      c.F64s(s->accel, 3);
-      c.F64s(cov, 9);
-      s->has_accel = cov[0] != -1;
-      break;
-    case RosMessageType::kMagneticField:
-      c.F64s(s->mag_tesla, 3);
-      c.F64s(cov, 9);
-      break;
-    case RosMessageType::kTemperature:
-      s->temperature_c = c.F64();
-      c.F64();  // variance
-      break;
-    case RosMessageType::kOther:
-      return false;
-  }
-  return c.ok;
+  return ReadSensorFields(c, type, s);
 }
 
 }  // namespace calibd::server

@@ -32,6 +32,37 @@ struct RosSample {
   double temperature_c = 0;
 };
 
+// The fields after std_msgs/Header of the three message types, laid out alike in ROS 1 and in
+// ROS 2's CDR: `Cursor` reads doubles in its encoding (F64() and F64s(out, n), with its own
+// alignment rules). Returns false for kOther, else whether the cursor read them all (c.ok).
+template <class Cursor>
+bool ReadSensorFields(Cursor& c, RosMessageType type, RosSample* s) {
+  double cov[9];
+  switch (type) {
+    case RosMessageType::kImu:
+      c.F64s(cov, 4);  // orientation
+      c.F64s(cov, 9);  // and its covariance
+      c.F64s(s->gyro, 3);
+      c.F64s(cov, 9);
+      s->has_gyro = cov[0] != -1;
+      c.F64s(s->accel, 3);
+      c.F64s(cov, 9);
+      s->has_accel = cov[0] != -1;
+      break;
+    case RosMessageType::kMagneticField:
+      c.F64s(s->mag_tesla, 3);
+      c.F64s(cov, 9);
+      break;
+    case RosMessageType::kTemperature:
+      s->temperature_c = c.F64();
+      c.F64();  // variance
+      break;
+    case RosMessageType::kOther:
+      return false;
+  }
+  return c.ok;
+}
+
 // Collects samples topic by topic. Not thread-safe.
 class RosTopicSamples {
  public:

@@ -103,28 +103,7 @@ struct MessageCursor {
 bool DecodeMessage(std::string_view data, RosMessageType type, RosSample* s) {
   MessageCursor c{data};
   s->stamp_ns = c.Header();
-  double cov[9];
-  switch (type) {
-    case RosMessageType::kImu:
-      c.Skip(4 * 8 + 9 * 8);  // orientation and its covariance
-      c.F64s(s->gyro, 3);
-      c.F64s(cov, 9);
-      s->has_gyro = cov[0] != -1;
-      c.F64s(s->accel, 3);
-      c.F64s(cov, 9);
-      s->has_accel = cov[0] != -1;
-      break;
-    case RosMessageType::kMagneticField:
-      c.F64s(s->mag_tesla, 3);
-      c.F64s(cov, 9);
-      break;
-    case RosMessageType::kTemperature:
-      s->temperature_c = c.F64();
-      c.F64();  // variance
-      break;
-    case RosMessageType::kOther:
-      break;
-  }
+  ReadSensorFields(c, type, s);  // kOther: the header alone
   return c.ok;
 }
 
