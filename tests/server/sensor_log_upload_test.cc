@@ -60,6 +60,24 @@ ArrayRecording Parse(const std::string& csv) {
   return rec;
 }
 
+// A simulated hand-held imu log (core/imu_simulation.h) with `statics` holds: its samples, the
+// imu config without the CSV unit keys (a log is SI), and the truth.
+struct SimulatedImu {
+  ArrayRecording rec;
+  json config, truth;
+};
+SimulatedImu Simulate(int statics, uint64_t seed) {
+  core::ImuSimulationOptions sim;
+  sim.statics = statics;
+  sim.seed = seed;
+  std::string csv;
+  SimulatedImu out;
+  EXPECT_TRUE(SimulateImuFiles(sim, &csv, &out.config, &out.truth).ok());
+  out.rec = Parse(csv);
+  for (const char* key : {"accel_unit", "gyro_unit", "time_unit"}) out.config.erase(key);
+  return out;
+}
+
 json GetJson(const TestServer& server, const std::string& path) {
   auto res = server.Client().Get(path.c_str());
   if (!res || res->status != 200) return nullptr;
@@ -67,15 +85,11 @@ json GetJson(const TestServer& server, const std::string& path) {
 }
 
 TEST(SensorLogUpload, AnImuJobOnADataFlashLogRecoversTheTruthAndSaysWhatWasRead) {
-  core::ImuSimulationOptions sim;
-  sim.statics = 24;
-  sim.seed = 11;
-  std::string csv;
-  json config, truth;
-  ASSERT_TRUE(SimulateImuFiles(sim, &csv, &config, &truth).ok());
-  const ArrayRecording rec = Parse(csv);
+  SimulatedImu sim = Simulate(24, 11);
+  json& config = sim.config;
+  const json& truth = sim.truth;
+  const ArrayRecording& rec = sim.rec;
   const std::string log = AsDataFlash(rec);
-  for (const char* key : {"accel_unit", "gyro_unit", "time_unit"}) config.erase(key);
   TestServer server;
   ASSERT_EQ(server.error(), "");
   const json job = server.UploadAndWait(log, config, "upload.dat");  // a neutral name
@@ -128,14 +142,10 @@ TEST(SensorLogUpload, AnImuJobOnADataFlashLogRecoversTheTruthAndSaysWhatWasRead)
 }
 
 TEST(SensorLogUpload, AnImuJobOnAULogPairsAccelAndGyroByDeviceAndRecoversTheTruth) {
-  core::ImuSimulationOptions sim;
-  sim.statics = 24;
-  sim.seed = 12;
-  std::string csv;
-  json config, truth;
-  ASSERT_TRUE(SimulateImuFiles(sim, &csv, &config, &truth).ok());
-  const ArrayRecording rec = Parse(csv);
-  for (const char* key : {"accel_unit", "gyro_unit", "time_unit"}) config.erase(key);
+  SimulatedImu sim = Simulate(24, 12);
+  json& config = sim.config;
+  const json& truth = sim.truth;
+  const ArrayRecording& rec = sim.rec;
   TestServer server;
   ASSERT_EQ(server.error(), "");
   const json job = server.UploadAndWait(AsULog(rec), config, "flight");
@@ -191,12 +201,9 @@ TEST(SensorLogUpload, ANoiseJobOnADataFlashLogFindsTheWhiteNoiseDensity) {
 }
 
 TEST(SensorLogUpload, CsvUnitKeysAreRefusedForALog) {
-  core::ImuSimulationOptions sim;
-  sim.statics = 12;
-  std::string csv;
-  json config, truth;
-  ASSERT_TRUE(SimulateImuFiles(sim, &csv, &config, &truth).ok());
-  const std::string log = AsDataFlash(Parse(csv));
+  SimulatedImu sim = Simulate(12, 1);
+  json& config = sim.config;
+  const std::string log = AsDataFlash(sim.rec);
   config["time_unit"] = "ms";
   TestServer server;
   ASSERT_EQ(server.error(), "");
@@ -211,12 +218,8 @@ TEST(SensorLogUpload, CsvUnitKeysAreRefusedForALog) {
 }
 
 TEST(SensorLogUpload, ACutLogIsStoredWithAWarningAndADamagedOneIsRefused) {
-  core::ImuSimulationOptions sim;
-  sim.statics = 12;
-  std::string csv;
-  json config, truth;
-  ASSERT_TRUE(SimulateImuFiles(sim, &csv, &config, &truth).ok());
-  const std::string log = AsDataFlash(Parse(csv));
+  SimulatedImu sim = Simulate(12, 1);
+  const std::string log = AsDataFlash(sim.rec);
   TestServer server;
   ASSERT_EQ(server.error(), "");
   auto client = server.Client();
