@@ -6,9 +6,13 @@
 #include <sqlite3.h>
 
 #include <cstdio>
+#include <cstdlib>
+#include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 
+#include "formats/recording.h"
 #include "tests/formats/ros2_cdr_writer.h"
 
 namespace calibd::server {
@@ -55,6 +59,34 @@ std::string WriteDb3(const std::string& name, int n, bool short_imu = false) {
   sqlite3_finalize(insert);
   sqlite3_close(db);
   return path;
+}
+
+// An upload's bytes: recognised by "SQLite format 3", written to a private temporary file for
+// SQLite (formats/log_readers.cc), read, assembled; the temporary file is gone afterwards.
+TEST(RosBag2Sqlite, ItsBytesReachTheRecordingParserLikeAnyLog) {
+  std::ifstream in(WriteDb3("bytes.db3", 30), std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string dir = ::testing::TempDir() + "db3-tmp";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  ::setenv("TMPDIR", dir.c_str(), 1);
+  RecordingParser parser("upload", /*collect=*/true);
+  ASSERT_TRUE(parser.Feed(bytes.substr(0, 7)).ok());  // recognised across small chunks
+  ASSERT_TRUE(parser.Feed(bytes.substr(7)).ok());
+  const Status s = parser.Finish();
+  ::unsetenv("TMPDIR");
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  EXPECT_EQ(parser.summary().format, "rosbag2");
+  ArrayRecording rec;
+  ASSERT_TRUE(parser.TakeArray(&rec).ok());
+  EXPECT_EQ(rec.t.size(), 30);
+  EXPECT_EQ(rec.accel(3, 0), 1.5);
+  EXPECT_EQ(rec.mag_names.size(), 1u);
+  EXPECT_TRUE(std::filesystem::is_empty(dir));
+
+  RecordingParser damaged("upload", /*collect=*/false);
+  ASSERT_TRUE(damaged.Feed(bytes.substr(0, 4096)).ok());
+  EXPECT_EQ(damaged.Finish().code(), StatusCode::kInvalidInput);
 }
 
 TEST(RosBag2Sqlite, ReadsTheSamplesWritten) {
