@@ -81,7 +81,9 @@ TEST(Saturation, ClippedTriadsAreFoundAndCountedExactly) {
       } else if (low[a] == 0) {
         EXPECT_EQ(out[a].pinned_low, 0);
       }
-      if (out[a].pinned() > 0) EXPECT_EQ(out[a].source, "data");
+      if (out[a].pinned() > 0) {
+        EXPECT_EQ(out[a].source, "data");
+      }
     }
   }
   EXPECT_GE(sides, 100);  // of 120: the test exercises what it claims

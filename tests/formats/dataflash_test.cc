@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "tests/lib/dataflash_writer.h"
+#include "tests/lib/test_paths.h"
 
 namespace calibd::server {
 namespace {
@@ -384,7 +385,7 @@ std::string EnvOr(const char* name, const char* fallback) {
 // DFReader's reading of `path` (tests/formats/dataflash_reference.py), or null when it did not run.
 nlohmann::json ReferenceReading(const std::string& path, const std::string& pymavlink) {
   const std::string command = "PYTHONPATH='" + pymavlink +
-                              "' python3 '" CALIBD_SOURCE_DIR
+                              "' python3 '" + calibd::test_paths::SourceDir() +
                               "/tests/formats/dataflash_reference.py' '" +
                               path + "' 2>/dev/null";
   FILE* pipe = popen(command.c_str(), "r");
@@ -464,7 +465,7 @@ TEST(DataFlashTest, WrittenLogsAgreeWithPymavlink) {
   std::string why;
   const std::string pymavlink = Pymavlink(&why);
   if (pymavlink.empty()) GTEST_SKIP() << why;
-  const std::string dir = std::string(CALIBD_SOURCE_DIR) + "/tests/fuzz/corpus/fuzz_dataflash/";
+  const std::string dir = calibd::test_paths::SourceDir() + "/tests/fuzz/corpus/fuzz_dataflash/";
   for (const char* seed : {"modern.bin", "batch.bin", "older.bin"})
     ExpectAgreesWithPymavlink(dir + seed, pymavlink);
 }

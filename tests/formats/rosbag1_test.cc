@@ -2,6 +2,7 @@
 // writer; uncompressed, bz2, lz4 chunks) read back to the samples written, and bags of the test's
 // own writer cut and damaged.
 #include "formats/rosbag1.h"
+#include "tests/lib/test_paths.h"
 
 #include <gtest/gtest.h>
 
@@ -35,7 +36,7 @@ bool HavePythonRosbag() {
 std::string WritePythonBag(const std::string& compression, int n) {
   std::string path = ::testing::TempDir() + "rosbag1_" + compression + ".bag";
   std::string cmd = "cd " + ::testing::TempDir() +
-                    " && /usr/bin/python3 " CALIBD_SOURCE_DIR "/tests/formats/write_rosbag1.py " +
+                    " && /usr/bin/python3 " + calibd::test_paths::SourceDir() + "/tests/formats/write_rosbag1.py " +
                     path + " " + compression + " " + std::to_string(n);
   EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
   return ReadFile(path);
@@ -240,7 +241,9 @@ TEST(RosBag1, CutAtEveryByteReadsWholeChunksOnly) {
     ASSERT_TRUE(s.ok()) << n << ": " << s.message();
     bool boundary = std::find(boundaries.begin(), boundaries.end(), n) != boundaries.end();
     ASSERT_EQ(log.warnings.size(), boundary ? 0u : 1u) << n;
-    if (!boundary) EXPECT_NE(log.warnings[0].find("at byte "), std::string::npos);
+    if (!boundary) {
+      EXPECT_NE(log.warnings[0].find("at byte "), std::string::npos);
+    }
     int64_t samples = log.streams.empty() ? 0 : log.streams[0].samples();
     EXPECT_EQ(samples % 4, 0) << n;  // whole chunks only
   }

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "tests/lib/ulog_writer.h"
+#include "tests/lib/test_paths.h"
 
 namespace calibd::server {
 namespace {
@@ -445,7 +446,7 @@ TEST(ULogTest, AgreesWithPyulogOnItsSampleLogs) {
     }
   if (python.empty()) GTEST_SKIP() << "no python3 with numpy for pyulog";
   const std::string script =
-      std::string(CALIBD_SOURCE_DIR) + "/tests/formats/ulog_pyulog_summary.py";
+      calibd::test_paths::SourceDir() + "/tests/formats/ulog_pyulog_summary.py";
   int files = 0;
   for (const auto& entry : std::filesystem::directory_iterator(data_dir)) {
     if (entry.path().extension() != ".ulg") continue;

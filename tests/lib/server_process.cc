@@ -7,6 +7,8 @@
 #include <chrono>
 #include <cstdlib>
 
+#include "tests/lib/test_paths.h"
+
 namespace calibd::server::testing {
 
 using nlohmann::json;
@@ -14,6 +16,7 @@ using nlohmann::json;
 ServerProcess::ServerProcess(const std::string& db, std::vector<std::string> extra,
                              const std::string& tmpdir,
                              const std::map<std::string, std::string>& env) {
+  const std::string binary = calibd::test_paths::CalibdBinary();  // not in the child: it may lock
   int fds[2];
   if (pipe(fds) != 0) return;
   pid_ = fork();
@@ -23,13 +26,13 @@ ServerProcess::ServerProcess(const std::string& db, std::vector<std::string> ext
     close(fds[1]);
     if (!tmpdir.empty()) setenv("TMPDIR", tmpdir.c_str(), 1);
     for (const auto& [name, value] : env) setenv(name.c_str(), value.c_str(), 1);
-    std::vector<std::string> args = {CALIBD_BINARY, "serve",       "--db",           db,
-                                     "--listen",    "127.0.0.1:0", "--no-access-log"};
+    std::vector<std::string> args = {binary,     "serve",       "--db",           db,
+                                     "--listen", "127.0.0.1:0", "--no-access-log"};
     args.insert(args.end(), extra.begin(), extra.end());
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
-    execv(CALIBD_BINARY, argv.data());
+    execv(binary.c_str(), argv.data());
     _exit(127);
   }
   close(fds[1]);

@@ -3,7 +3,7 @@
 // loopback port
 // (--listen 127.0.0.1:0, --no-access-log), its stderr collected to learn the port and to show in
 // failure messages, killed with SIGKILL when the object goes unless a test signalled it before.
-// The binary is the one the build made (CALIBD_BINARY of the test support library).
+// The binary is the one the build made (test_paths.h).
 #ifndef CALIBD_TESTS_LIB_SERVER_PROCESS_H_
 #define CALIBD_TESTS_LIB_SERVER_PROCESS_H_
 

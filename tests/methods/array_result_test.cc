@@ -24,7 +24,7 @@ ArrayResult PositionsResult() {
   p.positions = {{"a0", {0.01, 0.02, -0.003}, {1e-5, -2e-5, 3e-6}},
                  {"a1", {0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}}};
   ArrayUncertainty u;
-  u.positions = {{"a0", {4e-6, 5e-6, 6e-6}}, {"a1", {NAN, NAN, NAN}}};
+  u.positions = {{"a0", {4e-6, 5e-6, 6e-6}, std::nullopt}, {"a1", {NAN, NAN, NAN}, std::nullopt}};
   u.std_rms = 5.1e-6;
   r.parameters = p;
   r.uncertainty = u;
@@ -66,7 +66,7 @@ ArrayResult FullResult() {
   p.reference = 0;
   p.positions = {{"0", {0, 0, 0}, {0, 0, 0}}, {"1", {0.02, 0, 0}, {1e-4, 0, 0}}};
   ArrayUncertainty u;
-  u.positions = {{"0", {0, 0, 0}}, {"1", {1e-5, 2e-5, 3e-5}}};
+  u.positions = {{"0", {0, 0, 0}, std::nullopt}, {"1", {1e-5, 2e-5, 3e-5}, std::nullopt}};
   for (int k = 0; k < 2; ++k) {
     ArrayImu imu;
     imu.triads.name = std::to_string(k);

@@ -358,7 +358,7 @@ results::ArrayResult TypedArrayResult(double offset, double std, double accel_rm
     const double o = k == 0 ? 0.0 : offset;  // the reference stays at its nominal position
     const std::string name = "a" + std::to_string(k);
     params.positions.push_back({name, {o, 0, 0}, {o, 0, 0}});
-    unc.positions.push_back({name, {k == 0 ? 0.0 : std, std / 2, 0}});
+    unc.positions.push_back({name, {k == 0 ? 0.0 : std, std / 2, 0}, std::nullopt});
   }
   r.parameters = params;
   r.uncertainty = unc;

@@ -27,6 +27,7 @@
 #include "methods/registry.h"
 #include "server/config.h"
 #include "tests/server/http_test_util.h"
+#include "tests/lib/test_paths.h"
 
 namespace calibd::server {
 namespace {
@@ -76,7 +77,7 @@ TEST(FailureReasons, EveryMethodsOwnReasonsAreInTheCatalog) {
 }
 
 TEST(FailureReasons, TheReadmeDocumentsEveryCode) {
-  std::ifstream in(std::string(CALIBD_SOURCE_DIR) + "/README.md");
+  std::ifstream in(calibd::test_paths::SourceDir() + "/README.md");
   ASSERT_TRUE(in);
   const std::string readme((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   const size_t section = readme.find("### Failure reasons");
@@ -412,7 +413,7 @@ TEST(FailureReasons, CalibrateOnTheCommandLinePrintsTheReasonAndItsAdvice) {
   const std::string config = (dir.path() / "config.json").string();
   std::ofstream(csv) << f.csv;
   std::ofstream(config) << f.config.dump();
-  FILE* pipe = ::popen((std::string(CALIBD_BINARY) + " calibrate " + csv + " --config " + config +
+  FILE* pipe = ::popen((calibd::test_paths::CalibdBinary() + " calibrate " + csv + " --config " + config +
                         " 2>&1 >/dev/null")
                            .c_str(),
                        "r");

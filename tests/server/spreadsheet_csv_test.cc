@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tests/server/http_test_util.h"
+#include "tests/lib/test_paths.h"
 
 namespace calibd::server {
 namespace {
@@ -52,7 +53,7 @@ TEST(SpreadsheetCsv, TabSeparatedFileMakesCalibrateExitTwoWithTheMessage) {
   const std::string config = (dir.path() / "config.json").string();
   std::ofstream(csv) << "position\ts1\ts2\ts3\np1\t1.0\t0\t0\n";
   std::ofstream(config) << R"({"method": "pca"})";
-  FILE* pipe = ::popen((std::string(CALIBD_BINARY) + " calibrate " + csv + " --config " + config +
+  FILE* pipe = ::popen((calibd::test_paths::CalibdBinary() + " calibrate " + csv + " --config " + config +
                         " 2>&1 >/dev/null")
                            .c_str(),
                        "r");

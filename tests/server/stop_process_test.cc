@@ -25,6 +25,7 @@
 #include "tests/lib/sanitizer.h"
 #include "tests/lib/server_process.h"
 #include "tests/server/http_test_util.h"
+#include "tests/lib/test_paths.h"
 
 namespace calibd::server {
 namespace {
@@ -149,7 +150,7 @@ TEST(StopProcess, CalibrateStopsAtItsTimeLimitWithExitCodeFour) {
   std::ofstream(cfg) << items[1].content;
   auto run = [&](const std::string& args, std::string* err) {
     const std::string err_file = (dir.path() / "err.txt").string();
-    const std::string cmd = std::string(CALIBD_BINARY) + " calibrate " + csv + " --config " + cfg +
+    const std::string cmd = calibd::test_paths::CalibdBinary() + " calibrate " + csv + " --config " + cfg +
                             " " + args + " >/dev/null 2>" + err_file;
     const auto start = Clock::now();
     const int status = std::system(cmd.c_str());

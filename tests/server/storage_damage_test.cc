@@ -14,6 +14,7 @@
 #include "tests/lib/server_process.h"
 #include "tests/lib/unprivileged.h"
 #include "tests/server/http_test_util.h"
+#include "tests/lib/test_paths.h"
 
 namespace calibd::server {
 namespace {
@@ -275,7 +276,7 @@ TEST(StorageDamage, AFullDatabaseAnswers507DiskFullWithoutSqlAndHealthzSaysSo) {
 // Runs `calibd ARGS` (`command`: calibd, maybe behind a prefix) to its end; its exit status and
 // what it wrote.
 int RunCalibd(const std::string& args, std::string* output,
-              const std::string& command = CALIBD_BINARY) {
+              const std::string& command = calibd::test_paths::CalibdBinary()) {
   FILE* pipe = ::popen((command + " " + args + " 2>&1").c_str(), "r");
   char buf[4096];
   size_t n;
@@ -306,7 +307,7 @@ TEST(StartUp, AReadOnlyDbFileSaysSo) {
   if (!unprivileged::UnprivilegedCommand(db, &as_nobody, &why)) GTEST_SKIP() << why;
   std::string out;
   const int status =
-      RunCalibd("serve --listen 127.0.0.1:0 --db " + db, &out, as_nobody + CALIBD_BINARY);
+      RunCalibd("serve --listen 127.0.0.1:0 --db " + db, &out, as_nobody + calibd::test_paths::CalibdBinary());
   EXPECT_NE(status, 0) << out;
   EXPECT_NE(out.find("read-only"), std::string::npos) << out;
   EXPECT_EQ(out.find("unable to open database file"), std::string::npos) << out;

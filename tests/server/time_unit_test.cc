@@ -23,6 +23,7 @@
 #include "server/config.h"
 #include "tests/lib/sanitizer.h"
 #include "tests/server/http_test_util.h"
+#include "tests/lib/test_paths.h"
 
 namespace calibd::server {
 namespace {
@@ -355,7 +356,7 @@ int RunCalibrate(const std::string& csv, const json& config, std::string* err) {
   const std::string config_path = (dir.path() / "config.json").string();
   std::ofstream(csv_path) << csv;
   std::ofstream(config_path) << config.dump();
-  FILE* pipe = ::popen((std::string(CALIBD_BINARY) + " calibrate " + csv_path + " --config " +
+  FILE* pipe = ::popen((calibd::test_paths::CalibdBinary() + " calibrate " + csv_path + " --config " +
                         config_path + " 2>&1 >/dev/null")
                            .c_str(),
                        "r");

@@ -34,6 +34,7 @@
 #include "tests/lib/server_process.h"
 #include "tests/storage/pg_test_cluster.h"
 #include "tests/storage/storage_test_util.h"
+#include "tests/lib/test_paths.h"
 
 extern char** environ;
 
@@ -109,7 +110,7 @@ ChildResult RunProcess(const std::vector<std::string>& argv,
 std::map<std::string, std::string> SkewEnv(const std::string& skew_ms) {
   const char* asan = getenv("ASAN_OPTIONS");
   std::string asan_options = asan != nullptr && *asan != '\0' ? std::string(asan) + ":" : "";
-  return {{"LD_PRELOAD", CALIBD_CLOCK_SKEW_SHIM},
+  return {{"LD_PRELOAD", calibd::test_paths::BesideTests("libcalibd_clock_skew_shim.so")},
           {"CALIBD_CLOCK_SKEW_MS", skew_ms},
           {"ASAN_OPTIONS", asan_options + "verify_asan_link_order=0"}};
 }

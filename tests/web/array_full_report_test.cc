@@ -66,7 +66,7 @@ json FullResult(int K, const std::string& prefix = "", bool with_limits = true) 
     u.position_std = Eigen::Vector3d::Constant(2e-6);
     unc.imus.push_back(u);
     params.positions.push_back({name, imu.position, Eigen::Vector3d::Zero()});
-    unc.positions.push_back({name, Eigen::Vector3d::Constant(2e-6)});
+    unc.positions.push_back({name, Eigen::Vector3d::Constant(2e-6), std::nullopt});
     d.residual_rms_imus.push_back({name, {0.04, 0.06}, {0.041, 0.061}});
     results::ArrayPositionChange c;
     c.name = name;
@@ -282,7 +282,7 @@ TEST(ArrayFullReport, ResultsOfAnyShapeRenderAndOnlyFullResultsGetTheSections) {
   typed.envelope.model = "y_a,k = s + (Omega(omega)^2 + Omega(omega_dot)) r_k";
   typed.parameters = results::ArrayParameters{0, {{"a0", {0, 0, 0}, {0, 0, 0}}}, {}};
   typed.uncertainty = results::ArrayUncertainty();
-  typed.uncertainty->positions = {{"a0", {0, 0, 0}}};
+  typed.uncertainty->positions = {{"a0", {0, 0, 0}, std::nullopt}};
   typed.uncertainty->std_rms = 0;
   const json positions = results::ToJson(typed);
   ASSERT_TRUE(results::FromJson(positions, &typed).ok());

@@ -131,7 +131,7 @@ json ArrayResult(size_t excitation_samples = 1000, double shift = 0) {
     const std::string name = "a" + std::to_string(k);
     params.positions.push_back({name, {x + o[0], y + o[1], z + o[2]}, {o[0], o[1], o[2]}});
     const double s = k == 0 ? 0 : 2.0e-6 + Wiggle(k, 0.3e-6);
-    unc.positions.push_back({name, {s, s * 1.1, s * 0.9}});
+    unc.positions.push_back({name, {s, s * 1.1, s * 0.9}, std::nullopt});
   }
   unc.std_rms = 2e-6;
   r.parameters = params;
