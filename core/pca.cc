@@ -197,6 +197,7 @@ Status CalibrateScaled(const PcaProblem& problem, const PcaOptions& options, dou
   if (!s.ok()) return s;
   const std::string frame_note = pi::ExpressInFrame(setup, fit, result);
   pi::ReportSensors(setup, fit, cov_blocks, result);
+  pi::ApplySigmaBasis(setup, result);
   if (StopRequested(options.stop)) return pi::Stopped(setup, "uncertainty", result);
   pi::AssessCoverage(setup, frame_note, outliers, result);
   return pi::CheckFinite(result);
@@ -244,6 +245,10 @@ Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaRes
     se.bias *= unit;
     se.scale_std *= unit;
     se.bias_std *= unit;
+    if (se.crb) {
+      se.crb->scale_std *= unit;
+      se.crb->bias_std *= unit;
+    }
   }
   return s;
 }

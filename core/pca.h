@@ -187,6 +187,12 @@ struct PcaSensorEstimate {
   // 0 when the bias is neither estimated nor removed (it is then zero by assumption); NaN when
   // estimated but undefined.
   double bias_std = 0;
+  // The white-noise Cramér–Rao bound of the three σ above (σ of a reading = the given noise_std);
+  // absent when noise_std was not given (there is then no bound apart from the residuals).
+  struct Bound {
+    double scale_std, axis_std_rad, bias_std;
+  };
+  std::optional<Bound> crb;
 };
 
 // Fields start at sentinel values (NaN / empty / -1) and are filled as far as the computation got:
@@ -223,6 +229,14 @@ struct PcaResult {
   double noise_std = std::numeric_limits<double>::quiet_NaN();  // σ used for the uncertainty
   bool noise_std_given = false;
   double noise_std_estimated = std::numeric_limits<double>::quiet_NaN();  // NaN if dof <= 0
+  // What the sensors' σ are (the σ convention, SPEC §7): "crb" — noise_std given and the
+  // residuals consistent with it (χ²/dof within 3·√(2/dof) of 1) or no redundancy to judge;
+  // "chi2_scaled" — the CRB × √(χ²/dof), the residuals exceeding the given noise_std (a warning
+  // says by how much), or, without noise_std, the bound at the σ the residuals estimate
+  // (√(2·cost/dof): χ²-scaled by construction).
+  std::string uncertainty_basis = "crb";
+  // (noise_std_estimated / noise_std)²; NaN without a given noise_std or redundancy.
+  double chi2_per_dof = std::numeric_limits<double>::quiet_NaN();
   double cost_closed_form = std::numeric_limits<double>::quiet_NaN();  // ½Σr² at the closed form
   double cost = std::numeric_limits<double>::quiet_NaN();  // ½Σr² at the reported estimate
   bool refined = false;       // the refinement was run and its estimate is reported

@@ -255,9 +255,9 @@ OutlierReport Diagnose(const PcaSetup& setup, const Fit& fit, PcaResult* result)
         std::to_string(result->degrees_of_freedom) +
         "), so the uncertainties are undefined; give noise_std or record more positions.");
   }
+  // (Residuals above the given noise_std scale the σ instead: ApplySigmaBasis.)
   if (options.noise_std && result->degrees_of_freedom >= 20 &&
-      (result->noise_std_estimated > 2 * *options.noise_std ||
-       result->noise_std_estimated < 0.5 * *options.noise_std)) {
+      result->noise_std_estimated < 0.5 * *options.noise_std) {
     result->warnings.push_back("The residuals suggest a noise level of " +
                                Num(unit * result->noise_std_estimated) +
                                ", not the given noise_std " + Num(unit * *options.noise_std) +
@@ -401,6 +401,37 @@ void ReportSensors(const PcaSetup& setup, const Fit& fit, const std::vector<Matr
         ") is undefined: the Fisher information is numerically singular for them (a variance "
         "came out negative or not finite); their *_std are NaN.");
   }
+}
+
+void ApplySigmaBasis(const PcaSetup& setup, PcaResult* result) {
+  const PcaOptions& options = setup.options;
+  const int dof = result->degrees_of_freedom;
+  if (!options.noise_std) {
+    // σ of a reading from the residuals themselves: no white-noise bound apart from them.
+    result->uncertainty_basis = "chi2_scaled";
+    return;
+  }
+  for (PcaSensorEstimate& se : result->sensors)
+    se.crb = PcaSensorEstimate::Bound{se.scale_std, se.axis_std_rad, se.bias_std};
+  result->uncertainty_basis = "crb";
+  if (dof <= 0 || !(result->noise_std_estimated >= 0)) return;
+  const double ratio = result->noise_std_estimated / *options.noise_std;
+  result->chi2_per_dof = ratio * ratio;
+  // χ²/dof of consistent residuals is within 3·√(2/dof) of 1 (its σ is √(2/dof)).
+  if (result->chi2_per_dof <= 1 + 3 * std::sqrt(2.0 / dof)) return;
+  result->uncertainty_basis = "chi2_scaled";
+  const bool estimated_bias = setup.affine;
+  for (PcaSensorEstimate& se : result->sensors) {
+    se.scale_std *= ratio;
+    se.axis_std_rad *= ratio;
+    if (estimated_bias) se.bias_std *= ratio;  // a removed bias keeps its own measurement's σ
+  }
+  result->warnings.push_back(
+      "The residuals are " + Fmt("%.2f", ratio) + " times the given noise_std (chi2/dof " +
+      Fmt("%.3g", result->chi2_per_dof) + " over " + std::to_string(dof) +
+      " degrees of freedom): the sensors' σ are the Cramér–Rao bound × " + Fmt("%.2f", ratio) +
+      " (χ²-scaled); the bound itself is in uncertainty.sensors[].crb. Check noise_std, or what "
+      "disturbed the positions.");
 }
 
 void AssessCoverage(const PcaSetup& setup, const std::string& frame_note,

@@ -77,6 +77,11 @@ std::string ExpressInFrame(const PcaSetup& setup, const Fit& fit, PcaResult* res
 void ReportSensors(const PcaSetup& setup, const Fit& fit,
                    const std::vector<Eigen::MatrixXd>& cov_blocks, PcaResult* result);
 
+// The σ convention (SPEC §7) on the σ of ReportSensors: keeps the white-noise bound in each
+// sensor's `crb` when noise_std is given, and scales the σ by √(χ²/dof) where the residuals exceed
+// it (uncertainty_basis "chi2_scaled", with a warning naming the factor), else leaves them ("crb").
+void ApplySigmaBasis(const PcaSetup& setup, PcaResult* result);
+
 // The coverage of the sphere in the result's frame (frame_note from ExpressInFrame), with the
 // coverage and outlier warnings.
 void AssessCoverage(const PcaSetup& setup, const std::string& frame_note,

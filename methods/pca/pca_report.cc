@@ -101,6 +101,23 @@ std::vector<PcaSensor> ReadPcaSensors(const results::PcaResult& result, const js
   return out;
 }
 
+// Which σ the tables show (the σ convention, SPEC §7), in words.
+std::string PcaSigmaBasisText(const results::PcaUncertainty& u) {
+  const std::string chi2 = std::isfinite(u.chi2_per_dof)
+                               ? ", \xCF\x87\xC2\xB2/dof " + FormatSig(u.chi2_per_dof, 3)
+                               : std::string();
+  if (u.basis == "chi2_scaled" && std::isfinite(u.chi2_per_dof))
+    return "the Cram\xC3\xA9r\xE2\x80\x93Rao bound scaled by the residuals (they exceed the "
+           "given noise_std" + chi2 + "; the bound itself is in uncertainty.sensors[].crb of the JSON)";
+  if (u.basis == "chi2_scaled")
+    return "the Cram\xC3\xA9r\xE2\x80\x93Rao bound at the noise the residuals estimate "
+           "(noise_std not given)";
+  if (u.basis == "crb")
+    return "the Cram\xC3\xA9r\xE2\x80\x93Rao bound at the given noise_std (the residuals match "
+           "it" + chi2 + ")";
+  return "the Cram\xC3\xA9r\xE2\x80\x93Rao bound at the estimate (stored by an earlier calibd)";
+}
+
 std::string PcaParametersTable(const std::vector<PcaSensor>& sensors, size_t d, bool has_bias) {
   bool any_nominal = false;
   for (const auto& s : sensors) any_nominal = any_nominal || !s.nominal.empty();
@@ -334,8 +351,9 @@ std::string PcaReport(const JobView& view) {
       s += NotAvailable("Sensor parameters");
     } else {
       s += PcaParametersTable(sensors, d, has_bias);
-      s += "<p class=\"muted small\">Uncertainties are one standard deviation from the Fisher "
-           "information at the estimate. Scale factors and angles do not depend on the frame.</p>";
+      s += "<p class=\"muted small\">Uncertainties are one standard deviation: " +
+           PcaSigmaBasisText(*result.uncertainty) +
+           ". Scale factors and angles do not depend on the frame.</p>";
     }
     return Section("parameters", "Parameters", s);
   });

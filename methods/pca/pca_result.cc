@@ -67,6 +67,14 @@ void ReadSensorStd(const JsonReader& r, PcaSensorStd* out) {
   r.Read("scale_std", &s.scale_std);
   r.Read("axis_std_rad", &s.axis_std_rad);
   r.Read("bias_std", &s.bias_std);
+  if (r.Has("crb")) {
+    const JsonReader c = r.Object("crb");
+    PcaSensorStd::Bound b;
+    c.Read("scale_std", &b.scale_std);
+    c.Read("axis_std_rad", &b.axis_std_rad);
+    c.Read("bias_std", &b.bias_std);
+    s.crb = b;
+  }
   if (r.ok()) *out = std::move(s);
 }
 
@@ -92,6 +100,11 @@ void ReadUncertainty(const JsonReader& u, PcaUncertainty* out) {
   PcaUncertainty v;
   u.ReadArray("sensors", &v.sensors, ReadSensorStd);
   u.ReadExtension("noise_std", &v.noise_std);  // not in SPEC §4: absent, NaN
+  // Absent in results stored before the σ convention: "crb_only" (the default), no χ².
+  u.ReadExtension("basis", &v.basis);
+  u.ReadExtension("chi2_per_dof", &v.chi2_per_dof);
+  if (u.ok() && v.basis != "crb" && v.basis != "chi2_scaled" && v.basis != kPcaBasisCrbOnly)
+    u.Fail("expected \"crb\", \"chi2_scaled\" or \"crb_only\", found \"" + v.basis + "\"", "basis");
   if (u.ok()) *out = std::move(v);
 }
 
@@ -209,13 +222,23 @@ json ToJson(const PcaResult& r) {
   if (r.uncertainty) {
     json sensors = json::array();
     for (const PcaSensorStd& s : r.uncertainty->sensors) {
-      sensors.push_back({{"name", s.name},
-                         {"scale_std", Num(s.scale_std)},
-                         {"axis_std_rad", Num(s.axis_std_rad)},
-                         {"bias_std", Num(s.bias_std)}});
+      json e = {{"name", s.name},
+                {"scale_std", Num(s.scale_std)},
+                {"axis_std_rad", Num(s.axis_std_rad)},
+                {"bias_std", Num(s.bias_std)}};
+      if (s.crb) {
+        e["crb"] = {{"scale_std", Num(s.crb->scale_std)},
+                    {"axis_std_rad", Num(s.crb->axis_std_rad)},
+                    {"bias_std", Num(s.crb->bias_std)}};
+      }
+      sensors.push_back(std::move(e));
     }
     out["uncertainty"] = {{"sensors", std::move(sensors)},
                           {"noise_std", Num(r.uncertainty->noise_std)}};
+    if (r.uncertainty->basis != kPcaBasisCrbOnly) {
+      out["uncertainty"]["basis"] = r.uncertainty->basis;
+      out["uncertainty"]["chi2_per_dof"] = Num(r.uncertainty->chi2_per_dof);
+    }
   }
   const PcaDiagnostics& g = r.diagnostics;
   json diag;

@@ -91,11 +91,23 @@ struct PcaSensorStd {
   double scale_std = kPcaNaN;     // reading units per field unit
   double axis_std_rad = kPcaNaN;  // RMS angle of the axis, radians
   double bias_std = kPcaNaN;      // reading units; 0 when the bias is zero by assumption
+  // "crb": {"scale_std", "axis_std_rad", "bias_std"}, the white-noise Cramér–Rao bound at the
+  // given noise_std; absent without noise_std and in results stored by an earlier calibd.
+  struct Bound {
+    double scale_std = kPcaNaN, axis_std_rad = kPcaNaN, bias_std = kPcaNaN;
+  };
+  std::optional<Bound> crb;
 };
 
+// The σ convention (SPEC §7): basis "crb" (the residuals consistent with the given noise_std),
+// "chi2_scaled" (the CRB × √(χ²/dof), or without noise_std the bound at the σ the residuals
+// estimate) or "crb_only" (absent: stored by an earlier calibd, its σ the bound at the σ used).
+inline constexpr char kPcaBasisCrbOnly[] = "crb_only";
 struct PcaUncertainty {
   std::vector<PcaSensorStd> sensors;  // m, in the order of parameters.sensors
   double noise_std = kPcaNaN;         // σ used (given or estimated), reading units; extension
+  std::string basis = kPcaBasisCrbOnly;  // "crb" | "chi2_scaled" | "crb_only"
+  double chi2_per_dof = kPcaNaN;  // (residual σ / given noise_std)²; null without either
 };
 
 // diagnostics.coverage: how well the positions span the sphere (directions in the result's frame).

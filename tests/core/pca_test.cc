@@ -258,6 +258,61 @@ TEST(PcaCalibration, ReportedUncertaintyMatchesMonteCarloSpread) {
   }
 }
 
+// The σ convention (SPEC §7) under a noise_std 3× too small: χ²/dof ≈ 9, far above its
+// consistency band (1 ± 3·√(2/dof), dof ≈ 1000), so every trial's σ is χ²-scaled and matches the
+// Monte-Carlo spread of the scale factors (±4 standard errors of a std ratio over 200 trials,
+// 0.20), while the bound kept under crb is 3× too small (a method that kept the CRB as the primary
+// fails by 0.67 ≫ 0.20). With the true noise_std given, the σ is the CRB: a consistent χ² leaves the
+// band in about 0.3 % of trials (3σ, two-sided), so ≥ 195 of 200 must say "crb".
+TEST(PcaCalibration, SigmaIsChiSquaredScaledWhenTheGivenNoiseIsUnderstated) {
+  PcaSimulationOptions so;
+  so.positions = 100;
+  so.noise_std = 0;
+  so.seed = 77;
+  const PcaSimulation sim = SimulatePca(so);
+  const double sigma = 0.01;
+  const int trials = 200, m = 12;
+  for (const double given : {sigma / 3, sigma}) {
+    std::vector<std::vector<double>> scales(m);
+    VectorXd reported = VectorXd::Zero(m), bound = VectorXd::Zero(m);
+    int crb_basis = 0;
+    for (int t = 0; t < trials; ++t) {
+      PcaRandom rng(9000 + t);
+      const MatrixXd readings = sim.m + sigma * rng.NormalMatrix(m, so.positions);
+      PcaOptions o = KnownMagnitude(3, 1.0);
+      o.noise_std = given;
+      PcaResult r;
+      ASSERT_TRUE(CalibratePca(Problem(readings), o, &r).ok()) << r.reason;
+      crb_basis += r.uncertainty_basis == "crb";
+      ASSERT_TRUE(std::isfinite(r.chi2_per_dof));
+      for (int i = 0; i < m; ++i) {
+        ASSERT_TRUE(r.sensors[i].crb.has_value());
+        scales[i].push_back(r.sensors[i].scale);
+        reported(i) += r.sensors[i].scale_std / trials;
+        bound(i) += r.sensors[i].crb->scale_std / trials;
+        if (r.uncertainty_basis == "crb") {
+          EXPECT_EQ(r.sensors[i].scale_std, r.sensors[i].crb->scale_std);
+        }
+      }
+    }
+    if (given < sigma) {
+      EXPECT_EQ(crb_basis, 0);
+    } else {
+      EXPECT_GE(crb_basis, 195);
+    }
+    const double tolerance = 4 * monte_carlo::StdRatioStandardError(trials - 1);
+    for (int i = 0; i < m; ++i) {
+      double mean = 0, var = 0;
+      for (double x : scales[i]) mean += x / trials;
+      for (double x : scales[i]) var += (x - mean) * (x - mean) / (trials - 1);
+      const double observed = std::sqrt(var);
+      EXPECT_NEAR(observed / reported(i), 1.0, tolerance) << "sensor " << i << ", given " << given;
+      EXPECT_NEAR(observed / bound(i), sigma / given, tolerance * sigma / given)
+          << "sensor " << i << ", given " << given;
+    }
+  }
+}
+
 TEST(PcaCalibration, GivenNoiseStdIsUsedForUncertainty) {
   const PcaSimulation sim = SimulatePca(PcaSimulationOptions());
   PcaOptions o = KnownMagnitude(3, 1.0);

@@ -27,7 +27,10 @@ PcaResult HandBuilt() {
                {"s1", {-0.5, 2.0}, 2.06, {-0.24, 0.97}, -0.02}};
   r.parameters = p;
   PcaUncertainty u;
-  u.sensors = {{"s0", 1e-4, 2e-3, 5e-5}, {"s1", kPcaNaN, 3e-3, 0.0}};
+  u.sensors = {{"s0", 1e-4, 2e-3, 5e-5, PcaSensorStd::Bound{5e-5, 1e-3, 2.5e-5}},
+               {"s1", kPcaNaN, 3e-3, 0.0, std::nullopt}};
+  u.basis = "chi2_scaled";
+  u.chi2_per_dof = 4.0;
   u.noise_std = 0.001;
   r.uncertainty = u;
   PcaDiagnostics& g = r.diagnostics;
@@ -124,6 +127,9 @@ TEST(PcaResult, AbsentExtensionsKeepTheirDefaults) {
   json j = ToJson(HandBuilt());
   j["parameters"].erase("bias");
   j["uncertainty"].erase("noise_std");
+  j["uncertainty"].erase("basis");  // before the σ convention: the CRB only
+  j["uncertainty"].erase("chi2_per_dof");
+  j["uncertainty"]["sensors"][0].erase("crb");
   for (const char* key :
        {"usable", "degrees_of_freedom", "coverage", "noise_std", "noise_std_given",
         "noise_std_estimated", "cost_closed_form", "cost", "refined", "refine_iterations",
@@ -136,6 +142,9 @@ TEST(PcaResult, AbsentExtensionsKeepTheirDefaults) {
   EXPECT_EQ(out.parameters->bias, PcaBias::kNone);
   EXPECT_EQ(out.parameters->sensors[1].bias, -0.02);  // the SPEC keys are read
   EXPECT_TRUE(std::isnan(out.uncertainty->noise_std));
+  EXPECT_EQ(out.uncertainty->basis, kPcaBasisCrbOnly);
+  EXPECT_TRUE(std::isnan(out.uncertainty->chi2_per_dof));
+  EXPECT_FALSE(out.uncertainty->sensors[0].crb.has_value());
   const PcaDiagnostics& g = out.diagnostics;
   EXPECT_TRUE(g.usable) << "absent: the envelope's usable";
   EXPECT_EQ(g.degrees_of_freedom, -1);
