@@ -129,9 +129,10 @@ results::PcaResult MakePcaResult(const core::PcaResult& r) {
   for (const core::PcaSensorEstimate& s : r.sensors) {
     params.sensors.push_back(
         {s.name, StdVector(s.sensitivity), s.scale, StdVector(s.axis), s.bias});
-    results::PcaSensorStd& u =
-        uncertainty.sensors.emplace_back(results::PcaSensorStd{s.name, s.scale_std, s.axis_std_rad, s.bias_std, std::nullopt});
-    if (s.crb) u.crb = results::PcaSensorStd::Bound{s.crb->scale_std, s.crb->axis_std_rad, s.crb->bias_std};
+    results::PcaSensorStd& u = uncertainty.sensors.emplace_back(
+        results::PcaSensorStd{s.name, s.scale_std, s.axis_std_rad, s.bias_std, std::nullopt});
+    if (s.crb)
+      u.crb = results::PcaSensorStd::Bound{s.crb->scale_std, s.crb->axis_std_rad, s.crb->bias_std};
   }
   uncertainty.noise_std = r.noise_std;
   uncertainty.basis = r.uncertainty_basis;

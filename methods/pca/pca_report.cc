@@ -108,13 +108,15 @@ std::string PcaSigmaBasisText(const results::PcaUncertainty& u) {
                                : std::string();
   if (u.basis == "chi2_scaled" && std::isfinite(u.chi2_per_dof))
     return "the Cram\xC3\xA9r\xE2\x80\x93Rao bound scaled by the residuals (they exceed the "
-           "given noise_std" + chi2 + "; the bound itself is in uncertainty.sensors[].crb of the JSON)";
+           "given noise_std" +
+           chi2 + "; the bound itself is in uncertainty.sensors[].crb of the JSON)";
   if (u.basis == "chi2_scaled")
     return "the Cram\xC3\xA9r\xE2\x80\x93Rao bound at the noise the residuals estimate "
            "(noise_std not given)";
   if (u.basis == "crb")
     return "the Cram\xC3\xA9r\xE2\x80\x93Rao bound at the given noise_std (the residuals match "
-           "it" + chi2 + ")";
+           "it" +
+           chi2 + ")";
   return "the Cram\xC3\xA9r\xE2\x80\x93Rao bound at the estimate (stored by an earlier calibd)";
 }
 

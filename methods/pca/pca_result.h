@@ -104,10 +104,10 @@ struct PcaSensorStd {
 // estimate) or "crb_only" (absent: stored by an earlier calibd, its σ the bound at the σ used).
 inline constexpr char kPcaBasisCrbOnly[] = "crb_only";
 struct PcaUncertainty {
-  std::vector<PcaSensorStd> sensors;  // m, in the order of parameters.sensors
-  double noise_std = kPcaNaN;         // σ used (given or estimated), reading units; extension
+  std::vector<PcaSensorStd> sensors;     // m, in the order of parameters.sensors
+  double noise_std = kPcaNaN;            // σ used (given or estimated), reading units; extension
   std::string basis = kPcaBasisCrbOnly;  // "crb" | "chi2_scaled" | "crb_only"
-  double chi2_per_dof = kPcaNaN;  // (residual σ / given noise_std)²; null without either
+  double chi2_per_dof = kPcaNaN;         // (residual σ / given noise_std)²; null without either
 };
 
 // diagnostics.coverage: how well the positions span the sphere (directions in the result's frame).

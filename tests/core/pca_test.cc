@@ -262,8 +262,8 @@ TEST(PcaCalibration, ReportedUncertaintyMatchesMonteCarloSpread) {
 // consistency band (1 ± 3·√(2/dof), dof ≈ 1000), so every trial's σ is χ²-scaled and matches the
 // Monte-Carlo spread of the scale factors (±4 standard errors of a std ratio over 200 trials,
 // 0.20), while the bound kept under crb is 3× too small (a method that kept the CRB as the primary
-// fails by 0.67 ≫ 0.20). With the true noise_std given, the σ is the CRB: a consistent χ² leaves the
-// band in about 0.3 % of trials (3σ, two-sided), so ≥ 195 of 200 must say "crb".
+// fails by 0.67 ≫ 0.20). With the true noise_std given, the σ is the CRB: a consistent χ² leaves
+// the band in about 0.3 % of trials (3σ, two-sided), so ≥ 195 of 200 must say "crb".
 TEST(PcaCalibration, SigmaIsChiSquaredScaledWhenTheGivenNoiseIsUnderstated) {
   PcaSimulationOptions so;
   so.positions = 100;
