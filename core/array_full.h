@@ -195,9 +195,16 @@ ArrayFullTriadReport ReportArrayFullTriad(const ArrayFullTriad& triad);
 ArrayFullTriadStd ReportArrayFullTriadStd(const ArrayFullTriad& triad,
                                           const Eigen::Matrix<double, 27, 27>& covariance);
 
-struct ArrayFullResidualStats {  // per triad, rms of the residual components (reading units)
-  double static_accel = 0, static_gyro = 0;    // of the static means times sqrt(samples)
+struct ArrayFullResidualStats {  // per triad, rms of the residual components (m/s², rad/s)
+  double static_accel = 0, static_gyro = 0;  // of the static means (a mean's noise: σ/√samples)
   double dynamic_accel = 0, dynamic_gyro = 0;  // of the dynamic samples
+};
+
+// One static interval the fit used, and its means' residuals over all triads.
+struct ArrayFullStatic {
+  double start = 0, end = 0;  // s (the recording's t)
+  int64_t samples = 0;
+  double accel_rms = 0, gyro_rms = 0;  // RMS of the static means' residual components, m/s², rad/s
 };
 
 struct ArrayFullResult {
@@ -233,6 +240,7 @@ struct ArrayFullResult {
   bool converged = false;
   std::vector<double> cost;
   int64_t statics = 0;
+  std::vector<ArrayFullStatic> static_intervals;  // time order, `statics` of them
   int64_t static_samples = 0;
   int64_t dynamic_samples = 0;
   int64_t samples_dropped = 0;             // saturation (gyroscope or accelerometer)

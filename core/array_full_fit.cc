@@ -60,6 +60,9 @@ Status FindStatics(FullFit* f) {
   d.J = static_cast<int64_t>(det.intervals.size());
   res.statics = d.J;
   res.static_samples = det.static_samples;
+  res.static_intervals.clear();
+  for (const StaticInterval& iv : det.intervals)
+    res.static_intervals.push_back({iv.start, iv.end, iv.samples, 0, 0});
   if (d.J < options.min_statics)
     return f->NotDeterminable(
         Reason::kTooFewStatics,
@@ -415,9 +418,21 @@ void ComputeResiduals(FullFit* f, const FullProblem& fp) {
   res.dof = 6LL * K * (d.J + d.Nd) - 9 * d.Nd - 2 * d.J - P;
   res.chi2_per_dof = res.dof > 0 ? final_summary.final_cost() / static_cast<double>(res.dof) : 0;
   {
+    // The model weights a static mean's residual by √samples (its noise is σ/√samples); the
+    // figures reported are the means' residuals themselves, in reading units.
     Eigen::MatrixX2d st = Eigen::MatrixX2d::Zero(K, 2), dy = Eigen::MatrixX2d::Zero(K, 2);
-    for (int64_t n = 0; n < d.J + d.Nd; ++n)
-      fp.AddSquaredResiduals(n, x.col(n), ctx, n < d.J ? &st : &dy);
+    Eigen::MatrixX2d one(K, 2);
+    for (int64_t n = 0; n < d.J; ++n) {
+      one.setZero();
+      fp.AddSquaredResiduals(n, x.col(n), ctx, &one);
+      one /= d.static_n(n);
+      st += one;
+      if (n < static_cast<int64_t>(res.static_intervals.size())) {
+        res.static_intervals[n].accel_rms = std::sqrt(one.col(0).sum() / (3.0 * K));
+        res.static_intervals[n].gyro_rms = std::sqrt(one.col(1).sum() / (3.0 * K));
+      }
+    }
+    for (int64_t n = d.J; n < d.J + d.Nd; ++n) fp.AddSquaredResiduals(n, x.col(n), ctx, &dy);
     res.residuals.resize(K);
     for (int k = 0; k < K; ++k) {
       res.residuals[k].static_accel = std::sqrt(st(k, 0) / (3.0 * d.J));

@@ -65,6 +65,10 @@ void WriteFullResult(const core::ArrayFullResult& r, const core::ArrayFullProble
   results::ArrayFullDiagnostics& d = out->full_diagnostics;
   const double gyro_unit = degrees ? core::kDegree : 1.0;  // rad/s per reading unit
   out->envelope.model = kFullModelEquation;
+  for (const core::ArrayFullStatic& st : r.static_intervals)
+    d.static_intervals.push_back(
+        {st.start, st.end, st.samples, st.accel_rms, st.gyro_rms / gyro_unit});
+
   results::ArrayParameters params;
   results::ArrayUncertainty unc;
   params.reference = r.reference;

@@ -10,6 +10,7 @@
 
 #include "methods/array/array_result.h"
 #include "web/html.h"
+#include "web/report_common.h"
 #include "web/svg_plot.h"
 
 namespace calibd::web {
@@ -309,6 +310,32 @@ std::string TriadsSection(const results::ArrayResult& result) {
   return Section("triads", "Triads (model full)", s);
 }
 
+// The static intervals the fit used (SPEC §7 lists them for every method with statics), each
+// with its means' residuals over all triads; empty for a result stored before they were listed.
+std::string StaticsTable(const results::ArrayFullDiagnostics& diag, const std::string& gyro_unit) {
+  if (diag.static_intervals.empty()) return "";
+  std::string rows;
+  for (size_t j = 0; j < diag.static_intervals.size(); ++j) {
+    const results::ArrayFullStaticInterval& st = diag.static_intervals[j];
+    rows += "<tr><td>" + std::to_string(j + 1) + "</td>" +
+            web::internal::NumCell(FormatFixed(st.start, 2)) +
+            web::internal::NumCell(FormatFixed(st.end, 2)) +
+            web::internal::NumCell(std::to_string(st.samples)) +
+            web::internal::NumCell(FormatSig(st.accel_residual_rms, 3)) +
+            web::internal::NumCell(FormatSig(st.gyro_residual_rms, 3)) + "</tr>";
+  }
+  return "<details class=\"array-full-statics\"><summary>The " +
+         std::to_string(diag.static_intervals.size()) +
+         " static intervals</summary><div class=\"table-wrap\"><table "
+         "class=\"table-array-full-statics\"><thead><tr><th>#</th><th>start (s)</th><th>end "
+         "(s)</th><th>samples</th><th>accelerometer residual RMS (m/s\xC2\xB2)</th><th>gyroscope "
+         "residual RMS (" +
+         gyro_unit + ")</th></tr></thead><tbody>" + rows +
+         "</tbody></table></div><p class=\"muted small\">The residual of a static is its means' "
+         "misfit over every triad's three axes; a static far above the others was probably not "
+         "still.</p></details>";
+}
+
 std::string ResidualsSection(const results::ArrayResult& result) {
   const results::ArrayFullDiagnostics& diag = result.full_diagnostics;
   const std::vector<results::ArrayImuResiduals>& per = diag.residual_rms_imus;
@@ -328,6 +355,12 @@ std::string ResidualsSection(const results::ArrayResult& result) {
       dy.values.push_back(a ? per[k].dynamic_rms.accelerometer : per[k].dynamic_rms.gyroscope);
     }
     const double noise = a ? diag.static_noise.accelerometer : diag.static_noise.gyroscope;
+    // Since the static intervals are listed, the statics' figures are the means' residuals (in
+    // reading units, their noise σ/√samples); before, the means' residuals × √samples.
+    const bool means = !diag.static_intervals.empty();
+    std::vector<double> samples;
+    for (const auto& st : diag.static_intervals) samples.push_back(static_cast<double>(st.samples));
+    const double mean_noise = means ? noise / std::sqrt(Median(samples)) : kNaN;
     PlotOptions o;
     o.name = std::string("array-full-residuals-") + kind;
     o.title = std::string("Residual RMS per triad, ") + (a ? "accelerometers" : "gyroscopes");
@@ -335,11 +368,20 @@ std::string ResidualsSection(const results::ArrayResult& result) {
     o.y.title = "RMS (" + unit + ")";
     o.y.type = ScaleType::kLog10;
     if (std::isfinite(noise) && noise > 0)
-      o.ref_lines.push_back({false, noise, "static noise " + FormatSig(noise, 2), true});
-    figs += Figure(RenderBarChart(o, names, {st, dy}),
-                   "Statics: RMS of the static means' residuals times \xE2\x88\x9Asamples; "
-                   "motion: RMS over the dynamic samples. Both sit at the static noise when the "
-                   "model fits.");
+      o.ref_lines.push_back({false, noise, "sample noise " + FormatSig(noise, 2), true});
+    if (std::isfinite(mean_noise) && mean_noise > 0)
+      o.ref_lines.push_back(
+          {false, mean_noise, "noise of a static mean " + FormatSig(mean_noise, 2), true});
+    figs += Figure(
+        RenderBarChart(o, names, {st, dy}),
+        means ? "Statics: RMS of the static means' residuals (" + unit +
+                    "), at the noise of a mean (the sample noise / \xE2\x88\x9Asamples, median "
+                    "static) when the model fits; motion: RMS over the dynamic samples, at the "
+                    "sample noise when the model fits."
+              : std::string("Statics: RMS of the static means' residuals times "
+                            "\xE2\x88\x9Asamples (a result stored by an earlier calibd); motion: "
+                            "RMS over the dynamic samples. Both sit at the static noise when the "
+                            "model fits."));
     // Triads that stand out: more than twice the median of all triads.
     for (const auto* series : {&st, &dy}) {
       const double med = Median(series->values);
@@ -365,6 +407,7 @@ std::string ResidualsSection(const results::ArrayResult& result) {
   }
   std::string body = "<div class=\"plots\">" + figs + "</div>";
   if (!words.empty()) body += "<ul class=\"warnings triad-outliers\">" + words + "</ul>";
+  body += StaticsTable(diag, gu);
   return Section("triad-residuals", "Residuals per triad", body);
 }
 

@@ -347,6 +347,14 @@ json FullDiagnosticsJson(const ArrayFullDiagnostics& d, bool usable) {
                   {"dynamic_accelerometer", Num(d.noise.dynamic_accelerometer)},
                   {"dynamic_gyroscope", Num(d.noise.dynamic_gyroscope)}};
   out["static_noise"] = Figures(d.static_noise);
+  json statics = json::array();
+  for (const ArrayFullStaticInterval& st : d.static_intervals)
+    statics.push_back({{"start", Num(st.start)},
+                       {"end", Num(st.end)},
+                       {"samples", st.samples},
+                       {"accel_residual_rms", Num(st.accel_residual_rms)},
+                       {"gyro_residual_rms", Num(st.gyro_residual_rms)}});
+  out["static_intervals"] = std::move(statics);
   json imus = json::array();
   for (const auto& i : d.residual_rms_imus)
     imus.push_back(
@@ -427,6 +435,14 @@ void ReadFullDiagnostics(const JsonReader& r, bool usable, ArrayFullDiagnostics*
     Ext(*n, "dynamic_gyroscope", &d->noise.dynamic_gyroscope);
   }
   ReadFigures(r, "static_noise", &d->static_noise, false);
+  ExtArray(r, "static_intervals", &d->static_intervals,
+           [](const JsonReader& e, ArrayFullStaticInterval* st) {
+             Ext(e, "start", &st->start);
+             Ext(e, "end", &st->end);
+             Ext(e, "samples", &st->samples);
+             Ext(e, "accel_residual_rms", &st->accel_residual_rms);
+             Ext(e, "gyro_residual_rms", &st->gyro_residual_rms);
+           });
   if (const std::optional<JsonReader> rms = MemberObject(r, false, "residual_rms")) {
     ReadFigures(*rms, "dynamic", &d->residual_rms_dynamic, false);
     ExtArray(*rms, "imus", &d->residual_rms_imus, [](const JsonReader& e, ArrayImuResiduals* i) {

@@ -243,6 +243,14 @@ struct ArrayPositionChange {
   Eigen::Vector3d position_change_sigma = array_internal::kNaN3;  // change / σ; null: reference
 };
 
+// diagnostics.static_intervals[] (full): a static the fit used, with its means' residuals.
+struct ArrayFullStaticInterval {
+  double start = array_internal::kNaN, end = array_internal::kNaN;  // s
+  int64_t samples = 0;
+  // RMS over every triad's three components of the static mean's residual: m/s², gyro_unit.
+  double accel_residual_rms = array_internal::kNaN, gyro_residual_rms = array_internal::kNaN;
+};
+
 // The diagnostics of the full model.
 struct ArrayFullDiagnostics {
   std::string termination;                      // [partial]
@@ -261,7 +269,11 @@ struct ArrayFullDiagnostics {
   double chi2_per_dof = array_internal::kNaN;
   std::string gyro_unit;
   ArrayFullNoise noise;
-  SensorFigures static_noise;                        // pooled within-static σ
+  SensorFigures static_noise;  // pooled within-static σ
+  // The statics in time order. Empty in results stored by an earlier calibd, whose
+  // residual_rms.imus[].static figures were the means' residuals × √samples (now: the means'
+  // residuals, m/s² and gyro_unit).
+  std::vector<ArrayFullStaticInterval> static_intervals;
   SensorFigures residual_rms_dynamic;                // residual_rms.dynamic, over all triads
   std::vector<ArrayImuResiduals> residual_rms_imus;  // residual_rms.imus
   ArrayTimeOffsets time_offsets;

@@ -198,6 +198,36 @@ TEST(ArrayFull, ResidualWeightingFindsTheNoiseWhenTheModelFits) {
   EXPECT_LT(worst, 0.2);
 }
 
+// Issue 28 (#22): the statics are listed (SPEC §7), and their residuals are the static means'
+// misfit in reading units: at the noise of a mean, σ/√samples, when the model fits (a little below:
+// the fit absorbs some of it; the earlier ×√samples figure would sit √samples ≈ 20–40 × higher).
+TEST(ArrayFull, ListsTheStaticsWithTheirMeansResidualsAtTheNoiseOfAMean) {
+  ArrayFullSimulationOptions so = Board8(13);
+  ArrayFullSimulation sim;
+  ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+  ArrayFullResult r;
+  ASSERT_TRUE(CalibrateArrayFull(sim.problem, FitOptions(so), &r).ok()) << r.reason;
+  ASSERT_EQ(static_cast<int64_t>(r.static_intervals.size()), r.statics);
+  double ratio_a = 0, ratio_g = 0, last_end = -1;
+  int64_t samples = 0;
+  for (const ArrayFullStatic& st : r.static_intervals) {
+    EXPECT_GT(st.start, last_end);
+    EXPECT_GT(st.end, st.start);
+    last_end = st.end;
+    samples += st.samples;
+    const double root_n = std::sqrt(static_cast<double>(st.samples));
+    ratio_a += std::pow(st.accel_rms / (so.accel_noise / root_n), 2) / r.statics;
+    ratio_g += std::pow(st.gyro_rms / (so.gyro_noise / root_n), 2) / r.statics;
+  }
+  EXPECT_EQ(samples, r.static_samples);
+  std::printf("static means' residual / noise of a mean: accelerometers %.2f, gyroscopes %.2f\n",
+              std::sqrt(ratio_a), std::sqrt(ratio_g));
+  EXPECT_GT(std::sqrt(ratio_a), 0.5);
+  EXPECT_LT(std::sqrt(ratio_a), 1.2);
+  EXPECT_GT(std::sqrt(ratio_g), 0.5);
+  EXPECT_LT(std::sqrt(ratio_g), 1.2);
+}
+
 TEST(ArrayFull, EstimateHoldsTheGauges) {
   ArrayFullSimulationOptions so = Board8(7);
   so.reference = 5;

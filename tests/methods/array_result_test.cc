@@ -107,6 +107,7 @@ ArrayResult FullResult() {
   d.gyro_unit = "rad/s";
   d.noise = {0.04, 0.001, "statics", "noise", 0.05, 0.002};
   d.static_noise = {0.039, 0.0011};
+  d.static_intervals = {{0.5, 2.5, 400, 0.002, 5e-5}, {3.0, 4.75, 350, 0.0021, NAN}};
   d.residual_rms_dynamic = {0.05, 0.002};
   d.residual_rms_imus = {{"0", {0.04, 0.001}, {0.05, 0.002}}, {"1", {0.03, 0.001}, {0.06, NAN}}};
   d.time_offsets.offsets_ms = {{"0", 0.1}, {"1", -0.1}};
@@ -225,6 +226,9 @@ TEST(ArrayResult, FullModelRoundTripsWithEveryField) {
   EXPECT_EQ(back.full_diagnostics.gauge.scale, "sum_trace_gyroscope");
   EXPECT_EQ(back.full_diagnostics.robust.batches, 12);
   EXPECT_TRUE(std::isnan(back.full_diagnostics.residual_rms_imus[1].dynamic_rms.gyroscope));
+  ASSERT_EQ(back.full_diagnostics.static_intervals.size(), 2u);
+  EXPECT_EQ(back.full_diagnostics.static_intervals[1].samples, 350);
+  EXPECT_TRUE(std::isnan(back.full_diagnostics.static_intervals[1].gyro_residual_rms));
   EXPECT_FALSE(back.full_diagnostics.changed_from_positions_only[0].positions_only_std);
   EXPECT_TRUE(back.full_diagnostics.changed_from_positions_only[1].positions_only_std);
   EXPECT_EQ(ToJson(back), j);
@@ -348,7 +352,8 @@ TEST(ArrayResult, FullResultWithoutPositionsDerivesThemFromTheImus) {
   j["diagnostics"].erase("model");  // the model is then told by parameters.imus
   for (const char* key :
        {"time_offsets", "dof", "chi2_per_dof", "noise", "robust", "changed_from_positions_only",
-        "positions_only_start", "statics", "rotation_excitation", "residual_rms", "static_noise"})
+        "positions_only_start", "statics", "rotation_excitation", "residual_rms", "static_noise",
+        "static_intervals"})
     j["diagnostics"].erase(key);
   ArrayResult r;
   const Status s = FromJson(j, &r);
@@ -369,6 +374,7 @@ TEST(ArrayResult, FullResultWithoutPositionsDerivesThemFromTheImus) {
   EXPECT_TRUE(std::isnan(d.noise.accelerometer));
   EXPECT_EQ(d.noise.source, "");
   EXPECT_TRUE(d.residual_rms_imus.empty());
+  EXPECT_TRUE(d.static_intervals.empty());  // an earlier calibd's: its static RMS × √samples
   EXPECT_EQ(d.rotation_excitation.verdict, "");
   EXPECT_EQ(d.gauge.scale, "sum_trace_gyroscope");
 }

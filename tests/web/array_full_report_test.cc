@@ -94,6 +94,7 @@ json FullResult(int K, const std::string& prefix = "", bool with_limits = true) 
   d.gyro_unit = "deg/s";
   d.noise = {0.04, 0.06, "configured", "noise", 0.04, 0.06};
   d.static_noise = {0.04, 0.06};
+  d.static_intervals = {{0.5, 2.5, 400, 0.002, 0.003}, {3.0, 4.75, 350, 0.0021, 0.0031}};
   d.residual_rms_dynamic = {0.041, 0.061};
   d.time_offsets.note = "diagnostic";
   d.robust = {false, 0, 2.0, 1.5};
@@ -205,7 +206,11 @@ TEST(ArrayFullReport, ResidualsPerTriadNameTheTriadThatStandsOut) {
   r["diagnostics"]["residual_rms"]["imus"][5]["dynamic"]["accelerometer"] = 0.41;  // 10x
   const std::string html = ArrayFullSections(r);
   EXPECT_TRUE(Has(html, "id=\"triad-residuals\""));
-  EXPECT_TRUE(Has(html, "static noise 0.04"));
+  EXPECT_TRUE(Has(html, "sample noise 0.04"));
+  // The statics: listed, and their residuals against the noise of a mean (0.04 / √400, the
+  // median static of two being the upper one).
+  EXPECT_TRUE(Has(html, "The 2 static intervals"));
+  EXPECT_TRUE(Has(html, "noise of a static mean 0.002"));
   const size_t list = html.find("triad-outliers");
   ASSERT_NE(list, std::string::npos);
   EXPECT_TRUE(Has(html.substr(list),
