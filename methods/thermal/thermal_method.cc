@@ -45,13 +45,17 @@ Status ParseThermalConfig(const json& config, core::ThermalOptions* options, Ine
   options->grid_points = static_cast<int>(grid);
   if (std::isfinite(t_ref)) options->t_ref = t_ref;
   if (auto it = config.find("lag"); it != config.end()) {
-    if (*it == "estimate") {
-      return ConfigKeyError(
-          "lag",
-          "'estimate' is not implemented yet: calibd fits the temperature reading as "
-          "the sensor's temperature (lag \"none\")");
+    if (it->is_number()) {
+      options->lag = core::ThermalLagMode::kFixed;
+      options->lag_seconds = it->get<double>();
+      if (!(options->lag_seconds > 0 && options->lag_seconds <= 86400)) {
+        return ConfigKeyError("lag", "in seconds must be in (0, 86400]");
+      }
+    } else if (*it == "estimate") {
+      options->lag = core::ThermalLagMode::kEstimate;
+    } else if (*it != "none") {
+      return ConfigKeyError("lag", "must be \"none\", \"estimate\" or the known τ in seconds");
     }
-    if (*it != "none") return ConfigKeyError("lag", "must be \"none\" or \"estimate\"");
   }
   if (auto it = config.find("device_id"); it != config.end()) {
     if (!it->is_number_integer() || it->get<int64_t>() < 0 || it->get<int64_t>() > 0xffffffffLL) {
@@ -245,6 +249,9 @@ std::function<Status(SimulatedFiles*)> Thermal::AddSimulateOptions(CLI::App* com
   command->add_option("--gyro-noise", o->gyro_noise, "rad/s per sample")->capture_default_str();
   command->add_option("--hysteresis", *hysteresis, "gyroscope y offset while cooling, rad/s")
       ->capture_default_str();
+  command->add_option("--lag", o->lag, "the sensor's lag behind the temperature reading, s")
+      ->check(CLI::Range(0.0, 1e5))
+      ->capture_default_str();
   command->add_option("--orientations", o->orientations, "orientations held in turn (1..6)")
       ->check(CLI::Range(1, 6))
       ->capture_default_str();
@@ -285,6 +292,7 @@ Status SimulateThermalFiles(const core::ThermalSimulationOptions& options, std::
   *truth = {{"method", "thermal"},
             {"t_ref", sim.truth.t_ref},
             {"seed", sim.truth.seed},
+            {"lag", sim.truth.lag},
             {"accelerometer", sensors[0]},
             {"gyroscope", sensors[1]},
             {"hysteresis",
