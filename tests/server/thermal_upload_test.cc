@@ -1,0 +1,107 @@
+// The thermal method through the real HTTP server (issue 31, SPEC §8): a simulated warm-up CSV
+// uploaded and calibrated, its report page and its firmware exports served; a 4 °C warm-up is a
+// failed job naming the range; the same warm-up as an ArduPilot DataFlash log (IMU messages with
+// their temperature T) through the same route.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "formats/recording.h"
+#include "methods/thermal/thermal_method.h"
+#include "tests/lib/dataflash_writer.h"
+#include "tests/server/http_test_util.h"
+
+namespace calibd::server {
+namespace {
+
+using json = nlohmann::json;
+using testing::TestServer;
+
+// A 30-minute warm-up at 20 Hz (`delta` °C asymptotic rise) as calibd's CSV, with its config.
+std::string WarmupCsv(double delta, json* config) {
+  core::ThermalSimulationOptions o;
+  o.rate = 20;
+  o.delta = delta;
+  o.seed = 3;
+  std::string csv;
+  json truth;
+  EXPECT_TRUE(SimulateThermalFiles(o, &csv, config, &truth).ok());
+  (*config)["device"] = "TC-1";
+  return csv;
+}
+
+std::string Get(const TestServer& server, const std::string& path, int want = 200) {
+  auto res = server.Client().Get(path.c_str());
+  if (!res) {
+    ADD_FAILURE() << path << ": no answer";
+    return "";
+  }
+  EXPECT_EQ(res->status, want) << path << ": " << res->body.substr(0, 500);
+  return res->body;
+}
+
+TEST(ThermalUpload, AWarmupCalibratesWithItsReportAndFirmwareFiles) {
+  json config;
+  const std::string csv = WarmupCsv(40, &config);
+  TestServer server;
+  ASSERT_EQ(server.error(), "");
+  const json job = server.UploadAndWait(csv, config, "warmup.csv");
+  ASSERT_FALSE(job.is_null());
+  ASSERT_EQ(job["status"], "succeeded") << job.dump().substr(0, 2000);
+  const json& imu = job["result"]["parameters"]["imus"][0];
+  EXPECT_GT(imu["t_max"].get<double>() - imu["t_min"].get<double>(), 30);
+  const std::string id = std::to_string(job["id"].get<int64_t>());
+  const std::string page = Get(server, "/jobs/" + id);
+  EXPECT_NE(page.find("thermal"), std::string::npos);
+  const std::string base = "/api/v1/devices/TC-1/calibration?method=thermal&job=" + id;
+  const std::string ardupilot = Get(server, base + "&format=ardupilot");
+  EXPECT_NE(ardupilot.find("INS_TCAL1_ENABLE"), std::string::npos) << ardupilot;
+  EXPECT_NE(ardupilot.find("INS_TCAL1_GYR1_X"), std::string::npos) << ardupilot;
+  const std::string px4 = Get(server, base + "&format=px4");
+  EXPECT_NE(px4.find("TC_A0_X1_0"), std::string::npos) << px4;
+  EXPECT_NE(px4.find("TC_G0_TREF"), std::string::npos) << px4;
+  for (const char* format : {"json", "csv", "h"}) Get(server, base + "&format=" + format);
+}
+
+TEST(ThermalUpload, AFourDegreeWarmupIsAFailedJobNamingTheRange) {
+  json config;
+  const std::string csv = WarmupCsv(4, &config);
+  TestServer server;
+  ASSERT_EQ(server.error(), "");
+  const json job = server.UploadAndWait(csv, config, "warmup.csv");
+  ASSERT_FALSE(job.is_null());
+  ASSERT_EQ(job["status"], "failed") << job.dump().substr(0, 2000);
+  const std::string error = job.dump();
+  EXPECT_NE(error.find("min_range 10"), std::string::npos) << error;
+  EXPECT_NE(error.find("the statics span 3."), std::string::npos) << error;
+}
+
+// The same warm-up as a DataFlash log: IMU instance 0 with its temperature (T, °C).
+TEST(ThermalUpload, ADataFlashWarmupCalibratesThroughTheSameRoute) {
+  json config;
+  const std::string csv = WarmupCsv(40, &config);
+  RecordingParser parser("sim.csv", /*collect=*/true);
+  ASSERT_TRUE(ParseRecording(csv, &parser).ok());
+  ArrayRecording rec;
+  ASSERT_TRUE(parser.TakeArray(&rec).ok());
+  calibd::testing::DataFlashWriter w;
+  calibd::testing::WriteArduPilotFormats(&w);
+  for (Eigen::Index i = 0; i < rec.t.size(); ++i) {
+    const double gyro[3] = {rec.gyro(i, 0), rec.gyro(i, 1), rec.gyro(i, 2)};
+    const double accel[3] = {rec.accel(i, 0), rec.accel(i, 1), rec.accel(i, 2)};
+    calibd::testing::WriteImu(&w, static_cast<uint64_t>(std::llround(1e6 + rec.t(i) * 1e6)), 0,
+                              gyro, accel, rec.temperature(i, 0));
+  }
+  TestServer server;
+  ASSERT_EQ(server.error(), "");
+  const json job = server.UploadAndWait(w.bytes(), config, "log.bin");
+  ASSERT_FALSE(job.is_null());
+  ASSERT_EQ(job["status"], "succeeded") << job.dump().substr(0, 2000);
+  EXPECT_EQ(job["result"]["diagnostics"]["log"]["format"], "dataflash");
+  const json& imu = job["result"]["parameters"]["imus"][0];
+  EXPECT_GT(imu["t_max"].get<double>() - imu["t_min"].get<double>(), 30);
+}
+
+}  // namespace
+}  // namespace calibd::server
