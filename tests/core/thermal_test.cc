@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Cholesky>
 #include <cmath>
 #include <cstdio>
 
@@ -188,14 +189,18 @@ TEST(ThermalTest, HysteresisFalseAlarmRateAndPower) {
 // reading to all samples by unweighted least squares. Returns the curve's coefficients c1..c3 of
 // (T − t_ref)^k for channel c (the constant is each firmware's room-temperature business).
 Eigen::VectorXd FlightStackFit(const ThermalSimulation& sim, int c, double t_ref) {
-  const Eigen::Index n = sim.t.size();
-  const Eigen::VectorXd x = sim.temp.array() - t_ref;
-  const Eigen::VectorXd y = c < 3 ? Eigen::VectorXd(sim.accel.col(c)) : sim.gyro.col(c - 3);
-  ThermalPolyFit fit;
-  EXPECT_TRUE(FitThermalPolynomial(x, y, Eigen::VectorXd::Ones(n), std::vector<int>(n, 0), 1, 3, 3,
-                                   0.5 * (x.maxCoeff() - x.minCoeff()), &fit)
-                  .ok());
-  return fit.coefficients;
+  // Normal equations in u = (T − t_ref)/h (well conditioned for a cubic), then unscaled.
+  const double h = 0.5 * (sim.temp.maxCoeff() - sim.temp.minCoeff());
+  Eigen::Matrix4d ata = Eigen::Matrix4d::Zero();
+  Eigen::Vector4d aty = Eigen::Vector4d::Zero();
+  for (Eigen::Index i = 0; i < sim.t.size(); ++i) {
+    const double u = (sim.temp(i) - t_ref) / h;
+    const Eigen::Vector4d row(1, u, u * u, u * u * u);
+    ata.noalias() += row * row.transpose();
+    aty += row * (c < 3 ? sim.accel(i, c) : sim.gyro(i, c - 3));
+  }
+  const Eigen::Vector4d a = ata.ldlt().solve(aty);
+  return Eigen::Vector3d(a(1) / h, a(2) / (h * h), a(3) / (h * h * h));
 }
 
 // A truth of order 5 whose 4th and 5th orders are not small (ArduPilot's "very poor fit" of a
