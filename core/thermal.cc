@@ -79,7 +79,8 @@ std::string Format(double v) {
 
 // Stage 1 for one range of samples: the channel means and their σ, the temperature from temp.
 ThermalWindow MakeWindow(const Eigen::VectorXd& t, const ThermalImuInput& imu,
-                         const Eigen::VectorXd& temp, const WindowRange& range, double min_rate) {
+                         const Eigen::VectorXd& temp, const WindowRange& range,
+                         const ThermalOptions& options) {
   ThermalWindow w;
   const int64_t first = range.first, last = range.last, n = last - first + 1;
   w.start = t(first);
@@ -103,7 +104,10 @@ ThermalWindow MakeWindow(const Eigen::VectorXd& t, const ThermalImuInput& imu,
           .cwiseMax(0.0);
   w.mean = origin + mean;
   w.mean_std = (var / static_cast<double>(n)).cwiseSqrt();
-  SetWindowTemperature(t, temp, range, min_rate, &w);
+  const double root_n = std::sqrt(static_cast<double>(n));
+  if (options.accel_noise) w.mean_std.head<3>().setConstant(*options.accel_noise / root_n);
+  if (options.gyro_noise) w.mean_std.tail<3>().setConstant(*options.gyro_noise / root_n);
+  SetWindowTemperature(t, temp, range, options.min_rate, &w);
   return w;
 }
 
@@ -231,7 +235,7 @@ Status MakeWindows(const Eigen::VectorXd& t, const ThermalImuInput& imu,
                                    " s in the statics; " + StaticShortfall(r->statics));
   }
   for (const WindowRange& range : *ranges) {
-    r->windows.push_back(MakeWindow(t, imu, *imu.temp, range, options.min_rate));
+    r->windows.push_back(MakeWindow(t, imu, *imu.temp, range, options));
   }
   r->orientations = GroupOrientations(options.orientation_tolerance, &r->windows);
   st = SetRange(options, r);
@@ -329,6 +333,9 @@ bool ThermalOptions::IsValid(std::string* error) const {
     return fail("a fixed lag must be > 0 s");
   if (!(lag_max > 0 && std::isfinite(lag_max))) return fail("lag_max must be > 0 s");
   if (!(lag_start > 0)) return fail("lag_start must be > 0 s");
+  for (const std::optional<double>& noise : {accel_noise, gyro_noise}) {
+    if (noise && !(*noise > 0 && std::isfinite(*noise))) return fail("a noise σ must be > 0");
+  }
   return statics.IsValid(error);
 }
 

@@ -6,10 +6,10 @@
 //  1. Statics: core/static_detection on the IMU's two triads; each static interval is cut into
 //     consecutive averaging windows of `window` seconds (a remainder shorter than half a window
 //     joins the last one). Per window: the mean of every channel, its σ from the window's own
-//     samples (sample std / √n, white noise), the mean temperature and the temperature rate (least
-//     squares slope of T over the window); the window's phase is heating (rate > min_rate), cooling
-//     (rate < −min_rate) or steady. Windows are grouped by orientation (gravity directions within
-//     `orientation_tolerance` of each other).
+//     samples (sample std / √n, white noise; or σ/√n with σ the options' accel_noise/gyro_noise),
+//     the mean temperature and the temperature rate (least squares slope of T over the window); the
+//     window's phase is heating (rate > min_rate), cooling (rate < −min_rate) or steady. Windows
+//     are grouped by orientation (gravity directions within `orientation_tolerance` of each other).
 //  2. Per channel, weighted least squares of the window means
 //       y_w = b_g(w) + Σ_{k=1..p} c_k (T_w − t_ref)^k,      weights 1/σ_w²,
 //     with one intercept b_g per orientation group for accelerometers (gravity is part of it) and
@@ -73,6 +73,9 @@ struct ThermalOptions {
   double lag_seconds = 0;  // s, > 0 with kFixed: the known τ
   double lag_max = 1800;   // s, > 0: kEstimate searches τ in [0, lag_max]
   double lag_start = 10;   // s, > 0: the lag state starts on a line fitted to these first seconds
+  // White noise per sample (σ, SI, > 0) of the accelerometers and gyroscopes, e.g. from a noise
+  // job: a window's σ is then σ/√n. nullopt: each window's σ from its own samples.
+  std::optional<double> accel_noise, gyro_noise;
 
   bool IsValid(std::string* error) const;
 };

@@ -5,10 +5,12 @@
 #include <cstdio>
 #include <memory>
 #include <set>
+#include <tuple>
 #include <vector>
 
 #include "formats/inertial_log.h"
 #include "methods/config_keys.h"
+#include "methods/noise/noise_reference.h"
 
 namespace calibd::server {
 
@@ -19,14 +21,15 @@ namespace {
 Status ParseThermalConfig(const json& config, core::ThermalOptions* options, InertialUnits* units) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
   static const std::set<std::string>& kKnown = *new std::set<std::string>{
-      "method",    "device", "accel_unit", "gyro_unit", "t_ref",       "max_order",
-      "min_range", "lag",    "device_id",  "window",    "grid_points", "hysteresis_alpha"};
+      "method",      "device",           "accel_unit",  "gyro_unit", "t_ref",
+      "max_order",   "min_range",        "lag",         "device_id", "window",
+      "grid_points", "hysteresis_alpha", "accel_noise", "gyro_noise"};
   for (const auto& [key, value] : config.items()) {
     if (kKnown.count(key) == 0) {
       return ConfigKeyError(key,
                             "is not a thermal config key (known: accel_unit, gyro_unit, t_ref, "
                             "max_order, min_range, lag, device_id, window, grid_points, "
-                            "hysteresis_alpha, method, device)");
+                            "hysteresis_alpha, accel_noise, gyro_noise, method, device)");
     }
   }
   *options = core::ThermalOptions();
@@ -62,9 +65,20 @@ Status ParseThermalConfig(const json& config, core::ThermalOptions* options, Ine
       return ConfigKeyError("device_id", "must be an integer 0..4294967295 (PX4's TC_*_ID)");
     }
   }
+  s = ParseInertialUnits(config, units);
+  // σ per sample: a number in the reading units, or {"job": ID} of a noise job resolved at
+  // enqueue (methods/noise/noise_reference.h, SI).
+  for (auto [key, out, unit] : {std::tuple<const char*, std::optional<double>*, double>{
+                                    "accel_noise", &options->accel_noise, units->accel},
+                                {"gyro_noise", &options->gyro_noise, units->gyro}}) {
+    std::optional<NoiseLevel> level;
+    if (s.ok()) s = ReadNoiseLevel(config, key, &level);
+    if (s.ok() && level) *out = level->value * (level->si ? 1.0 : unit);
+  }
+  if (!s.ok()) return s;
   std::string error;
   if (!options->IsValid(&error)) return Status::InvalidInput(error);
-  return ParseInertialUnits(config, units);
+  return Status::Ok();
 }
 
 // The temperature column of IMU k: `temp<k>`, else `temp`; -1 when neither.
@@ -87,6 +101,10 @@ class Thermal : public Method {
            "chosen order and a heating/cooling hysteresis test, from a warm-up log";
   }
   bool Reads(Layout layout) const override { return layout == Layout::kArray; }
+  // accel_noise / gyro_noise as {"job": ID} of a noise job (methods/noise/noise_reference.h).
+  Status ResolveReferences(storage::Store* store, json* config) const override {
+    return ResolveNoiseReferences(store, config);
+  }
   bool NeedsIncreasingTime() const override { return true; }
   Status ValidateConfig(const json& config) const override {
     core::ThermalOptions options;
@@ -223,6 +241,7 @@ Status Thermal::Run(RecordingParser* parser, const json& config, const RunContex
   s = core::CalibrateThermal(log.t, inputs, options, &r);
   if (!s.ok()) return s;
   *result = ThermalResultToJson(r, options);
+  (*result)["diagnostics"]["noise_jobs"] = NoiseJobsJson(config);
   return Status::Ok();
 }
 

@@ -1,10 +1,12 @@
 // The thermal method through the real HTTP server (issue 31, SPEC §8): a simulated warm-up CSV
 // uploaded and calibrated, its report page and its firmware exports served; a 4 °C warm-up is a
 // failed job naming the range; the same warm-up as an ArduPilot DataFlash log (IMU messages with
-// their temperature T) through the same route.
+// their temperature T) through the same route; the windows' σ from a noise job ({"job": ID}).
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <string>
 
 #include "formats/recording.h"
@@ -101,6 +103,46 @@ TEST(ThermalUpload, ADataFlashWarmupCalibratesThroughTheSameRoute) {
   EXPECT_EQ(job["result"]["diagnostics"]["log"]["format"], "dataflash");
   const json& imu = job["result"]["parameters"]["imus"][0];
   EXPECT_GT(imu["t_max"].get<double>() - imu["t_min"].get<double>(), 30);
+}
+
+// A noise job on 20 minutes of white noise at the warm-up's rate (σ 0.02 m/s², 0.002 rad/s, as
+// the simulation's); the thermal job given {"job": ID} takes its windows' σ from it: σ/√n.
+TEST(ThermalUpload, WindowNoiseFromANoiseJob) {
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> normal;
+  std::string noise_csv = "t,a0_x,a0_y,a0_z,g0_x,g0_y,g0_z\n";
+  char line[256];
+  for (int i = 0; i < 20 * 1200; ++i) {
+    std::snprintf(line, sizeof line, "%.3f,%.6f,%.6f,%.6f,%.7f,%.7f,%.7f\n", i / 20.0,
+                  0.02 * normal(rng), 0.02 * normal(rng), 9.80665 + 0.02 * normal(rng),
+                  0.002 * normal(rng), 0.002 * normal(rng), 0.002 * normal(rng));
+    noise_csv += line;
+  }
+  TestServer server;
+  ASSERT_EQ(server.error(), "");
+  const json noise = server.UploadAndWait(noise_csv, {{"method", "noise"}}, "still.csv");
+  ASSERT_FALSE(noise.is_null());
+  ASSERT_EQ(noise["status"], "succeeded") << noise.dump().substr(0, 2000);
+  const int64_t id = noise["id"].get<int64_t>();
+  json config;
+  const std::string csv = WarmupCsv(40, &config);
+  config["accel_noise"] = {{"job", id}};
+  config["gyro_noise"] = {{"job", id}};
+  const json job = server.UploadAndWait(csv, config, "warmup.csv");
+  ASSERT_FALSE(job.is_null());
+  ASSERT_EQ(job["status"], "succeeded") << job.dump().substr(0, 2000);
+  const json& d = job["result"]["diagnostics"];
+  EXPECT_EQ(d["noise_jobs"]["accelerometer"], id);
+  EXPECT_EQ(d["noise_jobs"]["gyroscope"], id);
+  // One σ for every full window (200 samples): the noise job's σ (the largest axis, within the
+  // ~5 % its white-noise density is determined to) over √200.
+  const json& imu = d["imus"][0];
+  const double n = imu["windows"][0]["samples"].get<double>();
+  const double accel = imu["channels"][0]["points"]["std"][0].get<double>() * std::sqrt(n);
+  const double gyro = imu["channels"][3]["points"]["std"][0].get<double>() * std::sqrt(n);
+  EXPECT_NEAR(accel, 0.02, 0.002);
+  EXPECT_NEAR(gyro, 0.002, 0.0002);
+  EXPECT_EQ(imu["channels"][0]["points"]["std"][0], imu["channels"][1]["points"]["std"][0]);
 }
 
 }  // namespace
