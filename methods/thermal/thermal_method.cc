@@ -195,8 +195,9 @@ void Thermal::Judge(const json& result, const json&, const AcceptanceLimits& lim
                     "the window means scatter beyond their noise (chi2/dof above max_chi2): the "
                     "device moved, the temperature lags the sensor, or the order is too low");
     hysteresis.RejectInto(verdict,
-                          "heating and cooling disagree (hysteresis or a lagging temperature "
-                          "reading): the bias is not a function of the temperature read");
+                          "heating and cooling disagree (hysteresis, or a temperature reading "
+                          "that lags the sensor: try lag \"estimate\"): the bias is not a "
+                          "function of the temperature read");
   } catch (const std::exception& e) {
     verdict->Reject(std::string("the result cannot be judged: ") + e.what());
   }

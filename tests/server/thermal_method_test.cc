@@ -89,8 +89,9 @@ TEST(ThermalMethodTest, LagKeyIsCheckedNamingIt) {
   }
 }
 
-// Warm-up then cool-down, the sensor 60 s behind the reading: τ within 4σ, its σ and bound in the
-// result; the same config on a warm-up alone is not determinable, naming why.
+// Warm-up then cool-down, the sensor 60 s behind the reading: with lag none a rejected verdict
+// pointing at the lag; with lag "estimate" τ within 4σ, its σ and bound in the result, accepted;
+// the same config on a warm-up alone is not determinable, naming why.
 TEST(ThermalMethodTest, LagEstimateThroughTheReader) {
   core::ThermalSimulationOptions o;
   o.rate = 20;
@@ -101,14 +102,21 @@ TEST(ThermalMethodTest, LagEstimateThroughTheReader) {
   json config, truth, r;
   ASSERT_TRUE(SimulateThermalFiles(o, &csv, &config, &truth).ok());
   EXPECT_EQ(truth.at("lag"), 60);
-  config["lag"] = "estimate";
+  // Without the lag the branches disagree: rejected as hysteresis, pointing at the lag.
   Status s = Calibrate(csv, "log.csv", config, &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(r["verdict"]["status"], "rejected");
+  EXPECT_NE(r["verdict"].dump().find("try lag \\\"estimate\\\""), std::string::npos)
+      << r["verdict"].dump();
+  config["lag"] = "estimate";
+  s = Calibrate(csv, "log.csv", config, &r);
   ASSERT_TRUE(s.ok()) << s.message();
   const double tau = r["parameters"]["imus"][0]["lag"];
   const double sd = r["uncertainty"]["imus"][0]["lag_std"];
   EXPECT_LT(std::abs(tau - 60), 4 * sd) << tau << " ± " << sd;
   EXPECT_GT(r["uncertainty"]["imus"][0]["crb"]["lag_std"].get<double>(), 0);
   EXPECT_EQ(r["diagnostics"]["imus"][0]["lag"]["mode"], "estimate");
+  EXPECT_EQ(r["verdict"]["status"], "accepted") << r["verdict"].dump();
   o.cooldown = 0;
   ASSERT_TRUE(SimulateThermalFiles(o, &csv, &config, &truth).ok());
   config["lag"] = "estimate";

@@ -56,6 +56,7 @@ TEST(ThermalUpload, AWarmupCalibratesWithItsReportAndFirmwareFiles) {
   const std::string id = std::to_string(job["id"].get<int64_t>());
   const std::string page = Get(server, "/jobs/" + id);
   EXPECT_NE(page.find("thermal"), std::string::npos);
+  EXPECT_NE(page.find("Lag: none"), std::string::npos);
   const std::string base = "/api/v1/devices/TC-1/calibration?method=thermal&job=" + id;
   const std::string ardupilot = Get(server, base + "&format=ardupilot");
   EXPECT_NE(ardupilot.find("INS_TCAL1_ENABLE"), std::string::npos) << ardupilot;
