@@ -66,7 +66,14 @@ ChannelData SelectWindows(const std::vector<ThermalWindow>& windows, int c, int 
 
 namespace {
 
-using namespace thermal_internal;  // NOLINT(build/namespaces): this file's own stages
+using thermal_internal::AddLagUncertainty;
+using thermal_internal::ChannelData;
+using thermal_internal::CheckLagDeterminable;
+using thermal_internal::EstimateLag;
+using thermal_internal::LaggedTemperature;
+using thermal_internal::SelectWindows;
+using thermal_internal::SetWindowTemperature;
+using thermal_internal::WindowRange;
 
 const char* const kChannelNames[6] = {"accelerometer.x", "accelerometer.y", "accelerometer.z",
                                       "gyroscope.x",     "gyroscope.y",     "gyroscope.z"};
