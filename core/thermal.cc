@@ -6,109 +6,34 @@
 #include <cmath>
 #include <cstdio>
 
+#include "core/thermal_internal.h"
+
 namespace calibd::core {
-namespace {
+namespace thermal_internal {
 
-const char* const kChannelNames[6] = {"accelerometer.x", "accelerometer.y", "accelerometer.z",
-                                      "gyroscope.x",     "gyroscope.y",     "gyroscope.z"};
-
-std::string Format(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.3g", v);
-  return buf;
-}
-
-// Stage 1 for one range of samples [first, last].
-ThermalWindow MakeWindow(const Eigen::VectorXd& t, const ThermalImuInput& imu, int64_t first,
-                         int64_t last, double min_rate) {
-  ThermalWindow w;
-  const int64_t n = last - first + 1;
-  w.start = t(first);
-  w.end = t(last);
-  w.samples = n;
-  Eigen::Matrix<double, 6, 1> sum = Eigen::Matrix<double, 6, 1>::Zero();
-  Eigen::Matrix<double, 6, 1> sq = Eigen::Matrix<double, 6, 1>::Zero();
+void SetWindowTemperature(const Eigen::VectorXd& t, const Eigen::VectorXd& temp,
+                          const WindowRange& range, double min_rate, ThermalWindow* w) {
+  const int64_t n = range.last - range.first + 1;
   double t_mean = 0, temp_mean = 0;
-  for (int64_t i = first; i <= last; ++i) {
+  for (int64_t i = range.first; i <= range.last; ++i) {
     t_mean += t(i);
-    temp_mean += (*imu.temp)(i);
+    temp_mean += temp(i);
   }
   t_mean /= n;
   temp_mean /= n;
-  // Centre on the first sample so the sums of squares keep their precision.
-  Eigen::Matrix<double, 6, 1> origin;
-  origin << imu.accel->row(first).transpose(), imu.gyro->row(first).transpose();
   double stt = 0, sty = 0;
-  for (int64_t i = first; i <= last; ++i) {
-    Eigen::Matrix<double, 6, 1> v;
-    v << imu.accel->row(i).transpose(), imu.gyro->row(i).transpose();
-    v -= origin;
-    sum += v;
-    sq += v.cwiseProduct(v);
+  for (int64_t i = range.first; i <= range.last; ++i) {
     const double dt = t(i) - t_mean;
     stt += dt * dt;
-    sty += dt * ((*imu.temp)(i)-temp_mean);
+    sty += dt * (temp(i) - temp_mean);
   }
-  const Eigen::Matrix<double, 6, 1> mean = sum / static_cast<double>(n);
-  const Eigen::Matrix<double, 6, 1> var =
-      ((sq - static_cast<double>(n) * mean.cwiseProduct(mean)) / static_cast<double>(n - 1))
-          .cwiseMax(0.0);
-  w.mean = origin + mean;
-  w.mean_std = (var / static_cast<double>(n)).cwiseSqrt();
-  w.temperature = temp_mean;
-  w.rate = stt > 0 ? sty / stt : 0;
-  w.phase = w.rate > min_rate ? 1 : (w.rate < -min_rate ? -1 : 0);
-  return w;
+  w->temperature = temp_mean;
+  w->rate = stt > 0 ? sty / stt : 0;
+  w->phase = w->rate > min_rate ? 1 : (w->rate < -min_rate ? -1 : 0);
 }
 
-std::vector<ThermalWindow> CutWindows(const Eigen::VectorXd& t, const ThermalImuInput& imu,
-                                      const StaticDetection& statics,
-                                      const ThermalOptions& options) {
-  std::vector<ThermalWindow> windows;
-  const int64_t per = std::max<int64_t>(
-      3, static_cast<int64_t>(std::llround(options.window / statics.sample_period)));
-  for (const StaticInterval& s : statics.intervals) {
-    const int64_t count = std::max<int64_t>(1, (s.samples + per / 2) / per);
-    for (int64_t j = 0; j < count; ++j) {
-      const int64_t first = s.first + j * per;
-      const int64_t last = j + 1 == count ? s.last : first + per - 1;
-      if (last - first + 1 >= 3)
-        windows.push_back(MakeWindow(t, imu, first, last, options.min_rate));
-    }
-  }
-  return windows;
-}
-
-// Groups windows by gravity direction (greedy, against each group's first window).
-int GroupOrientations(double tolerance, std::vector<ThermalWindow>* windows) {
-  std::vector<Eigen::Vector3d> heads;
-  for (ThermalWindow& w : *windows) {
-    const Eigen::Vector3d d = w.mean.head<3>().normalized();
-    int found = -1;
-    for (size_t g = 0; g < heads.size() && found < 0; ++g) {
-      if (std::acos(std::clamp(d.dot(heads[g]), -1.0, 1.0)) <= tolerance)
-        found = static_cast<int>(g);
-    }
-    if (found < 0) {
-      found = static_cast<int>(heads.size());
-      heads.push_back(d);
-    }
-    w.orientation = found;
-  }
-  return static_cast<int>(heads.size());
-}
-
-// The windows of one phase (0: all) as fit inputs for channel c; groups re-indexed densely.
-struct ChannelData {
-  Eigen::VectorXd x, y, sigma;
-  std::vector<int> group;
-  std::vector<int> group_of_orientation;  // orientation -> dense group, −1 absent
-  int groups = 0;
-  double t_lo = 0, t_hi = 0;
-};
-
-ChannelData Select(const std::vector<ThermalWindow>& windows, int c, int phase, double t_ref,
-                   int orientations) {
+ChannelData SelectWindows(const std::vector<ThermalWindow>& windows, int c, int phase, double t_ref,
+                          int orientations) {
   ChannelData d;
   const bool gyro = c >= 3;
   d.group_of_orientation.assign(static_cast<size_t>(gyro ? 1 : orientations), -1);
@@ -137,6 +62,96 @@ ChannelData Select(const std::vector<ThermalWindow>& windows, int c, int phase, 
   return d;
 }
 
+}  // namespace thermal_internal
+
+namespace {
+
+using thermal_internal::AddLagUncertainty;
+using thermal_internal::ChannelData;
+using thermal_internal::CheckLagDeterminable;
+using thermal_internal::EstimateLag;
+using thermal_internal::LaggedTemperature;
+using thermal_internal::SelectWindows;
+using thermal_internal::SetWindowTemperature;
+using thermal_internal::WindowRange;
+
+const char* const kChannelNames[6] = {"accelerometer.x", "accelerometer.y", "accelerometer.z",
+                                      "gyroscope.x",     "gyroscope.y",     "gyroscope.z"};
+
+std::string Format(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3g", v);
+  return buf;
+}
+
+// Stage 1 for one range of samples: the channel means and their σ, the temperature from temp.
+ThermalWindow MakeWindow(const Eigen::VectorXd& t, const ThermalImuInput& imu,
+                         const Eigen::VectorXd& temp, const WindowRange& range,
+                         const ThermalOptions& options) {
+  ThermalWindow w;
+  const int64_t first = range.first, last = range.last, n = last - first + 1;
+  w.start = t(first);
+  w.end = t(last);
+  w.samples = n;
+  Eigen::Matrix<double, 6, 1> sum = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::Matrix<double, 6, 1> sq = Eigen::Matrix<double, 6, 1>::Zero();
+  // Centre on the first sample so the sums of squares keep their precision.
+  Eigen::Matrix<double, 6, 1> origin;
+  origin << imu.accel->row(first).transpose(), imu.gyro->row(first).transpose();
+  for (int64_t i = first; i <= last; ++i) {
+    Eigen::Matrix<double, 6, 1> v;
+    v << imu.accel->row(i).transpose(), imu.gyro->row(i).transpose();
+    v -= origin;
+    sum += v;
+    sq += v.cwiseProduct(v);
+  }
+  const Eigen::Matrix<double, 6, 1> mean = sum / static_cast<double>(n);
+  const Eigen::Matrix<double, 6, 1> var =
+      ((sq - static_cast<double>(n) * mean.cwiseProduct(mean)) / static_cast<double>(n - 1))
+          .cwiseMax(0.0);
+  w.mean = origin + mean;
+  w.mean_std = (var / static_cast<double>(n)).cwiseSqrt();
+  const double root_n = std::sqrt(static_cast<double>(n));
+  if (options.accel_noise) w.mean_std.head<3>().setConstant(*options.accel_noise / root_n);
+  if (options.gyro_noise) w.mean_std.tail<3>().setConstant(*options.gyro_noise / root_n);
+  SetWindowTemperature(t, temp, range, options.min_rate, &w);
+  return w;
+}
+
+std::vector<WindowRange> CutWindows(const StaticDetection& statics, const ThermalOptions& options) {
+  std::vector<WindowRange> ranges;
+  const int64_t per = std::max<int64_t>(
+      3, static_cast<int64_t>(std::llround(options.window / statics.sample_period)));
+  for (const StaticInterval& s : statics.intervals) {
+    const int64_t count = std::max<int64_t>(1, (s.samples + per / 2) / per);
+    for (int64_t j = 0; j < count; ++j) {
+      const int64_t first = s.first + j * per;
+      const int64_t last = j + 1 == count ? s.last : first + per - 1;
+      if (last - first + 1 >= 3) ranges.push_back({first, last});
+    }
+  }
+  return ranges;
+}
+
+// Groups windows by gravity direction (greedy, against each group's first window).
+int GroupOrientations(double tolerance, std::vector<ThermalWindow>* windows) {
+  std::vector<Eigen::Vector3d> heads;
+  for (ThermalWindow& w : *windows) {
+    const Eigen::Vector3d d = w.mean.head<3>().normalized();
+    int found = -1;
+    for (size_t g = 0; g < heads.size() && found < 0; ++g) {
+      if (std::acos(std::clamp(d.dot(heads[g]), -1.0, 1.0)) <= tolerance)
+        found = static_cast<int>(g);
+    }
+    if (found < 0) {
+      found = static_cast<int>(heads.size());
+      heads.push_back(d);
+    }
+    w.orientation = found;
+  }
+  return static_cast<int>(heads.size());
+}
+
 // Bias at x = T − t_ref (intercept of dense group g plus the curve) and its 1σ.
 void BiasAt(const ThermalPolyFit& f, int g, double x, double* value, double* var) {
   const int groups = static_cast<int>(f.intercepts.size());
@@ -156,8 +171,8 @@ void BiasAt(const ThermalPolyFit& f, int g, double x, double* value, double* var
 void CompareHeatingCooling(const std::vector<ThermalWindow>& windows, int c, double t_ref,
                            int orientations, double scale, int grid_points, double critical_z,
                            ThermalChannel* ch) {
-  const ChannelData h = Select(windows, c, 1, t_ref, orientations);
-  const ChannelData k = Select(windows, c, -1, t_ref, orientations);
+  const ChannelData h = SelectWindows(windows, c, 1, t_ref, orientations);
+  const ChannelData k = SelectWindows(windows, c, -1, t_ref, orientations);
   int common = -1;  // an orientation both phases saw
   for (size_t o = 0; o < h.group_of_orientation.size() && common < 0; ++o) {
     if (h.group_of_orientation[o] >= 0 && k.group_of_orientation[o] >= 0)
@@ -190,21 +205,11 @@ void CompareHeatingCooling(const std::vector<ThermalWindow>& windows, int c, dou
   ch->hysteresis_flagged = ch->max_abs_z > critical_z;
 }
 
-Status CalibrateImu(const Eigen::VectorXd& t, const ThermalImuInput& imu,
-                    const ThermalOptions& options, ThermalImuResult* r) {
-  r->name = imu.name;
-  const std::vector<TriadSeries> triads = {{"a" + imu.name, TriadKind::kAccelerometer, imu.accel},
-                                           {"g" + imu.name, TriadKind::kGyroscope, imu.gyro}};
-  Status st = DetectStatics(t, triads, options.statics, &r->statics);
-  if (!st.ok()) return st;
-  r->windows = CutWindows(t, imu, r->statics, options);
-  if (r->windows.size() < 3) {
-    return Status::NotDeterminable("IMU " + imu.name + ": " + std::to_string(r->windows.size()) +
-                                   " averaging windows of " + Format(options.window) +
-                                   " s in the statics; " + StaticShortfall(r->statics));
-  }
-  r->orientations = GroupOrientations(options.orientation_tolerance, &r->windows);
+// The windows' temperature span into r (t_min, t_max, phase counts); kNotDeterminable below
+// min_range, naming the span found.
+Status SetRange(const ThermalOptions& options, ThermalImuResult* r) {
   r->t_min = r->t_max = r->windows[0].temperature;
+  r->heating_windows = r->cooling_windows = 0;
   for (const ThermalWindow& w : r->windows) {
     r->t_min = std::min(r->t_min, w.temperature);
     r->t_max = std::max(r->t_max, w.temperature);
@@ -214,11 +219,70 @@ Status CalibrateImu(const Eigen::VectorXd& t, const ThermalImuInput& imu,
   const double range = r->t_max - r->t_min;
   if (range < options.min_range) {
     return Status::NotDeterminable(
-        "IMU " + imu.name + ": the statics span " + Format(range) + " °C (" + Format(r->t_min) +
+        "IMU " + r->name + ": the statics span " + Format(range) + " °C (" + Format(r->t_min) +
         " to " + Format(r->t_max) + " °C), below min_range " + Format(options.min_range) +
         " °C: the temperature dependence is not determinable; record a warm-up or chamber ramp "
         "over a wider range");
   }
+  return Status::Ok();
+}
+
+// Stage 1 and 5: the windows (temperatures of the sensor where a lag is given or estimated).
+Status MakeWindows(const Eigen::VectorXd& t, const ThermalImuInput& imu,
+                   const ThermalOptions& options, std::vector<WindowRange>* ranges,
+                   ThermalImuResult* r) {
+  const std::vector<TriadSeries> triads = {{"a" + imu.name, TriadKind::kAccelerometer, imu.accel},
+                                           {"g" + imu.name, TriadKind::kGyroscope, imu.gyro}};
+  Status st = DetectStatics(t, triads, options.statics, &r->statics);
+  if (!st.ok()) return st;
+  *ranges = CutWindows(r->statics, options);
+  if (ranges->size() < 3) {
+    return Status::NotDeterminable("IMU " + imu.name + ": " + std::to_string(ranges->size()) +
+                                   " averaging windows of " + Format(options.window) +
+                                   " s in the statics; " + StaticShortfall(r->statics));
+  }
+  for (const WindowRange& range : *ranges) {
+    r->windows.push_back(MakeWindow(t, imu, *imu.temp, range, options));
+  }
+  r->orientations = GroupOrientations(options.orientation_tolerance, &r->windows);
+  st = SetRange(options, r);
+  if (!st.ok() || options.lag == ThermalLagMode::kNone) return st;
+  double tau = options.lag_seconds;
+  if (options.lag == ThermalLagMode::kEstimate) {
+    st = CheckLagDeterminable(r->windows, imu.name);
+    if (st.ok())
+      st = EstimateLag(t, *imu.temp, *ranges, options, 0.5 * (r->t_max - r->t_min), r, &tau);
+    if (!st.ok()) return st;
+  }
+  r->lag = tau;
+  const Eigen::VectorXd sensor = LaggedTemperature(t, *imu.temp, tau, options.lag_start);
+  for (size_t w = 0; w < ranges->size(); ++w) {
+    SetWindowTemperature(t, sensor, (*ranges)[w], options.min_rate, &r->windows[w]);
+  }
+  return SetRange(options, r);
+}
+
+// The curve and its bands on the grid.
+void Band(const ThermalImuResult& r, ThermalChannel* ch) {
+  const Eigen::Index n = r.grid.size();
+  ch->grid_value.resize(n);
+  ch->grid_std.resize(n);
+  ch->grid_crb_std.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const double x = r.grid(i) - r.t_ref;
+    ch->grid_value(i) = ThermalCurve(ch->fit.coefficients, x);
+    ch->grid_std(i) = ThermalCurveStd(ch->fit.covariance, x);
+    ch->grid_crb_std(i) = ThermalCurveStd(ch->fit.crb, x);
+  }
+}
+
+Status CalibrateImu(const Eigen::VectorXd& t, const ThermalImuInput& imu,
+                    const ThermalOptions& options, ThermalImuResult* r) {
+  r->name = imu.name;
+  std::vector<WindowRange> ranges;
+  Status st = MakeWindows(t, imu, options, &ranges, r);
+  if (!st.ok()) return st;
+  const double range = r->t_max - r->t_min;
   r->t_ref = options.t_ref.value_or(0.5 * (r->t_min + r->t_max));
   const double scale = 0.5 * range;
   r->grid.resize(options.grid_points);
@@ -227,31 +291,30 @@ Status CalibrateImu(const Eigen::VectorXd& t, const ThermalImuInput& imu,
   }
   r->hysteresis_threshold_z =
       BonferroniCriticalZ(options.hysteresis_alpha, 6 * options.grid_points);
-  Eigen::Vector3d gyro_bias, gyro_std;
   for (int c = 0; c < 6; ++c) {
     ThermalChannel ch;
     ch.name = kChannelNames[c];
-    const ChannelData d = Select(r->windows, c, 0, r->t_ref, r->orientations);
+    const ChannelData d = SelectWindows(r->windows, c, 0, r->t_ref, r->orientations);
     st = FitThermalPolynomial(d.x, d.y, d.sigma, d.group, d.groups, 0, options.max_order, scale,
                               &ch.fit);
     if (!st.ok())
       return Status::NotDeterminable("IMU " + imu.name + ", " + ch.name + ": " + st.message());
-    ch.grid_value.resize(options.grid_points);
-    ch.grid_std.resize(options.grid_points);
-    ch.grid_crb_std.resize(options.grid_points);
-    for (int i = 0; i < options.grid_points; ++i) {
-      const double x = r->grid(i) - r->t_ref;
-      ch.grid_value(i) = ThermalCurve(ch.fit.coefficients, x);
-      ch.grid_std(i) = ThermalCurveStd(ch.fit.covariance, x);
-      ch.grid_crb_std(i) = ThermalCurveStd(ch.fit.crb, x);
-    }
     CompareHeatingCooling(r->windows, c, r->t_ref, r->orientations, scale, options.grid_points,
                           r->hysteresis_threshold_z, &ch);
+    r->channels.push_back(std::move(ch));
+  }
+  if (options.lag == ThermalLagMode::kEstimate) {
+    st = AddLagUncertainty(t, *imu.temp, ranges, options, r);
+    if (!st.ok()) return st;
+  }
+  Eigen::Vector3d gyro_bias, gyro_std;
+  for (int c = 0; c < 6; ++c) {
+    ThermalChannel& ch = r->channels[static_cast<size_t>(c)];
+    Band(*r, &ch);
     if (c >= 3) {
       gyro_bias(c - 3) = ch.fit.intercepts(0);
       gyro_std(c - 3) = ch.fit.intercept_std;
     }
-    r->channels.push_back(std::move(ch));
   }
   r->gyro_at_t_ref = gyro_bias;
   r->gyro_at_t_ref_std = gyro_std;
@@ -273,6 +336,13 @@ bool ThermalOptions::IsValid(std::string* error) const {
   if (grid_points < 2) return fail("grid_points must be >= 2");
   if (!(hysteresis_alpha > 0 && hysteresis_alpha < 1)) return fail("hysteresis_alpha in (0, 1)");
   if (!(orientation_tolerance > 0)) return fail("orientation_tolerance must be > 0");
+  if (lag == ThermalLagMode::kFixed && !(lag_seconds > 0 && std::isfinite(lag_seconds)))
+    return fail("a fixed lag must be > 0 s");
+  if (!(lag_max > 0 && std::isfinite(lag_max))) return fail("lag_max must be > 0 s");
+  if (!(lag_start > 0)) return fail("lag_start must be > 0 s");
+  for (const std::optional<double>& noise : {accel_noise, gyro_noise}) {
+    if (noise && !(*noise > 0 && std::isfinite(*noise))) return fail("a noise σ must be > 0");
+  }
   return statics.IsValid(error);
 }
 
@@ -301,6 +371,12 @@ Status CalibrateThermal(const Eigen::VectorXd& t, const std::vector<ThermalImuIn
       out->warnings.push_back("IMU " + imu.name + ": " + std::to_string(r.orientations) +
                               " orientations found; the accelerometer bias at t_ref and the scale "
                               "curves are not estimated yet (null)");
+    }
+    if (r.lag_std && !(*r.lag_std < 0.5 * *r.lag)) {
+      out->warnings.push_back("IMU " + imu.name + ": the lag is weakly determined (τ = " +
+                              Format(*r.lag) + " ± " + Format(*r.lag_std) +
+                              " s): the curves' bands include its uncertainty; a longer cool-down "
+                              "or faster temperature changes determine it better");
     }
     out->imus.push_back(std::move(r));
   }

@@ -6,10 +6,10 @@
 //  1. Statics: core/static_detection on the IMU's two triads; each static interval is cut into
 //     consecutive averaging windows of `window` seconds (a remainder shorter than half a window
 //     joins the last one). Per window: the mean of every channel, its σ from the window's own
-//     samples (sample std / √n, white noise), the mean temperature and the temperature rate (least
-//     squares slope of T over the window); the window's phase is heating (rate > min_rate), cooling
-//     (rate < −min_rate) or steady. Windows are grouped by orientation (gravity directions within
-//     `orientation_tolerance` of each other).
+//     samples (sample std / √n, white noise; or σ/√n with σ the options' accel_noise/gyro_noise),
+//     the mean temperature and the temperature rate (least squares slope of T over the window); the
+//     window's phase is heating (rate > min_rate), cooling (rate < −min_rate) or steady. Windows
+//     are grouped by orientation (gravity directions within `orientation_tolerance` of each other).
 //  2. Per channel, weighted least squares of the window means
 //       y_w = b_g(w) + Σ_{k=1..p} c_k (T_w − t_ref)^k,      weights 1/σ_w²,
 //     with one intercept b_g per orientation group for accelerometers (gravity is part of it) and
@@ -27,9 +27,20 @@
 //     flagged when |z| > Φ⁻¹(1 − α/(2 m)), m = channels × grid points (Bonferroni: the false-alarm
 //     rate over all channels and temperatures is at most α, default 1 %; the grid points are
 //     correlated, so it is below α).
+//  5. Lag (core/thermal_lag.cc; options.lag): the sensing element's temperature T_s follows the
+//     reading T_r through dT_s/dt = (T_r − T_s)/τ, integrated sample by sample from a state
+//     started on a line fitted to the reading's first `lag_start` seconds (not on one noisy
+//     reading); the windows' temperatures are then means of T_s. With a known τ (kFixed) that is
+//     all. kEstimate needs the log to heat and cool over a common range (else kNotDeterminable:
+//     a single warm-up passes each temperature once, so a lag cannot be told from another curve);
+//     τ minimises the profile −2 ln L = Σ_channels n ln χ²_c(τ) over [0, lag_max] (a log grid,
+//     then golden section), the orders chosen at τ̂. Its σ and the curves' extra σ come from the
+//     Gauss–Newton information with τ as a parameter shared by the six channels: with M_c the
+//     channel's information and b_c = Aᵀ W ∂y/∂τ, S = Σ_c (d_c − b_cᵀ M_c⁻¹ b_c)/s_c,
+//     σ_τ² = 1/S and C_c += h_c h_cᵀ/S, h_c = M_c⁻¹ b_c (s_c the channel's χ² scale, 1 for crb).
 // Not done (the result says so): the accelerometer bias at t_ref (`at_t_ref`) is null even with
 // several orientations (separating it from gravity needs the imu model's scale; left for later),
-// scale curves are null, `lag: estimate` is refused by the caller.
+// scale curves are null.
 //
 // Pure numerics, thread-compatible. Units: SI readings (m/s², rad/s), °C, s.
 #ifndef CALIBD_CORE_THERMAL_H_
@@ -45,6 +56,9 @@
 
 namespace calibd::core {
 
+// SPEC §8 `lag`: none (the reading is the sensor's temperature), a known τ, or τ estimated.
+enum class ThermalLagMode { kNone, kFixed, kEstimate };
+
 struct ThermalOptions {
   double window = 10;              // s, > 0: averaging window inside the statics
   int max_order = 5;               // in [1, 8]: highest polynomial order offered
@@ -55,6 +69,13 @@ struct ThermalOptions {
   double hysteresis_alpha = 0.01;  // in (0, 1): false-alarm rate over all channels
   double orientation_tolerance = 0.17453;  // rad (10°): same orientation group
   StaticDetectionOptions statics;          // static detection (stop token included)
+  ThermalLagMode lag = ThermalLagMode::kNone;
+  double lag_seconds = 0;  // s, > 0 with kFixed: the known τ
+  double lag_max = 1800;   // s, > 0: kEstimate searches τ in [0, lag_max]
+  double lag_start = 10;   // s, > 0: the lag state starts on a line fitted to these first seconds
+  // White noise per sample (σ, SI, > 0) of the accelerometers and gyroscopes, e.g. from a noise
+  // job: a window's σ is then σ/√n. nullopt: each window's σ from its own samples.
+  std::optional<double> accel_noise, gyro_noise;
 
   bool IsValid(std::string* error) const;
 };
@@ -128,6 +149,10 @@ struct ThermalImuResult {
   std::optional<Eigen::Vector3d> gyro_at_t_ref, gyro_at_t_ref_std;  // rad/s
   int heating_windows = 0, cooling_windows = 0;
   double hysteresis_threshold_z = 0;  // Bonferroni critical |z|
+  // Stage 5: τ in s (nullopt: lag none); its primary σ and white-noise bound where estimated.
+  std::optional<double> lag, lag_std, lag_crb_std;
+  // kEstimate: the profile −2 ln L (relative to its minimum) on the τ grid searched.
+  Eigen::VectorXd lag_grid, lag_profile;
   StaticDetection statics;
 };
 

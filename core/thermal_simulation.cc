@@ -47,6 +47,7 @@ ThermalSimulation SimulateThermal(const ThermalSimulationOptions& options) {
   PcaRandom rng(o.seed);
   const double t_peak = o.t0 + o.delta * (1 - std::exp(-o.warmup / o.tau));
   const int orientations = std::max(1, std::min(6, o.orientations));
+  double sensor = o.t0, previous = o.t0;  // the element's temperature and the last true reading
   for (int64_t i = 0; i < n; ++i) {
     const double t = i / o.rate;
     const bool cooling = t > o.warmup;
@@ -56,8 +57,13 @@ ThermalSimulation SimulateThermal(const ThermalSimulationOptions& options) {
     const Eigen::Vector3d g = o.gravity * GravityDirection(orientation);
     sim.t(i) = t;
     sim.temp(i) = temp + o.temp_noise * rng.Normal();
+    // The lag integrated as core/thermal_lag.cc does (the step's mean reading), without noise.
+    sensor = o.lag > 0 && i > 0
+                 ? sensor - std::expm1(-1.0 / (o.rate * o.lag)) * (0.5 * (temp + previous) - sensor)
+                 : temp;
+    previous = temp;
     for (int c = 0; c < 6; ++c) {
-      double b = o.b0(c) + ThermalCurve(o.coefficients[static_cast<size_t>(c)], temp - o.t_ref);
+      double b = o.b0(c) + ThermalCurve(o.coefficients[static_cast<size_t>(c)], sensor - o.t_ref);
       if (cooling) b += o.hysteresis(c);
       if (c < 3) {
         sim.accel(i, c) = g(c) + b + o.accel_noise * rng.Normal();

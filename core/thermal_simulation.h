@@ -2,7 +2,9 @@
 // one IMU at rest while it warms up along T(t) = t0 + Δ (1 − e^{−t/τ}), optionally followed by a
 // cool-down T(t) = T_end − Δ_c (1 − e^{−(t − t_w)/τ}); per channel the bias
 //   b(T) = b0 + Σ_{k=1..p} c_k (T − t_ref)^k  (+ hysteresis offset on cooling),
-// white noise per channel, a temperature reading with white noise, and optionally several
+// white noise per channel, a temperature reading with white noise, optionally a sensing element
+// that follows the (noise-free) reading through a first-order lag of `lag` s (the bias is then
+// evaluated at the element's temperature, which starts equal to the reading), and several
 // orientations held for equal parts of the log (an instant change between them: the windows
 // around it are not static). Deterministic per seed. Thread-compatible.
 #ifndef CALIBD_CORE_THERMAL_SIMULATION_H_
@@ -22,6 +24,7 @@ struct ThermalSimulationOptions {
   double delta = 40;          // °C, asymptotic rise of the warm-up
   double cool_delta = 30;     // °C, asymptotic fall of the cool-down
   double tau = 600;           // s, time constant of both
+  double lag = 0;             // s, > 0: the sensing element's lag behind the reading
   double t_ref = 35;          // °C, reference of the truth's polynomials
   double accel_noise = 0.02;  // m/s² per sample
   double gyro_noise = 0.002;  // rad/s per sample

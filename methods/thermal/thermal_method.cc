@@ -5,10 +5,12 @@
 #include <cstdio>
 #include <memory>
 #include <set>
+#include <tuple>
 #include <vector>
 
 #include "formats/inertial_log.h"
 #include "methods/config_keys.h"
+#include "methods/noise/noise_reference.h"
 
 namespace calibd::server {
 
@@ -19,14 +21,15 @@ namespace {
 Status ParseThermalConfig(const json& config, core::ThermalOptions* options, InertialUnits* units) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
   static const std::set<std::string>& kKnown = *new std::set<std::string>{
-      "method",    "device", "accel_unit", "gyro_unit", "t_ref",       "max_order",
-      "min_range", "lag",    "device_id",  "window",    "grid_points", "hysteresis_alpha"};
+      "method",      "device",           "accel_unit",  "gyro_unit", "t_ref",
+      "max_order",   "min_range",        "lag",         "device_id", "window",
+      "grid_points", "hysteresis_alpha", "accel_noise", "gyro_noise"};
   for (const auto& [key, value] : config.items()) {
     if (kKnown.count(key) == 0) {
       return ConfigKeyError(key,
                             "is not a thermal config key (known: accel_unit, gyro_unit, t_ref, "
                             "max_order, min_range, lag, device_id, window, grid_points, "
-                            "hysteresis_alpha, method, device)");
+                            "hysteresis_alpha, accel_noise, gyro_noise, method, device)");
     }
   }
   *options = core::ThermalOptions();
@@ -45,22 +48,37 @@ Status ParseThermalConfig(const json& config, core::ThermalOptions* options, Ine
   options->grid_points = static_cast<int>(grid);
   if (std::isfinite(t_ref)) options->t_ref = t_ref;
   if (auto it = config.find("lag"); it != config.end()) {
-    if (*it == "estimate") {
-      return ConfigKeyError(
-          "lag",
-          "'estimate' is not implemented yet: calibd fits the temperature reading as "
-          "the sensor's temperature (lag \"none\")");
+    if (it->is_number()) {
+      options->lag = core::ThermalLagMode::kFixed;
+      options->lag_seconds = it->get<double>();
+      if (!(options->lag_seconds > 0 && options->lag_seconds <= 86400)) {
+        return ConfigKeyError("lag", "in seconds must be in (0, 86400]");
+      }
+    } else if (*it == "estimate") {
+      options->lag = core::ThermalLagMode::kEstimate;
+    } else if (*it != "none") {
+      return ConfigKeyError("lag", "must be \"none\", \"estimate\" or the known τ in seconds");
     }
-    if (*it != "none") return ConfigKeyError("lag", "must be \"none\" or \"estimate\"");
   }
   if (auto it = config.find("device_id"); it != config.end()) {
     if (!it->is_number_integer() || it->get<int64_t>() < 0 || it->get<int64_t>() > 0xffffffffLL) {
       return ConfigKeyError("device_id", "must be an integer 0..4294967295 (PX4's TC_*_ID)");
     }
   }
+  s = ParseInertialUnits(config, units);
+  // σ per sample: a number in the reading units, or {"job": ID} of a noise job resolved at
+  // enqueue (methods/noise/noise_reference.h, SI).
+  for (auto [key, out, unit] : {std::tuple<const char*, std::optional<double>*, double>{
+                                    "accel_noise", &options->accel_noise, units->accel},
+                                {"gyro_noise", &options->gyro_noise, units->gyro}}) {
+    std::optional<NoiseLevel> level;
+    if (s.ok()) s = ReadNoiseLevel(config, key, &level);
+    if (s.ok() && level) *out = level->value * (level->si ? 1.0 : unit);
+  }
+  if (!s.ok()) return s;
   std::string error;
   if (!options->IsValid(&error)) return Status::InvalidInput(error);
-  return ParseInertialUnits(config, units);
+  return Status::Ok();
 }
 
 // The temperature column of IMU k: `temp<k>`, else `temp`; -1 when neither.
@@ -83,6 +101,10 @@ class Thermal : public Method {
            "chosen order and a heating/cooling hysteresis test, from a warm-up log";
   }
   bool Reads(Layout layout) const override { return layout == Layout::kArray; }
+  // accel_noise / gyro_noise as {"job": ID} of a noise job (methods/noise/noise_reference.h).
+  Status ResolveReferences(storage::Store* store, json* config) const override {
+    return ResolveNoiseReferences(store, config);
+  }
   bool NeedsIncreasingTime() const override { return true; }
   Status ValidateConfig(const json& config) const override {
     core::ThermalOptions options;
@@ -173,8 +195,9 @@ void Thermal::Judge(const json& result, const json&, const AcceptanceLimits& lim
                     "the window means scatter beyond their noise (chi2/dof above max_chi2): the "
                     "device moved, the temperature lags the sensor, or the order is too low");
     hysteresis.RejectInto(verdict,
-                          "heating and cooling disagree (hysteresis or a lagging temperature "
-                          "reading): the bias is not a function of the temperature read");
+                          "heating and cooling disagree (hysteresis, or a temperature reading "
+                          "that lags the sensor: try lag \"estimate\"): the bias is not a "
+                          "function of the temperature read");
   } catch (const std::exception& e) {
     verdict->Reject(std::string("the result cannot be judged: ") + e.what());
   }
@@ -219,6 +242,7 @@ Status Thermal::Run(RecordingParser* parser, const json& config, const RunContex
   s = core::CalibrateThermal(log.t, inputs, options, &r);
   if (!s.ok()) return s;
   *result = ThermalResultToJson(r, options);
+  (*result)["diagnostics"]["noise_jobs"] = NoiseJobsJson(config);
   return Status::Ok();
 }
 
@@ -244,6 +268,9 @@ std::function<Status(SimulatedFiles*)> Thermal::AddSimulateOptions(CLI::App* com
   command->add_option("--accel-noise", o->accel_noise, "m/s^2 per sample")->capture_default_str();
   command->add_option("--gyro-noise", o->gyro_noise, "rad/s per sample")->capture_default_str();
   command->add_option("--hysteresis", *hysteresis, "gyroscope y offset while cooling, rad/s")
+      ->capture_default_str();
+  command->add_option("--lag", o->lag, "the sensor's lag behind the temperature reading, s")
+      ->check(CLI::Range(0.0, 1e5))
       ->capture_default_str();
   command->add_option("--orientations", o->orientations, "orientations held in turn (1..6)")
       ->check(CLI::Range(1, 6))
@@ -285,6 +312,7 @@ Status SimulateThermalFiles(const core::ThermalSimulationOptions& options, std::
   *truth = {{"method", "thermal"},
             {"t_ref", sim.truth.t_ref},
             {"seed", sim.truth.seed},
+            {"lag", sim.truth.lag},
             {"accelerometer", sensors[0]},
             {"gyroscope", sensors[1]},
             {"hysteresis",

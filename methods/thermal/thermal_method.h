@@ -1,11 +1,12 @@
 // JSON glue of the `thermal` method (SPEC §8): an inertial log with temperature columns (`tempK`
 // per IMU K, or one `temp`) to core::CalibrateThermal (core/thermal.h), and its result as the
 // SPEC §4 / §8 result JSON (methods/thermal/thermal_result.cc):
-//   parameters.imus[]: {"name", "t_ref", "t_min", "t_max", "lag": null,
+//   parameters.imus[]: {"name", "t_ref", "t_min", "t_max", "lag" (τ in s, or null: lag none),
 //     "accelerometer": {"bias": {"order" (the highest over the axes), "orders" [3],
 //        "coefficients": [[c1..cp] per axis, SI per °C^k], "at_t_ref": null}, "scale": null},
 //     "gyroscope": {"bias": {... "at_t_ref": [3] rad/s}, "scale": null}}
 //   uncertainty: {"basis": "crb" | "chi2_scaled", "chi2_per_dof": null, "imus": [{"name",
+//     "lag_std" (s; null unless estimated),
 //     "accelerometer": {"bias": {"covariance": [p×p per axis], "temperatures": [grid],
 //        "std": [[1σ on the grid] per axis], "at_t_ref_std": null}, "scale": null},
 //     "gyroscope": {... "at_t_ref_std": [3]}, "crb": {the same keys with the white-noise bound}}]}
@@ -13,11 +14,14 @@
 //     "orientations", "heating_windows", "cooling_windows", "temperature_rate": {min, max},
 //     "hysteresis_critical_z", "channels": [{"name", "order", "basis", "chi2_per_dof",
 //     "residual_rms", "noise_rms", "order_table": [{order, chi2, aicc}], "points":
-//     {"temperature", "deviation", "std"}, "hysteresis": {...}}]}]}
+//     {"temperature", "deviation", "std"}, "hysteresis": {...}}], "lag": {"mode", "tau",
+//     "profile": {"tau", "minus_2_log_likelihood"} (estimate only)}}]}
 // Config keys: method, device, accel_unit, gyro_unit (formats/inertial_log.h), t_ref, max_order
-// (1..8, default 5), min_range (°C, default 10), lag ("none"; "estimate" is refused: not
-// implemented yet), device_id (PX4's TC_*_ID), window (s, default 10), grid_points (default 21),
-// hysteresis_alpha (default 0.01).
+// (1..8, default 5), min_range (°C, default 10), lag ("none", "estimate", or τ in s: known),
+// device_id (PX4's TC_*_ID), window (s, default 10), grid_points (default 21),
+// hysteresis_alpha (default 0.01), accel_noise / gyro_noise (σ per sample in the reading units, or
+// {"job": ID} of a noise job, resolved at enqueue: the windows' σ are then σ/√n; the result's
+// diagnostics.noise_jobs names the jobs).
 #ifndef CALIBD_METHODS_THERMAL_THERMAL_METHOD_H_
 #define CALIBD_METHODS_THERMAL_THERMAL_METHOD_H_
 
@@ -38,8 +42,8 @@ nlohmann::json ThermalResultToJson(const core::ThermalResult& result,
                                    const core::ThermalOptions& options);
 
 // `calibd simulate thermal`: CSV `t,a0_x..g0_z,temp0` (%.10g), the config and the truth
-// ({"t_ref", "accelerometer"/"gyroscope": {"coefficients": [[c1..cp] per axis], "b0": [3]},
-// "hysteresis": [6]}).
+// ({"t_ref", "lag" (s), "accelerometer"/"gyroscope": {"coefficients": [[c1..cp] per axis],
+// "b0": [3]}, "hysteresis": [6]}).
 Status SimulateThermalFiles(const core::ThermalSimulationOptions& options, std::string* csv,
                             nlohmann::json* config, nlohmann::json* truth);
 

@@ -82,6 +82,21 @@ std::string OrderTable(const json& d) {
          " (Bonferroni over 6 channels and the grid).</p>";
 }
 
+// The lag line: τ with its σ where estimated, as given, or none (a result stored before the lag
+// existed has no diagnostics.imus[].lag: none).
+std::string LagLine(const json& uimu, const json& d) {
+  const json none = {{"mode", "none"}};
+  const json& lag = d.contains("lag") ? d.at("lag") : none;
+  const std::string mode = lag.at("mode").get<std::string>();
+  if (mode == "none") {
+    return "<p>Lag: none (the temperature reading is taken as the sensor's).</p>";
+  }
+  std::string text = "Lag between the temperature reading and the sensor: &tau; = " +
+                     E(FormatSig(lag.at("tau").get<double>(), 3));
+  if (mode == "estimate") text += " &plusmn; " + E(FormatSig(uimu.at("lag_std").get<double>(), 2));
+  return "<p>" + text + " s (" + E(mode == "estimate" ? "estimated" : "given") + ").</p>";
+}
+
 class ThermalReport : public MethodReport {
  public:
   const char* method() const override { return "thermal"; }
@@ -97,7 +112,7 @@ class ThermalReport : public MethodReport {
                 E(FormatSig(p[i].at("t_min").get<double>(), 4)) + " to " +
                 E(FormatSig(p[i].at("t_max").get<double>(), 4)) + " degC, t_ref " +
                 E(FormatSig(p[i].at("t_ref").get<double>(), 4)) + "</h3>";
-        body += OrderTable(d[i]);
+        body += LagLine(u[i], d[i]) + OrderTable(d[i]);
         for (int c = 0; c < 6; ++c) {
           body += ChannelPlot(p[i], u[i], d[i].at("channels").at(static_cast<size_t>(c)), c);
         }

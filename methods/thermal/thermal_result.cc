@@ -1,6 +1,7 @@
 // The thermal result JSON (methods/thermal/thermal_method.h) of a core::ThermalResult.
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include "methods/thermal/thermal_method.h"
 
@@ -115,6 +116,15 @@ json ImuDiagnostics(const core::ThermalImuResult& imu) {
     rate_max = std::max(rate_max, w.rate);
   }
   for (int c = 0; c < 6; ++c) channels.push_back(ChannelDiagnostics(imu, c));
+  json lag = {{"mode", imu.lag_std ? "estimate" : (imu.lag ? "fixed" : "none")},
+              {"tau", imu.lag ? json(*imu.lag) : json(nullptr)}};
+  if (imu.lag_std) {
+    lag["profile"] = {{"tau", Vec(imu.lag_grid)},
+                      {"minus_2_log_likelihood", Vec(imu.lag_profile)},
+                      {"about",
+                       "sum over the channels of n ln chi2 at each tau, relative to its minimum "
+                       "(highest order offered)"}};
+  }
   return {{"name", imu.name},
           {"statics", imu.statics.intervals.size()},
           {"windows", windows},
@@ -123,6 +133,7 @@ json ImuDiagnostics(const core::ThermalImuResult& imu) {
           {"cooling_windows", imu.cooling_windows},
           {"temperature_rate", {{"min", rate_min}, {"max", rate_max}, {"unit", "degC/s"}}},
           {"hysteresis_critical_z", imu.hysteresis_threshold_z},
+          {"lag", lag},
           {"channels", channels}};
 }
 
@@ -140,13 +151,16 @@ json ThermalResultToJson(const core::ThermalResult& r, const core::ThermalOption
                       {"t_ref", imu.t_ref},
                       {"t_min", imu.t_min},
                       {"t_max", imu.t_max},
-                      {"lag", nullptr},
+                      {"lag", imu.lag ? json(*imu.lag) : json(nullptr)},
                       {"accelerometer", pa},
                       {"gyroscope", pg}});
-    u_imus.push_back({{"name", imu.name},
-                      {"accelerometer", ua},
-                      {"gyroscope", ug},
-                      {"crb", {{"accelerometer", ca}, {"gyroscope", cg}}}});
+    const auto opt = [](const std::optional<double>& v) { return v ? json(*v) : json(nullptr); };
+    u_imus.push_back(
+        {{"name", imu.name},
+         {"lag_std", opt(imu.lag_std)},
+         {"accelerometer", ua},
+         {"gyroscope", ug},
+         {"crb", {{"lag_std", opt(imu.lag_crb_std)}, {"accelerometer", ca}, {"gyroscope", cg}}}});
     d_imus.push_back(ImuDiagnostics(imu));
     for (const core::ThermalChannel& ch : imu.channels) {
       if (ch.fit.basis == "chi2_scaled") {
