@@ -208,6 +208,32 @@ double Median(VectorXd v) {
   return v(mid);
 }
 
+// Newey-West over batches of `seconds` of consecutive samples, lag one batch (Bartlett weight ½:
+// noise correlated across a batch boundary counts too; positive semi-definite by construction):
+// M = Σ_b s_b s_bᵀ + ½ Σ_b (s_b s_{b−1}ᵀ + s_{b−1} s_bᵀ), s_b the sum of the batch's `score`.
+Matrix9d BatchMeat(const std::vector<Vector9d>& score, const VectorXd& t, double seconds,
+                   int64_t* batches) {
+  Matrix9d meat = Matrix9d::Zero();
+  *batches = 0;
+  Vector9d s = Vector9d::Zero(), previous = Vector9d::Zero();
+  double batch_start = t.size() ? t(0) : 0;
+  auto close_batch = [&] {
+    meat += s * s.transpose() + 0.5 * (s * previous.transpose() + previous * s.transpose());
+    ++*batches;
+    previous = s;
+    s.setZero();
+  };
+  for (size_t i = 0; i < score.size(); ++i) {
+    if (t(i) - batch_start >= seconds) {
+      close_batch();
+      batch_start = t(i);
+    }
+    s += score[i];
+  }
+  close_batch();
+  return meat;
+}
+
 // The two covariances of θ = (h, a) (stage 3).
 struct Covariances {
   Matrix9d crb = Matrix9d::Zero();
@@ -230,31 +256,27 @@ Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vect
   const double weight_sum = w.sum();
   c.sigma = std::sqrt(Cost(y, w, e) / std::max(weight_sum - 9, 1.0));
   c.crb = c.sigma * c.sigma * h_inv;
-  // Batches of consecutive samples: their reduced scores.
-  // Newey-West with lag one batch (Bartlett weight ½): noise correlated across a batch boundary
-  // counts too (positive semi-definite by construction).
-  Matrix9d meat = Matrix9d::Zero();
-  int64_t batches = 0;
-  Vector9d s = Vector9d::Zero(), previous = Vector9d::Zero();
-  double batch_start = t.size() ? t(0) : 0;
-  auto close_batch = [&] {
-    meat += s * s.transpose() + 0.5 * (s * previous.transpose() + previous * s.transpose());
-    ++batches;
-    previous = s;
-    s.setZero();
-  };
+  // Each sample's reduced score (its share of the Schur-reduced gradient).
+  std::vector<Vector9d> score(y.cols());
   for (Eigen::Index i = 0; i < y.cols(); ++i) {
-    if (t(i) - batch_start >= options.batch_seconds) {
-      close_batch();
-      batch_start = t(i);
-    }
-    s += l.score[i] - l.hut[i].transpose() * l.huu[i].inverse() * l.gu[i];
+    score[i] = l.score[i] - l.hut[i].transpose() * l.huu[i].inverse() * l.gu[i];
   }
-  close_batch();
-  if (batches > 9) {
-    c.sandwich = h_inv * meat * h_inv * (static_cast<double>(batches) / (batches - 9));
-  } else {
-    c.sandwich = c.crb;  // too few batches for a sandwich: the bound alone
+  // Batches of `options.batch_seconds`, then twice, four times... as long as at least
+  // `options.min_batches` remain (the blocking method): residuals correlated longer than a batch
+  // (a hand-held log's slow disturbances, drift, orientation-dependent misfit) make the sandwich
+  // grow with the batch length until the batches outlast the correlation; the largest is kept.
+  c.sandwich = c.crb;  // too few batches for a sandwich: the bound alone
+  double largest = 0;
+  for (double seconds = options.batch_seconds;; seconds *= 2) {
+    int64_t batches = 0;
+    const Matrix9d meat = BatchMeat(score, t, seconds, &batches);
+    if (batches <= 9 || (seconds > options.batch_seconds && batches < options.min_batches)) break;
+    const Matrix9d sandwich = h_inv * meat * h_inv * (static_cast<double>(batches) / (batches - 9));
+    const double size = (sandwich.diagonal().array() / c.crb.diagonal().array()).sum();
+    if (size > largest) {
+      largest = size;
+      c.sandwich = sandwich;
+    }
   }
   c.ok = c.crb.allFinite() && c.sandwich.allFinite();
   return c;
@@ -368,6 +390,7 @@ Status MagOptions::Validate() const {
     return Invalid("max_disturbed_fraction must lie in (0, 1]");
   }
   if (!(batch_seconds > 0)) return Invalid("batch_seconds must be > 0");
+  if (min_batches <= 9) return Invalid("min_batches must be > 9");
   if (!(span_merge_seconds >= 0)) return Invalid("span_merge_seconds must be >= 0");
   if (!(sandwich_margin >= 1)) return Invalid("sandwich_margin must be >= 1");
   if (!(min_coverage_eigenvalue > 0 && min_coverage_eigenvalue <= 1)) {
