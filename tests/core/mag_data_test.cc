@@ -8,9 +8,9 @@
 //    detection's windows depend on it).
 //  - noisy_raw_data.csv, a magnetometer-only sphere recording (github.com/tomisuarez2/
 //    MagnetometerCalibration at eb93f82, "calibration data/"): a QMC5883L at ±2 G (12 000 counts
-//    per gauss, as its sketch sets it), 50 Hz (its "Fs" line), 60 s still then turned by hand, 22
-//    743 rows of mx,my,mz counts. No accelerometer: the alignment is not estimated and the result
-//    says so.
+//    per gauss, as its sketch sets it), 50 Hz (its "Fs" line), 60 s still then turned by hand,
+//    22 743 rows of mx,my,mz counts. No accelerometer: the alignment is not estimated and the
+//    result says so.
 // Each log: the calibrated field's magnitude spread is no worse than a least-squares
 // ellipsoid fit's (ArduPilot's CompassCalibrator residual), and the log's two halves, each with
 // its own σ, agree.
