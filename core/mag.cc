@@ -2,6 +2,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -88,42 +89,67 @@ Status StartFit(const Eigen::Matrix3Xd& y, Ellipsoid* e) {
   return Status::Ok();
 }
 
-// The per-sample pieces of one linearisation (see MaximumLikelihood).
+// ∂r/∂θ of a sample whose field direction is u: −I for h, −E_k u for the entries a_k of A (E_k
+// the symmetric basis matrices). Linear in (one, u): the sample's Jacobian is ThetaJacobian(1, u).
+Eigen::Matrix<double, 3, 9> ThetaJacobian(double one, const Vector3d& u) {
+  Eigen::Matrix<double, 3, 9> jt;
+  jt << -one, 0, 0, -u(0), -u(1), -u(2), 0, 0, 0,  //
+      0, -one, 0, 0, -u(0), 0, -u(1), -u(2), 0,    //
+      0, 0, -one, 0, 0, -u(0), 0, -u(1), -u(2);
+  return jt;
+}
+
+// The per-sample pieces of one linearisation (see MaximumLikelihood). Reused from one
+// linearisation to the next (no reallocation).
 struct Linearized {
   std::vector<Eigen::Matrix2d> huu;
   std::vector<Eigen::Matrix<double, 2, 9>> hut;
   std::vector<Eigen::Vector2d> gu;
   std::vector<Eigen::Matrix<double, 3, 2>> tangent;
-  std::vector<Vector9d> score;  // w Jθᵀ r per sample (for the sandwich)
+  std::vector<Vector9d> score;  // w Jθᵀ r per sample (for the sandwich; empty unless asked)
   Matrix9d htt = Matrix9d::Zero();
   Vector9d gt = Vector9d::Zero();
 };
 
-void Linearize(const Eigen::Matrix3Xd& y, const VectorXd& w, const Ellipsoid& e, Linearized* l) {
+// Linearises the cost at `e`; `with_scores`: also each sample's score (l->score).
+void Linearize(const Eigen::Matrix3Xd& y, const VectorXd& w, const Ellipsoid& e, bool with_scores,
+               Linearized* l) {
   const Eigen::Index n = y.cols();
   l->huu.resize(n);
   l->hut.resize(n);
   l->gu.resize(n);
   l->tangent.resize(n);
-  l->score.resize(n);
-  l->htt.setZero();
+  l->score.resize(with_scores ? n : 0);
   l->gt.setZero();
+  // Σ w Jθᵀ Jθ from the moments Σ w φ φᵀ of φ = (1, u), Jθ being linear in φ.
+  Eigen::Matrix4d moments = Eigen::Matrix4d::Zero();
   for (Eigen::Index i = 0; i < n; ++i) {
     const Vector3d u = e.u.col(i);
     const Vector3d r = y.col(i) - e.h - e.a * u;
-    // ∂r/∂θ: −I for h; −E_k u for the entries a_k of A (E_k the symmetric basis matrices).
-    Eigen::Matrix<double, 3, 9> jt;
-    jt << -1, 0, 0, -u(0), -u(1), -u(2), 0, 0, 0,  //
-        0, -1, 0, 0, -u(0), 0, -u(1), -u(2), 0,    //
-        0, 0, -1, 0, 0, -u(0), 0, -u(1), -u(2);
+    const Eigen::Matrix<double, 3, 9> jt = ThetaJacobian(1, u);
     l->tangent[i] = Tangent(u);
     const Eigen::Matrix<double, 3, 2> ju = -e.a * l->tangent[i];
-    l->huu[i] = w(i) * ju.transpose() * ju;
-    l->hut[i] = w(i) * ju.transpose() * jt;
-    l->gu[i] = w(i) * ju.transpose() * r;
-    l->score[i] = w(i) * jt.transpose() * r;
-    l->htt += w(i) * jt.transpose() * jt;
-    l->gt += l->score[i];
+    const Eigen::Matrix<double, 3, 2> wju = w(i) * ju;
+    // Products with a dimension of 9 written as lazy (coefficient-wise) products: Eigen would
+    // send them to its blocked large-matrix kernel, several times slower at these sizes.
+    l->huu[i].noalias() = wju.transpose() * ju;
+    l->hut[i].noalias() = wju.transpose().lazyProduct(jt);
+    l->gu[i].noalias() = wju.transpose() * r;
+    const Vector9d score = jt.transpose().lazyProduct(w(i) * r);
+    if (with_scores) l->score[i] = score;
+    l->gt += score;
+    Eigen::Vector4d phi;
+    phi << 1, u;
+    moments.noalias() += w(i) * phi * phi.transpose();
+  }
+  std::array<Eigen::Matrix<double, 3, 9>, 4> basis;  // Jθ = Σ_p φ_p basis[p]
+  basis[0] = ThetaJacobian(1, Vector3d::Zero());
+  for (int k = 0; k < 3; ++k) basis[1 + k] = ThetaJacobian(0, Vector3d::Unit(k));
+  l->htt.setZero();
+  for (int p = 0; p < 4; ++p) {
+    for (int q = 0; q < 4; ++q) {
+      l->htt.noalias() += moments(p, q) * basis[p].transpose().lazyProduct(basis[q]);
+    }
   }
 }
 
@@ -143,22 +169,22 @@ void Reduce(const Linearized& l, double lambda, Matrix9d* h, Vector9d* g) {
   for (size_t i = 0; i < l.huu.size(); ++i) {
     Eigen::Matrix2d huu = l.huu[i];
     huu.diagonal() *= 1 + lambda;
-    const Eigen::Matrix2d inv = huu.inverse();
-    *h -= l.hut[i].transpose() * inv * l.hut[i];
-    *g -= l.hut[i].transpose() * inv * l.gu[i];
+    const Eigen::Matrix<double, 2, 9> inv_hut = huu.inverse() * l.hut[i];
+    h->noalias() -= l.hut[i].transpose().lazyProduct(inv_hut);
+    g->noalias() -= inv_hut.transpose().lazyProduct(l.gu[i]);
   }
 }
 
 // Stage 2: Levenberg-Marquardt with the weights w. Returns the iterations used.
 Status MaximumLikelihood(const Eigen::Matrix3Xd& y, const VectorXd& w, const MagOptions& options,
-                         int max_iterations, Ellipsoid* e, int* iterations) {
-  Linearized l;
+                         int max_iterations, Linearized* workspace, Ellipsoid* e, int* iterations) {
+  Linearized& l = *workspace;
   double lambda = 1e-6;
   double cost = Cost(y, w, *e);
   for (int it = 0; it < max_iterations; ++it) {
     if (StopRequested(options.stop)) return StoppedStatus(*options.stop, "mag: fit");
     ++*iterations;
-    Linearize(y, w, *e, &l);
+    Linearize(y, w, *e, /*with_scores=*/false, &l);
     bool accepted = false;
     while (!accepted && lambda < 1e12) {
       Matrix9d h;
@@ -175,7 +201,7 @@ Status MaximumLikelihood(const Eigen::Matrix3Xd& y, const VectorXd& w, const Mag
       for (Eigen::Index i = 0; i < y.cols(); ++i) {
         Eigen::Matrix2d huu = l.huu[i];
         huu.diagonal() *= 1 + lambda;
-        const Eigen::Vector2d du = -huu.inverse() * (l.gu[i] + l.hut[i] * dt);
+        const Eigen::Vector2d du = -huu.inverse() * (l.gu[i] + l.hut[i].lazyProduct(dt));
         next.u.col(i) = (e->u.col(i) + l.tangent[i] * du).normalized();
       }
       const double next_cost = Cost(y, w, next);
@@ -208,6 +234,32 @@ double Median(VectorXd v) {
   return v(mid);
 }
 
+// Newey-West over batches of `seconds` of consecutive samples, lag one batch (Bartlett weight ½:
+// noise correlated across a batch boundary counts too; positive semi-definite by construction):
+// M = Σ_b s_b s_bᵀ + ½ Σ_b (s_b s_{b−1}ᵀ + s_{b−1} s_bᵀ), s_b the sum of the batch's `score`.
+Matrix9d BatchMeat(const std::vector<Vector9d>& score, const VectorXd& t, double seconds,
+                   int64_t* batches) {
+  Matrix9d meat = Matrix9d::Zero();
+  *batches = 0;
+  Vector9d s = Vector9d::Zero(), previous = Vector9d::Zero();
+  double batch_start = t.size() ? t(0) : 0;
+  auto close_batch = [&] {
+    meat += s * s.transpose() + 0.5 * (s * previous.transpose() + previous * s.transpose());
+    ++*batches;
+    previous = s;
+    s.setZero();
+  };
+  for (size_t i = 0; i < score.size(); ++i) {
+    if (t(i) - batch_start >= seconds) {
+      close_batch();
+      batch_start = t(i);
+    }
+    s += score[i];
+  }
+  close_batch();
+  return meat;
+}
+
 // The two covariances of θ = (h, a) (stage 3).
 struct Covariances {
   Matrix9d crb = Matrix9d::Zero();
@@ -217,10 +269,10 @@ struct Covariances {
 };
 
 Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const VectorXd& w,
-                        const Ellipsoid& e, const MagOptions& options) {
+                        const Ellipsoid& e, const MagOptions& options, Linearized* workspace) {
   Covariances c;
-  Linearized l;
-  Linearize(y, w, e, &l);
+  Linearized& l = *workspace;
+  Linearize(y, w, e, /*with_scores=*/true, &l);
   Matrix9d h;
   Vector9d g;
   Reduce(l, 0, &h, &g);
@@ -230,31 +282,27 @@ Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vect
   const double weight_sum = w.sum();
   c.sigma = std::sqrt(Cost(y, w, e) / std::max(weight_sum - 9, 1.0));
   c.crb = c.sigma * c.sigma * h_inv;
-  // Batches of consecutive samples: their reduced scores.
-  // Newey-West with lag one batch (Bartlett weight ½): noise correlated across a batch boundary
-  // counts too (positive semi-definite by construction).
-  Matrix9d meat = Matrix9d::Zero();
-  int64_t batches = 0;
-  Vector9d s = Vector9d::Zero(), previous = Vector9d::Zero();
-  double batch_start = t.size() ? t(0) : 0;
-  auto close_batch = [&] {
-    meat += s * s.transpose() + 0.5 * (s * previous.transpose() + previous * s.transpose());
-    ++batches;
-    previous = s;
-    s.setZero();
-  };
+  // Each sample's reduced score (its share of the Schur-reduced gradient).
+  std::vector<Vector9d> score(y.cols());
   for (Eigen::Index i = 0; i < y.cols(); ++i) {
-    if (t(i) - batch_start >= options.batch_seconds) {
-      close_batch();
-      batch_start = t(i);
-    }
-    s += l.score[i] - l.hut[i].transpose() * l.huu[i].inverse() * l.gu[i];
+    score[i] = l.score[i] - l.hut[i].transpose().lazyProduct(l.huu[i].inverse() * l.gu[i]);
   }
-  close_batch();
-  if (batches > 9) {
-    c.sandwich = h_inv * meat * h_inv * (static_cast<double>(batches) / (batches - 9));
-  } else {
-    c.sandwich = c.crb;  // too few batches for a sandwich: the bound alone
+  // Batches of `options.batch_seconds`, then twice, four times... as long as at least
+  // `options.min_batches` remain (the blocking method): residuals correlated longer than a batch
+  // (a hand-held log's slow disturbances, drift, orientation-dependent misfit) make the sandwich
+  // grow with the batch length until the batches outlast the correlation; the largest is kept.
+  c.sandwich = c.crb;  // too few batches for a sandwich: the bound alone
+  double largest = 0;
+  for (double seconds = options.batch_seconds;; seconds *= 2) {
+    int64_t batches = 0;
+    const Matrix9d meat = BatchMeat(score, t, seconds, &batches);
+    if (batches <= 9 || (seconds > options.batch_seconds && batches < options.min_batches)) break;
+    const Matrix9d sandwich = h_inv * meat * h_inv * (static_cast<double>(batches) / (batches - 9));
+    const double size = (sandwich.diagonal().array() / c.crb.diagonal().array()).sum();
+    if (size > largest) {
+      largest = size;
+      c.sandwich = sandwich;
+    }
   }
   c.ok = c.crb.allFinite() && c.sandwich.allFinite();
   return c;
@@ -368,6 +416,7 @@ Status MagOptions::Validate() const {
     return Invalid("max_disturbed_fraction must lie in (0, 1]");
   }
   if (!(batch_seconds > 0)) return Invalid("batch_seconds must be > 0");
+  if (min_batches <= 9) return Invalid("min_batches must be > 9");
   if (!(span_merge_seconds >= 0)) return Invalid("span_merge_seconds must be >= 0");
   if (!(sandwich_margin >= 1)) return Invalid("sandwich_margin must be >= 1");
   if (!(min_coverage_eigenvalue > 0 && min_coverage_eigenvalue <= 1)) {
@@ -397,7 +446,9 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
     return pass < passes ? std::min(kPassIterations, options.max_iterations)
                          : options.max_iterations;
   };
-  if (Status s = MaximumLikelihood(y, w, options, pass_iterations(0), &e, &result->iterations);
+  Linearized workspace;  // the per-sample pieces, reused by every pass
+  if (Status s =
+          MaximumLikelihood(y, w, options, pass_iterations(0), &workspace, &e, &result->iterations);
       !s.ok()) {
     return s;
   }
@@ -410,15 +461,15 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
       const double z = r(i) / (options.robust_scale * sigma);
       w(i) = 1 / (1 + z * z);
     }
-    if (Status s =
-            MaximumLikelihood(y, w, options, pass_iterations(pass + 1), &e, &result->iterations);
+    if (Status s = MaximumLikelihood(y, w, options, pass_iterations(pass + 1), &workspace, &e,
+                                     &result->iterations);
         !s.ok()) {
       return s;
     }
   }
   if (pass < passes) {  // weighting ended early (a noise-free log): converge as weighted so far
-    if (Status s =
-            MaximumLikelihood(y, w, options, options.max_iterations, &e, &result->iterations);
+    if (Status s = MaximumLikelihood(y, w, options, options.max_iterations, &workspace, &e,
+                                     &result->iterations);
         !s.ok()) {
       return s;
     }
@@ -438,7 +489,7 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
         Reason::kIllConditioned, "mag: the fit's values are not finite (check the readings' unit)");
   }
   // Stage 3.
-  const Covariances c = Uncertainty(y, problem.t, w, e, options);
+  const Covariances c = Uncertainty(y, problem.t, w, e, options, &workspace);
   if (!c.ok) {
     return Status::NotDeterminable(Reason::kSingularInformation,
                                    "mag: the log does not determine every soft-iron entry");

@@ -25,7 +25,10 @@
 //  3. Uncertainty: the white-noise bound σ̂² (Σ w J̃ᵀJ̃)⁻¹ (J̃ the reduced Jacobian, σ̂ from the
 //     weighted residuals) and the residual-aware sandwich over batches of consecutive samples
 //     (`batch_seconds`), Newey-West with lag one batch: H⁻¹ M H⁻¹ · n_b/(n_b − 9),
-//     M = Σ_b s_b s_bᵀ + ½ Σ_b (s_b s_{b−1}ᵀ + s_{b−1} s_bᵀ), s_b the batch's reduced score.
+//     M = Σ_b s_b s_bᵀ + ½ Σ_b (s_b s_{b−1}ᵀ + s_{b−1} s_bᵀ), s_b the batch's reduced score;
+//     again over batches 2, 4, 8... times as long while `min_batches` remain, the largest kept
+//     (the blocking method: residuals correlated over longer than a batch, as a hand-held log's
+//     misfit is, make the short batches' sandwich too small; halves of a real log showed it).
 //     The sandwich holds when the noise is coloured (a hand-held log's disturbances and
 //     vibration are) or the weights matter; the primary σ is the sandwich where it exceeds the
 //     white-noise bound by more than `sandwich_margin` (RMS over the parameters' σ ratios),
@@ -80,6 +83,9 @@ struct MagOptions {
   // Length of the sandwich's batches of consecutive samples, s (several correlation times of the
   // disturbances a hand-held log holds). > 0.
   double batch_seconds = 2;
+  // The sandwich is also computed over batches of 2, 4, 8... × batch_seconds while at least this
+  // many batches remain, and the largest kept (residuals correlated longer than a batch). > 9.
+  int min_batches = 24;
   // Disturbed samples closer than this merge into one span, s. >= 0.
   double span_merge_seconds = 0.5;
   // The sandwich becomes the primary σ when the RMS of its σ over the bound's exceeds this. >= 1.

@@ -41,4 +41,7 @@ case_ array_full array --seed 5 --model full -N 600
 case_ imu imu --seed 6
 case_ imu_drift imu --seed 8 --gyro-bias-drift 1e-4 --initial-motion 2
 case_ noise noise --seed 7
+case_ mag mag --seed 9
+case_ mag_disturbed mag --seed 10 --turns 380 --disturbances 2
+case_ mag_coloured mag --seed 11 --ar1 0.98 --turns 160
 exit $differ

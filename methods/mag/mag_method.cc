@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <memory>
 #include <set>
@@ -31,6 +32,7 @@ struct MagConfig {
   std::string unit_text = "uT";  // mag_unit as configured
   // Hand-held holds are short: windows and holds of 0.5 s (SPEC §7's detection otherwise).
   core::StaticDetectionOptions statics = HandHeldStatics();
+  size_t device_ids = 0;  // entries of config device_id (a number counts as one)
 };
 
 // µT per reading unit of a named mag_unit; 0 for an unknown name.
@@ -45,12 +47,12 @@ double MicroteslaPerUnit(const std::string& name) {
 Status ParseMagConfig(const json& config, MagConfig* out) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
   static const std::set<std::string>& kKnown = *new std::set<std::string>{
-      "method", "device", "mag_unit", "field", "static_window", "min_static"};
+      "method", "device", "mag_unit", "field", "static_window", "min_static", "device_id"};
   for (const auto& [key, value] : config.items()) {
     if (kKnown.count(key) == 0) {
       return ConfigKeyError(key,
                             "is not a mag config key (known: mag_unit, field, static_window, "
-                            "min_static, method, device)");
+                            "min_static, device_id, method, device)");
     }
   }
   *out = MagConfig();
@@ -81,6 +83,18 @@ Status ParseMagConfig(const json& config, MagConfig* out) {
                             "must be the local field magnitude in µT, a number in (0, 10000]");
     }
     out->options.field = it->get<double>();
+  }
+  if (auto it = config.find("device_id"); it != config.end()) {
+    const json list = it->is_array() ? *it : json::array({*it});
+    for (const json& id : list) {
+      if (!id.is_number_integer() || id.get<int64_t>() < 0 || id.get<int64_t>() > INT32_MAX) {
+        return ConfigKeyError("device_id",
+                              "must be the magnetometer's firmware device id (PX4 CAL_MAGn_ID, "
+                              "ArduPilot COMPASS_DEV_ID), an integer in [0, 2147483647], or an "
+                              "array of them, one per magnetometer m0, m1, ...");
+      }
+    }
+    out->device_ids = list.size();
   }
   Status s = ConfigNumber(config, "static_window", 0.05, 60, &out->statics.static_window);
   if (s.ok()) s = ConfigNumber(config, "min_static", 0, 600, &out->statics.min_static);
@@ -327,6 +341,12 @@ Status Mag::Run(RecordingParser* parser, const json& config, const RunContext& c
                "mag needs magnetometer columns m0_x, m0_y, m0_z (one triad per magnetometer) "
                "and a time column t; the log has none")
         .WithReason(Reason::kInvalidRecording);
+  }
+  if (c.device_ids > log.mag_names.size()) {
+    return Status::InvalidInput("config device_id has " + std::to_string(c.device_ids) +
+                                " entries, the log " + std::to_string(log.mag_names.size()) +
+                                " magnetometer(s)")
+        .WithReason(Reason::kInvalidConfig);
   }
   s = CheckLogTimes(log, "mag", &parser->summary());
   if (!s.ok()) return s;

@@ -19,7 +19,9 @@
 //     "calibrated" [3][n], "residual" [n], "disturbed" [n] (0/1)} (at most kMagPlotPoints samples)}
 // Config keys: method, device, mag_unit ("uT" default, "gauss", "mG", "nT", or µT per reading
 // unit), field (µT, > 0; absent: unknown, |m| = 1), static_window and min_static (s, default 0.5:
-// hand-held holds are short).
+// hand-held holds are short), device_id (the firmware's device id of m0, or an array of them for
+// m0, m1, ...: written as PX4's CAL_MAGn_ID and ArduPilot's COMPASS_DEV_IDn; absent, the files say
+// it must be set).
 #ifndef CALIBD_METHODS_MAG_MAG_METHOD_H_
 #define CALIBD_METHODS_MAG_MAG_METHOD_H_
 

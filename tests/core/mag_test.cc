@@ -127,7 +127,7 @@ TEST(Mag, ThePrimarySigmaMatchesMonteCarloErrorsUnderWhiteNoise) {
 }
 
 // Coloured noise (AR(1), correlation time 0.5 s): the white-noise bound is far too small, the
-// sandwich over 2 s batches is honest.
+// sandwich (over 2 s batches and the longer ones) is honest.
 TEST(Mag, UnderColouredNoiseThePrimaryIsTheSandwichAndStaysHonest) {
   const int trials = 30;
   Z primary, bound;
@@ -307,6 +307,9 @@ TEST(Mag, InvalidOptionsAndInputsNameTheConstraint) {
   MagOptions o;
   o.disturbed_weight = 1.5;
   EXPECT_NE(o.Validate().message().find("disturbed_weight"), std::string::npos);
+  o = MagOptions();
+  o.min_batches = 9;
+  EXPECT_NE(o.Validate().message().find("min_batches"), std::string::npos);
   MagProblem p;
   p.t = Eigen::VectorXd::LinSpaced(10, 0, 1);
   p.y = Eigen::Matrix3Xd::Random(3, 10);

@@ -67,6 +67,8 @@ TEST(MagMethod, ConfigErrorsNameTheKey) {
       {{{"method", "mag"}, {"field", "50"}}, "field"},
       {{{"method", "mag"}, {"static_window", 0}}, "static_window"},
       {{{"method", "mag"}, {"colour", "red"}}, "colour"},
+      {{{"method", "mag"}, {"device_id", "MMC5983"}}, "device_id"},
+      {{{"method", "mag"}, {"device_id", {1, -2}}}, "device_id"},
   };
   for (const auto& c : cases) {
     const Status s = MagMethod().ValidateConfig(c.config);
@@ -245,6 +247,22 @@ TEST(MagMethod, FirmwareFilesReproduceTheCorrectionAsTheFirmwaresApplyIt) {
     EXPECT_NE(ap.find("alignment is not carried"), std::string::npos) << ap;
     EXPECT_NE(header.find("_correct(const double raw[3]"), std::string::npos) << header;
     EXPECT_EQ(std::count(table.begin(), table.end(), '\n'), 2) << table;
+    // Without config device_id the files say that the id must be set; with it, they carry it.
+    EXPECT_NE(ap.find("# COMPASS_DEV_ID not written"), std::string::npos) << ap;
+    EXPECT_NE(px4.find("# CAL_MAG0_ID not written"), std::string::npos) << px4;
+    ExportContext with_id;
+    with_id.config = {{"device_id", 7340553}};
+    std::string ap_id, px4_id;
+    ASSERT_TRUE(MagMethod().Export("ardupilot", result, with_id, &ap_id).ok());
+    ASSERT_TRUE(MagMethod().Export("px4", result, with_id, &px4_id).ok());
+    EXPECT_EQ(ReadParams(ap_id).at("COMPASS_DEV_ID"), 7340553) << ap_id;
+    EXPECT_EQ(ReadParams(px4_id).at("CAL_MAG0_ID"), 7340553) << px4_id;
+    json two_ids = cfg;
+    two_ids["device_id"] = {7340553, 7340554};  // the log has one magnetometer
+    json refused;
+    const Status s = RunMag(csv, two_ids, &refused);
+    EXPECT_EQ(s.code(), StatusCode::kInvalidInput) << s.ToString();
+    EXPECT_NE(s.message().find("device_id has 2 entries"), std::string::npos) << s.message();
     const auto a = ReadParams(ap), x = ReadParams(px4);
     const Eigen::Matrix3d ap_m = ArduPilotMatrix(a);
     const Eigen::Vector3d ap_ofs(a.at("COMPASS_OFS_X"), a.at("COMPASS_OFS_Y"),
