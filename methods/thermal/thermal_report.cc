@@ -22,8 +22,17 @@ std::string ChannelPlot(const json& pimu, const json& uimu, const json& ch, int 
   const std::vector<double> curve = ch.at("curve").get<std::vector<double>>();
   const std::vector<double> sd =
       unc.at("std").at(static_cast<size_t>(c % 3)).get<std::vector<double>>();
-  Series mid{"curve", grid, curve};
-  Series hi{"curve + 1 sigma", grid, curve}, lo{"", grid, curve};
+  // A series of the curve's points with `label` (members set one by one: the struct's later
+  // members keep their defaults).
+  auto curve_series = [&](const char* label) {
+    Series s;
+    s.label = label;
+    s.x = grid;
+    s.y = curve;
+    return s;
+  };
+  Series mid = curve_series("curve");
+  Series hi = curve_series("curve + 1 sigma"), lo = curve_series("");
   hi.dashed = lo.dashed = true;
   hi.color = lo.color = mid.color = 0;
   for (size_t i = 0; i < grid.size(); ++i) {
@@ -31,7 +40,9 @@ std::string ChannelPlot(const json& pimu, const json& uimu, const json& ch, int 
     lo.y[i] -= sd[i];
   }
   const json& pts = ch.at("points");
-  Series phases[3] = {{"cooling"}, {"steady"}, {"heating"}};
+  Series phases[3];
+  const char* const kPhaseNames[3] = {"cooling", "steady", "heating"};
+  for (int p = 0; p < 3; ++p) phases[p].label = kPhaseNames[p];
   for (size_t i = 0; i < pts.at("temperature").size(); ++i) {
     Series& s = phases[pts.at("phase")[i].get<int>() + 1];
     s.x.push_back(pts.at("temperature")[i].get<double>());
