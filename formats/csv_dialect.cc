@@ -50,9 +50,9 @@ Status ParseColumns(const json& columns, CsvDialect* dialect) {
     bool printable = IsValidUtf8(name) && name.size() <= kMaxMappedName;
     for (char c : name) printable &= static_cast<unsigned char>(c) >= 0x20 && c != 0x7f;
     if (!printable) {
-      return Status::InvalidInput("'" + field + "' must be a printable UTF-8 column name of at most " +
-                                  std::to_string(kMaxMappedName) + " bytes, not '" + Shown(name) +
-                                  "'")
+      return Status::InvalidInput(
+                 "'" + field + "' must be a printable UTF-8 column name of at most " +
+                 std::to_string(kMaxMappedName) + " bytes, not '" + Shown(name) + "'")
           .WithField(field);
     }
     auto [it, inserted] = by_file_name.emplace(name, key);
@@ -99,9 +99,10 @@ Status ParseCsvDialect(const json& config, CsvDialect* dialect) {
     } else if (text == "tab") {
       dialect->delimiter = '\t';
     } else {
-      return Status::InvalidInput("'delimiter' must be \",\" (default), \";\" or \"\\t\" (a tab; "
-                                  "also \"tab\"), not " +
-                                  it->dump().substr(0, 40))
+      return Status::InvalidInput(
+                 "'delimiter' must be \",\" (default), \";\" or \"\\t\" (a tab; "
+                 "also \"tab\"), not " +
+                 it->dump().substr(0, 40))
           .WithField("delimiter");
     }
   }
