@@ -179,6 +179,13 @@ void RecordingParser::SetTimeUnit(TimeUnit unit) {
 
 TimeUnit RecordingParser::time_unit() const { return impl_->time_unit; }
 
+void RecordingParser::SetCsvDialect(const CsvDialect& dialect) {
+  if (impl_->have_header) return;  // too late: the header was read with the old one
+  impl_->dialect = dialect;
+}
+
+bool RecordingParser::header_read() const { return impl_->header_ok; }
+
 void RecordingParser::SetLogStreams(const LogStreamSelection& streams) {
   const bool mag = impl_->log_streams.mag_time_base;
   impl_->log_streams = streams;

@@ -20,6 +20,7 @@
 namespace calibd::server {
 
 struct LogStreamSelection;  // formats/log_assembly.h
+struct CsvDialect;          // formats/csv_dialect.h
 
 enum class Layout {
   kPcaAveraged,  // position,s1,...,sm
@@ -125,7 +126,10 @@ struct RecordingSummary {
   // are for CSV only). A log's rows are its first IMU's samples and its columns those of the
   // equivalent CSV (t, aK_*, gK_*, tempK).
   std::string format = "csv";
-  // A log only: what was read (AssembledLog::description) as JSON text; empty for CSV.
+  // What was read, as JSON text: a log's AssembledLog::description; a CSV read with config
+  // `columns`, `delimiter` or `decimal` (RecordingParser::SetCsvDialect): {"format": "csv",
+  // "csv": {"columns": {calibd name: file name}, "delimiter", "decimal", "ignored": [file
+  // columns not read]}, "warnings": [...]}; empty for a CSV read as calibd's own.
   std::string log_description;
 };
 
@@ -181,6 +185,15 @@ class RecordingParser {
   // nothing once the header has been read.
   void SetTimeUnit(TimeUnit unit);
   TimeUnit time_unit() const;
+  // Optional, before the first Feed: how a CSV from another tool is read (config `columns`,
+  // `delimiter`, `decimal`; formats/csv_dialect.h). With a mapping, the header's mapped names
+  // read as their calibd names; in the array layout a header column neither mapped nor named as
+  // calibd's is ignored (listed in the summary's warnings); a mapped name the header lacks, or a
+  // mapping onto a calibd name another header column already has, is an error naming
+  // `columns.<key>`. Does nothing to a sensor log, nor once the header has been read.
+  void SetCsvDialect(const CsvDialect& dialect);
+  // Whether a CSV's header line has been read without an error (false for a sensor log).
+  bool header_read() const;
   // Optional, before the first Feed: which streams of a binary sensor log form the IMUs (config
   // `streams`, SPEC §9; default every IMU). Does nothing to a CSV recording.
   void SetLogStreams(const LogStreamSelection& streams);

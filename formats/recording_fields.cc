@@ -12,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "formats/csv_dialect.h"
 #include "formats/recording.h"
 #include "formats/recording_parser.h"
 
@@ -59,6 +60,13 @@ char ForeignSeparator(std::string_view s, size_t* at) {
 
 std::string SeparatorName(char c) { return c == '\t' ? "a tab" : "';'"; }
 
+// The advice for a file separated by `sep`: export it as calibd reads it, or name the config
+// keys that read it as it is (formats/csv_dialect.h).
+std::string SeparatorAdvice(char sep) {
+  return std::string(kCsvExportAdvice) + ", or read it as it is with the config key delimiter \"" +
+         (sep == '\t' ? "\\t" : ";") + "\" (and decimal \",\" if its numbers have decimal commas)";
+}
+
 // True when `text` is a number once its one ',' is read as '.' ("1,5", "-0,25e-3").
 bool IsDecimalCommaNumber(std::string_view text) {
   const size_t comma = text.find(',');
@@ -101,39 +109,6 @@ std::string ControlName(int c) {
   }
 }
 
-// `temp` or `tempK` (K a triad index without leading zeros): a temperature column (SPEC §8).
-bool IsTemperatureColumn(std::string_view name) {
-  if (name.substr(0, 4) != "temp") return false;
-  const std::string_view digits = name.substr(4);
-  if (digits.empty()) return true;
-  if (digits.size() > 1 && digits[0] == '0') return false;
-  for (char c : digits) {
-    if (c < '0' || c > '9') return false;
-  }
-  return digits.size() <= 6;
-}
-
-// Parses "a12_x" style names. kind is 'a', 'g' or 'm' (magnetometer); returns false if the name
-// has another form.
-bool ParseTriadColumn(std::string_view name, char* kind, int* index, int* axis) {
-  if (name.size() < 4 || (name[0] != 'a' && name[0] != 'g' && name[0] != 'm')) return false;
-  const size_t underscore = name.find('_');
-  if (underscore == std::string_view::npos || underscore < 2 || underscore + 2 != name.size()) {
-    return false;
-  }
-  const std::string_view digits = name.substr(1, underscore - 1);
-  if (digits.size() > 1 && digits[0] == '0') return false;  // "a01_x" is not a0/a1
-  int value = 0;
-  auto [ptr, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
-  if (ec != std::errc() || ptr != digits.data() + digits.size() || value < 0) return false;
-  const char axis_char = name.back();
-  if (axis_char < 'x' || axis_char > 'z') return false;
-  *kind = name[0];
-  *index = value;
-  *axis = axis_char - 'x';
-  return true;
-}
-
 }  // namespace
 
 Status RecordingParser::Impl::Fail(std::string message, int64_t column, std::string field) {
@@ -156,7 +131,10 @@ Status RecordingParser::Impl::Split(std::string_view line) {
     }
     const size_t start = pos;
     size_t lead = start;
-    while (lead < line.size() && (line[lead] == ' ' || line[lead] == '\t')) ++lead;
+    while (lead < line.size() &&
+           (line[lead] == ' ' || (line[lead] == '\t' && dialect.delimiter != '\t'))) {
+      ++lead;
+    }
     if (lead < line.size() && line[lead] == '"') {
       std::string value;
       size_t i = lead + 1;
@@ -177,8 +155,11 @@ Status RecordingParser::Impl::Split(std::string_view line) {
       if (!closed) {
         return Fail("unterminated quoted field", static_cast<int64_t>(fields.size()) + 1);
       }
-      while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
-      if (i < line.size() && line[i] != ',') {
+      while (i < line.size() &&
+             (line[i] == ' ' || (line[i] == '\t' && dialect.delimiter != '\t'))) {
+        ++i;
+      }
+      if (i < line.size() && line[i] != dialect.delimiter) {
         return Fail("unexpected text after a quoted field",
                     static_cast<int64_t>(fields.size()) + 1);
       }
@@ -190,7 +171,7 @@ Status RecordingParser::Impl::Split(std::string_view line) {
       fields.push_back(unquoted.back());
       pos = i;
     } else {
-      size_t comma = line.find(',', start);
+      size_t comma = line.find(dialect.delimiter, start);
       if (comma == std::string_view::npos) comma = line.size();
       fields.push_back(TrimSpaces(line.substr(start, comma - start)));
       pos = comma;
@@ -209,7 +190,8 @@ Status RecordingParser::Impl::SplitUnquoted(std::string_view line) {
       return Fail("more than " + std::to_string(limits.max_columns) + " columns",
                   static_cast<int64_t>(fields.size()) + 1);
     }
-    const char* comma = static_cast<const char*>(memchr(p, ',', static_cast<size_t>(end - p)));
+    const char* comma =
+        static_cast<const char*>(memchr(p, dialect.delimiter, static_cast<size_t>(end - p)));
     const char* field_end = comma ? comma : end;
     fields.push_back(TrimSpaces(std::string_view(p, static_cast<size_t>(field_end - p))));
     if (!comma) break;
@@ -222,6 +204,12 @@ Status RecordingParser::Impl::ParseNumber(std::string_view text, int64_t column,
                                           const std::string& name, double* value) {
   if (text.empty()) return Fail("empty cell in column '" + name + "'", column, name);
   std::string_view digits = text;
+  std::string pointed;  // decimal ',': the field with its comma as a point
+  if (dialect.decimal == ',' && digits.find(',') != std::string_view::npos) {
+    pointed.assign(digits);
+    for (char& c : pointed) c = c == ',' ? '.' : c;
+    digits = pointed;
+  }
   if (digits.front() == '+') digits.remove_prefix(1);
   if (ParseDecimalFast(digits, value)) return Status::Ok();
   const char* end = digits.data() + digits.size();
@@ -235,10 +223,10 @@ Status RecordingParser::Impl::ParseNumber(std::string_view text, int64_t column,
     if (const char sep = ForeignSeparator(text, &at); sep != 0) {
       return Fail("line " + std::to_string(line_no) + " uses " + SeparatorName(sep) +
                       " as the separator ('" + Excerpt(text) + "' in column '" + name +
-                      "'): " + kCsvExportAdvice,
+                      "'): " + SeparatorAdvice(sep),
                   column, name);
     }
-    if (IsDecimalCommaNumber(text)) {
+    if (dialect.decimal == '.' && IsDecimalCommaNumber(text)) {
       std::string dotted(text);
       dotted[dotted.find(',')] = '.';
       return Fail("line " + std::to_string(line_no) + " uses ',' as the decimal mark ('" +
@@ -264,7 +252,7 @@ Status RecordingParser::Impl::RowShapeError(size_t got, size_t expected) {
   if (const char sep = ForeignSeparator(line_text, &at); sep != 0) {
     return Fail("line " + std::to_string(line_no) + " uses " + SeparatorName(sep) +
                     " as the separator (first at character " + std::to_string(at) + "; " + counts +
-                    "): " + kCsvExportAdvice,
+                    "): " + SeparatorAdvice(sep),
                 column);
   }
   if (got > expected) {
@@ -277,10 +265,13 @@ Status RecordingParser::Impl::RowShapeError(size_t got, size_t expected) {
 
 bool RecordingParser::Impl::ForeignHeader(std::string_view line) {
   size_t at = 0;
-  const char sep = line.find(',') == std::string_view::npos ? ForeignSeparator(line, &at) : 0;
+  const char sep = dialect.delimiter == ',' && line.find(',') == std::string_view::npos
+                       ? ForeignSeparator(line, &at)
+                       : 0;
   if (sep == 0) return false;
   Fail("line " + std::to_string(line_no) + " uses " + SeparatorName(sep) +
-           " as the separator (first at character " + std::to_string(at) + "): " + kCsvExportAdvice,
+           " as the separator (first at character " + std::to_string(at) + "): " +
+           SeparatorAdvice(sep),
        1);
   return true;
 }
@@ -299,7 +290,77 @@ Status RecordingParser::Impl::Header() {
   }
   summary.columns.assign(f.begin(), f.end());
   if (f.size() == 1 && f[0].empty()) return Fail("empty header line");
-  return f[0] == "position" ? PcaHeader() : ArrayHeader();
+  if (!dialect.columns.empty()) {
+    Status s = MapHeaderNames();
+    if (!s.ok()) return s;
+  }
+  Status s = f[0] == "position" ? PcaHeader() : ArrayHeader();
+  if (s.ok() && !dialect.IsDefault()) DescribeDialect();
+  return s;
+}
+
+Status RecordingParser::Impl::MapHeaderNames() {
+  std::unordered_map<std::string_view, size_t> file_column;  // header name → 0-based column
+  for (size_t i = 0; i < fields.size(); ++i) file_column.emplace(fields[i], i);
+  for (const auto& [calibd_name, file_name] : dialect.columns) {
+    const auto first = file_column.find(file_name);
+    for (size_t i = 0; first != file_column.end() && i < fields.size(); ++i) {
+      if (i != first->second && fields[i] == file_name) {
+        return Fail("config 'columns." + calibd_name + "' names the column '" +
+                        Excerpt(file_name) + "', which the header has twice (columns " +
+                        std::to_string(first->second + 1) + " and " + std::to_string(i + 1) + ")",
+                    static_cast<int64_t>(i) + 1, "columns." + calibd_name);
+      }
+    }
+  }
+  std::unordered_map<std::string_view, size_t> mapped_to;  // calibd name → its file column
+  for (const auto& [calibd_name, file_name] : dialect.columns) {
+    const auto it = file_column.find(file_name);
+    if (it == file_column.end()) {
+      std::string names;
+      for (size_t i = 0; i < fields.size() && i < 12; ++i) {
+        names += (i ? ", '" : "'") + Excerpt(fields[i]) + "'";
+      }
+      if (fields.size() > 12) names += ", ...";
+      return Fail("config 'columns." + calibd_name + "' names the column '" + Excerpt(file_name) +
+                      "', which the header does not have (it has " + names + ")",
+                  0, "columns." + calibd_name);
+    }
+    mapped_to.emplace(calibd_name, it->second);
+  }
+  // A header column already named as calibd names a mapped column: the data would be ambiguous.
+  for (size_t i = 0; i < fields.size(); ++i) {
+    const auto it = mapped_to.find(fields[i]);
+    if (it != mapped_to.end() && it->second != i) {
+      const std::string key(it->first);
+      return Fail("config 'columns." + key + "' maps the column '" +
+                      Excerpt(fields[it->second]) + "' (column " +
+                      std::to_string(it->second + 1) + ") to '" + key +
+                      "', but the header already has a column '" + key + "' (column " +
+                      std::to_string(i + 1) + "): map it to another name or leave it out",
+                  static_cast<int64_t>(i) + 1, "columns." + key);
+    }
+  }
+  for (const auto& [calibd_name, column] : mapped_to) fields[column] = calibd_name;
+  return Status::Ok();
+}
+
+void RecordingParser::Impl::DescribeDialect() {
+  nlohmann::json csv = dialect.ToJson();
+  csv["ignored"] = ignored_columns;
+  nlohmann::json description = {{"format", "csv"}, {"csv", csv}, {"warnings", nlohmann::json::array()}};
+  if (!ignored_columns.empty()) {
+    std::string names;
+    for (size_t i = 0; i < ignored_columns.size(); ++i) {
+      names += (i ? ", '" : "'") + Excerpt(ignored_columns[i]) + "'";
+    }
+    description["warnings"].push_back(
+        std::to_string(ignored_columns.size()) +
+        " column(s) of the file not read (neither named in config 'columns' nor a calibd "
+        "column name): " +
+        names);
+  }
+  summary.log_description = description.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 Status RecordingParser::Impl::PcaHeader() {
@@ -363,6 +424,10 @@ Status RecordingParser::Impl::ArrayHeader() {
     char kind;
     int index, axis;
     if (!ParseTriadColumn(f[i], &kind, &index, &axis)) {
+      if (!dialect.columns.empty()) {  // a mapping names what is read; the rest is ignored
+        ignored_columns.push_back(name);
+        continue;
+      }
       return Fail("unknown column '" + Excerpt(f[i]) +
                       "': an array recording has columns t, aK_x, aK_y, aK_z (accelerometer "
                       "triad K), gJ_x, gJ_y, gJ_z (gyroscope triad J), mJ_x, mJ_y, mJ_z "
@@ -404,7 +469,8 @@ Status RecordingParser::Impl::ArrayHeader() {
   has_t = t_col != 0;
   t_column = t_col;
   summary.t_column = t_col;
-  column_target.assign(f.size(), -1);
+  column_target.assign(f.size(), kIgnoredColumn);
+  if (t_col) column_target[t_col - 1] = kTimeColumn;
   for (int k = 0; k < accel_triads; ++k) {
     for (int axis = 0; axis < 3; ++axis) column_target[accel_cols[k][axis] - 1] = 3 * k + axis;
   }
@@ -484,10 +550,11 @@ Status RecordingParser::Impl::ArrayRow() {
   std::string_view t_text;
   for (size_t i = 0; i < f.size(); ++i) {
     const int target = column_target[i];
-    double* dst = target < 0 ? &t : &row_values[target];
+    if (target == kIgnoredColumn) continue;
+    double* dst = target == kTimeColumn ? &t : &row_values[target];
     Status s = ParseNumber(f[i], static_cast<int64_t>(i) + 1, summary.columns[i], dst);
     if (!s.ok()) return s;
-    if (target < 0) t_text = f[i];
+    if (target == kTimeColumn) t_text = f[i];
   }
   CommitArrayRow(t, t_text);
   return Status::Ok();

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "base/status.h"
+#include "formats/csv_dialect.h"
 #include "formats/log_assembly.h"
 #include "formats/recording.h"
 #include "formats/sensor_log.h"
@@ -48,10 +49,16 @@ struct RecordingParser::Impl {
   int64_t line_no = 0;   // physical line number of the line being parsed
   bool at_start = true;  // BOM check pending
   bool have_header = false;
+  bool header_ok = false;  // the header line was read without an error
   RecordingSummary summary;
   std::vector<std::string_view> fields;  // reused per line
   std::vector<std::string> unquoted;     // storage for fields that had quotes (see Split)
   std::string_view line_text;            // the line on the general path (for error hints)
+  // How the CSV is written (SetCsvDialect). With decimal ',', a data line is read from
+  // decimal_line: the line with its commas made points (the label of a pca row kept as it is).
+  CsvDialect dialect;
+  std::string decimal_line;
+  std::vector<std::string> ignored_columns;  // array layout: header columns not read, file order
 
   // pca
   int first_sensor_col = 1;  // 1 (averaged) or 2 (raw)
@@ -67,8 +74,9 @@ struct RecordingParser::Impl {
   std::vector<double> moving_sum, static_sum;  // n*m, position-major (collect only)
   std::vector<double> row_values;              // reused
 
-  // array: for each file column, the destination (-1 = t, otherwise index into the row layout
-  // a0_x..a{K-1}_z, g0_x..g{G-1}_z).
+  // array: for each file column, the destination (kTimeColumn = t, kIgnoredColumn = not read
+  // (config `columns`), otherwise index into the row layout a0_x..a{K-1}_z, g0_x..g{G-1}_z).
+  static constexpr int kTimeColumn = -1, kIgnoredColumn = -2;
   std::vector<int> column_target;
   int accel_triads = 0, gyro_triads = 0;
   int mag_triads = 0;                   // magnetometer triads (row_values after the gyroscopes)
@@ -184,8 +192,16 @@ struct RecordingParser::Impl {
   // usual causes in spreadsheet exports.
   Status RowShapeError(size_t got, size_t expected);
 
-  // A header line without a comma that uses ';' or tabs: a spreadsheet's export.
+  // A header line without a comma that uses ';' or tabs: a spreadsheet's export (not with a
+  // configured delimiter).
   bool ForeignHeader(std::string_view line);
+  // Config `columns`: the header's mapped names in `fields` replaced by their calibd names; a
+  // mapped name the header lacks, or one that collides with a calibd-named column, fails.
+  Status MapHeaderNames();
+  // The summary's description of a CSV read with a dialect (RecordingSummary::log_description).
+  void DescribeDialect();
+  // The data line as the readers take it: with decimal ',', a copy with its commas as points.
+  std::string_view DecimalPoints(std::string_view line);
   // The header line in `fields`: the layout, its sensors or triads, and the row layout.
   Status Header();
   // The header of the pca layouts (first field "position"), and of the array layout: t and
@@ -224,7 +240,8 @@ struct RecordingParser::Impl {
   // single commas, read straight from the line. It returns kFallback, having changed nothing but
   // row_values, for any other row (quotes included); the general path (Split, ParseNumber) then
   // reads that row and names any error. Both paths give bit-identical values.
-  static const char* NextNumber(const char* p, const char* end, bool last, double* value);
+  static const char* NextNumber(const char* p, const char* end, bool last, char delimiter,
+                                double* value);
 
   // kRead: the row is read; kFallback: take the general path; kFailed: `error` says why.
   enum class Fast { kRead, kFallback, kFailed };

@@ -363,11 +363,11 @@ void RecordingParser::Impl::LeaveDirectCollection() {
 }
 
 const char* RecordingParser::Impl::NextNumber(const char* p, const char* end, bool last,
-                                              double* value) {
+                                              char delimiter, double* value) {
   p = DecimalPrefixFast(p, end, value);
   if (p == nullptr) return nullptr;
   if (last) return p == end ? p : nullptr;
-  return p < end && *p == ',' ? p + 1 : nullptr;
+  return p < end && *p == delimiter ? p + 1 : nullptr;
 }
 
 RecordingParser::Impl::Fast RecordingParser::Impl::FastPcaRow(std::string_view line) {
@@ -376,7 +376,8 @@ RecordingParser::Impl::Fast RecordingParser::Impl::FastPcaRow(std::string_view l
   // The label: one pass that also notes quotes and non-ASCII bytes (labels are short).
   const char* q = p;
   bool quote = false, ascii = true, control = false;
-  for (; q < end && *q != ','; ++q) {
+  const char delimiter = dialect.delimiter;
+  for (; q < end && *q != delimiter; ++q) {
     const auto u = static_cast<unsigned char>(*q);
     quote |= *q == '"';
     ascii &= u < 0x80;
@@ -391,15 +392,15 @@ RecordingParser::Impl::Fast RecordingParser::Impl::FastPcaRow(std::string_view l
   p = q + 1;
   bool moving = true;
   if (first_sensor_col == 2) {
-    if (end - p >= 7 && std::memcmp(p, "static,", 7) == 0) {
+    if (end - p >= 7 && std::memcmp(p, "static", 6) == 0 && p[6] == delimiter) {
       moving = false;
-    } else if (!(end - p >= 7 && std::memcmp(p, "moving,", 7) == 0)) {
+    } else if (!(end - p >= 7 && std::memcmp(p, "moving", 6) == 0 && p[6] == delimiter)) {
       return Fast::kFallback;
     }
     p += 7;
   }
   for (size_t i = 0; i < sensor_count; ++i) {
-    p = NextNumber(p, end, i + 1 == sensor_count, &row_values[i]);
+    p = NextNumber(p, end, i + 1 == sensor_count, delimiter, &row_values[i]);
     if (p == nullptr) return Fast::kFallback;
   }
   return CommitPcaRow(label, moving) ? Fast::kRead : Fast::kFailed;
@@ -411,16 +412,41 @@ RecordingParser::Impl::Fast RecordingParser::Impl::FastArrayRow(std::string_view
   double t = 0;
   std::string_view t_text;
   const size_t n = column_target.size();
+  const char delimiter = dialect.delimiter;
   for (size_t i = 0; i < n; ++i) {
     const int target = column_target[i];
     const char* start = p;
-    p = NextNumber(p, end, i + 1 == n, target < 0 ? &t : &row_values[target]);
+    if (target == kIgnoredColumn) {  // not read: up to the next delimiter (quotes: general path)
+      const char* next = static_cast<const char*>(std::memchr(p, delimiter, end - p));
+      if (std::memchr(p, '"', (next ? next : end) - p) != nullptr) return Fast::kFallback;
+      if (i + 1 == n) {
+        p = next == nullptr ? end : nullptr;
+      } else {
+        p = next == nullptr ? nullptr : next + 1;
+      }
+      if (p == nullptr) return Fast::kFallback;
+      continue;
+    }
+    p = NextNumber(p, end, i + 1 == n, delimiter, target == kTimeColumn ? &t : &row_values[target]);
     if (p == nullptr) return Fast::kFallback;
-    if (target < 0)
+    if (target == kTimeColumn)
       t_text = std::string_view(start, static_cast<size_t>(p - start) - (i + 1 == n ? 0 : 1));
   }
   CommitArrayRow(t, t_text);
   return Fast::kRead;
+}
+
+std::string_view RecordingParser::Impl::DecimalPoints(std::string_view line) {
+  size_t from = 0;
+  if (summary.layout != Layout::kArray) {  // a pca row's label is kept as written
+    if (line.find('"') != std::string_view::npos) return line;  // ParseNumber reads each number
+    from = line.find(dialect.delimiter);
+    if (from == std::string_view::npos) return line;
+  }
+  decimal_line.assign(line);
+  std::replace(decimal_line.begin() + static_cast<std::ptrdiff_t>(from), decimal_line.end(), ',',
+               '.');
+  return decimal_line;
 }
 
 bool RecordingParser::Impl::Line(std::string_view line) {
@@ -432,6 +458,7 @@ bool RecordingParser::Impl::Line(std::string_view line) {
   if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
   if (!line.empty() && line.front() == '#') return true;
   if (TrimSpaces(line).empty()) return true;
+  if (have_header && dialect.decimal == ',') line = DecimalPoints(line);
   if (have_header && limits.one_pass_rows) {
     const Fast fast = summary.layout == Layout::kArray ? FastArrayRow(line) : FastPcaRow(line);
     if (fast != Fast::kFallback) {
@@ -444,7 +471,8 @@ bool RecordingParser::Impl::Line(std::string_view line) {
   if (!Split(line).ok()) return false;
   if (!have_header) {
     have_header = true;
-    return Header().ok();
+    header_ok = Header().ok();
+    return header_ok;
   }
   ++summary.rows;
   return (summary.layout == Layout::kArray ? ArrayRow() : PcaRow()).ok();

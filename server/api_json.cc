@@ -74,11 +74,12 @@ json RecordingJson(const storage::RecordingInfo& r) {
   json columns, sensors;
   if (ParseJsonText(r.columns_json, "columns", &columns).ok()) j["columns"] = columns;
   if (ParseJsonText(r.sensors_json, "sensors", &sensors).ok()) j["sensors"] = sensors;
-  // SPEC §9 "What was read": a sensor log's format, time base, streams, IMUs and warnings.
+  // SPEC §9 "What was read": a sensor log's format, time base, streams, IMUs and warnings; a
+  // CSV read with config columns/delimiter/decimal: `csv` (the mapping used) and warnings.
   j["format"] = "csv";
   json log;
   if (!r.log_json.empty() && ParseJsonText(r.log_json, "log", &log).ok() && log.is_object()) {
-    for (const char* key : {"format", "time_base", "streams", "imus", "warnings"}) {
+    for (const char* key : {"format", "time_base", "streams", "imus", "csv", "warnings"}) {
       if (log.contains(key)) j[key] = log[key];
     }
   }

@@ -3,6 +3,7 @@
 #include <cctype>
 #include <cstdio>
 
+#include "formats/csv_dialect.h"
 #include "formats/inertial_log.h"
 #include "formats/log_assembly.h"
 #include "methods/method.h"
@@ -117,6 +118,12 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
     Status s = ParseTimeUnit(config, &unit, &given);
     if (!s.ok()) return s;
   }
+  // columns, delimiter, decimal: how a CSV from another tool is read; the parser applies them.
+  if (HasCsvDialectKeys(config)) {
+    CsvDialect dialect;
+    Status s = ParseCsvDialect(config, &dialect);
+    if (!s.ok()) return s;
+  }
   // streams: which streams of a sensor log form the IMUs (SPEC §9); the parser applies it.
   if (config.contains("streams")) {
     if (!m->Reads(Layout::kArray)) {
@@ -134,10 +141,11 @@ Status ValidateConfig(const json& config, CommonConfig* common) {
 json WithoutAcceptance(const json& config) {
   if (!config.is_object() || (!config.contains("acceptance") && !config.contains("time_unit") &&
                               !config.contains("job_seconds") && !config.contains("product") &&
-                              !config.contains("streams"))) {
+                              !config.contains("streams") && !HasCsvDialectKeys(config))) {
     return config;
   }
   json out = config;
+  for (const char* key : kCsvDialectKeys) out.erase(key);
   out.erase("streams");
   out.erase("product");
   out.erase("acceptance");
@@ -174,7 +182,8 @@ void JudgeResult(const Method& method, const json& config, const json& acceptanc
 Status CheckLogConfig(const RecordingSummary& summary, const json& config,
                       const std::string& file_name) {
   if (summary.format == "csv" || !config.is_object()) return Status::Ok();
-  for (const char* key : {"time_unit", "accel_unit", "gyro_unit", "mag_unit"}) {
+  for (const char* key :
+       {"time_unit", "accel_unit", "gyro_unit", "mag_unit", "columns", "delimiter", "decimal"}) {
     if (config.contains(key)) {
       return Status::InvalidInput(Reason::kInvalidConfig,
                                   std::string("'") + key + "' is for CSV recordings; this " +
@@ -189,6 +198,8 @@ Status CheckLogConfig(const RecordingSummary& summary, const json& config,
 
 void PrepareParser(const json& config, RecordingParser* parser) {
   if (!config.is_object()) return;
+  CsvDialect dialect;
+  if (ParseCsvDialect(config, &dialect).ok()) parser->SetCsvDialect(dialect);
   const auto it = config.find("method");
   if (it == config.end() || !it->is_string()) return;
   TimeUnit unit;

@@ -203,6 +203,11 @@ void AddRecordingPaths(json* out) {
        QueryParam("accel_unit", "string", "imu, noise: m/s^2 | g | m/s^2 per reading unit"),
        QueryParam("time_unit", "string",
                   "imu, noise, array: unit of the time column t, s (default) | ms | us | ns"),
+       QueryParam("columns", "string",
+                  "CSV from another tool: JSON {calibd name: the file's column}, e.g. "
+                  "{\"t\": \"time_ms\", \"a0_x\": \"accX\"}; other columns are ignored"),
+       QueryParam("delimiter", "string", "CSV field separator: , (default) | ; | \\t"),
+       QueryParam("decimal", "string", "CSV decimal mark: . (default) | , (not with delimiter ,)"),
        QueryParam("solver", "string", "array: joint | bcd"),
        QueryParam("streams", "string",
                   "sensor logs (ULog, DataFlash, bags): JSON {\"imus\": [{\"accel\", \"gyro\", "

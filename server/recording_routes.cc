@@ -102,7 +102,8 @@ void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store) {
     }
     if (!info.log_json.empty()) {
       view.log = json::parse(info.log_json, nullptr, /*allow_exceptions=*/false);
-      if (!view.log.is_object()) view.log = nullptr;
+      // A CSV's reading options (config columns) are no log: the API shows them (`csv`).
+      if (!view.log.is_object() || view.log.value("format", "") == "csv") view.log = nullptr;
     }
     SegmentsOptions options;
     options.timeline_points = kTimelinePoints;

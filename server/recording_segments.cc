@@ -3,6 +3,7 @@
 #include <cmath>
 #include <mutex>
 
+#include "formats/csv_dialect.h"
 #include "formats/inertial_log.h"
 #include "formats/recording.h"
 #include "methods/imu/imu_method.h"
@@ -84,6 +85,12 @@ Status ComputeSegments(storage::Store* store, int64_t recording_id, const Segmen
   // Streamed from storage into the parser: the bytes are never held whole.
   RecordingParser parser("recording " + std::to_string(recording_id), /*collect=*/true);
   parser.SetTimeUnit(options.time_unit);
+  // A CSV from another tool is read as it was at upload (config columns/delimiter/decimal).
+  const json read = json::parse(info.log_json, nullptr, /*allow_exceptions=*/false);
+  CsvDialect dialect;
+  if (read.is_object() && read.contains("csv") && ParseCsvDialect(read["csv"], &dialect).ok()) {
+    parser.SetCsvDialect(dialect);
+  }
   Status parse;
   s = store->ReadRecordingData(recording_id, [&](std::string_view chunk) {
     parse = parser.Feed(chunk);

@@ -1,4 +1,7 @@
 // POST /api/v1/recordings and POST /api/v1/jobs (server/service_impl.h).
+#include <fstream>
+
+#include "formats/csv_dialect.h"
 #include "formats/log_assembly.h"
 #include "methods/registry.h"
 #include "server/service_impl.h"
@@ -117,13 +120,20 @@ int RefuseUploadMedia(const httplib::Request& req, bool body_gzip, httplib::Resp
 // decompressed as it arrives, and the decompressed CSV is what is parsed, hashed and staged on
 // disk, chunk by chunk under the upload limits; the same log sent compressed or not is one
 // recording, and GET /recordings/{id}/data returns the CSV. A multipart body's config part is
-// merged into the query's config. One per request; not thread-safe.
+// merged into the query's config. How the CSV is read (config `columns`, `delimiter`,
+// `decimal`) applies whatever the parts' order: a config part before the recording sets it
+// before the first byte is parsed; after the recording, the staged file is parsed again with it
+// (streamed from disk; a header the first reading refused is only staged meanwhile, and its
+// error is answered when the config part does not name those keys). One per request; not
+// thread-safe.
 class UploadBody {
  public:
   // `options`: the upload limits (kept by reference: must outlive this); `body_gzip`: the
   // request's Content-Encoding is gzip.
   UploadBody(const ServeOptions& options, bool body_gzip)
-      : options_(options), body_gzip_(body_gzip), parser_("upload", /*collect=*/false) {
+      : options_(options),
+        body_gzip_(body_gzip),
+        parser_(std::make_unique<RecordingParser>("upload", /*collect=*/false)) {
     gzip_limits_.max_output_bytes = options.max_upload_bytes;
     gzip_limits_.max_ratio = options.max_gzip_ratio;
   }
@@ -138,9 +148,12 @@ class UploadBody {
   bool Read(const httplib::ContentReader& reader, bool multipart, json* config) {
     bool read_ok;
     if (multipart) {
+      multipart_ = true;
+      query_config_ = config;
       read_ok = reader([&](const httplib::MultipartFormData& header) { return StartPart(header); },
                        [&](const char* data, size_t len) { return TakePartBytes(data, len); });
       if (read_ok && body_status_.ok() && parse_status_.ok()) MergeParts(config);
+      if (read_ok && body_status_.ok() && parse_status_.ok()) ReadAfterConfig(*config);
     } else {
       read_ok = reader([&](const char* data, size_t len) { return TakeRecordingBytes(data, len); });
     }
@@ -152,11 +165,11 @@ class UploadBody {
   // The first error other than the CSV's (size, I/O, gzip, multipart shape).
   const Status& body_status() const { return body_status_; }
   const Status& parse_status() const { return parse_status_; }  // the first CSV error
-  RecordingParser& parser() { return parser_; }
+  RecordingParser& parser() { return *parser_; }
   StagingFile& staged() { return staged_; }
   // The recording's row as storage takes it, from the CSV read (after parser().Finish()).
   storage::NewRecording Recording() {
-    const RecordingSummary& summary = parser_.summary();
+    const RecordingSummary& summary = parser_->summary();
     storage::NewRecording rec;
     rec.path = staged_.path();
     rec.sha256 = sha_.HexDigest();
@@ -187,8 +200,54 @@ class UploadBody {
       body_status_ = staged_.WriteError();
       return false;
     }
-    parse_status_ = parser_.Feed(std::string_view(data, len));
+    if (deferred_) return true;  // staged only: parsed again once the config part is known
+    parse_status_ = parser_->Feed(std::string_view(data, len));
+    if (!parse_status_.ok() && multipart_ && !have_config_ && !parser_->header_read()) {
+      deferred_status_ = parse_status_;  // a config part after the recording may read it
+      parse_status_ = Status::Ok();
+      deferred_ = true;
+    }
     return parse_status_.ok();
+  }
+
+  // After a multipart body whose config part came after the recording: the staged file parsed
+  // again when that part names how the CSV is read; else the first reading's error stands.
+  void ReadAfterConfig(const json& config) {
+    if (!config_after_recording_ || !HasCsvDialectKeys(part_config_)) {
+      if (deferred_) parse_status_ = deferred_status_;
+      return;
+    }
+    CsvDialect dialect;
+    parse_status_ = ParseCsvDialect(config, &dialect);
+    if (!parse_status_.ok()) return;
+    parser_ = std::make_unique<RecordingParser>("upload", /*collect=*/false);
+    parser_->SetCsvDialect(dialect);
+    std::ifstream in(staged_.path(), std::ios::binary);
+    std::string buffer(1 << 16, '\0');
+    while (in && parse_status_.ok()) {
+      in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+      const std::streamsize got = in.gcount();
+      if (got > 0) parse_status_ = parser_->Feed(std::string_view(buffer.data(), got));
+    }
+    if (in.bad()) body_status_ = Status::IoError("cannot read the staged upload back");
+  }
+
+  // A config part before the recording: its CSV keys (with the query's) set how it is read.
+  bool ApplyEarlyConfig() {
+    json merged = *query_config_;
+    json part;
+    Status s = ParseJsonText(config_text_, "config", &part);
+    if (!s.ok() || !part.is_object()) return true;  // MergeParts names the problem
+    if (!HasCsvDialectKeys(part)) return true;
+    for (auto& [key, value] : part.items()) merged[key] = value;
+    CsvDialect dialect;
+    s = ParseCsvDialect(merged, &dialect);
+    if (!s.ok()) {
+      body_status_ = s;
+      return false;
+    }
+    parser_->SetCsvDialect(dialect);
+    return true;
   }
 
   bool FeedRecording(const char* data, size_t len) {
@@ -246,12 +305,14 @@ class UploadBody {
       }
       have_recording_ = true;
       file_name_ = header.filename;
+      if (have_config_ && !ApplyEarlyConfig()) return false;
     } else if (part_ == "config") {
       if (have_config_) {
         body_status_ = Status::InvalidInput("more than one 'config' part").WithField("config");
         return false;
       }
       have_config_ = true;
+      config_after_recording_ = have_recording_;
     } else {
       body_status_ = Status::InvalidInput("unknown multipart part '" + part_.substr(0, 64) +
                                           "': expected 'recording' and 'config'")
@@ -291,6 +352,7 @@ class UploadBody {
       body_status_ =
           Status::InvalidInput("the config part must be a JSON object").WithField("config");
     } else {
+      part_config_ = part_config;
       for (auto& [key, value] : part_config.items()) {
         if (config->contains(key)) {
           body_status_ =
@@ -307,7 +369,7 @@ class UploadBody {
   const bool body_gzip_;
   StagingFile staged_;
   Sha256 sha_;
-  RecordingParser parser_;
+  std::unique_ptr<RecordingParser> parser_;  // replaced when the staged file is read again
   Status parse_status_;  // first CSV error
   Status body_status_;   // first other error (size, I/O, multipart shape)
   std::string file_name_;
@@ -321,6 +383,13 @@ class UploadBody {
   std::string part_;
   std::string config_text_;
   bool have_recording_ = false, have_config_ = false;
+  // How the CSV is read when the config part comes after the recording (ReadAfterConfig).
+  bool multipart_ = false;
+  const json* query_config_ = nullptr;  // the query's config (Read's), during Read
+  bool config_after_recording_ = false;
+  json part_config_;        // the config part's keys
+  bool deferred_ = false;   // the first reading failed at the header: staged only since
+  Status deferred_status_;  // that reading's error
 };
 
 // The answer to a stored upload: 201 with the recording (and its job), Location naming the job
@@ -358,7 +427,7 @@ Status CheckDeviceOnlyConfig(const json& config, CommonConfig* common) {
   Status s = NormalizeSerial(config["device"].get_ref<const std::string&>(), &common->device);
   if (!s.ok()) return s;
   for (auto& [key, value] : config.items()) {
-    if (key != "device") {
+    if (key != "device" && key != "columns" && key != "delimiter" && key != "decimal") {
       return Status::InvalidInput("config key '" + key + "' given without 'method'").WithField(key);
     }
   }
@@ -425,6 +494,10 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
   if (const int refused = RefuseUploadMedia(req, body_gzip, res); refused != 0) {
     return finish(refused);
   }
+  CsvDialect dialect;  // query keys; a config part's join them (UploadBody)
+  s = ParseCsvDialect(config, &dialect);
+  if (!s.ok()) return finish(SendStatus(res, s));
+  body.parser().SetCsvDialect(dialect);
   s = body.Stage(staging_dir);
   if (!s.ok()) return finish(SendStatus(res, s));
 

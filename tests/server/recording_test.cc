@@ -320,19 +320,24 @@ TEST(RecordingParser, SpreadsheetSeparatorsAndDecimalCommasSayWhatToChange) {
   const std::string advice =
       "calibd reads comma-separated files; export as CSV with ',' as the separator and '.' as "
       "the decimal mark";
+  // A separator found: also the config keys that read the file as it is.
+  auto read_as_is = [&](const std::string& sep) {
+    return advice + ", or read it as it is with the config key delimiter \"" + sep +
+           "\" (and decimal \",\" if its numbers have decimal commas)";
+  };
   struct Case {
     std::string text;
     int64_t line, column;
     std::string message;
   } cases[] = {
       {"position;s1;s2;s3\np1;1,5;0;0\n", 1, 1,
-       "line 1 uses ';' as the separator (first at character 9): " + advice},
+       "line 1 uses ';' as the separator (first at character 9): " + read_as_is(";")},
       {"# exported\nt\ta0_x\ta0_y\ta0_z\n0\t1.5\t0\t0\n", 2, 1,
-       "line 2 uses a tab as the separator (first at character 2): " + advice},
+       "line 2 uses a tab as the separator (first at character 2): " + read_as_is("\\t")},
       {"position,s1,s2,s3\np1;1;0;0\n", 2, 2,
        "line 2 uses ';' as the separator (first at character 3; row has 1 fields, the header "
        "has 4): " +
-           advice},
+           read_as_is(";")},
       {"position,s1,s2\np1,1,5,0,25\n", 2, 4,
        "row has 5 fields, the header has 3: if ',' is the decimal mark here (e.g. '1,5' for "
        "1.5), " +
@@ -343,7 +348,7 @@ TEST(RecordingParser, SpreadsheetSeparatorsAndDecimalCommasSayWhatToChange) {
        "line 2 uses ',' as the decimal mark ('-0,25e-3' in column 'a0_y'; write -0.25e-3): " +
            advice},
       {"position,s1,s2\np1;1,5;2,3\n", 2, 2,
-       "line 2 uses ';' as the separator ('5;2' in column 's1'): " + advice},
+       "line 2 uses ';' as the separator ('5;2' in column 's1'): " + read_as_is(";")},
   };
   for (const Case& c : cases) {
     for (bool one_pass : {true, false}) {

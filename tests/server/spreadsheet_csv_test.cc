@@ -30,7 +30,9 @@ TEST(SpreadsheetCsv, SemicolonUploadGetsA400NamingLineColumnAndTheFix) {
   EXPECT_EQ(res->status, 400) << res->body;
   const json error = json::parse(res->body)["error"];
   EXPECT_EQ(error["message"],
-            std::string("line 1 uses ';' as the separator (first at character 9): ") + kAdvice);
+            std::string("line 1 uses ';' as the separator (first at character 9): ") + kAdvice +
+                ", or read it as it is with the config key delimiter \";\" (and decimal \",\" "
+                "if its numbers have decimal commas)");
   EXPECT_EQ(error["line"], 1);
   EXPECT_EQ(error["column"], 1);
   // Nothing was stored.
