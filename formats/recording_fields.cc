@@ -270,8 +270,8 @@ bool RecordingParser::Impl::ForeignHeader(std::string_view line) {
                        : 0;
   if (sep == 0) return false;
   Fail("line " + std::to_string(line_no) + " uses " + SeparatorName(sep) +
-           " as the separator (first at character " + std::to_string(at) + "): " +
-           SeparatorAdvice(sep),
+           " as the separator (first at character " + std::to_string(at) +
+           "): " + SeparatorAdvice(sep),
        1);
   return true;
 }
@@ -306,8 +306,8 @@ Status RecordingParser::Impl::MapHeaderNames() {
     const auto first = file_column.find(file_name);
     for (size_t i = 0; first != file_column.end() && i < fields.size(); ++i) {
       if (i != first->second && fields[i] == file_name) {
-        return Fail("config 'columns." + calibd_name + "' names the column '" +
-                        Excerpt(file_name) + "', which the header has twice (columns " +
+        return Fail("config 'columns." + calibd_name + "' names the column '" + Excerpt(file_name) +
+                        "', which the header has twice (columns " +
                         std::to_string(first->second + 1) + " and " + std::to_string(i + 1) + ")",
                     static_cast<int64_t>(i) + 1, "columns." + calibd_name);
       }
@@ -333,9 +333,8 @@ Status RecordingParser::Impl::MapHeaderNames() {
     const auto it = mapped_to.find(fields[i]);
     if (it != mapped_to.end() && it->second != i) {
       const std::string key(it->first);
-      return Fail("config 'columns." + key + "' maps the column '" +
-                      Excerpt(fields[it->second]) + "' (column " +
-                      std::to_string(it->second + 1) + ") to '" + key +
+      return Fail("config 'columns." + key + "' maps the column '" + Excerpt(fields[it->second]) +
+                      "' (column " + std::to_string(it->second + 1) + ") to '" + key +
                       "', but the header already has a column '" + key + "' (column " +
                       std::to_string(i + 1) + "): map it to another name or leave it out",
                   static_cast<int64_t>(i) + 1, "columns." + key);
@@ -348,7 +347,8 @@ Status RecordingParser::Impl::MapHeaderNames() {
 void RecordingParser::Impl::DescribeDialect() {
   nlohmann::json csv = dialect.ToJson();
   csv["ignored"] = ignored_columns;
-  nlohmann::json description = {{"format", "csv"}, {"csv", csv}, {"warnings", nlohmann::json::array()}};
+  nlohmann::json description = {
+      {"format", "csv"}, {"csv", csv}, {"warnings", nlohmann::json::array()}};
   if (!ignored_columns.empty()) {
     std::string names;
     for (size_t i = 0; i < ignored_columns.size(); ++i) {
@@ -360,7 +360,8 @@ void RecordingParser::Impl::DescribeDialect() {
         "column name): " +
         names);
   }
-  summary.log_description = description.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+  summary.log_description =
+      description.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 Status RecordingParser::Impl::PcaHeader() {

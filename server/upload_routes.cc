@@ -370,8 +370,8 @@ class UploadBody {
   StagingFile staged_;
   Sha256 sha_;
   std::unique_ptr<RecordingParser> parser_;  // replaced when the staged file is read again
-  Status parse_status_;  // first CSV error
-  Status body_status_;   // first other error (size, I/O, multipart shape)
+  Status parse_status_;                      // first CSV error
+  Status body_status_;                       // first other error (size, I/O, multipart shape)
   std::string file_name_;
   int64_t received_ = 0;  // body bytes as sent
   GzipLimits gzip_limits_;
@@ -549,6 +549,26 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
   finish(201);
 }
 
+namespace {
+
+// A job on a stored CSV from another tool reads it as its upload did: when the config gives none
+// of the reading rules (columns, delimiter, decimal), they are taken from the recording's stored
+// description (its log_json "csv", validated at upload). A config that gives any of them is
+// taken as it is.
+void InheritCsvDialect(const storage::RecordingInfo& recording, json* config) {
+  for (const char* key : kCsvDialectKeys)
+    if (config->contains(key)) return;
+  const json read = json::parse(recording.log_json, nullptr, /*allow_exceptions=*/false);
+  if (!read.is_object() || !read.contains("csv") || !read["csv"].is_object()) return;
+  CsvDialect dialect;
+  if (!ParseCsvDialect(read["csv"], &dialect).ok() || dialect.IsDefault()) return;
+  const json rules = dialect.ToJson();
+  for (const char* key : kCsvDialectKeys)
+    if (rules.contains(key)) (*config)[key] = rules[key];
+}
+
+}  // namespace
+
 void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Response& res) {
   const std::string media = ToLower(req.get_header_value("Content-Type"));
   if (media.rfind("application/json", 0) != 0) {
@@ -590,6 +610,7 @@ void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Respon
   storage::RecordingInfo recording;
   s = store->GetRecording(recording_id, &recording);
   if (!s.ok()) return (void)SendStatus(res, s);
+  InheritCsvDialect(recording, &config);
   Layout layout;
   if (!LayoutFromName(recording.layout, &layout) || !FindMethod(common.method)->Reads(layout)) {
     return (void)SendStatus(

@@ -1,6 +1,9 @@
 // libFuzzer target: the incremental CSV parser (formats/recording.h) on arbitrary bytes.
 //
-// Input: byte 0 picks the chunking seed, the rest is the recording. The bytes are parsed four
+// Input: byte 0 picks the chunking seed and, by its top two bits, the reading rules every parser
+// gets (formats/csv_dialect.h): 0 calibd's CSV, 1 ';'-separated, 2 ';' with decimal commas, 3
+// tab-separated with a column mapping (t ← time, a0_* ← ax.., g0_* ← gx..); the rest is the
+// recording. The bytes are parsed four
 // ways: whole by a collecting parser, whole by a collecting parser without the one-pass row
 // reader (RecordingLimits::one_pass_rows = false), in pseudo-random chunks (1..64 bytes) by a
 // collecting parser, and in other chunks by a validating (non-collecting) parser, as an upload is.
@@ -20,6 +23,7 @@
 #include <string>
 #include <string_view>
 
+#include "formats/csv_dialect.h"
 #include "formats/recording.h"
 
 namespace {
@@ -78,6 +82,28 @@ bool SameSummary(const RecordingSummary& a, const RecordingSummary& b) {
          a.sensors == b.sensors && a.positions == b.positions;
 }
 
+// The reading rules of input byte `b` (top two bits).
+calibd::server::CsvDialect DialectOf(uint8_t b) {
+  calibd::server::CsvDialect d;
+  switch (b >> 6) {
+    case 1:
+      d.delimiter = ';';
+      break;
+    case 2:
+      d.delimiter = ';';
+      d.decimal = ',';
+      break;
+    case 3:
+      d.delimiter = '\t';
+      d.columns = {{"t", "time"}, {"a0_x", "ax"}, {"a0_y", "ay"}, {"a0_z", "az"},
+                   {"g0_x", "gx"}, {"g0_y", "gy"}, {"g0_z", "gz"}};
+      break;
+    default:
+      break;
+  }
+  return d;
+}
+
 bool AllFinite(const Eigen::MatrixXd& m) { return m.size() == 0 || m.allFinite(); }
 
 template <typename A, typename B>
@@ -93,15 +119,20 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const uint32_t seed = data[0] | 1u;
   const std::string_view bytes(reinterpret_cast<const char*>(data) + 1, size - 1);
 
+  const calibd::server::CsvDialect dialect = DialectOf(data[0]);
   RecordingParser whole("fuzz.csv", /*collect=*/true);
+  whole.SetCsvDialect(dialect);
   const Status s_whole = Parse(bytes, 0, &whole);
   calibd::server::RecordingLimits general_limits;
   general_limits.one_pass_rows = false;
   RecordingParser general("fuzz.csv", /*collect=*/true, general_limits);
+  general.SetCsvDialect(dialect);
   const Status s_general = Parse(bytes, 0, &general);
   RecordingParser chunked("fuzz.csv", /*collect=*/true);
+  chunked.SetCsvDialect(dialect);
   const Status s_chunked = Parse(bytes, seed, &chunked);
   RecordingParser validating("fuzz.csv", /*collect=*/false);
+  validating.SetCsvDialect(dialect);
   const Status s_valid = Parse(bytes, seed * 7919u, &validating);
 
   Check(SameStatus(s_whole, s_general), "one-pass and general row readers disagree", s_general);

@@ -97,6 +97,18 @@ TEST(ForeignCsv, PhoneAppLogRunsImuAndNoiseWhateverThePartOrder) {
   auto data = server.Client().Get("/api/v1/recordings/2/data");
   ASSERT_TRUE(data);
   EXPECT_EQ(data->body, phone);
+  // A job on the stored recording whose config gives none of the reading rules reads it as its
+  // upload did (the rules stored with the recording), with the same numbers.
+  json again = foreign;
+  for (const char* key : {"columns", "delimiter", "decimal"}) again.erase(key);
+  auto posted = server.Client().Post("/api/v1/jobs",
+                                     json{{"recording_id", 2}, {"config", again}}.dump(),
+                                     "application/json");
+  ASSERT_TRUE(posted);
+  ASSERT_EQ(posted->status, 202) << posted->body;
+  const json rerun = server.WaitForJob(json::parse(posted->body)["job"]["id"].get<int64_t>());
+  ASSERT_EQ(rerun["status"], "succeeded") << rerun.dump().substr(0, 2000);
+  EXPECT_EQ(rerun["result"]["parameters"], reference["result"]["parameters"]);
 
   // A noise job on the same mapped layout: a still phone, 100 Hz for 60 s, white noise.
   std::mt19937_64 rng(5);

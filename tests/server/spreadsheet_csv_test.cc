@@ -7,8 +7,8 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "tests/server/http_test_util.h"
 #include "tests/lib/test_paths.h"
+#include "tests/server/http_test_util.h"
 
 namespace calibd::server {
 namespace {
@@ -55,8 +55,8 @@ TEST(SpreadsheetCsv, TabSeparatedFileMakesCalibrateExitTwoWithTheMessage) {
   const std::string config = (dir.path() / "config.json").string();
   std::ofstream(csv) << "position\ts1\ts2\ts3\np1\t1.0\t0\t0\n";
   std::ofstream(config) << R"({"method": "pca"})";
-  FILE* pipe = ::popen((calibd::test_paths::CalibdBinary() + " calibrate " + csv + " --config " + config +
-                        " 2>&1 >/dev/null")
+  FILE* pipe = ::popen((calibd::test_paths::CalibdBinary() + " calibrate " + csv + " --config " +
+                        config + " 2>&1 >/dev/null")
                            .c_str(),
                        "r");
   ASSERT_NE(pipe, nullptr);
