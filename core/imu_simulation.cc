@@ -37,6 +37,9 @@ bool ImuSimulationOptions::IsValid(std::string* error) const {
   auto pos = [](double v) { return std::isfinite(v) && v > 0; };
   auto nonneg = [](double v) { return std::isfinite(v) && v >= 0; };
   if (statics < 1) return fail("statics must be >= 1");
+  if (!orientations.empty() && orientations.size() != static_cast<size_t>(statics)) {
+    return fail("statics must equal the number of orientations given");
+  }
   if (!pos(static_duration)) return fail("static_duration must be > 0 s");
   if (!pos(rotation_duration)) return fail("rotation_duration must be > 0 s");
   if (!nonneg(initial_motion)) return fail("initial_motion must be >= 0 s");
@@ -86,7 +89,7 @@ Status SimulateImu(const ImuSimulationOptions& o, ImuSimulation* out) {
   // Motion plan.
   std::vector<Segment> segments;
   double t = 0;
-  Eigen::Matrix3d r = RandomRotation(&rng);
+  Eigen::Matrix3d r = o.orientations.empty() ? RandomRotation(&rng) : o.orientations.front();
   auto add_rotation = [&](const Eigen::Matrix3d& to, double duration) {
     const Eigen::AngleAxisd aa(r.transpose() * to);
     Segment seg;
@@ -109,7 +112,10 @@ Status SimulateImu(const ImuSimulationOptions& o, ImuSimulation* out) {
   };
   if (o.initial_motion > 0) add_rotation(RandomRotation(&rng), o.initial_motion);
   for (int j = 0; j < o.statics; ++j) {
-    if (j > 0) add_rotation(RandomRotation(&rng), o.rotation_duration);
+    if (j > 0) {
+      add_rotation(o.orientations.empty() ? RandomRotation(&rng) : o.orientations[j],
+                   o.rotation_duration);
+    }
     s.orientations.push_back(r);
     add_static(o.static_duration);
   }

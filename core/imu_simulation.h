@@ -46,6 +46,11 @@ struct ImuSimulationOptions {
   double gyro_bias = 0.01;      // rad/s, >= 0
   double gyro_bias_drift = 0;   // rad/s per s, linear drift along a random direction, >= 0
   double accel_bias_drift = 0;  // m/s² per s, same
+  // The statics' orientations R_j (body → world, world z up), in order; empty: uniform on SO(3)
+  // per seed. When given, `statics` must equal their number and each rotation between statics
+  // is the shortest one (angle-axis of R_jᵀR_{j+1}); consecutive equal orientations join into one
+  // static. A plan's protocol (methods/plan.h) sets them.
+  std::vector<Eigen::Matrix3d> orientations;
   bool quantize = false;        // round readings to whole reading units (counts)
   uint64_t seed = 1;            // sensor errors and motion
   uint64_t noise_seed = 0;      // the noise stream; 0: derived from seed (set it to vary only the

@@ -262,6 +262,20 @@ struct PcaResult {
 // of sensors for a fixed number of positions.
 Status CalibratePca(const PcaProblem& problem, const PcaOptions& options, PcaResult* result);
 
+// The Fisher information CalibratePca's uncertainty is computed from, for experiment design
+// (the plan, SPEC §10): the reduced information S (unit noise) of the sensor parameters
+// θ_i = [c·a_i; b_i] (p = d, or d + 1 with biases; sensor-major, p·m rows), the positions
+// eliminated, at sensitivities `a` (d×m) and field directions `u` (d×n, unit length); and an
+// orthonormal basis of its rotation gauge (p·m × d(d−1)/2), a null space of S by construction.
+// S is singular beyond the gauge exactly when the positions cannot determine some parameter.
+struct PcaInformation {
+  Eigen::MatrixXd s;
+  Eigen::MatrixXd gauge;
+};
+// kInvalidInput when the shapes disagree or a·aᵀ is singular (the sensors do not span d).
+Status ComputePcaInformation(const Eigen::MatrixXd& a, const Eigen::MatrixXd& u, BiasModel bias,
+                             PcaInformation* out);
+
 // The paper's Eq. 19 canonical frame: the orthogonal h (d×d) such that h·a is upper triangular
 // with a non-negative diagonal (QR of a, d×m). Requires a.rows() >= 1.
 Eigen::MatrixXd CanonicalFrame(const Eigen::MatrixXd& a);

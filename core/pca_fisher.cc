@@ -353,3 +353,20 @@ void ReducedFisher::InitLowRank(const MatrixXd& a, const MatrixXd& u, bool with_
 }
 
 }  // namespace calibd::core::pca_internal
+
+namespace calibd::core {
+
+Status ComputePcaInformation(const Eigen::MatrixXd& a, const Eigen::MatrixXd& u, BiasModel bias,
+                             PcaInformation* out) {
+  if (a.rows() < 1 || a.cols() < 1 || u.rows() != a.rows()) {
+    return Status::InvalidInput("pca information: a is d×m and u d×n");
+  }
+  const bool with_bias = bias == BiasModel::kEstimate;
+  if (!pca_internal::ReducedInformation(a, u, with_bias, &out->s, nullptr)) {
+    return Status::InvalidInput("pca information: the sensitivities do not span the dimension");
+  }
+  out->gauge = pca_internal::GaugeBasis(a, with_bias);
+  return Status::Ok();
+}
+
+}  // namespace calibd::core

@@ -28,6 +28,7 @@
 #include "methods/acceptance.h"
 #include "methods/exports.h"
 #include "methods/failure_reason.h"
+#include "methods/plan.h"
 
 namespace CLI {
 class App;  // CLI11 (server/cli.cc)
@@ -152,6 +153,27 @@ class Method {
     (void)command;
     return {};
   }
+  // ---- Plan (SPEC §10, issue #27 item 1; methods/plan.h) ----
+  // POST /api/v1/plan and `calibd plan`: what a calibration of a recording made with `protocol`
+  // would report, computed with the method's own numerics at nominal values: {"uncertainty" (the
+  // shape of the result's, null where undetermined), "undetermined": [{"parameters": [...],
+  // "missing": [...]}] (empty when the protocol determines everything), "suggested":
+  // {"design", "orientations", "uncertainty", "meets_limits", "unmet"}, "notes": [...]}.
+  // `config` has been validated (ValidateConfig) with its references resolved; `limits` are the
+  // ones in force for the config (the suggestion's target). kInvalidInput naming the field for
+  // what the plan needs and the config lacks. Default: no plan for this method yet (400 naming
+  // `method`).
+  virtual Status Plan(const nlohmann::json& config, const PlanProtocol& protocol,
+                      const AcceptanceLimits& limits, nlohmann::json* out) const {
+    (void)config;
+    (void)protocol;
+    (void)limits;
+    (void)out;
+    return Status::InvalidInput(std::string("the plan is not available for method ") + name() +
+                                " yet")
+        .WithField("method");
+  }
+  // ---- end Plan ----
   // The job's peak memory per value of the recording (rows x columns), in bytes: the parser's
   // doubles (8) plus what the method's run holds at its peak, measured on large recordings
   // (bench/README.md, "Memory budget per job"). Used by the per-job budget (server/job_budget.h)

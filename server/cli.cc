@@ -15,6 +15,7 @@
 #include "methods/registry.h"
 #include "server/config.h"
 #include "server/failure_reasons.h"
+#include "server/plan.h"
 #include "server/serve.h"
 
 namespace calibd::server {
@@ -156,6 +157,32 @@ int Calibrate(const std::string& recording_path, const std::string& config_path,
   for (const json& reason : verdict.value("reasons", json::array())) {
     std::cerr << "calibd:   - " << reason.get<std::string>() << "\n";
   }
+  return kExitOk;
+}
+
+// `calibd plan`: the plan of a protocol (SPEC §10, server/plan.h) printed as JSON.
+int Plan(const std::string& method, const std::string& config_path,
+         const std::string& protocol_path, const std::string& acceptance_path) {
+  json acceptance;
+  if (!acceptance_path.empty()) {
+    if (Status s = LoadAcceptanceFile(acceptance_path, &acceptance); !s.ok()) return Report(s);
+  }
+  json request = {{"method", method}, {"config", json::object()}};
+  for (const auto& [path, key] : {std::pair<std::string, const char*>{config_path, "config"},
+                                  {protocol_path, "protocol"}}) {
+    if (path.empty()) continue;
+    std::string text;
+    if (Status s = ReadFile(path, &text); !s.ok()) return Report(s);
+    if (Status s = ParseJsonText(text, path, &request[key]); !s.ok()) return Report(s);
+  }
+  json& config = request["config"];
+  if (config.is_object()) {
+    if (!config.contains("method")) config["method"] = method;
+    if (Status s = InlineCalibrationFile(config_path, &config); !s.ok()) return Report(s);
+  }
+  json out;
+  if (Status s = PlanJson(request, acceptance, &out); !s.ok()) return Report(s);
+  std::cout << out.dump(2) << "\n";
   return kExitOk;
 }
 
@@ -311,6 +338,19 @@ int RunCli(int argc, char** argv) {
       "data cannot determine the parameters (the message says what to record instead), 4 the "
       "time limit (--job-seconds or the config's job_seconds) was reached.");
 
+  // plan
+  std::string plan_method, plan_config, plan_protocol, plan_acceptance;
+  CLI::App* plan_cmd = app.add_subcommand(
+      "plan", "predict the σ a protocol would give, what it cannot determine, and a suggestion");
+  plan_cmd->add_option("--method", plan_method, "the method")->required();
+  plan_cmd->add_option("--config", plan_config, "config JSON (SPEC §3)");
+  plan_cmd->add_option("--protocol", plan_protocol,
+                       "protocol JSON: {\"orientations\": [\"+x\", [0, 0, 1], ...], "
+                       "\"static_duration\", \"rate\", \"rotation_duration\"}")
+      ->required();
+  plan_cmd->add_option("--acceptance", plan_acceptance,
+                       "JSON file of acceptance limits per method, as for serve");
+
   // simulate
   CLI::App* simulate_cmd =
       app.add_subcommand("simulate",
@@ -338,6 +378,7 @@ int RunCli(int argc, char** argv) {
   if (*calibrate_cmd) {
     return Calibrate(recording_path, config_path, compact, acceptance_path, calibrate_seconds);
   }
+  if (*plan_cmd) return Plan(plan_method, plan_config, plan_protocol, plan_acceptance);
   for (const auto& [command, simulate] : simulations) {
     if (!*command) continue;
     SimulatedFiles files;

@@ -19,6 +19,16 @@
 
 namespace calibd::server {
 
+void SendPage(httplib::Response& res, int status, std::string html) {
+  res.status = status;
+  res.set_header("Cache-Control", "no-cache");
+  res.set_header(
+      "Content-Security-Policy",
+      "default-src 'none'; style-src 'unsafe-inline'; img-src data:; form-action 'self'");
+  res.set_header("X-Content-Type-Options", "nosniff");
+  res.set_content(std::move(html), "text/html; charset=utf-8");
+}
+
 using nlohmann::json;
 
 namespace {
@@ -65,15 +75,6 @@ web::JobSummary SummarizeWithEvents(storage::Store* store, const storage::JobInf
   return s;
 }
 
-void SendPage(httplib::Response& res, int status, std::string html) {
-  res.status = status;
-  res.set_header("Cache-Control", "no-cache");
-  res.set_header(
-      "Content-Security-Policy",
-      "default-src 'none'; style-src 'unsafe-inline'; img-src data:; form-action 'self'");
-  res.set_header("X-Content-Type-Options", "nosniff");
-  res.set_content(std::move(html), "text/html; charset=utf-8");
-}
 
 void SendErrorPage(httplib::Response& res, const Status& s) {
   int status = s.code() == StatusCode::kNotFound ? 404 : 500;

@@ -58,6 +58,8 @@ const nlohmann::json& OpenApiDocument();
 // The HTML pages (SPEC §5): /, /jobs/{id}, /devices/{serial}. `token_required`: writes need the
 // server's token (the job page's cancel form asks for it).
 void RegisterHtmlRoutes(httplib::Server* http, storage::Store* store, bool token_required);
+// Sends a page with the pages' headers (no-cache, the Content-Security-Policy, nosniff).
+void SendPage(httplib::Response& res, int status, std::string html);
 
 }  // namespace calibd::server
 

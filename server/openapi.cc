@@ -429,6 +429,26 @@ void AddDevicePaths(json* out) {
          JsonResponse("the fleet (an unknown product is an empty fleet)", {{"type", "object"}})},
         {"400", ErrorResponse("product not a valid name, method missing or unknown, outlier_z "
                               "not > 0, or an unknown query parameter")}}}};
+  paths["/plan"]["post"] = {
+      {"summary",
+       "Plan a calibration (SPEC §10): the σ a recording of a protocol would give (the result's "
+       "uncertainty shape), what it cannot determine, and a suggested protocol (greedy "
+       "D-optimal) meeting the gate's limits"},
+      {"requestBody",
+       {{"required", true},
+        {"content",
+         {{"application/json",
+           {{"schema",
+             {{"type", "object"},
+              {"required", {"method", "protocol"}},
+              {"properties",
+               {{"method", {{"type", "string"}}},
+                {"config", {{"type", "object"}}},
+                {"protocol", {{"type", "object"}}}}}}}}}}}}},
+      {"responses",
+       {{"200", JsonResponse("the plan: uncertainty, undetermined, suggested, notes, limits",
+                             {{"type", "object"}})},
+        {"400", ErrorResponse("a field of the request (named), or no plan for the method yet")}}}};
 }
 
 // Liveness, metrics and this document.

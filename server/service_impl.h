@@ -116,6 +116,7 @@ struct Service::Impl {
   void HandleDevices(const httplib::Request& req, httplib::Response& res);
   void HandleLatest(const httplib::Request& req, httplib::Response& res);
   void HandleFleet(const httplib::Request& req, httplib::Response& res);  // fleet_routes.cc
+  void HandlePlan(const httplib::Request& req, httplib::Response& res);   // plan.cc
   void HandleRecording(const httplib::Request& req, httplib::Response& res);
   void HandleRecordingData(const httplib::Request& req, httplib::Response& res);
   void HandleHealth(const httplib::Request& req, httplib::Response& res);

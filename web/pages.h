@@ -189,6 +189,26 @@ struct FleetView {
 // medians' count. Every user-controlled string is escaped.
 std::string RenderFleetPage(const FleetView& view);
 
+// The plan page (/plan, SPEC §10): the form as the person filled it and the plan it gave.
+struct PlanView {
+  std::vector<std::string> methods;     // the registry's, in the select
+  std::string method;                   // selected
+  std::string config;                   // JSON text of the config
+  std::string orientations;             // free text: names or [x, y, z], separated by spaces
+  std::vector<std::string> checked;     // the candidate directions ticked
+  std::vector<std::string> candidates;  // every candidate direction's name (the checkboxes)
+  std::string static_duration, rate, rotation_duration;  // as typed
+  std::string error;                    // the plan's error message (empty: none)
+  nlohmann::json plan;                  // PlanJson's answer; null before the form is sent
+};
+
+// The plan page: form.plan-form (GET, works without JS), then, once sent, table.table-plan (the
+// predicted σ, one row per quantity), ul.undetermined (what the protocol cannot determine), the
+// suggested orientations with their σ, and svg.sphere: the protocol's and the suggestion's
+// orientations on the unit sphere seen from +z and from −z. Every user-controlled string is
+// escaped.
+std::string RenderPlanPage(const PlanView& view);
+
 // The history page: filter form (GET, works without JS), table.table-history (device link,
 // method, status badge, created time, key figures, warnings flag), "older" pagination link.
 std::string RenderHistoryPage(const HistoryView& view);

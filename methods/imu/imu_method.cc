@@ -348,6 +348,10 @@ class Imu : public Method {
     core::ImuOptions options;
     return ParseImuConfig(config, &options);
   }
+  Status Plan(const nlohmann::json& config, const PlanProtocol& protocol,
+              const AcceptanceLimits& limits, nlohmann::json* out) const override {
+    return PlanImu(config, protocol, limits, out);
+  }
   const std::vector<AcceptanceKey>& AcceptanceKeys() const override {
     const AcceptanceKey& chi2 = limit_keys::kMaxChi2;
     static const std::vector<AcceptanceKey>& keys = *new std::vector<AcceptanceKey>(JoinKeys({

@@ -56,6 +56,14 @@ Status ParseImuOptions(const nlohmann::json& config, core::ImuOptions* options);
 Status SimulateImuFiles(const core::ImuSimulationOptions& options, std::string* csv,
                         nlohmann::json* config, nlohmann::json* truth);
 
+// Method::Plan of imu (methods/imu/imu_plan.cc): needs the config's accel_noise and gyro_noise.
+Status PlanImu(const nlohmann::json& config, const PlanProtocol& protocol,
+               const AcceptanceLimits& limits, nlohmann::json* out);
+// The result the imu method reports for the log of `protocol` simulated with a nominal IMU and
+// the config's noise figures (deterministic); errors as Run's.
+Status PredictImu(const nlohmann::json& config, const PlanProtocol& protocol,
+                  nlohmann::json* result);
+
 // Exports of a imu result (methods/imu/imu_exports.cc; formats in methods/exports.h).
 Status ImuResultToCsv(const nlohmann::json& result, std::string* out);
 Status ImuResultToHeader(const nlohmann::json& result, const ExportContext& context,

@@ -576,6 +576,10 @@ class Pca : public Method {
     };
     return keys;
   }
+  Status Plan(const nlohmann::json& config, const PlanProtocol& protocol,
+              const AcceptanceLimits& limits, nlohmann::json* out) const override {
+    return PlanPca(config, protocol, limits, out);
+  }
   Status Run(RecordingParser* parser, const nlohmann::json& config, const RunContext& ctx,
              nlohmann::json* result) const override {
     PcaRecording recording;

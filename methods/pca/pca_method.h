@@ -68,6 +68,10 @@ void JudgePca(const results::PcaResult& result, const core::PcaOptions& options,
 Status SimulatePcaFiles(const core::PcaSimulationOptions& options, std::string* csv,
                         nlohmann::json* config, nlohmann::json* truth);
 
+// Method::Plan of pca (methods/pca/pca_plan.cc): needs the config's nominal and noise_std.
+Status PlanPca(const nlohmann::json& config, const PlanProtocol& protocol,
+               const AcceptanceLimits& limits, nlohmann::json* out);
+
 // Exports of a pca result (methods/pca/pca_exports.cc; formats in methods/exports.h).
 Status PcaResultToCsv(const nlohmann::json& result, std::string* out);
 Status PcaResultToHeader(const nlohmann::json& result, const ExportContext& context,

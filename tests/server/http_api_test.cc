@@ -629,6 +629,7 @@ TEST_F(HttpApi, OpenApiDocumentsEveryRouteTheServerHas) {
     }
   }
   const std::set<std::string> served = {"post /recordings",
+                                        "post /plan",
                                         "post /jobs",
                                         "get /jobs",
                                         "get /jobs/{id}",

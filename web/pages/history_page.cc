@@ -34,7 +34,9 @@ std::string FilterQuery(const HistoryFilter& f) {
 }
 
 std::string HistoryBody(const HistoryView& v) {
-  std::string out = "<h1>Calibration history</h1>";
+  std::string out =
+      "<h1>Calibration history</h1><p class=\"small\"><a href=\"/plan\">Plan a "
+      "calibration</a>: the σ a protocol would give, before recording it.</p>";
   out += "<form class=\"filters\" method=\"get\" action=\"/\">";
   out += "<label>device<input type=\"text\" name=\"device\" value=\"" + A(v.filter.device) +
          "\" list=\"devices\" size=\"18\"></label>";

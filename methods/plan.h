@@ -1,0 +1,77 @@
+// Planning a calibration before recording it (SPEC §10, issue #27 item 1): the protocol a person
+// proposes (orientations, static duration, rate; for imu the rotations between the statics), read
+// from JSON with errors naming the field and index, the candidate orientations a suggested
+// protocol is chosen from, and the words for what a protocol misses. The numbers (σ, information)
+// are each method's own: Method::Plan (methods/method.h) in methods/<name>/.
+#ifndef CALIBD_METHODS_PLAN_H_
+#define CALIBD_METHODS_PLAN_H_
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "base/status.h"
+
+namespace calibd::server {
+
+// A protocol: static positions in order. Plain data; thread-compatible.
+struct PlanProtocol {
+  // Per static, the unit direction of the field (gravity's reaction, "up") in the body frame of
+  // the sensors: "+z" is the z axis pointing up. At least 1, at most kMaxPositions.
+  std::vector<Eigen::Vector3d> orientations;
+  std::vector<std::string> labels;  // per orientation: its name ("+x+y") or "[x, y, z]"
+  double static_duration = 3;       // s per static, in (0, kMaxStaticDuration]
+  double rate = 100;                // samples per second, in (0, kMaxRate]
+  // s per rotation between consecutive statics (imu), in (0, kMaxStaticDuration]. Each rotation
+  // is the shortest one taking one orientation to the next (about the axis perpendicular to
+  // both, by the angle between them).
+  double rotation_duration = 2;
+
+  static constexpr int kMaxPositions = 1000;
+  static constexpr double kMaxStaticDuration = 600;
+  static constexpr double kMaxRate = 10000;
+  static constexpr double kMaxSamples = 2e7;  // rate × total duration
+};
+
+// Reads {"orientations": [name or [x, y, z], ...], "static_duration", "rate",
+// "rotation_duration"} (the last three optional, defaults as above). A name is up to three signed
+// axes, e.g. "+x", "-z", "+x+y", "-x+y-z" (the sum, normalised). kInvalidInput with
+// WithField("protocol.orientations[3]") etc. naming what is wrong; unknown keys are errors.
+Status ParsePlanProtocol(const nlohmann::json& protocol, PlanProtocol* out);
+
+// The unit vector of a name such as "+x-y"; kInvalidInput when it is not one.
+Status OrientationFromName(const std::string& name, Eigen::Vector3d* out);
+
+// The body orientations R_j (body → world, world z up) of a protocol's up directions:
+// R_jᵀ z = u_j, R_0 the shortest rotation from z, each next one from the previous by the shortest
+// rotation (about u_{j+1} × u_j, by the angle between them; about some perpendicular axis when
+// opposite). What a simulation of the protocol turns the body through.
+std::vector<Eigen::Matrix3d> ProtocolRotations(const std::vector<Eigen::Vector3d>& up);
+
+// The candidates of a suggested protocol: the 26 directions ±x, ±y, ±z (6), the 12 edge
+// diagonals (+x+y, ...) and the 8 corner diagonals (+x+y+z, ...), unit length, with their names.
+struct PlanCandidate {
+  std::string name;
+  Eigen::Vector3d direction;
+};
+const std::vector<PlanCandidate>& PlanCandidates();
+
+// "z" for a unit axis direction (either sign), "[0.71, 0.71, 0]" otherwise: for messages.
+std::string DirectionWords(const Eigen::Vector3d& direction);
+
+// The JSON of a protocol's orientations for the answer: [{"name", "direction": [x, y, z]}].
+nlohmann::json OrientationsJson(const std::vector<Eigen::Vector3d>& directions,
+                                const std::vector<std::string>& labels);
+
+// What the orientations fail to span, from the null space of their design Σ_j f_j f_jᵀ with
+// f_j = [u_j; 1] (with_bias) or u_j: the information every method's sensitivities (and biases)
+// are estimated from. One sentence per null direction ("no orientation with a component along
+// z", "every orientation has the same component along x: the bias and the sensitivity along x are
+// not separated"); empty when the design is regular.
+std::vector<std::string> MissingDirections(const std::vector<Eigen::Vector3d>& orientations,
+                                           bool with_bias);
+
+}  // namespace calibd::server
+
+#endif  // CALIBD_METHODS_PLAN_H_
