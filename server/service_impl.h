@@ -116,6 +116,7 @@ struct Service::Impl {
   void HandleDevices(const httplib::Request& req, httplib::Response& res);
   void HandleLatest(const httplib::Request& req, httplib::Response& res);
   void HandleFleet(const httplib::Request& req, httplib::Response& res);  // fleet_routes.cc
+  void HandleCheck(const httplib::Request& req, httplib::Response& res);  // check_routes.cc
   void HandleRecording(const httplib::Request& req, httplib::Response& res);
   void HandleRecordingData(const httplib::Request& req, httplib::Response& res);
   void HandleHealth(const httplib::Request& req, httplib::Response& res);
