@@ -14,7 +14,7 @@
 
 namespace {
 
-using calibd::ArrayRecording;
+using calibd::server::ArrayRecording;
 using nlohmann::json;
 
 const double kAccelUnit = 16 * 9.80665 / 32768;                  // ±16 g counts
