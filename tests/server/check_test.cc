@@ -203,8 +203,34 @@ TEST(RecordingCheck, RefusesNamingWhat) {
   // A method without statics gives timing and says what it leaves out.
   ASSERT_EQ(Check(server, base + "?method=noise", &body), 200) << body;
   EXPECT_TRUE(body.at("statics").is_null());
+  EXPECT_TRUE(body.at("saturation").at("channels").empty()) << body;
   EXPECT_FALSE(body.at("notes").empty());
   EXPECT_NEAR(body.at("timing").at("rate").get<double>(), 100, 1e-3);
+}
+
+TEST(RecordingCheck, NoiseSaturationIsTheJobs) {
+  TestServer server;
+  ASSERT_TRUE(server.error().empty()) << server.error();
+  const core::ImuSimulation sim = Simulated();
+  // A clipped log: the noise job refuses it naming the channels; the check names the same.
+  const json job = server.UploadAndWait(ImuCsv(sim, 1, 1, 1, 0.7 * sim.gyro.cwiseAbs().maxCoeff()),
+                                        {{"method", "noise"}});
+  ASSERT_EQ(job.value("status", ""), "failed") << job.dump().substr(0, 400);
+  json check;
+  ASSERT_EQ(Check(server,
+                  "/api/v1/recordings/" + std::to_string(job.at("recording_id").get<int64_t>()) +
+                      "/check?job=" + std::to_string(job.at("id").get<int64_t>()),
+                  &check),
+            200)
+      << check.dump();
+  // The failed job keeps its partial diagnostics with its error.
+  const json& sat = job.at("error").at("diagnostics").at("diagnostics").at("saturation");
+  EXPECT_EQ(check.at("saturation"), sat);
+  EXPECT_GT(sat.at("samples").get<int64_t>(), 20);
+  EXPECT_NE(job.at("error").at("message").get<std::string>().find(
+                check.at("job_would_fail").get<std::string>()),
+            std::string::npos)
+      << job.at("error") << check.at("job_would_fail");
 }
 
 // ----- Real data (skipped when absent).

@@ -25,9 +25,7 @@ std::string Number(const json& j, int sig = 4) {
 std::string Hemisphere(const json& statics, bool upper) {
   PlotOptions o;
   o.name = upper ? "check-upper" : "check-lower";
-  o.title = upper ? "Gravity directions, z up (seen from +z)"
-                  : "Gravity directions, z down "
-                    "(seen from -z)";
+  o.title = upper ? "z up (seen from +z)" : "z down (seen from -z)";
   o.x.title = "x";
   o.y.title = "y";
   o.x.min = o.y.min = -1.5;
@@ -125,8 +123,8 @@ std::string CheckSection(const RecordingPageView& v) {
     const json& statics = v.check.value("statics", json());
     if (statics.is_array()) {
       s += "<p>" + std::to_string(statics.size()) +
-           " static interval(s); their gravity directions (nominal units, numbered in time "
-           "order):</p><div class=\"plots\">" +
+           " static interval(s); their gravity directions on the two hemispheres (equal-area "
+           "projection, nominal units, numbered in time order):</p><div class=\"plots\">" +
            Hemisphere(statics, true) + Hemisphere(statics, false) + "</div>";
     }
   }
