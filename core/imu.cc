@@ -158,6 +158,20 @@ void ReportThresholdChoice(const ThresholdChoice& choice, const ImuOptions& opti
   }
 }
 
+// The coverage of the gravity directions of IMU k's statics in `d`, read with the nominal
+// conversion (no fit): what the too-few-statics failure and FindImuStatics report.
+ImuCoverage NominalCoverage(const StaticDetection& d, int k, const ImuOptions& options) {
+  std::vector<Vector3d> u;
+  for (const StaticInterval& iv : d.intervals) {
+    const Vector3d v =
+        iv.mean[static_cast<size_t>(2 * k)] - Vector3d::Constant(options.nominal_accel_bias);
+    if (v.norm() > 0) u.push_back(v.normalized());
+  }
+  ImuCoverage cov;
+  Coverage(u, Vector3d::Ones(), &cov);
+  return cov;
+}
+
 // No candidate's statics determine the accelerometer: fails every result, with the coverage of
 // the orientations found (nominal conversion, first IMU) and what is missing.
 Status FailTooFewStatics(const ThresholdChoice& choice, const ImuOptions& options,
@@ -167,13 +181,7 @@ Status FailTooFewStatics(const ThresholdChoice& choice, const ImuOptions& option
   const StaticDetection& d = cands[static_cast<size_t>(chosen)].det;
   const int n = static_cast<int>(d.intervals.size());
   // Which orientations are there (nominal conversion, first IMU) and which are missing.
-  std::vector<Vector3d> u;
-  for (const StaticInterval& iv : d.intervals) {
-    const Vector3d v = iv.mean[0] - Vector3d::Constant(options.nominal_accel_bias);
-    if (v.norm() > 0) u.push_back(v.normalized());
-  }
-  ImuCoverage cov;
-  Coverage(u, Vector3d::Ones(), &cov);
+  const ImuCoverage cov = NominalCoverage(d, 0, options);
   std::ostringstream m;
   m << "found " << n << " static intervals, at least " << options.min_statics << " are needed ("
     << options.recommended_statics << " or more recommended)";
@@ -193,6 +201,40 @@ Status FailTooFewStatics(const ThresholdChoice& choice, const ImuOptions& option
     r.coverage = cov;
   }
   return Status::NotDeterminable(why, msg);
+}
+
+// Steps 1-2 for every IMU (CalibrateImus and FindImuStatics): the inputs checked, the static
+// detection at every candidate multiplier with the accelerometer fits, and the choice reported
+// in every result. Not ok(): every result has been failed (invalid input, stopped, or too few
+// statics: kNotDeterminable).
+Status DetectAndChooseStatics(const Eigen::VectorXd& t, const std::vector<ImuReadings>& imus,
+                              const ImuOptions& options, std::vector<ImuResult>* results,
+                              ThresholdChoice* choice) {
+  results->assign(imus.size(), ImuResult());
+  for (size_t k = 0; k < imus.size(); ++k) {
+    (*results)[k].name = imus[k].name;
+    (*results)[k].gravity = options.gravity;
+    (*results)[k].gyro_bias_model = options.gyro_bias;
+  }
+  std::vector<TriadSeries> triads;
+  Status s = CheckInputs(imus, options, &triads);
+  if (!s.ok()) return FailAll(s, ImuTermination::kInvalidInput, results);
+  auto stopped_all = [&](const std::string& stage) {
+    return FailAll(StoppedStatus(*options.stop, "imu: " + stage), ImuTermination::kStopped,
+                   results);
+  };
+  if (StopRequested(options.stop)) return stopped_all("static detection");
+  StaticDetector detector;
+  s = detector.Init(t, triads, options.detection);
+  if (s.code() == StatusCode::kStopped) return FailAll(s, ImuTermination::kStopped, results);
+  if (!s.ok()) return FailAll(s, ImuTermination::kInvalidInput, results);
+  if (StopRequested(options.stop)) return stopped_all("static detection");
+
+  s = ChooseThreshold(imus, detector, options, choice);
+  if (!s.ok()) return FailAll(s, ImuTermination::kStopped, results);
+  ReportThresholdChoice(*choice, options, results);
+  if (choice->best < 0) return FailTooFewStatics(*choice, options, results);
+  return Status::Ok();
 }
 
 // Steps 3-5 and the diagnostics for IMU k, given its accelerometer fit on the chosen detection:
@@ -313,31 +355,9 @@ Eigen::Matrix3d IntegrateRotation(const Eigen::VectorXd& t, const Eigen::MatrixX
 
 Status CalibrateImus(const Eigen::VectorXd& t, const std::vector<ImuReadings>& imus,
                      const ImuOptions& options, std::vector<ImuResult>* results) {
-  results->assign(imus.size(), ImuResult());
-  for (size_t k = 0; k < imus.size(); ++k) {
-    (*results)[k].name = imus[k].name;
-    (*results)[k].gravity = options.gravity;
-    (*results)[k].gyro_bias_model = options.gyro_bias;
-  }
-  std::vector<TriadSeries> triads;
-  Status s = CheckInputs(imus, options, &triads);
-  if (!s.ok()) return FailAll(s, ImuTermination::kInvalidInput, results);
-  auto stopped_all = [&](const std::string& stage) {
-    return FailAll(StoppedStatus(*options.stop, "imu: " + stage), ImuTermination::kStopped,
-                   results);
-  };
-  if (StopRequested(options.stop)) return stopped_all("static detection");
-  StaticDetector detector;
-  s = detector.Init(t, triads, options.detection);
-  if (s.code() == StatusCode::kStopped) return FailAll(s, ImuTermination::kStopped, results);
-  if (!s.ok()) return FailAll(s, ImuTermination::kInvalidInput, results);
-  if (StopRequested(options.stop)) return stopped_all("static detection");
-
   ThresholdChoice choice;
-  s = ChooseThreshold(imus, detector, options, &choice);
-  if (!s.ok()) return FailAll(s, ImuTermination::kStopped, results);
-  ReportThresholdChoice(choice, options, results);
-  if (choice.best < 0) return FailTooFewStatics(choice, options, results);
+  Status s = DetectAndChooseStatics(t, imus, options, results, &choice);
+  if (!s.ok()) return s;
   const int best = choice.best;
   const std::vector<ThresholdCandidate>& cands = choice.candidates;
   Status first_failure;
@@ -357,6 +377,17 @@ Status CalibrateImus(const Eigen::VectorXd& t, const std::vector<ImuReadings>& i
     }
   }
   return first_failure;
+}
+
+Status FindImuStatics(const Eigen::VectorXd& t, const std::vector<ImuReadings>& imus,
+                      const ImuOptions& options, std::vector<ImuResult>* results) {
+  ThresholdChoice choice;
+  Status s = DetectAndChooseStatics(t, imus, options, results, &choice);
+  if (!s.ok()) return s;
+  for (size_t k = 0; k < results->size(); ++k) {
+    (*results)[k].coverage = NominalCoverage((*results)[k].detection, static_cast<int>(k), options);
+  }
+  return Status::Ok();
 }
 
 Status CalibrateImu(const Eigen::VectorXd& t, const Eigen::MatrixX3d& accel,

@@ -263,6 +263,16 @@ struct ImuResult {
 Status CalibrateImus(const Eigen::VectorXd& t, const std::vector<ImuReadings>& imus,
                      const ImuOptions& options, std::vector<ImuResult>* results);
 
+// Steps 1-2 of CalibrateImus alone, the same code (what GET /recordings/{id}/check shows before
+// fitting, server/recording_check.h): the static detection at every candidate multiplier, the
+// accelerometer fits that choose among them, and per IMU its detection, threshold_trials,
+// threshold_choice and warnings as CalibrateImus leaves them, and the coverage of the chosen
+// statics' gravity directions read with the nominal conversion (CalibrateImus reports the
+// calibrated one). No gyroscope fit: cost O(N × triads × multipliers). The status as CalibrateImus
+// would return it at that point (kNotDeterminable for too few statics, the results then failed).
+Status FindImuStatics(const Eigen::VectorXd& t, const std::vector<ImuReadings>& imus,
+                      const ImuOptions& options, std::vector<ImuResult>* results);
+
 // One IMU.
 Status CalibrateImu(const Eigen::VectorXd& t, const Eigen::MatrixX3d& accel,
                     const Eigen::MatrixX3d& gyro, const ImuOptions& options, ImuResult* result);

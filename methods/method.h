@@ -104,6 +104,26 @@ class Method {
     (void)config;
     return Status::Ok();
   }
+  // GET /api/v1/recordings/{id}/check (SPEC §10; server/recording_check.h): what Run with this
+  // config would find before fitting, computed by the stages Run itself runs (so the numbers are
+  // the job's by construction). Writes the method's part into *check (an object the caller made):
+  //   "saturation": diagnostics.saturation as Run writes it (results/saturation.h),
+  //   "statics": [{"start", "end", "samples", "up": [x, y, z]}] (the gravity direction read with
+  //       the nominal units, body frame), "coverage": {"sufficient", "verdict", "missing_up",
+  //       "min_eigenvalue"}, "threshold_choice", and "job_would_fail": the message Run would stop
+  //       with at that stage (absent when it would go on);
+  // keys a method does not compute are left out (the check then says so). `log` is the whole
+  // inertial log in seconds (never the float form: PrepareParser is not applied); `config` has
+  // been validated, `acceptance` and `time_unit` removed. kInvalidInput for a log Run would
+  // refuse outright (its message); kStopped when ctx.stop asks. Default: adds nothing.
+  virtual Status Check(const ArrayRecording& log, const nlohmann::json& config,
+                       const RunContext& ctx, nlohmann::json* check) const {
+    (void)log;
+    (void)config;
+    (void)ctx;
+    (void)check;
+    return Status::Ok();
+  }
   // Called before the recording is fed to the collecting parser that Run will take it from
   // (server/config.h PrepareParser): a method may ask for a leaner collection, e.g.
   // RecordingParser::CollectArrayAsFloat. `config` may be invalid (Run reports that); Run must

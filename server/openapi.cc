@@ -272,6 +272,23 @@ void AddRecordingPaths(json* out) {
         {"400", ErrorResponse("bad option (field)")},
         {"404", ErrorResponse("no such recording")},
         {"422", ErrorResponse("not an inertial log")}}}};
+  paths["/recordings/{id}/check"]["get"] = {
+      {"summary",
+       "What a job would find before fitting (SPEC section 10): timing (rate, jitter, gaps), "
+       "units that look wrong, temperature range, and the method's saturation per channel, "
+       "statics with their gravity directions, coverage and what the job would fail with, "
+       "computed by the job's own stages; the method's config keys come as query parameters, "
+       "as for an upload (SPEC section 3)"},
+      {"parameters",
+       json::array({PathParam("id", "integer", "recording id"),
+                    QueryParam("method", "string", "a method reading inertial logs"),
+                    QueryParam("job", "integer",
+                               "instead of method and config keys: the config of this job")})},
+      {"responses",
+       {{"200", JsonResponse("the check", {{"type", "object"}})},
+        {"400", ErrorResponse("bad method or config key (field)")},
+        {"404", ErrorResponse("no such recording or job")},
+        {"422", ErrorResponse("not an inertial log, or over the job memory budget")}}}};
 }
 
 // The jobs: queue, list, one job, and the decisions (revoke, accept, cancel) on it.

@@ -2,7 +2,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "methods/registry.h"
 #include "server/config.h"
+#include "server/recording_check.h"
 #include "server/recording_segments.h"
 #include "web/html.h"
 #include "web/recording_page.h"
@@ -49,12 +51,39 @@ std::string EchoQuery(const httplib::Request& req) {
   return q;
 }
 
+// The page's check section: the methods it offers and, with ?check=METHOD, that check with the
+// other query keys as its config (then taken out of *params, the detection options).
+void CheckOnPage(storage::Store* store, int64_t id, int64_t job_memory_bytes,
+                 std::multimap<std::string, std::string>* params, web::RecordingPageView* view) {
+  for (const Method* m : AllMethods()) {
+    if (m->Reads(Layout::kArray) && m->NeedsIncreasingTime())
+      view->check_methods.push_back(m->name());
+  }
+  auto it = params->find("check");
+  if (it == params->end()) return;
+  view->check_method = it->second;
+  std::multimap<std::string, std::string> query = *params;
+  query.erase("check");
+  query.emplace("method", view->check_method);
+  params->clear();
+  CheckRequest request;
+  request.recording_id = id;
+  request.job_memory_bytes = job_memory_bytes;
+  Status s = ParseCheckQuery(query, store, &request);
+  if (s.ok()) s = ComputeCheck(store, request, &view->check);
+  if (!s.ok()) {
+    view->check = nullptr;
+    view->check_note = "No check: " + s.message();
+  }
+}
+
 constexpr size_t kTimelinePoints = 3000;  // per triad: min/max of 1500 buckets
 constexpr int kJobPages = 10;             // the page lists jobs among the newest 10 × 500
 
 }  // namespace
 
-void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store) {
+void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store,
+                             int64_t job_memory_bytes) {
   http->Get(R"(/api/v1/recordings/([^/]+)/segments)",
             [store](const httplib::Request& req, httplib::Response& res) {
               int64_t id = 0;
@@ -71,7 +100,8 @@ void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store) {
               res.set_content(JsonBody(SegmentsJson(segments, options)), "application/json");
             });
 
-  http->Get(R"(/recordings/([^/]+))", [store](const httplib::Request& req, httplib::Response& res) {
+  http->Get(R"(/recordings/([^/]+))", [store, job_memory_bytes](const httplib::Request& req,
+                                                                httplib::Response& res) {
     int64_t id = 0;
     if (!ParseRecordingId(req.matches[1], &id)) {
       return SendHtml(res, 404, web::RenderErrorPage(404, "no such recording"));
@@ -105,10 +135,15 @@ void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store) {
       // A CSV's reading options (config columns) are no log: the API shows them (`csv`).
       if (!view.log.is_object() || view.log.value("format", "") == "csv") view.log = nullptr;
     }
+    // ?check=METHOD&<its config keys>: the check before fitting instead of detection options.
+    std::multimap<std::string, std::string> segment_params = req.params;
+    if (info.layout == LayoutName(Layout::kArray)) {
+      CheckOnPage(store, id, job_memory_bytes, &segment_params, &view);
+    }
     SegmentsOptions options;
     options.timeline_points = kTimelinePoints;
-    s = ParseSegmentsQuery(req.params, &options);
-    view.query = s.ok() ? EchoQuery(req) : "";
+    s = ParseSegmentsQuery(segment_params, &options);
+    view.query = s.ok() && view.check_method.empty() ? EchoQuery(req) : "";
     view.accel_unit_given = s.ok() && req.has_param("accel_unit");
     view.gyro_unit_given = s.ok() && req.has_param("gyro_unit");
     if (s.ok()) {

@@ -3,7 +3,8 @@
 //       &accel_unit=&gyro_unit=   the static intervals of an inertial log (JSON; 400 naming the
 //       key for a bad option, 422 when the recording is not an inertial log, 404)
 //   GET /recordings/{id}   the recording's HTML page (metadata, timeline with the statics shaded
-//       and numbered, the jobs that used it)
+//       and numbered, the jobs that used it, and with ?check=METHOD&<config keys> the check
+//       before fitting of server/recording_check.h within `job_memory_bytes`)
 #ifndef CALIBD_SERVER_RECORDING_ROUTES_H_
 #define CALIBD_SERVER_RECORDING_ROUTES_H_
 
@@ -12,7 +13,8 @@
 
 namespace calibd::server {
 
-void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store);
+void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store,
+                             int64_t job_memory_bytes);
 
 }  // namespace calibd::server
 

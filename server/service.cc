@@ -530,6 +530,8 @@ void Service::Impl::RegisterApiRoutes(httplib::Server* server) {
   http.Get("/plan", [this](const httplib::Request& req, httplib::Response& res) {
     SendPage(res, 200, web::RenderPlanPage(PlanPageView(req.params, store.get(), acceptance)));
   });
+  http.Get(R"(/api/v1/recordings/([^/]+)/check)",
+           [this](const httplib::Request& req, httplib::Response& res) { HandleCheck(req, res); });
   http.Get(R"(/api/v1/products/([^/]+)/fleet)",
            [this](const httplib::Request& req, httplib::Response& res) { HandleFleet(req, res); });
   http.Get(
@@ -552,7 +554,8 @@ void Service::Impl::RegisterApiRoutes(httplib::Server* server) {
   http.Get("/api/v1/openapi.json", [](const httplib::Request&, httplib::Response& res) {
     res.set_content(JsonBody(OpenApiDocument()), "application/json");
   });
-  RegisterRecordingRoutes(&http, store.get());  // /segments and the recording page
+  RegisterRecordingRoutes(&http, store.get(),
+                          job_memory_bytes);  // /segments and the recording page
   RegisterHtmlRoutes(&http, store.get(), !token.empty());
 }
 

@@ -117,6 +117,7 @@ struct Service::Impl {
   void HandleLatest(const httplib::Request& req, httplib::Response& res);
   void HandleFleet(const httplib::Request& req, httplib::Response& res);  // fleet_routes.cc
   void HandlePlan(const httplib::Request& req, httplib::Response& res);   // plan.cc
+  void HandleCheck(const httplib::Request& req, httplib::Response& res);  // check_routes.cc
   void HandleRecording(const httplib::Request& req, httplib::Response& res);
   void HandleRecordingData(const httplib::Request& req, httplib::Response& res);
   void HandleHealth(const httplib::Request& req, httplib::Response& res);

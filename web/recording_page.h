@@ -38,6 +38,13 @@ struct RecordingPageView {
   // accelerometer norm at rest is about 1 g (RestNorm), else "reading units", saying why and
   // which accel_unit would convert them.
   bool accel_unit_given = false, gyro_unit_given = false;
+  // The check before fitting (GET /api/v1/recordings/{id}/check, server/recording_check.h) of
+  // `check_method` when the page was asked for one (?check=METHOD&<config keys>), else null;
+  // `check_note` says why there is none (a bad config, not an inertial log). `check_methods`:
+  // the methods the form offers (those that read inertial logs, in the registry's order).
+  nlohmann::json check;
+  std::string check_method, check_note;
+  std::vector<std::string> check_methods;
   // A sensor log (SPEC §9): what was read, as stored (formats/log_assembly.h
   // AssembledLog::description: format, time_base, streams, imus, warnings); null for CSV.
   nlohmann::json log;
@@ -48,6 +55,11 @@ struct RecordingPageView {
 double RestNorm(const RecordingPageView& view);
 
 std::string RenderRecordingPage(const RecordingPageView& view);
+
+// The page's "Check before fitting" section (web/pages/check_section.cc): a form picking the
+// method, and for a check its verdicts (units, timing, saturation, coverage, what the job would
+// fail with) and its statics' gravity directions on the two hemispheres (equal-area projection).
+std::string CheckSection(const RecordingPageView& view);
 
 }  // namespace calibd::web
 

@@ -252,6 +252,71 @@ void NoiseReferences(const json& config, results::ImuDiagnostics* d) {
   d->noise_model = models;
 }
 
+// The IMUs of a log: triad K of the accelerometers and of the gyroscopes, copied out (N×3 each)
+// for core::CalibrateImus / FindImuStatics, which borrow them through `readings`.
+struct ImuTriadCopies {
+  std::vector<Eigen::MatrixX3d> accel, gyro;
+  std::vector<core::ImuReadings> readings;
+
+  // kInvalidInput when the log's accelerometer and gyroscope triads do not pair up.
+  Status From(const ArrayRecording& log) {
+    const size_t imus = log.accel_names.size();
+    if (log.gyro_names.size() != imus) {
+      return Status::InvalidInput(
+          "the imu method pairs accelerometer triad K with gyroscope "
+          "triad K, but the log has " +
+          std::to_string(imus) + " accelerometer and " + std::to_string(log.gyro_names.size()) +
+          " gyroscope triads");
+    }
+    accel.resize(imus);
+    gyro.resize(imus);
+    readings.resize(imus);
+    for (size_t k = 0; k < imus; ++k) {
+      accel[k] = log.accel.middleCols(3 * static_cast<Eigen::Index>(k), 3);
+      gyro[k] = log.gyro.middleCols(3 * static_cast<Eigen::Index>(k), 3);
+      readings[k].name = std::to_string(k);
+      readings[k].accel = &accel[k];
+      readings[k].gyro = &gyro[k];
+    }
+    return Status::Ok();
+  }
+};
+
+// Saturation (core/saturation.h) as Run and Check find it: per kind, the configured limit or the
+// clip levels found in the data, combined into the one [low, high] the fit takes (the tightest
+// over the kind's channels; written into *options); pinned samples never join a static (nor any
+// window holding one) and rotations through one are not used. The channels with pinned samples
+// are appended to *saturation.
+Status FindImuSaturation(const ArrayRecording& log, const core::StopToken* stop,
+                         core::ImuOptions* options, results::SaturationDiagnostics* saturation) {
+  std::vector<core::ChannelSaturation> accel_channels, gyro_channels;
+  for (auto [columns, names, low, high, channels] :
+       {std::tuple<const Eigen::MatrixXd*, const std::vector<std::string>*, double*, double*,
+                   std::vector<core::ChannelSaturation>*>{
+            &log.accel, &log.accel_names, &options->accel_saturation_low,
+            &options->accel_saturation_high, &accel_channels},
+        std::tuple<const Eigen::MatrixXd*, const std::vector<std::string>*, double*, double*,
+                   std::vector<core::ChannelSaturation>*>{
+            &log.gyro, &log.gyro_names, &options->gyro_saturation_low,
+            &options->gyro_saturation_high, &gyro_channels}}) {
+    core::SaturationOptions so;
+    so.stop = stop;
+    if (std::isfinite(*low) || std::isfinite(*high)) {  // configured: overrides the search
+      so.low = *low;
+      so.high = *high;
+    }
+    Status s = FindSaturation(*columns, *names, so, channels);
+    if (!s.ok()) return s;
+    if (!so.low && !so.high) {
+      const core::SaturationLimits limits = core::CombinedLimits(*channels);
+      *low = limits.low;
+      *high = limits.high;
+    }
+    AddSaturationChannels(*channels, 1, "reading units", saturation);
+  }
+  return Status::Ok();
+}
+
 class Imu : public Method {
  public:
   const char* name() const override { return "imu"; }
@@ -441,54 +506,14 @@ class Imu : public Method {
     const double rate = log.t.size() > 1 ? static_cast<double>(log.t.size() - 1) /
                                                (log.t[log.t.size() - 1] - log.t[0])
                                          : 0.0;
-    const size_t imus = log.accel_names.size();
-    if (log.gyro_names.size() != imus) {
-      return Status::InvalidInput(
-          "the imu method pairs accelerometer triad K with gyroscope "
-          "triad K, but the log has " +
-          std::to_string(imus) + " accelerometer and " + std::to_string(log.gyro_names.size()) +
-          " gyroscope triads");
-    }
-    std::vector<Eigen::MatrixX3d> accel(imus), gyro(imus);
-    std::vector<core::ImuReadings> readings(imus);
-    for (size_t k = 0; k < imus; ++k) {
-      accel[k] = log.accel.middleCols(3 * static_cast<Eigen::Index>(k), 3);
-      gyro[k] = log.gyro.middleCols(3 * static_cast<Eigen::Index>(k), 3);
-      readings[k].name = std::to_string(k);
-      readings[k].accel = &accel[k];
-      readings[k].gyro = &gyro[k];
-    }
-    // Saturation (core/saturation.h): per kind, the configured limit or the clip levels found in
-    // the data, combined into the one [low, high] the fit takes (the tightest over the kind's
-    // channels); pinned samples never join a static (nor any window holding one) and rotations
-    // through one are not used.
+    ImuTriadCopies triads;
+    s = triads.From(log);
+    if (!s.ok()) return s;
+    std::vector<core::ImuReadings>& readings = triads.readings;
     options.detection.stop = context.stop;
     results::SaturationDiagnostics saturation{"dropped", 0, {}};
-    std::vector<core::ChannelSaturation> accel_channels, gyro_channels;
-    for (auto [columns, names, low, high, channels] :
-         {std::tuple<const Eigen::MatrixXd*, const std::vector<std::string>*, double*, double*,
-                     std::vector<core::ChannelSaturation>*>{
-              &log.accel, &log.accel_names, &options.accel_saturation_low,
-              &options.accel_saturation_high, &accel_channels},
-          std::tuple<const Eigen::MatrixXd*, const std::vector<std::string>*, double*, double*,
-                     std::vector<core::ChannelSaturation>*>{
-              &log.gyro, &log.gyro_names, &options.gyro_saturation_low,
-              &options.gyro_saturation_high, &gyro_channels}}) {
-      core::SaturationOptions so;
-      so.stop = context.stop;
-      if (std::isfinite(*low) || std::isfinite(*high)) {  // configured: overrides the search
-        so.low = *low;
-        so.high = *high;
-      }
-      s = FindSaturation(*columns, *names, so, channels);
-      if (!s.ok()) return s;
-      if (!so.low && !so.high) {
-        const core::SaturationLimits limits = core::CombinedLimits(*channels);
-        *low = limits.low;
-        *high = limits.high;
-      }
-      AddSaturationChannels(*channels, 1, "reading units", &saturation);
-    }
+    s = FindImuSaturation(log, context.stop, &options, &saturation);
+    if (!s.ok()) return s;
     log.accel.resize(0, 0);
     log.gyro.resize(0, 0);
     std::vector<core::ImuResult> results;
@@ -556,6 +581,56 @@ class Imu : public Method {
     typed.parameters = std::move(params);
     typed.uncertainty = std::move(stds);
     *result = results::ToJson(typed);
+    return Status::Ok();
+  }
+  // Steps 1-2 of Run (the same FindImuSaturation and core::FindImuStatics), no fit.
+  Status Check(const ArrayRecording& log, const json& config, const RunContext& context,
+               json* check) const override {
+    core::ImuOptions options;
+    Status s = ParseImuConfig(config, &options);
+    if (!s.ok()) return s;
+    options.stop = context.stop;
+    options.detection.stop = context.stop;
+    s = CheckLogTimes(log, "imu");
+    if (!s.ok()) return s;
+    ImuTriadCopies triads;
+    s = triads.From(log);
+    if (!s.ok()) return s;
+    results::SaturationDiagnostics saturation{"dropped", 0, {}};
+    s = FindImuSaturation(log, context.stop, &options, &saturation);
+    if (!s.ok()) return s;
+    std::vector<core::ImuResult> found;
+    s = core::FindImuStatics(log.t, triads.readings, options, &found);
+    if (s.code() == StatusCode::kStopped || s.code() == StatusCode::kInvalidInput) return s;
+    if (found.empty()) return Status::Internal("imu: no result");
+    const core::StaticDetection& d = found.front().detection;
+    saturation.samples = d.saturated_samples;
+    (*check)["saturation"] = results::ToJson(saturation);
+    json statics = json::array();
+    for (const core::StaticInterval& iv : d.intervals) {
+      // IMU 0's gravity direction (the detection's triad 0), nominal units.
+      const Eigen::Vector3d v = iv.mean[0] - Eigen::Vector3d::Constant(options.nominal_accel_bias);
+      const Eigen::Vector3d up = v.norm() > 0 ? Eigen::Vector3d(v.normalized()) : v;
+      statics.push_back({{"start", iv.start},
+                         {"end", iv.end},
+                         {"samples", iv.samples},
+                         {"up", {up.x(), up.y(), up.z()}},
+                         {"accel_norm", v.norm() * options.accel_unit}});
+    }
+    (*check)["statics"] = std::move(statics);
+    json coverage = json::array();
+    for (const core::ImuResult& r : found) {
+      coverage.push_back({{"name", r.name},
+                          {"sufficient", r.coverage.sufficient},
+                          {"verdict", r.coverage.verdict},
+                          {"missing_up", r.coverage.missing_up},
+                          {"min_eigenvalue", r.coverage.min_eigenvalue}});
+      for (const std::string& w : r.warnings)
+        (*check)["warnings"].push_back("IMU " + r.name + ": " + w);
+    }
+    (*check)["coverage"] = std::move(coverage);
+    (*check)["threshold_choice"] = found.front().threshold_choice;
+    if (!s.ok()) (*check)["job_would_fail"] = s.message();
     return Status::Ok();
   }
 };

@@ -48,6 +48,45 @@ Status ParseNoiseConfig(const json& config, core::NoiseOptions* options, Inertia
   return ParseInertialUnits(config, units);
 }
 
+// Saturation as Run finds it (core/saturation.h): the default search on every channel of the
+// float log (SI). The channels with pinned samples are appended to *report and, when there are
+// any, report->samples counts the rows holding one.
+Status FindNoiseSaturation(const ArrayRecordingFloat& log, const core::StopToken* stop,
+                           results::SaturationDiagnostics* report) {
+  core::SaturationOptions so;
+  so.stop = stop;
+  std::vector<core::ChannelSaturation> channels;
+  Status s = FindSaturation(log.accel, log.accel_names, so, &channels);
+  if (s.ok()) s = FindSaturation(log.gyro, log.gyro_names, so, &channels);
+  if (!s.ok() || !AnyPinned(channels)) return s;
+  const std::vector<core::ChannelSaturation> accel_part(channels.begin(),
+                                                        channels.begin() + log.accel.cols());
+  const std::vector<core::ChannelSaturation> gyro_part(channels.begin() + log.accel.cols(),
+                                                       channels.end());
+  AddSaturationChannels(accel_part, 1, "m/s^2", report);
+  AddSaturationChannels(gyro_part, 1, "rad/s", report);
+  for (Eigen::Index i = 0; i < log.t.size(); ++i) {  // rows with any channel pinned
+    bool pinned = false;
+    for (size_t c = 0; c < channels.size() && !pinned; ++c) {
+      const auto col = static_cast<Eigen::Index>(c);
+      const double v =
+          col < log.accel.cols() ? log.accel(i, col) : log.gyro(i, col - log.accel.cols());
+      pinned = v <= channels[c].low || v >= channels[c].high;
+    }
+    if (pinned) ++report->samples;
+  }
+  return Status::Ok();
+}
+
+// Why Run refuses a log with pinned samples (kNotStationary).
+std::string ClippedLogMessage(const results::SaturationDiagnostics& report) {
+  return PinnedList(report) +
+         ": a noise log recorded at rest never reaches its sensor's full scale, so the sensor "
+         "was knocked or moved (or its range is too small); the Allan deviation of a clipped log "
+         "is not the sensor's noise, and dropping the samples would break the uniform sampling "
+         "it needs: record again at rest, or cut the log before or after the knock";
+}
+
 class Noise : public Method {
  public:
   const char* name() const override { return "noise"; }
@@ -177,6 +216,28 @@ class Noise : public Method {
                         "white-noise density far above any MEMS sensor: check accel_unit "
                         "and gyro_unit, and that the device was at rest");
   }
+  // Run's saturation search (FindNoiseSaturation) on the same floats; a noise log has no statics.
+  Status Check(const ArrayRecording& log, const json& config, const RunContext& context,
+               json* check) const override {
+    core::NoiseOptions options;
+    InertialUnits units;
+    Status s = ParseNoiseConfig(config, &options, &units);
+    if (!s.ok()) return s;
+    ArrayRecordingFloat floats;
+    floats.accel_names = log.accel_names;
+    floats.gyro_names = log.gyro_names;
+    floats.t = log.t;
+    floats.accel = (log.accel * units.accel).cast<float>();
+    floats.gyro = (log.gyro * units.gyro).cast<float>();
+    results::SaturationDiagnostics report{"refused", 0, {}};
+    s = FindNoiseSaturation(floats, context.stop, &report);
+    if (!s.ok()) return s;
+    (*check)["saturation"] = results::ToJson(report);
+    if (!report.channels.empty()) {
+      (*check)["job_would_fail"] = ClippedLogMessage(report);
+    }
+    return Status::Ok();
+  }
   void PrepareParser(const json& config, RecordingParser* parser) const override {
     core::NoiseOptions options;
     InertialUnits units;
@@ -227,30 +288,10 @@ class Noise : public Method {
     // the Allan deviation needs the uniformly sampled series (a hole would bias every cluster
     // that spans it) and a clipped stretch is not the sensor's noise either.
     {
-      core::SaturationOptions so;
-      so.stop = context.stop;
-      std::vector<core::ChannelSaturation> channels;
-      s = FindSaturation(log.accel, log.accel_names, so, &channels);
-      if (s.ok()) s = FindSaturation(log.gyro, log.gyro_names, so, &channels);
+      results::SaturationDiagnostics report{"refused", 0, {}};
+      s = FindNoiseSaturation(log, context.stop, &report);
       if (!s.ok()) return s;
-      if (AnyPinned(channels)) {
-        const std::vector<core::ChannelSaturation> accel_part(channels.begin(),
-                                                              channels.begin() + log.accel.cols());
-        const std::vector<core::ChannelSaturation> gyro_part(channels.begin() + log.accel.cols(),
-                                                             channels.end());
-        results::SaturationDiagnostics report{"refused", 0, {}};
-        AddSaturationChannels(accel_part, 1, "m/s^2", &report);
-        AddSaturationChannels(gyro_part, 1, "rad/s", &report);
-        for (Eigen::Index i = 0; i < log.t.size(); ++i) {  // rows with any channel pinned
-          bool pinned = false;
-          for (size_t c = 0; c < channels.size() && !pinned; ++c) {
-            const auto col = static_cast<Eigen::Index>(c);
-            const double v =
-                col < log.accel.cols() ? log.accel(i, col) : log.gyro(i, col - log.accel.cols());
-            pinned = v <= channels[c].low || v >= channels[c].high;
-          }
-          if (pinned) ++report.samples;
-        }
+      if (!report.channels.empty()) {
         results::NoiseResult typed;
         typed.envelope.method = "noise";
         typed.envelope.usable = false;
@@ -258,14 +299,8 @@ class Noise : public Method {
         typed.diagnostics.saturation = report;
         typed.diagnostics.units = results::NoiseUnits{units.accel_text, units.gyro_text};
         *result = results::ToJson(typed);
-        return Status::NotDeterminable(
-            core::noise_reason::kNotStationary,
-            PinnedList(report) +
-                ": a noise log recorded at rest never reaches its sensor's full scale, so the "
-                "sensor was knocked or moved (or its range is too small); the Allan deviation of "
-                "a clipped log is not the sensor's noise, and dropping the samples would break "
-                "the uniform sampling it needs: record again at rest, or cut the log before or "
-                "after the knock");
+        return Status::NotDeterminable(core::noise_reason::kNotStationary,
+                                       ClippedLogMessage(report));
       }
     }
     const Eigen::Index n = log.t.size();

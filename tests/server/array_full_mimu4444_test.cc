@@ -21,74 +21,13 @@
 #include "methods/array/array_method.h"
 #include "methods/registry.h"
 #include "server/config.h"
+#include "tests/lib/mimu4444.h"
 #include "tests/lib/sanitizer.h"
 
 namespace calibd::server {
 namespace {
 
 using nlohmann::json;
-
-std::string DataDir() {
-  const char* env = std::getenv("CALIBD_MIMU4444_DATA");
-  return env && *env ? env : "/work/data/mimu4444";
-}
-
-// One data.bin as a recording (m/s², deg/s, board frame; packet format in the core test).
-bool ReadMimu4444(const std::string& path, ArrayRecording* rec) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return false;
-  const std::string d((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  constexpr size_t kPacket = 106;
-  auto u8 = [&](size_t i) { return static_cast<unsigned>(static_cast<unsigned char>(d[i])); };
-  auto i16 = [&](size_t i) { return static_cast<int16_t>((u8(i) << 8) | u8(i + 1)); };
-  std::vector<std::array<int16_t, 48>> rows;
-  std::vector<double> t;
-  uint32_t last_ts = 0;
-  double time = 0;
-  for (size_t i = 0; i + kPacket <= d.size();) {
-    unsigned sum = 0;
-    if (u8(i) == 0xAA)
-      for (size_t j = 0; j < kPacket - 2; ++j) sum += u8(i + j);
-    if (u8(i) != 0xAA || (sum & 0xFFFF) != ((u8(i + 104) << 8) | u8(i + 105))) {
-      ++i;
-      continue;
-    }
-    const uint32_t ts = (u8(i + 4) << 24) | (u8(i + 5) << 16) | (u8(i + 6) << 8) | u8(i + 7);
-    if (!rows.empty()) time += static_cast<uint32_t>(ts - last_ts) / 64e6;
-    last_ts = ts;
-    std::array<int16_t, 48> row;
-    for (int c = 0; c < 48; ++c) row[c] = i16(i + 8 + 2 * c);
-    rows.push_back(row);
-    t.push_back(time);
-    i += kPacket;
-  }
-  const Eigen::Index n = static_cast<Eigen::Index>(rows.size());
-  rec->t = Eigen::Map<Eigen::VectorXd>(t.data(), n);
-  rec->accel.resize(n, 24);
-  rec->gyro.resize(n, 24);
-  const double a_unit = core::kStandardGravity / 2048, g_unit = 1 / 16.4;
-  for (Eigen::Index r = 0; r < n; ++r)
-    for (int k = 0; k < 8; ++k) {
-      Eigen::Vector3d a, g;
-      for (int i = 0; i < 3; ++i) {
-        a(i) = rows[r][6 * k + i] * a_unit;
-        g(i) = rows[r][6 * k + 3 + i] * g_unit;
-      }
-      if (k % 2 == 1) {  // underside: x <-> -y, z -> -z
-        a = Eigen::Vector3d(-a.y(), -a.x(), -a.z());
-        g = Eigen::Vector3d(-g.y(), -g.x(), -g.z());
-      }
-      rec->accel.row(r).segment<3>(3 * k) = a.transpose();
-      rec->gyro.row(r).segment<3>(3 * k) = g.transpose();
-    }
-  rec->accel_names.clear();
-  rec->gyro_names.clear();
-  for (int k = 0; k < 8; ++k) {
-    rec->accel_names.push_back("a" + std::to_string(k));
-    rec->gyro_names.push_back("g" + std::to_string(k));
-  }
-  return n > 0;
-}
 
 json Config() {
   const Eigen::Matrix3Xd p = core::Mimu4444NominalPositions();
@@ -108,7 +47,7 @@ Eigen::Vector3d Position(const json& result, int k) {
 TEST(ArrayFullMimu4444, TheDefaultConfigFindsTheSaturationAndMatchesTheConfiguredLimit) {
   if (sanitizer::kAddressSanitizer)
     GTEST_SKIP() << "two fits per 10-minute recording: ~7 s of CPU each in Release, not under ASan";
-  const std::string dir = DataDir();
+  const std::string dir = testing::Mimu4444Dir();
   std::vector<std::string> files;
   for (int e = 1; e <= 10; ++e) {
     const std::string f = dir + "/exp_" + std::to_string(e) + "/data.bin";
@@ -123,7 +62,7 @@ TEST(ArrayFullMimu4444, TheDefaultConfigFindsTheSaturationAndMatchesTheConfigure
   for (const std::string& f : files) {
     SCOPED_TRACE(f);
     ArrayRecording rec;
-    ASSERT_TRUE(ReadMimu4444(f, &rec));
+    ASSERT_TRUE(testing::ReadMimu4444(f, &rec));
     json by_data, by_limit;
     Status s = RunArray(rec, Config(), &by_data);
     ASSERT_TRUE(s.ok()) << s.message();
@@ -217,10 +156,10 @@ TEST(ArrayFullMimu4444, TheDefaultConfigFindsTheSaturationAndMatchesTheConfigure
 TEST(ArrayFullMimu4444, APositionSigmaLimitBetweenTheBoundAndTheHonestSigmaRejects) {
   if (sanitizer::kAddressSanitizer)
     GTEST_SKIP() << "a fit of a 10-minute recording: ~7 s of CPU in Release, not under ASan";
-  const std::string f = DataDir() + "/exp_1/data.bin";
+  const std::string f = testing::Mimu4444Dir() + "/exp_1/data.bin";
   if (!std::filesystem::exists(f)) GTEST_SKIP() << "MIMU4444 recording not found: " << f;
   ArrayRecording rec;
-  ASSERT_TRUE(ReadMimu4444(f, &rec));
+  ASSERT_TRUE(testing::ReadMimu4444(f, &rec));
   json result;
   const Status s = RunArray(std::move(rec), Config(), &result);
   ASSERT_TRUE(s.ok()) << s.message();

@@ -641,6 +641,7 @@ TEST_F(HttpApi, OpenApiDocumentsEveryRouteTheServerHas) {
                                         "get /products/{product}/fleet",
                                         "get /recordings/{id}",
                                         "get /recordings/{id}/data",
+                                        "get /recordings/{id}/check",
                                         "get /recordings/{id}/segments",
                                         "get /healthz",
                                         "get /metrics",

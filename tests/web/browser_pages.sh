@@ -133,6 +133,8 @@ render rejected "/jobs/$j5"
 render missing /jobs/999999
 render devices /devices
 render recording "/recordings/$r7"
+# The check before fitting (issue #27) of that log on its page: verdicts and the statics' sphere.
+render check "/recordings/$r7?check=imu"
 render full "/jobs/$j8"
 render device-drift /devices/IMU-DRIFT
 render mag "/jobs/$jm"
@@ -207,14 +209,17 @@ reject failed 'class="advice"'
 expect recording '|a| (m/s²)'
 expect recording 'class="page-recording' 'plot-timeline-accel' 'plot-timeline-gyro' \
   'table-intervals' 'table-thresholds' "href=\"/jobs/$j7\""
+expect recording 'id="check"' 'Check before fitting' '<option'
+expect check 'id="check"' 'plot-check-upper' 'plot-check-lower' 'Saturation: 0 sample' \
+  'Coverage of IMU 0' 'Timing: 100.0 Hz'
 expect device-drift 'imu (2 accepted calibrations' 'noise (2 accepted calibrations' \
   'table-drift-imu' 'table-drift-noise' 'data-sensor="accelerometer"' 'data-sensor="gyroscope"' \
   'plot-drift-imu-scale' 'plot-drift-noise-accel' 'plot-drift-noise-gyro'
 expect mag 'plot-mag-sphere' 'plot-mag-residuals' 'plot-mag-coverage' 'Hard and soft iron' \
   'ArduPilot COMPASS parameters' 'PX4 CAL_MAG parameters'
 expect mag-device 'mag: hard-iron drift'
-for page in history pca array failed failed-imu device devices revoked rejected recording full \
-  device-drift running fleet plan plan-planar mag mag-device; do
+for page in history pca array failed failed-imu device devices revoked rejected recording check \
+  full device-drift running fleet plan plan-planar mag mag-device; do
   reject "$page" '<script' '<img'
   if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"
@@ -225,7 +230,7 @@ done
 if python3 "$(dirname "$0")/table_widths.py" "$chromium" "$tmp/profile-widths" "$base/" \
   "$base/jobs/$j2" "$base/jobs/$j3" "$base/jobs/$j4" "$base/jobs/$j5" "$base/jobs/$j8" \
   "$base/devices" "$base/devices/$hostile" "$base/devices/IMU-DRIFT" "$base/recordings/$r7" \
-  "$base/jobs/$jm" "$base/devices/MAG-1" \
+  "$base/recordings/$r7?check=imu" "$base/jobs/$jm" "$base/devices/MAG-1" \
   "$base/products/P-%3Cb%3E?method=pca" >"$tmp/widths.log" 2>&1; then
   passed=$((passed + 1))
 else

@@ -317,6 +317,7 @@ std::string RenderRecordingPage(const RecordingPageView& v) {
           "</dl></section>";
   if (v.log.is_object()) body += LogSection(v.log);
   body += SegmentsSection(v);
+  body += CheckSection(v);
   body += JobsSection(v);
   return RenderPage("Recording " + id, "page-recording", body);
 }

@@ -1,0 +1,322 @@
+// GET /api/v1/recordings/{id}/check (SPEC §10, issue #27 item 2) on a real server: the check's
+// statics and saturation counts are the imu job's (same count, bounds and pinned samples), a
+// millisecond time column, an accelerometer in g and a gyroscope in deg/s declared as SI are
+// named, and bad requests are refused naming what. Real data, skipped when absent: imu_tk's Xsens
+// recording ($CALIBD_IMU_TK_DATA, default /work/data/imu_tk; statics agree with the imu job's)
+// and the MIMU4444 recordings ($CALIBD_MIMU4444_DATA; the gyroscopes' saturation named).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <string>
+
+#include "core/imu_simulation.h"
+#include "methods/imu/imu_method.h"
+#include "tests/lib/mimu4444.h"
+#include "tests/server/http_test_util.h"
+
+namespace calibd::server {
+namespace {
+
+using nlohmann::json;
+using testing::TestServer;
+
+// An imu log as CSV: t times `t_scale`, accelerometer times `a_scale`, gyroscope times `g_scale`,
+// the gyroscope clipped at ±clip (clip <= 0: not clipped).
+std::string ImuCsv(const core::ImuSimulation& sim, double t_scale = 1, double a_scale = 1,
+                   double g_scale = 1, double clip = 0) {
+  std::string csv = "t,a0_x,a0_y,a0_z,g0_x,g0_y,g0_z\n";
+  char line[256];
+  for (Eigen::Index i = 0; i < sim.t.size(); ++i) {
+    double g[3];
+    for (int a = 0; a < 3; ++a) {
+      g[a] = sim.gyro(i, a) * g_scale;
+      if (clip > 0) g[a] = std::min(std::max(g[a], -clip), clip);
+    }
+    std::snprintf(line, sizeof line, "%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g\n",
+                  sim.t[i] * t_scale, sim.accel(i, 0) * a_scale, sim.accel(i, 1) * a_scale,
+                  sim.accel(i, 2) * a_scale, g[0], g[1], g[2]);
+    csv += line;
+  }
+  return csv;
+}
+
+core::ImuSimulation Simulated() {
+  core::ImuSimulationOptions o;
+  o.statics = 24;
+  o.rotation_duration = 1;
+  o.seed = 11;
+  core::ImuSimulation sim;
+  EXPECT_TRUE(core::SimulateImu(o, &sim).ok());
+  return sim;
+}
+
+// Uploads `csv` without a method (a recording, no job); its id.
+int64_t Store(const TestServer& server, const std::string& csv) {
+  auto res = server.Client().Post("/api/v1/recordings", csv, "text/csv");
+  if (!res || res->status != 201) {
+    ADD_FAILURE() << "upload: " << (res ? std::to_string(res->status) + res->body : "no answer");
+    return 0;
+  }
+  return json::parse(res->body).at("recording").at("id").get<int64_t>();
+}
+
+// GET the check; its status and JSON body.
+int Check(const TestServer& server, const std::string& path, json* body) {
+  auto res = server.Client().Get(path.c_str());
+  if (!res) return 0;
+  *body = json::parse(res->body, nullptr, false);
+  return res->status;
+}
+
+std::string Query(const json& config) {
+  std::string q;
+  for (const auto& [key, value] : config.items()) {
+    q += (q.empty() ? "?" : "&") + key + "=" +
+         httplib::detail::encode_query_param(value.is_string() ? value.get<std::string>()
+                                                               : value.dump());
+  }
+  return q;
+}
+
+// The check and the job on the same recording with the same config: same statics (count and
+// bounds) and the same saturation (per channel and rows). Returns the check.
+json ExpectCheckAgreesWithJob(const TestServer& server, const std::string& csv,
+                              const json& config) {
+  const json job = server.UploadAndWait(csv, config);
+  EXPECT_EQ(job.value("status", ""), "succeeded") << job.dump().substr(0, 600);
+  const int64_t recording = job.value("recording_id", int64_t{0});
+  json check;
+  EXPECT_EQ(Check(server,
+                  "/api/v1/recordings/" + std::to_string(recording) +
+                      "/check?job=" + std::to_string(job.value("id", int64_t{0})),
+                  &check),
+            200)
+      << check.dump();
+  const json& d = job.at("result").at("diagnostics");
+  const json& statics = check.at("statics");
+  EXPECT_EQ(statics.size(), d.at("statics").size());
+  for (size_t i = 0; i < statics.size() && i < d.at("statics").size(); ++i) {
+    EXPECT_EQ(statics[i].at("start"), d["statics"][i].at("start")) << i;
+    EXPECT_EQ(statics[i].at("end"), d["statics"][i].at("end")) << i;
+    EXPECT_EQ(statics[i].at("samples"), d["statics"][i].at("samples")) << i;
+  }
+  EXPECT_EQ(check.at("saturation").at("samples"), d.at("saturated_samples"));
+  if (d.contains("saturation")) {
+    EXPECT_EQ(check.at("saturation"), d.at("saturation"));
+  } else {
+    EXPECT_TRUE(check.at("saturation").at("channels").empty()) << check["saturation"].dump();
+  }
+  EXPECT_EQ(check.at("threshold_choice"), d.at("threshold_choice"));
+  return check;
+}
+
+TEST(RecordingCheck, StaticsAndSaturationAreTheJobs) {
+  TestServer server;
+  ASSERT_TRUE(server.error().empty()) << server.error();
+  const core::ImuSimulation sim = Simulated();
+  std::string unused;
+  json config, truth;
+  core::ImuSimulationOptions o;
+  o.statics = 24;
+  ASSERT_TRUE(SimulateImuFiles(o, &unused, &config, &truth).ok());
+  // Clean: 24 statics, nothing pinned, every direction covered.
+  json check = ExpectCheckAgreesWithJob(server, ImuCsv(sim), config);
+  EXPECT_EQ(check.at("statics").size(), 24u);
+  EXPECT_TRUE(check.at("coverage").at(0).at("sufficient").get<bool>()) << check["coverage"];
+  EXPECT_TRUE(check.at("units").empty()) << check["units"];
+  EXPECT_FALSE(check.contains("job_would_fail"));
+  EXPECT_NEAR(check.at("timing").at("rate").get<double>(), 100, 1e-3);
+  EXPECT_EQ(check.at("timing").at("gap_count"), 0);
+  EXPECT_TRUE(check.at("predicted").is_null());
+  for (const json& s : check.at("statics")) {
+    EXPECT_NEAR(s.at("accel_norm").get<double>(), 9.80665, 0.3) << s;  // a few % scale errors
+  }
+  // Clipped at 0.7 of the largest rate: the pinned samples are the job's, channel by channel.
+  check = ExpectCheckAgreesWithJob(
+      server, ImuCsv(sim, 1, 1, 1, 0.7 * sim.gyro.cwiseAbs().maxCoeff()), config);
+  EXPECT_GT(check.at("saturation").at("samples").get<int64_t>(), 20);
+  EXPECT_FALSE(check.at("saturation").at("channels").empty());
+}
+
+TEST(RecordingCheck, NamesMillisecondsGAndDegreesPerSecond) {
+  TestServer server;
+  ASSERT_TRUE(server.error().empty()) << server.error();
+  const core::ImuSimulation sim = Simulated();
+  json check;
+  // t in ms: named (the job would refuse it), no statics found on it.
+  const int64_t ms = Store(server, ImuCsv(sim, 1000));
+  ASSERT_EQ(Check(server, "/api/v1/recordings/" + std::to_string(ms) + "/check?method=imu", &check),
+            200)
+      << check.dump();
+  ASSERT_EQ(check.at("units").size(), 1u) << check["units"];
+  EXPECT_EQ(check["units"][0].at("quantity"), "time");
+  EXPECT_EQ(check["units"][0].at("likely"), "ms");
+  EXPECT_NE(check["units"][0].at("message").get<std::string>().find("milliseconds"),
+            std::string::npos);
+  EXPECT_TRUE(check.contains("job_would_fail"));
+  EXPECT_TRUE(check.at("statics").is_null());
+  // With time_unit the same log checks like the seconds one.
+  ASSERT_EQ(
+      Check(server, "/api/v1/recordings/" + std::to_string(ms) + "/check?method=imu&time_unit=ms",
+            &check),
+      200);
+  EXPECT_TRUE(check.at("units").empty()) << check["units"];
+  EXPECT_EQ(check.at("statics").size(), 24u);
+  // Accelerometer in g and gyroscope in deg/s, declared as SI (the default).
+  const int64_t g = Store(server, ImuCsv(sim, 1, 1 / 9.80665, 180 / M_PI));
+  ASSERT_EQ(Check(server, "/api/v1/recordings/" + std::to_string(g) + "/check?method=imu", &check),
+            200)
+      << check.dump();
+  ASSERT_EQ(check.at("units").size(), 2u) << check["units"];
+  EXPECT_EQ(check["units"][0].at("quantity"), "accelerometer");
+  EXPECT_EQ(check["units"][0].at("likely"), "g");
+  EXPECT_EQ(check["units"][1].at("quantity"), "gyroscope");
+  EXPECT_EQ(check["units"][1].at("likely"), "deg/s");
+  // Declared right, nothing is named.
+  ASSERT_EQ(Check(server,
+                  "/api/v1/recordings/" + std::to_string(g) +
+                      "/check?method=imu&accel_unit=g&gyro_unit=deg%2Fs",
+                  &check),
+            200);
+  EXPECT_TRUE(check.at("units").empty()) << check["units"];
+}
+
+TEST(RecordingCheck, RefusesNamingWhat) {
+  TestServer server;
+  ASSERT_TRUE(server.error().empty()) << server.error();
+  const int64_t id = Store(server, ImuCsv(Simulated()));
+  const std::string base = "/api/v1/recordings/" + std::to_string(id) + "/check";
+  json body;
+  EXPECT_EQ(Check(server, "/api/v1/recordings/999999/check?method=imu", &body), 404);
+  EXPECT_EQ(Check(server, "/api/v1/recordings/x/check?method=imu", &body), 404);
+  EXPECT_EQ(Check(server, base, &body), 400);
+  EXPECT_EQ(body.at("error").value("field", ""), "method") << body;
+  EXPECT_EQ(Check(server, base + "?method=nope", &body), 400);
+  EXPECT_EQ(Check(server, base + "?method=pca", &body), 400);
+  EXPECT_EQ(Check(server, base + "?method=imu&static_window=-1", &body), 400);
+  EXPECT_EQ(body.at("error").value("field", ""), "static_window") << body;
+  EXPECT_EQ(Check(server, base + "?method=imu&bogus=1", &body), 400);
+  EXPECT_EQ(Check(server, base + "?job=77", &body), 404);
+  EXPECT_EQ(Check(server, base + "?job=1&method=imu", &body), 400);
+  // A method without statics gives timing and says what it leaves out.
+  ASSERT_EQ(Check(server, base + "?method=noise", &body), 200) << body;
+  EXPECT_TRUE(body.at("statics").is_null());
+  EXPECT_TRUE(body.at("saturation").at("channels").empty()) << body;
+  EXPECT_FALSE(body.at("notes").empty());
+  EXPECT_NEAR(body.at("timing").at("rate").get<double>(), 100, 1e-3);
+}
+
+TEST(RecordingCheck, NoiseSaturationIsTheJobs) {
+  TestServer server;
+  ASSERT_TRUE(server.error().empty()) << server.error();
+  const core::ImuSimulation sim = Simulated();
+  // A clipped log: the noise job refuses it naming the channels; the check names the same.
+  const json job = server.UploadAndWait(ImuCsv(sim, 1, 1, 1, 0.7 * sim.gyro.cwiseAbs().maxCoeff()),
+                                        {{"method", "noise"}});
+  ASSERT_EQ(job.value("status", ""), "failed") << job.dump().substr(0, 400);
+  json check;
+  ASSERT_EQ(Check(server,
+                  "/api/v1/recordings/" + std::to_string(job.at("recording_id").get<int64_t>()) +
+                      "/check?job=" + std::to_string(job.at("id").get<int64_t>()),
+                  &check),
+            200)
+      << check.dump();
+  // The failed job keeps its partial diagnostics with its error.
+  const json& sat = job.at("error").at("diagnostics").at("diagnostics").at("saturation");
+  EXPECT_EQ(check.at("saturation"), sat);
+  EXPECT_GT(sat.at("samples").get<int64_t>(), 20);
+  EXPECT_NE(job.at("error").at("message").get<std::string>().find(
+                check.at("job_would_fail").get<std::string>()),
+            std::string::npos)
+      << job.at("error") << check.at("job_would_fail");
+}
+
+// ----- Real data (skipped when absent).
+
+std::string ImuTkDir() {
+  const char* env = std::getenv("CALIBD_IMU_TK_DATA");
+  return env != nullptr && *env != '\0' ? env : "/work/data/imu_tk";
+}
+
+TEST(RecordingCheck, ImuTkXsensStaticsAreTheJobs) {
+  std::ifstream acc(ImuTkDir() + "/xsens_acc.mat"), gyr(ImuTkDir() + "/xsens_gyro.mat");
+  if (!acc || !gyr) GTEST_SKIP() << "imu_tk's xsens_*.mat not found in " << ImuTkDir();
+  std::string csv = "t,a0_x,a0_y,a0_z,g0_x,g0_y,g0_z\n";
+  double v[8];
+  char buf[256];
+  while ((acc >> v[0] >> v[1] >> v[2] >> v[3]) && (gyr >> v[4] >> v[5] >> v[6] >> v[7])) {
+    std::snprintf(buf, sizeof buf, "%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", v[0], v[1], v[2],
+                  v[3], v[5], v[6], v[7]);
+    csv += buf;
+  }
+  TestServer server;
+  ASSERT_TRUE(server.error().empty()) << server.error();
+  // As tests/core/imu_tk_data_test.cc: ±8 g over 16 bits, imu_tk's gyroscope guess, offset binary.
+  const json config = {{"method", "imu"},
+                       {"accel_unit", 8 * 9.80665 / 32768},
+                       {"gyro_unit", 1.0 / 6258},
+                       {"gravity", 9.81744},
+                       {"max_scale_deviation", 0.5},
+                       {"nominal_accel_bias", 32768},
+                       {"nominal_gyro_bias", 32768}};
+  const json check = ExpectCheckAgreesWithJob(server, csv, config);
+  EXPECT_GE(check.at("statics").size(), 30u);  // imu_tk's protocol: 36 or more positions
+  EXPECT_TRUE(check.at("units").empty()) << check["units"];
+  // The query form of the same config gives the same statics.
+  json by_query;
+  ASSERT_EQ(Check(server,
+                  "/api/v1/recordings/" + std::to_string(check.at("recording_id").get<int64_t>()) +
+                      "/check" + Query(config),
+                  &by_query),
+            200);
+  EXPECT_EQ(by_query.at("statics"), check.at("statics"));
+}
+
+TEST(RecordingCheck, Mimu4444SaturationNamed) {
+  const std::string f = testing::Mimu4444Dir() + "/exp_1/data.bin";
+  ArrayRecording rec;
+  if (!testing::ReadMimu4444(f, &rec)) GTEST_SKIP() << "MIMU4444 exp_1 not found at " << f;
+  std::string csv = "t";
+  for (const auto* names : {&rec.accel_names, &rec.gyro_names}) {
+    for (const std::string& n : *names) csv += "," + n + "_x," + n + "_y," + n + "_z";
+  }
+  csv += "\n";
+  char buf[32];
+  for (Eigen::Index i = 0; i < rec.t.size(); ++i) {
+    std::snprintf(buf, sizeof buf, "%.9f", rec.t[i]);
+    csv += buf;
+    for (const Eigen::MatrixXd* m : {&rec.accel, &rec.gyro}) {
+      for (Eigen::Index c = 0; c < m->cols(); ++c) {
+        std::snprintf(buf, sizeof buf, ",%.10g", (*m)(i, c));
+        csv += buf;
+      }
+    }
+    csv += "\n";
+  }
+  TestServer server;
+  ASSERT_TRUE(server.error().empty()) << server.error();
+  const int64_t id = Store(server, csv);
+  json check;
+  ASSERT_EQ(
+      Check(server,
+            "/api/v1/recordings/" + std::to_string(id) + "/check?method=imu&gyro_unit=deg%2Fs",
+            &check),
+      200)
+      << check.dump().substr(0, 400);
+  const json& sat = check.at("saturation");
+  // The 1 035 samples of exp_1 pinned at the int16 full scale (tests/server/
+  // array_full_mimu4444_test.cc), gyroscopes only.
+  ASSERT_FALSE(sat.at("channels").empty());
+  int64_t pinned = 0;
+  for (const json& c : sat.at("channels")) {
+    EXPECT_EQ(c.at("name").get<std::string>()[0], 'g') << c;
+    pinned += c.at("pinned_low").get<int64_t>() + c.at("pinned_high").get<int64_t>();
+  }
+  EXPECT_GE(pinned, 1000);
+  EXPECT_GT(sat.at("samples").get<int64_t>(), 0);
+}
+
+}  // namespace
+}  // namespace calibd::server
