@@ -4,8 +4,6 @@
 #include "formats/mcap.h"
 
 #include <gtest/gtest.h>
-#include <lz4frame.h>
-#include <zstd.h>
 
 #include <algorithm>
 #include <cstdint>
@@ -14,80 +12,26 @@
 #include <string>
 #include <vector>
 
+#include "tests/formats/mcap_writer.h"
 #include "tests/formats/ros2_cdr_writer.h"
 
 namespace calibd::server {
 namespace {
 
+using testing::Channel;
+using testing::Chunk;
 using testing::ImuCdr;
 using testing::MagCdr;
+using testing::McapBegin;
+using testing::McapEnd;
+using testing::Message;
+using testing::Schema;
 using testing::TemperatureCdr;
-
-// --- An MCAP writer. ---
-template <typename T>
-void Put(T v, std::string* out) {
-  out->append(reinterpret_cast<const char*>(&v), sizeof(T));
-}
-void PutString(const std::string& s, std::string* out) {
-  Put(static_cast<uint32_t>(s.size()), out);
-  *out += s;
-}
-std::string Record(uint8_t op, const std::string& content) {
-  std::string r(1, static_cast<char>(op));
-  Put(static_cast<uint64_t>(content.size()), &r);
-  return r + content;
-}
-std::string Schema(uint16_t id, const std::string& name) {
-  std::string c;
-  Put(id, &c);
-  PutString(name, &c);
-  PutString("ros2msg", &c);
-  PutString("", &c);
-  return Record(0x03, c);
-}
-std::string Channel(uint16_t id, uint16_t schema, const std::string& topic) {
-  std::string c;
-  Put(id, &c);
-  Put(schema, &c);
-  PutString(topic, &c);
-  PutString("cdr", &c);
-  Put(uint32_t{0}, &c);  // metadata: empty map
-  return Record(0x04, c);
-}
-std::string Message(uint16_t channel, uint64_t log_time, const std::string& data) {
-  std::string c;
-  Put(channel, &c);
-  Put(uint32_t{0}, &c);
-  Put(log_time, &c);
-  Put(log_time, &c);
-  return Record(0x05, c + data);
-}
-std::string Chunk(const std::string& records, const std::string& compression) {
-  std::string stored = records;
-  if (compression == "lz4") {
-    stored.resize(LZ4F_compressFrameBound(records.size(), nullptr));
-    stored.resize(
-        LZ4F_compressFrame(stored.data(), stored.size(), records.data(), records.size(), nullptr));
-  } else if (compression == "zstd") {
-    stored.resize(ZSTD_compressBound(records.size()));
-    stored.resize(ZSTD_compress(stored.data(), stored.size(), records.data(), records.size(), 3));
-  }
-  std::string c;
-  Put(uint64_t{0}, &c);
-  Put(uint64_t{0}, &c);
-  Put(static_cast<uint64_t>(records.size()), &c);
-  Put(uint32_t{0}, &c);
-  PutString(compression, &c);
-  Put(static_cast<uint64_t>(stored.size()), &c);
-  return Record(0x06, c + stored);
-}
-
-const std::string kMagic("\x89MCAP0\r\n", 8);
 
 // n samples on /imu (stamps 50 s + 2 ms i + 3 ns), /mag (no stamp: log time 7 s + i µs), /temp,
 // in chunks of 10 samples; schemas and channels in the first chunk.
 std::string OwnMcap(int n, const std::string& compression, bool big_endian) {
-  std::string file = kMagic + Record(0x01, std::string(8, '\0'));
+  std::string file = McapBegin();
   std::string records = Schema(1, "sensor_msgs/msg/Imu") +
                         Schema(2, "sensor_msgs/msg/MagneticField") +
                         Schema(3, "sensor_msgs/msg/Temperature") +
@@ -107,7 +51,7 @@ std::string OwnMcap(int n, const std::string& compression, bool big_endian) {
       records.clear();
     }
   }
-  return file + Record(0x0F, std::string(4, '\0')) + Record(0x02, std::string(20, '\0')) + kMagic;
+  return file + McapEnd();
 }
 
 const SensorStream* Find(const SensorLog& log, const std::string& topic, StreamKind kind) {

@@ -3,9 +3,7 @@
 #include "formats/rosbag2_sqlite.h"
 
 #include <gtest/gtest.h>
-#include <sqlite3.h>
 
-#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -13,6 +11,7 @@
 #include <string>
 
 #include "formats/recording.h"
+#include "tests/formats/db3_writer.h"
 #include "tests/formats/ros2_cdr_writer.h"
 
 namespace calibd::server {
@@ -20,31 +19,10 @@ namespace {
 
 // A .db3 of n messages each on /imu (stamps 10 s + i ms), /mag (no stamp) and /chatter.
 std::string WriteDb3(const std::string& name, int n, bool short_imu = false) {
-  std::string path = ::testing::TempDir() + name;
-  std::remove(path.c_str());
-  sqlite3* db = nullptr;
-  EXPECT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
-  EXPECT_EQ(sqlite3_exec(db,
-                         "CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL, type "
-                         "TEXT NOT NULL, serialization_format TEXT NOT NULL, offered_qos_profiles "
-                         "TEXT NOT NULL);"
-                         "CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL,"
-                         " timestamp INTEGER NOT NULL, data BLOB NOT NULL);"
-                         "INSERT INTO topics VALUES(1, '/imu', 'sensor_msgs/msg/Imu', 'cdr', ''),"
-                         "(2, '/mag', 'sensor_msgs/msg/MagneticField', 'cdr', ''),"
-                         "(3, '/chatter', 'std_msgs/msg/String', 'cdr', '');",
-                         nullptr, nullptr, nullptr),
-            SQLITE_OK);
-  sqlite3_stmt* insert = nullptr;
-  sqlite3_prepare_v2(db, "INSERT INTO messages(topic_id, timestamp, data) VALUES(?, ?, ?)", -1,
-                     &insert, nullptr);
-  auto add = [&](int topic, int64_t t, const std::string& data) {
-    sqlite3_bind_int(insert, 1, topic);
-    sqlite3_bind_int64(insert, 2, t);
-    sqlite3_bind_blob(insert, 3, data.data(), static_cast<int>(data.size()), SQLITE_TRANSIENT);
-    EXPECT_EQ(sqlite3_step(insert), SQLITE_DONE);
-    sqlite3_reset(insert);
-  };
+  testing::Db3Writer db(::testing::TempDir() + name);
+  db.Topic(1, "/imu", "sensor_msgs/msg/Imu");
+  db.Topic(2, "/mag", "sensor_msgs/msg/MagneticField");
+  db.Topic(3, "/chatter", "std_msgs/msg/String");
   for (int i = 0; i < n; ++i) {
     const double accel[3] = {0.5 * i, 9.75, -0.25};
     const double gyro[3] = {0.125, -0.01 * i, 0};
@@ -52,13 +30,12 @@ std::string WriteDb3(const std::string& name, int n, bool short_imu = false) {
     const int64_t t = 1'700'000'000'000'000'000 + 1000 * i;
     std::string imu = testing::ImuCdr(false, 10, 1'000'000u * i, accel, gyro);
     if (short_imu && i == n - 1) imu.resize(40);
-    add(1, t, imu);
-    add(2, t, testing::MagCdr(tesla));
-    add(3, t, std::string("\0\1\0\0\2\0\0\0a\0", 10));
+    db.Add(1, t, imu);
+    db.Add(2, t, testing::MagCdr(tesla));
+    db.Add(3, t, std::string("\0\1\0\0\2\0\0\0a\0", 10));
   }
-  sqlite3_finalize(insert);
-  sqlite3_close(db);
-  return path;
+  db.Close();
+  return db.path();
 }
 
 // An upload's bytes: recognised by "SQLite format 3", written to a private temporary file for
