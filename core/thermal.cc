@@ -167,7 +167,7 @@ void BiasAt(const ThermalPolyFit& f, int g, double x, double* value, double* var
   *var = v.dot(f.full_covariance * v);
 }
 
-// Stage 4 for one channel: heating and cooling apart at the chosen order.
+// Stage 4 for one channel: heating and cooling apart at the curve's order.
 void CompareHeatingCooling(const std::vector<ThermalWindow>& windows, int c, double t_ref,
                            int orientations, double scale, int grid_points, double critical_z,
                            ThermalChannel* ch) {

@@ -14,16 +14,23 @@
 //       y_w = b_g(w) + Σ_{k=1..p} c_k (T_w − t_ref)^k,      weights 1/σ_w²,
 //     with one intercept b_g per orientation group for accelerometers (gravity is part of it) and
 //     one for gyroscopes. Solved by Householder QR on (T − t_ref)/h, h = half the range, so order 5
-//     over 60 °C stays well conditioned. The order p ∈ [0, max_order] minimises AICc with the
-//     noise scale estimated (n ln(χ²/n) + 2k + 2k(k+1)/(n−k−1), k the regression parameters plus
-//     the scale), so σ_w that are uniformly too small do not inflate the order; the table of every
-//     order is kept.
-//  3. Uncertainty (SPEC §7 σ convention): crb = (AᵀWA)⁻¹; when χ²/dof exceeds its one-sided 1 %
-//     quantile under the white-noise model (1 + 2.326 √(2/dof)), the primary is chi2_scaled (crb ×
-//     χ²/dof), else crb. The 1σ band of the curve c(T) = Σ c_k (T − t_ref)^k on a grid across
-//     [t_min, t_max] is √(vᵀ C v), v_k = (T − t_ref)^k.
-//  4. Hysteresis: heating and cooling windows fitted apart at the chosen order (each with its own
-//     intercepts); their difference on the grid across the temperatures both cover, z = Δ/σ_Δ,
+//     over 60 °C stays well conditioned. Every order p ∈ [0, P] is fitted (P = max_order, or less
+//     where fewer windows leave no residual degree of freedom) and the curves are averaged with
+//     BIC weights w_p ∝ exp(−BIC_p/2), BIC_p = n ln(χ²_p/n) + k ln n (k the regression parameters
+//     plus the noise scale: σ_w that are uniformly too small do not favour high orders). Choosing
+//     one order on the same data either overfits (AICc: order 4–5 in ~25 % of logs whose truth is
+//     cubic) or, with a stricter criterion, drops a weak term and leaves a bias the band does not
+//     cover; the average's covariance Σ w_p (C_p + d_p d_pᵀ), d_p the order's parameters minus the
+//     average (zero-padded to P), includes that between-order spread. The fit's order is P (the
+//     length of the averaged coefficients); the table keeps every order's χ², BIC and weight; χ²,
+//     dof and the basis are the heaviest order's.
+//  3. Uncertainty (SPEC §7 σ convention), per order: crb = (AᵀWA)⁻¹; when χ²/dof exceeds its
+//     one-sided 1 % quantile under the white-noise model (1 + 2.326 √(2/dof)), the primary is
+//     chi2_scaled (crb × χ²/dof), else crb; averaged as in stage 2 (the crb without the spread).
+//     The 1σ band of the curve c(T) = Σ c_k (T − t_ref)^k on a grid across [t_min, t_max] is
+//     √(vᵀ C v), v_k = (T − t_ref)^k.
+//  4. Hysteresis: heating and cooling windows fitted apart at the curve's order P (each with its
+//     own intercepts); their difference on the grid across the temperatures both cover, z = Δ/σ_Δ,
 //     flagged when |z| > Φ⁻¹(1 − α/(2 m)), m = channels × grid points (Bonferroni: the false-alarm
 //     rate over all channels and temperatures is at most α, default 1 %; the grid points are
 //     correlated, so it is below α).
@@ -34,8 +41,8 @@
 //     all. kEstimate needs the log to heat and cool over a common range (else kNotDeterminable:
 //     a single warm-up passes each temperature once, so a lag cannot be told from another curve);
 //     τ minimises the profile −2 ln L = Σ_channels n ln χ²_c(τ) over [0, lag_max] (a log grid,
-//     then golden section), the orders chosen at τ̂. Its σ and the curves' extra σ come from the
-//     Gauss–Newton information with τ as a parameter shared by the six channels: with M_c the
+//     then golden section), each channel at its order P. Its σ and the curves' extra σ come from
+//     the Gauss–Newton information with τ as a parameter shared by the six channels: with M_c the
 //     channel's information and b_c = Aᵀ W ∂y/∂τ, S = Σ_c (d_c − b_cᵀ M_c⁻¹ b_c)/s_c,
 //     σ_τ² = 1/S and C_c += h_c h_cᵀ/S, h_c = M_c⁻¹ b_c (s_c the channel's χ² scale, 1 for crb).
 // Not done (the result says so): the accelerometer bias at t_ref (`at_t_ref`) is null even with
@@ -100,11 +107,12 @@ struct ThermalWindow {
   Eigen::Matrix<double, 6, 1> mean_std;  // σ of the mean, SI
 };
 
-// One row of the order-selection table.
+// One row of the order table (stage 2).
 struct ThermalOrderRow {
   int order = 0;
   double chi2 = 0;
-  double aicc = 0;  // +inf where n − k − 1 <= 0
+  double bic = 0;
+  double weight = 0;  // in [0, 1], summing to 1 over the table: the order's share of the curve
 };
 
 // One weighted polynomial fit (one channel, one set of windows).
@@ -168,7 +176,7 @@ Status CalibrateThermal(const Eigen::VectorXd& t, const std::vector<ThermalImuIn
                         const ThermalOptions& options, ThermalResult* out);
 
 // Stage 2 and 3 for one channel, exposed for tests: x = T − t_ref (°C), group per window (in
-// [0, groups)), the order chosen in [min_order, max_order] (equal: a fixed order). `scale` (> 0)
+// [0, groups)), the orders min_order..max_order averaged (equal: a fixed order). `scale` (> 0)
 // is the unit of x the design uses internally (half the range).
 Status FitThermalPolynomial(const Eigen::VectorXd& x, const Eigen::VectorXd& y,
                             const Eigen::VectorXd& sigma, const std::vector<int>& group, int groups,

@@ -1,8 +1,9 @@
-// Stages 2 and 3 of core/thermal.h: the weighted polynomial fit of one channel, its order chosen
-// by AICc, its covariance under the σ convention, and the curve's band.
+// Stages 2 and 3 of core/thermal.h: the weighted polynomial fits of one channel at every order,
+// their BIC-weighted average, its covariance under the σ convention, and the curve's band.
 #include <Eigen/QR>
 #include <cmath>
 #include <limits>
+#include <vector>
 
 #include "core/thermal.h"
 
@@ -44,10 +45,39 @@ ScaledFit SolveScaled(const Eigen::VectorXd& u, const Eigen::VectorXd& y,
   return fit;
 }
 
-double Aicc(double chi2, int n, int k) {
-  if (n - k - 1 <= 0) return std::numeric_limits<double>::infinity();
-  const double rss = std::max(chi2, 1e-300);
-  return n * std::log(rss / n) + 2.0 * k + 2.0 * k * (k + 1.0) / (n - k - 1.0);
+// BIC with the noise scale estimated: n ln(χ²/n) + k ln n, k the regression parameters plus the
+// scale.
+double Bic(double chi2, int n, int k) {
+  return n * std::log(std::max(chi2, 1e-300) / n) + k * std::log(static_cast<double>(n));
+}
+
+// One order's fit unscaled to x and padded to `top`: parameters (intercepts, then c_1..c_top) and
+// their white-noise and primary covariances.
+struct OrderFit {
+  Eigen::VectorXd params;
+  Eigen::MatrixXd crb, primary;
+  double chi2 = 0;
+  int dof = 0;
+  bool scaled = false;
+};
+
+OrderFit FitOrder(const Eigen::VectorXd& u, const Eigen::VectorXd& y, const Eigen::VectorXd& sigma,
+                  const std::vector<int>& group, int groups, int order, int top, double scale) {
+  const int n = static_cast<int>(u.size()), m = groups + order, padded = groups + top;
+  const ScaledFit f = SolveScaled(u, y, sigma, group, groups, order);
+  Eigen::VectorXd unscale = Eigen::VectorXd::Ones(m);
+  for (int k = 1; k <= order; ++k) unscale(groups + k - 1) = std::pow(scale, -k);
+  OrderFit out;
+  out.params = Eigen::VectorXd::Zero(padded);
+  out.params.head(m) = unscale.asDiagonal() * f.params;
+  out.crb = Eigen::MatrixXd::Zero(padded, padded);
+  out.crb.topLeftCorner(m, m) = unscale.asDiagonal() * f.cov * unscale.asDiagonal();
+  out.chi2 = f.chi2;
+  out.dof = n - m;
+  const double chi2_per_dof = out.dof > 0 ? f.chi2 / out.dof : 1.0;
+  out.scaled = out.dof > 0 && chi2_per_dof > 1 + 2.326 * std::sqrt(2.0 / out.dof);
+  out.primary = out.scaled ? Eigen::MatrixXd(out.crb * chi2_per_dof) : out.crb;
+  return out;
 }
 
 }  // namespace
@@ -66,44 +96,51 @@ Status FitThermalPolynomial(const Eigen::VectorXd& x, const Eigen::VectorXd& y,
                                   " has a non-finite mean or a σ that is not positive");
     }
   }
-  const Eigen::VectorXd u = x / scale;
   *out = ThermalPolyFit();
-  int best = -1;
-  double best_aicc = std::numeric_limits<double>::infinity();
-  for (int p = min_order; p <= max_order; ++p) {
-    const int k = groups + p + 1;  // regression parameters plus the noise scale
-    if (n - groups - p < 1) break;
-    const ScaledFit f = SolveScaled(u, y, sigma, group, groups, p);
-    ThermalOrderRow row{p, f.chi2, Aicc(f.chi2, n, k)};
-    out->table.push_back(row);
-    if (row.aicc < best_aicc) {
-      best_aicc = row.aicc;
-      best = p;
-    }
-  }
-  if (best < 0) {
+  // Orders with at least one residual degree of freedom (a noise check).
+  const int top = std::min(max_order, n - groups - 1);
+  if (top < min_order) {
     return Status::NotDeterminable("thermal fit: " + std::to_string(n) + " windows for " +
                                    std::to_string(groups) +
                                    " orientation groups: too few to fit even a constant with a "
                                    "noise check; record longer statics");
   }
-  const ScaledFit f = SolveScaled(u, y, sigma, group, groups, best);
-  const int m = groups + best;
-  Eigen::VectorXd unscale = Eigen::VectorXd::Ones(m);
-  for (int k = 1; k <= best; ++k) unscale(groups + k - 1) = std::pow(scale, -k);
-  const Eigen::VectorXd params = unscale.asDiagonal() * f.params;
-  const Eigen::MatrixXd crb_full = unscale.asDiagonal() * f.cov * unscale.asDiagonal();
-  out->order = best;
-  out->chi2 = f.chi2;
-  out->dof = n - m;
-  const double chi2_per_dof = out->dof > 0 ? f.chi2 / out->dof : 1.0;
-  const bool scaled = out->dof > 0 && chi2_per_dof > 1 + 2.326 * std::sqrt(2.0 / out->dof);
-  out->basis = scaled ? "chi2_scaled" : "crb";
-  out->full_covariance = scaled ? Eigen::MatrixXd(crb_full * chi2_per_dof) : crb_full;
+  const Eigen::VectorXd u = x / scale;
+  std::vector<OrderFit> fits;
+  double bic_min = std::numeric_limits<double>::infinity();
+  for (int p = min_order; p <= top; ++p) {
+    fits.push_back(FitOrder(u, y, sigma, group, groups, p, top, scale));
+    out->table.push_back({p, fits.back().chi2, Bic(fits.back().chi2, n, groups + p + 1), 0});
+    bic_min = std::min(bic_min, out->table.back().bic);
+  }
+  // Weights ∝ exp(−ΔBIC/2); the curve is their average, its covariance the mixture's (each
+  // order's primary plus the spread of the orders' parameters about the average).
+  double total = 0;
+  for (ThermalOrderRow& row : out->table)
+    total += row.weight = std::exp(-0.5 * (row.bic - bic_min));
+  const int m = groups + top;
+  Eigen::VectorXd params = Eigen::VectorXd::Zero(m);
+  size_t heaviest = 0;
+  for (size_t i = 0; i < fits.size(); ++i) {
+    out->table[i].weight /= total;
+    params += out->table[i].weight * fits[i].params;
+    if (out->table[i].weight > out->table[heaviest].weight) heaviest = i;
+  }
+  out->full_covariance = Eigen::MatrixXd::Zero(m, m);
+  Eigen::MatrixXd crb_full = Eigen::MatrixXd::Zero(m, m);
+  for (size_t i = 0; i < fits.size(); ++i) {
+    const Eigen::VectorXd d = fits[i].params - params;
+    out->full_covariance += out->table[i].weight * (fits[i].primary + d * d.transpose());
+    crb_full += out->table[i].weight * fits[i].crb;
+  }
+  out->order = top;
+  out->chi2 = fits[heaviest].chi2;
+  out->dof = fits[heaviest].dof;
+  out->basis = fits[heaviest].scaled ? "chi2_scaled" : "crb";
   out->intercepts = params.head(groups);
-  out->coefficients = params.tail(best);
-  out->crb = crb_full.bottomRightCorner(best, best);
-  out->covariance = out->full_covariance.bottomRightCorner(best, best);
+  out->coefficients = params.tail(top);
+  out->crb = crb_full.bottomRightCorner(top, top);
+  out->covariance = out->full_covariance.bottomRightCorner(top, top);
   out->intercept_std = std::sqrt(out->full_covariance(0, 0));
   double rss = 0, noise = 0;
   for (int i = 0; i < n; ++i) {

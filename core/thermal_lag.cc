@@ -191,7 +191,7 @@ Status EstimateLag(const Eigen::VectorXd& t, const Eigen::VectorXd& reading,
     if (!status.ok()) return status;
     orders[c] = fit.order;
   }
-  // Golden section between the grid's neighbours of the minimum, at the chosen orders.
+  // Golden section between the grid's neighbours of the minimum, at the curves' orders.
   double a = imu->lag_grid(std::max<Eigen::Index>(0, best - 1));
   double b = imu->lag_grid(std::min<Eigen::Index>(m - 1, best + 1));
   const double g = 0.5 * (std::sqrt(5.0) - 1);

@@ -13,7 +13,7 @@
 //   diagnostics: {"order_selection", "hysteresis_test", "imus": [{"name", "windows" [...],
 //     "orientations", "heating_windows", "cooling_windows", "temperature_rate": {min, max},
 //     "hysteresis_critical_z", "channels": [{"name", "order", "basis", "chi2_per_dof",
-//     "residual_rms", "noise_rms", "order_table": [{order, chi2, aicc}], "points":
+//     "residual_rms", "noise_rms", "order_table": [{order, chi2, bic, weight}], "points":
 //     {"temperature", "deviation", "std"}, "hysteresis": {...}}], "lag": {"mode", "tau",
 //     "profile": {"tau", "minus_2_log_likelihood"} (estimate only)}}]}
 // Config keys: method, device, accel_unit, gyro_unit (formats/inertial_log.h), t_ref, max_order

@@ -69,12 +69,12 @@ std::string ChannelPlot(const json& pimu, const json& uimu, const json& ch, int 
 std::string OrderTable(const json& d) {
   std::string h =
       "<table><tr><th>channel</th><th>order</th><th>chi2/dof</th><th>residual RMS</th>"
-      "<th>noise RMS</th><th>AICc by order</th><th>hysteresis max |z|</th></tr>";
+      "<th>noise RMS</th><th>BIC weight by order</th><th>hysteresis max |z|</th></tr>";
   for (const json& ch : d.at("channels")) {
-    std::string aicc;
+    std::string weights;
     for (const json& row : ch.at("order_table")) {
-      aicc +=
-          std::to_string(row.at("order").get<int>()) + ": " + ScalarText(&row.at("aicc"), 4) + " ";
+      weights += std::to_string(row.at("order").get<int>()) + ": " +
+                 FormatSig(row.at("weight").get<double>(), 2) + " ";
     }
     const json& hy = ch.at("hysteresis");
     const std::string z = hy.at("tested").get<bool>()
@@ -85,7 +85,7 @@ std::string OrderTable(const json& d) {
          NumCell(std::to_string(ch.at("order").get<int>())) +
          NumCell(ScalarText(&ch.at("chi2_per_dof"), 3)) +
          NumCell(ScalarText(&ch.at("residual_rms"), 3)) +
-         NumCell(ScalarText(&ch.at("noise_rms"), 3)) + "<td class=\"small\">" + E(aicc) +
+         NumCell(ScalarText(&ch.at("noise_rms"), 3)) + "<td class=\"small\">" + E(weights) +
          "</td><td>" + E(z) + "</td></tr>";
   }
   return h + "</table><p class=\"muted small\">Hysteresis flagged above |z| " +

@@ -62,9 +62,8 @@ json ChannelDiagnostics(const core::ThermalImuResult& imu, int c) {
   const core::ThermalChannel& ch = imu.channels[static_cast<size_t>(c)];
   json table = json::array();
   for (const core::ThermalOrderRow& row : ch.fit.table) {
-    table.push_back({{"order", row.order},
-                     {"chi2", row.chi2},
-                     {"aicc", std::isfinite(row.aicc) ? json(row.aicc) : json(nullptr)}});
+    table.push_back(
+        {{"order", row.order}, {"chi2", row.chi2}, {"bic", row.bic}, {"weight", row.weight}});
   }
   // The window means as deviations from the curve's value at t_ref (their orientation's
   // intercept removed), for the report's plot.
@@ -192,11 +191,12 @@ json ThermalResultToJson(const core::ThermalResult& r, const core::ThermalOption
        {{"basis", scaled ? "chi2_scaled" : "crb"}, {"chi2_per_dof", nullptr}, {"imus", u_imus}}},
       {"diagnostics",
        {{"order_selection",
-         "AICc with the noise scale estimated (n ln(chi2/n) + 2k + 2k(k+1)/(n-k-1)), orders 0.." +
-             std::to_string(options.max_order)},
+         "curves of orders 0.." + std::to_string(options.max_order) +
+             " averaged with BIC weights exp(-BIC/2), BIC = n ln(chi2/n) + k ln n (noise scale "
+             "estimated); order_table[].weight"},
         {"hysteresis_test",
          {{"method",
-           "heating and cooling windows fitted apart at the chosen order; |z| of their difference "
+           "heating and cooling windows fitted apart at the curve's order; |z| of their difference "
            "on a grid over the common range against the Bonferroni bound over 6 channels x grid "
            "points (family-wise false-alarm rate at most alpha per IMU)"},
           {"alpha", options.hysteresis_alpha},

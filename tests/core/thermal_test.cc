@@ -1,6 +1,6 @@
 // Tests of the thermal calibration (core/thermal.h) on simulated warm-up logs with a known
 // polynomial truth: exact recovery without noise, Monte-Carlo honesty of the curve's band (also
-// with a too-high max_order offered), the order AICc picks, the min_range refusal, and the
+// with a too-high max_order offered), the BIC weight of the true order, the min_range refusal, the
 // hysteresis test's false-alarm rate and power; the error against a fixed-order least-squares fit
 // of all samples (the flight stacks' approach); the lag's estimate, its σ and its refusal.
 #include "core/thermal.h"
@@ -52,7 +52,9 @@ TEST(ThermalTest, RecoversTheCurveWithoutNoise) {
   EXPECT_GT(imu.t_max - imu.t_min, 30);
   for (int c = 0; c < 6; ++c) {
     const ThermalChannel& ch = imu.channels[static_cast<size_t>(c)];
-    EXPECT_GE(ch.fit.order, 3) << ch.name;
+    double below_truth = 0;  // BIC weight of the orders below the true 3
+    for (const ThermalOrderRow& row : ch.fit.table) below_truth += row.order < 3 ? row.weight : 0;
+    EXPECT_LT(below_truth, 1e-9) << ch.name;
     for (Eigen::Index i = 0; i < imu.grid.size(); ++i) {
       // The window mean of a curved bias differs from the bias at the window's mean temperature
       // by ~c2 × var(T within a window): ~1e-8 with 1 s windows.
@@ -69,10 +71,10 @@ TEST(ThermalTest, RecoversTheCurveWithoutNoise) {
 }
 
 // z of the curve against the truth over the grid (t_ref excluded: there σ = 0), per channel, over
-// `trials` seeds; also counts how often each channel's order equals `true_order`.
+// `trials` seeds; also the mean BIC weight of `true_order` per channel.
 struct Honesty {
   double z_rms[6] = {0};
-  int right_order[6] = {0};
+  double true_order_weight[6] = {0};
 };
 
 Honesty MonteCarlo(int trials, int max_order, int true_order) {
@@ -93,7 +95,9 @@ Honesty MonteCarlo(int trials, int max_order, int true_order) {
     const ThermalImuResult& imu = r.imus[0];
     for (int c = 0; c < 6; ++c) {
       const ThermalChannel& ch = imu.channels[static_cast<size_t>(c)];
-      h.right_order[c] += ch.fit.order == true_order;
+      for (const ThermalOrderRow& row : ch.fit.table) {
+        if (row.order == true_order) h.true_order_weight[c] += row.weight / trials;
+      }
       for (Eigen::Index i = 0; i < imu.grid.size(); ++i) {
         if (std::abs(imu.grid(i) - imu.t_ref) < 1e-6) continue;  // σ = 0 there (up to rounding)
         const double z =
@@ -113,24 +117,24 @@ Honesty MonteCarlo(int trials, int max_order, int true_order) {
 TEST(ThermalTest, BandIsHonestInMonteCarlo) {
   const Honesty h = MonteCarlo(100, 5, 3);
   for (int c = 0; c < 6; ++c) {
-    std::printf("channel %d: z RMS %.3f, order 3 chosen in %d/100\n", c, h.z_rms[c],
-                h.right_order[c]);
+    std::printf("channel %d: z RMS %.3f, mean weight of order 3 %.2f\n", c, h.z_rms[c],
+                h.true_order_weight[c]);
     EXPECT_GT(h.z_rms[c], 0.7);
     EXPECT_LT(h.z_rms[c], 1.4);
-    // AICc picks the true order in most trials (measured: see the printout; the rest are mostly
-    // one order higher, which stays unbiased).
-    EXPECT_GE(h.right_order[c], 50);
+    // The true order carries most of the weight on average (see the printout; the rest mostly
+    // on one order higher, which stays unbiased).
+    EXPECT_GE(h.true_order_weight[c], 0.5);
   }
 }
 
 TEST(ThermalTest, BandStaysHonestWithTooHighMaxOrder) {
   const Honesty h = MonteCarlo(100, 8, 2);
   for (int c = 0; c < 6; ++c) {
-    std::printf("channel %d (max_order 8, truth 2): z RMS %.3f, order 2 in %d/100\n", c, h.z_rms[c],
-                h.right_order[c]);
+    std::printf("channel %d (max_order 8, truth 2): z RMS %.3f, mean weight of order 2 %.2f\n", c,
+                h.z_rms[c], h.true_order_weight[c]);
     EXPECT_GT(h.z_rms[c], 0.7);
     EXPECT_LT(h.z_rms[c], 1.4);
-    EXPECT_GE(h.right_order[c], 50);
+    EXPECT_GE(h.true_order_weight[c], 0.5);
   }
 }
 
@@ -272,14 +276,25 @@ CurveErrors CompareWithFlightStacks(char scenario, int trials) {
 // With 100 trials (60 with the lag) the ratio of the mean squared errors of two methods of equal
 // error has a spread of ~0.15 (measured: the trials' errors are ~χ² with few degrees of freedom),
 // so "clearly smaller" is a ratio below 0.5 (> 3 spreads from 1). Where the cubic is the true
-// order (a), calibd pays for choosing the order: measured 1.37–1.59 (AICc picks order 4 or 5 in
-// ~25 % of the trials), bounded here at 1.8 so that a regression shows.
+// order (a), calibd pays for not knowing the order. Measured ratios (a) / (b) / (c) per channel,
+// by the way the orders are combined (same seeds):
+//   AICc, one order:                  1.37–1.59 / 0.05–0.30 / 0.01–0.09 (order 4–5 in ~25 %)
+//   AICc within 2 of its minimum:     1.17–1.40 / 0.05–0.30 / 0.01–0.10, lag z RMS up to 1.63
+//   likelihood-ratio tests, α 5 %:    1.19–1.42 / 0.05–0.30 / 0.01–0.09, lag z RMS up to 1.59
+//   BIC, one order:                   1.05–1.32 / 0.05–0.31 / 0.01–0.10, z RMS up to 2.05 (lag)
+//   Akaike-weight average:            1.26–1.40 / 0.05–0.31 / 0.01–0.08
+//   BIC-weight average (calibd):      1.06–1.31 / 0.05–0.32 / 0.01–0.09, z RMS 0.83–1.27
+//   order fixed at 3 (the oracle):    0.99–1.06
+// Selecting one order strictly drops weak terms (gyroscope y's cubic, 0.6e-4/45² rad/s/°C³) and
+// leaves a bias the band does not cover; the average's band includes the spread between orders.
+// Gyroscope y stays at 1.31 in (a): its cubic term is at the edge of detection, where any use of
+// the data to decide it costs against knowing it. Bounded at 1.5 (1.31 + > 1 spread).
 TEST(ThermalTest, ComparedWithTheFlightStacksCubic) {
   const CurveErrors a = CompareWithFlightStacks('a', 100);
   const CurveErrors b = CompareWithFlightStacks('b', 100);
   const CurveErrors c = CompareWithFlightStacks('c', 60);
   for (int ch = 0; ch < 6; ++ch) {
-    EXPECT_LT(a.calibd[ch] / a.cubic[ch], 1.8) << ch;
+    EXPECT_LT(a.calibd[ch] / a.cubic[ch], 1.5) << ch;
     EXPECT_LT(b.calibd[ch] / b.cubic[ch], 0.5) << ch;
     EXPECT_LT(c.calibd[ch] / c.cubic[ch], 0.5) << ch;
   }
