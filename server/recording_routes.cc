@@ -4,6 +4,7 @@
 
 #include "methods/registry.h"
 #include "server/config.h"
+#include "server/http_util.h"
 #include "server/recording_check.h"
 #include "server/recording_segments.h"
 #include "web/html.h"
@@ -22,16 +23,6 @@ bool ParseRecordingId(const std::string& text, int64_t* id) {
   }
   *id = std::stoll(text);
   return *id > 0;
-}
-
-void SendHtml(httplib::Response& res, int status, std::string html) {
-  res.status = status;
-  res.set_header("Cache-Control", "no-cache");
-  res.set_header(
-      "Content-Security-Policy",
-      "default-src 'none'; style-src 'unsafe-inline'; img-src data:; form-action 'self'");
-  res.set_header("X-Content-Type-Options", "nosniff");
-  res.set_content(std::move(html), "text/html; charset=utf-8");
 }
 
 // A recording that is not an inertial log cannot be segmented: 422 (valid input, nothing to find).
@@ -104,15 +95,15 @@ void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store,
                                                                 httplib::Response& res) {
     int64_t id = 0;
     if (!ParseRecordingId(req.matches[1], &id)) {
-      return SendHtml(res, 404, web::RenderErrorPage(404, "no such recording"));
+      return SendPage(res, 404, web::RenderErrorPage(404, "no such recording"));
     }
     storage::RecordingInfo info;
     Status s = store->GetRecording(id, &info);
     if (s.code() == StatusCode::kNotFound) {
-      return SendHtml(res, 404, web::RenderErrorPage(404, "no such recording"));
+      return SendPage(res, 404, web::RenderErrorPage(404, "no such recording"));
     }
     if (!s.ok()) {
-      return SendHtml(res, 503,
+      return SendPage(res, 503,
                       web::RenderErrorPage(503, "the database is unavailable; try again shortly"));
     }
     web::RecordingPageView view;
@@ -183,7 +174,7 @@ void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store,
       if (static_cast<int>(jobs.size()) < filter.limit) break;
       filter.before = jobs.back().id;
     }
-    SendHtml(res, 200, web::RenderRecordingPage(view));
+    SendPage(res, 200, web::RenderRecordingPage(view));
   });
 }
 

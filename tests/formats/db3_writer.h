@@ -1,11 +1,14 @@
 // A writer of ROS 2 SQLite bags (.db3, rosbag2's schema: topics, messages) for the tests of
 // formats/rosbag2_sqlite.h and of uploads: topics of cdr messages, messages with their record
-// time (ns), then the file at `path` (replaced). Not thread-safe; one writer per file.
+// time (ns), then the file at path() = `path` + "." + the process id (replaced; private to the
+// process, so test programs that ctest runs in parallel never share one). Not thread-safe; one
+// writer per file.
 #ifndef CALIBD_TESTS_FORMATS_DB3_WRITER_H_
 #define CALIBD_TESTS_FORMATS_DB3_WRITER_H_
 
 #include <gtest/gtest.h>
 #include <sqlite3.h>
+#include <unistd.h>
 
 #include <cstdint>
 #include <cstdio>
@@ -18,7 +21,7 @@ namespace calibd::server::testing {
 
 class Db3Writer {
  public:
-  explicit Db3Writer(std::string path) : path_(std::move(path)) {
+  explicit Db3Writer(std::string path) : path_(std::move(path) + "." + std::to_string(::getpid())) {
     std::remove(path_.c_str());
     EXPECT_EQ(sqlite3_open(path_.c_str(), &db_), SQLITE_OK);
     Exec(
