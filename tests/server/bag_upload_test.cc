@@ -16,6 +16,7 @@
 #include "tests/formats/mcap_writer.h"
 #include "tests/formats/ros2_cdr_writer.h"
 #include "tests/server/http_test_util.h"
+#include "tests/server/simulated_imu.h"
 
 namespace calibd::server {
 namespace {
@@ -69,25 +70,9 @@ std::string AsBag(Bag format, const std::vector<BagMessage>& messages) {
   return file + testing::McapEnd();
 }
 
-// A simulated hand-held imu log (core/imu_simulation.h) with `statics` holds: its samples, the
-// imu config without the CSV unit keys (a bag is SI), and the truth.
-struct SimulatedImu {
-  ArrayRecording rec;
-  json config, truth;
-};
-SimulatedImu Simulate(int statics, uint64_t seed) {
-  core::ImuSimulationOptions sim;
-  sim.statics = statics;
-  sim.seed = seed;
-  std::string csv;
-  SimulatedImu out;
-  EXPECT_TRUE(SimulateImuFiles(sim, &csv, &out.config, &out.truth).ok());
-  RecordingParser parser("sim.csv", /*collect=*/true);
-  EXPECT_TRUE(ParseRecording(csv, &parser).ok());
-  EXPECT_TRUE(parser.TakeArray(&out.rec).ok());
-  for (const char* key : {"accel_unit", "gyro_unit", "time_unit"}) out.config.erase(key);
-  return out;
-}
+// A simulated hand-held imu log with `statics` holds (tests/server/simulated_imu.h).
+using testing::SimulatedImu;
+SimulatedImu Simulate(int statics, uint64_t seed) { return testing::SimulateImuLog(statics, seed); }
 
 json GetJson(const TestServer& server, const std::string& path) {
   auto res = server.Client().Get(path.c_str());

@@ -14,6 +14,7 @@
 #include "tests/lib/dataflash_writer.h"
 #include "tests/lib/ulog_writer.h"
 #include "tests/server/http_test_util.h"
+#include "tests/server/simulated_imu.h"
 
 namespace calibd::server {
 namespace {
@@ -52,31 +53,9 @@ std::string AsULog(const ArrayRecording& rec) {
   return w.bytes();
 }
 
-ArrayRecording Parse(const std::string& csv) {
-  RecordingParser parser("sim.csv", /*collect=*/true);
-  ArrayRecording rec;
-  EXPECT_TRUE(ParseRecording(csv, &parser).ok());
-  EXPECT_TRUE(parser.TakeArray(&rec).ok());
-  return rec;
-}
-
-// A simulated hand-held imu log (core/imu_simulation.h) with `statics` holds: its samples, the
-// imu config without the CSV unit keys (a log is SI), and the truth.
-struct SimulatedImu {
-  ArrayRecording rec;
-  json config, truth;
-};
-SimulatedImu Simulate(int statics, uint64_t seed) {
-  core::ImuSimulationOptions sim;
-  sim.statics = statics;
-  sim.seed = seed;
-  std::string csv;
-  SimulatedImu out;
-  EXPECT_TRUE(SimulateImuFiles(sim, &csv, &out.config, &out.truth).ok());
-  out.rec = Parse(csv);
-  for (const char* key : {"accel_unit", "gyro_unit", "time_unit"}) out.config.erase(key);
-  return out;
-}
+// A simulated hand-held imu log with `statics` holds (tests/server/simulated_imu.h).
+using testing::SimulatedImu;
+SimulatedImu Simulate(int statics, uint64_t seed) { return testing::SimulateImuLog(statics, seed); }
 
 json GetJson(const TestServer& server, const std::string& path) {
   auto res = server.Client().Get(path.c_str());
