@@ -246,8 +246,9 @@ Status ComputeCheck(storage::Store* store, const CheckRequest& request, json* ou
        {"temperature", TemperatureRange(log)},
        {"warnings", json::array()},
        {"predicted", nullptr},
-       {"notes", json::array({"predicted: the sigma the job would report comes from the plan "
-                              "(POST /api/v1/plan), not built yet"})}};
+       {"notes", json::array({"predicted: the sigma the job would report is what the plan "
+                              "(POST /api/v1/plan) gives for these statics; not yet joined to "
+                              "the check"})}};
   // A time column that does not look like seconds: the job would refuse it, and statics found
   // on it would be meaningless.
   TimeUnit unit;
