@@ -3,8 +3,13 @@
 // agree with what was written (count, rate, first and last stamps), and `imu` and `noise` jobs run
 // on it end to end; zero header stamps fall back to the record time and the recording says so.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iterator>
 #include <nlohmann/json.hpp>
 #include <random>
 #include <string>
@@ -15,6 +20,7 @@
 #include "tests/formats/db3_writer.h"
 #include "tests/formats/mcap_writer.h"
 #include "tests/formats/ros2_cdr_writer.h"
+#include "tests/lib/test_paths.h"
 #include "tests/server/http_test_util.h"
 #include "tests/server/simulated_imu.h"
 
@@ -24,14 +30,47 @@ namespace {
 using json = nlohmann::json;
 using testing::TestServer;
 
-// The bag formats written here.
-enum class Bag { kMcap, kDb3 };
+// The bag formats written here: MCAP and ROS 2 .db3 by the tests' own writers, ROS 1 by Debian's
+// python3-rosbag (tests/formats/write_rosbag1_imu.py: an independent writer).
+enum class Bag { kMcap, kDb3, kRos1 };
 
-// One record of a bag: its record (log) time and its CDR message.
+// One record of a bag: its record (log) time, the message's header stamp and values, and the
+// message as CDR (ROS 2).
 struct BagMessage {
   uint64_t record_ns;
+  int32_t sec;
+  uint32_t nsec;
+  double a[3], g[3];
   std::string cdr;
 };
+
+bool HavePythonRosbag() {
+  return std::system("/usr/bin/python3 -c 'import rosbag, sensor_msgs.msg' 2>/dev/null") == 0;
+}
+
+// The messages as a ROS 1 bag with lz4 chunks, written by python3-rosbag.
+std::string Ros1Bag(const std::vector<BagMessage>& messages) {
+  const std::string stem = ::testing::TempDir() + "upload-" + std::to_string(::getpid());
+  {
+    std::ofstream samples(stem + ".txt");
+    char line[512];
+    for (const BagMessage& m : messages) {
+      std::snprintf(line, sizeof line, "%llu %d %u %.17g %.17g %.17g %.17g %.17g %.17g\n",
+                    static_cast<unsigned long long>(m.record_ns), m.sec, m.nsec, m.a[0], m.a[1],
+                    m.a[2], m.g[0], m.g[1], m.g[2]);
+      samples << line;
+    }
+  }
+  const std::string command = "/usr/bin/python3 " + calibd::test_paths::SourceDir() +
+                              "/tests/formats/write_rosbag1_imu.py " + stem + ".bag lz4 " + stem +
+                              ".txt";
+  EXPECT_EQ(std::system(command.c_str()), 0) << command;
+  std::ifstream in(stem + ".bag", std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::remove((stem + ".txt").c_str());
+  std::remove((stem + ".bag").c_str());
+  return bytes;
+}
 
 // Samples of one IMU as sensor_msgs/msg/Imu messages at times `t` (s) plus 1 s: in the header
 // stamp with the record time 2 s later, or, when `zero_stamps`, only in the record time (stamps 0).
@@ -45,13 +84,19 @@ std::vector<BagMessage> ImuMessages(const Eigen::VectorXd& t, const Eigen::Matri
     const auto sec = static_cast<int32_t>(zero_stamps ? 0 : ns / 1'000'000'000);
     const auto nsec = static_cast<uint32_t>(zero_stamps ? 0 : ns % 1'000'000'000);
     out.push_back({static_cast<uint64_t>(ns + (zero_stamps ? 0 : 2'000'000'000)),
+                   sec,
+                   nsec,
+                   {a[0], a[1], a[2]},
+                   {g[0], g[1], g[2]},
                    testing::ImuCdr(false, sec, nsec, a, g)});
   }
   return out;
 }
 
-// The messages on topic /imu as a bag: MCAP with lz4 chunks of 500 messages, or a ROS 2 .db3.
+// The messages on topic /imu as a bag: MCAP with lz4 chunks of 500 messages, a ROS 2 .db3, or
+// a ROS 1 bag with lz4 chunks.
 std::string AsBag(Bag format, const std::vector<BagMessage>& messages) {
+  if (format == Bag::kRos1) return Ros1Bag(messages);
   if (format == Bag::kDb3) {
     testing::Db3Writer db(::testing::TempDir() + "upload.db3");
     db.Topic(1, "/imu", "sensor_msgs/msg/Imu");
@@ -108,7 +153,10 @@ class BagUpload : public ::testing::TestWithParam<Case> {};
 
 TEST_P(BagUpload, AnImuJobRecoversTheTruthAndTheRecordingSaysWhatWasRead) {
   const auto [format, zero_stamps] = GetParam();
-  const char* format_name = format == Bag::kMcap ? "mcap" : "rosbag2";
+  if (format == Bag::kRos1 && !HavePythonRosbag()) GTEST_SKIP() << "no python3-rosbag";
+  const char* format_name = format == Bag::kMcap  ? "mcap"
+                            : format == Bag::kDb3 ? "rosbag2"
+                                                  : "rosbag1";
   SimulatedImu sim = Simulate(24, 21);
   const ArrayRecording& rec = sim.rec;
   const std::string bag = AsBag(format, ImuMessages(rec.t, rec.accel, rec.gyro, zero_stamps));
@@ -150,10 +198,13 @@ INSTANTIATE_TEST_SUITE_P(Mcap, BagUpload,
 // on its own: seconds here, minutes on a loaded machine. The writer now uses one transaction.)
 INSTANTIATE_TEST_SUITE_P(Db3, BagUpload,
                          ::testing::Values(Case{Bag::kDb3, false}, Case{Bag::kDb3, true}));
+INSTANTIATE_TEST_SUITE_P(Ros1, BagUpload,
+                         ::testing::Values(Case{Bag::kRos1, false}, Case{Bag::kRos1, true}));
 
 class BagNoiseUpload : public ::testing::TestWithParam<Bag> {};
 
 TEST_P(BagNoiseUpload, ANoiseJobFindsTheWhiteNoiseDensity) {
+  if (GetParam() == Bag::kRos1 && !HavePythonRosbag()) GTEST_SKIP() << "no python3-rosbag";
   // 120 s at 200 Hz of white noise: N = σ·√Δt per channel.
   const double rate = 200, sigma_a = 0.02, sigma_g = 0.002;
   const int n = static_cast<int>(120 * rate);
@@ -188,6 +239,7 @@ TEST_P(BagNoiseUpload, ANoiseJobFindsTheWhiteNoiseDensity) {
 
 INSTANTIATE_TEST_SUITE_P(Mcap, BagNoiseUpload, ::testing::Values(Bag::kMcap));
 INSTANTIATE_TEST_SUITE_P(Db3, BagNoiseUpload, ::testing::Values(Bag::kDb3));
+INSTANTIATE_TEST_SUITE_P(Ros1, BagNoiseUpload, ::testing::Values(Bag::kRos1));
 
 }  // namespace
 }  // namespace calibd::server
