@@ -166,18 +166,8 @@ TEST_P(BagUpload, AnImuJobRecoversTheTruthAndTheRecordingSaysWhatWasRead) {
   ASSERT_FALSE(job.is_null());
   ASSERT_EQ(job["status"], "succeeded") << job.dump().substr(0, 2000);
   const json& r = job["result"];
-  const json& p = r["parameters"]["imus"][0];
-  const json& u = r["uncertainty"]["imus"][0];
-  // 5σ per entry, as for the same log as CSV (imu_method_test): the bag holds float64.
-  for (const char* sensor : {"accelerometer", "gyroscope"}) {
-    for (const char* key : {"bias", "scale"}) {
-      for (int k = 0; k < 3; ++k) {
-        const double est = p[sensor][key][k], want = sim.truth[sensor][key][k];
-        const double s = u[sensor][std::string(key) + "_std"][k];
-        EXPECT_LE(std::abs(est - want), 5 * s) << sensor << "." << key << "[" << k << "]";
-      }
-    }
-  }
+  // 5σ per entry: the bag holds float64.
+  testing::ExpectImuRecoversTheTruth(r, sim.truth);
   EXPECT_EQ(r["diagnostics"]["log"]["format"], format_name);
   const std::string id = std::to_string(job["recording_id"].get<int64_t>());
   const json recording = GetJson(server, "/api/v1/recordings/" + id);

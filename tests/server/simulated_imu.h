@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -33,6 +34,22 @@ inline SimulatedImu SimulateImuLog(int statics, uint64_t seed) {
   EXPECT_TRUE(parser.TakeArray(&out.rec).ok());
   for (const char* key : {"accel_unit", "gyro_unit", "time_unit"}) out.config.erase(key);
   return out;
+}
+
+// Every accelerometer and gyroscope bias and scale of IMU 0 of an imu job's `result` within 5σ (its
+// own σ) of `truth` (SimulateImuLog's): as for the same log as CSV (imu_method_test).
+inline void ExpectImuRecoversTheTruth(const nlohmann::json& result, const nlohmann::json& truth) {
+  const nlohmann::json& p = result["parameters"]["imus"][0];
+  const nlohmann::json& u = result["uncertainty"]["imus"][0];
+  for (const char* sensor : {"accelerometer", "gyroscope"}) {
+    for (const char* key : {"bias", "scale"}) {
+      for (int k = 0; k < 3; ++k) {
+        const double est = p[sensor][key][k], want = truth[sensor][key][k];
+        const double s = u[sensor][std::string(key) + "_std"][k];
+        EXPECT_LE(std::abs(est - want), 5 * s) << sensor << "." << key << "[" << k << "]";
+      }
+    }
+  }
 }
 
 }  // namespace calibd::server::testing
