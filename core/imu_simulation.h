@@ -51,10 +51,10 @@ struct ImuSimulationOptions {
   // is the shortest one (angle-axis of R_jᵀR_{j+1}); consecutive equal orientations join into one
   // static. A plan's protocol (methods/plan.h) sets them.
   std::vector<Eigen::Matrix3d> orientations;
-  bool quantize = false;        // round readings to whole reading units (counts)
-  uint64_t seed = 1;            // sensor errors and motion
-  uint64_t noise_seed = 0;      // the noise stream; 0: derived from seed (set it to vary only the
-                                // noise of one board and one motion, e.g. for Monte Carlo)
+  bool quantize = false;    // round readings to whole reading units (counts)
+  uint64_t seed = 1;        // sensor errors and motion
+  uint64_t noise_seed = 0;  // the noise stream; 0: derived from seed (set it to vary only the
+                            // noise of one board and one motion, e.g. for Monte Carlo)
 
   bool IsValid(std::string* error) const;
 };

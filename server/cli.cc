@@ -168,8 +168,8 @@ int Plan(const std::string& method, const std::string& config_path,
     if (Status s = LoadAcceptanceFile(acceptance_path, &acceptance); !s.ok()) return Report(s);
   }
   json request = {{"method", method}, {"config", json::object()}};
-  for (const auto& [path, key] : {std::pair<std::string, const char*>{config_path, "config"},
-                                  {protocol_path, "protocol"}}) {
+  for (const auto& [path, key] :
+       {std::pair<std::string, const char*>{config_path, "config"}, {protocol_path, "protocol"}}) {
     if (path.empty()) continue;
     std::string text;
     if (Status s = ReadFile(path, &text); !s.ok()) return Report(s);
@@ -344,9 +344,10 @@ int RunCli(int argc, char** argv) {
       "plan", "predict the σ a protocol would give, what it cannot determine, and a suggestion");
   plan_cmd->add_option("--method", plan_method, "the method")->required();
   plan_cmd->add_option("--config", plan_config, "config JSON (SPEC §3)");
-  plan_cmd->add_option("--protocol", plan_protocol,
-                       "protocol JSON: {\"orientations\": [\"+x\", [0, 0, 1], ...], "
-                       "\"static_duration\", \"rate\", \"rotation_duration\"}")
+  plan_cmd
+      ->add_option("--protocol", plan_protocol,
+                   "protocol JSON: {\"orientations\": [\"+x\", [0, 0, 1], ...], "
+                   "\"static_duration\", \"rate\", \"rotation_duration\"}")
       ->required();
   plan_cmd->add_option("--acceptance", plan_acceptance,
                        "JSON file of acceptance limits per method, as for serve");

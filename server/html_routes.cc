@@ -75,7 +75,6 @@ web::JobSummary SummarizeWithEvents(storage::Store* store, const storage::JobInf
   return s;
 }
 
-
 void SendErrorPage(httplib::Response& res, const Status& s) {
   int status = s.code() == StatusCode::kNotFound ? 404 : 500;
   if (s.code() == StatusCode::kBusy || s.code() == StatusCode::kIoError) status = 503;

@@ -31,9 +31,9 @@
 #include "server/http_server.h"
 #include "server/http_util.h"
 #include "server/instance.h"
-#include "server/plan.h"
 #include "server/job_budget.h"
 #include "server/metrics.h"
+#include "server/plan.h"
 #include "server/recording_routes.h"
 #include "server/service_impl.h"
 #include "server/worker_pool.h"
@@ -524,9 +524,8 @@ void Service::Impl::RegisterApiRoutes(httplib::Server* server) {
   });
   http.Get(R"(/api/v1/devices/([^/]+)/calibration)",
            [this](const httplib::Request& req, httplib::Response& res) { HandleLatest(req, res); });
-  http.Post("/api/v1/plan", [this](const httplib::Request& req, httplib::Response& res) {
-    HandlePlan(req, res);
-  });
+  http.Post("/api/v1/plan",
+            [this](const httplib::Request& req, httplib::Response& res) { HandlePlan(req, res); });
   http.Get("/plan", [this](const httplib::Request& req, httplib::Response& res) {
     SendPage(res, 200, web::RenderPlanPage(PlanPageView(req.params, store.get(), acceptance)));
   });

@@ -384,10 +384,9 @@ std::string EnvOr(const char* name, const char* fallback) {
 
 // DFReader's reading of `path` (tests/formats/dataflash_reference.py), or null when it did not run.
 nlohmann::json ReferenceReading(const std::string& path, const std::string& pymavlink) {
-  const std::string command = "PYTHONPATH='" + pymavlink +
-                              "' python3 '" + calibd::test_paths::SourceDir() +
-                              "/tests/formats/dataflash_reference.py' '" +
-                              path + "' 2>/dev/null";
+  const std::string command = "PYTHONPATH='" + pymavlink + "' python3 '" +
+                              calibd::test_paths::SourceDir() +
+                              "/tests/formats/dataflash_reference.py' '" + path + "' 2>/dev/null";
   FILE* pipe = popen(command.c_str(), "r");
   if (!pipe) return nullptr;
   std::string out;

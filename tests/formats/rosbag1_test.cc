@@ -2,7 +2,6 @@
 // writer; uncompressed, bz2, lz4 chunks) read back to the samples written, and bags of the test's
 // own writer cut and damaged.
 #include "formats/rosbag1.h"
-#include "tests/lib/test_paths.h"
 
 #include <gtest/gtest.h>
 
@@ -17,6 +16,8 @@
 #include <string>
 #include <utility>
 #include <vector>
+
+#include "tests/lib/test_paths.h"
 
 namespace calibd::server {
 namespace {
@@ -35,9 +36,9 @@ bool HavePythonRosbag() {
 // A bag of `n` samples per topic written by tests/formats/write_rosbag1.py.
 std::string WritePythonBag(const std::string& compression, int n) {
   std::string path = ::testing::TempDir() + "rosbag1_" + compression + ".bag";
-  std::string cmd = "cd " + ::testing::TempDir() +
-                    " && /usr/bin/python3 " + calibd::test_paths::SourceDir() + "/tests/formats/write_rosbag1.py " +
-                    path + " " + compression + " " + std::to_string(n);
+  std::string cmd = "cd " + ::testing::TempDir() + " && /usr/bin/python3 " +
+                    calibd::test_paths::SourceDir() + "/tests/formats/write_rosbag1.py " + path +
+                    " " + compression + " " + std::to_string(n);
   EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
   return ReadFile(path);
 }

@@ -18,8 +18,8 @@
 #include <string>
 #include <vector>
 
-#include "tests/lib/ulog_writer.h"
 #include "tests/lib/test_paths.h"
+#include "tests/lib/ulog_writer.h"
 
 namespace calibd::server {
 namespace {

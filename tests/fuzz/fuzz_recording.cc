@@ -95,7 +95,7 @@ calibd::server::CsvDialect DialectOf(uint8_t b) {
       break;
     case 3:
       d.delimiter = '\t';
-      d.columns = {{"t", "time"}, {"a0_x", "ax"}, {"a0_y", "ay"}, {"a0_z", "az"},
+      d.columns = {{"t", "time"},  {"a0_x", "ax"}, {"a0_y", "ay"}, {"a0_z", "az"},
                    {"g0_x", "gx"}, {"g0_y", "gy"}, {"g0_z", "gz"}};
       break;
     default:

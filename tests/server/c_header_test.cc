@@ -289,7 +289,8 @@ json OneSensorPcaResult(const std::string& name, bool magnitude_known, double bi
   p.frame = results::PcaFrame::kCanonical;
   p.sensors = {{name, {2.0}, 2.0, {1.0}, bias}};
   r.parameters = p;
-  r.uncertainty = results::PcaUncertainty{{{name, results::kPcaNaN, 1e-3, 0.0, std::nullopt}}, 0.01};
+  r.uncertainty =
+      results::PcaUncertainty{{{name, results::kPcaNaN, 1e-3, 0.0, std::nullopt}}, 0.01};
   r.diagnostics.usable = true;
   return results::ToJson(r);
 }

@@ -26,8 +26,8 @@
 #include "methods/pca/pca_method.h"
 #include "methods/registry.h"
 #include "server/config.h"
-#include "tests/server/http_test_util.h"
 #include "tests/lib/test_paths.h"
+#include "tests/server/http_test_util.h"
 
 namespace calibd::server {
 namespace {
@@ -413,8 +413,8 @@ TEST(FailureReasons, CalibrateOnTheCommandLinePrintsTheReasonAndItsAdvice) {
   const std::string config = (dir.path() / "config.json").string();
   std::ofstream(csv) << f.csv;
   std::ofstream(config) << f.config.dump();
-  FILE* pipe = ::popen((calibd::test_paths::CalibdBinary() + " calibrate " + csv + " --config " + config +
-                        " 2>&1 >/dev/null")
+  FILE* pipe = ::popen((calibd::test_paths::CalibdBinary() + " calibrate " + csv + " --config " +
+                        config + " 2>&1 >/dev/null")
                            .c_str(),
                        "r");
   ASSERT_NE(pipe, nullptr);
