@@ -195,36 +195,16 @@ class BagNoiseUpload : public ::testing::TestWithParam<Bag> {};
 
 TEST_P(BagNoiseUpload, ANoiseJobFindsTheWhiteNoiseDensity) {
   if (GetParam() == Bag::kRos1 && !HavePythonRosbag()) GTEST_SKIP() << "no python3-rosbag";
-  // 120 s at 200 Hz of white noise: N = σ·√Δt per channel.
-  const double rate = 200, sigma_a = 0.02, sigma_g = 0.002;
-  const int n = static_cast<int>(120 * rate);
-  std::mt19937_64 rng(8);
-  std::normal_distribution<double> normal;
-  Eigen::VectorXd t(n);
-  Eigen::MatrixXd accel(n, 3), gyro(n, 3);
-  for (int i = 0; i < n; ++i) {
-    t(i) = 4.0 + i / rate;
-    for (int k = 0; k < 3; ++k) {
-      gyro(i, k) = 0.01 + sigma_g * normal(rng);
-      accel(i, k) = (k == 2 ? -9.81 : 0.0) + sigma_a * normal(rng);
-    }
-  }
+  const testing::WhiteNoiseLog still = testing::SimulateWhiteNoise(8);
+  const ArrayRecording& rec = still.rec;
   TestServer server;
   ASSERT_EQ(server.error(), "");
-  const json job = server.UploadAndWait(AsBag(GetParam(), ImuMessages(t, accel, gyro, false)),
-                                        {{"method", "noise"}}, "upload.bin");
+  const json job =
+      server.UploadAndWait(AsBag(GetParam(), ImuMessages(rec.t, rec.accel, rec.gyro, false)),
+                           {{"method", "noise"}}, "upload.bin");
   ASSERT_FALSE(job.is_null());
   ASSERT_EQ(job["status"], "succeeded") << job.dump().substr(0, 2000);
-  const json& channels = job["result"]["parameters"]["channels"];
-  const json& stds = job["result"]["uncertainty"]["channels"];
-  ASSERT_EQ(channels.size(), 6u);
-  for (size_t c = 0; c < channels.size(); ++c) {
-    const bool is_accel = channels[c]["name"].get<std::string>()[0] == 'a';
-    const double want = (is_accel ? sigma_a : sigma_g) / std::sqrt(rate);
-    const double got = channels[c]["white_noise"], s = stds[c]["white_noise_std"];
-    EXPECT_LE(std::abs(got - want), 5 * s) << channels[c].dump();
-    EXPECT_LE(std::abs(got - want), 0.1 * want) << channels[c].dump();
-  }
+  testing::ExpectWhiteNoiseDensity(job["result"]);
 }
 
 INSTANTIATE_TEST_SUITE_P(Mcap, BagNoiseUpload, ::testing::Values(Bag::kMcap));

@@ -131,22 +131,8 @@ TEST(SensorLogUpload, AnImuJobOnAULogPairsAccelAndGyroByDeviceAndRecoversTheTrut
 }
 
 TEST(SensorLogUpload, ANoiseJobOnADataFlashOrULogLogFindsTheWhiteNoiseDensity) {
-  // 120 s at 200 Hz of white noise: N = σ·√Δt per channel (ULog holds float32: far below σ).
-  const double rate = 200, sigma_a = 0.02, sigma_g = 0.002;
-  const int n = static_cast<int>(120 * rate);
-  std::mt19937_64 rng(7);
-  std::normal_distribution<double> normal;
-  ArrayRecording rec;
-  rec.t.resize(n);
-  rec.accel.resize(n, 3);
-  rec.gyro.resize(n, 3);
-  for (int i = 0; i < n; ++i) {
-    rec.t(i) = 4.0 + i / rate;
-    for (int k = 0; k < 3; ++k) {
-      rec.gyro(i, k) = 0.01 + sigma_g * normal(rng);
-      rec.accel(i, k) = (k == 2 ? -9.81 : 0.0) + sigma_a * normal(rng);
-    }
-  }
+  // White noise (tests/server/simulated_imu.h); ULog holds float32, far below σ.
+  const ArrayRecording rec = testing::SimulateWhiteNoise(7).rec;
   TestServer server;
   ASSERT_EQ(server.error(), "");
   for (const bool ulog : {false, true}) {
@@ -156,16 +142,7 @@ TEST(SensorLogUpload, ANoiseJobOnADataFlashOrULogLogFindsTheWhiteNoiseDensity) {
     ASSERT_FALSE(job.is_null());
     ASSERT_EQ(job["status"], "succeeded") << job.dump().substr(0, 2000);
     EXPECT_EQ(job["result"]["diagnostics"]["log"]["format"], ulog ? "ulog" : "dataflash");
-    const json& channels = job["result"]["parameters"]["channels"];
-    const json& stds = job["result"]["uncertainty"]["channels"];
-    ASSERT_EQ(channels.size(), 6u);
-    for (size_t c = 0; c < channels.size(); ++c) {
-      const bool accel = channels[c]["name"].get<std::string>()[0] == 'a';
-      const double want = (accel ? sigma_a : sigma_g) / std::sqrt(rate);
-      const double got = channels[c]["white_noise"], s = stds[c]["white_noise_std"];
-      EXPECT_LE(std::abs(got - want), 5 * s) << channels[c].dump();
-      EXPECT_LE(std::abs(got - want), 0.1 * want) << channels[c].dump();
-    }
+    testing::ExpectWhiteNoiseDensity(job["result"]);
   }
 }
 
