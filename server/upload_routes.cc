@@ -556,8 +556,7 @@ namespace {
 // description (its log_json "csv", validated at upload). A config that gives any of them is
 // taken as it is.
 void InheritCsvDialect(const storage::RecordingInfo& recording, json* config) {
-  for (const char* key : kCsvDialectKeys)
-    if (config->contains(key)) return;
+  if (HasCsvDialectKeys(*config)) return;
   const json read = json::parse(recording.log_json, nullptr, /*allow_exceptions=*/false);
   if (!read.is_object() || !read.contains("csv") || !read["csv"].is_object()) return;
   CsvDialect dialect;
