@@ -335,6 +335,28 @@ TEST(JobPage, FailedJobShowsTheMethodsMessageOnceAndNothingThatContradictsIt) {
 }
 
 // "reflection" is explained where the diagnostics show it: a mirror image, normal either way.
+// Which σ the pca tables show (the σ convention): said under the table for each basis.
+TEST(JobPage, PcaReportSaysWhichSigmaItShows) {
+  auto page_with = [](const json& basis, const json& chi2) {
+    json r = PcaResult();
+    if (basis.is_null()) {
+      r["uncertainty"].erase("basis");
+      r["uncertainty"].erase("chi2_per_dof");
+    } else {
+      r["uncertainty"]["basis"] = basis;
+      r["uncertainty"]["chi2_per_dof"] = chi2;
+    }
+    JobView v;
+    v.job = Job(17, "IMU-0042", "pca", "succeeded", "2026-11-20T09:15:02Z", r);
+    v.config = PcaConfig();
+    return RenderJobPage(v);
+  };
+  EXPECT_TRUE(Has(page_with("chi2_scaled", 9.0), "scaled by the residuals"));
+  EXPECT_TRUE(Has(page_with("chi2_scaled", nullptr), "at the noise the residuals estimate"));
+  EXPECT_TRUE(Has(page_with("crb", 1.02), "at the given noise_std"));
+  EXPECT_TRUE(Has(page_with(nullptr, nullptr), "stored by an earlier calibd"));
+}
+
 TEST(JobPage, PcaReflectionIsExplainedWhereShown) {
   JobView v;
   json r = PcaResult();
