@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "methods/thermal/thermal_drift.h"
 #include "web/html.h"
 #include "web/report_common.h"
 #include "web/svg_plot.h"
@@ -130,6 +131,9 @@ class ThermalReport : public MethodReport {
       }
       return internal::Section("thermal", "Bias against temperature", body);
     });
+  }
+  std::string Drift(const std::vector<const JobSummary*>& jobs) const override {
+    return ThermalDriftHtml(jobs);  // methods/thermal/thermal_drift.h
   }
 };
 

@@ -96,6 +96,12 @@ for s in 3 4; do
   jm=$(upload "$tmp/mag$s" 'MAG-1')
   wait_job "$jm"
 done
+# Two accepted thermal calibrations of one device: the device page's drift of the curves.
+for s in 3 4; do
+  "$bin" simulate thermal --out "$tmp/therm$s" --seed "$s" --rate 20 2>/dev/null
+  jt=$(upload "$tmp/therm$s" 'THERM-1')
+  wait_job "$jt"
+done
 
 render() {  # render NAME PATH -> DOM dump in $tmp/NAME.html, screenshot in $shots/NAME.png
   local flags=(--headless --no-sandbox --disable-gpu --disable-background-networking
@@ -139,6 +145,7 @@ render full "/jobs/$j8"
 render device-drift /devices/IMU-DRIFT
 render mag "/jobs/$jm"
 render mag-device /devices/MAG-1
+render thermal-device /devices/THERM-1
 # A product's fleet (issue #27): three units of the product "P-<b>" (escaped on the page).
 for k in 1 2 3; do
   jf=$(curl -sf -F "recording=@$tmp/pca/recording.csv" -F "config=@$tmp/pca/config.json" \
@@ -218,8 +225,10 @@ expect device-drift 'imu (2 accepted calibrations' 'noise (2 accepted calibratio
 expect mag 'plot-mag-sphere' 'plot-mag-residuals' 'plot-mag-coverage' 'Hard and soft iron' \
   'ArduPilot COMPASS parameters' 'PX4 CAL_MAG parameters'
 expect mag-device 'mag: hard-iron drift'
+expect thermal-device 'thermal (2 accepted calibrations' 'table-drift-thermal' \
+  'plot-drift-thermal-accel' 'plot-drift-thermal-gyro'
 for page in history pca array failed failed-imu device devices revoked rejected recording check \
-  full device-drift running fleet plan plan-planar mag mag-device; do
+  full device-drift running fleet plan plan-planar mag mag-device thermal-device; do
   reject "$page" '<script' '<img'
   if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"
@@ -230,7 +239,7 @@ done
 if python3 "$(dirname "$0")/table_widths.py" "$chromium" "$tmp/profile-widths" "$base/" \
   "$base/jobs/$j2" "$base/jobs/$j3" "$base/jobs/$j4" "$base/jobs/$j5" "$base/jobs/$j8" \
   "$base/devices" "$base/devices/$hostile" "$base/devices/IMU-DRIFT" "$base/recordings/$r7" \
-  "$base/recordings/$r7?check=imu" "$base/jobs/$jm" "$base/devices/MAG-1" \
+  "$base/recordings/$r7?check=imu" "$base/jobs/$jm" "$base/devices/MAG-1" "$base/devices/THERM-1" \
   "$base/products/P-%3Cb%3E?method=pca" >"$tmp/widths.log" 2>&1; then
   passed=$((passed + 1))
 else
