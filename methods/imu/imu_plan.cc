@@ -15,6 +15,29 @@
 // the orientations miss (methods/plan.h MissingDirections: the null space of Σ_j [u_j; 1][u_j; 1]ᵀ,
 // which is exactly that of the accelerometer's information in its bias and its response to the
 // field, ȳ_j = b_a + M u_j, for known directions u_j).
+//
+// Suggested (SuggestImu): a sequence of orientations from the 26 candidates (methods/plan.h),
+// each joined to the previous one by the shortest rotation, chosen greedily by D-optimality of a
+// linearised information at nominal values (ImuDesignInformation below): starting flat (+z up),
+// append the candidate (other than the current orientation) that most increases
+// log det(I_accel + εI) + log det(I_gyro + εI), keeping room for the faces ±x, ±y, ±z the method's
+// coverage rule needs by its minimum of statics (then only the missing faces are candidates). The
+// sum is the log det of the block-diagonal information, so the noise figures, durations and rate
+// (equal for every static and rotation) scale each block by a constant and do not change the
+// choice: the sequence is the same for every config; only where it stops depends on them. Where it
+// stops: the fewest positions k of that sequence (at least the method's min_statics, at most
+// max_positions) whose predicted result (PredictImu, the method itself) passes the method's gate
+// with the σ limits tightened by `margin`, found by bisection (k and k − 1 are both predicted, so k
+// − 1 is known to fail); when even max_positions fail, the unmet rules are named. Work: at most 1 +
+// ⌈log2(max_positions − min_statics + 1)⌉ runs of the method on simulated logs of at most
+// max_positions statics and ImuSuggestOptions::max_samples samples.
+#include "methods/imu/imu_plan.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+
 #include "methods/imu/imu_method.h"
 #include "methods/plan.h"
 
@@ -22,6 +45,157 @@ namespace calibd::server {
 namespace {
 
 using nlohmann::json;
+
+// The σ keys of the imu gate (methods/acceptance.h ImuTriadKeys): the ones the suggestion's
+// margin tightens.
+constexpr const char* kSigmaKeys[] = {"max_scale_std", "max_axis_std", "max_accel_bias_std",
+                                      "max_gyro_bias_std"};
+
+Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d s;
+  s << 0, -v(2), v(1), v(2), 0, -v(0), -v(1), v(0), 0;
+  return s;
+}
+
+// The right Jacobian of SO(3) at φ: Exp(φ + δ) ≈ Exp(φ) Exp(J_r(φ) δ).
+Eigen::Matrix3d RightJacobian(const Eigen::Vector3d& phi) {
+  const double theta = phi.norm();
+  const Eigen::Matrix3d k = Skew(phi);
+  if (theta < 1e-6) return Eigen::Matrix3d::Identity() - 0.5 * k;
+  return Eigen::Matrix3d::Identity() - (1 - std::cos(theta)) / (theta * theta) * k +
+         (theta - std::sin(theta)) / (theta * theta * theta) * k * k;
+}
+
+}  // namespace
+
+ImuDesignInformation ImuDesign(const std::vector<Eigen::Vector3d>& up) {
+  ImuDesignInformation info;
+  info.accel = Eigen::Matrix<double, 9, 9>::Zero();
+  info.gyro = Eigen::Matrix<double, 9, 9>::Zero();
+  for (const Eigen::Vector3d& u : up) {
+    Eigen::Matrix<double, 9, 1> f;
+    f << u, u.cwiseProduct(u), u(0) * u(1), u(0) * u(2), u(1) * u(2);
+    info.accel += f * f.transpose();
+  }
+  const std::vector<Eigen::Matrix3d> r = ProtocolRotations(up);
+  for (size_t j = 1; j < up.size(); ++j) {
+    const Eigen::AngleAxisd step(r[j - 1].transpose() * r[j]);
+    const Eigen::Vector3d phi = step.angle() * step.axis();
+    Eigen::Matrix<double, 3, 9> dphi = Eigen::Matrix<double, 3, 9>::Zero();
+    for (int row = 0; row < 3; ++row) dphi.block<1, 3>(row, 3 * row) = phi.transpose();
+    const Eigen::Matrix<double, 3, 9> jac = Skew(up[j]) * RightJacobian(phi) * dphi;
+    info.gyro += jac.transpose() * jac;
+  }
+  return info;
+}
+
+double ImuDesignCriterion(const ImuDesignInformation& info) {
+  double value = 0;
+  for (const Eigen::Matrix<double, 9, 9>* m : {&info.accel, &info.gyro}) {
+    Eigen::Matrix<double, 9, 9> regular = *m;
+    regular.diagonal().array() += 1e-6;
+    const Eigen::LLT<Eigen::Matrix<double, 9, 9>> llt(regular);
+    if (llt.info() != Eigen::Success) return -INFINITY;
+    value += 2 * llt.matrixLLT().diagonal().array().log().sum();
+  }
+  return value;
+}
+
+std::vector<const PlanCandidate*> ImuGreedySequence(int positions) {
+  const int min_positions = core::ImuOptions().min_statics;
+  std::vector<const PlanCandidate*> chosen;
+  std::vector<Eigen::Vector3d> up;
+  std::vector<const PlanCandidate*> faces_missing;  // ±x, ±y, ±z not chosen yet
+  for (const PlanCandidate& c : PlanCandidates()) {
+    if (c.name.size() == 2) faces_missing.push_back(&c);
+  }
+  auto take = [&](const PlanCandidate* c) {
+    chosen.push_back(c);
+    up.push_back(c->direction);
+    faces_missing.erase(std::remove(faces_missing.begin(), faces_missing.end(), c),
+                        faces_missing.end());
+  };
+  for (const PlanCandidate& c : PlanCandidates()) {
+    if (c.name == "+z") take(&c);
+  }
+  while (static_cast<int>(chosen.size()) < positions) {
+    // The method's coverage rule (every body axis up and down within 45°, core/imu.h
+    // ImuCoverage; an edge diagonal is on the boundary) is met by the method's minimum: once
+    // the positions left before it are as many as the faces missing, only those are candidates.
+    const bool faces_only =
+        !faces_missing.empty() &&
+        static_cast<int>(faces_missing.size()) >= min_positions - static_cast<int>(chosen.size());
+    double best = -INFINITY;
+    const PlanCandidate* pick = nullptr;
+    for (const PlanCandidate& c : PlanCandidates()) {
+      if (&c == chosen.back()) continue;  // the same orientation again is one longer static
+      if (faces_only &&
+          std::find(faces_missing.begin(), faces_missing.end(), &c) == faces_missing.end()) {
+        continue;
+      }
+      up.push_back(c.direction);
+      const double value = ImuDesignCriterion(ImuDesign(up));
+      up.pop_back();
+      if (pick == nullptr || value > best + 1e-9) {
+        best = value;
+        pick = &c;
+      }
+    }
+    take(pick);
+  }
+  return chosen;
+}
+
+bool ImuSuggestOptions::IsValid(std::string* error) const {
+  if (!(max_positions >= 9 && max_positions <= PlanProtocol::kMaxPositions)) {
+    *error = "max_positions must be in [9, " + std::to_string(PlanProtocol::kMaxPositions) +
+             "] (the method needs 9 statics)";
+    return false;
+  }
+  if (!(margin >= 0 && margin < 1)) {
+    *error = "margin must be in [0, 1)";
+    return false;
+  }
+  if (!(max_samples > 0)) {
+    *error = "max_samples must be > 0";
+    return false;
+  }
+  return true;
+}
+
+namespace {
+
+// The protocol of the first k positions of `sequence` with `protocol`'s durations and rate.
+PlanProtocol Prefix(const std::vector<const PlanCandidate*>& sequence, int k,
+                    const PlanProtocol& protocol) {
+  PlanProtocol out = protocol;
+  out.orientations.clear();
+  out.labels.clear();
+  for (int j = 0; j < k; ++j) {
+    out.orientations.push_back(sequence[static_cast<size_t>(j)]->direction);
+    out.labels.push_back(sequence[static_cast<size_t>(j)]->name);
+  }
+  return out;
+}
+
+// One prediction of a prefix and its verdict under `limits`.
+struct Trial {
+  bool predicted = false;  // the method ran and gave parameters
+  json result;
+  Verdict verdict;
+};
+
+Trial Try(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits) {
+  Trial t;
+  const Status s = PredictImu(config, protocol, &t.result);
+  t.predicted = s.ok();
+  if (!s.ok()) {
+    t.verdict.Reject(s.message());
+  } else {
+    ImuMethod().Judge(t.result, config, limits, &t.verdict);
+  }
+  return t;
+}
 
 Status MissingNoise(const char* key) {
   return Status::InvalidInput(std::string("config.") + key +
@@ -61,6 +235,86 @@ Status PredictImu(const json& config, const PlanProtocol& protocol, json* result
   return ImuMethod().Run(&parser, config, RunContext(), result);
 }
 
+json SuggestImu(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits,
+                const ImuSuggestOptions& options) {
+  const int min_positions = core::ImuOptions().min_statics;
+  const double per_position =
+      protocol.rate * (protocol.static_duration + protocol.rotation_duration);
+  const int by_samples = static_cast<int>(std::floor(
+      (options.max_samples + protocol.rate * protocol.rotation_duration) / per_position));
+  const int cap = std::min(options.max_positions, by_samples);
+  AcceptanceLimits margined = limits;
+  for (const char* key : kSigmaKeys) {
+    const auto it = margined.values.find(key);
+    if (it != margined.values.end() && it->second) *it->second *= 1 - options.margin;
+  }
+  json out = {
+      {"design",
+       "greedy D-optimal over the 26 directions ±x, ±y, ±z, the 12 edge and 8 corner diagonals, "
+       "starting flat (+z up), each joined to the previous one by the shortest rotation: the "
+       "candidate that most increases log det of the linearised accelerometer (|a| = g at each "
+       "static) and gyroscope (the gravity direction after each rotation) information at nominal "
+       "values; the fewest positions of that sequence, from " +
+           std::to_string(min_positions) + " to " + std::to_string(options.max_positions) +
+           ", whose predicted result (the imu method on the simulated log) passes the gate with "
+           "its σ limits tightened by " +
+           Fmt(options.margin * 100) + " %, by bisection"},
+      {"rotations", "the shortest rotation between consecutive orientations"},
+      {"margin", options.margin},
+      {"orientations", json::array()},
+      {"meets_limits", false},
+      {"unmet", json::array()},
+      {"uncertainty", nullptr},
+      {"fewer", nullptr},
+      {"predictions", 0}};
+  if (cap < min_positions) {
+    out["unmet"].push_back("a log of " + std::to_string(min_positions) +
+                           " positions at this rate and duration has more than " +
+                           Fmt(options.max_samples) +
+                           " samples, the most a suggestion simulates (max_samples): shorten the "
+                           "statics or lower the rate");
+    return out;
+  }
+  const std::vector<const PlanCandidate*> sequence = ImuGreedySequence(cap);
+  int predictions = 0;
+  auto attempt = [&](int k) {
+    ++predictions;
+    return Try(config, Prefix(sequence, k, protocol), margined);
+  };
+  // Invariant: hi passes (or is the cap), lo fails (lo = min − 1: the method refuses it).
+  int hi = cap, lo = min_positions - 1;
+  Trial best = attempt(hi), fewer;
+  bool fewer_predicted = false;
+  if (best.verdict.accepted()) {
+    while (hi - lo > 1) {
+      const int mid = lo + (hi - lo) / 2;
+      Trial t = attempt(mid);
+      if (t.verdict.accepted()) {
+        hi = mid;
+        best = std::move(t);
+      } else {
+        lo = mid;
+        fewer = std::move(t);
+        fewer_predicted = true;
+      }
+    }
+  }
+  const PlanProtocol chosen = Prefix(sequence, hi, protocol);
+  out["orientations"] = OrientationsJson(chosen.orientations, chosen.labels);
+  out["meets_limits"] = best.verdict.accepted();
+  out["unmet"] = best.verdict.reasons();
+  if (best.predicted) out["uncertainty"] = best.result["uncertainty"];
+  if (best.verdict.accepted()) {
+    out["fewer"] = {{"positions", lo},
+                    {"unmet", fewer_predicted ? fewer.verdict.reasons()
+                                              : std::vector<std::string>{
+                                                    "the imu method needs " +
+                                                    std::to_string(min_positions) + " statics"}}};
+  }
+  out["predictions"] = predictions;
+  return out;
+}
+
 Status PlanImu(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits,
                json* out) {
   json result;
@@ -81,7 +335,9 @@ Status PlanImu(const json& config, const PlanProtocol& protocol, const Acceptanc
         {"σ is what the imu method reports for a log of this protocol simulated with a nominal "
          "IMU and the config's noise figures (its Cramér–Rao bound, uncertainty.*.crb, and the "
          "primary σ)",
-         "a suggested protocol is not available for imu yet"}}};
+         "the suggested protocol keeps this protocol's static duration, rotation duration and "
+         "rate"}}};
+  o["suggested"] = SuggestImu(config, protocol, limits, ImuSuggestOptions());
   if (!s.ok()) {
     std::vector<std::string> parameters;
     std::vector<std::string> missing = MissingDirections(protocol.orientations, true);

@@ -158,6 +158,9 @@ render fleet '/products/P-%3Cb%3E?method=pca'
 plan_config='config=%7B%22nominal%22%3A%5B%5B1%2C0%2C0%5D%2C%5B0%2C1%2C0%5D%2C%5B0%2C0%2C1%5D%5D%2C%22noise_std%22%3A0.01%7D'
 render plan "/plan?method=pca&o=%2Bx&o=%2By&o=%2Bz&orientations=-x+-y+-z+%2Bx%2By%2Bz&$plan_config"
 render plan-planar "/plan?method=pca&orientations=%2Bx+-x+%2By+-y+%2Bx%2By+-x-y&$plan_config"
+# imu: a suggestion cut by a scale σ limit, with the one-position-less line.
+imu_plan_config='config=%7B%22accel_noise%22%3A0.05%2C%22gyro_noise%22%3A0.01%2C%22acceptance%22%3A%7B%22max_scale_std%22%3A0.0005%7D%7D'
+render plan-imu "/plan?method=imu&orientations=%2Bz+-z+%2Bx+-x+%2By+-y+%2Bx%2By+%2By%2Bz+-x%2Bz+-y-z+%2Bx-z+-x-y&$imu_plan_config"
 
 # A running job's page: its elapsed time and the Cancel form (issue #20); then it is cancelled.
 python3 - "$tmp/array/config.json" "$tmp/endless.json" <<'PY'
@@ -210,6 +213,8 @@ expect devices 'class="page-devices' 'table-devices' 'first seen (UTC)'
 expect fleet 'class="page-fleet' 'table-fleet' 'href="/devices/FLEET-1"' 'P-&lt;b&gt;' 'class="hist"'
 expect plan 'class="page-plan' 'table-plan' 'table-plan-suggested' 'class="sphere' 'greedy D-optimal'
 expect plan-planar 'class="undetermined' 'no orientation with a component along z'
+expect plan-imu 'class="page-plan' 'table-plan-suggested' 'starting flat (+z up)' \
+  'class="fewer small"' 'positions the limits are not met'
 expect pca 'class="model"'
 expect array 'class="model"'
 reject failed 'class="advice"'
@@ -228,7 +233,7 @@ expect mag-device 'mag: hard-iron drift'
 expect thermal-device 'thermal (2 accepted calibrations' 'table-drift-thermal' \
   'plot-drift-thermal-accel' 'plot-drift-thermal-gyro'
 for page in history pca array failed failed-imu device devices revoked rejected recording check \
-  full device-drift running fleet plan plan-planar mag mag-device thermal-device; do
+  full device-drift running fleet plan plan-planar plan-imu mag mag-device thermal-device; do
   reject "$page" '<script' '<img'
   if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"

@@ -160,6 +160,15 @@ std::string Result(const PlanView& v) {
     for (const json& u : suggested.value("unmet", json::array())) {
       out += "<p class=\"small\">" + E(u.get<std::string>()) + "</p>";
     }
+    // imu: one position less, and why it fails (methods/imu/imu_plan.h SuggestImu).
+    if (const json fewer = suggested.value("fewer", json()); fewer.is_object()) {
+      out += "<p class=\"fewer small\">With " + std::to_string(fewer.value("positions", 0)) +
+             " positions the limits are not met:";
+      for (const json& u : fewer.value("unmet", json::array())) {
+        out += " " + E(u.get<std::string>());
+      }
+      out += "</p>";
+    }
     out += SigmaTable(suggested.value("uncertainty", json()), "table-plan-suggested");
   }
   out += Sphere(p["protocol"]["orientations"], suggested_orientations);
