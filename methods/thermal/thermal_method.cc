@@ -104,8 +104,7 @@ class Thermal : public Method {
   const char* summary() const override {
     return "each IMU's accelerometer and gyroscope bias against temperature, with its band, "
            "orders from the cubic up averaged by BIC weight and a heating/cooling hysteresis test, "
-           "from a warm-up "
-           "log";
+           "from a warm-up log";
   }
   bool Reads(Layout layout) const override { return layout == Layout::kArray; }
   // accel_noise / gyro_noise as {"job": ID} of a noise job (methods/noise/noise_reference.h).
