@@ -295,8 +295,12 @@ Status CalibrateImu(const Eigen::VectorXd& t, const ThermalImuInput& imu,
     ThermalChannel ch;
     ch.name = kChannelNames[c];
     const ChannelData d = SelectWindows(r->windows, c, 0, r->t_ref, r->orientations);
-    st = FitThermalPolynomial(d.x, d.y, d.sigma, d.group, d.groups, 0, options.max_order, scale,
-                              &ch.fit);
+    // The floor, capped where the windows leave no residual degree of freedom at it (the fit
+    // then refuses only when not even a constant has one).
+    const int lowest = std::max(0, std::min({options.min_order, options.max_order,
+                                             static_cast<int>(d.x.size()) - d.groups - 1}));
+    st = FitThermalPolynomial(d.x, d.y, d.sigma, d.group, d.groups, lowest, options.max_order,
+                              scale, &ch.fit);
     if (!st.ok())
       return Status::NotDeterminable("IMU " + imu.name + ", " + ch.name + ": " + st.message());
     CompareHeatingCooling(r->windows, c, r->t_ref, r->orientations, scale, options.grid_points,
@@ -330,6 +334,7 @@ bool ThermalOptions::IsValid(std::string* error) const {
   };
   if (!(window > 0)) return fail("window must be > 0 s");
   if (max_order < 1 || max_order > 8) return fail("max_order must be in [1, 8]");
+  if (min_order < 0 || min_order > 8) return fail("min_order must be in [0, 8]");
   if (t_ref && !std::isfinite(*t_ref)) return fail("t_ref must be finite");
   if (!(min_range >= 0)) return fail("min_range must be >= 0 °C");
   if (!(min_rate >= 0)) return fail("min_rate must be >= 0 °C/s");

@@ -14,16 +14,23 @@
 //       y_w = b_g(w) + Σ_{k=1..p} c_k (T_w − t_ref)^k,      weights 1/σ_w²,
 //     with one intercept b_g per orientation group for accelerometers (gravity is part of it) and
 //     one for gyroscopes. Solved by Householder QR on (T − t_ref)/h, h = half the range, so order 5
-//     over 60 °C stays well conditioned. Every order p ∈ [0, P] is fitted (P = max_order, or less
-//     where fewer windows leave no residual degree of freedom) and the curves are averaged with
-//     BIC weights w_p ∝ exp(−BIC_p/2), BIC_p = n ln(χ²_p/n) + k ln n (k the regression parameters
-//     plus the noise scale: σ_w that are uniformly too small do not favour high orders). Choosing
-//     one order on the same data either overfits (AICc: order 4–5 in ~25 % of logs whose truth is
-//     cubic) or, with a stricter criterion, drops a weak term and leaves a bias the band does not
-//     cover; the average's covariance Σ w_p (C_p + d_p d_pᵀ), d_p the order's parameters minus the
-//     average (zero-padded to P), includes that between-order spread. The fit's order is P (the
-//     length of the averaged coefficients); the table keeps every order's χ², BIC and weight; χ²,
-//     dof and the basis are the heaviest order's.
+//     over 60 °C stays well conditioned. Every order p ∈ [p_0, P] is fitted (p_0 = min_order,
+//     default 3, the flight stacks' cubic; P = max_order; both less where fewer windows leave no
+//     residual degree of freedom) and the curves are averaged with BIC weights
+//     w_p ∝ exp(−BIC_p/2), BIC_p = n ln(χ²_p/n) + k ln n (k the regression parameters plus the
+//     noise scale: σ_w that are uniformly too small do not favour high orders). BIC is consistent:
+//     a term that is absent gets a weight that vanishes with n, so a curve of the floor's order
+//     pays little for the orders offered above it; efficient criteria (AIC weights, Mallows or
+//     jackknife model averaging) keep a spurious order's weight at O(1) and cost 25–40 % of squared
+//     error against the cubic when the truth is cubic (README, table of rules). The floor at 3
+//     keeps a barely detectable cubic term in the curve (below it every rule pays for deciding it
+//     from the data); it costs nothing against the flight stacks, which fit that cubic anyway.
+//     Choosing one order on the same data either overfits (AICc: order 4–5 in ~25 % of logs whose
+//     truth is cubic) or, with a stricter criterion, drops a weak term and leaves a bias the band
+//     does not cover; the average's covariance Σ w_p (C_p + d_p d_pᵀ), d_p the order's parameters
+//     minus the average (zero-padded to P), includes that between-order spread. The fit's order is
+//     P (the length of the averaged coefficients); the table keeps every order's χ², BIC and
+//     weight; χ², dof and the basis are the heaviest order's.
 //  3. Uncertainty (SPEC §7 σ convention), per order: crb = (AᵀWA)⁻¹; when χ²/dof exceeds its
 //     one-sided 1 % quantile under the white-noise model (1 + 2.326 √(2/dof)), the primary is
 //     chi2_scaled (crb × χ²/dof), else crb; averaged as in stage 2 (the crb without the spread).
@@ -67,8 +74,11 @@ namespace calibd::core {
 enum class ThermalLagMode { kNone, kFixed, kEstimate };
 
 struct ThermalOptions {
-  double window = 10;              // s, > 0: averaging window inside the statics
-  int max_order = 5;               // in [1, 8]: highest polynomial order offered
+  double window = 10;  // s, > 0: averaging window inside the statics
+  int max_order = 5;   // in [1, 8]: highest polynomial order offered
+  // In [0, 8]: lowest order offered (capped at max_order and at what the windows support). 3,
+  // the flight stacks' cubic: the data decide only the orders above it (see stage 2).
+  int min_order = 3;
   std::optional<double> t_ref;     // °C; nullopt: the middle of [t_min, t_max]
   double min_range = 10;           // °C, >= 0: a smaller range of window temperatures is refused
   double min_rate = 0.001;         // °C/s, >= 0: |rate| above it is heating or cooling

@@ -21,22 +21,26 @@ namespace {
 Status ParseThermalConfig(const json& config, core::ThermalOptions* options, InertialUnits* units) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
   static const std::set<std::string>& kKnown = *new std::set<std::string>{
-      "method",      "device",           "accel_unit",  "gyro_unit", "t_ref",
-      "max_order",   "min_range",        "lag",         "device_id", "window",
-      "grid_points", "hysteresis_alpha", "accel_noise", "gyro_noise"};
+      "method",    "device",      "accel_unit",       "gyro_unit",   "t_ref",
+      "max_order", "min_order",   "min_range",        "lag",         "device_id",
+      "window",    "grid_points", "hysteresis_alpha", "accel_noise", "gyro_noise"};
   for (const auto& [key, value] : config.items()) {
     if (kKnown.count(key) == 0) {
       return ConfigKeyError(key,
                             "is not a thermal config key (known: accel_unit, gyro_unit, t_ref, "
-                            "max_order, min_range, lag, device_id, window, grid_points, "
+                            "max_order, min_order, min_range, lag, device_id, window, grid_points, "
                             "hysteresis_alpha, accel_noise, gyro_noise, method, device)");
     }
   }
   *options = core::ThermalOptions();
-  double max_order = options->max_order, grid = options->grid_points, t_ref = NAN;
+  double max_order = options->max_order, min_order = options->min_order;
+  double grid = options->grid_points, t_ref = NAN;
   Status s = ConfigNumber(config, "max_order", 1, 8, &max_order);
   if (s.ok() && max_order != std::floor(max_order))
     s = ConfigKeyError("max_order", "must be an integer");
+  if (s.ok()) s = ConfigNumber(config, "min_order", 0, 8, &min_order);
+  if (s.ok() && min_order != std::floor(min_order))
+    s = ConfigKeyError("min_order", "must be an integer");
   if (s.ok()) s = ConfigNumber(config, "grid_points", 2, 1000, &grid);
   if (s.ok() && grid != std::floor(grid)) s = ConfigKeyError("grid_points", "must be an integer");
   if (s.ok()) s = ConfigNumber(config, "t_ref", -100, 200, &t_ref);
@@ -45,6 +49,7 @@ Status ParseThermalConfig(const json& config, core::ThermalOptions* options, Ine
   if (s.ok()) s = ConfigNumber(config, "hysteresis_alpha", 1e-9, 0.5, &options->hysteresis_alpha);
   if (!s.ok()) return s;
   options->max_order = static_cast<int>(max_order);
+  options->min_order = static_cast<int>(min_order);
   options->grid_points = static_cast<int>(grid);
   if (std::isfinite(t_ref)) options->t_ref = t_ref;
   if (auto it = config.find("lag"); it != config.end()) {
@@ -98,8 +103,8 @@ class Thermal : public Method {
   const char* name() const override { return "thermal"; }
   const char* summary() const override {
     return "each IMU's accelerometer and gyroscope bias against temperature, with its band, "
-           "orders averaged by BIC weight and a heating/cooling hysteresis test, from a warm-up "
-           "log";
+           "orders from the cubic up averaged by BIC weight and a heating/cooling hysteresis test, "
+           "from a warm-up log";
   }
   bool Reads(Layout layout) const override { return layout == Layout::kArray; }
   // accel_noise / gyro_noise as {"job": ID} of a noise job (methods/noise/noise_reference.h).

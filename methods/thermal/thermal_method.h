@@ -17,11 +17,11 @@
 //     {"temperature", "deviation", "std"}, "hysteresis": {...}}], "lag": {"mode", "tau",
 //     "profile": {"tau", "minus_2_log_likelihood"} (estimate only)}}]}
 // Config keys: method, device, accel_unit, gyro_unit (formats/inertial_log.h), t_ref, max_order
-// (1..8, default 5), min_range (°C, default 10), lag ("none", "estimate", or τ in s: known),
-// device_id (PX4's TC_*_ID), window (s, default 10), grid_points (default 21),
-// hysteresis_alpha (default 0.01), accel_noise / gyro_noise (σ per sample in the reading units, or
-// {"job": ID} of a noise job, resolved at enqueue: the windows' σ are then σ/√n; the result's
-// diagnostics.noise_jobs names the jobs).
+// (1..8, default 5), min_order (0..8, default 3: the lowest order averaged), min_range (°C, default
+// 10), lag ("none", "estimate", or τ in s: known), device_id (PX4's TC_*_ID), window (s, default
+// 10), grid_points (default 21), hysteresis_alpha (default 0.01), accel_noise / gyro_noise (σ per
+// sample in the reading units, or {"job": ID} of a noise job, resolved at enqueue: the windows' σ
+// are then σ/√n; the result's diagnostics.noise_jobs names the jobs).
 #ifndef CALIBD_METHODS_THERMAL_THERMAL_METHOD_H_
 #define CALIBD_METHODS_THERMAL_THERMAL_METHOD_H_
 

@@ -1,4 +1,5 @@
 // The thermal result JSON (methods/thermal/thermal_method.h) of a core::ThermalResult.
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <optional>
@@ -191,9 +192,11 @@ json ThermalResultToJson(const core::ThermalResult& r, const core::ThermalOption
        {{"basis", scaled ? "chi2_scaled" : "crb"}, {"chi2_per_dof", nullptr}, {"imus", u_imus}}},
       {"diagnostics",
        {{"order_selection",
-         "curves of orders 0.." + std::to_string(options.max_order) +
-             " averaged with BIC weights exp(-BIC/2), BIC = n ln(chi2/n) + k ln n (noise scale "
-             "estimated); order_table[].weight"},
+         "curves of orders " + std::to_string(std::min(options.min_order, options.max_order)) +
+             ".." + std::to_string(options.max_order) +
+             " (min_order..max_order, fewer where the windows leave no residual degree of "
+             "freedom) averaged with BIC weights exp(-BIC/2), BIC = n ln(chi2/n) + k ln n (noise "
+             "scale estimated); order_table[].weight"},
         {"hysteresis_test",
          {{"method",
            "heating and cooling windows fitted apart at the curve's order; |z| of their difference "

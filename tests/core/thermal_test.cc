@@ -10,6 +10,7 @@
 #include <Eigen/Cholesky>
 #include <cmath>
 #include <cstdio>
+#include <vector>
 
 #include "core/thermal_simulation.h"
 
@@ -45,6 +46,7 @@ TEST(ThermalTest, RecoversTheCurveWithoutNoise) {
   ThermalOptions options;
   options.window = 1;  // the window mean of a curved bias departs from the curve by ~c2 var(T)
   options.statics.accel_threshold = options.statics.gyro_threshold = 1.0;
+  options.min_order = 0;  // every order offered: the data alone rule out those below the truth
   ThermalResult r;
   const Status st = Calibrate(sim, options, &r);
   ASSERT_TRUE(st.ok()) << st.message();
@@ -77,7 +79,7 @@ struct Honesty {
   double true_order_weight[6] = {0};
 };
 
-Honesty MonteCarlo(int trials, int max_order, int true_order) {
+Honesty MonteCarlo(int trials, int min_order, int max_order, int true_order) {
   Honesty h;
   double sum[6] = {0};
   int count[6] = {0};
@@ -86,6 +88,7 @@ Honesty MonteCarlo(int trials, int max_order, int true_order) {
     o.coefficients = DefaultThermalTruth(true_order);
     const ThermalSimulation sim = SimulateThermal(o);
     ThermalOptions options;
+    options.min_order = min_order;
     options.max_order = max_order;
     options.grid_points = 11;
     ThermalResult r;
@@ -115,7 +118,7 @@ Honesty MonteCarlo(int trials, int max_order, int true_order) {
 // ~1/√200 = 7 % (the grid points of one trial are correlated, so not less); 0.7–1.4 is > 4σ
 // either side, while a σ off by 1.5× (e.g. a missing χ² scaling) falls outside.
 TEST(ThermalTest, BandIsHonestInMonteCarlo) {
-  const Honesty h = MonteCarlo(100, 5, 3);
+  const Honesty h = MonteCarlo(100, 3, 5, 3);
   for (int c = 0; c < 6; ++c) {
     std::printf("channel %d: z RMS %.3f, mean weight of order 3 %.2f\n", c, h.z_rms[c],
                 h.true_order_weight[c]);
@@ -127,14 +130,39 @@ TEST(ThermalTest, BandIsHonestInMonteCarlo) {
   }
 }
 
+// A truth of order 2 with orders up to 8 offered: from order 0 (the weights alone decide, and
+// order 2 carries most of them) and from the default floor 3 (the unneeded cubic widens the band
+// and leaves it unbiased).
 TEST(ThermalTest, BandStaysHonestWithTooHighMaxOrder) {
-  const Honesty h = MonteCarlo(100, 8, 2);
-  for (int c = 0; c < 6; ++c) {
-    std::printf("channel %d (max_order 8, truth 2): z RMS %.3f, mean weight of order 2 %.2f\n", c,
-                h.z_rms[c], h.true_order_weight[c]);
-    EXPECT_GT(h.z_rms[c], 0.7);
-    EXPECT_LT(h.z_rms[c], 1.4);
-    EXPECT_GE(h.true_order_weight[c], 0.5);
+  for (const int min_order : {0, 3}) {
+    const Honesty h = MonteCarlo(100, min_order, 8, 2);
+    for (int c = 0; c < 6; ++c) {
+      std::printf("channel %d (orders %d..8, truth 2): z RMS %.3f, mean weight of order 2 %.2f\n",
+                  c, min_order, h.z_rms[c], h.true_order_weight[c]);
+      EXPECT_GT(h.z_rms[c], 0.7);
+      EXPECT_LT(h.z_rms[c], 1.4);
+      if (min_order == 0) EXPECT_GE(h.true_order_weight[c], 0.5);
+    }
+  }
+}
+
+TEST(ThermalTest, MinOrderIsValidatedAndCapped) {
+  const ThermalSimulation sim = SimulateThermal(Warmup(4));
+  ThermalOptions options;
+  options.min_order = 9;
+  ThermalResult r;
+  Status st = Calibrate(sim, options, &r);
+  ASSERT_EQ(st.code(), StatusCode::kInvalidInput);
+  EXPECT_NE(st.message().find("min_order must be in [0, 8]"), std::string::npos) << st.message();
+  // A floor above max_order is capped at it: one order, weight 1.
+  options.min_order = 3;
+  options.max_order = 2;
+  st = Calibrate(sim, options, &r);
+  ASSERT_TRUE(st.ok()) << st.message();
+  for (const ThermalChannel& ch : r.imus[0].channels) {
+    ASSERT_EQ(ch.fit.table.size(), 1u) << ch.name;
+    EXPECT_EQ(ch.fit.table[0].order, 2);
+    EXPECT_EQ(ch.fit.table[0].weight, 1.0);
   }
 }
 
@@ -223,7 +251,17 @@ std::vector<Eigen::VectorXd> StrongOrder5Truth() {
 // channel, summed over trials: calibd's and the flight stacks' cubic.
 struct CurveErrors {
   double calibd[6] = {0}, cubic[6] = {0};
+  std::vector<double> calibd_trials[6], cubic_trials[6];  // per trial, for the ratio's σ
   int trials = 0;
+  double Ratio(int c) const { return calibd[c] / cubic[c]; }
+  // Monte-Carlo σ of Ratio(c) (the delta method on the paired per-trial errors):
+  // √(Σ (a_i − R b_i)²) / Σ b_i.
+  double RatioStd(int c) const {
+    double s = 0;
+    for (size_t i = 0; i < calibd_trials[c].size(); ++i)
+      s += std::pow(calibd_trials[c][i] - Ratio(c) * cubic_trials[c][i], 2);
+    return std::sqrt(s) / cubic[c];
+  }
 };
 
 void AddCurveErrors(const ThermalSimulation& sim, const ThermalImuResult& imu, CurveErrors* e) {
@@ -238,6 +276,8 @@ void AddCurveErrors(const ThermalSimulation& sim, const ThermalImuResult& imu, C
     }
     e->calibd[c] += sc / imu.grid.size();
     e->cubic[c] += sf / imu.grid.size();
+    e->calibd_trials[c].push_back(sc / imu.grid.size());
+    e->cubic_trials[c].push_back(sf / imu.grid.size());
   }
   ++e->trials;
 }
@@ -266,37 +306,46 @@ CurveErrors CompareWithFlightStacks(char scenario, int trials) {
   for (int c = 0; c < 6; ++c) {
     std::printf(
         "scenario %c channel %d: RMS error calibd %.3g, cubic of all samples %.3g (ratio "
-        "of MSE %.3f)\n",
+        "of MSE %.3f ± %.3f)\n",
         scenario, c, std::sqrt(e.calibd[c] / e.trials), std::sqrt(e.cubic[c] / e.trials),
-        e.calibd[c] / e.cubic[c]);
+        e.Ratio(c), e.RatioStd(c));
   }
   return e;
 }
 
-// With 100 trials (60 with the lag) the ratio of the mean squared errors of two methods of equal
-// error has a spread of ~0.15 (measured: the trials' errors are ~χ² with few degrees of freedom),
-// so "clearly smaller" is a ratio below 0.5 (> 3 spreads from 1). Where the cubic is the true
-// order (a), calibd pays for not knowing the order. Measured ratios (a) / (b) / (c) per channel,
-// by the way the orders are combined (same seeds):
+// Ratios of the mean squared errors calibd / cubic over 100 trials (60 with the lag), each with its
+// Monte-Carlo σ from the paired per-trial errors (CurveErrors::RatioStd: 0.02–0.07 in (a), 0.003–
+// 0.024 in (b), 0.002–0.010 in (c)). Where the cubic is the true order (a), calibd pays for the
+// orders offered above it; the issue asks for no more than the cubic's error, taken as ≤ 1.05
+// within 3σ. "Clearly smaller" in (b), (c): below 0.5 by 3σ. Measured ratios (a) / (b) / (c) per
+// channel by the way the orders are combined (same seeds; "from 3": min_order 3):
 //   AICc, one order:                  1.37–1.59 / 0.05–0.30 / 0.01–0.09 (order 4–5 in ~25 %)
 //   AICc within 2 of its minimum:     1.17–1.40 / 0.05–0.30 / 0.01–0.10, lag z RMS up to 1.63
 //   likelihood-ratio tests, α 5 %:    1.19–1.42 / 0.05–0.30 / 0.01–0.09, lag z RMS up to 1.59
 //   BIC, one order:                   1.05–1.32 / 0.05–0.31 / 0.01–0.10, z RMS up to 2.05 (lag)
+//   BIC, one order, from 3:           1.05–1.22 / 0.05–0.31 / 0.01–0.07
 //   Akaike-weight average:            1.26–1.40 / 0.05–0.31 / 0.01–0.08
-//   BIC-weight average (calibd):      1.06–1.31 / 0.05–0.32 / 0.01–0.09, z RMS 0.83–1.27
+//   Akaike-weight average, from 3:    1.27–1.37 / 0.05–0.31 / 0.01–0.08
+//   Mallows model averaging:          1.25–1.43 / 0.05–0.30 / 0.01–0.08, z RMS 0.68–0.83
+//   Mallows model averaging, from 3:  1.23–1.30 / 0.05–0.30 / 0.01–0.07
+//   jackknife averaging, from 3:      1.22–1.33 / 0.05–0.31 / 0.01–0.08
+//   BIC-weight average:               1.06–1.31 / 0.05–0.32 / 0.01–0.09, z RMS 0.83–1.27
+//   BIC-weight average, from 3 (now): 1.06–1.16 / 0.05–0.32 / 0.01–0.07, z RMS 0.89–1.04
 //   order fixed at 3 (the oracle):    0.99–1.06
-// Selecting one order strictly drops weak terms (gyroscope y's cubic, 0.6e-4/45² rad/s/°C³) and
-// leaves a bias the band does not cover; the average's band includes the spread between orders.
-// Gyroscope y stays at 1.31 in (a): its cubic term is at the edge of detection, where any use of
-// the data to decide it costs against knowing it. Bounded at 1.5 (1.31 + > 1 spread).
+// Mallows and jackknife averaging (Hansen 2007, Hansen & Racine 2012) and Akaike weights are
+// efficient, not consistent: an absent 4th or 5th order keeps an O(1) weight and costs its variance
+// (largest at the cold end, where a warm-up has few windows). Selecting one order strictly drops
+// weak terms and leaves a bias the band does not cover. From order 0, gyroscope y's barely
+// detectable cubic (0.6e-4/45² rad/s/°C³) cost 1.31; the floor at 3 keeps it. Left: the BIC weight
+// of orders 4–5 when absent, 1.06–1.16 (gyroscope x 1.156 ± 0.052, 2σ above 1.05).
 TEST(ThermalTest, ComparedWithTheFlightStacksCubic) {
   const CurveErrors a = CompareWithFlightStacks('a', 100);
   const CurveErrors b = CompareWithFlightStacks('b', 100);
   const CurveErrors c = CompareWithFlightStacks('c', 60);
   for (int ch = 0; ch < 6; ++ch) {
-    EXPECT_LT(a.calibd[ch] / a.cubic[ch], 1.5) << ch;
-    EXPECT_LT(b.calibd[ch] / b.cubic[ch], 0.5) << ch;
-    EXPECT_LT(c.calibd[ch] / c.cubic[ch], 0.5) << ch;
+    EXPECT_LT(a.Ratio(ch) - 3 * a.RatioStd(ch), 1.05) << ch;
+    EXPECT_LT(b.Ratio(ch) + 3 * b.RatioStd(ch), 0.5) << ch;
+    EXPECT_LT(c.Ratio(ch) + 3 * c.RatioStd(ch), 0.5) << ch;
   }
 }
 

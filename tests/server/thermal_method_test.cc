@@ -60,9 +60,35 @@ TEST(ThermalMethodTest, CalibratesThroughTheReaderAndAccepts) {
   json truth;
   const json r = Simulated(&csv, &truth);
   EXPECT_EQ(r.at("verdict").at("status"), "accepted") << r.at("verdict").dump();
-  // The curves average orders 0..max_order (5) with BIC weights: the order is the highest.
+  // The curves average orders min_order (3)..max_order (5) with BIC weights: the order is the
+  // highest, the table holds orders 3, 4, 5 and says so.
   const int order = r.at("parameters").at("imus").at(0).at("gyroscope").at("bias").at("order");
   EXPECT_EQ(order, 5);
+  const json& d = r.at("diagnostics");
+  EXPECT_NE(d.at("order_selection").get<std::string>().find("orders 3..5"), std::string::npos)
+      << d.at("order_selection");
+  for (const json& ch : d.at("imus").at(0).at("channels")) {
+    const json& table = ch.at("order_table");
+    ASSERT_EQ(table.size(), 3u) << ch.at("name");
+    double total = 0;
+    for (size_t i = 0; i < table.size(); ++i) {
+      EXPECT_EQ(table[i].at("order"), static_cast<int>(3 + i));
+      total += table[i].at("weight").get<double>();
+    }
+    EXPECT_NEAR(total, 1.0, 1e-12) << ch.at("name");
+  }
+}
+
+TEST(ThermalMethodTest, MinOrderKeyIsCheckedNamingIt) {
+  for (const json& v : {json(-1), json(9), json(2.5), json("cubic")}) {
+    const Status s = ThermalMethod().ValidateConfig({{"method", "thermal"}, {"min_order", v}});
+    EXPECT_EQ(s.code(), StatusCode::kInvalidInput) << v;
+    EXPECT_EQ(s.field(), "min_order") << v;
+  }
+  for (const json& v : {json(0), json(3), json(8)}) {
+    EXPECT_TRUE(ThermalMethod().ValidateConfig({{"method", "thermal"}, {"min_order", v}}).ok())
+        << v;
+  }
 }
 
 TEST(ThermalMethodTest, RefusesAFourDegreeRangeNamingIt) {
