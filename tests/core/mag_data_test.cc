@@ -13,9 +13,8 @@
 //    result says so.
 // Each log: the calibrated field's magnitude spread is no worse than a least-squares
 // ellipsoid fit's (ArduPilot's CompassCalibrator residual), and the log's two halves, each with
-// its own σ, agree (loosely: z RMS under 2.5; measured 1.68 and 2.08, the README's "mag"
-// section says why); replayed under the model with the log's own orientations, they agree at
-// z RMS under 1.5.
+// its own σ, agree (z RMS under 1.6; the README's "mag" section says what is left); replayed
+// under the model with the log's own orientations, they agree at z RMS under 1.5.
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
@@ -259,7 +258,9 @@ MagResult CheckLog(const Log& log) {
       "%.2f, %.2f), %.2f with the white-noise bound\n",
       z_rms, a.basis.c_str(), b.basis.c_str(), a.sandwich_ratio, b.sandwich_ratio,
       HalvesZRms(a, b, a.crb, b.crb));
-  EXPECT_LT(z_rms, 2.5);
+  // Measured 1.45 (CK-Explorer) and 1.50 (QMC5883L); 2.08 and 1.68 before the sandwich went on
+  // to batches that leave 15 (core/mag.h step 3): no plateau, so σ is still a lower bound there.
+  EXPECT_LT(z_rms, 1.6);
   ReplayWithWhiteNoise(log, r);
   return r;
 }
