@@ -263,8 +263,9 @@ Matrix9d BatchMeat(const std::vector<Vector9d>& score, const VectorXd& t, double
 // The two covariances of θ = (h, a) (stage 3).
 struct Covariances {
   Matrix9d crb = Matrix9d::Zero();
-  Matrix9d sandwich = Matrix9d::Zero();
-  double sigma = 0;  // σ̂, reading units
+  Matrix9d sandwich = Matrix9d::Zero();       // over batches that leave min_batches
+  Matrix9d sandwich_long = Matrix9d::Zero();  // also over those that leave min_long_batches
+  double sigma = 0;                           // σ̂, reading units
   bool ok = false;
 };
 
@@ -291,20 +292,29 @@ Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vect
   // `options.min_batches` remain (the blocking method): residuals correlated longer than a batch
   // (a hand-held log's slow disturbances, drift, orientation-dependent misfit) make the sandwich
   // grow with the batch length until the batches outlast the correlation; the largest is kept.
-  c.sandwich = c.crb;  // too few batches for a sandwich: the bound alone
-  double largest = 0;
+  // Batches down to `options.min_long_batches` (noisier) count only for `sandwich_long`, the
+  // primary once the sandwich is (see ChoosePrimary): a hand-held log's misfit can stay
+  // correlated longer than the batches that leave `min_batches` (no plateau yet).
+  c.sandwich = c.sandwich_long = c.crb;  // too few batches for a sandwich: the bound alone
+  double largest = 0, largest_long = 0;
   for (double seconds = options.batch_seconds;; seconds *= 2) {
     int64_t batches = 0;
     const Matrix9d meat = BatchMeat(score, t, seconds, &batches);
-    if (batches <= 9 || (seconds > options.batch_seconds && batches < options.min_batches)) break;
+    if (batches <= 9 || (seconds > options.batch_seconds && batches < options.min_long_batches)) {
+      break;
+    }
     const Matrix9d sandwich = h_inv * meat * h_inv * (static_cast<double>(batches) / (batches - 9));
     const double size = (sandwich.diagonal().array() / c.crb.diagonal().array()).sum();
-    if (size > largest) {
+    if (size > largest && (seconds == options.batch_seconds || batches >= options.min_batches)) {
       largest = size;
       c.sandwich = sandwich;
     }
+    if (size > largest_long) {
+      largest_long = size;
+      c.sandwich_long = sandwich;
+    }
   }
-  c.ok = c.crb.allFinite() && c.sandwich.allFinite();
+  c.ok = c.crb.allFinite() && c.sandwich.allFinite() && c.sandwich_long.allFinite();
   return c;
 }
 
@@ -378,17 +388,23 @@ Status CheckNotPlanar(const Eigen::Matrix3Xd& y, const MagOptions& options) {
           a + " and -" + a + " axes");
 }
 
-// The primary σ (stage 3's rule) and its warning.
+// RMS over θ of σ(sandwich) / σ(bound).
+double SandwichRatio(const Matrix9d& sandwich, const Matrix9d& crb) {
+  double sum = 0;
+  for (int k = 0; k < 9; ++k) sum += sandwich(k, k) / std::max(crb(k, k), 1e-300);
+  return std::sqrt(sum / 9);
+}
+
+// The primary σ (stage 3's rule: the basis decided on the sandwich over batches that leave
+// min_batches; a sandwich primary also over those that leave min_long_batches) and its warning.
 void ChoosePrimary(const Covariances& c, const std::vector<Matrix3d>& dp, const MagOptions& options,
                    MagResult* r) {
   r->crb = StdOf(c.crb, dp);
-  const MagStd sandwich = StdOf(c.sandwich, dp);
-  double sum = 0;
-  for (int k = 0; k < 9; ++k) sum += c.sandwich(k, k) / std::max(c.crb(k, k), 1e-300);
-  r->sandwich_ratio = std::sqrt(sum / 9);
+  r->sandwich_ratio = SandwichRatio(c.sandwich, c.crb);
   if (r->sandwich_ratio > options.sandwich_margin) {
     r->basis = "sandwich";
-    r->std = sandwich;
+    r->std = StdOf(c.sandwich_long, dp);
+    r->sandwich_ratio = SandwichRatio(c.sandwich_long, c.crb);
     r->warnings.push_back("σ is the residual-aware sandwich, " + Fmt("%.2g", r->sandwich_ratio) +
                           "× the white-noise bound: the residuals are correlated in time "
                           "(disturbances, vibration or a model error)");
@@ -417,6 +433,9 @@ Status MagOptions::Validate() const {
   }
   if (!(batch_seconds > 0)) return Invalid("batch_seconds must be > 0");
   if (min_batches <= 9) return Invalid("min_batches must be > 9");
+  if (min_long_batches <= 9 || min_long_batches > min_batches) {
+    return Invalid("min_long_batches must be > 9 and <= min_batches");
+  }
   if (!(span_merge_seconds >= 0)) return Invalid("span_merge_seconds must be >= 0");
   if (!(sandwich_margin >= 1)) return Invalid("sandwich_margin must be >= 1");
   if (!(min_coverage_eigenvalue > 0 && min_coverage_eigenvalue <= 1)) {
@@ -509,8 +528,8 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
   result->residual_rms_clean =
       FieldResidualRms(y, e.h, result->soft_iron_symmetric, result->field, to_ut, &clean);
   // Stage 4.
-  mag_internal::EstimateAlignment(problem, options, e,
-                                  result->basis == "sandwich" ? c.sandwich : c.crb, c.crb, result);
+  mag_internal::EstimateAlignment(
+      problem, options, e, result->basis == "sandwich" ? c.sandwich_long : c.crb, c.crb, result);
   const double disturbed = static_cast<double>(result->disturbed_samples) / n;
   if (disturbed > options.max_disturbed_fraction) {
     return Status::NotDeterminable(Reason::kFieldDisturbed,

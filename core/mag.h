@@ -32,7 +32,13 @@
 //     The sandwich holds when the noise is coloured (a hand-held log's disturbances and
 //     vibration are) or the weights matter; the primary σ is the sandwich where it exceeds the
 //     white-noise bound by more than `sandwich_margin` (RMS over the parameters' σ ratios),
-//     else the bound (SPEC §7's uncertainty rule; basis named in the result).
+//     else the bound (SPEC §7's uncertainty rule; basis named in the result). A sandwich primary
+//     is the largest over batches down to `min_long_batches` (noisier; they do not decide the
+//     basis, so white noise keeps the bound): the public logs' blocking reaches no plateau (the
+//     QMC5883L sphere's σ ratio grows 1.9, 2.2, 2.6, 3.1, 4.5 over 2-32 s batches, its x and z
+//     offsets wandering at every time scale from 5 s up; CK-Explorer's 8.5, 10, 14 over 2-8 s),
+//     and its halves, each with 24 batches at most, disagreed at z RMS 2.08 and 1.68 (1.50 and
+//     1.45 with 15). Where there is no plateau the σ stays a lower bound.
 //  4. Alignment (with accelerometer statics): the down direction d_j (−specific force, unit) and
 //     the calibrated field direction n_j = P(ȳ_j − h)/|·| of each static satisfy
 //     d_jᵀ R n_j = sin δ (δ the dip, positive down); Gauss-Newton over R (left perturbation) and
@@ -86,6 +92,10 @@ struct MagOptions {
   // The sandwich is also computed over batches of 2, 4, 8... × batch_seconds while at least this
   // many batches remain, and the largest kept (residuals correlated longer than a batch). > 9.
   int min_batches = 24;
+  // Once the sandwich is the primary (see sandwich_margin), batches down to this many also
+  // count (the largest kept; step 3): residuals correlated longer than the batches that leave
+  // min_batches. In (9, min_batches].
+  int min_long_batches = 15;
   // Disturbed samples closer than this merge into one span, s. >= 0.
   double span_merge_seconds = 0.5;
   // The sandwich becomes the primary σ when the RMS of its σ over the bound's exceeds this. >= 1.
@@ -152,8 +162,9 @@ struct MagResult {
   MagStd std;         // primary σ (basis says which)
   MagStd crb;         // the white-noise bound
   std::string basis;  // "crb" or "sandwich"
-  // RMS over the parameters of σ(sandwich) / σ(bound): about 1 for white noise. (No χ²/dof: σ̂
-  // comes from the residuals themselves.)
+  // RMS over the parameters of σ(sandwich) / σ(bound): about 1 for white noise; the primary's
+  // sandwich (down to min_long_batches) when the basis is "sandwich". (No χ²/dof: σ̂ comes from
+  // the residuals themselves.)
   double sandwich_ratio = std::numeric_limits<double>::quiet_NaN();
   double noise_std = 0;  // σ̂, reading units (white, from the residuals)
 

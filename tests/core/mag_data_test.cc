@@ -13,7 +13,8 @@
 //    result says so.
 // Each log: the calibrated field's magnitude spread is no worse than a least-squares
 // ellipsoid fit's (ArduPilot's CompassCalibrator residual), and the log's two halves, each with
-// its own σ, agree.
+// its own σ, agree (z RMS under 1.6; the README's "mag" section says what is left); replayed
+// under the model with the log's own orientations, they agree at z RMS under 1.5.
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
@@ -25,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "core/array_simulation.h"
 #include "core/mag.h"
 #include "core/mag_internal.h"
 #include "core/static_detection.h"
@@ -172,6 +174,52 @@ double HalvesZRms(const MagResult& a, const MagResult& b, const MagStd& sa, cons
   return std::sqrt(sum / count);
 }
 
+// The log replayed under the model: the whole log's fit as the truth, each sample's field
+// direction from it (so the halves keep the log's own orientations and coverage), white noise of
+// the fit's σ. The halves then agree (z RMS near 1 over 6 seeds × 9 parameters; 1.5 is 5
+// standard errors of that RMS above 1): the real log's excess comes from its data (residuals
+// correlated longer than the sandwich's batches), not from the halves' coverage or from how σ is
+// computed. Also printed: the whole replayed fit's error over its white-noise bound for P's
+// diagonal, the errors-in-variables bias of a fit whose noise is a sizeable part of the field.
+void ReplayWithWhiteNoise(const Log& log, const MagResult& whole) {
+  MagOptions o;
+  o.microtesla_per_unit = log.microtesla_per_unit;
+  const Eigen::Index n = log.mag.rows();
+  const Eigen::Matrix3d a = whole.field * whole.soft_iron_symmetric.inverse();
+  const Eigen::Matrix3d a_inv = a.inverse();
+  double sum = 0;
+  int count = 0;
+  Eigen::Vector3d bias = Eigen::Vector3d::Zero();
+  constexpr int kSeeds = 6;
+  for (int seed = 1; seed <= kSeeds; ++seed) {
+    GaussianRng rng(seed);
+    Log replay = log;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const Eigen::Vector3d u =
+          (a_inv * (log.mag.row(i).transpose() - whole.hard_iron)).normalized();
+      const Eigen::Vector3d e(rng.Normal(), rng.Normal(), rng.Normal());
+      replay.mag.row(i) = (whole.hard_iron + a * u + whole.noise_std * e).transpose();
+    }
+    MagResult ra, rb, rw;
+    ASSERT_TRUE(CalibrateMag(Problem(replay, 0, n / 2), o, &ra).ok());
+    ASSERT_TRUE(CalibrateMag(Problem(replay, n / 2, n - n / 2), o, &rb).ok());
+    ASSERT_TRUE(CalibrateMag(Problem(replay, 0, n), o, &rw).ok());
+    const double z = HalvesZRms(ra, rb, ra.std, rb.std);
+    sum += 9 * z * z;
+    count += 9;
+    for (int k = 0; k < 3; ++k) {
+      bias(k) += (rw.soft_iron_symmetric(k, k) - whole.soft_iron_symmetric(k, k)) /
+                 rw.crb.soft_iron(k, k) / kSeeds;
+    }
+  }
+  const double z_rms = std::sqrt(sum / count);
+  std::printf(
+      "replayed with white noise (%d seeds): halves z RMS %.2f; whole fit's P diagonal error "
+      "over its bound, mean: %.1f %.1f %.1f\n",
+      kSeeds, z_rms, bias(0), bias(1), bias(2));
+  EXPECT_LT(z_rms, 1.5);
+}
+
 // The whole log calibrates to an Earth field, at least as tightly as the least-squares fit, and
 // its two halves agree within their σ. Returns the whole log's result.
 MagResult CheckLog(const Log& log) {
@@ -210,7 +258,10 @@ MagResult CheckLog(const Log& log) {
       "%.2f, %.2f), %.2f with the white-noise bound\n",
       z_rms, a.basis.c_str(), b.basis.c_str(), a.sandwich_ratio, b.sandwich_ratio,
       HalvesZRms(a, b, a.crb, b.crb));
-  EXPECT_LT(z_rms, 2.5);
+  // Measured 1.45 (CK-Explorer) and 1.50 (QMC5883L); 2.08 and 1.68 before the sandwich went on
+  // to batches that leave 15 (core/mag.h step 3): no plateau, so σ is still a lower bound there.
+  EXPECT_LT(z_rms, 1.6);
+  ReplayWithWhiteNoise(log, r);
   return r;
 }
 

@@ -308,10 +308,14 @@ TEST(MagMethod, ThePublicAccMagLogCalibratesThroughTheMethod) {
   ASSERT_TRUE(s.ok()) << s.ToString();
   const json& p = result["parameters"]["mags"][0];
   const json& d = result["diagnostics"]["mags"][0];
-  std::printf("field %.2f uT, dip %.2f, |m| RMS %.3f -> %.3f uT, chi2 %.2f, basis %s\n",
-              p["field_estimate"].get<double>(), p["dip"].get<double>(),
-              d["residual_rms_before"].get<double>(), d["residual_rms_clean"].get<double>(),
-              d["chi2"].get<double>(), result["uncertainty"]["basis"].get<std::string>().c_str());
+  const json& u = result["uncertainty"]["mags"][0];
+  std::printf(
+      "field %.2f uT, dip %.2f ± %.2f, |m| RMS %.3f -> %.3f uT, chi2 %.2f, basis %s (%.1f× the "
+      "bound), alignment σ %s\n",
+      p["field_estimate"].get<double>(), p["dip"].get<double>(), u["dip_std"].get<double>(),
+      d["residual_rms_before"].get<double>(), d["residual_rms_clean"].get<double>(),
+      d["chi2"].get<double>(), result["uncertainty"]["basis"].get<std::string>().c_str(),
+      d["sandwich_ratio"].get<double>(), u["alignment_std"].dump().c_str());
   EXPECT_GT(p["field_estimate"].get<double>(), 20);
   EXPECT_LT(p["field_estimate"].get<double>(), 70);
   EXPECT_LT(d["residual_rms_clean"].get<double>(), d["residual_rms_before"].get<double>() / 3);
