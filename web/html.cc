@@ -304,11 +304,12 @@ font-weight:600;border:1px solid;line-height:1.5;white-space:nowrap}
 .flag-warn{color:var(--warn);font-weight:600;white-space:nowrap}
 .sd{font-size:.7rem;color:var(--muted);margin-left:.2rem}
 table.table-array-full td,table.table-array-full th{padding:.28rem .3rem}
-table.table-drift-imu,table.table-drift-noise{font-size:.78rem}
+table.table-drift-imu,table.table-drift-noise,table.table-drift-thermal{font-size:.78rem}
 table.table-drift-imu td,table.table-drift-imu th,table.table-drift-noise td,
-table.table-drift-noise th{padding:.28rem .3rem}
-table.table-drift-imu thead th,table.table-drift-noise thead th,table.table-drift-pca thead th{
-white-space:normal}
+table.table-drift-noise th,table.table-drift-thermal td,table.table-drift-thermal th{
+padding:.28rem .3rem}
+table.table-drift-imu thead th,table.table-drift-noise thead th,table.table-drift-pca thead th,
+table.table-drift-thermal thead th{white-space:normal}
 td details{margin:0}
 th.group{text-align:center}
 .gs{border-left:2px solid var(--line)}

@@ -168,11 +168,8 @@ std::string ShapeCell(const ThermalImu& before, const ThermalImu& now, int first
     const ShapeChange s = CompareShape(before, now, first + a, lo, hi);
     double& w = (*worst_z)[static_cast<size_t>(first + a)];
     if (std::isfinite(s.z)) w = std::max(w, std::fabs(s.z));
-    lines.emplace_back(std::string(1, kAxes[a]) + " " + Signed(s.delta, 3) + " at " +
-                           FormatSig(s.at, 3) +
-                           " \xC2\xB0"
-                           "C",
-                       s.z);
+    lines.emplace_back(
+        std::string(1, kAxes[a]) + " " + Signed(s.delta, 3) + " at " + FormatSig(s.at, 2), s.z);
   }
   return ChangeCell(lines);
 }
@@ -180,10 +177,7 @@ std::string ShapeCell(const ThermalImu& before, const ThermalImu& now, int first
 std::string GyroAtRefCell(const ThermalImu& before, const ThermalImu& now) {
   if (!before.gyro_at || !now.gyro_at) return NoChangeCell(kDash);
   if (!(std::fabs(before.t_ref - now.t_ref) <= kSameTref))
-    return NoChangeCell("t_ref differs (" + FormatSig(before.t_ref, 4) + " / " +
-                        FormatSig(now.t_ref, 4) +
-                        " \xC2\xB0"
-                        "C)");
+    return NoChangeCell("t_ref differs");  // both are in the range column
   std::vector<std::pair<std::string, double>> lines;
   for (int a = 0; a < 3; ++a) {
     auto line = ChangeLine((*before.gyro_at)(a), (*before.gyro_at_std)(a), (*now.gyro_at)(a),
@@ -228,8 +222,10 @@ std::string DriftTable(const std::vector<const JobSummary*>& jobs,
   return "<div class=\"table-wrap\"><table class=\"table-drift-thermal\"><thead><tr>"
          "<th>calibration</th><th>IMU</th><th class=\"num\">range (\xC2\xB0"
          "C)</th>"
-         "<th class=\"num\">accelerometer curve change (m/s\xC2\xB2)</th>"
-         "<th class=\"num\">gyroscope curve change (rad/s)</th>"
+         "<th class=\"num\">accelerometer curve change (m/s\xC2\xB2) at T (\xC2\xB0"
+         "C)</th>"
+         "<th class=\"num\">gyroscope curve change (rad/s) at T (\xC2\xB0"
+         "C)</th>"
          "<th class=\"num\">gyroscope bias at t_ref change (rad/s)</th>"
          "</tr></thead><tbody>" +
          rows + "</tbody></table></div>";
