@@ -370,7 +370,7 @@ int main(int argc, char** argv) {
   const std::vector<Plan> plans = {
       {"pca", Pca, {Misfit::kRight, Misfit::kUnderstated, Misfit::kColoured}, 300},
       {"array", Array, {Misfit::kRight, Misfit::kUnderstated, Misfit::kColoured}, 40},
-      {"array_full", ArrayFull, {Misfit::kRight, Misfit::kUnderstated, Misfit::kColoured}, 20},
+      {"array_full", ArrayFull, {Misfit::kRight, Misfit::kUnderstated, Misfit::kColoured}, 30},
       {"imu", Imu, {Misfit::kRight, Misfit::kUnderstated, Misfit::kColoured, Misfit::kJitter}, 150},
       {"noise", NoiseMethod, {Misfit::kRight, Misfit::kColoured, Misfit::kJitter}, 400},
   };
