@@ -243,9 +243,14 @@ struct ArrayFullResult {
   std::vector<ArrayFullStatic> static_intervals;  // time order, `statics` of them
   int64_t static_samples = 0;
   int64_t dynamic_samples = 0;
-  int64_t samples_dropped = 0;             // saturation (gyroscope or accelerometer)
-  int64_t dof = 0;                         // residuals - block unknowns - free shared unknowns
-  double chi2_per_dof = 0;                 // final cost / dof
+  int64_t samples_dropped = 0;  // saturation (gyroscope or accelerometer)
+  int64_t dof = 0;              // residuals - block unknowns - free shared unknowns
+  double chi2_per_dof = 0;      // final cost / dof
+  // χ² of the static means alone (each weighted by its σ/√samples) / their degrees of freedom
+  // 6KJ − 2J − 15K (J statics; the accelerometers and gyroscope biases are what they fix): noise
+  // correlated in time inflates it by the static means' variance ratio while the dynamic samples
+  // keep chi2_per_dof near 1. Above robust_ratio the sandwich is the primary σ. 0: none.
+  double static_chi2_per_dof = 0;
   double accel_noise = 0, gyro_noise = 0;  // sigma used
   bool noise_estimated = false;            // from the statics (not configured)
   // Sigma used for the dynamic samples (= accel_noise, gyro_noise unless kResidual raised it).

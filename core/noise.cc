@@ -16,6 +16,8 @@ constexpr double kFloorFactor = 0.664;  // IEEE 952: the Allan deviation floor i
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr int kIterations = 5;  // reweighting passes of the fit
+// χ² above E χ² + this many of its standard deviations: the σ are χ²-scaled.
+constexpr double kChi2Deviations = 3;
 
 std::string Format(const char* fmt, double v) {
   char buf[64];
@@ -51,6 +53,11 @@ struct Fit {
   Mat3 cov_support = Mat3::Zero();       // covariance on the support (zero rows/cols elsewhere)
   Mat3 cov_full = Mat3::Constant(kNaN);  // unconstrained covariance (all three terms)
   double chi2 = kNaN;
+  // χ² the noise model predicts for the fitted points (their correlation Σ and the fit's
+  // projection: E χ² = tr M, Var χ² = 2 tr M², M = W½(I−P)Σ(I−P)ᵀW½, P the weighted hat matrix
+  // on the support). The points are correlated, so E χ² is not points − terms.
+  double chi2_expected = kNaN;
+  double chi2_expected_std = kNaN;
   std::vector<AllanNoiseType> types;  // dominant term per point of the curve
   std::vector<double> model;          // fitted σ² per point of the curve
 };
@@ -159,6 +166,7 @@ Fit FitModel(const AllanCurve& curve, int64_t min_fit_cluster) {
     const Mat3 meat = wx.transpose() * sigma * wx;
     auto chi2_of = [&](const Vec3& coef) { return (y - x * coef).cwiseAbs2().dot(weight); };
     double best = kInf;
+    Mat3 best_bread = Mat3::Zero();
     for (int mask = 1; mask < 8; ++mask) {
       Vec3 coef;
       Mat3 bread;
@@ -169,7 +177,19 @@ Fit FitModel(const AllanCurve& curve, int64_t min_fit_cluster) {
         best = chi2;
         fit.coef = coef;
         fit.cov_support = bread * meat * bread;
+        best_bread = bread;
       }
+    }
+    if (std::isfinite(best)) {
+      // Residual operator I − P, P = X (XᵀWX)⁻¹_support XᵀW; M = W½ (I−P) Σ (I−P)ᵀ W½.
+      const Eigen::MatrixXd residual =
+          Eigen::MatrixXd::Identity(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k)) -
+          x * best_bread * wx.transpose();
+      const Eigen::VectorXd root = weight.cwiseSqrt();
+      const Eigen::MatrixXd m =
+          root.asDiagonal() * residual * sigma * residual.transpose() * root.asDiagonal();
+      fit.chi2_expected = m.trace();
+      fit.chi2_expected_std = std::sqrt(2 * m.cwiseAbs2().sum());
     }
     Vec3 coef_full;
     Mat3 bread_full;
@@ -307,13 +327,16 @@ void CheckStationarity(const float* y, int64_t n, double tau0, const NoiseOption
 }
 
 // ----- One channel.
+// `scale` (>= 1) multiplies the model's covariance (√(χ²/E χ²) when the residuals exceed the
+// noise model, else 1): visibility, upper bounds and the primary σ use the scaled one, the
+// model's own σ stays in NoiseTerm::crb_std.
 void ReadTerms(const Fit& fit, const AllanCurve& curve, const NoiseOptions& options,
-               double duration, double tau0, NoiseChannelResult* ch) {
+               double duration, double tau0, double scale, NoiseChannelResult* ch) {
   const Vec3& coef = fit.coef;
   Vec3 std_support, std_full;
   for (int j = 0; j < 3; ++j) {
-    std_support(j) = std::sqrt(std::max(fit.cov_support(j, j), 0.0));
-    std_full(j) = std::sqrt(std::max(fit.cov_full(j, j), 0.0));
+    std_support(j) = scale * std::sqrt(std::max(fit.cov_support(j, j), 0.0));
+    std_full(j) = scale * std::sqrt(std::max(fit.cov_full(j, j), 0.0));
     if (!std::isfinite(std_full(j))) std_full(j) = std_support(j);
   }
   // Which term dominates where, over the fitted points.
@@ -340,6 +363,7 @@ void ReadTerms(const Fit& fit, const AllanCurve& curve, const NoiseOptions& opti
       const double value = factor[j] * std::sqrt(coef(j));
       t.value = value;
       t.std = factor[j] * std_support(j) / (2 * std::sqrt(coef(j)));
+      t.crb_std = *t.std / scale;
     }
   }
   const double a = coef(0), c = coef(1), d = coef(2);
@@ -443,13 +467,24 @@ Status AnalyseChannel(const NoiseChannelInput& in, int64_t n, double tau0,
     ch->fitted_adev.push_back(std::sqrt(std::max(fit.model[j], 0.0)));
     if (ch->allan.cluster[j] >= options.min_fit_cluster && ch->allan.avar[j] > 0) ++ch->fit_points;
   }
-  ReadTerms(fit, ch->allan, options, static_cast<double>(n) * tau0, tau0, ch);
-  const int dof = ch->fit_points - 3;
-  if (dof >= 3 && fit.chi2 > 4 * dof) {
-    ch->warnings.push_back(ch->name + ": the N/B/K model fits the Allan curve poorly (χ² = " +
-                           Format("%.0f", fit.chi2) + " for " + std::to_string(dof) +
-                           " degrees of freedom): look at the plot for quantisation, a "
-                           "sinusoid or a rate ramp");
+  // The σ convention (SPEC §4/§7, issue 28): the model's σ where χ² is within 3 standard
+  // deviations of what the noise model predicts, else that σ × √(χ²/E χ²).
+  ch->chi2_expected = fit.chi2_expected;
+  ch->chi2_per_dof = fit.chi2 / fit.chi2_expected;
+  double scale = 1;
+  if (fit.chi2_expected > 0 &&
+      fit.chi2 > fit.chi2_expected + kChi2Deviations * fit.chi2_expected_std) {
+    scale = std::sqrt(ch->chi2_per_dof);
+    ch->uncertainty_basis = "chi2_scaled";
+  }
+  ReadTerms(fit, ch->allan, options, static_cast<double>(n) * tau0, tau0, scale, ch);
+  if (scale > 1) {
+    ch->warnings.push_back(
+        ch->name + ": the N/B/K model fits the Allan curve worse than its noise allows (χ² = " +
+        Format("%.1f", fit.chi2) + " where " + Format("%.1f", fit.chi2_expected) + " ± " +
+        Format("%.1f", fit.chi2_expected_std) + " is expected): the σ are scaled by " +
+        Format("%.2f", scale) +
+        "; look at the plot for quantisation, a sinusoid, a rate ramp or a correlated bump");
   }
   const NoiseStationarity& st = ch->stationarity;
   if (!st.checked) {

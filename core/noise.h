@@ -23,6 +23,11 @@
 // (Paciorek's non-stationary form, positive definite). Generalised least squares with that Σ
 // was tried and rejected: it fits below the data (Peelle's puzzle). The variances are propagated
 // to N = √a, B = √c/0.664, K = √(3d) to first order; tests/core/noise_test.cc measures coverage.
+// The σ convention (issue 28, as pca/imu/array): that σ is the bound the noise model gives
+// (NoiseTerm::crb_std, basis "crb"). The fit's χ² is compared with what the model predicts for
+// it, E χ² = tr M and Var χ² = 2 tr M² with M = W½(I−P)Σ(I−P)ᵀW½ (P the weighted hat matrix):
+// above E χ² + 3 sd the curve does not follow N/B/K within its chi-square intervals, and the
+// primary σ (and the visibility test) use the bound × √(χ²/E χ²) (basis "chi2_scaled", warned).
 //
 // Visibility: a term is reported only when it dominates (is the largest of the three) at one
 // fitted cluster time at least and its coefficient is at least `min_significance` standard
@@ -168,7 +173,10 @@ struct NoiseStationarity {
 // the term is not visible; the rest is for reports and for the fitted line of plots.
 struct NoiseTerm {
   std::optional<double> value;  // N (unit/√Hz), B (unit) or K (unit/s/√Hz); nullopt: not visible
-  std::optional<double> std;    // 1σ of value
+  std::optional<double> std;    // 1σ of value: the primary σ (see NoiseChannelResult's basis)
+  // The noise model's own 1σ (the sandwich from the Allan points' chi-square spread: the bound
+  // when the curve follows N/B/K); equals std when the basis is "crb". With value.
+  std::optional<double> crb_std;
   // Fitted coefficient (N², (0.664B)² or K²/3, ≥ 0, the fit's line even when not visible) and
   // its 1σ, so plots can draw every fitted line.
   double coefficient = 0;
@@ -198,7 +206,14 @@ struct NoiseChannelResult {
   AllanCurve allan;  // tau, adev, adev_lower, adev_upper (and edf, noise type per point)
   std::vector<double> fitted_adev;  // √ of the fitted model at each tau (for plots)
   int fit_points = 0;               // cluster times used by the fit (m >= min_fit_cluster)
-  double fit_chi2 = std::numeric_limits<double>::quiet_NaN();  // Σ w (σ̂² − model)²: ≈ points−3
+  double fit_chi2 = std::numeric_limits<double>::quiet_NaN();  // Σ w (σ̂² − model)²
+  // What the noise model predicts for fit_chi2 (the points are correlated, so not points − 3)
+  // and fit_chi2 / that: ≈ 1 when the curve follows N/B/K.
+  double chi2_expected = std::numeric_limits<double>::quiet_NaN();
+  double chi2_per_dof = std::numeric_limits<double>::quiet_NaN();
+  // "crb": the terms' std are the model's σ (fit_chi2 within 3 of its standard deviations of
+  // chi2_expected); "chi2_scaled": the model's σ × √chi2_per_dof, with a warning.
+  std::string uncertainty_basis = "crb";
   double mean = std::numeric_limits<double>::quiet_NaN();  // of the samples, unit
   NoiseStationarity stationarity;
   std::vector<std::string> warnings;  // this channel's, also copied to NoiseResult::warnings

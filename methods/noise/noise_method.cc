@@ -350,8 +350,21 @@ results::NoiseResult NoiseResultOf(const core::NoiseResult& r, int taus_per_deca
     out.channels.push_back({c.name, c.unit, value(c.white_noise.value),
                             value(c.bias_instability.value), value(c.bias_instability_tau),
                             value(c.random_walk.value)});
-    out.channel_stds.push_back({c.name, value(c.white_noise.std), value(c.bias_instability.std),
-                                value(c.random_walk.std)});
+    results::NoiseChannelUncertainty u;
+    u.name = c.name;
+    u.white_noise_std = value(c.white_noise.std);
+    u.bias_instability_std = value(c.bias_instability.std);
+    u.random_walk_std = value(c.random_walk.std);
+    if (c.status != core::NoiseChannelStatus::kNotRun) {  // a constant channel: NaN σ, "crb"
+      u.basis = c.uncertainty_basis;
+      u.chi2_per_dof = c.chi2_per_dof;
+      u.crb =
+          results::NoiseTermStds{value(c.white_noise.crb_std), value(c.bias_instability.crb_std),
+                                 value(c.random_walk.crb_std)};
+      if (out.basis != "chi2_scaled") out.basis = c.uncertainty_basis;
+      if (!(out.chi2_per_dof >= c.chi2_per_dof)) out.chi2_per_dof = c.chi2_per_dof;
+    }
+    out.channel_stds.push_back(std::move(u));
     d.allan.push_back(
         {c.name, c.allan.tau, c.allan.adev, c.allan.adev_lower, c.allan.adev_upper, c.fitted_adev});
     d.channels.push_back({c.name, core::NoiseChannelStatusName(c.status), c.reason, c.fit_points,

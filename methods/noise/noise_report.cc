@@ -92,6 +92,25 @@ std::string AllanPlot(const std::vector<results::NoiseAllanCurve>& allan, char k
                 "+\xC2\xBD: random walk (read at 3 s).");
 }
 
+// Which σ the table shows (the σ convention, issue 28), in words.
+std::string NoiseSigmaBasisText(const results::NoiseResult& r) {
+  std::string scaled;
+  for (const results::NoiseChannelUncertainty& u : r.channel_stds) {
+    if (u.basis != "chi2_scaled") continue;
+    scaled += (scaled.empty() ? "" : ", ") + u.name + " \xC3\x97" +
+              FormatSig(std::sqrt(u.chi2_per_dof), 3);
+  }
+  if (r.basis == "chi2_scaled")
+    return "the noise model's \xCF\x83 where the Allan curve follows it, scaled by "
+           "\xE2\x88\x9A(\xCF\x87\xC2\xB2 / expected \xCF\x87\xC2\xB2) where it does not (" +
+           scaled + "; the model's own in uncertainty.channels[].crb of the JSON)";
+  if (r.basis == "crb")
+    return "the noise model's \xCF\x83 (the Allan curve follows N/B/K within its intervals, "
+           "largest \xCF\x87\xC2\xB2 / expected " +
+           FormatSig(r.chi2_per_dof, 3) + ")";
+  return "the noise model's \xCF\x83, whatever the fit (stored by an earlier calibd)";
+}
+
 }  // namespace
 
 std::string NoiseReport(const JobView& view) {
@@ -125,8 +144,9 @@ std::string NoiseReport(const JobView& view) {
            NumCell(c.bias_instability_tau, 3) + TermCell(c.random_walk, u.random_walk_std) +
            "</tr>";
     }
-    s += "</tbody></table></div><p class=\"muted small\">\xC2\xB1 is one standard deviation. "
-         "N and K are Kalibr's noise_density and random_walk "
+    s += "</tbody></table></div><p class=\"muted small\">\xC2\xB1 is one standard deviation: " +
+         E(NoiseSigmaBasisText(r)) +
+         ". N and K are Kalibr's noise_density and random_walk "
          "(<a href=\"/api/v1/devices/" +
          A(UrlEncode(view.job.device)) +
          "/calibration?method=noise&amp;format=yaml\">imu.yaml</a>). A term the log is too short "

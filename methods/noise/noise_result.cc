@@ -7,7 +7,14 @@ namespace calibd::results {
 
 using nlohmann::json;
 
-namespace {}  // namespace
+namespace {
+
+void CheckBasis(const JsonReader& r, const std::string& basis) {
+  if (r.ok() && basis != "crb" && basis != "chi2_scaled" && basis != kNoiseBasisCrbOnly)
+    r.Fail("expected \"crb\", \"chi2_scaled\" or \"crb_only\", found \"" + basis + "\"", "basis");
+}
+
+}  // namespace
 
 json ToJson(const NoiseResult& r) {
   json out = json::object();
@@ -23,13 +30,27 @@ json ToJson(const NoiseResult& r) {
                         {"random_walk", Num(c.random_walk)}});
     }
     for (const NoiseChannelUncertainty& c : r.channel_stds) {
-      stds.push_back({{"name", c.name},
-                      {"white_noise_std", Num(c.white_noise_std)},
-                      {"bias_instability_std", Num(c.bias_instability_std)},
-                      {"random_walk_std", Num(c.random_walk_std)}});
+      json e = {{"name", c.name},
+                {"white_noise_std", Num(c.white_noise_std)},
+                {"bias_instability_std", Num(c.bias_instability_std)},
+                {"random_walk_std", Num(c.random_walk_std)}};
+      if (c.basis != kNoiseBasisCrbOnly) {
+        e["basis"] = c.basis;
+        e["chi2_per_dof"] = Num(c.chi2_per_dof);
+      }
+      if (c.crb) {
+        e["crb"] = {{"white_noise_std", Num(c.crb->white_noise_std)},
+                    {"bias_instability_std", Num(c.crb->bias_instability_std)},
+                    {"random_walk_std", Num(c.crb->random_walk_std)}};
+      }
+      stds.push_back(std::move(e));
     }
     out["parameters"] = {{"channels", std::move(params)}};
     out["uncertainty"] = {{"channels", std::move(stds)}};
+    if (r.basis != kNoiseBasisCrbOnly) {
+      out["uncertainty"]["basis"] = r.basis;
+      out["uncertainty"]["chi2_per_dof"] = Num(r.chi2_per_dof);
+    }
   }
   const NoiseDiagnostics& d = r.diagnostics;
   json channels = json::array(), allan = json::array();
@@ -92,7 +113,21 @@ Status FromJson(const json& doc, NoiseResult* out) {
       e.Read("white_noise_std", &c->white_noise_std);
       e.Read("bias_instability_std", &c->bias_instability_std);
       e.Read("random_walk_std", &c->random_walk_std);
+      // Absent in results stored before the σ convention: "crb_only", no χ², no crb.
+      e.ReadExtension("basis", &c->basis);
+      e.ReadExtension("chi2_per_dof", &c->chi2_per_dof);
+      CheckBasis(e, c->basis);
+      if (std::optional<JsonReader> b = e.OptionalObject("crb")) {
+        NoiseTermStds crb;
+        b->Read("white_noise_std", &crb.white_noise_std);
+        b->Read("bias_instability_std", &crb.bias_instability_std);
+        b->Read("random_walk_std", &crb.random_walk_std);
+        c->crb = crb;
+      }
     });
+    unc.ReadExtension("basis", &v.basis);
+    unc.ReadExtension("chi2_per_dof", &v.chi2_per_dof);
+    CheckBasis(unc, v.basis);
     if (r.ok() && v.channel_stds.size() != v.channels.size()) {
       unc.Fail(std::to_string(v.channels.size()) + " channels in parameters but " +
                    std::to_string(v.channel_stds.size()) + " here",

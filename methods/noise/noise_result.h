@@ -48,12 +48,30 @@ struct NoiseChannelParameters {
   double random_walk = std::numeric_limits<double>::quiet_NaN();           // K, unit/s/√Hz
 };
 
-// uncertainty.channels[]: one standard deviation of each term (NaN: undefined or not shown).
+// The σ convention (issue 28, SPEC §4/§7 in README's changelog): per channel basis "crb" (the
+// noise model's σ: the Allan curve follows N/B/K within its chi-square intervals) or
+// "chi2_scaled" (that σ × √chi2_per_dof, warned); "crb_only": absent, a result stored by an
+// earlier calibd, whose σ are the model's whatever the fit.
+inline constexpr char kNoiseBasisCrbOnly[] = "crb_only";
+
+// The three terms' σ (uncertainty.channels[].crb: the noise model's own, ext.).
+struct NoiseTermStds {
+  double white_noise_std = std::numeric_limits<double>::quiet_NaN();
+  double bias_instability_std = std::numeric_limits<double>::quiet_NaN();
+  double random_walk_std = std::numeric_limits<double>::quiet_NaN();
+};
+
+// uncertainty.channels[]: one standard deviation of each term (NaN: undefined or not shown),
+// the primary σ of the basis.
 struct NoiseChannelUncertainty {
   std::string name;
   double white_noise_std = std::numeric_limits<double>::quiet_NaN();
   double bias_instability_std = std::numeric_limits<double>::quiet_NaN();
   double random_walk_std = std::numeric_limits<double>::quiet_NaN();
+  std::string basis = kNoiseBasisCrbOnly;  // ext.: "crb" | "chi2_scaled" | "crb_only"
+  // ext.: the fit's χ² / the χ² the noise model predicts for the correlated Allan points.
+  double chi2_per_dof = std::numeric_limits<double>::quiet_NaN();
+  std::optional<NoiseTermStds> crb;  // ext.: absent with crb_only
 };
 
 // diagnostics.channels[]: how the fit of one channel went (ext., every member).
@@ -102,6 +120,10 @@ struct NoiseResult {
   // parameters.channels and uncertainty.channels, in the same order (empty when not usable).
   std::vector<NoiseChannelParameters> channels;
   std::vector<NoiseChannelUncertainty> channel_stds;
+  // uncertainty.basis (ext.): "chi2_scaled" when any channel's is, else "crb"; "crb_only" when
+  // absent. uncertainty.chi2_per_dof (ext.): the largest of the channels' (NaN when absent).
+  std::string basis = kNoiseBasisCrbOnly;
+  double chi2_per_dof = std::numeric_limits<double>::quiet_NaN();
   NoiseDiagnostics diagnostics;
   // A partial document the server trimmed to fit the store (server/failure_reasons.h,
   // PartialDiagnosticsText): its "trimmed" note as stored (open shape) and the diagnostics

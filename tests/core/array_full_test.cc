@@ -121,6 +121,7 @@ TEST(ArrayFull, IsEfficientAndItsSigmaMatchesTheSpreadOnAnEightImuBoard) {
     ASSERT_TRUE(s.ok()) << s.message();
     EXPECT_TRUE(r.converged) << r.BriefReport();
     EXPECT_EQ(r.sigma_basis, "crb");
+    EXPECT_NEAR(r.static_chi2_per_dof, 1.0, 0.3) << r.BriefReport();
     // No sampling-time errors simulated: the offsets explain (almost) nothing.
     EXPECT_LT(r.time_offset_explained, 0.05);
     const Whitened w = WhitenedError(r, sim.truth_theta, r.theta_covariance);
@@ -172,6 +173,55 @@ TEST(ArrayFull, ResidualAwareSigmaMatchesTheSpreadWhenTheNoiseIsUnderstated) {
               z.se);
   EXPECT_NEAR(c.mean, 9.0, 3 * c.se);
   EXPECT_NEAR(z.mean, 1.0, 3 * z.se);
+}
+
+// Noise correlated in time (AR(1), φ = 0.9 from sample to sample, the configured σ its
+// marginal σ): the dynamic samples keep χ²/dof near 1, but the static means' χ² is inflated by
+// their variance ratio (≈ (1 + φ)/(1 − φ) = 19): the residual-aware sigma becomes the primary,
+// with its warning, and is far closer to the spread than the Cramér-Rao sigma (bench/README.md
+// "σ consistency": positions and gyroscope biases z RMS 1.1 against 3.3).
+TEST(ArrayFull, CorrelatedNoiseInflatesTheStaticsChiSquareAndMakesTheSandwichPrimary) {
+  constexpr int kRuns = sanitizer::kAddressSanitizer ? 3 : 10;
+  constexpr double kPhi = 0.9;
+  std::vector<double> z2_crb, z2_robust;
+  for (int run = 0; run < kRuns; ++run) {
+    ArrayFullSimulationOptions so = Board8(300 + run);
+    const double sa = so.accel_noise, sg = so.gyro_noise;
+    so.accel_noise = so.gyro_noise = 0;
+    ArrayFullSimulation sim;
+    ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+    GaussianRng rng(400 + run);
+    for (Eigen::MatrixXd* x : {&sim.problem.accel, &sim.problem.gyro}) {
+      const double sigma = x == &sim.problem.accel ? sa : sg;
+      for (Eigen::Index c = 0; c < x->cols(); ++c) {
+        double e = sigma * rng.Normal();
+        for (Eigen::Index n = 0; n < x->rows(); ++n) {
+          if (n > 0) e = kPhi * e + sigma * std::sqrt(1 - kPhi * kPhi) * rng.Normal();
+          (*x)(n, c) += e;
+        }
+      }
+    }
+    ArrayFullOptions fo = FitOptions(so);
+    fo.accel_noise = sa;
+    fo.gyro_noise = sg;
+    ArrayFullResult r;
+    const Status s = CalibrateArrayFull(sim.problem, fo, &r);
+    ASSERT_TRUE(s.ok()) << s.message();
+    EXPECT_LT(r.chi2_per_dof, 1.5);         // the dynamic samples do not see it
+    EXPECT_GT(r.static_chi2_per_dof, 5.0);  // the static means do
+    ASSERT_EQ(r.sigma_basis, "sandwich");
+    bool warned = false;
+    for (const auto& w : r.warnings) warned |= w.find("of the static means") != std::string::npos;
+    EXPECT_TRUE(warned);
+    z2_crb.push_back(WhitenedError(r, sim.truth_theta, r.theta_covariance_crb).z2);
+    z2_robust.push_back(WhitenedError(r, sim.truth_theta, r.theta_covariance).z2);
+  }
+  const MeanSe c = Summarise(z2_crb), z = Summarise(z2_robust);
+  std::printf("mean (err/sigma)^2: CRB %.3f +- %.3f, robust %.4f +- %.4f\n", c.mean, c.se, z.mean,
+              z.se);
+  EXPECT_GT(c.mean, 4.0);  // the CRB is far too small
+  EXPECT_LT(z.mean, 2.0);  // z RMS within 1.4
+  EXPECT_GT(z.mean, 0.5);  // and not far too large (0.7²)
 }
 
 // When the model fits (simulation), weighting the dynamic samples by their own residual level

@@ -144,6 +144,78 @@ TEST(NoiseEstimate, UncertaintiesCoverTheTruthWithTenTausPerDecade) {
   ExpectNominalCoverage(10);  // 3.3 times as many, more strongly correlated points
 }
 
+// Monte-Carlo z = (estimate − truth) / σ of N and K over many seeds (where visible), with the
+// primary σ and with the noise model's own (crb_std).
+struct NoiseZ {
+  int trials = 0, scaled = 0, terms = 0;
+  double z_primary = 0, z_crb = 0, chi2_per_dof = 0;  // RMS, RMS, mean
+};
+NoiseZ MeasureNoiseZ(const NoiseSimulationOptions& base, int seeds, uint64_t first_seed) {
+  NoiseZ out;
+  double sum_p = 0, sum_c = 0;
+  for (int s = 0; s < seeds; ++s) {
+    NoiseSimulationOptions o = base;
+    o.seed = first_seed + static_cast<uint64_t>(s);
+    const NoiseSimulation sim = SimulateNoise(o);
+    NoiseResult r;
+    if (!EstimateNoise(Problem(sim), NoiseOptions(), &r).ok()) continue;
+    const NoiseChannelResult& c = r.channels[0];
+    ++out.trials;
+    out.scaled += c.uncertainty_basis == "chi2_scaled";
+    out.chi2_per_dof += c.chi2_per_dof;
+    const std::pair<const NoiseTerm*, double> terms[] = {
+        {&c.white_noise, base.channels[0].white_noise},
+        {&c.random_walk, base.channels[0].random_walk}};
+    for (const auto& [t, truth] : terms) {
+      if (!t->value) continue;
+      ++out.terms;
+      sum_p += std::pow((*t->value - truth) / *t->std, 2);
+      sum_c += std::pow((*t->value - truth) / *t->crb_std, 2);
+    }
+  }
+  out.z_primary = std::sqrt(sum_p / out.terms);
+  out.z_crb = std::sqrt(sum_c / out.terms);
+  out.chi2_per_dof /= out.trials;
+  std::printf("%d trials, %d terms: z RMS %.3f (model σ %.3f), chi2_scaled in %d, mean χ²/E %.3f\n",
+              out.trials, out.terms, out.z_primary, out.z_crb, out.scaled, out.chi2_per_dof);
+  return out;
+}
+
+TEST(NoiseEstimate, SigmaFollowsTheConventionUnderTheRightAndAMisspecifiedModel) {
+  const int seeds = 200;
+  // Right model: white noise, random walk and a flat bias instability floor.
+  NoiseSimulationOptions right = Sim(50, 600, 1e-3, 5e-4, 1e-4, 0);
+  right.gauss_markov_per_decade = 1;
+  const NoiseZ r = MeasureNoiseZ(right, seeds, 9000);
+  ASSERT_EQ(r.trials, seeds);
+  // z RMS from ≈ 400 terms: standard error ≈ 1/√(2·400) ≈ 0.035; ±0.15 is > 4 of them.
+  EXPECT_NEAR(r.z_primary, 1.0, 0.15);
+  // The predicted χ² matches the observed one (mean of 200 ratios whose sd is ≈ 0.4: ±0.1).
+  EXPECT_NEAR(r.chi2_per_dof, 1.0, 0.1);
+  // At E + 3 sd (χ² of correlated points is skewed: a few per cent, not 0.13 %) few trials scale.
+  EXPECT_LE(r.scaled, seeds / 20);
+  // Misspecified: a strong Gauss-Markov bump (correlation time 2-4 s) the N/B/K model lacks.
+  NoiseSimulationOptions bump = Sim(50, 600, 1e-3, 5e-4, 3e-3, 0);
+  bump.flicker_min_tau = 2;
+  bump.flicker_max_tau = 4;
+  const NoiseZ b = MeasureNoiseZ(bump, seeds, 9000);
+  ASSERT_EQ(b.trials, seeds);
+  EXPECT_GT(b.z_crb, 3.0);  // the model's σ is far too small there
+  EXPECT_LT(b.z_primary, b.z_crb / 3);
+  // The error is mostly a bias no scaling of σ removes (z RMS ≈ 1.5 > 1.4): every trial says
+  // its σ are χ²-scaled, with the warning (the rule for rows outside 0.7–1.4).
+  EXPECT_EQ(b.scaled, seeds);
+  NoiseSimulationOptions one = bump;
+  one.seed = 9000;
+  const NoiseSimulation sim = SimulateNoise(one);
+  NoiseResult res;
+  ASSERT_TRUE(EstimateNoise(Problem(sim), NoiseOptions(), &res).ok()) << res.reason;
+  EXPECT_TRUE(Contains(res.warnings, "g0_x: the N/B/K model fits the Allan curve worse than"));
+  const NoiseTerm& n = res.channels[0].white_noise;
+  ASSERT_TRUE(n.value && n.crb_std);
+  EXPECT_NEAR(*n.std / *n.crb_std, std::sqrt(res.channels[0].chi2_per_dof), 1e-9);
+}
+
 TEST(NoiseEstimate, BiasInstabilityFromTheFlatFloor) {
   // Floor (0.664 B)² crosses the white noise at τ = N²/(0.664B)² ≈ 9 s; the Gauss-Markov band
   // (0.05..20000 s) keeps it flat to the end of the one-hour log. Several seeds, 15 % (the

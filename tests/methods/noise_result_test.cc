@@ -20,7 +20,13 @@ NoiseResult HandBuilt() {
   r.envelope.warnings = {"a0_z: random walk not visible"};
   r.channels = {{"a0_x", "m/s^2", 2e-3, 1e-4, 12.5, 1e-4},
                 {"g0_x", "rad/s", 2e-4, kNaN, kNaN, kNaN}};
-  r.channel_stds = {{"a0_x", 1e-5, 2e-6, 3e-6}, {"g0_x", 2e-6, kNaN, kNaN}};
+  r.channel_stds.resize(2);  // as an earlier calibd wrote them: no basis, no crb
+  r.channel_stds[0].name = "a0_x";
+  r.channel_stds[0].white_noise_std = 1e-5;
+  r.channel_stds[0].bias_instability_std = 2e-6;
+  r.channel_stds[0].random_walk_std = 3e-6;
+  r.channel_stds[1].name = "g0_x";
+  r.channel_stds[1].white_noise_std = 2e-6;
   NoiseDiagnostics& d = r.diagnostics;
   d.rate = 100;
   d.samples = 180000;
@@ -188,6 +194,50 @@ TEST(NoiseResult, AbsentExtensionsKeepTheirDefaults) {
   // SPEC's keys are still required.
   j["diagnostics"].erase("samples");
   EXPECT_EQ(FromJson(j, &r).field(), "diagnostics.samples");
+}
+
+// The σ convention (issue 28): basis, χ²/dof and the model's σ round-trip; a result stored
+// before it (no basis, no crb) reads as "crb_only"; an unknown basis is named by its path.
+TEST(NoiseResult, SigmaBasisRoundTripsAndAnEarlierResultReadsAsCrbOnly) {
+  NoiseResult r = HandBuilt();
+  r.basis = "chi2_scaled";
+  r.chi2_per_dof = 19.6;
+  r.channel_stds[0].basis = "chi2_scaled";
+  r.channel_stds[0].chi2_per_dof = 19.6;
+  r.channel_stds[0].crb = NoiseTermStds{1e-5 / 4.4, 2e-6 / 4.4, 3e-6 / 4.4};
+  r.channel_stds[1].basis = "crb";
+  r.channel_stds[1].chi2_per_dof = 0.9;
+  r.channel_stds[1].crb = NoiseTermStds{2e-6, kNaN, kNaN};
+  json j = ToJson(r);
+  EXPECT_EQ(j["uncertainty"]["basis"], "chi2_scaled");
+  EXPECT_EQ(j["uncertainty"]["channels"][0]["crb"]["white_noise_std"], 1e-5 / 4.4);
+  EXPECT_TRUE(j["uncertainty"]["channels"][1]["crb"]["random_walk_std"].is_null());
+  NoiseResult back;
+  ASSERT_TRUE(FromJson(j, &back).ok()) << FromJson(j, &back).message();
+  EXPECT_EQ(ToJson(back), j);
+  EXPECT_EQ(back.basis, "chi2_scaled");
+  EXPECT_EQ(back.chi2_per_dof, 19.6);
+  ASSERT_TRUE(back.channel_stds[0].crb.has_value());
+  EXPECT_EQ(back.channel_stds[0].crb->bias_instability_std, 2e-6 / 4.4);
+  EXPECT_EQ(back.channel_stds[1].basis, "crb");
+
+  // An earlier calibd's result: the σ keys only.
+  const json earlier = ToJson(HandBuilt());
+  EXPECT_FALSE(earlier["uncertainty"].contains("basis"));
+  EXPECT_FALSE(earlier["uncertainty"]["channels"][0].contains("crb"));
+  ASSERT_TRUE(FromJson(earlier, &back).ok());
+  EXPECT_EQ(back.basis, kNoiseBasisCrbOnly);
+  EXPECT_TRUE(std::isnan(back.chi2_per_dof));
+  EXPECT_EQ(back.channel_stds[0].basis, kNoiseBasisCrbOnly);
+  EXPECT_FALSE(back.channel_stds[0].crb.has_value());
+  EXPECT_EQ(back.channel_stds[0].white_noise_std, 1e-5);
+
+  j["uncertainty"]["channels"][1]["basis"] = "sandwich";
+  const Status s = FromJson(j, &back);
+  EXPECT_EQ(s.field(), "uncertainty.channels[1].basis") << s.ToString();
+  j["uncertainty"]["channels"][1]["basis"] = "crb";
+  j["uncertainty"]["channels"][0]["crb"]["random_walk_std"] = "3e-6";
+  EXPECT_EQ(FromJson(j, &back).field(), "uncertainty.channels[0].crb.random_walk_std");
 }
 
 }  // namespace

@@ -470,7 +470,7 @@ TEST(Gate, NoiseNeedsAStationaryLogAndAPreciseWhiteNoise) {
     r.envelope.method = "noise";
     r.envelope.model = "the Allan variance";
     r.channels = {{"a0_x", "m/s^2", density, NAN, NAN, NAN}};
-    r.channel_stds = {{"a0_x", rel_std * density, NAN, NAN}};
+    r.channel_stds = {{"a0_x", rel_std * density, NAN, NAN, "crb", 1.0, std::nullopt}};
     r.diagnostics.stationary = stationary;
     return results::ToJson(r);
   };

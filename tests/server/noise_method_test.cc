@@ -61,12 +61,20 @@ TEST(NoiseMethod, RecoversWhiteNoiseAndRandomWalkOfAnHourLogThroughTheServer) {
     EXPECT_GT(n_std, 0);
     EXPECT_LT(std::abs(n - n_true), 4 * n_std) << p.dump() << u.dump();
     EXPECT_LT(std::abs(n - n_true), 0.02 * n_true);
+    // The σ convention (issue 28): the model fits white noise + random walk, so the primary σ
+    // is the noise model's own (basis "crb", kept under crb), χ²/dof near 1.
+    EXPECT_EQ(u["basis"], "crb") << u.dump();
+    EXPECT_EQ(u["crb"]["white_noise_std"], u["white_noise_std"]) << u.dump();
+    EXPECT_LT(u["chi2_per_dof"].get<double>(), 3) << u.dump();
     // K is visible in an hour at these levels; within 4 reported σ of the truth.
     ASSERT_TRUE(p["random_walk"].is_number()) << p.dump() << r["warnings"].dump();
     const double k = p["random_walk"], k_std = u["random_walk_std"], k_true = t["random_walk"];
     EXPECT_LT(std::abs(k - k_true), 4 * k_std) << p.dump() << u.dump();
     // The Allan curve: octaves from one sample to a quarter of the log, intervals around it.
     const json& a = r["diagnostics"]["allan"][c];
+    if (c == 0) {
+      EXPECT_EQ(r["uncertainty"]["basis"], "crb") << r["uncertainty"].dump();
+    }
     ASSERT_GT(a["tau"].size(), 10u);
     EXPECT_NEAR(a["tau"][0].get<double>(), 1.0 / 50, 1e-9);
     EXPECT_LE(a["tau"].back().get<double>(), 3600.0 / 4 + 1e-6);

@@ -48,7 +48,7 @@ json NoiseResult(double n_gyro, double gyro_k, const std::string& extra_channel 
     const double n = gyro ? n_gyro : 2e-3;
     const double k = gyro && gyro_k > 0 ? gyro_k : kNaN;
     r.channels.push_back({name, gyro ? "rad/s" : "m/s^2", n, 0.5 * n, 120.0, k});
-    r.channel_stds.push_back({name, 0.01 * n, 0.1 * n, 0.2 * k});
+    r.channel_stds.push_back({name, 0.01 * n, 0.1 * n, 0.2 * k, "crb", 1.0, std::nullopt});
   }
   return results::ToJson(r);
 }

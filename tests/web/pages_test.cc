@@ -357,6 +357,29 @@ TEST(JobPage, PcaReportSaysWhichSigmaItShows) {
   EXPECT_TRUE(Has(page_with(nullptr, nullptr), "stored by an earlier calibd"));
 }
 
+// Which σ the noise table shows (the σ convention, issue 28): said under the table.
+TEST(JobPage, NoiseReportSaysWhichSigmaItShows) {
+  auto page_with = [](const char* basis) {
+    results::NoiseResult noise;
+    noise.envelope.method = "noise";
+    noise.envelope.model = "the Allan variance";
+    noise.channels = {{"a0_x", "m/s^2", 2e-3, NAN, NAN, NAN}};
+    noise.channel_stds = {{"a0_x", 4.4e-5, NAN, NAN, basis, 19.36, std::nullopt}};
+    if (std::string(basis) != results::kNoiseBasisCrbOnly) {
+      noise.basis = basis;
+      noise.chi2_per_dof = 19.36;
+      noise.channel_stds[0].crb = results::NoiseTermStds{1e-5, NAN, NAN};
+    }
+    JobView v;
+    v.job =
+        Job(43, "IMU-0042", "noise", "succeeded", "2026-11-20T09:20:00Z", results::ToJson(noise));
+    return RenderJobPage(v);
+  };
+  EXPECT_TRUE(Has(page_with("chi2_scaled"), "a0_x \xC3\x974.4"));
+  EXPECT_TRUE(Has(page_with("crb"), "follows N/B/K within its intervals"));
+  EXPECT_TRUE(Has(page_with(results::kNoiseBasisCrbOnly), "stored by an earlier calibd"));
+}
+
 TEST(JobPage, PcaReflectionIsExplainedWhereShown) {
   JobView v;
   json r = PcaResult();
@@ -528,7 +551,7 @@ TEST(JobPage, AnImuOrNoiseResultThatDoesNotReadSaysWhereItIsDamaged) {
   noise.envelope.method = "noise";
   noise.envelope.model = "the Allan variance";
   noise.channels = {{"a0_x", "m/s^2", 2e-3, NAN, NAN, NAN}};
-  noise.channel_stds = {{"a0_x", 1e-5, NAN, NAN}};
+  noise.channel_stds = {{"a0_x", 1e-5, NAN, NAN, "crb", 1.0, std::nullopt}};
   json damaged = results::ToJson(noise);
   damaged["diagnostics"]["stationary"] = "yes";
   JobView v;
@@ -847,7 +870,7 @@ TEST(KeyFiguresTest, ImuAndNoiseSummaries) {
     const bool gyro = name[0] == 'g';
     noise.channels.push_back({name, gyro ? "rad/s" : "m/s^2",
                               gyro ? (name[3] == 'y' ? 1.2e-4 : 9e-5) : kNaN, kNaN, kNaN, kNaN});
-    noise.channel_stds.push_back({name, kNaN, kNaN, kNaN});
+    noise.channel_stds.push_back({name, kNaN, kNaN, kNaN, "crb", kNaN, std::nullopt});
   }
   std::string n = KeyFigures("noise", results::ToJson(noise));
   EXPECT_EQ(n, "accel N not visible \xC2\xB7 gyro N \xE2\x89\xA4 120 \xC2\xB5rad/s/\xE2\x88\x9AHz");
