@@ -375,7 +375,9 @@ TEST(JobPage, NoiseReportSaysWhichSigmaItShows) {
         Job(43, "IMU-0042", "noise", "succeeded", "2026-11-20T09:20:00Z", results::ToJson(noise));
     return RenderJobPage(v);
   };
-  EXPECT_TRUE(Has(page_with("chi2_scaled"), "a0_x \xC3\x97" "4.4"));
+  EXPECT_TRUE(Has(page_with("chi2_scaled"),
+                  "a0_x \xC3\x97"
+                  "4.4"));
   EXPECT_TRUE(Has(page_with("crb"), "follows N/B/K within its intervals"));
   EXPECT_TRUE(Has(page_with(results::kNoiseBasisCrbOnly), "stored by an earlier calibd"));
 }
