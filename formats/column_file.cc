@@ -37,7 +37,10 @@ double FromBits(uint64_t b) {
   return x;
 }
 
+// zlib's CRC-32 continued over `data`. An empty block leaves it as it is (zlib would answer a
+// null pointer, an empty matrix's data(), with the initial value 0, resetting it).
 uint32_t Crc(uint32_t crc, const void* data, size_t n) {
+  if (n == 0) return crc;
   return static_cast<uint32_t>(crc32_z(crc, static_cast<const Bytef*>(data), n));
 }
 
