@@ -151,7 +151,7 @@ Status RecordingParser::TakeArray(ArrayRecording* out) {
   }
   if (d.summary.layout != Layout::kArray) return NotArray(d.file_name);
   if (d.as_float) return Status::Internal("the array was collected as float: TakeArrayFloat");
-  if (d.log_format != LogFormat::kUnknown) {
+  if (d.log_format != LogFormat::kUnknown || d.restored) {
     *out = std::move(d.log_recording);
     return Status::Ok();
   }
@@ -164,6 +164,12 @@ void RecordingParser::CollectArrayAsFloat(double accel_scale, double gyro_scale)
   impl_->as_float = true;
   impl_->float_scale_accel = accel_scale;
   impl_->float_scale_gyro = gyro_scale;
+}
+
+void RecordingParser::CollectArrayAsDouble() {
+  if (impl_->have_header) return;
+  impl_->as_float = false;
+  impl_->float_scale_accel = impl_->float_scale_gyro = 1;
 }
 
 void RecordingParser::SetTimeUnit(TimeUnit unit) {
@@ -185,6 +191,35 @@ void RecordingParser::SetCsvDialect(const CsvDialect& dialect) {
 }
 
 bool RecordingParser::header_read() const { return impl_->header_ok; }
+
+const CsvDialect& RecordingParser::csv_dialect() const { return impl_->dialect; }
+
+const LogStreamSelection& RecordingParser::log_streams() const { return impl_->log_streams; }
+
+bool RecordingParser::collects() const { return impl_->collect; }
+
+void RecordingParser::Restore(const RecordingSummary& summary, ArrayRecording log) {
+  Impl& d = *impl_;
+  d.summary = summary;
+  d.summary.time_unit = d.time_unit;
+  d.log_recording = std::move(log);
+  d.restored = true;
+  d.finished = true;
+  d.error = Status::Ok();
+  // What the CSV stages held is released: the recording is the one handed in.
+  d.array_values = {};
+  d.t_values = {};
+  d.side_values = {};
+  d.array_values_f = {};
+  d.direct = false;
+  d.direct_accel.resize(0, 0);
+  d.direct_gyro.resize(0, 0);
+  d.direct_t.resize(0);
+  d.direct_side.resize(0, 0);
+  d.direct_accel_f.resize(0, 0);
+  d.direct_gyro_f.resize(0, 0);
+  d.log_bytes = {};
+}
 
 void RecordingParser::SetLogStreams(const LogStreamSelection& streams) {
   const bool mag = impl_->log_streams.mag_time_base;
@@ -210,7 +245,7 @@ Status RecordingParser::TakeArrayFloat(ArrayRecordingFloat* out) {
   if (d.summary.layout != Layout::kArray) return NotArray(d.file_name);
   out->accel_scale = d.float_scale_accel;
   out->gyro_scale = d.float_scale_gyro;
-  if (d.log_format != LogFormat::kUnknown) {
+  if (d.log_format != LogFormat::kUnknown || d.restored) {
     ArrayRecording& r = d.log_recording;
     out->accel_names = std::move(r.accel_names);
     out->gyro_names = std::move(r.gyro_names);

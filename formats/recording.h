@@ -177,6 +177,9 @@ class RecordingParser {
   // Does nothing to a pca recording, nor once the header has been read (collects_float() then
   // stays false).
   void CollectArrayAsFloat(double accel_scale, double gyro_scale);
+  // Undoes CollectArrayAsFloat (a reader that needs the doubles, e.g. the check, after
+  // PrepareParser); does nothing once the header has been read.
+  void CollectArrayAsDouble();
   // Whether CollectArrayAsFloat was called, and with which scales (either pointer may be null).
   bool collects_float(double* accel_scale = nullptr, double* gyro_scale = nullptr) const;
   // Optional, before the first Feed: the unit of the time column (default seconds). The
@@ -194,6 +197,19 @@ class RecordingParser {
   void SetCsvDialect(const CsvDialect& dialect);
   // Whether a CSV's header line has been read without an error (false for a sensor log).
   bool header_read() const;
+  // The reading rules in force (SetCsvDialect, SetLogStreams and SetLogTimeBaseMag): with
+  // time_unit() and collects_float(), what decides the numbers a parse gives.
+  const CsvDialect& csv_dialect() const;
+  const LogStreamSelection& log_streams() const;
+  bool collects() const;  // constructed with collect = true
+  // A parse done before, handed in instead of Feed/Finish (a verified parsed-columns cache entry,
+  // server/column_cache.h): the parser is then finished with this summary (its time_unit set to
+  // the parser's) and this array recording, which TakeArray hands out as it is and
+  // TakeArrayFloat converts as for a sensor log (reading × scale in double, rounded once to
+  // float: the values a CSV parse collecting floats gives). The caller vouches that `log` is
+  // what this parser, with its reading rules, made or would make of the recording; anything the
+  // parser held is released.
+  void Restore(const RecordingSummary& summary, ArrayRecording log);
   // Optional, before the first Feed: which streams of a binary sensor log form the IMUs (config
   // `streams`, SPEC §9; default every IMU). Does nothing to a CSV recording.
   void SetLogStreams(const LogStreamSelection& streams);

@@ -266,7 +266,8 @@ struct RecordingParser::Impl {
   LogFormat log_format = LogFormat::kUnknown;
   std::string log_bytes;           // the whole log, until Finish
   LogStreamSelection log_streams;  // config `streams` (SetLogStreams)
-  ArrayRecording log_recording;    // after Finish of a collecting parser
+  ArrayRecording log_recording;    // after Finish of a collecting parser, or Restore
+  bool restored = false;           // Restore: the summary and log_recording were handed in
 
   Status FeedAny(std::string_view chunk);
   Status FinishAny();

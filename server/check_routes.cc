@@ -18,6 +18,7 @@ void Service::Impl::HandleCheck(const httplib::Request& req, httplib::Response& 
   CheckRequest request;
   request.recording_id = std::stoll(text);
   request.job_memory_bytes = job_memory_bytes;
+  request.cache = column_cache.get();
   Status s = ParseCheckQuery(req.params, store.get(), &request);
   if (!s.ok()) return (void)SendStatus(res, s);
   nlohmann::json body;

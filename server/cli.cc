@@ -302,6 +302,12 @@ CLI::App* AddServeCommand(CLI::App* app, ServeOptions* serve) {
                    "like a full disk (0: none)")
       ->check(CLI::Range(int64_t{0}, int64_t{1} << 40))
       ->capture_default_str();
+  serve_cmd
+      ->add_option("--column-cache-bytes", serve->column_cache_bytes,
+                   "disk for the parsed-columns cache of stored inertial logs (beside the SQLite "
+                   "file in columns/; least recently used removed first; 0: no cache)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 50))
+      ->capture_default_str();
   serve_cmd->add_flag("!--no-access-log", serve->access_log, "do not log requests to stderr");
   return serve_cmd;
 }

@@ -196,6 +196,17 @@ Status CheckLogConfig(const RecordingSummary& summary, const json& config,
   return Status::Ok();
 }
 
+void InheritCsvDialect(const storage::RecordingInfo& recording, json* config) {
+  if (HasCsvDialectKeys(*config)) return;
+  const json read = json::parse(recording.log_json, nullptr, /*allow_exceptions=*/false);
+  if (!read.is_object() || !read.contains("csv") || !read["csv"].is_object()) return;
+  CsvDialect dialect;
+  if (!ParseCsvDialect(read["csv"], &dialect).ok() || dialect.IsDefault()) return;
+  const json rules = dialect.ToJson();
+  for (const char* key : kCsvDialectKeys)
+    if (rules.contains(key)) (*config)[key] = rules[key];
+}
+
 void PrepareParser(const json& config, RecordingParser* parser) {
   if (!config.is_object()) return;
   CsvDialect dialect;

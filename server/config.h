@@ -14,6 +14,7 @@
 #include "core/stop_token.h"
 #include "formats/recording.h"
 #include "results/json_text.h"
+#include "storage/store.h"
 
 namespace calibd::server {
 
@@ -89,6 +90,12 @@ Status CheckLogConfig(const RecordingSummary& summary, const nlohmann::json& con
 // the numbers are held (Method::PrepareParser). Does nothing for an unknown method or a config
 // that is not an object (CalibrateParsed then reports the error).
 void PrepareParser(const nlohmann::json& config, RecordingParser* parser);
+
+// A job, a check or a cache build on a stored CSV from another tool reads it as its upload did:
+// when `config` gives none of the reading rules (columns, delimiter, decimal), they are taken
+// from the recording's stored description (its log_json "csv", validated at upload). A config
+// that gives any of them is taken as it is.
+void InheritCsvDialect(const storage::RecordingInfo& recording, nlohmann::json* config);
 
 // The same, from a parser that has already been fed and finished (collecting), and prepared by
 // PrepareParser. Without `time_unit`, a method that reads the times (Method::ReadsTime) first

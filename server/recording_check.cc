@@ -11,6 +11,7 @@
 #include "formats/recording.h"
 #include "methods/acceptance.h"
 #include "methods/registry.h"
+#include "server/column_cache.h"
 #include "server/config.h"
 #include "server/job_budget.h"
 
@@ -146,24 +147,6 @@ json TemperatureRange(const ArrayRecording& log) {
   return out;
 }
 
-// The stored recording through a collecting parser told the config's time unit and log streams
-// (as the worker's PrepareParser does, without a method's leaner float collection).
-Status ReadLog(storage::Store* store, int64_t id, const json& config, RecordingParser* parser) {
-  TimeUnit unit;
-  bool given;
-  if (ParseTimeUnit(config, &unit, &given).ok()) parser->SetTimeUnit(unit);
-  LogStreamSelection streams;
-  if (ParseLogStreams(config, &streams).ok()) parser->SetLogStreams(streams);
-  Status parse;
-  Status s = store->ReadRecordingData(id, [&](std::string_view chunk) {
-    parse = parser->Feed(chunk);
-    return parse.ok();
-  });
-  if (!parse.ok()) return parse;
-  if (!s.ok()) return s;
-  return parser->Finish();
-}
-
 }  // namespace
 
 Status ParseCheckQuery(const std::multimap<std::string, std::string>& params, storage::Store* store,
@@ -222,10 +205,18 @@ Status ComputeCheck(storage::Store* store, const CheckRequest& request, json* ou
                      {info.rows, columns.is_array() ? static_cast<int64_t>(columns.size()) : 0},
                      method_config, request.job_memory_bytes);
   if (!s.ok()) return s;
+  // Read as the job reads it (PrepareParser: time unit, the upload's CSV dialect unless the
+  // config gives one, log streams, the method's time base), in doubles: from the parsed-columns
+  // cache when it holds the recording under these rules.
+  json read_config = request.config;
+  InheritCsvDialect(info, &read_config);
   RecordingParser parser(name, /*collect=*/true);
   parser.ExpectRows(info.rows);
-  s = ReadLog(store, request.recording_id, request.config, &parser);
-  if (!s.ok()) return s;
+  PrepareParser(read_config, &parser);
+  parser.CollectArrayAsDouble();
+  const ColumnCache::Outcome read = FillParser(request.cache, store, info, &parser);
+  if (!read.parse.ok()) return read.parse;
+  if (!read.read.ok()) return read.read;
   s = CheckLogConfig(parser.summary(), request.config, name);
   if (!s.ok()) return s;
   ArrayRecording log;

@@ -5,7 +5,9 @@
 // The config: the query's keys (as an upload's, SPEC §3), or `job=ID` for the config a stored
 // job ran with (then no other key); the method's defaults otherwise. Not the recording's
 // upload config: a recording may have been run with several. It is validated as a job's
-// (ValidateConfig, errors naming the key).
+// (ValidateConfig, errors naming the key). The recording is read as a job with that config reads
+// it (PrepareParser, the upload's CSV dialect unless the config gives one), in doubles, from the
+// parsed-columns cache (server/column_cache.h) when CheckRequest::cache holds it.
 //
 // What is computed where: the recording's own figures here (timing, units that look wrong,
 // temperature range); the method's part (saturation, statics, coverage, what the job would fail
@@ -27,12 +29,15 @@
 
 namespace calibd::server {
 
+class ColumnCache;  // server/column_cache.h
+
 // The request: recording, method and config (validated by ComputeCheck).
 struct CheckRequest {
   int64_t recording_id = 0;
   nlohmann::json config;         // with "method"; acceptance and time_unit allowed as in a job
   int64_t job_memory_bytes = 0;  // the per-job budget (server/job_budget.h); <= 0: none
   const core::StopToken* stop = nullptr;  // may be null; polled by the method's stages
+  ColumnCache* cache = nullptr;           // may be null: the stored bytes are parsed
 };
 
 // Reads the query of the check route into *request (config and recording id not touched

@@ -44,7 +44,7 @@ std::string EchoQuery(const httplib::Request& req) {
 
 // The page's check section: the methods it offers and, with ?check=METHOD, that check with the
 // other query keys as its config (then taken out of *params, the detection options).
-void CheckOnPage(storage::Store* store, int64_t id, int64_t job_memory_bytes,
+void CheckOnPage(storage::Store* store, ColumnCache* cache, int64_t id, int64_t job_memory_bytes,
                  std::multimap<std::string, std::string>* params, web::RecordingPageView* view) {
   for (const Method* m : AllMethods()) {
     if (m->Reads(Layout::kArray) && m->NeedsIncreasingTime())
@@ -60,6 +60,7 @@ void CheckOnPage(storage::Store* store, int64_t id, int64_t job_memory_bytes,
   CheckRequest request;
   request.recording_id = id;
   request.job_memory_bytes = job_memory_bytes;
+  request.cache = cache;
   Status s = ParseCheckQuery(query, store, &request);
   if (s.ok()) s = ComputeCheck(store, request, &view->check);
   if (!s.ok()) {
@@ -73,10 +74,10 @@ constexpr int kJobPages = 10;             // the page lists jobs among the newes
 
 }  // namespace
 
-void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store,
-                             int64_t job_memory_bytes) {
+void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store, int64_t job_memory_bytes,
+                             ColumnCache* cache) {
   http->Get(R"(/api/v1/recordings/([^/]+)/segments)",
-            [store](const httplib::Request& req, httplib::Response& res) {
+            [store, cache](const httplib::Request& req, httplib::Response& res) {
               int64_t id = 0;
               if (!ParseRecordingId(req.matches[1], &id)) {
                 SendError(res, 404, "not_found", "no such recording");
@@ -86,13 +87,13 @@ void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store,
               Status s = ParseSegmentsQuery(req.params, &options);
               if (!s.ok()) return (void)SendStatus(res, s);
               RecordingSegments segments;
-              s = ComputeSegments(store, id, options, &segments);
+              s = ComputeSegments(store, id, options, &segments, cache);
               if (!s.ok()) return (void)SendStatus(res, AsNotSegmentable(s));
               res.set_content(JsonBody(SegmentsJson(segments, options)), "application/json");
             });
 
-  http->Get(R"(/recordings/([^/]+))", [store, job_memory_bytes](const httplib::Request& req,
-                                                                httplib::Response& res) {
+  http->Get(R"(/recordings/([^/]+))", [store, job_memory_bytes, cache](const httplib::Request& req,
+                                                                       httplib::Response& res) {
     int64_t id = 0;
     if (!ParseRecordingId(req.matches[1], &id)) {
       return SendPage(res, 404, web::RenderErrorPage(404, "no such recording"));
@@ -129,7 +130,7 @@ void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store,
     // ?check=METHOD&<its config keys>: the check before fitting instead of detection options.
     std::multimap<std::string, std::string> segment_params = req.params;
     if (info.layout == LayoutName(Layout::kArray)) {
-      CheckOnPage(store, id, job_memory_bytes, &segment_params, &view);
+      CheckOnPage(store, cache, id, job_memory_bytes, &segment_params, &view);
     }
     SegmentsOptions options;
     options.timeline_points = kTimelinePoints;
@@ -139,7 +140,7 @@ void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store,
     view.gyro_unit_given = s.ok() && req.has_param("gyro_unit");
     if (s.ok()) {
       RecordingSegments segments;
-      s = ComputeSegments(store, id, options, &segments);
+      s = ComputeSegments(store, id, options, &segments, cache);
       if (s.ok()) {
         view.segments = SegmentsJson(segments, options);
         for (auto& tr : segments.accel_traces) {

@@ -13,8 +13,11 @@
 
 namespace calibd::server {
 
-void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store,
-                             int64_t job_memory_bytes);
+class ColumnCache;  // server/column_cache.h
+
+// `cache` (may be null): the parsed-columns cache /segments, the page and its check read from.
+void RegisterRecordingRoutes(httplib::Server* http, storage::Store* store, int64_t job_memory_bytes,
+                             ColumnCache* cache = nullptr);
 
 }  // namespace calibd::server
 

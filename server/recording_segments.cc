@@ -7,6 +7,7 @@
 #include "formats/inertial_log.h"
 #include "formats/recording.h"
 #include "methods/imu/imu_method.h"
+#include "server/column_cache.h"
 #include "server/config.h"
 #include "web/svg_plot.h"
 
@@ -68,7 +69,7 @@ Status ParseSegmentsQuery(const std::multimap<std::string, std::string>& params,
 }
 
 Status ComputeSegments(storage::Store* store, int64_t recording_id, const SegmentsOptions& options,
-                       RecordingSegments* out) {
+                       RecordingSegments* out, ColumnCache* cache) {
   // One at a time per process: a 2-hour 400 Hz log costs ~2 s and a few hundred MB while it is
   // read (bench/README.md), and page views must not multiply that.
   static std::mutex& one_at_a_time = *new std::mutex;
@@ -82,7 +83,8 @@ Status ComputeSegments(storage::Store* store, int64_t recording_id, const Segmen
                                 " layout; static intervals are found in inertial logs (t, aK_*, "
                                 "gK_*)");
   }
-  // Streamed from storage into the parser: the bytes are never held whole.
+  // Streamed from storage into the parser (the bytes are never held whole), or restored from the
+  // parsed-columns cache.
   RecordingParser parser("recording " + std::to_string(recording_id), /*collect=*/true);
   parser.SetTimeUnit(options.time_unit);
   // A CSV from another tool is read as it was at upload (config columns/delimiter/decimal).
@@ -91,15 +93,10 @@ Status ComputeSegments(storage::Store* store, int64_t recording_id, const Segmen
   if (read.is_object() && read.contains("csv") && ParseCsvDialect(read["csv"], &dialect).ok()) {
     parser.SetCsvDialect(dialect);
   }
-  Status parse;
-  s = store->ReadRecordingData(recording_id, [&](std::string_view chunk) {
-    parse = parser.Feed(chunk);
-    return parse.ok();
-  });
-  if (!parse.ok()) return parse;
-  if (!s.ok()) return s;
-  s = parser.Finish();
-  if (!s.ok()) return s;
+  parser.ExpectRows(info.rows);
+  const ColumnCache::Outcome got = FillParser(cache, store, info, &parser);
+  if (!got.parse.ok()) return got.parse;
+  if (!got.read.ok()) return got.read;
   ArrayRecording log;
   s = parser.TakeArray(&log);
   if (!s.ok()) return s;

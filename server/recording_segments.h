@@ -21,6 +21,8 @@
 
 namespace calibd::server {
 
+class ColumnCache;  // server/column_cache.h
+
 struct SegmentsOptions {
   core::StaticDetectionOptions detection;   // static_window, min_static, static_threshold
   double accel_unit = 1;                    // m/s² per reading unit
@@ -54,9 +56,10 @@ struct RecordingSegments {
 };
 
 // kNotFound: no such recording; kInvalidInput: not an inertial log (the array layout with `t`
-// strictly increasing, at least one triad), naming why; kIoError/kBusy from storage.
+// strictly increasing, at least one triad), naming why; kIoError/kBusy from storage. `cache`
+// (may be null): the parsed-columns cache the log is read from when it holds it.
 Status ComputeSegments(storage::Store* store, int64_t recording_id, const SegmentsOptions& options,
-                       RecordingSegments* out);
+                       RecordingSegments* out, ColumnCache* cache = nullptr);
 
 // The JSON answer: {"recording_id", "samples", "start", "end", "sample_period", "static_window",
 // "min_static", "window_samples", "threshold_multiplier", "triads": [{"name", "kind",

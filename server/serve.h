@@ -50,6 +50,11 @@ struct ServeOptions {
   // > 0: a quota on the SQLite file in pages of 4 KiB (PRAGMA max_page_count); writes beyond it
   // answer 507 like a full disk. 0 = none (default). SQLite only.
   int64_t db_max_pages = 0;
+  // The parsed-columns cache of stored inertial logs (server/column_cache.h): at most this many
+  // bytes of entries (least recently used removed first), in the folder `columns` beside the
+  // SQLite file (PostgreSQL: $TMPDIR/calibd-columns-<hash of the URI>, per host). 0 = no cache:
+  // every job, check and /segments parses the stored bytes. Default 2 GiB.
+  int64_t column_cache_bytes = int64_t{2} << 30;
   // Returns "" when the options are consistent, else what is wrong (names the flag).
   std::string Validate() const;
 };

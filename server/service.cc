@@ -135,6 +135,7 @@ std::string ServeOptions::Validate() const {
   if (max_connections_per_client < 1) return "--max-connections-per-client must be >= 1";
   if (max_requests_per_client < 1) return "--max-requests-per-client must be >= 1";
   if (db_path.empty()) return "--db must not be empty";
+  if (column_cache_bytes < 0) return "--column-cache-bytes must be >= 0 (0: no cache)";
   return "";
 }
 
@@ -204,6 +205,16 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
   if (!s.ok()) return s;
   impl->staging_dir = impl->instance->staging_dir();
   impl->ReapDeadProcesses();
+  // The parsed-columns cache beside the staging folder (per host for PostgreSQL: a cache is
+  // local, what it holds is re-derived from the database).
+  ColumnCacheOptions columns;
+  if (options.column_cache_bytes > 0 && options.db_path != ":memory:") {
+    columns.dir = staging_root.parent_path() /
+                  (storage::Store::IsPostgresTarget(options.db_path)
+                       ? "calibd-columns-" + Sha256Hex(options.db_path).substr(0, 12)
+                       : "columns");
+    columns.max_bytes = options.column_cache_bytes;
+  }
   WorkerPoolOptions pool;
   pool.storage_outcome = [d = impl.get()](const Status& st, const std::string& what, bool write) {
     d->health.Note(st, what, write);
@@ -220,6 +231,9 @@ Status Service::Create(const ServeOptions& options, std::unique_ptr<Service>* ou
   impl->job_memory_bytes =
       options.job_memory_bytes > 0 ? options.job_memory_bytes : DefaultJobMemoryBytes(pool.workers);
   pool.job_memory_bytes = impl->job_memory_bytes;
+  columns.prefetch_memory_bytes = impl->job_memory_bytes;
+  impl->column_cache = std::make_unique<ColumnCache>(columns);
+  pool.column_cache = impl->column_cache.get();
   impl->job_seconds =
       options.job_seconds > 0 ? options.job_seconds : DefaultJobSeconds(impl->job_memory_bytes);
   pool.job_ms = impl->job_seconds * 1000;
@@ -553,8 +567,8 @@ void Service::Impl::RegisterApiRoutes(httplib::Server* server) {
   http.Get("/api/v1/openapi.json", [](const httplib::Request&, httplib::Response& res) {
     res.set_content(JsonBody(OpenApiDocument()), "application/json");
   });
-  RegisterRecordingRoutes(&http, store.get(),
-                          job_memory_bytes);  // /segments and the recording page
+  RegisterRecordingRoutes(&http, store.get(), job_memory_bytes,
+                          column_cache.get());  // /segments and the recording page
   RegisterHtmlRoutes(&http, store.get(), !token.empty());
 }
 

@@ -29,6 +29,7 @@
 #include "methods/acceptance.h"
 #include "methods/exports.h"
 #include "methods/method.h"
+#include "server/column_cache.h"
 #include "server/config.h"
 #include "server/device_lookup.h"
 #include "server/gzip_stream.h"
@@ -61,6 +62,9 @@ struct Service::Impl {
   std::unique_ptr<storage::Store> store;
   std::unique_ptr<ProcessInstance> instance;  // after store: removed before the store closes
   Metrics metrics;
+  // The parsed-columns cache of stored inertial logs (server/column_cache.h): used by the
+  // workers, the check and /segments, filled at upload. After store, before workers.
+  std::unique_ptr<ColumnCache> column_cache;
   // The jobs' parallel numerics: cores - 1 threads shared by every worker (each worker computes
   // too), so W concurrent jobs use at most W + cores - 1 threads. Outlives the workers.
   std::unique_ptr<core::TaskPool> numerics;

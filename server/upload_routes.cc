@@ -545,28 +545,13 @@ void Service::Impl::HandleUpload(const httplib::Request& req, httplib::Response&
   health.Note(s, s.ok() ? "recording " + std::to_string(info.id) : "an upload", true);
   if (!s.ok()) return finish(SendStatus(res, s));
   AnswerStoredUpload(info, existed, body.compressed_bytes(), res);
+  // An inertial log is parsed once more in the background into the parsed-columns cache, with
+  // the upload's reading rules, so that its first check, /segments or job does not parse it.
+  if (info.layout == LayoutName(Layout::kArray))
+    column_cache->Prefetch(store.get(), info.id, config);
   if (info.job) workers->Notify();
   finish(201);
 }
-
-namespace {
-
-// A job on a stored CSV from another tool reads it as its upload did: when the config gives none
-// of the reading rules (columns, delimiter, decimal), they are taken from the recording's stored
-// description (its log_json "csv", validated at upload). A config that gives any of them is
-// taken as it is.
-void InheritCsvDialect(const storage::RecordingInfo& recording, json* config) {
-  if (HasCsvDialectKeys(*config)) return;
-  const json read = json::parse(recording.log_json, nullptr, /*allow_exceptions=*/false);
-  if (!read.is_object() || !read.contains("csv") || !read["csv"].is_object()) return;
-  CsvDialect dialect;
-  if (!ParseCsvDialect(read["csv"], &dialect).ok() || dialect.IsDefault()) return;
-  const json rules = dialect.ToJson();
-  for (const char* key : kCsvDialectKeys)
-    if (rules.contains(key)) (*config)[key] = rules[key];
-}
-
-}  // namespace
 
 void Service::Impl::HandleCreateJob(const httplib::Request& req, httplib::Response& res) {
   const std::string media = ToLower(req.get_header_value("Content-Type"));

@@ -9,6 +9,7 @@
 #include "formats/recording.h"
 #include "methods/method.h"
 #include "methods/registry.h"
+#include "server/column_cache.h"
 #include "server/config.h"
 #include "server/failure_reasons.h"
 #include "server/fleet.h"
@@ -368,18 +369,17 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
       RecordingParser parser(file_name, /*collect=*/true);
       parser.ExpectRows(recording.rows);
       PrepareParser(config, &parser);  // e.g. noise: the samples as float
-      Status parsed;
-      s = store_->ReadRecordingData(job.recording_id, [&](std::string_view chunk) {
-        parsed = parser.Feed(chunk);
-        return parsed.ok() && !stop.stop_requested();
-      });
+      // From the parsed-columns cache when it holds the recording under the job's rules.
+      const ColumnCache::Outcome read = FillParser(options_.column_cache, store_, recording,
+                                                   &parser, [&] { return !stop.stop_requested(); });
+      s = read.read;
+      Status parsed = read.parse;
       if (options_.storage_outcome) {
         options_.storage_outcome(s, "recording " + std::to_string(job.recording_id), false);
       }
       // Damaged stored bytes (their SHA-256 is not the stored one): never calibrated, and not
       // retried until a re-upload repairs them.
       if (!s.ok()) return fail(s, s.IsTransient() && s.code() != StatusCode::kCorruption);
-      if (parsed.ok() && !stop.stop_requested()) parsed = parser.Finish();
       if (!parsed.ok() && parsed.reason() == Reason::kUnspecified) {
         parsed.WithReason(Reason::kRecordingUnreadable);
       }

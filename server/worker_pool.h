@@ -40,6 +40,8 @@
 
 namespace calibd::server {
 
+class ColumnCache;  // server/column_cache.h
+
 struct WorkerPoolOptions {
   int workers = 1;           // threads; >= 1
   int64_t lease_ms = 30000;  // lease length; renewed every lease_ms / 3 while a job runs
@@ -70,6 +72,9 @@ struct WorkerPoolOptions {
   // recording `what` = "recording N" (write false), storing the result or failure `what` =
   // "job N" (write true). Must be thread-safe and quick.
   std::function<void(const Status& s, const std::string& what, bool write)> storage_outcome;
+  // Optional: the parsed-columns cache a job's recording is read from when it holds it under
+  // the job's reading rules (and written to otherwise); must outlive the pool.
+  ColumnCache* column_cache = nullptr;
 };
 
 // What Stop did with the jobs still running.
