@@ -353,6 +353,17 @@ Eigen::Matrix3d IntegrateRotation(const Eigen::VectorXd& t, const Eigen::MatrixX
   return Integrate(t, gyro, matrix, bias, first, last, nullptr);
 }
 
+Eigen::Vector3d PooledStd(const StaticDetection& d, int tri) {
+  Eigen::Vector3d ss = Eigen::Vector3d::Zero();
+  double dof = 0;
+  for (const StaticInterval& iv : d.intervals) {
+    if (iv.samples < 2) continue;
+    ss += (iv.std[static_cast<size_t>(tri)].array().square() * (iv.samples - 1.0)).matrix();
+    dof += static_cast<double>(iv.samples - 1);
+  }
+  return dof > 0 ? Eigen::Vector3d((ss / dof).cwiseSqrt()) : Eigen::Vector3d::Zero();
+}
+
 Status CalibrateImus(const Eigen::VectorXd& t, const std::vector<ImuReadings>& imus,
                      const ImuOptions& options, std::vector<ImuResult>* results) {
   ThresholdChoice choice;

@@ -283,6 +283,10 @@ Eigen::Matrix3d IntegrateRotation(const Eigen::VectorXd& t, const Eigen::MatrixX
                                   const Eigen::Matrix3d& matrix, const Eigen::Vector3d& bias,
                                   int64_t first, int64_t last);
 
+// Pooled within-static σ per axis (reading units) of triad `tri` of a detection (2k: IMU k's
+// accelerometer, 2k + 1 its gyroscope): the noise CalibrateImus uses when the options give none.
+Eigen::Vector3d PooledStd(const StaticDetection& d, int tri);
+
 }  // namespace calibd::core
 
 #endif  // CALIBD_CORE_IMU_H_

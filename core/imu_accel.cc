@@ -65,17 +65,6 @@ std::string AxisName(int axis, int sign) { return std::string(sign > 0 ? "+" : "
 
 }  // namespace
 
-Vector3d PooledStd(const StaticDetection& d, int tri) {
-  Vector3d ss = Vector3d::Zero();
-  double dof = 0;
-  for (const StaticInterval& iv : d.intervals) {
-    if (iv.samples < 2) continue;
-    ss += (iv.std[static_cast<size_t>(tri)].array().square() * (iv.samples - 1.0)).matrix();
-    dof += static_cast<double>(iv.samples - 1);
-  }
-  return dof > 0 ? Vector3d((ss / dof).cwiseSqrt()) : Vector3d::Zero();
-}
-
 AccelFit FitAccelerometer(const StaticDetection& d, int k, const ImuOptions& o) {
   AccelFit f;
   f.pr.g = o.gravity;

@@ -193,9 +193,6 @@ struct AccelFit {
   int iterations = 0;
 };
 
-// Pooled within-static σ per axis (reading units) of triad `tri`.
-Vector3d PooledStd(const StaticDetection& d, int tri);
-
 // The accelerometer fit of IMU k (triad 2k) on detection d: closed-form ellipsoid start, then
 // Levenberg-Marquardt over M_a, b_a and the gravity directions.
 AccelFit FitAccelerometer(const StaticDetection& d, int k, const ImuOptions& o);

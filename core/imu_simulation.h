@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "base/status.h"
+#include "core/imu.h"
 
 namespace calibd::core {
 
@@ -33,11 +34,14 @@ struct ImuSimulationOptions {
   double gravity = 9.80665;        // |f| at rest, m/s², > 0
   double accel_noise = 0.01;       // σ per axis per sample, m/s² (SI), >= 0
   double gyro_noise = 0.002;       // σ per axis per sample, rad/s (SI), >= 0
-  double accel_unit = 1;           // SI per reading unit (nominal), > 0 (e.g. 0.0024 for counts)
-  double gyro_unit = 1;            // SI per reading unit (nominal), > 0
-  double accel_offset = 0;         // added to every accelerometer reading, reading units
-                                   // (e.g. 32768 for offset-binary counts)
-  double gyro_offset = 0;          // same for the gyroscope
+  // Per axis, the σ of that axis over the one above (>= 0 each): unequal axes, as a real IMU's.
+  Eigen::Vector3d accel_axis_ratio = Eigen::Vector3d::Ones();
+  Eigen::Vector3d gyro_axis_ratio = Eigen::Vector3d::Ones();
+  double accel_unit = 1;    // SI per reading unit (nominal), > 0 (e.g. 0.0024 for counts)
+  double gyro_unit = 1;     // SI per reading unit (nominal), > 0
+  double accel_offset = 0;  // added to every accelerometer reading, reading units
+                            // (e.g. 32768 for offset-binary counts)
+  double gyro_offset = 0;   // same for the gyroscope
   // Sensor errors, drawn per seed: K = unit · (1 + N(0, scale_error²)), off-diagonal T entries
   // N(0, misalignment²) (T_a upper triangular, T_g full), biases N(0, bias²) (SI, converted).
   double scale_error = 0.01;    // relative, >= 0
@@ -51,6 +55,11 @@ struct ImuSimulationOptions {
   // is the shortest one (angle-axis of R_jᵀR_{j+1}); consecutive equal orientations join into one
   // static. A plan's protocol (methods/plan.h) sets them.
   std::vector<Eigen::Matrix3d> orientations;
+  // Per static its duration, s (> 0 each; `statics` of them), and per rotation between
+  // consecutive statics its duration (`statics` − 1 of them); empty: static_duration and
+  // rotation_duration for all. A recorded log's replay (the check's predicted σ) sets them.
+  std::vector<double> static_durations;
+  std::vector<double> rotation_durations;
   bool quantize = false;    // round readings to whole reading units (counts)
   uint64_t seed = 1;        // sensor errors and motion
   uint64_t noise_seed = 0;  // the noise stream; 0: derived from seed (set it to vary only the
@@ -79,6 +88,23 @@ struct ImuSimulation {
 
 // kInvalidInput: options not valid (message names the option).
 Status SimulateImu(const ImuSimulationOptions& options, ImuSimulation* out);
+
+// The protocol a recorded log followed, for a simulation that replays it (the recording check's
+// predicted σ, issue #27 item 2): sets `statics`, `orientations`, `static_durations` and
+// `rotation_durations` of *sim from the statics of `detection` (IMU `k`: triads 2k and 2k + 1 of
+// the detection, readings `imu`) and leaves the other options as they are. Each static's duration
+// is its extent's (the run the detection grew, which it trims again by half a window at each end
+// in the replay) plus one sample period, each rotation's the time between two extents.
+// Orientations: R_0 is the shortest rotation turning the first static's up direction (its mean
+// specific force read with the nominal conversion: y − nominal bias) to world z (its heading is
+// arbitrary; no σ depends on it); R_{j+1} = C R_j ΔR_j with ΔR_j the nominal gyroscope (gyro_unit
+// (y − b_j), b_j the mean of the two statics' gyroscope means) integrated between the statics, and
+// C the least rotation that makes static j + 1's up direction the measured one (the accelerometer's
+// information is then the log's exactly; the gyroscope's up to the path, which the simulation
+// replaces by the shortest rotation). kNotDeterminable with fewer than 2 statics.
+Status ReplayImuProtocol(const Eigen::VectorXd& t, const ImuReadings& imu,
+                         const StaticDetection& detection, int k, const ImuOptions& options,
+                         ImuSimulationOptions* sim);
 
 }  // namespace calibd::core
 

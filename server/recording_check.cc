@@ -237,9 +237,7 @@ Status ComputeCheck(storage::Store* store, const CheckRequest& request, json* ou
        {"temperature", TemperatureRange(log)},
        {"warnings", json::array()},
        {"predicted", nullptr},
-       {"notes", json::array({"predicted: the sigma the job would report is what the plan "
-                              "(POST /api/v1/plan) gives for these statics; not yet joined to "
-                              "the check"})}};
+       {"notes", json::array()}};
   // A time column that does not look like seconds: the job would refuse it, and statics found
   // on it would be meaningless.
   TimeUnit unit;
@@ -270,6 +268,11 @@ Status ComputeCheck(storage::Store* store, const CheckRequest& request, json* ou
     context.stop = request.stop;
     s = method->Check(log, method_config, context, &o);
     if (!s.ok()) return s;
+  }
+  if (o["predicted"].is_null() && time_unit.ok() && !o.contains("job_would_fail")) {
+    o["notes"].push_back("predicted: the " + common.method +
+                         " method's check does not predict its σ (POST /api/v1/plan does, "
+                         "for a protocol)");
   }
   for (const char* key : {"saturation", "statics"}) {
     if (!o.contains(key)) {

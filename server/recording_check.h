@@ -13,8 +13,9 @@
 // temperature range); the method's part (saturation, statics, coverage, what the job would fail
 // with) by Method::Check, from the stages the method's Run runs, so those numbers are the
 // job's. A method without a Check (no statics: noise) gives the recording's figures only, and the
-// answer says so in `notes`. `predicted` (the σ the job would report, from the plan of issue
-// #27 item 1) is null until the plan exists.
+// answer says so in `notes`. `predicted` (the σ the job would report, computed as the plan
+// of issue #27 item 1 computes it, for the statics found) comes from Method::Check too: null
+// where the method does not predict (a note says so) or the job would fail.
 #ifndef CALIBD_SERVER_RECORDING_CHECK_H_
 #define CALIBD_SERVER_RECORDING_CHECK_H_
 
@@ -56,7 +57,8 @@ Status ParseCheckQuery(const std::multimap<std::string, std::string>& params, st
 //    "temperature": [{"name", "min", "max"}] (°C; empty when the log has none),
 //    the method's part (Method::Check): "saturation", "statics", "coverage",
 //    "threshold_choice", "job_would_fail", "warnings" (absent keys: see notes),
-//    "predicted": null, "notes": [...]}
+//    "predicted": null or the method's {"uncertainty" (the result's shape), "basis", "how",
+//                  its inputs; or "uncertainty": null and "reason"}, "notes": [...]}
 // Times in seconds after time_origin. kNotFound (no such recording), kInvalidInput (config,
 // method, or a log the job would refuse, naming why), kNotDeterminable (not an inertial log;
 // over the memory budget), kBusy/kIoError from storage, kStopped.

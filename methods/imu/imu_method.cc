@@ -7,6 +7,7 @@
 #include <set>
 #include <tuple>
 
+#include "core/imu_simulation.h"
 #include "formats/inertial_log.h"
 #include "methods/imu/imu_result.h"
 #include "methods/imu/openvins_yaml.h"
@@ -315,6 +316,103 @@ Status FindImuSaturation(const ArrayRecording& log, const core::StopToken* stop,
     AddSaturationChannels(*channels, 1, "reading units", saturation);
   }
   return Status::Ok();
+}
+
+// The check's "predicted" (SPEC §10, issue #27 item 2): per IMU, the σ its job would report,
+// computed as the plan computes it (the imu fit on a simulated log of a nominal IMU, here with the
+// statics' orientations, durations and the times between them replayed from the log:
+// core::ReplayImuProtocol) with the noise the job would use (the config's, else the statics'
+// pooled σ). The simulation runs at most kPredictRate Hz (and fewer when the log is long, down
+// to kPredictMinRate) with the noise density kept (σ per sample × √(rate'/rate)): the statics'
+// means and the integrated rotations then carry the log's information at a fraction of its
+// samples. {"uncertainty": null, "reason"} when no prediction is possible.
+constexpr double kPredictRate = 100, kPredictMinRate = 20, kPredictMaxSamples = 2e5;
+
+json PredictFromLog(const Eigen::VectorXd& t, const std::vector<core::ImuReadings>& readings,
+                    const std::vector<core::ImuResult>& found, core::ImuOptions options) {
+  json out = {{"uncertainty", nullptr},
+              {"basis", "crb"},
+              {"how",
+               "the imu method's σ (its Cramér–Rao bound: what the job reports when its "
+               "residuals match the noise; χ²-scaled when they exceed it) on a simulation of a "
+               "nominal IMU held in the statics found, for their durations, turned between them "
+               "by the shortest rotation that the nominal gyroscope integrates to, with the "
+               "noise below (SI per sample; from the config, or the statics' pooled σ as the "
+               "job takes it)"},
+              {"noise", json::array()}};
+  auto fail = [&out](const std::string& why) {
+    out["noise"] = json::array();
+    out["reason"] = why;
+    return out;
+  };
+  results::ImuUncertainty stds;
+  for (size_t k = 0; k < found.size() && k < readings.size(); ++k) {
+    const core::StaticDetection& d = found[k].detection;
+    core::ImuSimulationOptions sim;
+    Status s = core::ReplayImuProtocol(t, readings[k], d, static_cast<int>(k), options, &sim);
+    if (!s.ok()) return fail(s.message());
+    const double rate = d.sample_period > 0 ? 1 / d.sample_period : 0;
+    double duration = 0;
+    for (double x : sim.static_durations) duration += x;
+    for (double x : sim.rotation_durations) duration += x;
+    sim.rate = std::min({rate, kPredictRate, kPredictMaxSamples / duration});
+    if (!(sim.rate >= kPredictMinRate)) {
+      return fail("the statics and rotations last " + Fmt(duration) +
+                  " s: more than a replay within the check's time");
+    }
+    // The job's noise: the config's σ for every axis, else the statics' pooled σ per axis.
+    const Eigen::Vector3d pooled_a =
+        core::PooledStd(d, static_cast<int>(2 * k)) * options.accel_unit;
+    const Eigen::Vector3d pooled_g =
+        core::PooledStd(d, static_cast<int>(2 * k + 1)) * options.gyro_unit;
+    const Eigen::Vector3d accel_axes =
+        options.accel_noise ? Eigen::Vector3d::Constant(*options.accel_noise) : pooled_a;
+    const Eigen::Vector3d gyro_axes =
+        options.gyro_noise ? Eigen::Vector3d::Constant(*options.gyro_noise) : pooled_g;
+    const double accel_noise = accel_axes.maxCoeff(), gyro_noise = gyro_axes.maxCoeff();
+    if (!(accel_axes.minCoeff() > 0) || !(gyro_axes.minCoeff() > 0)) {
+      return fail("the statics show no noise on an axis (constant readings?)");
+    }
+    sim.accel_axis_ratio = accel_axes / accel_noise;
+    sim.gyro_axis_ratio = gyro_axes / gyro_noise;
+    out["noise"].push_back({{"name", found[k].name},
+                            {"accel", {accel_axes.x(), accel_axes.y(), accel_axes.z()}},
+                            {"gyro", {gyro_axes.x(), gyro_axes.y(), gyro_axes.z()}},
+                            {"accel_source", options.accel_noise ? "config" : "statics"},
+                            {"gyro_source", options.gyro_noise ? "config" : "statics"}});
+    const double keep_density = std::sqrt(sim.rate / rate);
+    sim.accel_noise = accel_noise * keep_density;
+    sim.gyro_noise = gyro_noise * keep_density;
+    sim.gravity = options.gravity;
+    sim.accel_unit = options.accel_unit;
+    sim.gyro_unit = options.gyro_unit;
+    sim.accel_offset = options.nominal_accel_bias;
+    sim.gyro_offset = options.nominal_gyro_bias;
+    sim.scale_error = sim.misalignment = sim.accel_bias = sim.gyro_bias = 0;
+    core::ImuSimulation log;
+    if (s = core::SimulateImu(sim, &log); !s.ok()) return fail(s.message());
+    core::ImuOptions fit = options;
+    // As the job: the config's σ (at the replay's rate), else the replay's pooled σ per axis.
+    if (options.accel_noise) fit.accel_noise = sim.accel_noise;
+    if (options.gyro_noise) fit.gyro_noise = sim.gyro_noise;
+    core::ImuResult r;
+    s = core::CalibrateImu(log.t, log.accel, log.gyro, fit, &r);
+    if (!s.ok()) {
+      return fail("IMU " + found[k].name +
+                  ": the fit of the replayed protocol failed: " + s.message());
+    }
+    // The CRB: the σ of a log whose residuals match the noise (a replay whose χ² is above it
+    // only says that a static of the replay caught the ends of a slow rotation).
+    stds.imus.push_back({found[k].name, TriadStd(r.accelerometer_crb), TriadStd(r.gyroscope_crb)});
+    out["rate"] = sim.rate;
+    out["statics"] = r.detection.intervals.size();
+  }
+  results::ImuResult typed;
+  typed.envelope.method = "imu";
+  stds.basis = "crb";
+  typed.uncertainty = std::move(stds);
+  out["uncertainty"] = results::ToJson(typed).at("uncertainty");
+  return out;
 }
 
 class Imu : public Method {
@@ -630,7 +728,12 @@ class Imu : public Method {
     }
     (*check)["coverage"] = std::move(coverage);
     (*check)["threshold_choice"] = found.front().threshold_choice;
-    if (!s.ok()) (*check)["job_would_fail"] = s.message();
+    if (!s.ok()) {
+      (*check)["job_would_fail"] = s.message();
+    } else {
+      options.stop = context.stop;
+      (*check)["predicted"] = PredictFromLog(log.t, triads.readings, found, options);
+    }
     return Status::Ok();
   }
 };
