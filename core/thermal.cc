@@ -276,6 +276,22 @@ void Band(const ThermalImuResult& r, ThermalChannel* ch) {
   }
 }
 
+// kInvalidInput unless the IMU's arrays have one row per t and its temperatures are finite.
+Status CheckInput(const Eigen::VectorXd& t, const ThermalImuInput& imu) {
+  if (!imu.accel || !imu.gyro || !imu.temp || imu.accel->rows() != t.size() ||
+      imu.gyro->rows() != t.size() || imu.temp->size() != t.size()) {
+    return Status::InvalidInput("IMU " + imu.name +
+                                ": accelerometer, gyroscope and temperature need one row per t");
+  }
+  for (Eigen::Index i = 0; i < t.size(); ++i) {
+    if (!std::isfinite((*imu.temp)(i))) {
+      return Status::InvalidInput("IMU " + imu.name + ": temperature not finite at sample " +
+                                  std::to_string(i));
+    }
+  }
+  return Status::Ok();
+}
+
 Status CalibrateImu(const Eigen::VectorXd& t, const ThermalImuInput& imu,
                     const ThermalOptions& options, ThermalImuResult* r) {
   r->name = imu.name;
@@ -358,17 +374,7 @@ Status CalibrateThermal(const Eigen::VectorXd& t, const std::vector<ThermalImuIn
   if (imus.empty()) return Status::InvalidInput("thermal: no IMU in the log");
   *out = ThermalResult();
   for (const ThermalImuInput& imu : imus) {
-    if (!imu.accel || !imu.gyro || !imu.temp || imu.accel->rows() != t.size() ||
-        imu.gyro->rows() != t.size() || imu.temp->size() != t.size()) {
-      return Status::InvalidInput("IMU " + imu.name +
-                                  ": accelerometer, gyroscope and temperature need one row per t");
-    }
-    for (Eigen::Index i = 0; i < t.size(); ++i) {
-      if (!std::isfinite((*imu.temp)(i))) {
-        return Status::InvalidInput("IMU " + imu.name + ": temperature not finite at sample " +
-                                    std::to_string(i));
-      }
-    }
+    if (Status s = CheckInput(t, imu); !s.ok()) return s;
     ThermalImuResult r;
     const Status st = CalibrateImu(t, imu, options, &r);
     if (!st.ok()) return st;
@@ -386,6 +392,17 @@ Status CalibrateThermal(const Eigen::VectorXd& t, const std::vector<ThermalImuIn
     out->imus.push_back(std::move(r));
   }
   return Status::Ok();
+}
+
+Status FindThermalWindows(const Eigen::VectorXd& t, const ThermalImuInput& imu,
+                          const ThermalOptions& options, ThermalImuResult* out) {
+  std::string error;
+  if (!options.IsValid(&error)) return Status::InvalidInput("thermal options: " + error);
+  if (Status s = CheckInput(t, imu); !s.ok()) return s;
+  *out = ThermalImuResult();
+  out->name = imu.name;
+  std::vector<WindowRange> ranges;
+  return MakeWindows(t, imu, options, &ranges, out);
 }
 
 }  // namespace calibd::core

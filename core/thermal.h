@@ -185,6 +185,15 @@ struct ThermalResult {
 Status CalibrateThermal(const Eigen::VectorXd& t, const std::vector<ThermalImuInput>& imus,
                         const ThermalOptions& options, ThermalResult* out);
 
+// Stages 1 and 5 alone, for one IMU (what the recording check shows before a fit, issue #27): its
+// statics, the averaging windows with their temperatures, phases and orientation groups, t_min,
+// t_max and the phase counts, and the lag where options ask for one, written into *out exactly as
+// CalibrateThermal finds them. The same errors as CalibrateThermal for these stages
+// (kNotDeterminable: too few windows, a range below min_range, a lag not determinable), with *out
+// filled as far as it got. No channel fit.
+Status FindThermalWindows(const Eigen::VectorXd& t, const ThermalImuInput& imu,
+                          const ThermalOptions& options, ThermalImuResult* out);
+
 // Stage 2 and 3 for one channel, exposed for tests: x = T − t_ref (°C), group per window (in
 // [0, groups)), the orders min_order..max_order averaged (equal: a fixed order). `scale` (> 0)
 // is the unit of x the design uses internally (half the range).

@@ -11,6 +11,7 @@
 #include "formats/inertial_log.h"
 #include "methods/config_keys.h"
 #include "methods/noise/noise_reference.h"
+#include "results/json_reader.h"
 
 namespace calibd::server {
 
@@ -98,6 +99,42 @@ int TemperatureColumn(const std::vector<std::string>& names, int k) {
   return -1;
 }
 
+// Each IMU's triads in SI and its temperature column (tempK, else temp), as Run and Check read
+// them. kInvalidInput naming the column a log lacks.
+struct ThermalInputs {
+  std::vector<Eigen::MatrixX3d> accel, gyro;
+  std::vector<Eigen::VectorXd> temp;
+  std::vector<core::ThermalImuInput> inputs;
+
+  Status From(const ArrayRecording& log, const InertialUnits& units) {
+    const int imus = static_cast<int>(log.accel_names.size());
+    if (static_cast<int>(log.gyro_names.size()) != imus) {
+      return Status::InvalidInput(
+          "thermal needs one gyroscope triad per accelerometer triad (aK_*, "
+          "gK_* of IMU K); the log has " +
+          std::to_string(imus) + " and " + std::to_string(log.gyro_names.size()));
+    }
+    accel.resize(imus);
+    gyro.resize(imus);
+    temp.resize(imus);
+    inputs.clear();
+    for (int k = 0; k < imus; ++k) {
+      const int column = TemperatureColumn(log.temp_names, k);
+      if (column < 0) {
+        return Status::InvalidInput("thermal: no temperature column for IMU " + std::to_string(k) +
+                                    " (a 'temp" + std::to_string(k) +
+                                    "' column in °C, or one 'temp' for all IMUs)")
+            .WithField("temp" + std::to_string(k));
+      }
+      accel[k] = log.accel.middleCols(3 * k, 3) * units.accel;
+      gyro[k] = log.gyro.middleCols(3 * k, 3) * units.gyro;
+      temp[k] = log.temperature.col(column);
+      inputs.push_back({std::to_string(k), &accel[k], &gyro[k], &temp[k]});
+    }
+    return Status::Ok();
+  }
+};
+
 class Thermal : public Method {
  public:
   const char* name() const override { return "thermal"; }
@@ -154,6 +191,8 @@ class Thermal : public Method {
              Verdict* verdict) const override;
   Status Run(RecordingParser* parser, const json& config, const RunContext& context,
              json* result) const override;
+  Status Check(const ArrayRecording& log, const json& config, const RunContext& context,
+               json* check) const override;
 };
 
 void Thermal::Judge(const json& result, const json&, const AcceptanceLimits& limits,
@@ -221,34 +260,73 @@ Status Thermal::Run(RecordingParser* parser, const json& config, const RunContex
   if (!s.ok()) return s;
   s = CheckLogTimes(log, "thermal", &parser->summary());
   if (!s.ok()) return s;
-  const int imus = static_cast<int>(log.accel_names.size());
-  if (static_cast<int>(log.gyro_names.size()) != imus) {
-    return Status::InvalidInput(
-        "thermal needs one gyroscope triad per accelerometer triad (aK_*, "
-        "gK_* of IMU K); the log has " +
-        std::to_string(imus) + " and " + std::to_string(log.gyro_names.size()));
-  }
-  std::vector<Eigen::MatrixX3d> accel(imus), gyro(imus);
-  std::vector<Eigen::VectorXd> temp(imus);
-  std::vector<core::ThermalImuInput> inputs;
-  for (int k = 0; k < imus; ++k) {
-    const int column = TemperatureColumn(log.temp_names, k);
-    if (column < 0) {
-      return Status::InvalidInput("thermal: no temperature column for IMU " + std::to_string(k) +
-                                  " (a 'temp" + std::to_string(k) +
-                                  "' column in °C, or one 'temp' for all IMUs)")
-          .WithField("temp" + std::to_string(k));
-    }
-    accel[k] = log.accel.middleCols(3 * k, 3) * units.accel;
-    gyro[k] = log.gyro.middleCols(3 * k, 3) * units.gyro;
-    temp[k] = log.temperature.col(column);
-    inputs.push_back({std::to_string(k), &accel[k], &gyro[k], &temp[k]});
-  }
+  ThermalInputs in;
+  s = in.From(log, units);
+  if (!s.ok()) return s;
   core::ThermalResult r;
-  s = core::CalibrateThermal(log.t, inputs, options, &r);
+  s = core::CalibrateThermal(log.t, in.inputs, options, &r);
   if (!s.ok()) return s;
   *result = ThermalResultToJson(r, options);
   (*result)["diagnostics"]["noise_jobs"] = NoiseJobsJson(config);
+  return Status::Ok();
+}
+
+// Stages 1 and 5 of Run (core::FindThermalWindows), no fit: the statics (IMU 0's, with the
+// temperatures of their windows), per IMU the range, windows, phases, orientations and lag the
+// fit would see, and the message the job would stop with (range below min_range, too few
+// windows, lag not determinable).
+Status Thermal::Check(const ArrayRecording& log, const json& config, const RunContext& context,
+                      json* check) const {
+  core::ThermalOptions options;
+  InertialUnits units;
+  Status s = ParseThermalConfig(config, &options, &units);
+  if (!s.ok()) return s;
+  options.statics.stop = context.stop;
+  s = CheckLogTimes(log, "thermal");
+  if (!s.ok()) return s;
+  ThermalInputs in;
+  s = in.From(log, units);
+  if (!s.ok()) return s;
+  json imus = json::array();
+  for (size_t k = 0; k < in.inputs.size(); ++k) {
+    core::ThermalImuResult r;
+    s = core::FindThermalWindows(log.t, in.inputs[k], options, &r);
+    if (s.code() == StatusCode::kStopped || s.code() == StatusCode::kInvalidInput) return s;
+    if (!s.ok() && !check->contains("job_would_fail")) (*check)["job_would_fail"] = s.message();
+    if (k == 0) {
+      json statics = json::array();
+      for (const core::StaticInterval& iv : r.statics.intervals) {
+        const Eigen::Vector3d v = iv.mean[0] * units.accel;
+        const Eigen::Vector3d up = v.norm() > 0 ? Eigen::Vector3d(v.normalized()) : v;
+        double t_lo = NAN, t_hi = NAN;
+        for (const core::ThermalWindow& w : r.windows) {
+          if (w.start >= iv.start && w.end <= iv.end) {
+            t_lo = std::isnan(t_lo) ? w.temperature : std::min(t_lo, w.temperature);
+            t_hi = std::isnan(t_hi) ? w.temperature : std::max(t_hi, w.temperature);
+          }
+        }
+        statics.push_back({{"start", iv.start},
+                           {"end", iv.end},
+                           {"samples", iv.samples},
+                           {"up", {up.x(), up.y(), up.z()}},
+                           {"accel_norm", v.norm()},
+                           {"temperature", {results::Num(t_lo), results::Num(t_hi)}}});
+      }
+      (*check)["statics"] = std::move(statics);
+    }
+    const bool found = !r.windows.empty();
+    imus.push_back({{"name", r.name},
+                    {"windows", r.windows.size()},
+                    {"t_min", found ? results::Num(r.t_min) : json()},
+                    {"t_max", found ? results::Num(r.t_max) : json()},
+                    {"range", found ? results::Num(r.t_max - r.t_min) : json()},
+                    {"min_range", options.min_range},
+                    {"heating_windows", r.heating_windows},
+                    {"cooling_windows", r.cooling_windows},
+                    {"orientations", r.orientations},
+                    {"lag", r.lag ? json(*r.lag) : json()}});
+  }
+  (*check)["thermal"] = {{"window", options.window}, {"imus", std::move(imus)}};
   return Status::Ok();
 }
 

@@ -14,7 +14,9 @@
 #include <vector>
 
 #include "core/imu_simulation.h"
+#include "core/thermal_simulation.h"
 #include "methods/imu/imu_method.h"
+#include "methods/thermal/thermal_method.h"
 #include "tests/lib/mimu4444.h"
 #include "tests/server/http_test_util.h"
 
@@ -318,6 +320,65 @@ TEST(RecordingCheck, PredictedSigmaIsTheJobs) {
   }
   std::printf("predicted / reported σ over %zu values: mean %.3f, largest deviation %.3f\n",
               all.size(), sum / static_cast<double>(all.size()), max_dev);
+}
+
+// The thermal check (Method::Check: the job's stages 1 and 5, no fit): the windows, their
+// temperature span and phase counts are the job's; a 4 °C warm-up is named as the job refuses it,
+// with the range found.
+TEST(RecordingCheck, ThermalWindowsAndRangeAreTheJobs) {
+  TestServer server;
+  ASSERT_TRUE(server.error().empty()) << server.error();
+  core::ThermalSimulationOptions o;
+  o.warmup = 900;
+  o.cooldown = 600;
+  o.coefficients = core::DefaultThermalTruth(3);
+  std::string csv;
+  json config, truth;
+  ASSERT_TRUE(SimulateThermalFiles(o, &csv, &config, &truth).ok());
+  const json job = server.UploadAndWait(csv, config);
+  ASSERT_EQ(job.value("status", ""), "succeeded") << job.dump().substr(0, 600);
+  json check;
+  ASSERT_EQ(Check(server,
+                  "/api/v1/recordings/" + std::to_string(job.at("recording_id").get<int64_t>()) +
+                      "/check?job=" + std::to_string(job.at("id").get<int64_t>()),
+                  &check),
+            200)
+      << check.dump();
+  EXPECT_FALSE(check.contains("job_would_fail")) << check["job_would_fail"];
+  const json& p = job.at("result").at("parameters").at("imus").at(0);
+  const json& d = job.at("result").at("diagnostics").at("imus").at(0);
+  const json& c = check.at("thermal").at("imus").at(0);
+  EXPECT_EQ(c.at("t_min"), p.at("t_min"));
+  EXPECT_EQ(c.at("t_max"), p.at("t_max"));
+  EXPECT_EQ(c.at("windows").get<size_t>(), d.at("windows").size());
+  EXPECT_EQ(c.at("heating_windows"), d.at("heating_windows"));
+  EXPECT_EQ(c.at("cooling_windows"), d.at("cooling_windows"));
+  EXPECT_GT(c.at("heating_windows").get<int>(), 3);
+  EXPECT_GT(c.at("cooling_windows").get<int>(), 3);
+  EXPECT_EQ(check.at("statics").size(), d.at("statics").get<size_t>());
+  for (const json& st : check.at("statics")) {
+    EXPECT_NEAR(st.at("accel_norm").get<double>(), 9.80665, 0.5) << st;
+    EXPECT_TRUE(st.at("temperature").at(0).is_number()) << st;
+  }
+  EXPECT_EQ(check.at("temperature").at(0).at("name"), "temp0");
+
+  // A 4 °C warm-up: the job refuses it naming the range, and so does the check.
+  o.delta = 4;
+  o.cooldown = 0;
+  ASSERT_TRUE(SimulateThermalFiles(o, &csv, &config, &truth).ok());
+  const json narrow = server.UploadAndWait(csv, config);
+  ASSERT_EQ(narrow.value("status", ""), "failed") << narrow.dump().substr(0, 600);
+  ASSERT_EQ(Check(server,
+                  "/api/v1/recordings/" + std::to_string(narrow.at("recording_id").get<int64_t>()) +
+                      "/check?job=" + std::to_string(narrow.at("id").get<int64_t>()),
+                  &check),
+            200)
+      << check.dump();
+  const std::string why = check.value("job_would_fail", "");
+  EXPECT_NE(why.find("below min_range 10"), std::string::npos) << why;
+  EXPECT_NE(narrow.at("error").at("message").get<std::string>().find(why), std::string::npos)
+      << narrow["error"].dump() << " vs " << why;
+  EXPECT_LT(check.at("thermal").at("imus").at(0).at("range").get<double>(), 4.5);
 }
 
 std::string ImuTkDir() {
