@@ -141,7 +141,9 @@ TEST(ThermalTest, BandStaysHonestWithTooHighMaxOrder) {
                   c, min_order, h.z_rms[c], h.true_order_weight[c]);
       EXPECT_GT(h.z_rms[c], 0.7);
       EXPECT_LT(h.z_rms[c], 1.4);
-      if (min_order == 0) EXPECT_GE(h.true_order_weight[c], 0.5);
+      if (min_order == 0) {
+        EXPECT_GE(h.true_order_weight[c], 0.5);
+      }
     }
   }
 }
