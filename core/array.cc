@@ -501,10 +501,10 @@ void AddWarnings(const ArrayOptions& options, int64_t samples_in, int max_iterat
   if (result->excitation.verdict == "weak")
     warnings.push_back("weak excitation: the smallest eigenvalue of sum A_n^T A_n (" +
                        Fmt(result->excitation.min_eigenvalue) +
-                       ") is less than 100x what noise "
+                       " rad^2/s^4) is less than 100x what noise "
                        "alone gives (" +
                        Fmt(result->excitation.noise_floor) +
-                       "); positions along the weakest direction are poorly determined; " +
+                       " rad^2/s^4); positions along the weakest direction are poorly determined; " +
                        kRecordAdvice);
   if (result->parallel_fraction > 0.5)
     warnings.push_back(
