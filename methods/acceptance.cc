@@ -46,7 +46,10 @@ const std::vector<AcceptanceKey>& AcceptanceKeys(const std::string& method) {
   std::lock_guard<std::mutex> lock(mu);
   auto it = cache.find(method);
   if (it == cache.end()) {
-    it = cache.emplace(method, JoinKeys({m->AcceptanceKeys(), {limit_keys::kMaxFleetZ}})).first;
+    it = cache
+             .emplace(method, JoinKeys({m->AcceptanceKeys(),
+                                        {limit_keys::kMaxFleetZ, limit_keys::kMaxFleetFalseAlarm}}))
+             .first;
   }
   return it->second;  // map nodes do not move
 }
@@ -100,6 +103,11 @@ Status ValidateAcceptance(const json& value, const std::string& method, const st
         (!limit.is_number() || !std::isfinite(limit.get<double>()) || limit.get<double>() < 0)) {
       return Status::InvalidInput(where + ": '" + key + "' must be a number >= 0 (" +
                                   known->meaning + "), or null for no limit")
+          .WithField(field);
+    }
+    if (!limit.is_null() && limit.get<double>() > known->max_value) {
+      return Status::InvalidInput(where + ": '" + key + "' must be at most " +
+                                  Fmt(known->max_value) + " (" + known->meaning + ")")
           .WithField(field);
     }
   }

@@ -28,6 +28,7 @@ struct AcceptanceKey {
   const char* name;
   const char* meaning;                  // with its unit, for error messages and the README
   std::optional<double> default_value;  // nullopt: no limit unless set
+  double max_value = 1e300;             // a value above this is refused (a rate: 0.5)
 };
 
 // Keys several methods share, with one meaning and default wherever they appear (a method lists
@@ -73,6 +74,16 @@ inline constexpr AcceptanceKey kMaxFleetZ = {
     "of the upload's product (applies when the config names a product and a parameter is known "
     "for at least 8 of its devices)",
     std::nullopt};
+// Every method, with max_fleet_z: the same comparison with the threshold set per parameter from
+// the fleet's size and the number of parameters compared, so that a unit drawn from the fleet's
+// own distribution is rejected with this probability (core/fleet_stats.h RobustZCritical at
+// Šidák's level). Where both are set, the smaller threshold applies.
+inline constexpr AcceptanceKey kMaxFleetFalseAlarm = {
+    "max_fleet_false_alarm",
+    "probability, in [0, 0.5], that a unit like the fleet's others is rejected by the fleet "
+    "comparison: each parameter's robust |z| threshold is calibrated to it for the fleet's size "
+    "and the number of parameters compared (a product and 8 devices as for max_fleet_z)",
+    std::nullopt, 0.5};
 }  // namespace limit_keys
 
 // The keys JudgeImuTriads reads, in this order: kMaxScaleStd, kMaxAxisStd, kScaleRange,
@@ -83,8 +94,8 @@ const std::vector<AcceptanceKey>& ImuTriadKeys();
 std::vector<AcceptanceKey> JoinKeys(std::initializer_list<std::vector<AcceptanceKey>> parts);
 
 // The keys of the registered method `method`: its Method::AcceptanceKeys, then the keys every
-// method has (limit_keys::kMaxFleetZ); empty for a name the registry (methods/registry.cc) does
-// not know. Thread-safe; the reference stays valid.
+// method has (limit_keys::kMaxFleetZ, kMaxFleetFalseAlarm); empty for a name the registry
+// (methods/registry.cc) does not know. Thread-safe; the reference stays valid.
 const std::vector<AcceptanceKey>& AcceptanceKeys(const std::string& method);
 
 // The limits in force for one result: every key of the method, nullopt = no limit.

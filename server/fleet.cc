@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
+#include <mutex>
 #include <utility>
 #include <vector>
 
@@ -112,6 +114,17 @@ Status CollectMembers(storage::Store* store, const std::string& product, const s
 
 json ZValue(double z) { return std::isfinite(z) ? json(z) : json(z > 0 ? "inf" : "-inf"); }
 
+// core::RobustZCritical(n, p), computed once per (n, p) per process (about 20 ms each).
+double CalibratedFleetZ(int64_t n, double p) {
+  static std::mutex& mu = *new std::mutex;
+  static auto& cache = *new std::map<std::pair<int64_t, double>, double>;
+  std::lock_guard<std::mutex> lock(mu);
+  auto it = cache.find({n, p});
+  if (it == cache.end())
+    it = cache.emplace(std::make_pair(n, p), core::RobustZCritical(n, p)).first;
+  return it->second;
+}
+
 // The parameters of `result` the method's FleetParameters select, by their fleet names.
 std::map<std::string, double> FleetValues(const json& result, const std::string& method) {
   std::map<std::string, double> all, selected;
@@ -211,10 +224,11 @@ Status ApplyFleetGate(storage::Store* store, const std::string& method, const st
   if (!result->is_object() || !result->contains("verdict") || !config.is_object()) {
     return Status::Ok();
   }
-  const std::optional<double> max_z =
-      EffectiveAcceptance(method, acceptance_defaults, config).Get(limit_keys::kMaxFleetZ.name);
+  const AcceptanceLimits limits = EffectiveAcceptance(method, acceptance_defaults, config);
+  const std::optional<double> max_z = limits.Get(limit_keys::kMaxFleetZ.name);
+  const std::optional<double> alpha = limits.Get(limit_keys::kMaxFleetFalseAlarm.name);
   const auto product = config.find("product");
-  if (!max_z || product == config.end() || !product->is_string()) return Status::Ok();
+  if ((!max_z && !alpha) || product == config.end() || !product->is_string()) return Status::Ok();
   std::vector<Member> members;
   int64_t scanned = 0;
   bool complete = true;
@@ -227,7 +241,7 @@ Status ApplyFleetGate(storage::Store* store, const std::string& method, const st
                                [&](const Member& m) { return m.device == device; }),
                 members.end());
   json judged = json::array();
-  Offenders offenders;
+  std::vector<double> zs;
   for (const auto& [name, value] : FleetValues(*result, method)) {
     std::vector<double> values;
     for (const Member& m : members) {
@@ -235,23 +249,42 @@ Status ApplyFleetGate(storage::Store* store, const std::string& method, const st
     }
     if (static_cast<int64_t>(values.size()) < options.min_devices) continue;
     const core::RobustSummary s = core::Summarize(values, 1);
-    const double z = core::RobustZ(value, s);
+    zs.push_back(core::RobustZ(value, s));
     judged.push_back({{"name", name},
                       {"value", value},
                       {"median", s.median},
                       {"spread", s.spread},
                       {"n", s.n},
-                      {"z", ZValue(z)}});
-    if (std::abs(z) > *max_z) {
-      offenders.Add(name + " (z " +
-                    (std::isfinite(z) ? Fmt(z) : std::string(z > 0 ? "+inf" : "-inf")) + ")");
+                      {"z", ZValue(zs.back())}});
+  }
+  // Each parameter's threshold: max_fleet_z, or the one calibrated to max_fleet_false_alarm for
+  // its fleet size and the number judged, whichever is smaller.
+  Offenders offenders;
+  const int m = static_cast<int>(judged.size());
+  for (size_t i = 0; i < judged.size(); ++i) {
+    json& j = judged[i];
+    double threshold = max_z.value_or(std::numeric_limits<double>::infinity());
+    if (alpha && *alpha > 0) {
+      threshold =
+          std::min(threshold, CalibratedFleetZ(j["n"].get<int64_t>(), core::SidakLevel(*alpha, m)));
     }
+    j["threshold"] = ZValue(threshold);
+    const double z = zs[i];
+    if (std::abs(z) > threshold) {
+      offenders.Add(j["name"].get<std::string>() + " (z " +
+                    (std::isfinite(z) ? Fmt(z) : std::string(z > 0 ? "+inf" : "-inf")) + " above " +
+                    Fmt(threshold) + ")");
+    }
+  }
+  std::string rules = max_z ? "max_fleet_z " + Fmt(*max_z) : "";
+  if (alpha) {
+    rules += (rules.empty() ? "" : ", ") + std::string("max_fleet_false_alarm ") + Fmt(*alpha);
   }
   json& verdict = (*result)["verdict"];
   Verdict fleet;
   offenders.RejectInto(&fleet, "outside the fleet of product '" + product->get<std::string>() +
-                                   "' (" + std::to_string(members.size()) +
-                                   " other devices; max_fleet_z " + Fmt(*max_z) + ")");
+                                   "' (" + std::to_string(members.size()) + " other devices; " +
+                                   rules + ")");
   if (!fleet.accepted()) {
     verdict["status"] = "rejected";
     if (!verdict.contains("reasons") || !verdict["reasons"].is_array()) {
@@ -262,7 +295,8 @@ Status ApplyFleetGate(storage::Store* store, const std::string& method, const st
   if (result->contains("diagnostics") && (*result)["diagnostics"].is_object()) {
     json d = {{"product", *product},
               {"devices", members.size()},
-              {"max_fleet_z", *max_z},
+              {"max_fleet_z", max_z ? json(*max_z) : json()},
+              {"max_fleet_false_alarm", alpha ? json(*alpha) : json()},
               {"judged", !judged.empty()},
               {"parameters", judged}};
     if (judged.empty()) {

@@ -29,7 +29,8 @@ struct FleetOptions {
   // median absolute deviation of a fleet of tens of units is itself uncertain by 20-35 %, and
   // a fleet is screened over every parameter of every unit at once, so 3.5 flags units of a
   // normal fleet (tests/server/fleet_test.cc: a 12-unit fleet showed a noise-only |z| of 4.8).
-  // A threshold calibrated to a family-wise false-alarm rate is still to do (issue #27).
+  // The gate can calibrate its threshold to a family-wise false-alarm rate instead
+  // (max_fleet_false_alarm, ApplyFleetGate); the page flags at this fixed |z|.
   double outlier_z = 5;
   // A parameter known for fewer devices flags none (its median absolute deviation is too noisy
   // to call a unit an outlier: with 5 devices a normal fleet shows |z| > 3.5 often). >= 3.
@@ -50,14 +51,18 @@ Status FleetJson(storage::Store* store, const std::string& product, const std::s
 
 // The gate's fleet rule (acceptance key max_fleet_z, SPEC §10), for a result the method has judged
 // (result["verdict"] set). When the limits in force (EffectiveAcceptance of `method` with
-// `acceptance_defaults` and the config) set max_fleet_z and the config names a `product`, each
+// `acceptance_defaults` and the config) set max_fleet_z or max_fleet_false_alarm (α) and the
+// config names a `product`, each
 // parameter of the result that Method::FleetParameters selects is compared with the accepted
 // calibrations of the product's other devices (`device`'s own is left out): robust z = (value −
 // median) / spread over them, judged only where the parameter is known for at least
-// options.min_devices devices. Any |z| above the limit rejects the result, one reason naming the
-// parameters, their z, the product and the fleet's size; diagnostics.fleet gets {"product",
-// "devices", "max_fleet_z", "judged", "parameters": [{"name", "value", "median", "spread", "n",
-// "z"}]} (judged false, saying why, when the fleet is too small). Storage errors are returned
+// options.min_devices devices. Each parameter's threshold is max_fleet_z, or
+// core::RobustZCritical(n, SidakLevel(α, m)) for its n devices and the m parameters judged,
+// whichever is smaller. Any |z| above its threshold rejects the result, one reason naming the
+// parameters, their z and thresholds, the rules, the product and the fleet's size;
+// diagnostics.fleet gets {"product", "devices", "max_fleet_z", "max_fleet_false_alarm", "judged",
+// "parameters": [{"name", "value", "median", "spread", "n", "z", "threshold"}]} (judged false,
+// saying why, when the fleet is too small). Storage errors are returned
 // as they are and change nothing (the worker retries the job).
 Status ApplyFleetGate(storage::Store* store, const std::string& method, const std::string& device,
                       const nlohmann::json& config, const nlohmann::json& acceptance_defaults,

@@ -4,7 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 #include "core/array_simulation.h"
@@ -68,6 +70,52 @@ TEST(FleetStats, EqualValuesHaveNoSpreadAndOnlyADifferentValueIsInfinitelyFar) {
   const RobustSummary one = Summarize({4}, 5);
   EXPECT_EQ(one.counts.size(), 1u);
   EXPECT_EQ(one.median, 4);
+}
+
+// The calibrated threshold holds its family-wise false-alarm rate: a normal unit with m
+// independent parameters, each judged against a normal fleet of n devices, is flagged in a
+// fraction α of trials (4 000 trials per case: the standard error of a rate of 0.05 is 0.0034;
+// the bounds are ±3.5 of them). The normal quantile at the same Šidák level, which ignores the
+// fleet's own uncertainty, flags a small fleet's units several times too often, and the fixed
+// |z| of 5 far too rarely for large fleets: the test tells the three apart.
+TEST(FleetStats, TheCalibratedThresholdHoldsTheFamilyWiseFalseAlarmRate) {
+  const double alpha = 0.05;
+  const int m = 10, trials = 4000;
+  for (int64_t n : {8, 12, 30, 100}) {
+    const double p = SidakLevel(alpha, m);
+    const double critical = RobustZCritical(n, p);
+    double normal = 0;  // the two-sided normal quantile: erfc(c / √2) = p, by bisection
+    for (double lo = 0, hi = 40, i = 0; i < 200; ++i, normal = 0.5 * (lo + hi)) {
+      (std::erfc(0.5 * (lo + hi) / std::sqrt(2.0)) > p ? lo : hi) = 0.5 * (lo + hi);
+    }
+    GaussianRng rng(900 + static_cast<uint64_t>(n));
+    int flagged = 0, flagged_normal = 0, flagged_five = 0;
+    std::vector<double> fleet(static_cast<size_t>(n));
+    for (int t = 0; t < trials; ++t) {
+      double worst = 0;
+      for (int j = 0; j < m; ++j) {
+        for (double& x : fleet) x = rng.Normal();
+        worst = std::max(worst, std::abs(RobustZ(rng.Normal(), Summarize(fleet, 1))));
+      }
+      flagged += worst > critical;
+      flagged_normal += worst > normal;
+      flagged_five += worst > 5;
+    }
+    const double rate = static_cast<double>(flagged) / trials;
+    std::printf(
+        "n %lld: critical |z| %.2f (normal %.2f); family-wise rate %.4f, with the normal "
+        "quantile %.4f, with |z| > 5 %.4f\n",
+        static_cast<long long>(n), critical, normal, rate,
+        static_cast<double>(flagged_normal) / trials, static_cast<double>(flagged_five) / trials);
+    EXPECT_NEAR(rate, alpha, 3.5 * std::sqrt(alpha * (1 - alpha) / trials)) << "n " << n;
+    if (n <= 12) {
+      EXPECT_GT(flagged_normal, 2 * flagged) << "n " << n;
+    }
+  }
+  EXPECT_NEAR(SidakLevel(0.05, 1), 0.05, 1e-15);
+  EXPECT_NEAR(SidakLevel(0.05, 10), 1 - std::pow(0.95, 0.1), 1e-15);
+  EXPECT_TRUE(std::isnan(RobustZCritical(2, 0.01)));
+  EXPECT_EQ(RobustZCritical(30, 0.001), RobustZCritical(30, 0.001));  // deterministic
 }
 
 }  // namespace

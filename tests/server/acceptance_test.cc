@@ -205,8 +205,9 @@ TEST(Gate, EveryRegisteredMethodSuppliesItsLimitsWithTheirDefaults) {
     SCOPED_TRACE(m->name());
     ASSERT_FALSE(m->AcceptanceKeys().empty());
     const std::vector<AcceptanceKey>& keys = AcceptanceKeys(m->name());
-    ASSERT_EQ(keys.size(), m->AcceptanceKeys().size() + 1);
-    EXPECT_STREQ(keys.back().name, limit_keys::kMaxFleetZ.name);
+    ASSERT_EQ(keys.size(), m->AcceptanceKeys().size() + 2);
+    EXPECT_STREQ(keys[keys.size() - 2].name, limit_keys::kMaxFleetZ.name);
+    EXPECT_STREQ(keys.back().name, limit_keys::kMaxFleetFalseAlarm.name);
     EXPECT_EQ(&AcceptanceKeys(m->name()), &keys);  // one list per method, kept
     std::set<std::string> names;
     json defaults = json::object();

@@ -55,12 +55,13 @@ class Fleet : public ::testing::Test {
     ASSERT_EQ(job["status"], "succeeded") << job.dump();
   }
 
-  // One calibration with the gate key max_fleet_z: the finished job.
-  json CalibrateGated(const std::string& device, double scale_x, uint64_t seed, double max_z) {
+  // One calibration with the gate key max_fleet_z (or `key`): the finished job.
+  json CalibrateGated(const std::string& device, double scale_x, uint64_t seed, double max_z,
+                      const std::string& key = "max_fleet_z") {
     const std::string path =
         "/api/v1/recordings?method=pca&magnitude=9.80665&bias=estimate"
         "&product=IMU-300&device=" +
-        device + "&acceptance=%7B%22max_fleet_z%22:" + std::to_string(max_z) + "%7D";
+        device + "&acceptance=%7B%22" + key + "%22:" + std::to_string(max_z) + "%7D";
     auto res = server_.Client().Post(path.c_str(), TriadCsv(seed, scale_x), "text/csv");
     EXPECT_TRUE(res && res->status == 201) << (res ? res->body : "no answer");
     if (!res || res->status != 201) return nullptr;
@@ -151,6 +152,37 @@ TEST_F(Fleet, MaxFleetZRejectsAUnitOutsideTheFleetOnceTheFleetIsLargeEnough) {
   Get("/api/v1/devices/BAD-1/calibration?method=pca", 404);
   // A config without max_fleet_z is not judged against the fleet.
   Calibrate("FREE-1", "IMU-300", 1.06, 602);
+
+  // max_fleet_false_alarm: each parameter's threshold calibrated to the fleet's size and the
+  // number of parameters judged (core::RobustZCritical at Šidák's level). The normal unit passes,
+  // the 5 % scale error is rejected naming the rule.
+  job = CalibrateGated("GOOD-2", 1.01, 603, 0.01, "max_fleet_false_alarm");
+  ASSERT_EQ(job["status"], "succeeded") << job.dump();
+  EXPECT_EQ(job["result"]["verdict"]["status"], "accepted") << job["result"]["verdict"].dump();
+  const json& fleet = job["result"]["diagnostics"]["fleet"];
+  EXPECT_EQ(fleet["max_fleet_false_alarm"], 0.01);
+  EXPECT_TRUE(fleet["max_fleet_z"].is_null());
+  ASSERT_FALSE(fleet["parameters"].empty());
+  for (const json& p : fleet["parameters"]) {
+    // 30 devices, several parameters at 1 %: well above the normal quantile of 2.6-3.5.
+    EXPECT_GT(p["threshold"].get<double>(), 3.5) << p.dump();
+    EXPECT_LT(p["threshold"].get<double>(), 8) << p.dump();
+  }
+  job = CalibrateGated("BAD-2", 1.06, 604, 0.01, "max_fleet_false_alarm");
+  ASSERT_EQ(job["status"], "succeeded") << job.dump();
+  EXPECT_EQ(job["result"]["verdict"]["status"], "rejected") << job["result"]["verdict"].dump();
+  EXPECT_NE(job["result"]["verdict"]["reasons"].dump().find("max_fleet_false_alarm 0.01"),
+            std::string::npos)
+      << job["result"]["verdict"].dump();
+  // A rate above 0.5 is refused, naming the key.
+  auto refused = server_.Client().Post(
+      "/api/v1/recordings?method=pca&magnitude=9.80665&bias=estimate&product=IMU-300"
+      "&device=X-1&acceptance=%7B%22max_fleet_false_alarm%22:0.7%7D",
+      TriadCsv(605, 1.01), "text/csv");
+  ASSERT_TRUE(refused);
+  EXPECT_EQ(refused->status, 400) << refused->body;
+  EXPECT_NE(refused->body.find("max_fleet_false_alarm"), std::string::npos) << refused->body;
+  EXPECT_NE(refused->body.find("at most 0.5"), std::string::npos) << refused->body;
 }
 
 TEST_F(Fleet, BadRequestsNameWhatIsWrong) {
