@@ -16,7 +16,8 @@ build=${CALIBD_TSAN_BUILD_DIR:-build-tsan}
 tests=(storage_store_test storage_queue_concurrency_test core_task_pool_test
   server_http_api_test server_http_frontend_test server_hostile_http_test server_process_test
   server_imu_method_test server_noise_method_test server_worker_pool_test server_job_budget_test
-  storage_pg_store_test server_pg_process_test server_storage_damage_test)
+  storage_pg_store_test server_pg_process_test server_storage_damage_test server_column_cache_test
+  server_check_test)
 scripts/setup.sh
 # libFuzzer's -fsanitize=fuzzer is added per fuzz target by tests/fuzz/CMakeLists.txt.
 CC=clang CXX=clang++ cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Debug \
