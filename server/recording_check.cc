@@ -183,7 +183,7 @@ Status ComputeCheck(storage::Store* store, const CheckRequest& request, json* ou
   Status s = ValidateConfig(request.config, &common);
   if (!s.ok()) return s;
   const Method* method = FindMethod(common.method);
-  if (!method->Reads(Layout::kArray) || !method->NeedsIncreasingTime()) {
+  if (!method->Reads(Layout::kArray)) {
     return Status::InvalidInput("the check reads inertial logs; method '" + common.method +
                                 "' does not calibrate from one")
         .WithField("method");
@@ -222,8 +222,12 @@ Status ComputeCheck(storage::Store* store, const CheckRequest& request, json* ou
   ArrayRecording log;
   s = parser.TakeArray(&log);
   if (!s.ok()) return s;
-  s = CheckLogTimes(log, common.method, &parser.summary());
-  if (!s.ok()) return s;
+  // A method that needs t to increase refuses such a log, as its job does; the array method
+  // reads t only for its full model's statics, and its positions model not at all.
+  if (method->NeedsIncreasingTime()) {
+    s = CheckLogTimes(log, common.method, &parser.summary());
+    if (!s.ok()) return s;
+  }
   json& o = *out;
   o = {{"recording_id", request.recording_id},
        {"method", common.method},
@@ -232,7 +236,7 @@ Status ComputeCheck(storage::Store* store, const CheckRequest& request, json* ou
        {"start", Num(log.t.size() ? log.t[0] : std::nan(""))},
        {"end", Num(log.t.size() ? log.t[log.t.size() - 1] : std::nan(""))},
        {"time_origin", parser.summary().time_origin},
-       {"timing", Timing(log.t)},
+       {"timing", log.t.size() >= 2 ? Timing(log.t) : json()},
        {"units", json::array()},
        {"temperature", TemperatureRange(log)},
        {"warnings", json::array()},

@@ -12,10 +12,12 @@
 // What is computed where: the recording's own figures here (timing, units that look wrong,
 // temperature range); the method's part (saturation, statics, coverage, what the job would fail
 // with) by Method::Check, from the stages the method's Run runs, so those numbers are the
-// job's. A method without a Check (no statics: noise) gives the recording's figures only, and the
-// answer says so in `notes`. `predicted` (the σ the job would report, computed as the plan
-// of issue #27 item 1 computes it, for the statics found) comes from Method::Check too: null
-// where the method does not predict (a note says so) or the job would fail.
+// job's. A method without a Check gives the recording's figures only, and the answer says so in
+// `notes`. Methods that need t to increase refuse a log whose t does not, as their jobs do; the
+// others (array) are checked as they read the log (`timing` null without a t). `predicted` (the σ
+// the job would report, computed as the plan of issue #27 item 1 computes it, for the statics
+// found) comes from Method::Check too: null where the method does not predict (a note says so) or
+// the job would fail.
 #ifndef CALIBD_SERVER_RECORDING_CHECK_H_
 #define CALIBD_SERVER_RECORDING_CHECK_H_
 

@@ -449,6 +449,38 @@ class Array : public Method {
            "hand-twisted recording (Carlsson, Skog, Jalden: maximum likelihood)";
   }
   bool Reads(Layout layout) const override { return layout == Layout::kArray; }
+  // The saturation search Run runs (ArraySaturation, with the config's limits and gyro unit),
+  // for either model: the channels pinned and the samples the fit would drop. No statics yet.
+  Status Check(const ArrayRecording& log, const nlohmann::json& config, const RunContext& ctx,
+               nlohmann::json* check) const override {
+    std::optional<double> accel_limit, gyro_limit;
+    bool degrees = false;
+    Status s;
+    if (IsFullModel(config)) {
+      core::ArrayFullProblem geometry;
+      core::ArrayFullOptions options;
+      s = ParseArrayFullConfig(config, &geometry, &options, &degrees);
+      accel_limit = options.accel_saturation;
+      gyro_limit = options.gyro_saturation;
+    } else {
+      core::ArrayProblem geometry;
+      core::ArrayOptions options;
+      s = ParseArrayConfig(config, &geometry, &options, &degrees);
+      accel_limit = options.accel_saturation;
+      gyro_limit = options.gyro_saturation;
+    }
+    if (!s.ok()) return s;
+    const Eigen::MatrixXd gyro = degrees ? Eigen::MatrixXd(log.gyro * core::kDegree) : log.gyro;
+    std::optional<results::SaturationDiagnostics> saturation;
+    std::vector<std::string> warnings;
+    s = array_detail::ArraySaturation(log.accel, log.accel_names, gyro, log.gyro_names, degrees,
+                                      ctx.stop, &accel_limit, &gyro_limit, &saturation, &warnings);
+    if (!s.ok()) return s;
+    (*check)["saturation"] =
+        results::ToJson(saturation.value_or(results::SaturationDiagnostics{"dropped", 0, {}}));
+    for (const std::string& w : warnings) (*check)["warnings"].push_back(w);
+    return Status::Ok();
+  }
   // The positions model ignores t; the full model finds its statics from it.
   bool ReadsTime(const nlohmann::json& config) const override { return IsFullModel(config); }
   // Measured server peaks (bench/README.md, "Memory budget per job"): positions model, N = 100 000

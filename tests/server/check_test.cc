@@ -13,6 +13,7 @@
 #include <tuple>
 #include <vector>
 
+#include "core/array_full_simulation.h"
 #include "core/imu_simulation.h"
 #include "core/thermal_simulation.h"
 #include "methods/imu/imu_method.h"
@@ -501,6 +502,35 @@ TEST(RecordingCheck, Mimu4444SaturationNamed) {
   }
   EXPECT_GE(pinned, 1000);
   EXPECT_GT(sat.at("samples").get<int64_t>(), 0);
+
+  // The array method's own check (its job's saturation search, either model): the channels and
+  // the dropped samples are its job's, which a positions job here shows.
+  const Eigen::Matrix3Xd p = core::Mimu4444NominalPositions();
+  json positions = json::array();
+  for (Eigen::Index k = 0; k < p.cols(); ++k) positions.push_back({p(0, k), p(1, k), p(2, k)});
+  json config = {{"method", "array"},
+                 {"gyro_unit", "deg/s"},
+                 {"accel_noise", 0.05},
+                 {"gyro_noise", 0.2},
+                 {"geometry", {{"positions", positions}, {"reference", 0}}}};
+  json array_check;
+  ASSERT_EQ(Check(server, "/api/v1/recordings/" + std::to_string(id) + "/check" + Query(config),
+                  &array_check),
+            200)
+      << array_check.dump().substr(0, 400);
+  const json job = server.UploadAndWait(csv, config);  // the same bytes: the same recording
+  ASSERT_EQ(job.value("status", ""), "succeeded") << job.dump().substr(0, 600);
+  EXPECT_EQ(job.at("recording_id"), id);
+  EXPECT_EQ(array_check.at("saturation"), job.at("result").at("diagnostics").at("saturation"));
+  EXPECT_TRUE(array_check.at("timing").at("rate").is_number());
+  // The full model's check: the same search (its job reads t for statics, not for the search).
+  config["model"] = "full";
+  json full_check;
+  ASSERT_EQ(Check(server, "/api/v1/recordings/" + std::to_string(id) + "/check" + Query(config),
+                  &full_check),
+            200)
+      << full_check.dump().substr(0, 400);
+  EXPECT_EQ(full_check.at("saturation"), array_check.at("saturation"));
 }
 
 }  // namespace
