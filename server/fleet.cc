@@ -166,10 +166,17 @@ Status FleetJson(storage::Store* store, const std::string& product, const std::s
     std::vector<double> values;
     for (const auto& e : entries) values.push_back(e.second);
     const core::RobustSummary s = core::Summarize(values, options.bins);
+    // The summary includes the device judged (its z shrinks a little: conservative).
+    const double threshold =
+        options.outlier_false_alarm > 0
+            ? CalibratedFleetZ(
+                  std::max<int64_t>(s.n - 1, 3),
+                  core::SidakLevel(options.outlier_false_alarm, static_cast<int>(by_name.size())))
+            : options.outlier_z;
     json outliers = json::array();
     for (const auto& [m, v] : entries) {
       const double z = core::RobustZ(v, s);
-      if (s.n < options.min_devices || !(std::abs(z) > options.outlier_z)) continue;
+      if (s.n < options.min_devices || !(std::abs(z) > threshold)) continue;
       outliers.push_back(
           {{"device", m->device}, {"job_id", m->job_id}, {"value", v}, {"z", ZValue(z)}});
       auto& f = flagged[m];
@@ -182,6 +189,7 @@ Status FleetJson(storage::Store* store, const std::string& product, const std::s
                           {"spread", s.spread},
                           {"min", s.min},
                           {"max", s.max},
+                          {"threshold", s.n < options.min_devices ? json() : ZValue(threshold)},
                           {"histogram", {{"edges", s.edges}, {"counts", s.counts}}},
                           {"outliers", outliers}});
   }
@@ -211,9 +219,16 @@ Status FleetJson(storage::Store* store, const std::string& product, const std::s
     }
     drift.push_back({{"month", month}, {"devices", ms.size()}, {"median", medians}});
   }
-  *out = {{"product", product},     {"method", method},         {"devices", members.size()},
-          {"scanned", scanned},     {"complete", complete},     {"outlier_z", options.outlier_z},
-          {"members", member_list}, {"parameters", parameters}, {"outliers", device_outliers},
+  *out = {{"product", product},
+          {"method", method},
+          {"devices", members.size()},
+          {"scanned", scanned},
+          {"complete", complete},
+          {"outlier_false_alarm", options.outlier_false_alarm},
+          {"outlier_z", options.outlier_false_alarm > 0 ? json() : json(options.outlier_z)},
+          {"members", member_list},
+          {"parameters", parameters},
+          {"outliers", device_outliers},
           {"drift", drift}};
   return Status::Ok();
 }

@@ -25,13 +25,15 @@ namespace calibd::server {
 Status NormalizeProduct(std::string_view raw, std::string* out);
 
 struct FleetOptions {
-  // |robust z| above this flags a device's value (> 0). 5, not Iglewicz & Hoaglin's 3.5: the
-  // median absolute deviation of a fleet of tens of units is itself uncertain by 20-35 %, and
-  // a fleet is screened over every parameter of every unit at once, so 3.5 flags units of a
-  // normal fleet (tests/server/fleet_test.cc: a 12-unit fleet showed a noise-only |z| of 4.8).
-  // The gate can calibrate its threshold to a family-wise false-alarm rate instead
-  // (max_fleet_false_alarm, ApplyFleetGate); the page flags at this fixed |z|.
-  double outlier_z = 5;
+  // A device is flagged when one of its parameters' |robust z| exceeds the threshold. By default
+  // the threshold is calibrated per parameter (core::RobustZCritical for the n − 1 other devices
+  // that know it, at Šidák's level for the number of parameters compared) so that a unit drawn
+  // from the fleet's own distribution is flagged with probability outlier_false_alarm. A fixed
+  // |z| (outlier_z, with outlier_false_alarm 0) over- or under-flags by fleet size: |z| > 5 flags
+  // 15 % of the normal units of an 8-device fleet with 10 parameters, and 0.03 % of a 100-device
+  // one (tests/core/fleet_stats_test.cc).
+  double outlier_false_alarm = 0.01;  // in [0, 0.5]; 0: outlier_z for every parameter
+  double outlier_z = 5;               // > 0: the fixed threshold when outlier_false_alarm is 0
   // A parameter known for fewer devices flags none (its median absolute deviation is too noisy
   // to call a unit an outlier: with 5 devices a normal fleet shows |z| > 3.5 often). >= 3.
   int64_t min_devices = 8;
@@ -40,9 +42,11 @@ struct FleetOptions {
 };
 
 // The fleet of `product` for `method` (a registered method) as SPEC §10's JSON:
-// {"product", "method", "devices", "scanned", "complete", "outlier_z", "min_devices", "members":
-// [{"device", "job_id", "calibrated_at"}], "parameters": [{"name", "n", "median", "spread", "min",
-// "max", "histogram": {"edges", "counts"}, "outliers": [{"device", "job_id", "value", "z"}]}],
+// {"product", "method", "devices", "scanned", "complete", "outlier_false_alarm", "outlier_z" (null
+// when calibrated), "min_devices", "members": [{"device", "job_id", "calibrated_at"}],
+// "parameters": [{"name", "n", "median", "spread", "min", "max", "threshold" (null below
+// min_devices), "histogram": {"edges", "counts"}, "outliers": [{"device", "job_id", "value",
+// "z"}]}],
 // "outliers": [{"device", "job_id", "parameters": [names], "max_abs_z"}], "drift": [{"month",
 // "devices", "median": {name: value}}]}. A product without devices is an empty fleet, not an
 // error. Storage errors as they are.

@@ -1,4 +1,5 @@
-// GET /api/v1/products/{product}/fleet?method=M[&outlier_z=Z] (SPEC §10, server/fleet.h).
+// GET /api/v1/products/{product}/fleet?method=M[&false_alarm=A | &outlier_z=Z] (SPEC §10,
+// server/fleet.h): the threshold calibrated to A (default 0.01), or a fixed robust |z|.
 #include <cmath>
 #include <string>
 
@@ -27,10 +28,21 @@ void Service::Impl::HandleFleet(const httplib::Request& req, httplib::Response& 
                      .WithField("outlier_z"));
       }
       options.outlier_z = z;
+      options.outlier_false_alarm = 0;
+    } else if (key == "false_alarm") {
+      char* end = nullptr;
+      const double a = std::strtod(value.c_str(), &end);
+      if (value.empty() || end != value.c_str() + value.size() || !(a > 0 && a <= 0.5)) {
+        return (void)SendStatus(
+            res, Status::InvalidInput("false_alarm must be a number in (0, 0.5] (the probability "
+                                      "that a unit like the others is flagged; default 0.01)")
+                     .WithField("false_alarm"));
+      }
+      options.outlier_false_alarm = a;
     } else {
       return (void)SendStatus(res,
                               Status::InvalidInput("unknown query parameter '" + key.substr(0, 64) +
-                                                   "' (known: method, outlier_z)")
+                                                   "' (known: method, false_alarm, outlier_z)")
                                   .WithField(key.substr(0, 64)));
     }
   }

@@ -109,7 +109,22 @@ TEST_F(Fleet, NamesTheOutlierUnitAndItsParameterAmongTheProductsDevices) {
   EXPECT_EQ(counted, 12);
   ASSERT_EQ(fleet["drift"].size(), 1u);  // every calibration of this test is in one month
   EXPECT_EQ(fleet["drift"][0]["devices"], 12);
-  // A looser limit flags nothing, a tight one more; the other product is its own fleet.
+  // By default each parameter's threshold is calibrated (1 % per unit over its parameters): for
+  // 11 other devices it is far above the normal quantile, and the unit stays flagged.
+  EXPECT_EQ(fleet["outlier_false_alarm"], 0.01);
+  EXPECT_TRUE(fleet["outlier_z"].is_null());
+  EXPECT_GT((*scale)["threshold"].get<double>(), 6);
+  EXPECT_LT((*scale)["threshold"].get<double>(), 20);
+  EXPECT_GT((*scale)["outliers"][0]["z"].get<double>(), (*scale)["threshold"].get<double>());
+  const json loose = Get("/api/v1/products/IMU-100/fleet?method=pca&false_alarm=0.5");
+  EXPECT_LT(loose["parameters"][0]["threshold"].get<double>(),
+            fleet["parameters"][0]["threshold"].get<double>());
+  EXPECT_NE(Get("/api/v1/products/IMU-100/fleet?method=pca&false_alarm=0.7", 400)
+                .dump()
+                .find("false_alarm must be a number in (0, 0.5]"),
+            std::string::npos);
+  // A fixed |z|: a looser limit flags nothing, a tight one more; the other product is its own
+  // fleet.
   EXPECT_GT(Get("/api/v1/products/IMU-100/fleet?method=pca&outlier_z=1")["outliers"].size(), 1u);
   EXPECT_EQ(Get("/api/v1/products/IMU-100/fleet?method=pca&outlier_z=1000")["outliers"].size(), 0u);
   EXPECT_EQ(Get("/api/v1/products/IMU-200/fleet?method=pca")["devices"], 1);
@@ -121,6 +136,7 @@ TEST_F(Fleet, NamesTheOutlierUnitAndItsParameterAmongTheProductsDevices) {
   EXPECT_NE(page->body.find("href=\"/devices/U-7\""), std::string::npos);
   EXPECT_NE(page->body.find("table-fleet"), std::string::npos);
   EXPECT_NE(page->body.find("sensors/a0_x/scale"), std::string::npos);
+  EXPECT_NE(page->body.find("flag at |z|"), std::string::npos);
   auto choose = server_.Client().Get("/products/IMU-100");
   ASSERT_TRUE(choose);
   EXPECT_EQ(choose->status, 200);

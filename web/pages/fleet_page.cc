@@ -97,9 +97,16 @@ std::string RenderFleetPage(const FleetView& view) {
            (devices == 1 ? " device" : " devices") +
            ": each one's latest served calibration. A unit is flagged when a parameter lies more "
            "than " +
-           FormatSig(Number(f["outlier_z"]), 3) +
+           (f["outlier_z"].is_number() ? FormatSig(Number(f["outlier_z"]), 3)
+                                       : std::string("the threshold (column \"flag at |z|\")")) +
            " robust standard deviations (1.4826 \xC3\x97 the median absolute deviation) from "
-           "the fleet's median; parameters known for fewer than " +
+           "the fleet's median" +
+           (f["outlier_z"].is_number()
+                ? std::string()
+                : ", set per parameter for the fleet's size so that a unit like the others is "
+                  "flagged with probability " +
+                      FormatSig(Number(f["outlier_false_alarm"]), 2) + " over all its parameters") +
+           "; parameters known for fewer than " +
            std::to_string(f.value("min_devices", int64_t{0})) + " devices flag none." +
            (f.value("complete", true) ? "" : " Only part of the devices was scanned.") + "</p>";
     out += "<h2>Flagged units</h2>";
@@ -120,14 +127,18 @@ std::string RenderFleetPage(const FleetView& view) {
     out +=
         "<h2>Parameters</h2><div class=\"table-wrap\"><table class=\"table-fleet\"><thead><tr>"
         "<th>parameter</th><th class=\"num\">devices</th><th class=\"num\">median</th>"
-        "<th class=\"num\">spread</th><th class=\"num\">min</th><th class=\"num\">max</th>"
+        "<th class=\"num\">spread</th><th class=\"num\">flag at |z|</th>"
+        "<th class=\"num\">min</th><th class=\"num\">max</th>"
         "<th>distribution</th><th>outliers (z)</th></tr></thead><tbody>";
     for (const json& p : f["parameters"]) {
       out += "<tr><td class=\"name\">" + E(p["name"].get<std::string>()) + "</td>" +
              NumCell(std::to_string(p["n"].get<int64_t>())) + NumCell(Number(p["median"]), 6) +
-             NumCell(Number(p["spread"]), 3) + NumCell(Number(p["min"]), 6) +
-             NumCell(Number(p["max"]), 6) + "<td>" + Histogram(p["histogram"]) + "</td><td>" +
-             OutlierList(p["outliers"]) + "</td></tr>";
+             NumCell(Number(p["spread"]), 3) +
+             (p.contains("threshold") && p["threshold"].is_number()
+                  ? NumCell(Number(p["threshold"]), 3)
+                  : NumCell(std::string("\xE2\x80\x94"))) +
+             NumCell(Number(p["min"]), 6) + NumCell(Number(p["max"]), 6) + "<td>" +
+             Histogram(p["histogram"]) + "</td><td>" + OutlierList(p["outliers"]) + "</td></tr>";
     }
     out += "</tbody></table></div>";
     // The members, linked (the first kMaxListed; the JSON has them all).
