@@ -27,9 +27,14 @@ cmake --build "$build" -j "$(nproc)" --target calibd fuzz_multipart "${tests[@]}
 # scripts/tsan.supp: the fuzz build's coverage counters, which every thread bumps by design.
 export TSAN_OPTIONS=${TSAN_OPTIONS:-halt_on_error=1:second_deadlock_stack=1:suppressions=$PWD/scripts/tsan.supp}
 [ -x /usr/lib/llvm-14/bin/llvm-symbolizer ] && export TSAN_SYMBOLIZER_PATH=/usr/lib/llvm-14/bin/llvm-symbolizer
+# The two-process queue test forks children that start threads; ThreadSanitizer does not support
+# a forked child of a process it has instrumented (its report there names no real location:
+# "global '__interceptor_pthread_create'", a thread "created" inside the test's own function), so
+# that case runs in the Release and ASan suites only.
+filter() { [ "$1" = storage_queue_concurrency_test ] && echo '--gtest_filter=-*TwoProcesses*' || echo '--gtest_filter=*'; }
 for t in "${tests[@]}"; do
   echo "tsan.sh: $t"
-  "$build/tests/$t" --gtest_brief=1
+  "$build/tests/$t" --gtest_brief=1 "$(filter "$t")"
 done
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
