@@ -334,6 +334,9 @@ bool Service::Shutdown() {
     if (d.store && !d.abandoned) {
       d.store->Checkpoint();
       d.workers.reset();
+      // The parsed-columns cache's background build reads the store: stopped (and joined)
+      // before the store goes.
+      d.column_cache.reset();
       d.store.reset();
     }
   });

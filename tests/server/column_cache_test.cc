@@ -360,5 +360,19 @@ TEST(ColumnCacheHttp, CheckAndSegmentsAreTheUncachedOnes) {
   EXPECT_FALSE(fs::exists(uncached.dir() / "columns"));
 }
 
+// A shutdown while the background build reads a just-uploaded log: the build stops and is joined
+// before the store is closed (before the fix the store went first and the builder used it freed:
+// ThreadSanitizer and AddressSanitizer report it here; in Release the server must simply stop).
+TEST(ColumnCacheHttp, AShutdownDuringTheBackgroundBuildStopsItBeforeTheStoreCloses) {
+  const std::string csv = SimulatedCsv(200, 22);  // ~1.8 MB: its build is still running
+  for (int round = 0; round < 3; ++round) {
+    TestServer server;
+    ASSERT_EQ(server.error(), "");
+    auto res = server.Client().Post("/api/v1/recordings", csv, "text/csv");
+    ASSERT_TRUE(res && res->status == 201);
+    server.Stop();  // at once: the build has just started
+  }
+}
+
 }  // namespace
 }  // namespace calibd::server
