@@ -51,6 +51,12 @@
 //   // Undamped H_pp (P x P), g_p (P), lift L (q x P) and weight w from the merged sums.
 //   void AssembleShared(const Sums& sums, const Context& c, SharedNormal* out) const;
 //   BlockState PlusBlock(const BlockState& x, const BlockVector& dx) const;        // x [+] dx
+//   // Optional, runtime q only (declare static constexpr bool kStructuredCouplingGram = true):
+//   // adds C_n^T H_nn^-1 C_n (H_nn = L L^T, given L^-1 of the possibly damped H_nn; at least
+//   // the lower triangle) to *T from the block's structure, or returns false to leave it to
+//   // the dense rank-k update. Equal to the dense term up to rounding.
+//   bool AddCouplingGram(int64_t n, const BlockState& x, const Context& c,
+//                        const BlockMatrix& L_inverse, Eigen::MatrixXd* T) const;
 //   SharedState PlusShared(const SharedState& p, const Eigen::VectorXd& dp) const;  // p [+] dp
 //   double SharedMaxNorm(const SharedState& p) const;  // scale of the step tolerance
 //
@@ -68,6 +74,7 @@
 #include <functional>
 #include <limits>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -258,6 +265,13 @@ struct SharedNormal {
   Eigen::MatrixXd lift;  // q x P
   double coupling_weight = 1;
 };
+
+// True when Problem declares kStructuredCouplingGram (the optional AddCouplingGram above).
+template <class P, class = void>
+struct HasStructuredCouplingGram : std::false_type {};
+template <class P>
+struct HasStructuredCouplingGram<P, std::void_t<decltype(P::kStructuredCouplingGram)>>
+    : std::bool_constant<P::kStructuredCouplingGram> {};
 
 // The reduced (Schur) system at the final point, with mu = 0.
 struct BlockLmInformation {
@@ -488,13 +502,21 @@ class BlockLm {
         if (mu > 0) b.H.diagonal() *= (1 + mu);
         // H = L L^T; with Z = L^-1 C and u = L^-1 g: C^T H^-1 C = Z^T Z, C^T H^-1 g = Z^T u.
         const BlockMatrix Linv = InverseCholeskyFactor<B>(b.H);
-        Z = Linv.lazyProduct(b.C);
         const BlockVector u = Linv.lazyProduct(g);
-        if constexpr (Q == Eigen::Dynamic) {
+        bool structured = false;
+        if constexpr (Q == Eigen::Dynamic && HasStructuredCouplingGram<Problem>::value)
+          structured = problem_.AddCouplingGram(n, x.col(n), context, Linv, &acc.T);
+        if (structured) {
+          // C^T H^-1 g = C^T (L^-T u).
+          const BlockVector v = Linv.transpose().lazyProduct(u);
+          acc.t.noalias() += b.C.transpose() * v;
+        } else if constexpr (Q == Eigen::Dynamic) {
+          Z = Linv.lazyProduct(b.C);
           Zs.middleRows(B * stacked, B) = Z;
           if (++stacked == kStack) flush();
           acc.t.noalias() += Z.transpose() * u;
         } else {
+          Z = Linv.lazyProduct(b.C);
           acc.T.noalias() += Z.transpose().lazyProduct(Z);
           acc.t.noalias() += Z.transpose().lazyProduct(u);
         }
