@@ -384,6 +384,8 @@ GravitySplit DeterminedAxes(const ThermalOptions& options, ThermalImuResult* r) 
     intercepts.col(a) = r->channels[static_cast<size_t>(a)].fit.intercepts;
   const Eigen::VectorXd norms = intercepts.rowwise().norm();
   split.magnitude.setConstant(norms.mean());
+  const std::vector<int> dense =
+      SelectWindows(r->windows, 0, 0, r->t_ref, r->orientations).group_of_orientation;
   for (int a = 0; a < 3; ++a) {
     const Eigen::VectorXd n = intercepts.col(a).cwiseQuotient(norms);
     double lo = 2, hi = -2;  // over the groups near the axis
@@ -399,6 +401,30 @@ GravitySplit DeterminedAxes(const ThermalOptions& options, ThermalImuResult* r) 
           " (unit vectors, over the groups within 60° of the axis), below scale_min_spread " +
           Format(options.scale_min_spread) + ": add the faces +" + std::string(1, axes[a]) +
           " and -" + std::string(1, axes[a]);
+      continue;
+    }
+    // The curves separate only where the faces of both signs were held at the same
+    // temperatures; elsewhere they rest on the polynomials' extrapolation.
+    double t_lo[2] = {1e300, 1e300}, t_hi[2] = {-1e300, -1e300};  // + and − faces
+    for (const ThermalWindow& w : r->windows) {
+      const int g = dense[static_cast<size_t>(w.orientation)];
+      if (g < 0 || std::abs(n(g)) < kAxisFace) continue;
+      const int side = n(g) > 0 ? 0 : 1;
+      t_lo[side] = std::min(t_lo[side], w.temperature);
+      t_hi[side] = std::max(t_hi[side], w.temperature);
+    }
+    const double overlap = std::min(t_hi[0], t_hi[1]) - std::max(t_lo[0], t_lo[1]);
+    if (!(overlap >= options.min_range)) {
+      split.determined[static_cast<size_t>(a)] = false;
+      const std::string ax(1, axes[a]);
+      r->channels[static_cast<size_t>(a)].scale_reason =
+          t_hi[1] < t_lo[1] || t_hi[0] < t_lo[0]
+              ? "no faces of both signs along " + ax + ": add the faces +" + ax + " and -" + ax
+              : "the +" + ax + " faces (" + Format(t_lo[0]) + " to " + Format(t_hi[0]) +
+                    " °C) and -" + ax + " faces (" + Format(t_lo[1]) + " to " + Format(t_hi[1]) +
+                    " °C) share less than min_range " + Format(options.min_range) +
+                    " °C: hold both faces across the range (e.g. one through the warm-up, the "
+                    "other through the cool-down)";
     }
   }
   return split;

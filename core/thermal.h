@@ -55,12 +55,14 @@
 //  2b. Accelerometer scale and bias at t_ref (several orientations). Per axis a, the intercepts
 //     are the reading at t_ref: I_g = b0_a + S_a n_{g,a}, n_g the group's unit gravity direction,
 //     S_a = |g| (1 + k0_a) the gravity part's magnitude. Assumption: one gravity (magnitude and
-//     direction fixed while a group is held), and groups whose directions differ along the axis
-//     by at least scale_min_spread — antipodal faces (+a and −a) ideally, where b0_a =
-//     (I_+ + I_−)/2 exactly; otherwise the directions n_g = normalize((I_g − b0) / S) are
-//     iterated with (b0_a, S_a) from the least squares of the intercepts on [1, n_g,a] weighted by
-//     their variances (σ from their full covariance, A Σ Aᵀ), which is exact for faces along the
-//     axes and second order in b0/|g| for others. The window means are then fitted as
+//     direction fixed while a group is held), and groups within 60° of the axis whose directions
+//     differ along it by at least scale_min_spread — antipodal faces (+a and −a) ideally, where
+//     b0_a = (I_+ + I_−)/2 exactly. The faces of both signs must share a temperature span of at
+//     least min_range (else the curves rest on extrapolation: null, with the spans found).
+//     Otherwise the directions n_g = normalize((I_g − b0) / S) are iterated with (b0_a, S_a) from
+//     the least squares of the intercepts on [1, n_g,a] weighted by their variances (σ from their
+//     full covariance, A Σ Aᵀ), which is exact for faces along the axes and second order in b0/|g|
+//     for others. The window means are then fitted as
 //       y_w = I_g + Σ c_k x^k + G_g Σ d_k x^k,   G_g = S_a n_{g,a},
 //     the bias curve c and the gain's relative change d (reading's gravity part × (1 + d(x)))
 //     separated because G_g differs between groups; same orders, BIC average and σ convention as
