@@ -62,18 +62,19 @@
 //     Otherwise the directions n_g = normalize((I_g − b0) / S) are iterated with (b0_a, S_a) from
 //     the least squares of the intercepts on [1, n_g,a] weighted by their variances (σ from their
 //     full covariance, A Σ Aᵀ), which is exact for faces along the axes and second order in b0/|g|
-//     for others. The window means are then fitted as
+//     for others (S_a is off by |b_⊥|²/(2|g|) where the other axes' b0 are not determined). The
+//     window means are then fitted as
 //       y_w = I_g + Σ c_k x^k + G_g Σ d_k x^k,   G_g = S_a n_{g,a},
 //     the bias curve c and the gain's relative change d (reading's gravity part × (1 + d(x)))
 //     separated because G_g differs between groups; same orders, BIC average and σ convention as
 //     stage 2 with twice the curve columns. G_g is taken from the fit's own intercepts (not the
 //     raw group means, which carry the bias and the curves' average): the two steps alternate
-//     until b0 changes by less than 1e-12 |g| (a few rounds: the coupling is of the size of d), so
+//     until b0 changes by less than 1e-12 |g| (Aitken's Δ² every third round where it creeps), so
 //     the fixed point is the bilinear model's least squares and noise-free data are recovered
 //     exactly. G_g's own error (σ of I_g, ~1e-5 of |g|) scales d by that relative amount and is
 //     not propagated. Not estimated (null, the channel says why): one orientation, groups that do
 //     not differ along the axis, or lag = estimate (the lag's profile models bias curves only;
-//     the bias at t_ref is still given there, from stage 2's intercepts).
+//     the bias at t_ref is still given there, from stage 2's intercepts, its σ without τ's).
 //
 // Pure numerics, thread-compatible. Units: SI readings (m/s², rad/s), °C, s.
 #ifndef CALIBD_CORE_THERMAL_H_
