@@ -2,6 +2,7 @@
 // orientation groups, the six channel fits and the heating/cooling comparison.
 #include "core/thermal.h"
 
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -33,7 +34,7 @@ void SetWindowTemperature(const Eigen::VectorXd& t, const Eigen::VectorXd& temp,
 }
 
 ChannelData SelectWindows(const std::vector<ThermalWindow>& windows, int c, int phase, double t_ref,
-                          int orientations) {
+                          int orientations, const std::vector<double>& gravity_of_orientation) {
   ChannelData d;
   const bool gyro = c >= 3;
   d.group_of_orientation.assign(static_cast<size_t>(gyro ? 1 : orientations), -1);
@@ -44,6 +45,7 @@ ChannelData SelectWindows(const std::vector<ThermalWindow>& windows, int c, int 
   d.x.resize(static_cast<Eigen::Index>(rows.size()));
   d.y.resize(d.x.size());
   d.sigma.resize(d.x.size());
+  if (!gravity_of_orientation.empty()) d.gravity.resize(d.x.size());
   d.t_lo = std::numeric_limits<double>::infinity();
   d.t_hi = -d.t_lo;
   for (size_t r = 0; r < rows.size(); ++r) {
@@ -56,6 +58,8 @@ ChannelData SelectWindows(const std::vector<ThermalWindow>& windows, int c, int 
     d.y(static_cast<Eigen::Index>(r)) = w.mean(c);
     // A window without noise (a noise-free simulation) still needs a positive weight.
     d.sigma(static_cast<Eigen::Index>(r)) = std::max(w.mean_std(c), 1e-15);
+    if (!gravity_of_orientation.empty())
+      d.gravity(static_cast<Eigen::Index>(r)) = gravity_of_orientation[static_cast<size_t>(o)];
     d.t_lo = std::min(d.t_lo, w.temperature);
     d.t_hi = std::max(d.t_hi, w.temperature);
   }
@@ -152,27 +156,32 @@ int GroupOrientations(double tolerance, std::vector<ThermalWindow>* windows) {
   return static_cast<int>(heads.size());
 }
 
-// Bias at x = T − t_ref (intercept of dense group g plus the curve) and its 1σ.
-void BiasAt(const ThermalPolyFit& f, int g, double x, double* value, double* var) {
+// The reading at x = T − t_ref in dense group g (intercept plus the bias curve, plus G times the
+// scale curve where the fit has one) and its variance.
+void BiasAt(const ThermalPolyFit& f, int g, double gravity, double x, double* value, double* var) {
   const int groups = static_cast<int>(f.intercepts.size());
   const int p = f.order;
-  Eigen::VectorXd v = Eigen::VectorXd::Zero(groups + p);
+  const bool with_scale = f.scale_coefficients.size() > 0;
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(groups + (with_scale ? 2 : 1) * p);
   v(g) = 1;
   double power = 1;
   for (int k = 0; k < p; ++k) {
     power *= x;
     v(groups + k) = power;
+    if (with_scale) v(groups + p + k) = gravity * power;
   }
   *value = f.intercepts(g) + ThermalCurve(f.coefficients, x);
+  if (with_scale) *value += gravity * ThermalCurve(f.scale_coefficients, x);
   *var = v.dot(f.full_covariance * v);
 }
 
 // Stage 4 for one channel: heating and cooling apart at the curve's order.
+// `gravity_of_orientation` as for SelectWindows (the channel's scale curve, or empty).
 void CompareHeatingCooling(const std::vector<ThermalWindow>& windows, int c, double t_ref,
                            int orientations, double scale, int grid_points, double critical_z,
-                           ThermalChannel* ch) {
-  const ChannelData h = SelectWindows(windows, c, 1, t_ref, orientations);
-  const ChannelData k = SelectWindows(windows, c, -1, t_ref, orientations);
+                           const std::vector<double>& gravity_of_orientation, ThermalChannel* ch) {
+  const ChannelData h = SelectWindows(windows, c, 1, t_ref, orientations, gravity_of_orientation);
+  const ChannelData k = SelectWindows(windows, c, -1, t_ref, orientations, gravity_of_orientation);
   int common = -1;  // an orientation both phases saw
   for (size_t o = 0; o < h.group_of_orientation.size() && common < 0; ++o) {
     if (h.group_of_orientation[o] >= 0 && k.group_of_orientation[o] >= 0)
@@ -182,11 +191,17 @@ void CompareHeatingCooling(const std::vector<ThermalWindow>& windows, int c, dou
   if (common < 0 || !(hi > lo)) return;
   const int order = ch->fit.order;
   ThermalPolyFit fh, fk;
-  if (!FitThermalPolynomial(h.x, h.y, h.sigma, h.group, h.groups, order, order, scale, &fh).ok() ||
-      !FitThermalPolynomial(k.x, k.y, k.sigma, k.group, k.groups, order, order, scale, &fk).ok() ||
+  if (!FitThermalPolynomial(h.x, h.y, h.sigma, h.group, h.groups, order, order, scale, &fh,
+                            h.gravity)
+           .ok() ||
+      !FitThermalPolynomial(k.x, k.y, k.sigma, k.group, k.groups, order, order, scale, &fk,
+                            k.gravity)
+           .ok() ||
       fh.dof < 1 || fk.dof < 1) {
     return;
   }
+  const double g_common =
+      gravity_of_orientation.empty() ? 0.0 : gravity_of_orientation[static_cast<size_t>(common)];
   ch->hysteresis_tested = true;
   ch->hysteresis_temperatures.resize(grid_points);
   ch->hysteresis_difference.resize(grid_points);
@@ -194,8 +209,10 @@ void CompareHeatingCooling(const std::vector<ThermalWindow>& windows, int c, dou
   for (int i = 0; i < grid_points; ++i) {
     const double temp = lo + (hi - lo) * i / (grid_points - 1);
     double vh, varh, vk, vark;
-    BiasAt(fh, h.group_of_orientation[static_cast<size_t>(common)], temp - t_ref, &vh, &varh);
-    BiasAt(fk, k.group_of_orientation[static_cast<size_t>(common)], temp - t_ref, &vk, &vark);
+    BiasAt(fh, h.group_of_orientation[static_cast<size_t>(common)], g_common, temp - t_ref, &vh,
+           &varh);
+    BiasAt(fk, k.group_of_orientation[static_cast<size_t>(common)], g_common, temp - t_ref, &vk,
+           &vark);
     const double sd = std::sqrt(varh + vark);
     ch->hysteresis_temperatures(i) = temp;
     ch->hysteresis_difference(i) = vh - vk;
@@ -274,6 +291,223 @@ void Band(const ThermalImuResult& r, ThermalChannel* ch) {
     ch->grid_std(i) = ThermalCurveStd(ch->fit.covariance, x);
     ch->grid_crb_std(i) = ThermalCurveStd(ch->fit.crb, x);
   }
+  if (!ch->scale_estimated) return;
+  ch->grid_scale_value.resize(n);
+  ch->grid_scale_std.resize(n);
+  ch->grid_scale_crb_std.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const double x = r.grid(i) - r.t_ref;
+    ch->grid_scale_value(i) = ThermalCurve(ch->fit.scale_coefficients, x);
+    ch->grid_scale_std(i) = ThermalCurveStd(ch->fit.scale_covariance, x);
+    ch->grid_scale_crb_std(i) = ThermalCurveStd(ch->fit.scale_crb, x);
+  }
+}
+
+// Stage 2b: a group is near axis a when |n_a| >= this (within 60°); only those determine b0_a, S_a.
+constexpr double kAxisFace = 0.5;
+
+// Stage 2b: the intercepts' split I_g = b0_a + S_a n_{g,a} on the determined axes.
+struct GravitySplit {
+  std::array<bool, 3> determined{};
+  Eigen::MatrixXd directions;  // groups × 3, unit gravity directions n_g
+  Eigen::Vector3d b0 = Eigen::Vector3d::Zero(), b0_std = Eigen::Vector3d::Zero();
+  Eigen::Vector3d magnitude = Eigen::Vector3d::Zero();  // S_a
+};
+
+// Alternates the directions n_g = normalize((I_g − b0) / S) and, per determined axis, the
+// generalised least squares of I_{·,a} on [1, n_{·,a}] under the intercepts' covariance.
+// estimate false: only the directions from the current b0 and S.
+void SplitIntercepts(const ThermalImuResult& r, GravitySplit* s, bool estimate = true) {
+  const Eigen::Index groups = r.channels[0].fit.intercepts.size();
+  Eigen::MatrixXd intercepts(groups, 3);
+  for (int a = 0; a < 3; ++a) intercepts.col(a) = r.channels[static_cast<size_t>(a)].fit.intercepts;
+  s->directions.resize(groups, 3);
+  for (int iteration = 0; iteration < 100; ++iteration) {
+    double mean_magnitude = 0;
+    int known = 0;
+    for (int a = 0; a < 3; ++a) {
+      if (s->determined[static_cast<size_t>(a)]) mean_magnitude += s->magnitude(a), ++known;
+    }
+    mean_magnitude = known > 0 ? mean_magnitude / known : intercepts.rowwise().norm().mean();
+    Eigen::Vector3d unit;
+    for (int a = 0; a < 3; ++a)
+      unit(a) = s->determined[static_cast<size_t>(a)] ? s->magnitude(a) : mean_magnitude;
+    for (Eigen::Index g = 0; g < groups; ++g) {
+      s->directions.row(g) =
+          (intercepts.row(g) - s->b0.transpose()).cwiseQuotient(unit.transpose()).normalized();
+    }
+    if (!estimate) return;
+    const Eigen::Vector3d before = s->b0;
+    for (int a = 0; a < 3; ++a) {
+      if (!s->determined[static_cast<size_t>(a)]) continue;
+      Eigen::MatrixXd x(groups, 2);
+      x.col(0).setOnes();
+      x.col(1) = s->directions.col(a);
+      const Eigen::MatrixXd sigma =
+          r.channels[static_cast<size_t>(a)].fit.full_covariance.topLeftCorner(groups, groups);
+      // Weighted by 1/σ² of each intercept (stable where their covariance is near singular, as
+      // without noise); the σ from the full covariance: b = A I, Cov(b) = A Σ Aᵀ.
+      // Groups far from the axis (|n_a| < kAxisFace) are left out: their n_a is (I_a − b0_a)/S,
+      // so they fit any b0 and would only feign information on it.
+      Eigen::VectorXd w = sigma.diagonal().cwiseMax(1e-300).cwiseInverse();
+      for (Eigen::Index g = 0; g < groups; ++g) {
+        if (std::abs(s->directions(g, a)) < kAxisFace) w(g) = 0;
+      }
+      const Eigen::MatrixXd xw = x.transpose() * w.asDiagonal();
+      const Eigen::MatrixXd estimator = (xw * x).inverse() * xw;  // 2 × groups
+      const Eigen::Vector2d estimate = estimator * intercepts.col(a);
+      const Eigen::Matrix2d info_inv = estimator * sigma * estimator.transpose();
+      s->b0(a) = estimate(0);
+      s->magnitude(a) = estimate(1);
+      s->b0_std(a) = std::sqrt(std::max(0.0, info_inv(0, 0)));
+    }
+    if ((s->b0 - before).cwiseAbs().maxCoeff() <= 1e-13 * mean_magnitude && iteration > 0) break;
+  }
+}
+
+// Stage 2b: which axes the orientation groups determine (else the channel's scale_reason).
+GravitySplit DeterminedAxes(const ThermalOptions& options, ThermalImuResult* r) {
+  GravitySplit split;
+  const char* const axes = "xyz";
+  if (r->orientations < 2) {
+    for (int a = 0; a < 3; ++a) {
+      r->channels[static_cast<size_t>(a)].scale_reason =
+          "one orientation: gravity, the bias at t_ref and the scale are not separable; hold the "
+          "device in opposite faces (e.g. +" +
+          std::string(1, axes[a]) + " and -" + std::string(1, axes[a]) + ")";
+    }
+    return split;
+  }
+  const Eigen::Index groups = r->channels[0].fit.intercepts.size();
+  Eigen::MatrixXd intercepts(groups, 3);
+  for (int a = 0; a < 3; ++a)
+    intercepts.col(a) = r->channels[static_cast<size_t>(a)].fit.intercepts;
+  const Eigen::VectorXd norms = intercepts.rowwise().norm();
+  split.magnitude.setConstant(norms.mean());
+  const std::vector<int> dense =
+      SelectWindows(r->windows, 0, 0, r->t_ref, r->orientations).group_of_orientation;
+  for (int a = 0; a < 3; ++a) {
+    const Eigen::VectorXd n = intercepts.col(a).cwiseQuotient(norms);
+    double lo = 2, hi = -2;  // over the groups near the axis
+    for (Eigen::Index g = 0; g < groups; ++g) {
+      if (std::abs(n(g)) >= kAxisFace) lo = std::min(lo, n(g)), hi = std::max(hi, n(g));
+    }
+    const double spread = hi > lo ? hi - lo : 0.0;
+    split.determined[static_cast<size_t>(a)] = spread >= options.scale_min_spread;
+    if (!split.determined[static_cast<size_t>(a)]) {
+      r->channels[static_cast<size_t>(a)].scale_reason =
+          "the " + std::to_string(r->orientations) + " orientations' gravity directions differ " +
+          "along " + std::string(1, axes[a]) + " by " + Format(spread) +
+          " (unit vectors, over the groups within 60° of the axis), below scale_min_spread " +
+          Format(options.scale_min_spread) + ": add the faces +" + std::string(1, axes[a]) +
+          " and -" + std::string(1, axes[a]);
+      continue;
+    }
+    // The curves separate only where the faces of both signs were held at the same
+    // temperatures; elsewhere they rest on the polynomials' extrapolation.
+    double t_lo[2] = {1e300, 1e300}, t_hi[2] = {-1e300, -1e300};  // + and − faces
+    for (const ThermalWindow& w : r->windows) {
+      const int g = dense[static_cast<size_t>(w.orientation)];
+      if (g < 0 || std::abs(n(g)) < kAxisFace) continue;
+      const int side = n(g) > 0 ? 0 : 1;
+      t_lo[side] = std::min(t_lo[side], w.temperature);
+      t_hi[side] = std::max(t_hi[side], w.temperature);
+    }
+    const double overlap = std::min(t_hi[0], t_hi[1]) - std::max(t_lo[0], t_lo[1]);
+    if (!(overlap >= options.min_range)) {
+      split.determined[static_cast<size_t>(a)] = false;
+      const std::string ax(1, axes[a]);
+      r->channels[static_cast<size_t>(a)].scale_reason =
+          t_hi[1] < t_lo[1] || t_hi[0] < t_lo[0]
+              ? "no faces of both signs along " + ax + ": add the faces +" + ax + " and -" + ax
+              : "the +" + ax + " faces (" + Format(t_lo[0]) + " to " + Format(t_hi[0]) +
+                    " °C) and -" + ax + " faces (" + Format(t_lo[1]) + " to " + Format(t_hi[1]) +
+                    " °C) share less than min_range " + Format(options.min_range) +
+                    " °C: hold both faces across the range (e.g. one through the warm-up, the "
+                    "other through the cool-down)";
+    }
+  }
+  return split;
+}
+
+// Per orientation, G = S_a n_{g,a} (0 for an orientation absent from the fit).
+std::vector<double> GravityOfOrientation(const GravitySplit& split, int a,
+                                         const std::vector<int>& group_of_orientation) {
+  std::vector<double> out(group_of_orientation.size(), 0.0);
+  for (size_t o = 0; o < out.size(); ++o) {
+    if (group_of_orientation[o] >= 0)
+      out[o] = split.magnitude(a) * split.directions(group_of_orientation[o], a);
+  }
+  return out;
+}
+
+// Stage 2b after stage 2's fits: the accelerometer's bias at t_ref and, where determined, the
+// channel refitted with the scale columns. gravity[a]: the axis's G per orientation (empty
+// without a scale curve), for the hysteresis fits.
+void SeparateGravity(const ThermalOptions& options, double scale, ThermalImuResult* r,
+                     std::array<std::vector<double>, 3>* gravity) {
+  GravitySplit split = DeterminedAxes(options, r);
+  if (split.determined == std::array<bool, 3>{}) return;
+  SplitIntercepts(*r, &split);
+  std::array<bool, 3> with_scale = split.determined;
+  if (options.lag == ThermalLagMode::kEstimate) {
+    with_scale = {};
+    for (int a = 0; a < 3; ++a) {
+      if (split.determined[static_cast<size_t>(a)]) {
+        r->channels[static_cast<size_t>(a)].scale_reason =
+            "lag estimate: the lag's profile models bias curves only; give the lag in seconds "
+            "(or none) for the scale curve";
+      }
+    }
+  }
+  const std::vector<int> dense =
+      SelectWindows(r->windows, 0, 0, r->t_ref, r->orientations).group_of_orientation;
+  std::vector<Eigen::Vector3d> history;  // b0 of the last rounds, for the extrapolation
+  for (int round = 0; round < 200 && with_scale != std::array<bool, 3>{}; ++round) {
+    for (int a = 0; a < 3; ++a) {
+      if (!with_scale[static_cast<size_t>(a)]) continue;
+      ThermalChannel& ch = r->channels[static_cast<size_t>(a)];
+      (*gravity)[static_cast<size_t>(a)] = GravityOfOrientation(split, a, dense);
+      const ChannelData d = SelectWindows(r->windows, a, 0, r->t_ref, r->orientations,
+                                          (*gravity)[static_cast<size_t>(a)]);
+      const int lowest = std::max(0, std::min({options.min_order, options.max_order,
+                                               (static_cast<int>(d.x.size()) - d.groups - 1) / 2}));
+      ThermalPolyFit fit;
+      const Status st = FitThermalPolynomial(d.x, d.y, d.sigma, d.group, d.groups, lowest,
+                                             options.max_order, scale, &fit, d.gravity);
+      if (!st.ok()) {  // the bias-only fit stays
+        with_scale[static_cast<size_t>(a)] = false;
+        (*gravity)[static_cast<size_t>(a)].clear();
+        ch.scale_reason = "too few windows for the bias and scale curves together: " + st.message();
+        continue;
+      }
+      ch.fit = std::move(fit);
+      ch.scale_estimated = true;
+    }
+    const Eigen::Vector3d before = split.b0;
+    SplitIntercepts(*r, &split);
+    if ((split.b0 - before).cwiseAbs().maxCoeff() <= 1e-12 * split.magnitude.cwiseAbs().maxCoeff())
+      break;
+    // The alternation contracts slowly where an axis's opposite faces were held at temperatures
+    // the other groups do not cover (b0 then moves by nearly equal steps): Aitken's Δ² on every
+    // third round jumps to the fixed point of the sequence.
+    history.push_back(split.b0);
+    if (history.size() == 3) {
+      for (int a = 0; a < 3; ++a) {
+        const double d1 = history[1](a) - history[0](a), d2 = history[2](a) - history[1](a);
+        if (std::abs(d2 - d1) > 0 && std::abs(d2) < std::abs(d1))
+          split.b0(a) = history[2](a) - d2 * d2 / (d2 - d1);
+      }
+      SplitIntercepts(*r, &split, false);
+      history.clear();
+    }
+  }
+  for (int a = 0; a < 3; ++a) {
+    if (!split.determined[static_cast<size_t>(a)]) continue;
+    r->accel_at_t_ref[static_cast<size_t>(a)] = split.b0(a);
+    r->accel_at_t_ref_std[static_cast<size_t>(a)] = split.b0_std(a);
+    r->accel_gravity[static_cast<size_t>(a)] = split.magnitude(a);
+  }
 }
 
 // kInvalidInput unless the IMU's arrays have one row per t and its temperatures are finite.
@@ -319,9 +553,15 @@ Status CalibrateImu(const Eigen::VectorXd& t, const ThermalImuInput& imu,
                               scale, &ch.fit);
     if (!st.ok())
       return Status::NotDeterminable("IMU " + imu.name + ", " + ch.name + ": " + st.message());
-    CompareHeatingCooling(r->windows, c, r->t_ref, r->orientations, scale, options.grid_points,
-                          r->hysteresis_threshold_z, &ch);
     r->channels.push_back(std::move(ch));
+  }
+  std::array<std::vector<double>, 3> gravity;
+  SeparateGravity(options, scale, r, &gravity);
+  for (int c = 0; c < 6; ++c) {
+    CompareHeatingCooling(r->windows, c, r->t_ref, r->orientations, scale, options.grid_points,
+                          r->hysteresis_threshold_z,
+                          c < 3 ? gravity[static_cast<size_t>(c)] : std::vector<double>(),
+                          &r->channels[static_cast<size_t>(c)]);
   }
   if (options.lag == ThermalLagMode::kEstimate) {
     st = AddLagUncertainty(t, *imu.temp, ranges, options, r);
@@ -357,6 +597,7 @@ bool ThermalOptions::IsValid(std::string* error) const {
   if (grid_points < 2) return fail("grid_points must be >= 2");
   if (!(hysteresis_alpha > 0 && hysteresis_alpha < 1)) return fail("hysteresis_alpha in (0, 1)");
   if (!(orientation_tolerance > 0)) return fail("orientation_tolerance must be > 0");
+  if (!(scale_min_spread > 0 && scale_min_spread <= 2)) return fail("scale_min_spread in (0, 2]");
   if (lag == ThermalLagMode::kFixed && !(lag_seconds > 0 && std::isfinite(lag_seconds)))
     return fail("a fixed lag must be > 0 s");
   if (!(lag_max > 0 && std::isfinite(lag_max))) return fail("lag_max must be > 0 s");
@@ -378,10 +619,14 @@ Status CalibrateThermal(const Eigen::VectorXd& t, const std::vector<ThermalImuIn
     ThermalImuResult r;
     const Status st = CalibrateImu(t, imu, options, &r);
     if (!st.ok()) return st;
-    if (r.orientations > 1) {
-      out->warnings.push_back("IMU " + imu.name + ": " + std::to_string(r.orientations) +
-                              " orientations found; the accelerometer bias at t_ref and the scale "
-                              "curves are not estimated yet (null)");
+    for (int a = 0; a < 3 && r.orientations > 1; ++a) {
+      const ThermalChannel& ch = r.channels[static_cast<size_t>(a)];
+      if (!ch.scale_estimated) {
+        out->warnings.push_back(
+            "IMU " + imu.name + ", " + ch.name + ": scale curve" +
+            (r.accel_at_t_ref[static_cast<size_t>(a)] ? "" : " and bias at t_ref") +
+            " not estimated (null): " + ch.scale_reason);
+      }
     }
     if (r.lag_std && !(*r.lag_std < 0.5 * *r.lag)) {
       out->warnings.push_back("IMU " + imu.name + ": the lag is weakly determined (τ = " +

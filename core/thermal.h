@@ -52,15 +52,36 @@
 //     the Gauss–Newton information with τ as a parameter shared by the six channels: with M_c the
 //     channel's information and b_c = Aᵀ W ∂y/∂τ, S = Σ_c (d_c − b_cᵀ M_c⁻¹ b_c)/s_c,
 //     σ_τ² = 1/S and C_c += h_c h_cᵀ/S, h_c = M_c⁻¹ b_c (s_c the channel's χ² scale, 1 for crb).
-// Not done (the result says so): the accelerometer bias at t_ref (`at_t_ref`) is null even with
-// several orientations (separating it from gravity needs the imu model's scale; left for later),
-// scale curves are null.
+//  2b. Accelerometer scale and bias at t_ref (several orientations). Per axis a, the intercepts
+//     are the reading at t_ref: I_g = b0_a + S_a n_{g,a}, n_g the group's unit gravity direction,
+//     S_a = |g| (1 + k0_a) the gravity part's magnitude. Assumption: one gravity (magnitude and
+//     direction fixed while a group is held), and groups within 60° of the axis whose directions
+//     differ along it by at least scale_min_spread — antipodal faces (+a and −a) ideally, where
+//     b0_a = (I_+ + I_−)/2 exactly. The faces of both signs must share a temperature span of at
+//     least min_range (else the curves rest on extrapolation: null, with the spans found).
+//     Otherwise the directions n_g = normalize((I_g − b0) / S) are iterated with (b0_a, S_a) from
+//     the least squares of the intercepts on [1, n_g,a] weighted by their variances (σ from their
+//     full covariance, A Σ Aᵀ), which is exact for faces along the axes and second order in b0/|g|
+//     for others (S_a is off by |b_⊥|²/(2|g|) where the other axes' b0 are not determined). The
+//     window means are then fitted as
+//       y_w = I_g + Σ c_k x^k + G_g Σ d_k x^k,   G_g = S_a n_{g,a},
+//     the bias curve c and the gain's relative change d (reading's gravity part × (1 + d(x)))
+//     separated because G_g differs between groups; same orders, BIC average and σ convention as
+//     stage 2 with twice the curve columns. G_g is taken from the fit's own intercepts (not the
+//     raw group means, which carry the bias and the curves' average): the two steps alternate
+//     until b0 changes by less than 1e-12 |g| (Aitken's Δ² every third round where it creeps), so
+//     the fixed point is the bilinear model's least squares and noise-free data are recovered
+//     exactly. G_g's own error (σ of I_g, ~1e-5 of |g|) scales d by that relative amount and is
+//     not propagated. Not estimated (null, the channel says why): one orientation, groups that do
+//     not differ along the axis, or lag = estimate (the lag's profile models bias curves only;
+//     the bias at t_ref is still given there, from stage 2's intercepts, its σ without τ's).
 //
 // Pure numerics, thread-compatible. Units: SI readings (m/s², rad/s), °C, s.
 #ifndef CALIBD_CORE_THERMAL_H_
 #define CALIBD_CORE_THERMAL_H_
 
 #include <Eigen/Core>
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
@@ -85,7 +106,10 @@ struct ThermalOptions {
   int grid_points = 21;            // >= 2: band and hysteresis grid across [t_min, t_max]
   double hysteresis_alpha = 0.01;  // in (0, 1): false-alarm rate over all channels
   double orientation_tolerance = 0.17453;  // rad (10°): same orientation group
-  StaticDetectionOptions statics;          // static detection (stop token included)
+  // In (0, 2]: an accelerometer axis gets a scale curve and its bias at t_ref only when the
+  // orientation groups' unit gravity directions differ along it by at least this (2: antipodal).
+  double scale_min_spread = 0.5;
+  StaticDetectionOptions statics;  // static detection (stop token included)
   ThermalLagMode lag = ThermalLagMode::kNone;
   double lag_seconds = 0;  // s, > 0 with kFixed: the known τ
   double lag_max = 1800;   // s, > 0: kEstimate searches τ in [0, lag_max]
@@ -128,12 +152,17 @@ struct ThermalOrderRow {
 // One weighted polynomial fit (one channel, one set of windows).
 struct ThermalPolyFit {
   int order = 0;
-  Eigen::VectorXd coefficients;     // c_1..c_p, SI per °C^k
-  Eigen::VectorXd intercepts;       // per orientation group (gyro: one), SI
-  Eigen::MatrixXd covariance;       // p×p, primary
-  Eigen::MatrixXd crb;              // p×p, white-noise bound
-  Eigen::MatrixXd full_covariance;  // (groups + p)², primary (intercepts first)
-  double intercept_std = 0;         // primary σ of intercepts(0)
+  Eigen::VectorXd coefficients;  // c_1..c_p, SI per °C^k
+  Eigen::VectorXd intercepts;    // per orientation group (gyro: one), SI
+  Eigen::MatrixXd covariance;    // p×p, primary
+  Eigen::MatrixXd crb;           // p×p, white-noise bound
+  // With a scale column block (FitThermalPolynomial's gravity given): d_1..d_p (dimensionless gain
+  // change per °C^k) and their primary and white-noise covariances; empty otherwise.
+  Eigen::VectorXd scale_coefficients;
+  Eigen::MatrixXd scale_covariance, scale_crb;
+  // (groups + p)², or (groups + 2p)² with scale, primary: intercepts, c_1..c_p, then d_1..d_p.
+  Eigen::MatrixXd full_covariance;
+  double intercept_std = 0;  // primary σ of intercepts(0)
   double chi2 = 0;
   int dof = 0;
   std::string basis;        // "crb" | "chi2_scaled"
@@ -148,6 +177,10 @@ struct ThermalChannel {
   Eigen::VectorXd grid_value;  // curve on the grid, SI
   Eigen::VectorXd grid_std;    // primary 1σ on the grid
   Eigen::VectorXd grid_crb_std;
+  // Accelerometer scale curve (stage 2b): fit.scale_* hold it when estimated; else the reason.
+  bool scale_estimated = false;
+  std::string scale_reason;
+  Eigen::VectorXd grid_scale_value, grid_scale_std, grid_scale_crb_std;  // dimensionless
   // Hysteresis (empty when heating or cooling has too few windows).
   bool hysteresis_tested = false;
   Eigen::VectorXd hysteresis_temperatures;
@@ -165,6 +198,10 @@ struct ThermalImuResult {
   Eigen::VectorXd grid;                  // °C
   std::vector<ThermalChannel> channels;  // 6: accelerometer x,y,z, gyroscope x,y,z
   std::optional<Eigen::Vector3d> gyro_at_t_ref, gyro_at_t_ref_std;  // rad/s
+  // Stage 2b, per accelerometer axis (nullopt where the orientations do not determine it, the
+  // channel's scale_reason says why): the bias at t_ref (m/s²), its primary σ, and the gravity
+  // part's magnitude S_a = |g| (1 + k0_a) at t_ref (m/s²).
+  std::array<std::optional<double>, 3> accel_at_t_ref, accel_at_t_ref_std, accel_gravity;
   int heating_windows = 0, cooling_windows = 0;
   double hysteresis_threshold_z = 0;  // Bonferroni critical |z|
   // Stage 5: τ in s (nullopt: lag none); its primary σ and white-noise bound where estimated.
@@ -196,10 +233,12 @@ Status FindThermalWindows(const Eigen::VectorXd& t, const ThermalImuInput& imu,
 
 // Stage 2 and 3 for one channel, exposed for tests: x = T − t_ref (°C), group per window (in
 // [0, groups)), the orders min_order..max_order averaged (equal: a fixed order). `scale` (> 0)
-// is the unit of x the design uses internally (half the range).
+// is the unit of x the design uses internally (half the range). `gravity` non-empty (one per
+// window, SI): the model y = I_g + Σ c_k x^k + G_w Σ d_k x^k, both curves of the same order.
 Status FitThermalPolynomial(const Eigen::VectorXd& x, const Eigen::VectorXd& y,
                             const Eigen::VectorXd& sigma, const std::vector<int>& group, int groups,
-                            int min_order, int max_order, double scale, ThermalPolyFit* out);
+                            int min_order, int max_order, double scale, ThermalPolyFit* out,
+                            const Eigen::VectorXd& gravity = Eigen::VectorXd());
 
 // The curve Σ c_k x^k and its 1σ √(vᵀ C v) at x = T − t_ref.
 double ThermalCurve(const Eigen::VectorXd& coefficients, double x);

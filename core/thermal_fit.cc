@@ -12,16 +12,19 @@ namespace {
 
 // One weighted least-squares fit at a fixed order, in the scaled variable u = x / scale.
 struct ScaledFit {
-  Eigen::VectorXd params;  // groups intercepts, then a_1..a_p (coefficients of u^k)
+  Eigen::VectorXd params;  // groups intercepts, a_1..a_p (of u^k), then e_1..e_p (of G u^k)
   Eigen::MatrixXd cov;     // (AᵀWA)⁻¹ in the scaled parameters
   double chi2 = 0;
 };
 
+// `gravity` empty: no scale columns; else per window the gravity component G_w of the columns
+// G_w u^k.
 ScaledFit SolveScaled(const Eigen::VectorXd& u, const Eigen::VectorXd& y,
                       const Eigen::VectorXd& sigma, const std::vector<int>& group, int groups,
-                      int order) {
+                      int order, const Eigen::VectorXd& gravity) {
   const int n = static_cast<int>(u.size());
-  const int m = groups + order;
+  const bool with_scale = gravity.size() > 0;
+  const int m = groups + (with_scale ? 2 : 1) * order;
   Eigen::MatrixXd a = Eigen::MatrixXd::Zero(n, m);
   Eigen::VectorXd b(n);
   for (int i = 0; i < n; ++i) {
@@ -31,6 +34,7 @@ ScaledFit SolveScaled(const Eigen::VectorXd& u, const Eigen::VectorXd& y,
     for (int k = 1; k <= order; ++k) {
       p *= u(i);
       a(i, groups + k - 1) = w * p;
+      if (with_scale) a(i, groups + order + k - 1) = w * gravity(i) * p;
     }
     b(i) = w * y(i);
   }
@@ -51,8 +55,8 @@ double Bic(double chi2, int n, int k) {
   return n * std::log(std::max(chi2, 1e-300) / n) + k * std::log(static_cast<double>(n));
 }
 
-// One order's fit unscaled to x and padded to `top`: parameters (intercepts, then c_1..c_top) and
-// their white-noise and primary covariances.
+// One order's fit unscaled to x and padded to `top`: parameters (intercepts, c_1..c_top, then
+// with scale d_1..d_top) and their white-noise and primary covariances.
 struct OrderFit {
   Eigen::VectorXd params;
   Eigen::MatrixXd crb, primary;
@@ -62,16 +66,33 @@ struct OrderFit {
 };
 
 OrderFit FitOrder(const Eigen::VectorXd& u, const Eigen::VectorXd& y, const Eigen::VectorXd& sigma,
-                  const std::vector<int>& group, int groups, int order, int top, double scale) {
-  const int n = static_cast<int>(u.size()), m = groups + order, padded = groups + top;
-  const ScaledFit f = SolveScaled(u, y, sigma, group, groups, order);
+                  const std::vector<int>& group, int groups, int order, int top, double scale,
+                  const Eigen::VectorXd& gravity) {
+  const int blocks = gravity.size() > 0 ? 2 : 1;
+  const int n = static_cast<int>(u.size()), m = groups + blocks * order;
+  const int padded = groups + blocks * top;
+  const ScaledFit f = SolveScaled(u, y, sigma, group, groups, order, gravity);
+  // Row j of the order's parameters goes to place[j] of the padded ones, times unscale(j).
   Eigen::VectorXd unscale = Eigen::VectorXd::Ones(m);
-  for (int k = 1; k <= order; ++k) unscale(groups + k - 1) = std::pow(scale, -k);
+  std::vector<int> place(static_cast<size_t>(m));
+  for (int g = 0; g < groups; ++g) place[static_cast<size_t>(g)] = g;
+  for (int b = 0; b < blocks; ++b) {
+    for (int k = 1; k <= order; ++k) {
+      const int j = groups + b * order + k - 1;
+      unscale(j) = std::pow(scale, -k);
+      place[static_cast<size_t>(j)] = groups + b * top + k - 1;
+    }
+  }
   OrderFit out;
   out.params = Eigen::VectorXd::Zero(padded);
-  out.params.head(m) = unscale.asDiagonal() * f.params;
   out.crb = Eigen::MatrixXd::Zero(padded, padded);
-  out.crb.topLeftCorner(m, m) = unscale.asDiagonal() * f.cov * unscale.asDiagonal();
+  for (int i = 0; i < m; ++i) {
+    out.params(place[static_cast<size_t>(i)]) = unscale(i) * f.params(i);
+    for (int j = 0; j < m; ++j) {
+      out.crb(place[static_cast<size_t>(i)], place[static_cast<size_t>(j)]) =
+          unscale(i) * f.cov(i, j) * unscale(j);
+    }
+  }
   out.chi2 = f.chi2;
   out.dof = n - m;
   const double chi2_per_dof = out.dof > 0 ? f.chi2 / out.dof : 1.0;
@@ -84,21 +105,25 @@ OrderFit FitOrder(const Eigen::VectorXd& u, const Eigen::VectorXd& y, const Eige
 
 Status FitThermalPolynomial(const Eigen::VectorXd& x, const Eigen::VectorXd& y,
                             const Eigen::VectorXd& sigma, const std::vector<int>& group, int groups,
-                            int min_order, int max_order, double scale, ThermalPolyFit* out) {
+                            int min_order, int max_order, double scale, ThermalPolyFit* out,
+                            const Eigen::VectorXd& gravity) {
   const int n = static_cast<int>(x.size());
+  const int blocks = gravity.size() > 0 ? 2 : 1;
   if (y.size() != n || sigma.size() != n || static_cast<int>(group.size()) != n || groups < 1 ||
-      min_order < 0 || max_order < min_order || !(scale > 0)) {
+      (blocks == 2 && gravity.size() != n) || min_order < 0 || max_order < min_order ||
+      !(scale > 0)) {
     return Status::InvalidInput("thermal fit: inconsistent inputs");
   }
   for (int i = 0; i < n; ++i) {
-    if (!(sigma(i) > 0) || !std::isfinite(y(i)) || !std::isfinite(x(i))) {
+    if (!(sigma(i) > 0) || !std::isfinite(y(i)) || !std::isfinite(x(i)) ||
+        (blocks == 2 && !std::isfinite(gravity(i)))) {
       return Status::InvalidInput("thermal fit: window " + std::to_string(i) +
                                   " has a non-finite mean or a σ that is not positive");
     }
   }
   *out = ThermalPolyFit();
   // Orders with at least one residual degree of freedom (a noise check).
-  const int top = std::min(max_order, n - groups - 1);
+  const int top = std::min(max_order, (n - groups - 1) / blocks);
   if (top < min_order) {
     return Status::NotDeterminable("thermal fit: " + std::to_string(n) + " windows for " +
                                    std::to_string(groups) +
@@ -109,8 +134,9 @@ Status FitThermalPolynomial(const Eigen::VectorXd& x, const Eigen::VectorXd& y,
   std::vector<OrderFit> fits;
   double bic_min = std::numeric_limits<double>::infinity();
   for (int p = min_order; p <= top; ++p) {
-    fits.push_back(FitOrder(u, y, sigma, group, groups, p, top, scale));
-    out->table.push_back({p, fits.back().chi2, Bic(fits.back().chi2, n, groups + p + 1), 0});
+    fits.push_back(FitOrder(u, y, sigma, group, groups, p, top, scale, gravity));
+    out->table.push_back(
+        {p, fits.back().chi2, Bic(fits.back().chi2, n, groups + blocks * p + 1), 0});
     bic_min = std::min(bic_min, out->table.back().bic);
   }
   // Weights ∝ exp(−ΔBIC/2); the curve is their average, its covariance the mixture's (each
@@ -118,7 +144,7 @@ Status FitThermalPolynomial(const Eigen::VectorXd& x, const Eigen::VectorXd& y,
   double total = 0;
   for (ThermalOrderRow& row : out->table)
     total += row.weight = std::exp(-0.5 * (row.bic - bic_min));
-  const int m = groups + top;
+  const int m = groups + blocks * top;
   Eigen::VectorXd params = Eigen::VectorXd::Zero(m);
   size_t heaviest = 0;
   for (size_t i = 0; i < fits.size(); ++i) {
@@ -138,14 +164,19 @@ Status FitThermalPolynomial(const Eigen::VectorXd& x, const Eigen::VectorXd& y,
   out->dof = fits[heaviest].dof;
   out->basis = fits[heaviest].scaled ? "chi2_scaled" : "crb";
   out->intercepts = params.head(groups);
-  out->coefficients = params.tail(top);
-  out->crb = crb_full.bottomRightCorner(top, top);
-  out->covariance = out->full_covariance.bottomRightCorner(top, top);
+  out->coefficients = params.segment(groups, top);
+  out->crb = crb_full.block(groups, groups, top, top);
+  out->covariance = out->full_covariance.block(groups, groups, top, top);
+  if (blocks == 2) {
+    out->scale_coefficients = params.tail(top);
+    out->scale_crb = crb_full.bottomRightCorner(top, top);
+    out->scale_covariance = out->full_covariance.bottomRightCorner(top, top);
+  }
   out->intercept_std = std::sqrt(out->full_covariance(0, 0));
   double rss = 0, noise = 0;
   for (int i = 0; i < n; ++i) {
-    const double pred =
-        params(group[static_cast<size_t>(i)]) + ThermalCurve(out->coefficients, x(i));
+    double pred = params(group[static_cast<size_t>(i)]) + ThermalCurve(out->coefficients, x(i));
+    if (blocks == 2) pred += gravity(i) * ThermalCurve(out->scale_coefficients, x(i));
     rss += (y(i) - pred) * (y(i) - pred);
     noise += sigma(i) * sigma(i);
   }

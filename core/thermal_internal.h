@@ -23,16 +23,18 @@ void SetWindowTemperature(const Eigen::VectorXd& t, const Eigen::VectorXd& temp,
                           const WindowRange& range, double min_rate, ThermalWindow* w);
 
 // The windows of one phase (0: all, in window order) as fit inputs for channel c (0..5); groups
-// re-indexed densely in order of first appearance.
+// re-indexed densely in order of first appearance. `gravity_of_orientation` non-empty (an
+// accelerometer channel with a scale curve): each window's gravity component along the axis.
 struct ChannelData {
   Eigen::VectorXd x, y, sigma;  // x = T − t_ref (°C), y SI, σ of y
+  Eigen::VectorXd gravity;      // G_w, SI; empty without a scale curve
   std::vector<int> group;
   std::vector<int> group_of_orientation;  // orientation -> dense group, −1 absent
   int groups = 0;
   double t_lo = 0, t_hi = 0;
 };
 ChannelData SelectWindows(const std::vector<ThermalWindow>& windows, int c, int phase, double t_ref,
-                          int orientations);
+                          int orientations, const std::vector<double>& gravity_of_orientation = {});
 
 // Stage 5. The sensing element's temperature: the reading through dT_s/dt = (T_r − T_s)/τ
 // (τ = 0: the reading itself), per step with the mean of the step's two readings, from a state

@@ -23,6 +23,21 @@ std::vector<Eigen::VectorXd> DefaultThermalTruth(int order) {
   return out;
 }
 
+std::vector<Eigen::VectorXd> DefaultThermalScaleTruth(int order) {
+  std::vector<Eigen::VectorXd> out;
+  const double first[3] = {1.0e-4, -1.5e-4, 2.0e-4};
+  for (int a = 0; a < 3; ++a) {
+    Eigen::VectorXd v(order);
+    double size = first[a];
+    for (int k = 0; k < order; ++k) {
+      v(k) = size * ((k + a) % 2 == 0 ? 1 : -1);
+      size /= 45.0;
+    }
+    out.push_back(v);
+  }
+  return out;
+}
+
 namespace {
 
 Eigen::Vector3d GravityDirection(int orientation) {
@@ -66,7 +81,11 @@ ThermalSimulation SimulateThermal(const ThermalSimulationOptions& options) {
       double b = o.b0(c) + ThermalCurve(o.coefficients[static_cast<size_t>(c)], sensor - o.t_ref);
       if (cooling) b += o.hysteresis(c);
       if (c < 3) {
-        sim.accel(i, c) = g(c) + b + o.accel_noise * rng.Normal();
+        const double gain = o.scale_coefficients.empty()
+                                ? 1.0
+                                : 1.0 + ThermalCurve(o.scale_coefficients[static_cast<size_t>(c)],
+                                                     sensor - o.t_ref);
+        sim.accel(i, c) = g(c) * gain + b + o.accel_noise * rng.Normal();
       } else {
         sim.gyro(i, c - 3) = b + o.gyro_noise * rng.Normal();
       }

@@ -2,11 +2,12 @@
 // one IMU at rest while it warms up along T(t) = t0 + Δ (1 − e^{−t/τ}), optionally followed by a
 // cool-down T(t) = T_end − Δ_c (1 − e^{−(t − t_w)/τ}); per channel the bias
 //   b(T) = b0 + Σ_{k=1..p} c_k (T − t_ref)^k  (+ hysteresis offset on cooling),
-// white noise per channel, a temperature reading with white noise, optionally a sensing element
-// that follows the (noise-free) reading through a first-order lag of `lag` s (the bias is then
-// evaluated at the element's temperature, which starts equal to the reading), and several
-// orientations held for equal parts of the log (an instant change between them: the windows
-// around it are not static). Deterministic per seed. Thread-compatible.
+// on each accelerometer axis the gravity part of the reading times 1 + Σ_k d_k (T − t_ref)^k (a
+// scale drift; none by default), white noise per channel, a temperature reading with white noise,
+// optionally a sensing element that follows the (noise-free) reading through a first-order lag of
+// `lag` s (the bias is then evaluated at the element's temperature, which starts equal to the
+// reading), and several orientations held for equal parts of the log (an instant change between
+// them: the windows around it are not static). Deterministic per seed. Thread-compatible.
 #ifndef CALIBD_CORE_THERMAL_SIMULATION_H_
 #define CALIBD_CORE_THERMAL_SIMULATION_H_
 
@@ -34,6 +35,9 @@ struct ThermalSimulationOptions {
   // Truth: per channel (ax ay az gx gy gz) the coefficients c_1..c_p (SI per °C^k) and b0.
   std::vector<Eigen::VectorXd> coefficients;  // 6 entries; empty: DefaultThermalTruth(3)
   Eigen::Matrix<double, 6, 1> b0 = Eigen::Matrix<double, 6, 1>::Zero();
+  // Scale drift per accelerometer axis: d_1..d_p (per °C^k, dimensionless gain change); empty
+  // (default) or 3 entries.
+  std::vector<Eigen::VectorXd> scale_coefficients;
   Eigen::Matrix<double, 6, 1> hysteresis = Eigen::Matrix<double, 6, 1>::Zero();  // on cooling
   uint64_t seed = 1;
 };
@@ -49,6 +53,10 @@ struct ThermalSimulation {
 // A plausible truth of order `order` (1..5): MEMS-sized drifts (accelerometer ~1e-3 m/s²/°C,
 // gyroscope ~1e-4 rad/s/°C at first order; each further order contributes ~3× less at ±15 °C).
 std::vector<Eigen::VectorXd> DefaultThermalTruth(int order);
+
+// A plausible scale drift of order `order` (1..5) per accelerometer axis: ~1e-4 per °C (100 ppm/°C)
+// at first order, each further order ~3× less at ±15 °C.
+std::vector<Eigen::VectorXd> DefaultThermalScaleTruth(int order);
 
 ThermalSimulation SimulateThermal(const ThermalSimulationOptions& options);
 

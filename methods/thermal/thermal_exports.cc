@@ -216,8 +216,9 @@ Status ThermalResultToPx4(const json& result, const ExportContext& context, std:
     std::ostringstream p;
     p << "# Onboard parameters for Vehicle 1\n# calibd thermal job " << context.job_id
       << " of device '" << CommentSafe(context.device) << "', " << CommentSafe(context.finished_at)
-      << "\n# Scale curves are not held by PX4: left out. TC_An_X0 is 0: the accelerometer bias at"
-         " TREF is supplied by the room-temperature calibration.\n"
+      << "\n# Scale curves are not held by PX4: left out. TC_An_X0_a is the accelerometer bias at"
+         " TREF where the log's orientations determine it (opposite faces), else 0: the"
+         " room-temperature calibration supplies it.\n"
       << "# MAV ID\tCOMPONENT ID\tPARAM NAME\tVALUE\t(TYPE)\n";
     auto line = [&](const std::string& name, const std::string& value, int type) {
       p << "1\t1\t" << name << "\t" << value << "\t" << type << "\n";
@@ -242,8 +243,10 @@ Status ThermalResultToPx4(const json& result, const ExportContext& context, std:
               << Num(f.max_error, "%.3g") << (s ? " rad/s" : " m/s^2") << "\n";
           }
           // X0: the bias at TREF where known, plus the refit's constant (0 for order <= 3).
-          const double x0 =
-              (at.is_array() ? at.at(static_cast<size_t>(a)).get<double>() : 0.0) + f.constant;
+          const double x0 = (at.is_array() && at.at(static_cast<size_t>(a)).is_number()
+                                 ? at.at(static_cast<size_t>(a)).get<double>()
+                                 : 0.0) +
+                            f.constant;
           const std::string ax = "_" + std::to_string(a);
           line(base + "_X0" + ax, Num(x0), 9);
           for (int k = 0; k < 3; ++k)

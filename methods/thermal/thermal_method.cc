@@ -334,6 +334,7 @@ std::function<Status(SimulatedFiles*)> Thermal::AddSimulateOptions(CLI::App* com
   auto o = std::make_shared<core::ThermalSimulationOptions>();
   auto order = std::make_shared<int>(3);
   auto hysteresis = std::make_shared<double>(0);
+  auto scale_order = std::make_shared<int>(0);
   command->add_option("--seed", o->seed, "random seed")->capture_default_str();
   command->add_option("--rate", o->rate, "samples per second")
       ->check(CLI::Range(1.0, 10000.0))
@@ -359,9 +360,16 @@ std::function<Status(SimulatedFiles*)> Thermal::AddSimulateOptions(CLI::App* com
   command->add_option("--orientations", o->orientations, "orientations held in turn (1..6)")
       ->check(CLI::Range(1, 6))
       ->capture_default_str();
-  return [o, order, hysteresis](SimulatedFiles* files) {
+  command
+      ->add_option("--scale-order", *scale_order,
+                   "order of the accelerometers' true scale drift (0: none; seen with "
+                   "--orientations >= 2)")
+      ->check(CLI::Range(0, 5))
+      ->capture_default_str();
+  return [o, order, hysteresis, scale_order](SimulatedFiles* files) {
     core::ThermalSimulationOptions options = *o;
     options.coefficients = core::DefaultThermalTruth(*order);
+    if (*scale_order > 0) options.scale_coefficients = core::DefaultThermalScaleTruth(*scale_order);
     options.hysteresis(4) = *hysteresis;
     return SimulateThermalFiles(options, &files->csv, &files->config, &files->truth);
   };
@@ -392,6 +400,16 @@ Status SimulateThermalFiles(const core::ThermalSimulationOptions& options, std::
     }
     sensors[s] = {{"coefficients", coefficients}, {"b0", b0}};
   }
+  json scale = json::array();  // per accelerometer axis d_1..d_p (empty arrays: no drift)
+  for (int a = 0; a < 3; ++a) {
+    scale.push_back(
+        sim.truth.scale_coefficients.empty()
+            ? std::vector<double>()
+            : std::vector<double>(sim.truth.scale_coefficients[static_cast<size_t>(a)].data(),
+                                  sim.truth.scale_coefficients[static_cast<size_t>(a)].data() +
+                                      sim.truth.scale_coefficients[static_cast<size_t>(a)].size()));
+  }
+  sensors[0]["scale_coefficients"] = scale;
   *config = {{"method", "thermal"}};
   *truth = {{"method", "thermal"},
             {"t_ref", sim.truth.t_ref},

@@ -67,6 +67,50 @@ std::string ChannelPlot(const json& pimu, const json& uimu, const json& ch, int 
                                              ", basis " + ch.at("basis").get<std::string>());
 }
 
+// Accelerometer axis a's scale curve d(T) (the gain's relative change from t_ref) ± 1σ, where the
+// result has one; else a line with the reason it is null.
+std::string ScalePlot(const json& pimu, const json& uimu, int a) {
+  const json& scale = pimu.at("accelerometer").at("scale");
+  if (scale.is_null()) return "";
+  const json& coefficients = scale.at("coefficients").at(static_cast<size_t>(a));
+  const std::string axis(1, "xyz"[a]);
+  if (coefficients.is_null()) {
+    return "<p>Scale curve of accelerometer " + axis + " not estimated: " +
+           E(scale.at("not_estimated").at(static_cast<size_t>(a)).get<std::string>()) + "</p>";
+  }
+  const json& unc = uimu.at("accelerometer").at("scale");
+  const std::vector<double> grid = unc.at("temperatures").get<std::vector<double>>();
+  const std::vector<double> sd =
+      unc.at("std").at(static_cast<size_t>(a)).get<std::vector<double>>();
+  const double t_ref = pimu.at("t_ref").get<double>();
+  Series mid, hi, lo;
+  mid.label = "scale curve";
+  hi.label = "curve + 1 sigma";
+  for (Series* s : {&mid, &hi, &lo}) {
+    s->x = grid;
+    s->color = 0;
+  }
+  hi.dashed = lo.dashed = true;
+  for (size_t i = 0; i < grid.size(); ++i) {
+    double value = 0, power = 1;  // sum_k d_k (T - t_ref)^k
+    for (const json& d : coefficients) {
+      power *= grid[i] - t_ref;
+      value += d.get<double>() * power;
+    }
+    mid.y.push_back(value);
+    hi.y.push_back(value + sd[i]);
+    lo.y.push_back(value - sd[i]);
+  }
+  PlotOptions o;
+  o.x.title = "temperature (degC)";
+  o.name = "thermal_scale";
+  o.title = "IMU " + pimu.at("name").get<std::string>() + " accelerometer." + axis + " scale";
+  o.y.title = "gain / gain(t_ref) - 1";
+  return Figure(RenderXYPlot(o, {mid, hi, lo}),
+                o.title + ": order " +
+                    std::to_string(scale.at("orders").at(static_cast<size_t>(a)).get<int>()));
+}
+
 std::string OrderTable(const json& d) {
   std::string h =
       "<table><tr><th>channel</th><th>order</th><th>chi2/dof</th><th>residual RMS</th>"
@@ -128,6 +172,7 @@ class ThermalReport : public MethodReport {
         for (int c = 0; c < 6; ++c) {
           body += ChannelPlot(p[i], u[i], d[i].at("channels").at(static_cast<size_t>(c)), c);
         }
+        for (int a = 0; a < 3; ++a) body += ScalePlot(p[i], u[i], a);
       }
       return internal::Section("thermal", "Bias against temperature", body);
     });

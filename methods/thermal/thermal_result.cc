@@ -1,5 +1,6 @@
 // The thermal result JSON (methods/thermal/thermal_method.h) of a core::ThermalResult.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <optional>
@@ -24,6 +25,41 @@ json Mat(const Eigen::MatrixXd& m) {
   return out;
 }
 
+// The accelerometer's scale curves (core stage 2b: the gain's relative change d(T), reading's
+// gravity part × (1 + d)), per axis null where not estimated with the reason; all null when no
+// axis has one.
+void AccelerometerScale(const core::ThermalImuResult& imu, json* params, json* unc, json* crb) {
+  json coefficients = json::array(), orders = json::array(), reasons = json::array(),
+       cov = json::array(), std = json::array(), crb_cov = json::array(), crb_std = json::array();
+  int order = 0;
+  bool any = false;
+  for (int a = 0; a < 3; ++a) {
+    const core::ThermalChannel& ch = imu.channels[static_cast<size_t>(a)];
+    if (!ch.scale_estimated) {
+      for (json* j : {&coefficients, &orders, &cov, &std, &crb_cov, &crb_std})
+        j->push_back(nullptr);
+      reasons.push_back(ch.scale_reason);
+      continue;
+    }
+    any = true;
+    order = std::max(order, ch.fit.order);
+    orders.push_back(ch.fit.order);
+    coefficients.push_back(Vec(ch.fit.scale_coefficients));
+    reasons.push_back(nullptr);
+    cov.push_back(Mat(ch.fit.scale_covariance));
+    std.push_back(Vec(ch.grid_scale_std));
+    crb_cov.push_back(Mat(ch.fit.scale_crb));
+    crb_std.push_back(Vec(ch.grid_scale_crb_std));
+  }
+  if (!any) return;
+  *params = {{"order", order},
+             {"orders", orders},
+             {"coefficients", coefficients},
+             {"not_estimated", reasons}};
+  *unc = {{"covariance", cov}, {"temperatures", Vec(imu.grid)}, {"std", std}};
+  *crb = {{"covariance", crb_cov}, {"temperatures", Vec(imu.grid)}, {"std", crb_std}};
+}
+
 // One sensor's (accelerometer: channels 0..2, gyroscope: 3..5) bias parameters and uncertainty.
 void SensorBias(const core::ThermalImuResult& imu, int first, bool gyro, json* params, json* unc,
                 json* crb) {
@@ -45,18 +81,30 @@ void SensorBias(const core::ThermalImuResult& imu, int first, bool gyro, json* p
     at = Vec(*imu.gyro_at_t_ref);
     at_std = Vec(*imu.gyro_at_t_ref_std);
   }
+  if (!gyro && imu.accel_at_t_ref != std::array<std::optional<double>, 3>{}) {
+    at = json::array();  // per axis; null where the orientations do not determine it
+    at_std = json::array();
+    for (int a = 0; a < 3; ++a) {
+      const size_t i = static_cast<size_t>(a);
+      at.push_back(imu.accel_at_t_ref[i] ? json(*imu.accel_at_t_ref[i]) : json(nullptr));
+      at_std.push_back(imu.accel_at_t_ref_std[i] ? json(*imu.accel_at_t_ref_std[i])
+                                                 : json(nullptr));
+    }
+  }
+  json scale = nullptr, scale_unc = nullptr, scale_crb = nullptr;
+  if (!gyro) AccelerometerScale(imu, &scale, &scale_unc, &scale_crb);
   *params = {
       {"bias",
        {{"order", order}, {"orders", orders}, {"coefficients", coefficients}, {"at_t_ref", at}}},
-      {"scale", nullptr}};
+      {"scale", scale}};
   *unc = {{"bias",
            {{"covariance", cov},
             {"temperatures", Vec(imu.grid)},
             {"std", std},
             {"at_t_ref_std", at_std}}},
-          {"scale", nullptr}};
+          {"scale", scale_unc}};
   *crb = {{"bias", {{"covariance", crb_cov}, {"temperatures", Vec(imu.grid)}, {"std", crb_std}}},
-          {"scale", nullptr}};
+          {"scale", scale_crb}};
 }
 
 json ChannelDiagnostics(const core::ThermalImuResult& imu, int c) {
@@ -179,14 +227,13 @@ json ThermalResultToJson(const core::ThermalResult& r, const core::ThermalOption
                   std::sqrt(worst), worst);
     warnings.push_back(buf);
   }
-  warnings.push_back(
-      "the accelerometer bias at t_ref and the scale curves are not estimated yet (null)");
   return {
       {"method", "thermal"},
       {"model",
        "per IMU and axis, bias(T) = bias(t_ref) + sum_k c_k (T - t_ref)^k, T in degC clamped to "
        "[t_min, t_max]; corrected reading = reading - (bias(T) - bias(t_ref)) in the sensor frame, "
-       "before the room-temperature calibration"},
+       "before the room-temperature calibration; where accelerometer.scale is given, the reading's "
+       "gravity part is (1 + sum_k d_k (T - t_ref)^k) times its value at t_ref (divide it out)"},
       {"parameters", {{"imus", p_imus}}},
       {"uncertainty",
        {{"basis", scaled ? "chi2_scaled" : "crb"}, {"chi2_per_dof", nullptr}, {"imus", u_imus}}},

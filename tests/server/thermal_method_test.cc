@@ -215,5 +215,60 @@ TEST(ThermalMethodTest, FirmwareFilesReproduceTheCurveAsTheFirmwareEvaluatesIt) 
   }
 }
 
+// +z through a warm-up, −z through the cool-down over the same temperatures, with a scale drift:
+// the result holds z's scale curve (SPEC shape, with covariance, temperatures and std) and bias at
+// t_ref, x and y null with the reason; the PX4 file's TC_A0_X0_2 is that bias at t_ref and x, y
+// keep 0; both firmware files still say the scale is left out.
+TEST(ThermalMethodTest, ScaleCurveAndBiasAtTRefWithOppositeFaces) {
+  core::ThermalSimulationOptions o;
+  o.rate = 50;
+  o.warmup = o.cooldown = 3600;
+  o.cool_delta = 40;
+  o.tau = 1200;
+  o.orientations = 2;
+  o.seed = 11;
+  o.b0.head<3>() << 0.05, -0.03, 0.08;
+  o.scale_coefficients = core::DefaultThermalScaleTruth(2);
+  std::string csv;
+  json config, truth;
+  ASSERT_TRUE(SimulateThermalFiles(o, &csv, &config, &truth).ok());
+  json r;
+  const Status s = Calibrate(csv, "log.csv", config, &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  const json& a = r.at("parameters").at("imus").at(0).at("accelerometer");
+  const json& scale = a.at("scale");
+  ASSERT_TRUE(scale.is_object()) << a.dump();
+  EXPECT_TRUE(scale.at("coefficients").at(0).is_null());
+  EXPECT_TRUE(scale.at("coefficients").at(1).is_null());
+  EXPECT_EQ(scale.at("coefficients").at(2).size(), scale.at("orders").at(2).get<size_t>());
+  EXPECT_NE(scale.at("not_estimated").at(0).get<std::string>().find("+x and -x"),
+            std::string::npos);
+  EXPECT_TRUE(scale.at("not_estimated").at(2).is_null());
+  const json& at = a.at("bias").at("at_t_ref");
+  ASSERT_TRUE(at.is_array());
+  EXPECT_TRUE(at.at(0).is_null());
+  const double t_ref = r.at("parameters").at("imus").at(0).at("t_ref");
+  const json& unc = r.at("uncertainty").at("imus").at(0).at("accelerometer");
+  const double at_std = unc.at("bias").at("at_t_ref_std").at(2);
+  EXPECT_NEAR(at.at(2).get<double>(), 0.08 + TrueBias(truth, 0, 2, t_ref), 5 * at_std);
+  const json& us = unc.at("scale");
+  const size_t p = scale.at("orders").at(2).get<size_t>();
+  EXPECT_EQ(us.at("covariance").at(2).size(), p);
+  EXPECT_EQ(us.at("std").at(2).size(), us.at("temperatures").size());
+  EXPECT_TRUE(us.at("std").at(0).is_null());
+  ExportContext context;
+  context.device = "unit-1";
+  std::string ap, px4;
+  ASSERT_TRUE(ThermalResultToArduPilot(r, context, &ap).ok());
+  ASSERT_TRUE(ThermalResultToPx4(r, context, &px4).ok());
+  EXPECT_NE(ap.find("left out"), std::string::npos);
+  EXPECT_NE(px4.find("left out"), std::string::npos);
+  const auto pxm = Params(px4, '\t', 2, 3);
+  // X0 also carries the order-3 refit's constant (~1e-6 here), far below the bias (0.08).
+  EXPECT_NEAR(pxm.at("TC_A0_X0_0"), 0.0, 1e-4);
+  EXPECT_NEAR(pxm.at("TC_A0_X0_2"), at.at(2).get<double>(), 1e-4);
+  EXPECT_GT(std::abs(pxm.at("TC_A0_X0_2")), 0.05);
+}
+
 }  // namespace
 }  // namespace calibd::server

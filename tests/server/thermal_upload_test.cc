@@ -67,6 +67,38 @@ TEST(ThermalUpload, AWarmupCalibratesWithItsReportAndFirmwareFiles) {
   for (const char* format : {"json", "csv", "h"}) Get(server, base + "&format=" + format);
 }
 
+// +z through a warm-up, −z through the cool-down, with a scale drift: the report plots z's scale
+// curve with its band and says why x and y have none; every export is still served.
+TEST(ThermalUpload, OppositeFacesReportTheScaleCurve) {
+  core::ThermalSimulationOptions o;
+  o.rate = 20;
+  o.warmup = o.cooldown = 3600;
+  o.cool_delta = 40;
+  o.tau = 1200;
+  o.orientations = 2;
+  o.seed = 5;
+  o.scale_coefficients = core::DefaultThermalScaleTruth(2);
+  std::string csv;
+  json config, truth;
+  ASSERT_TRUE(SimulateThermalFiles(o, &csv, &config, &truth).ok());
+  config["device"] = "TC-2";
+  TestServer server;
+  ASSERT_EQ(server.error(), "");
+  const json job = server.UploadAndWait(csv, config, "faces.csv");
+  ASSERT_FALSE(job.is_null());
+  ASSERT_EQ(job["status"], "succeeded") << job.dump().substr(0, 2000);
+  const std::string id = std::to_string(job["id"].get<int64_t>());
+  const std::string page = Get(server, "/jobs/" + id);
+  EXPECT_NE(page.find("accelerometer.z scale"), std::string::npos);
+  EXPECT_NE(page.find("Scale curve of accelerometer x not estimated"), std::string::npos);
+  const std::string base = "/api/v1/devices/TC-2/calibration?method=thermal&job=" + id;
+  const std::string px4 = Get(server, base + "&format=px4");
+  EXPECT_NE(px4.find("Scale curves are not held by PX4: left out"), std::string::npos) << px4;
+  const std::string ardupilot = Get(server, base + "&format=ardupilot");
+  EXPECT_NE(ardupilot.find("left out"), std::string::npos) << ardupilot;
+  for (const char* format : {"json", "csv", "h"}) Get(server, base + "&format=" + format);
+}
+
 TEST(ThermalUpload, AFourDegreeWarmupIsAFailedJobNamingTheRange) {
   json config;
   const std::string csv = WarmupCsv(4, &config);
