@@ -71,6 +71,9 @@ std::string ColumnCache::RulesText(const RecordingParser& parser) {
   return json{{"time_unit", TimeUnitName(parser.time_unit())},
               {"csv", parser.csv_dialect().ToJson()},
               {"imus", imus},
+              // `streams` given at all (even {}): a log with IMUs on their own time bases is
+              // then refused rather than read without them, so it is a reading rule too.
+              {"streams_given", streams.given},
               {"mags", streams.mags},
               {"mag_time_base", streams.mag_time_base}}
       .dump(-1, ' ', false, json::error_handler_t::replace);
