@@ -499,13 +499,14 @@ void AddWarnings(const ArrayOptions& options, int64_t samples_in, int max_iterat
   if (gyro_dof > 0.5)
     check_noise("gyroscope", result->noise_estimate_gyro, options.gyro_noise, "rad/s");
   if (result->excitation.verdict == "weak")
-    warnings.push_back("weak excitation: the smallest eigenvalue of sum A_n^T A_n (" +
-                       Fmt(result->excitation.min_eigenvalue) +
-                       " rad^2/s^4) is less than 100x what noise "
-                       "alone gives (" +
-                       Fmt(result->excitation.noise_floor) +
-                       " rad^2/s^4); positions along the weakest direction are poorly determined; " +
-                       kRecordAdvice);
+    warnings.push_back(
+        "weak excitation: the smallest eigenvalue of sum A_n^T A_n (" +
+        Fmt(result->excitation.min_eigenvalue) +
+        " rad^2/s^4) is less than 100x what noise "
+        "alone gives (" +
+        Fmt(result->excitation.noise_floor) +
+        " rad^2/s^4); positions along the weakest direction are poorly determined; " +
+        kRecordAdvice);
   if (result->parallel_fraction > 0.5)
     warnings.push_back(
         Format("omega and omega_dot are nearly parallel in %.0f%% of the samples "
