@@ -75,6 +75,14 @@ int Check(const TestServer& server, const std::string& path, json* body) {
   return res->status;
 }
 
+// GET the check of `job`'s recording with that job's config (?job=ID); its status and body.
+int CheckOfJob(const TestServer& server, const json& job, json* body) {
+  return Check(server,
+               "/api/v1/recordings/" + std::to_string(job.value("recording_id", int64_t{0})) +
+                   "/check?job=" + std::to_string(job.value("id", int64_t{0})),
+               body);
+}
+
 std::string Query(const json& config) {
   std::string q;
   for (const auto& [key, value] : config.items()) {
@@ -92,14 +100,8 @@ json ExpectCheckAgreesWithJob(const TestServer& server, const std::string& csv, 
   const json job = server.UploadAndWait(csv, config);
   if (job_out != nullptr) *job_out = job;
   EXPECT_EQ(job.value("status", ""), "succeeded") << job.dump().substr(0, 600);
-  const int64_t recording = job.value("recording_id", int64_t{0});
   json check;
-  EXPECT_EQ(Check(server,
-                  "/api/v1/recordings/" + std::to_string(recording) +
-                      "/check?job=" + std::to_string(job.value("id", int64_t{0})),
-                  &check),
-            200)
-      << check.dump();
+  EXPECT_EQ(CheckOfJob(server, job, &check), 200) << check.dump();
   const json& d = job.at("result").at("diagnostics");
   const json& statics = check.at("statics");
   EXPECT_EQ(statics.size(), d.at("statics").size());
@@ -252,12 +254,7 @@ TEST(RecordingCheck, NoiseSaturationIsTheJobs) {
                                         {{"method", "noise"}});
   ASSERT_EQ(job.value("status", ""), "failed") << job.dump().substr(0, 400);
   json check;
-  ASSERT_EQ(Check(server,
-                  "/api/v1/recordings/" + std::to_string(job.at("recording_id").get<int64_t>()) +
-                      "/check?job=" + std::to_string(job.at("id").get<int64_t>()),
-                  &check),
-            200)
-      << check.dump();
+  ASSERT_EQ(CheckOfJob(server, job, &check), 200) << check.dump();
   // The failed job keeps its partial diagnostics with its error.
   const json& sat = job.at("error").at("diagnostics").at("diagnostics").at("saturation");
   EXPECT_EQ(check.at("saturation"), sat);
@@ -297,11 +294,7 @@ TEST(RecordingCheck, PredictedSigmaIsTheJobs) {
     const json job = server.UploadAndWait(csv, config);
     ASSERT_EQ(job.value("status", ""), "succeeded") << job.dump().substr(0, 600);
     json check;
-    ASSERT_EQ(Check(server,
-                    "/api/v1/recordings/" + std::to_string(job.at("recording_id").get<int64_t>()) +
-                        "/check?job=" + std::to_string(job.at("id").get<int64_t>()),
-                    &check),
-              200);
+    ASSERT_EQ(CheckOfJob(server, job, &check), 200);
     const json& predicted = check.at("predicted");
     ASSERT_TRUE(predicted.at("uncertainty").is_object()) << predicted.dump();
     EXPECT_EQ(predicted.at("rate"), 100.0);
@@ -339,12 +332,7 @@ TEST(RecordingCheck, ThermalWindowsAndRangeAreTheJobs) {
   const json job = server.UploadAndWait(csv, config);
   ASSERT_EQ(job.value("status", ""), "succeeded") << job.dump().substr(0, 600);
   json check;
-  ASSERT_EQ(Check(server,
-                  "/api/v1/recordings/" + std::to_string(job.at("recording_id").get<int64_t>()) +
-                      "/check?job=" + std::to_string(job.at("id").get<int64_t>()),
-                  &check),
-            200)
-      << check.dump();
+  ASSERT_EQ(CheckOfJob(server, job, &check), 200) << check.dump();
   EXPECT_FALSE(check.contains("job_would_fail")) << check["job_would_fail"];
   const json& p = job.at("result").at("parameters").at("imus").at(0);
   const json& d = job.at("result").at("diagnostics").at("imus").at(0);
@@ -369,12 +357,7 @@ TEST(RecordingCheck, ThermalWindowsAndRangeAreTheJobs) {
   ASSERT_TRUE(SimulateThermalFiles(o, &csv, &config, &truth).ok());
   const json narrow = server.UploadAndWait(csv, config);
   ASSERT_EQ(narrow.value("status", ""), "failed") << narrow.dump().substr(0, 600);
-  ASSERT_EQ(Check(server,
-                  "/api/v1/recordings/" + std::to_string(narrow.at("recording_id").get<int64_t>()) +
-                      "/check?job=" + std::to_string(narrow.at("id").get<int64_t>()),
-                  &check),
-            200)
-      << check.dump();
+  ASSERT_EQ(CheckOfJob(server, narrow, &check), 200) << check.dump();
   const std::string why = check.value("job_would_fail", "");
   EXPECT_NE(why.find("below min_range 10"), std::string::npos) << why;
   EXPECT_NE(narrow.at("error").at("message").get<std::string>().find(why), std::string::npos)
