@@ -383,12 +383,7 @@ json PredictFromLog(const Eigen::VectorXd& t, const std::vector<core::ImuReading
     const double keep_density = std::sqrt(sim.rate / rate);
     sim.accel_noise = accel_noise * keep_density;
     sim.gyro_noise = gyro_noise * keep_density;
-    sim.gravity = options.gravity;
-    sim.accel_unit = options.accel_unit;
-    sim.gyro_unit = options.gyro_unit;
-    sim.accel_offset = options.nominal_accel_bias;
-    sim.gyro_offset = options.nominal_gyro_bias;
-    sim.scale_error = sim.misalignment = sim.accel_bias = sim.gyro_bias = 0;
+    SetNominalImu(options, &sim);
     core::ImuSimulation log;
     if (s = core::SimulateImu(sim, &log); !s.ok()) return fail(s.message());
     core::ImuOptions fit = options;
@@ -770,6 +765,15 @@ Status SimulateImuFiles(const core::ImuSimulationOptions& options, std::string* 
             {"accelerometer", triad(sim.accel_truth)},
             {"gyroscope", triad(sim.gyro_truth)}};
   return Status::Ok();
+}
+
+void SetNominalImu(const core::ImuOptions& options, core::ImuSimulationOptions* sim) {
+  sim->gravity = options.gravity;
+  sim->accel_unit = options.accel_unit;
+  sim->gyro_unit = options.gyro_unit;
+  sim->accel_offset = options.nominal_accel_bias;
+  sim->gyro_offset = options.nominal_gyro_bias;
+  sim->scale_error = sim->misalignment = sim->accel_bias = sim->gyro_bias = 0;
 }
 
 Status ParseImuOptions(const json& config, core::ImuOptions* options) {

@@ -56,6 +56,10 @@ Status ParseImuOptions(const nlohmann::json& config, core::ImuOptions* options);
 Status SimulateImuFiles(const core::ImuSimulationOptions& options, std::string* csv,
                         nlohmann::json* config, nlohmann::json* truth);
 
+// Sets *sim to the nominal IMU `options` describe (gravity, units, offsets) without sensor
+// errors: what the plan and the check's prediction simulate. Motion and noise are left as they are.
+void SetNominalImu(const core::ImuOptions& options, core::ImuSimulationOptions* sim);
+
 // Method::Plan of imu (methods/imu/imu_plan.cc): needs the config's accel_noise and gyro_noise.
 Status PlanImu(const nlohmann::json& config, const PlanProtocol& protocol,
                const AcceptanceLimits& limits, nlohmann::json* out);

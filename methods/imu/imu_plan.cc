@@ -217,14 +217,9 @@ Status PredictImu(const json& config, const PlanProtocol& protocol, json* result
   sim.static_duration = protocol.static_duration;
   sim.rotation_duration = protocol.rotation_duration;
   sim.rate = protocol.rate;
-  sim.gravity = options.gravity;
   sim.accel_noise = *options.accel_noise;
   sim.gyro_noise = *options.gyro_noise;
-  sim.accel_unit = options.accel_unit;
-  sim.gyro_unit = options.gyro_unit;
-  sim.accel_offset = options.nominal_accel_bias;
-  sim.gyro_offset = options.nominal_gyro_bias;
-  sim.scale_error = sim.misalignment = sim.accel_bias = sim.gyro_bias = 0;
+  SetNominalImu(options, &sim);
   std::string csv;
   json sim_config, truth;
   if (Status s = SimulateImuFiles(sim, &csv, &sim_config, &truth); !s.ok()) return s;
