@@ -60,14 +60,17 @@ ThermalSimulation SimulateThermal(const ThermalSimulationOptions& options) {
   sim.gyro.resize(n, 3);
   sim.temp.resize(n);
   PcaRandom rng(o.seed);
-  const double t_peak = o.t0 + o.delta * (1 - std::exp(-o.warmup / o.tau));
+  const auto warm = [&o](double t) {
+    return o.ramp > 0 ? o.t0 + o.ramp * t : o.t0 + o.delta * (1 - std::exp(-t / o.tau));
+  };
+  const double t_peak = warm(o.warmup);
   const int orientations = std::max(1, std::min(6, o.orientations));
   double sensor = o.t0, previous = o.t0;  // the element's temperature and the last true reading
   for (int64_t i = 0; i < n; ++i) {
     const double t = i / o.rate;
     const bool cooling = t > o.warmup;
-    const double temp = cooling ? t_peak - o.cool_delta * (1 - std::exp(-(t - o.warmup) / o.tau))
-                                : o.t0 + o.delta * (1 - std::exp(-t / o.tau));
+    const double temp =
+        cooling ? t_peak - o.cool_delta * (1 - std::exp(-(t - o.warmup) / o.tau)) : warm(t);
     const int orientation = static_cast<int>(i * orientations / n);
     const Eigen::Vector3d g = o.gravity * GravityDirection(orientation);
     sim.t(i) = t;

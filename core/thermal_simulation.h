@@ -1,6 +1,7 @@
 // Simulated thermal-calibration logs with a known truth (`calibd simulate thermal`, tests):
-// one IMU at rest while it warms up along T(t) = t0 + Δ (1 − e^{−t/τ}), optionally followed by a
-// cool-down T(t) = T_end − Δ_c (1 − e^{−(t − t_w)/τ}); per channel the bias
+// one IMU at rest while it warms up along T(t) = t0 + Δ (1 − e^{−t/τ}) (or a linear ramp),
+// optionally followed by a cool-down T(t) = T_end − Δ_c (1 − e^{−(t − t_w)/τ}); per channel the
+// bias
 //   b(T) = b0 + Σ_{k=1..p} c_k (T − t_ref)^k  (+ hysteresis offset on cooling),
 // on each accelerometer axis the gravity part of the reading times 1 + Σ_k d_k (T − t_ref)^k (a
 // scale drift; none by default), white noise per channel, a temperature reading with white noise,
@@ -18,13 +19,16 @@
 namespace calibd::core {
 
 struct ThermalSimulationOptions {
-  double rate = 100;          // Hz
-  double warmup = 1800;       // s, duration of the warm-up
-  double cooldown = 0;        // s, duration of the cool-down after it (0: none)
-  double t0 = 20;             // °C at the start
-  double delta = 40;          // °C, asymptotic rise of the warm-up
-  double cool_delta = 30;     // °C, asymptotic fall of the cool-down
-  double tau = 600;           // s, time constant of both
+  double rate = 100;       // Hz
+  double warmup = 1800;    // s, duration of the warm-up
+  double cooldown = 0;     // s, duration of the cool-down after it (0: none)
+  double t0 = 20;          // °C at the start
+  double delta = 40;       // °C, asymptotic rise of the warm-up
+  double cool_delta = 30;  // °C, asymptotic fall of the cool-down
+  double tau = 600;        // s, time constant of both
+  // °C/s, > 0: the warm-up is the linear ramp T(t) = t0 + ramp t instead (delta and tau unused
+  // for it; a plan's protocol, methods/thermal/thermal_plan.cc). 0: the exponential.
+  double ramp = 0;
   double lag = 0;             // s, > 0: the sensing element's lag behind the reading
   double t_ref = 35;          // °C, reference of the truth's polynomials
   double accel_noise = 0.02;  // m/s² per sample

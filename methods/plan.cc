@@ -34,6 +34,79 @@ std::string Num(double x) {
   return buf;
 }
 
+// The thermal keys (methods/plan.h): t_min and t_max together, t_max > t_min, both within
+// [-100, 200] °C; temperature_rate; imus.
+Status ParseThermalProtocol(const json& protocol, PlanProtocol* out) {
+  const bool has_min = protocol.contains("t_min"), has_max = protocol.contains("t_max");
+  if (has_min != has_max) {
+    return FieldError(has_min ? "t_max" : "t_min",
+                      "is missing: a thermal protocol gives both t_min and t_max (°C)");
+  }
+  if (has_min) {
+    for (const char* key : {"t_min", "t_max"}) {
+      const json& v = protocol[key];
+      if (!v.is_number() || !(v.get<double>() >= -100) || !(v.get<double>() <= 200)) {
+        return FieldError(key, "must be a temperature in [-100, 200] °C");
+      }
+    }
+    out->t_min = protocol["t_min"].get<double>();
+    out->t_max = protocol["t_max"].get<double>();
+    if (!(*out->t_max > *out->t_min)) {
+      return FieldError("t_max", "must be above t_min (" + Num(*out->t_min) + " °C)");
+    }
+  }
+  if (Status s = ReadPositive(protocol, "temperature_rate", PlanProtocol::kMaxTemperatureRate,
+                              &out->temperature_rate);
+      !s.ok()) {
+    return s;
+  }
+  if (const auto it = protocol.find("imus"); it != protocol.end()) {
+    // A whole number (3 or 3.0: the page's fields are typed as numbers).
+    if (!it->is_number() || !(it->get<double>() >= 1) ||
+        !(it->get<double>() <= PlanProtocol::kMaxImus) ||
+        it->get<double>() != std::floor(it->get<double>())) {
+      return FieldError(
+          "imus", "must be an integer in [1, " + std::to_string(PlanProtocol::kMaxImus) + "]");
+    }
+    out->imus = static_cast<int>(it->get<double>());
+  }
+  return Status::Ok();
+}
+
+// protocol.orientations into out (names or vectors, normalised).
+Status ParseOrientations(const json& protocol, PlanProtocol* out) {
+  const auto it = protocol.find("orientations");
+  if (it == protocol.end() || !it->is_array() || it->empty() ||
+      it->size() > static_cast<size_t>(PlanProtocol::kMaxPositions)) {
+    return FieldError("orientations", "must be an array of 1 to " +
+                                          std::to_string(PlanProtocol::kMaxPositions) +
+                                          " orientations (names such as \"+x\" or [x, y, z])");
+  }
+  for (size_t i = 0; i < it->size(); ++i) {
+    const json& o = (*it)[i];
+    const std::string field = "orientations[" + std::to_string(i) + "]";
+    Eigen::Vector3d v;
+    if (o.is_string()) {
+      if (Status s = OrientationFromName(o.get<std::string>(), &v); !s.ok()) {
+        return FieldError(field, s.message());
+      }
+      out->labels.push_back(o.get<std::string>());
+    } else if (o.is_array() && o.size() == 3 && o[0].is_number() && o[1].is_number() &&
+               o[2].is_number()) {
+      v = Eigen::Vector3d(o[0].get<double>(), o[1].get<double>(), o[2].get<double>());
+      if (!v.allFinite() || !(v.norm() > 1e-9)) {
+        return FieldError(field, "must be a non-zero finite vector");
+      }
+      v.normalize();
+      out->labels.push_back("[" + Num(v(0)) + ", " + Num(v(1)) + ", " + Num(v(2)) + "]");
+    } else {
+      return FieldError(field, "must be a name such as \"+x\" or a vector [x, y, z]");
+    }
+    out->orientations.push_back(v);
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status OrientationFromName(const std::string& name, Eigen::Vector3d* out) {
@@ -68,40 +141,17 @@ Status ParsePlanProtocol(const json& protocol, PlanProtocol* out) {
   for (const auto& [key, value] : protocol.items()) {
     (void)value;
     if (key != "orientations" && key != "static_duration" && key != "rate" &&
-        key != "rotation_duration") {
+        key != "rotation_duration" && key != "t_min" && key != "t_max" &&
+        key != "temperature_rate" && key != "imus") {
       return FieldError(key.substr(0, 64),
                         "is not a protocol key (known: orientations, static_duration, rate, "
-                        "rotation_duration)");
+                        "rotation_duration, t_min, t_max, temperature_rate, imus)");
     }
   }
-  const auto it = protocol.find("orientations");
-  if (it == protocol.end() || !it->is_array() || it->empty() ||
-      it->size() > static_cast<size_t>(PlanProtocol::kMaxPositions)) {
-    return FieldError("orientations", "must be an array of 1 to " +
-                                          std::to_string(PlanProtocol::kMaxPositions) +
-                                          " orientations (names such as \"+x\" or [x, y, z])");
-  }
-  for (size_t i = 0; i < it->size(); ++i) {
-    const json& o = (*it)[i];
-    const std::string field = "orientations[" + std::to_string(i) + "]";
-    Eigen::Vector3d v;
-    if (o.is_string()) {
-      if (Status s = OrientationFromName(o.get<std::string>(), &v); !s.ok()) {
-        return FieldError(field, s.message());
-      }
-      out->labels.push_back(o.get<std::string>());
-    } else if (o.is_array() && o.size() == 3 && o[0].is_number() && o[1].is_number() &&
-               o[2].is_number()) {
-      v = Eigen::Vector3d(o[0].get<double>(), o[1].get<double>(), o[2].get<double>());
-      if (!v.allFinite() || !(v.norm() > 1e-9)) {
-        return FieldError(field, "must be a non-zero finite vector");
-      }
-      v.normalize();
-      out->labels.push_back("[" + Num(v(0)) + ", " + Num(v(1)) + ", " + Num(v(2)) + "]");
-    } else {
-      return FieldError(field, "must be a name such as \"+x\" or a vector [x, y, z]");
-    }
-    out->orientations.push_back(v);
+  if (Status s = ParseThermalProtocol(protocol, out); !s.ok()) return s;
+  // A thermal protocol may leave the orientations out (methods/plan.h).
+  if (!out->t_min || protocol.contains("orientations")) {
+    if (Status s = ParseOrientations(protocol, out); !s.ok()) return s;
   }
   if (Status s = ReadPositive(protocol, "static_duration", PlanProtocol::kMaxStaticDuration,
                               &out->static_duration);
@@ -117,13 +167,22 @@ Status ParsePlanProtocol(const json& protocol, PlanProtocol* out) {
     return s;
   }
   const double n = static_cast<double>(out->orientations.size());
-  const double samples = out->rate * (n * out->static_duration + (n - 1) * out->rotation_duration);
+  const double samples =
+      out->t_min ? out->rate * (*out->t_max - *out->t_min) / out->temperature_rate * 60
+                 : out->rate * (n * out->static_duration + (n - 1) * out->rotation_duration);
   if (samples > PlanProtocol::kMaxSamples) {
     return FieldError("rate", "× the protocol's duration is " + Num(samples) +
                                   " samples; at most " + Num(PlanProtocol::kMaxSamples) +
                                   " are planned");
   }
   return Status::Ok();
+}
+
+Status RequireOrientations(const PlanProtocol& protocol) {
+  if (!protocol.orientations.empty()) return Status::Ok();
+  return FieldError("orientations",
+                    "is missing: this method plans static orientations (names "
+                    "such as \"+x\" or [x, y, z])");
 }
 
 std::vector<Eigen::Matrix3d> ProtocolRotations(const std::vector<Eigen::Vector3d>& up) {

@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -27,18 +28,32 @@ struct PlanProtocol {
   // is the shortest one taking one orientation to the next (about the axis perpendicular to
   // both, by the angle between them).
   double rotation_duration = 2;
+  // thermal: a warm-up at rest from t_min to t_max °C at temperature_rate °C/min (a linear ramp,
+  // t_max > t_min), `imus` IMUs logged together (in [1, kMaxImus]); orientations optional there
+  // (each held for an equal part of the ramp). Unset when the protocol names none of them.
+  std::optional<double> t_min, t_max;
+  double temperature_rate = 1;  // °C/min, in (0, kMaxTemperatureRate]
+  int imus = 1;
 
   static constexpr int kMaxPositions = 1000;
+  static constexpr int kMaxImus = 64;
+  static constexpr double kMaxTemperatureRate = 60;
   static constexpr double kMaxStaticDuration = 600;
   static constexpr double kMaxRate = 10000;
   static constexpr double kMaxSamples = 2e7;  // rate × total duration
 };
 
 // Reads {"orientations": [name or [x, y, z], ...], "static_duration", "rate",
-// "rotation_duration"} (the last three optional, defaults as above). A name is up to three signed
-// axes, e.g. "+x", "-z", "+x+y", "-x+y-z" (the sum, normalised). kInvalidInput with
+// "rotation_duration", "t_min", "t_max", "temperature_rate", "imus"} (all but orientations
+// optional, defaults as above; orientations may be left out when t_min or t_max is given: a
+// thermal protocol. A method needing orientations then names protocol.orientations). A name is up
+// to three signed axes, e.g. "+x", "-z", "+x+y", "-x+y-z" (the sum, normalised). kInvalidInput with
 // WithField("protocol.orientations[3]") etc. naming what is wrong; unknown keys are errors.
 Status ParsePlanProtocol(const nlohmann::json& protocol, PlanProtocol* out);
+
+// kInvalidInput naming protocol.orientations when the protocol has none (a thermal protocol sent
+// to a method that plans orientations).
+Status RequireOrientations(const PlanProtocol& protocol);
 
 // The unit vector of a name such as "+x-y"; kInvalidInput when it is not one.
 Status OrientationFromName(const std::string& name, Eigen::Vector3d* out);

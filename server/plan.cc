@@ -17,7 +17,8 @@ namespace {
 
 // kInvalidInput of the config with its field under "config.".
 Status InConfig(const Status& s) {
-  if (s.ok() || s.field().empty() || s.field() == "method" || s.field().rfind("config.", 0) == 0) {
+  if (s.ok() || s.field().empty() || s.field() == "method" || s.field().rfind("config.", 0) == 0 ||
+      s.field().rfind("protocol.", 0) == 0) {
     return s;
   }
   return Status::InvalidInput(s.message()).WithField("config." + s.field());
@@ -124,15 +125,25 @@ web::PlanView PlanPageView(const std::multimap<std::string, std::string>& params
     if (key == "static_duration") view.static_duration = value;
     if (key == "rate") view.rate = value;
     if (key == "rotation_duration") view.rotation_duration = value;
+    if (key == "t_min") view.t_min = value;
+    if (key == "t_max") view.t_max = value;
+    if (key == "temperature_rate") view.temperature_rate = value;
+    if (key == "imus") view.imus = value;
   }
   json request = {{"method", view.method}};
   json protocol = {{"orientations", json::array()}};
   for (const std::string& c : view.checked) protocol["orientations"].push_back(c);
   for (const json& o : TypedOrientations(view.orientations)) protocol["orientations"].push_back(o);
+  // A thermal warm-up may have no orientations (methods/plan.h).
+  if (protocol["orientations"].empty() && !view.t_min.empty()) protocol.erase("orientations");
   for (const auto& [key, text] :
        {std::pair<const char*, const std::string*>{"static_duration", &view.static_duration},
         {"rate", &view.rate},
-        {"rotation_duration", &view.rotation_duration}}) {
+        {"rotation_duration", &view.rotation_duration},
+        {"t_min", &view.t_min},
+        {"t_max", &view.t_max},
+        {"temperature_rate", &view.temperature_rate},
+        {"imus", &view.imus}}) {
     if (!text->empty()) protocol[key] = TypedNumber(*text);
   }
   request["protocol"] = protocol;

@@ -312,6 +312,7 @@ json SuggestImu(const json& config, const PlanProtocol& protocol, const Acceptan
 
 Status PlanImu(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits,
                json* out) {
+  if (Status s = RequireOrientations(protocol); !s.ok()) return s;
   json result;
   const Status s = PredictImu(config, protocol, &result);
   if (s.code() == StatusCode::kInvalidInput) return s;

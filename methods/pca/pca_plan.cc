@@ -154,6 +154,7 @@ json Suggest(const core::PcaOptions& options, const std::vector<std::string>& se
 
 Status PlanPca(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits,
                json* out) {
+  if (Status s = RequireOrientations(protocol); !s.ok()) return s;
   core::PcaOptions options;
   if (Status s = ParsePcaConfig(config, &options); !s.ok()) return s;
   if (options.dimension != 3) {

@@ -154,6 +154,13 @@ class Thermal : public Method {
     InertialUnits units;
     return ParseThermalConfig(config, &options, &units);
   }
+  Status Plan(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits,
+              json* out) const override {
+    core::ThermalOptions options;
+    InertialUnits units;
+    if (Status s = ParseThermalConfig(config, &options, &units); !s.ok()) return s;
+    return PlanThermal(options, protocol, limits, out);
+  }
   const char* simulate_summary() const override {
     return "one IMU at rest warming (and cooling) with a known polynomial bias per channel";
   }

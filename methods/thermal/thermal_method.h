@@ -41,6 +41,12 @@ const Method& ThermalMethod();
 nlohmann::json ThermalResultToJson(const core::ThermalResult& result,
                                    const core::ThermalOptions& options);
 
+// The plan of a warm-up protocol (Method::Plan; methods/thermal/thermal_plan.cc): `options` from
+// the validated config. kInvalidInput naming protocol.t_min or config.accel_noise/gyro_noise
+// when what the plan needs is missing.
+Status PlanThermal(const core::ThermalOptions& options, const PlanProtocol& protocol,
+                   const AcceptanceLimits& limits, nlohmann::json* out);
+
 // `calibd simulate thermal`: CSV `t,a0_x..g0_z,temp0` (%.10g), the config and the truth
 // ({"t_ref", "lag" (s), "accelerometer"/"gyroscope": {"coefficients": [[c1..cp] per axis],
 // "b0": [3]}, "hysteresis": [6]}).

@@ -161,6 +161,9 @@ render plan-planar "/plan?method=pca&orientations=%2Bx+-x+%2By+-y+%2Bx%2By+-x-y&
 # imu: a suggestion cut by a scale σ limit, with the one-position-less line.
 imu_plan_config='config=%7B%22accel_noise%22%3A0.05%2C%22gyro_noise%22%3A0.01%2C%22acceptance%22%3A%7B%22max_scale_std%22%3A0.0005%7D%7D'
 render plan-imu "/plan?method=imu&orientations=%2Bz+-z+%2Bx+-x+%2By+-y+%2Bx%2By+%2By%2Bz+-x%2Bz+-y-z+%2Bx-z+-x-y&$imu_plan_config"
+# thermal: a warm-up 20 -> 50 degC at 1 degC/min, without orientations (issue #27 item 1).
+thermal_plan_config='config=%7B%22accel_noise%22%3A0.02%2C%22gyro_noise%22%3A0.002%7D'
+render plan-thermal "/plan?method=thermal&t_min=20&t_max=50&temperature_rate=1&rate=100&$thermal_plan_config"
 
 # A running job's page: its elapsed time and the Cancel form (issue #20); then it is cancelled.
 python3 - "$tmp/array/config.json" "$tmp/endless.json" <<'PY'
@@ -213,6 +216,7 @@ expect devices 'class="page-devices' 'table-devices' 'first seen (UTC)'
 expect fleet 'class="page-fleet' 'table-fleet' 'href="/devices/FLEET-1"' 'P-&lt;b&gt;' 'class="hist"'
 expect plan 'class="page-plan' 'table-plan' 'table-plan-suggested' 'class="sphere' 'greedy D-optimal'
 expect plan-planar 'class="undetermined' 'no orientation with a component along z'
+expect plan-thermal 'class="page-plan' 'table-plan-suggested' 'suggested-ramp' 'one orientation'
 expect plan-imu 'class="page-plan' 'table-plan-suggested' 'starting flat (+z up)' \
   'class="fewer small"' 'positions the limits are not met'
 expect pca 'class="model"'
@@ -233,7 +237,7 @@ expect mag-device 'mag: hard-iron drift'
 expect thermal-device 'thermal (2 accepted calibrations' 'table-drift-thermal' \
   'plot-drift-thermal-accel' 'plot-drift-thermal-gyro'
 for page in history pca array failed failed-imu device devices revoked rejected recording check \
-  full device-drift running fleet plan plan-planar plan-imu mag mag-device thermal-device; do
+  full device-drift running fleet plan plan-planar plan-imu plan-thermal mag mag-device thermal-device; do
   reject "$page" '<script' '<img'
   if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"

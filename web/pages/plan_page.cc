@@ -2,6 +2,7 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "web/html.h"
@@ -34,6 +35,15 @@ std::string Form(const PlanView& v) {
          "\"></label>";
   out += "<label>rotation (s)<input type=\"text\" name=\"rotation_duration\" size=\"6\" value=\"" +
          A(v.rotation_duration) + "\"></label>";
+  out += "<p class=\"small\">thermal: a warm-up at rest from t_min to t_max at a steady rate.</p>";
+  for (const auto& [name, label, value] :
+       {std::tuple<const char*, const char*, const std::string*>{"t_min", "t_min (°C)", &v.t_min},
+        {"t_max", "t_max (°C)", &v.t_max},
+        {"temperature_rate", "rate (°C/min)", &v.temperature_rate},
+        {"imus", "IMUs", &v.imus}}) {
+    out += "<label>" + E(label) + "<input type=\"text\" name=\"" + A(name) +
+           "\" size=\"6\" value=\"" + A(*value) + "\"></label>";
+  }
   out +=
       "<p class=\"small\">Orientations: the direction pointing up (along the field), in the "
       "sensors' axes. Tick directions and/or type names or vectors, in order.</p><p>";
@@ -67,6 +77,9 @@ void SigmaRows(const json& x, const std::string& path, std::string* rows) {
     for (const json& item : x) {
       SigmaRows(item, path + "[" + item["name"].get<std::string>() + "]", rows);
     }
+  } else if (x.is_array() && !x.empty() && x[0].is_array()) {
+    for (size_t i = 0; i < x.size(); ++i)
+      SigmaRows(x[i], path + "[" + std::to_string(i) + "]", rows);
   } else if (x.is_array()) {
     std::string cells;
     for (const json& v : x) cells += (cells.empty() ? "" : ", ") + Number(v);
@@ -152,8 +165,16 @@ std::string Result(const PlanView& v) {
     suggested_orientations = suggested["orientations"];
     out += "<h2>Suggested protocol</h2><p class=\"small\">" +
            E(suggested.value("design", std::string())) + "</p><p class=\"suggested\">";
-    for (const json& o : suggested_orientations) out += E(o["name"].get<std::string>()) + " ";
+    if (suggested_orientations.is_array()) {
+      for (const json& o : suggested_orientations) out += E(o["name"].get<std::string>()) + " ";
+    }
     out += "</p>";
+    // thermal: the warm-up (methods/thermal/thermal_plan.cc Suggest).
+    if (suggested.contains("temperature_rate")) {
+      out += "<p class=\"suggested-ramp\">" + Number(suggested["t_min"]) + " → " +
+             Number(suggested["t_max"]) + " °C at " + Number(suggested["temperature_rate"]) +
+             " °C/min (" + Number(suggested["duration"]) + " s)</p>";
+    }
     out += suggested.value("meets_limits", false)
                ? "<p>Meets the gate's limits.</p>"
                : "<p class=\"callout-error\">Does not meet every limit:</p>";
