@@ -322,9 +322,17 @@ Status PlanThermal(const core::ThermalOptions& options, const PlanProtocol& prot
       "opposite faces (+a and −a of each axis) held over a common span of at least min_range, "
       "e.g. +z through a warm-up and −z through a cool-down; a single warm-up holds each face "
       "over its own part of the range"};
+  if (ramp.orientations < 2) {
+    scale_missing.push_back(
+        "one orientation: a scale curve needs the field along each axis in turn, both ways");
+  }
   o["undetermined"].push_back(
-      {{"parameters", {"imus[].accelerometer.scale", "imus[].gyroscope.scale"}},
-       {"missing", scale_missing}});
+      {{"parameters", {"imus[].accelerometer.scale"}}, {"missing", scale_missing}});
+  o["undetermined"].push_back(
+      {{"parameters", {"imus[].gyroscope.scale"}},
+       {"missing",
+        {"a rate input: at rest a gyroscope sees only the Earth's rate (7.3e-5 rad/s), so the "
+         "method never estimates its scale curves"}}});
   if (options.lag == core::ThermalLagMode::kEstimate) {
     o["undetermined"].push_back(
         {{"parameters", {"imus[].lag"}},
