@@ -441,7 +441,11 @@ Status MagOptions::Validate() const {
   if (!(min_coverage_eigenvalue > 0 && min_coverage_eigenvalue <= 1)) {
     return Invalid("min_coverage_eigenvalue must lie in (0, 1]");
   }
-  if (min_alignment_statics < 4) return Invalid("min_alignment_statics must be >= 4");
+  if (min_alignment_statics < 7) {
+    return Invalid(
+        "min_alignment_statics must be >= 7 (the alignment's σ from the statics' scatter needs 3 "
+        "degrees of freedom over its 4 unknowns)");
+  }
   return Status::Ok();
 }
 

@@ -42,8 +42,10 @@
 //  4. Alignment (with accelerometer statics): the down direction d_j (−specific force, unit) and
 //     the calibrated field direction n_j = P(ȳ_j − h)/|·| of each static satisfy
 //     d_jᵀ R n_j = sin δ (δ the dip, positive down); Gauss-Newton over R (left perturbation) and
-//     sin δ, 1σ from the residual scatter. Too few statics, or statics about one axis only: not
-//     estimated, with the reason in `alignment_note`.
+//     sin δ, 1σ from the residual scatter (as a Student-t's standard deviation: ν/(ν − 2) times
+//     the scatter's variance, ν = statics − 4) plus the ellipsoid's σ carried through. Too few
+//     statics, or statics about one axis only: not estimated, with the reason in
+//     `alignment_note`.
 //  5. Coverage of orientations: the calibrated field directions' scatter (3/N) Σ u_i u_iᵀ and the
 //     magnetometer axes (±x, ±y, ±z) the field never came within 45° of (SPEC §8: "judged as for
 //     imu"). Readings close to a plane (turned about one axis only: the smallest eigenvalue of
@@ -103,8 +105,9 @@ struct MagOptions {
   // Coverage: the smallest eigenvalue of (3/N) Σ u uᵀ for a "good" verdict (all 1 when the field
   // directions are spread evenly). In (0, 1].
   double min_coverage_eigenvalue = 0.2;
-  // Alignment: at least this many statics. >= 4.
-  int min_alignment_statics = 6;
+  // Alignment: at least this many statics. >= 7: the rotation and the dip (4 unknowns) take their
+  // σ from the statics' scatter, whose Student-t variance ν/(ν − 2) needs ν = statics − 4 >= 3.
+  int min_alignment_statics = 7;
   // Asks the fit to stop early (kStopped). May be null.
   const StopToken* stop = nullptr;
 
