@@ -58,7 +58,9 @@ std::string RenderRecordingPage(const RecordingPageView& view);
 
 // The page's "Check before fitting" section (web/pages/check_section.cc): a form picking the
 // method, and for a check its verdicts (units, timing, saturation, coverage, what the job would
-// fail with) and its statics' gravity directions on the two hemispheres (equal-area projection).
+// fail with), its statics' gravity directions on the two hemispheres (equal-area projection), and
+// the job's predicted σ (the largest of every σ in the check's `predicted.uncertainty`, per IMU,
+// the primary ones: `crb` entries left out), or why there is none.
 std::string CheckSection(const RecordingPageView& view);
 
 }  // namespace calibd::web

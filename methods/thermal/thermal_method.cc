@@ -280,8 +280,8 @@ Status Thermal::Run(RecordingParser* parser, const json& config, const RunContex
 
 // Stages 1 and 5 of Run (core::FindThermalWindows), no fit: the statics (IMU 0's, with the
 // temperatures of their windows), per IMU the range, windows, phases, orientations and lag the
-// fit would see, and the message the job would stop with (range below min_range, too few
-// windows, lag not determinable).
+// fit would see, the message the job would stop with (range below min_range, too few windows,
+// lag not determinable), and per IMU the σ the job would report (PredictThermalWindows).
 Status Thermal::Check(const ArrayRecording& log, const json& config, const RunContext& context,
                       json* check) const {
   core::ThermalOptions options;
@@ -294,7 +294,7 @@ Status Thermal::Check(const ArrayRecording& log, const json& config, const RunCo
   ThermalInputs in;
   s = in.From(log, units);
   if (!s.ok()) return s;
-  json imus = json::array();
+  json imus = json::array(), predicted = json::array();
   for (size_t k = 0; k < in.inputs.size(); ++k) {
     core::ThermalImuResult r;
     s = core::FindThermalWindows(log.t, in.inputs[k], options, &r);
@@ -332,8 +332,35 @@ Status Thermal::Check(const ArrayRecording& log, const json& config, const RunCo
                     {"cooling_windows", r.cooling_windows},
                     {"orientations", r.orientations},
                     {"lag", r.lag ? json(*r.lag) : json()}});
+    predicted.push_back(PredictThermalWindows(options, r));
   }
   (*check)["thermal"] = {{"window", options.window}, {"imus", std::move(imus)}};
+  // The result's uncertainty shape over the IMUs that give a curve; each IMU's orders or why not.
+  json unc = json::array(), per_imu = json::array();
+  std::string reason;
+  for (size_t k = 0; k < predicted.size(); ++k) {
+    json& p = predicted[k];
+    if (p["uncertainty"].is_object()) {
+      unc.push_back(std::move(p["uncertainty"]));
+      per_imu.push_back({{"name", imus[k]["name"]}, {"orders", p["orders"]}});
+    } else {
+      reason = p["reason"].get<std::string>();
+      per_imu.push_back({{"name", imus[k]["name"]}, {"reason", p["reason"]}});
+    }
+  }
+  const bool none = unc.empty();
+  (*check)["predicted"] = {
+      {"basis", "crb"},
+      {"how",
+       "the thermal method's white-noise σ of the bias curves on the windows found (each mean's "
+       "σ the job's: the config's noise/√n, else the window's own samples), at the floor order "
+       "the job offers first; the job's BIC average over higher orders widens it towards "
+       "orders.band_std_at_max_order, a χ²/dof above 1 scales it, and the scale stage's "
+       "parameters (opposite faces) are not counted"},
+      {"uncertainty",
+       none ? json() : json{{"basis", "crb"}, {"chi2_per_dof", nullptr}, {"imus", std::move(unc)}}},
+      {"imus", std::move(per_imu)}};
+  if (none) (*check)["predicted"]["reason"] = reason;
   return Status::Ok();
 }
 

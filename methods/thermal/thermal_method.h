@@ -47,6 +47,14 @@ nlohmann::json ThermalResultToJson(const core::ThermalResult& result,
 Status PlanThermal(const core::ThermalOptions& options, const PlanProtocol& protocol,
                    const AcceptanceLimits& limits, nlohmann::json* out);
 
+// What a job would report for the windows a recording check found (Thermal::Check, issue #27
+// item 2; core::FindThermalWindows): the plan's white-noise σ (basis crb) of the bias curves on
+// exactly those windows, each window mean's σ the job's own (window.mean_std), at the floor order
+// the job offers first (`orders` as the plan's). {"uncertainty": null, "reason"} when the windows
+// give no curve. The scale stage's extra parameters (opposite faces) are not counted.
+nlohmann::json PredictThermalWindows(const core::ThermalOptions& options,
+                                     const core::ThermalImuResult& found);
+
 // `calibd simulate thermal`: CSV `t,a0_x..g0_z,temp0` (%.10g), the config and the truth
 // ({"t_ref", "lag" (s), "accelerometer"/"gyroscope": {"coefficients": [[c1..cp] per axis],
 // "b0": [3]}, "hysteresis": [6]}).

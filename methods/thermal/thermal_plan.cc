@@ -25,6 +25,7 @@
 // temperature_rate whose band meets max_accel_band_std and max_gyro_band_std (bisection on
 // log rate: the band grows with the rate, as the windows get fewer), i.e. the shortest warm-up.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 
@@ -97,14 +98,24 @@ struct Prediction {
   double t_lo = 0, t_hi = 0, t_ref = 0;
   Eigen::VectorXd grid;
   int floor_order = 0, top_order = 0;
-  SensorPrediction accel, gyro;
+  std::array<SensorPrediction, 6> channels;  // ax ay az gx gy gz
+  // The largest band (at the floor order, at max_order) of the accelerometer's (first = 0) or
+  // the gyroscope's (3) axes.
+  double WorstBand(int first) const {
+    return std::max({channels[first].worst_band, channels[first + 1].worst_band,
+                     channels[first + 2].worst_band});
+  }
+  double WorstBandTop(int first) const {
+    return std::max({channels[first].worst_band_top, channels[first + 1].worst_band_top,
+                     channels[first + 2].worst_band_top});
+  }
 };
 
-// The curve's crb of one sensor at orders [lowest, lowest] and [top, top].
-Status PredictSensor(const PlannedWindows& w, const Prediction& p, double noise, int groups,
-                     int lowest, int top, SensorPrediction* out) {
+// The curve's crb of one channel at orders [lowest, lowest] and [top, top], each window's mean
+// with σ `sigma`.
+Status PredictSensor(const PlannedWindows& w, const Eigen::VectorXd& sigma, const Prediction& p,
+                     int groups, int lowest, int top, SensorPrediction* out) {
   const Eigen::VectorXd x = w.temperature.array() - p.t_ref;
-  const Eigen::VectorXd sigma = noise / w.samples.array().sqrt();
   const Eigen::VectorXd y = Eigen::VectorXd::Zero(x.size());
   const double scale = 0.5 * (p.t_hi - p.t_lo);
   core::ThermalPolyFit fit;
@@ -128,10 +139,11 @@ Status PredictSensor(const PlannedWindows& w, const Prediction& p, double noise,
   return Status::Ok();
 }
 
-// The prediction of a ramp; kNotDeterminable naming the range (below min_range) or the windows
-// (too few for a curve).
-Status Predict(const core::ThermalOptions& options, const Ramp& ramp, Prediction* p) {
-  const PlannedWindows w = CutRamp(ramp, options.window);
+// The prediction for windows `w` (accelerometer groups: w.group, `groups` of them), each window
+// mean's σ per channel sigma(c) (windows × 6); kNotDeterminable naming the range (below
+// min_range) or the windows (too few for a curve).
+Status PredictWindows(const core::ThermalOptions& options, const PlannedWindows& w, int groups,
+                      const Eigen::MatrixXd& sigma, Prediction* p) {
   if (w.temperature.size() == 0) {
     return Status::NotDeterminable("the warm-up holds no averaging window of " +
                                    Fmt(options.window) + " s");
@@ -149,17 +161,16 @@ Status Predict(const core::ThermalOptions& options, const Ramp& ramp, Prediction
     p->grid(i) = p->t_lo + (p->t_hi - p->t_lo) * i / (options.grid_points - 1);
   }
   const int m = static_cast<int>(w.temperature.size());
-  for (bool accel : {true, false}) {
-    const int groups = accel ? ramp.orientations : 1;
-    std::vector<int> group = w.group;
-    if (!accel) std::fill(group.begin(), group.end(), 0);
-    PlannedWindows g{w.temperature, w.samples, group};
-    const int lowest =
-        std::max(0, std::min({options.min_order, options.max_order, m - groups - 1}));
-    const int top = std::max(lowest, std::min(options.max_order, m - groups - 1));
-    if (accel) p->floor_order = lowest, p->top_order = top;
-    Status s = PredictSensor(g, *p, accel ? *options.accel_noise : *options.gyro_noise, groups,
-                             lowest, top, accel ? &p->accel : &p->gyro);
+  for (int c = 0; c < 6; ++c) {
+    const bool accel = c < 3;
+    const int g = accel ? groups : 1;
+    PlannedWindows windows = w;
+    if (!accel) std::fill(windows.group.begin(), windows.group.end(), 0);
+    const int lowest = std::max(0, std::min({options.min_order, options.max_order, m - g - 1}));
+    const int top = std::max(lowest, std::min(options.max_order, m - g - 1));
+    if (c == 0) p->floor_order = lowest, p->top_order = top;
+    Status s = PredictSensor(windows, sigma.col(c), *p, g, lowest, top,
+                             &p->channels[static_cast<size_t>(c)]);
     if (!s.ok()) {
       return Status::NotDeterminable(std::to_string(m) + " averaging windows are too few for a " +
                                      (accel ? "accelerometer" : "gyroscope") +
@@ -167,6 +178,16 @@ Status Predict(const core::ThermalOptions& options, const Ramp& ramp, Prediction
     }
   }
   return Status::Ok();
+}
+
+// The prediction of a ramp: its windows with σ = noise/√n.
+Status Predict(const core::ThermalOptions& options, const Ramp& ramp, Prediction* p) {
+  const PlannedWindows w = CutRamp(ramp, options.window);
+  Eigen::MatrixXd sigma(w.temperature.size(), 6);
+  for (int c = 0; c < 6; ++c) {
+    sigma.col(c) = (c < 3 ? *options.accel_noise : *options.gyro_noise) / w.samples.array().sqrt();
+  }
+  return PredictWindows(options, w, ramp.orientations, sigma, p);
 }
 
 json Vec(const Eigen::VectorXd& v) { return std::vector<double>(v.data(), v.data() + v.size()); }
@@ -177,27 +198,31 @@ json Mat(const Eigen::MatrixXd& m) {
   return out;
 }
 
-// The result's uncertainty shape (methods/thermal/thermal_result.cc) for `imus` equal IMUs.
-json UncertaintyJson(const Prediction& p, int imus) {
-  const auto sensor = [&p](const SensorPrediction& s, bool gyro) {
-    json cov = json::array(), std = json::array();
+// One IMU's entry of the result's uncertainty shape (methods/thermal/thermal_result.cc).
+json UncertaintyImuJson(const Prediction& p, const std::string& name) {
+  const auto sensor = [&p](int first) {
+    json cov = json::array(), std = json::array(), at = json::array();
     for (int a = 0; a < 3; ++a) {
+      const SensorPrediction& s = p.channels[static_cast<size_t>(first + a)];
       cov.push_back(Mat(s.covariance));
       std.push_back(Vec(s.band));
+      at.push_back(s.intercept_std);
     }
-    json at = gyro ? json(std::vector<double>(3, s.intercept_std)) : json(nullptr);
-    return json{
-        {"bias",
-         {{"covariance", cov}, {"temperatures", Vec(p.grid)}, {"std", std}, {"at_t_ref_std", at}}},
-        {"scale", nullptr}};
+    return json{{"bias",
+                 {{"covariance", cov},
+                  {"temperatures", Vec(p.grid)},
+                  {"std", std},
+                  {"at_t_ref_std", first == 3 ? at : json(nullptr)}}},
+                {"scale", nullptr}};
   };
+  return {
+      {"name", name}, {"lag_std", nullptr}, {"accelerometer", sensor(0)}, {"gyroscope", sensor(3)}};
+}
+
+// The result's uncertainty shape for `imus` equal IMUs.
+json UncertaintyJson(const Prediction& p, int imus) {
   json list = json::array();
-  for (int i = 0; i < imus; ++i) {
-    list.push_back({{"name", std::to_string(i)},
-                    {"lag_std", nullptr},
-                    {"accelerometer", sensor(p.accel, false)},
-                    {"gyroscope", sensor(p.gyro, true)}});
-  }
+  for (int i = 0; i < imus; ++i) list.push_back(UncertaintyImuJson(p, std::to_string(i)));
   return {{"basis", "crb"}, {"chi2_per_dof", nullptr}, {"imus", list}};
 }
 
@@ -205,12 +230,12 @@ json UncertaintyJson(const Prediction& p, int imus) {
 std::vector<std::string> Unmet(const Prediction& p, const AcceptanceLimits& limits) {
   std::vector<std::string> unmet;
   const auto a = limits.Get("max_accel_band_std"), g = limits.Get("max_gyro_band_std");
-  if (a && p.accel.worst_band > *a) {
-    unmet.push_back("accelerometer band " + Fmt(p.accel.worst_band) + " m/s² above " +
+  if (a && p.WorstBand(0) > *a) {
+    unmet.push_back("accelerometer band " + Fmt(p.WorstBand(0)) + " m/s² above " +
                     "max_accel_band_std " + Fmt(*a));
   }
-  if (g && p.gyro.worst_band > *g) {
-    unmet.push_back("gyroscope band " + Fmt(p.gyro.worst_band) + " rad/s above " +
+  if (g && p.WorstBand(3) > *g) {
+    unmet.push_back("gyroscope band " + Fmt(p.WorstBand(3)) + " rad/s above " +
                     "max_gyro_band_std " + Fmt(*g));
   }
   return unmet;
@@ -305,11 +330,10 @@ Status PlanThermal(const core::ThermalOptions& options, const PlanProtocol& prot
   const Status s = Predict(options, ramp, &p);
   if (s.ok()) {
     o["uncertainty"] = UncertaintyJson(p, protocol.imus);
-    o["orders"] = {
-        {"planned", p.floor_order},
-        {"max", p.top_order},
-        {"band_std_at_max_order",
-         {{"accelerometer", p.accel.worst_band_top}, {"gyroscope", p.gyro.worst_band_top}}}};
+    o["orders"] = {{"planned", p.floor_order},
+                   {"max", p.top_order},
+                   {"band_std_at_max_order",
+                    {{"accelerometer", p.WorstBandTop(0)}, {"gyroscope", p.WorstBandTop(3)}}}};
   } else {
     o["uncertainty"] = nullptr;
     o["undetermined"].push_back(
@@ -347,6 +371,34 @@ Status PlanThermal(const core::ThermalOptions& options, const PlanProtocol& prot
   }
   o["suggested"] = Suggest(options, ramp, limits, protocol.imus);
   return Status::Ok();
+}
+
+json PredictThermalWindows(const core::ThermalOptions& options,
+                           const core::ThermalImuResult& found) {
+  PlannedWindows w;
+  const auto m = static_cast<Eigen::Index>(found.windows.size());
+  w.temperature.resize(m);
+  w.samples.resize(m);
+  Eigen::MatrixXd sigma(m, 6);
+  int groups = 1;
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const core::ThermalWindow& window = found.windows[static_cast<size_t>(i)];
+    w.temperature(i) = window.temperature;
+    w.samples(i) = static_cast<double>(window.samples);
+    w.group.push_back(window.orientation);
+    groups = std::max(groups, window.orientation + 1);
+    sigma.row(i) = window.mean_std.transpose();
+  }
+  Prediction p;
+  const Status s = PredictWindows(options, w, groups, sigma, &p);
+  if (!s.ok()) return {{"uncertainty", nullptr}, {"reason", s.message()}};
+  return {{"basis", "crb"},
+          {"uncertainty", UncertaintyImuJson(p, found.name)},
+          {"orders",
+           {{"planned", p.floor_order},
+            {"max", p.top_order},
+            {"band_std_at_max_order",
+             {{"accelerometer", p.WorstBandTop(0)}, {"gyroscope", p.WorstBandTop(3)}}}}}};
 }
 
 }  // namespace calibd::server

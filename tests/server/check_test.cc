@@ -365,6 +365,76 @@ TEST(RecordingCheck, ThermalWindowsAndRangeAreTheJobs) {
   EXPECT_LT(check.at("thermal").at("imus").at(0).at("range").get<double>(), 4.5);
 }
 
+// The thermal check's predicted σ (PredictThermalWindows) is the job's white-noise bound on the
+// same windows: with the order fixed (min_order = max_order = 3) the job's crb band and
+// coefficient covariance, to rounding (same windows, same σ per window, same least squares);
+// with the default orders 3..5 a lower bound of the job's band (a nested model's fitted values
+// are no less uncertain, the BIC average adds the orders' spread). A 4 °C warm-up predicts
+// nothing and says why.
+TEST(RecordingCheck, ThermalPredictedSigmaIsTheJobsBound) {
+  TestServer server;
+  ASSERT_TRUE(server.error().empty()) << server.error();
+  core::ThermalSimulationOptions o;
+  o.warmup = 900;
+  o.cooldown = 600;
+  o.coefficients = core::DefaultThermalTruth(3);
+  std::string csv;
+  json config, truth;
+  ASSERT_TRUE(SimulateThermalFiles(o, &csv, &config, &truth).ok());
+  for (bool fixed : {true, false}) {
+    json c = config;
+    if (fixed) c["min_order"] = c["max_order"] = 3;
+    const json job = server.UploadAndWait(csv, c);
+    ASSERT_EQ(job.value("status", ""), "succeeded") << job.dump().substr(0, 600);
+    json check;
+    ASSERT_EQ(CheckOfJob(server, job, &check), 200) << check.dump();
+    const json& predicted = check.at("predicted");
+    ASSERT_TRUE(predicted.at("uncertainty").is_object()) << predicted.dump();
+    EXPECT_EQ(predicted.at("imus").at(0).at("orders").at("planned"), 3);
+    const json& p = predicted.at("uncertainty").at("imus").at(0);
+    const json& u = job.at("result").at("uncertainty").at("imus").at(0);
+    for (const char* sensor : {"accelerometer", "gyroscope"}) {
+      const json& band = p.at(sensor).at("bias").at("std");
+      ASSERT_EQ(band.size(), 3u);
+      ASSERT_EQ(p.at(sensor).at("bias").at("temperatures"),
+                u.at(sensor).at("bias").at("temperatures"));
+      for (size_t a = 0; a < 3; ++a) {
+        const json& crb = u.at("crb").at(sensor).at("bias").at("std").at(a);
+        const json& primary = u.at(sensor).at("bias").at("std").at(a);
+        ASSERT_EQ(band[a].size(), crb.size());
+        for (size_t i = 0; i < crb.size(); ++i) {
+          const double b = band[a][i].get<double>();
+          if (fixed) {
+            EXPECT_NEAR(b, crb[i].get<double>(), 1e-9 * crb[i].get<double>() + 1e-15)
+                << sensor << " " << a << " grid " << i;
+          } else {
+            EXPECT_LE(b, primary[i].get<double>() * (1 + 1e-9) + 1e-15)
+                << sensor << " " << a << " grid " << i;
+          }
+        }
+        if (fixed) {
+          const json& pc = p.at(sensor).at("bias").at("covariance").at(a);
+          const json& jc = u.at("crb").at(sensor).at("bias").at("covariance").at(a);
+          for (size_t k = 0; k < 3; ++k) {
+            EXPECT_NEAR(pc[k][k].get<double>(), jc[k][k].get<double>(),
+                        1e-9 * jc[k][k].get<double>())
+                << sensor << " " << a << " c_" << k + 1;
+          }
+        }
+      }
+    }
+  }
+  o.delta = 4;
+  o.cooldown = 0;
+  ASSERT_TRUE(SimulateThermalFiles(o, &csv, &config, &truth).ok());
+  const json narrow = server.UploadAndWait(csv, config);
+  json check;
+  ASSERT_EQ(CheckOfJob(server, narrow, &check), 200) << check.dump();
+  EXPECT_TRUE(check.at("predicted").at("uncertainty").is_null()) << check["predicted"].dump();
+  EXPECT_NE(check.at("predicted").value("reason", "").find("below min_range 10"), std::string::npos)
+      << check["predicted"].dump();
+}
+
 std::string ImuTkDir() {
   const char* env = std::getenv("CALIBD_IMU_TK_DATA");
   return env != nullptr && *env != '\0' ? env : "/work/data/imu_tk";

@@ -227,7 +227,7 @@ expect recording 'class="page-recording' 'plot-timeline-accel' 'plot-timeline-gy
   'table-intervals' 'table-thresholds' "href=\"/jobs/$j7\""
 expect recording 'id="check"' 'Check before fitting' '<option'
 expect check 'id="check"' 'plot-check-upper' 'plot-check-lower' 'Saturation: 0 sample' \
-  'Coverage of IMU 0' 'Timing: 100.0 Hz'
+  'Coverage of IMU 0' 'Timing: 100.0 Hz' 'class="check-predicted"' 'IMU 0 accelerometer.'
 expect device-drift 'imu (2 accepted calibrations' 'noise (2 accepted calibrations' \
   'table-drift-imu' 'table-drift-noise' 'data-sensor="accelerometer"' 'data-sensor="gyroscope"' \
   'plot-drift-imu-scale' 'plot-drift-noise-accel' 'plot-drift-noise-gyro'

@@ -189,5 +189,31 @@ TEST(RecordingPage, ASensorLogShowsItsStreamsImusAndWarningsEscaped) {
   EXPECT_EQ(RenderRecordingPage(v).find("id=\"log\""), std::string::npos);
 }
 
+// The check's predicted σ: every σ of the uncertainty shape by its largest value, per IMU (a
+// band's grid reduced to its largest), covariances, grids and crb copies left out, names escaped;
+// without a prediction, the reason.
+TEST(RecordingPage, TheChecksPredictedSigmaIsListedOrItsReasonGiven) {
+  RecordingPageView v = View();
+  v.check_methods = {"thermal"};
+  v.check_method = "thermal";
+  v.check = json::parse(R"({"predicted": {"how": "white-noise <bound>", "uncertainty": {"imus": [
+      {"name": "<0>",
+       "accelerometer": {"bias": {"std": [[1e-3, 4e-3, 2e-3], [1e-3, 1e-3, 1e-3], [5e-3, 1e-3, 1e-3]],
+                                  "covariance": [[[9.0]]], "temperatures": [20, 35, 50],
+                                  "at_t_ref_std": null},
+                         "scale": null},
+       "crb": {"accelerometer": {"bias": {"std": [[7.0]]}}}}]}}})");
+  const std::string page = CheckSection(v);
+  EXPECT_NE(page.find("white-noise &lt;bound&gt;"), std::string::npos) << page;
+  EXPECT_NE(page.find("IMU &lt;0&gt; accelerometer.bias.std</td><td class=\"num\">0.005"),
+            std::string::npos)
+      << page;
+  EXPECT_EQ(Count(page, "<tr><td>"), 1u) << page;  // no covariance, grid, null σ or crb row
+  EXPECT_EQ(page.find(">7<"), std::string::npos) << page;
+
+  v.check = {{"predicted", {{"uncertainty", nullptr}, {"reason", "the windows span 4 °C"}}}};
+  EXPECT_NE(CheckSection(v).find("No prediction: the windows span 4 °C"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace calibd::web

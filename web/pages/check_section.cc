@@ -106,6 +106,59 @@ std::string Verdicts(const json& c) {
   return s + "</ul>";
 }
 
+// The largest of the numbers in `j` (nested arrays); NaN when there are none.
+double Largest(const json& j) {
+  double worst = std::nan("");
+  if (j.is_number()) return j.get<double>();
+  if (j.is_array()) {
+    for (const json& v : j) {
+      const double x = Largest(v);
+      if (!std::isnan(x) && (std::isnan(worst) || x > worst)) worst = x;
+    }
+  }
+  return worst;
+}
+
+// Rows "where | largest 1σ" for every σ in a result's uncertainty shape (keys named "std" or
+// ending in "_std"; covariances and grids left out), per IMU.
+void SigmaRows(const json& node, const std::string& where, std::string* rows) {
+  if (!node.is_object()) return;
+  for (const auto& [key, value] : node.items()) {
+    const bool is_std =
+        key == "std" || (key.size() > 4 && key.compare(key.size() - 4, 4, "_std") == 0);
+    if (is_std && value.is_array()) {
+      const double worst = Largest(value);
+      if (std::isnan(worst)) continue;
+      *rows += "<tr><td>" + E(where + key) + "</td><td class=\"num\">" + E(FormatSig(worst, 3)) +
+               "</td></tr>";
+    } else if (value.is_object() && key != "crb") {
+      SigmaRows(value, where + key + ".", rows);
+    }
+  }
+}
+
+// The job's σ predicted by the method's check (its `predicted`), or why there is none.
+std::string Predicted(const json& c) {
+  const json& p = c.value("predicted", json());
+  if (!p.is_object()) return "";
+  std::string s = "<h3>Predicted &sigma;</h3>";
+  if (p.contains("how") && p["how"].is_string()) {
+    s += "<p class=\"muted\">" + E(p["how"].get<std::string>()) + "</p>";
+  }
+  const json& u = p.value("uncertainty", json());
+  if (!u.is_object()) {
+    return s + "<p>No prediction: " + E(p.value("reason", std::string("not given"))) + "</p>";
+  }
+  std::string rows;
+  for (const json& imu : u.value("imus", json::array())) {
+    SigmaRows(imu, "IMU " + imu.value("name", std::string("?")) + " ", &rows);
+  }
+  return s +
+         "<table class=\"check-predicted\"><thead><tr><th>quantity (SI)</th><th>largest "
+         "1&sigma;</th></tr></thead><tbody>" +
+         rows + "</tbody></table>";
+}
+
 }  // namespace
 
 std::string CheckSection(const RecordingPageView& v) {
@@ -119,7 +172,7 @@ std::string CheckSection(const RecordingPageView& v) {
       "\">as JSON</a>).</p>" + Form(v);
   if (!v.check_note.empty()) s += "<p class=\"muted\">" + E(v.check_note) + "</p>";
   if (v.check.is_object()) {
-    s += Verdicts(v.check);
+    s += Verdicts(v.check) + Predicted(v.check);
     const json& statics = v.check.value("statics", json());
     if (statics.is_array()) {
       s += "<p>" + std::to_string(statics.size()) +
