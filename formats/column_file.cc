@@ -170,6 +170,7 @@ Status WriteColumnFile(const std::string& path, const ColumnFileKey& key,
       {"gyro_names", log.gyro_names},
       {"temp_names", log.temp_names},
       {"mag_names", log.mag_names},
+      {"mag_device_ids", log.mag_device_ids},
       {"data_bytes", data_bytes}}.dump(-1, ' ', false, json::error_handler_t::replace);
   static std::atomic<uint64_t> counter{0};
   const std::string temporary =
@@ -268,6 +269,7 @@ Status ReadColumnFile(const std::string& path, const ColumnFileKey& expected,
     log.gyro_names = h.at("gyro_names").get<std::vector<std::string>>();
     log.temp_names = h.at("temp_names").get<std::vector<std::string>>();
     log.mag_names = h.at("mag_names").get<std::vector<std::string>>();
+    log.mag_device_ids = h.at("mag_device_ids").get<std::vector<int64_t>>();
     data_bytes = h.at("data_bytes").get<uint64_t>();
   } catch (const std::exception& e) {
     return Damaged(path, std::string("its header does not read: ") + e.what());

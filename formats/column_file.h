@@ -27,7 +27,8 @@ namespace calibd::server {
 
 // Bumped whenever the parser could give other numbers for the same bytes and rules, or the
 // layout changes: files of another version are not read (and are rebuilt by the cache).
-inline constexpr uint32_t kColumnFileVersion = 1;
+// 2: the magnetometers' device ids (mag_device_ids) in the header.
+inline constexpr uint32_t kColumnFileVersion = 2;
 
 // What a file is of: the recording's bytes (their SHA-256) and the reading rules they were
 // parsed with (any text that determines the parse, compared verbatim).

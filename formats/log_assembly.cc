@@ -417,6 +417,7 @@ Status AssembleLog(const SensorLog& log, const LogStreamSelection& selection,
   for (size_t j = 0; j < mags.size(); ++j) {
     json d = {{"stream", mags[j]->Name()}, {"resampled", json::array()}};
     r.mag_names.push_back("m" + std::to_string(j));
+    r.mag_device_ids.push_back(mags[j]->device_id);
     FillColumns(*mags[j], t, &r.mag, 3 * static_cast<int>(j), &d["resampled"]);
     mags_json.push_back(d);
   }

@@ -256,6 +256,7 @@ Status RecordingParser::TakeArrayFloat(ArrayRecordingFloat* out) {
     out->temperature = std::move(r.temperature);
     out->mag_names = std::move(r.mag_names);
     out->mag = std::move(r.mag);
+    out->mag_device_ids = std::move(r.mag_device_ids);
     r = {};
     return Status::Ok();
   }

@@ -73,6 +73,9 @@ struct ArrayRecording {
   // double); empty when the log has none. Methods that do not use them ignore them.
   std::vector<std::string> mag_names;  // "m0".., by index
   Eigen::MatrixXd mag;
+  // Per magnetometer, the firmware's device id its log stream carries (ULog sensor_mag's
+  // device_id, DataFlash COMPASS_DEV_ID*), -1 where it has none; empty for a CSV recording.
+  std::vector<int64_t> mag_device_ids;
 };
 
 // An array recording held as floats (RecordingParser::CollectArrayAsFloat): what the raw-log
@@ -89,6 +92,7 @@ struct ArrayRecordingFloat {
   Eigen::MatrixXd temperature;
   std::vector<std::string> mag_names;  // as ArrayRecording (kept in double, not scaled)
   Eigen::MatrixXd mag;
+  std::vector<int64_t> mag_device_ids;  // as ArrayRecording
   double accel_scale = 1, gyro_scale = 1;
 };
 

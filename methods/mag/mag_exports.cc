@@ -60,9 +60,13 @@ const char* const kFirmwareComment =
     "P (the soft iron without the rotation to the accelerometer frame), so the alignment is not "
     "carried; the orientation parameters are not written (leave them at 0, rotation none).";
 
-// The firmware device id of magnetometer k from config device_id (a number: m0's; an array: one
-// per magnetometer), or -1 when the config gives none.
-int64_t DeviceId(const ExportContext& context, size_t k) {
+// The firmware device id of magnetometer k: the result's (config device_id, else the log
+// stream's; see methods/mag/mag_method.cc SetDeviceId), else, for a result stored before it
+// carried one, config device_id (a number: m0's; an array: one per magnetometer); -1: none.
+int64_t DeviceId(const json& mags, const ExportContext& context, size_t k) {
+  if (const json& m = mags.at(k); m.contains("device_id")) {
+    return m.at("device_id").is_number_integer() ? m.at("device_id").get<int64_t>() : -1;
+  }
   if (!context.config.is_object() || !context.config.contains("device_id")) return -1;
   const json& id = context.config.at("device_id");
   if (id.is_array()) return k < id.size() ? id.at(k).get<int64_t>() : -1;
@@ -157,10 +161,11 @@ Status MagResultToArduPilot(const json& result, const ExportContext& context, st
       }
       for (int a = 0; a < 3; ++a)
         p << "COMPASS_ODI" << n << "_" << kAxes[a] << "," << Num(odi[a]) << "\n";
-      if (const int64_t id = DeviceId(context, i); id >= 0) {
+      if (const int64_t id = DeviceId(mags, context, i); id >= 0) {
         p << "COMPASS_DEV_ID" << n << "," << id << "\n";
       } else {
-        p << "# COMPASS_DEV_ID" << n << " not written (config device_id absent): the firmware "
+        p << "# COMPASS_DEV_ID" << n
+          << " not written (neither the log nor config device_id gives it): the firmware "
           << "applies these values only where it matches the compass's id; set it.\n";
       }
     }
@@ -196,11 +201,11 @@ Status MagResultToPx4(const json& result, const ExportContext& context, std::str
       for (int a = 0; a < 3; ++a) line(std::string(1, kAxes[a]) + "OFF", off(a));
       for (int a = 0; a < 3; ++a) line(std::string(1, kAxes[a]) + "SCALE", f.matrix(a, a));
       for (int a = 0; a < 3; ++a) line(std::string(1, kAxes[a]) + "ODIAG", odiag[a]);
-      if (const int64_t id = DeviceId(context, i); id >= 0) {
+      if (const int64_t id = DeviceId(mags, context, i); id >= 0) {
         p << "1\t1\t" << base << "ID\t" << id << "\t6\n";
       } else {
-        p << "# " << base << "ID not written (config device_id absent): the firmware applies "
-          << "these values only to the sensor whose id it holds; set it.\n";
+        p << "# " << base << "ID not written (neither the log nor config device_id gives it): the "
+          << "firmware applies these values only to the sensor whose id it holds; set it.\n";
       }
     }
     *out = p.str();

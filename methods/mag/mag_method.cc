@@ -32,7 +32,7 @@ struct MagConfig {
   std::string unit_text = "uT";  // mag_unit as configured
   // Hand-held holds are short: windows and holds of 0.5 s (SPEC §7's detection otherwise).
   core::StaticDetectionOptions statics = HandHeldStatics();
-  size_t device_ids = 0;  // entries of config device_id (a number counts as one)
+  std::vector<int64_t> device_ids;  // config device_id (a number: m0's), empty when absent
 };
 
 // µT per reading unit of a named mag_unit; 0 for an unknown name.
@@ -94,7 +94,7 @@ Status ParseMagConfig(const json& config, MagConfig* out) {
                               "array of them, one per magnetometer m0, m1, ...");
       }
     }
-    out->device_ids = list.size();
+    for (const json& id : list) out->device_ids.push_back(id.get<int64_t>());
   }
   Status s = ConfigNumber(config, "static_window", 0.05, 60, &out->statics.static_window);
   if (s.ok()) s = ConfigNumber(config, "min_static", 0, 600, &out->statics.min_static);
@@ -106,6 +106,25 @@ Status ParseMagConfig(const json& config, MagConfig* out) {
 int AccelFor(const ArrayRecording& log, size_t k) {
   if (k < log.accel_names.size()) return static_cast<int>(k);
   return log.accel_names.empty() ? -1 : 0;
+}
+
+// The firmware device id of magnetometer k: config device_id's entry (it wins: the user names the
+// sensor the files are for), else its log stream's (ULog device_id, DataFlash COMPASS_DEV_ID*),
+// else none (-1); a config id that differs from the log's is warned about.
+void SetDeviceId(const MagConfig& c, const ArrayRecording& log, size_t k, MagRun* run) {
+  const int64_t from_log = k < log.mag_device_ids.size() ? log.mag_device_ids[k] : -1;
+  if (k < c.device_ids.size()) {
+    run->device_id = c.device_ids[k];
+    run->device_id_source = "config";
+    if (from_log >= 0 && from_log != run->device_id) {
+      run->warnings.push_back("config device_id " + std::to_string(run->device_id) +
+                              " differs from the log's " + std::to_string(from_log) +
+                              " for this magnetometer: the exports carry the config's");
+    }
+  } else if (from_log >= 0) {
+    run->device_id = from_log;
+    run->device_id_source = "log";
+  }
 }
 
 // The statics of the log on accelerometer triad `a` (and gyroscope triad `a` when there is one).
@@ -342,8 +361,8 @@ Status Mag::Run(RecordingParser* parser, const json& config, const RunContext& c
                "and a time column t; the log has none")
         .WithReason(Reason::kInvalidRecording);
   }
-  if (c.device_ids > log.mag_names.size()) {
-    return Status::InvalidInput("config device_id has " + std::to_string(c.device_ids) +
+  if (c.device_ids.size() > log.mag_names.size()) {
+    return Status::InvalidInput("config device_id has " + std::to_string(c.device_ids.size()) +
                                 " entries, the log " + std::to_string(log.mag_names.size()) +
                                 " magnetometer(s)")
         .WithReason(Reason::kInvalidConfig);
@@ -356,6 +375,7 @@ Status Mag::Run(RecordingParser* parser, const json& config, const RunContext& c
     MagRun& run = runs[k];
     core::MagProblem& p = problems[k];
     run.name = log.mag_names[k];
+    SetDeviceId(c, log, k, &run);
     run.problem = &p;
     p.t = log.t;
     p.y = log.mag.middleCols(3 * static_cast<Eigen::Index>(k), 3).transpose();

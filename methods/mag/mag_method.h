@@ -43,11 +43,14 @@ inline constexpr int kMagPlotPoints = 800;
 
 // One magnetometer's run, for the result JSON.
 struct MagRun {
-  std::string name;                 // "m0"
-  std::string accelerometer;        // the triad whose statics were used ("" none)
-  int statics = 0;                  // statics found on it
-  double sample_noise_std = NAN;    // µT per axis, from consecutive samples (SampleNoise)
-  const core::MagProblem* problem;  // the readings (not owned)
+  std::string name;                   // "m0"
+  std::string accelerometer;          // the triad whose statics were used ("" none)
+  int statics = 0;                    // statics found on it
+  double sample_noise_std = NAN;      // µT per axis, from consecutive samples (SampleNoise)
+  int64_t device_id = -1;             // the firmware's device id, -1 unknown (SetDeviceId)
+  std::string device_id_source;       // "config", "log" or "" (unknown)
+  std::vector<std::string> warnings;  // the method's own (besides the numerics')
+  const core::MagProblem* problem;    // the readings (not owned)
   core::MagResult result;
 };
 

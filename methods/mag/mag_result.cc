@@ -121,15 +121,19 @@ json MagResultToJson(const std::vector<MagRun>& runs, const std::string& unit_te
                       {"field", field > 0 ? json(field) : json(nullptr)},
                       {"field_estimate", Num(r.field_estimate)},
                       {"mag_unit", unit_text},
-                      {"microtesla_per_unit", microtesla_per_unit}});
+                      {"microtesla_per_unit", microtesla_per_unit},
+                      {"device_id", run.device_id >= 0 ? json(run.device_id) : json(nullptr)},
+                      {"device_id_source",
+                       run.device_id_source.empty() ? json(nullptr) : json(run.device_id_source)}});
     json u = StdKeys(r.std, aligned);
     u["name"] = run.name;
     u["crb"] = StdKeys(r.crb, aligned);
     unc.push_back(u);
     diag.push_back(MagDiagnostics(run));
     sandwich |= r.basis == "sandwich";
-    for (const std::string& w : r.warnings) {
-      warnings.push_back(runs.size() > 1 ? run.name + ": " + w : w);
+    for (const auto* list : {&run.warnings, &r.warnings}) {
+      for (const std::string& w : *list)
+        warnings.push_back(runs.size() > 1 ? run.name + ": " + w : w);
     }
     if (!aligned) {
       warnings.push_back(run.name + ": alignment to the accelerometer not estimated (" +
