@@ -65,13 +65,14 @@ ThermalSimulation SimulateThermal(const ThermalSimulationOptions& options) {
   };
   const double t_peak = warm(o.warmup);
   const int orientations = std::max(1, std::min(6, o.orientations));
+  const int64_t cycles = std::max(1, o.cycles);
   double sensor = o.t0, previous = o.t0;  // the element's temperature and the last true reading
   for (int64_t i = 0; i < n; ++i) {
     const double t = i / o.rate;
     const bool cooling = t > o.warmup;
     const double temp =
         cooling ? t_peak - o.cool_delta * (1 - std::exp(-(t - o.warmup) / o.tau)) : warm(t);
-    const int orientation = static_cast<int>(i * orientations / n);
+    const int orientation = static_cast<int>(i * orientations * cycles / n) % orientations;
     const Eigen::Vector3d g = o.gravity * GravityDirection(orientation);
     sim.t(i) = t;
     sim.temp(i) = temp + o.temp_noise * rng.Normal();

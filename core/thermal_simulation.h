@@ -7,8 +7,9 @@
 // scale drift; none by default), white noise per channel, a temperature reading with white noise,
 // optionally a sensing element that follows the (noise-free) reading through a first-order lag of
 // `lag` s (the bias is then evaluated at the element's temperature, which starts equal to the
-// reading), and several orientations held for equal parts of the log (an instant change between
-// them: the windows around it are not static). Deterministic per seed. Thread-compatible.
+// reading), and several orientations held for equal parts of the log, in sequence, `cycles` times
+// (an instant change between them: the windows around it are not static). Deterministic per seed.
+// Thread-compatible.
 #ifndef CALIBD_CORE_THERMAL_SIMULATION_H_
 #define CALIBD_CORE_THERMAL_SIMULATION_H_
 
@@ -36,6 +37,10 @@ struct ThermalSimulationOptions {
   double temp_noise = 0.01;   // °C per sample
   double gravity = 9.80665;
   int orientations = 1;  // gravity along +z, then −z, +x, −x, +y, −y
+  // The orientations' sequence is held this many times over the log (>= 1; each hold then lasts
+  // the log / (orientations × cycles)): a tumble repeated through the warm-up and cool-down, so
+  // that every face is seen across the range.
+  int cycles = 1;
   // Truth: per channel (ax ay az gx gy gz) the coefficients c_1..c_p (SI per °C^k) and b0.
   std::vector<Eigen::VectorXd> coefficients;  // 6 entries; empty: DefaultThermalTruth(3)
   Eigen::Matrix<double, 6, 1> b0 = Eigen::Matrix<double, 6, 1>::Zero();

@@ -395,6 +395,11 @@ std::function<Status(SimulatedFiles*)> Thermal::AddSimulateOptions(CLI::App* com
       ->check(CLI::Range(1, 6))
       ->capture_default_str();
   command
+      ->add_option("--cycles", o->cycles,
+                   "times the orientations' sequence is held over the log (a repeated tumble)")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  command
       ->add_option("--scale-order", *scale_order,
                    "order of the accelerometers' true scale drift (0: none; seen with "
                    "--orientations >= 2)")
@@ -444,7 +449,9 @@ Status SimulateThermalFiles(const core::ThermalSimulationOptions& options, std::
                                       sim.truth.scale_coefficients[static_cast<size_t>(a)].size()));
   }
   sensors[0]["scale_coefficients"] = scale;
-  *config = {{"method", "thermal"}};
+  // t is in seconds by construction: said, since a slow log (10 Hz and below, as warm-ups are
+  // often logged) would otherwise be refused as ambiguous (formats/inertial_log.h CheckTimeUnit).
+  *config = {{"method", "thermal"}, {"time_unit", "s"}};
   *truth = {{"method", "thermal"},
             {"t_ref", sim.truth.t_ref},
             {"seed", sim.truth.seed},

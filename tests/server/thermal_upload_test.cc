@@ -128,6 +128,7 @@ TEST(ThermalUpload, ADataFlashWarmupCalibratesThroughTheSameRoute) {
     calibd::testing::WriteImu(&w, static_cast<uint64_t>(std::llround(1e6 + rec.t(i) * 1e6)), 0,
                               gyro, accel, rec.temperature(i, 0));
   }
+  config.erase("time_unit");  // the simulated CSV's; a DataFlash log has its own clock
   TestServer server;
   ASSERT_EQ(server.error(), "");
   const json job = server.UploadAndWait(w.bytes(), config, "log.bin");
