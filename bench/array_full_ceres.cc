@@ -217,11 +217,11 @@ int RunCalibd(int64_t n) {
   }
   std::printf(
       "calibd N=%lld statics=%lld dynamic=%lld iterations=%d cost=%.10g wall_s=%.3f cpu_s=%.3f "
-      "peak_rss_delta_MB=%.1f start_cost=%.10g (start, solve, CRB, null-space check, "
-      "diagnostics)\n",
+      "peak_rss_delta_MB=%.1f start_cost=%.10g sigma_ratio=%.12g (start, solve, CRB, "
+      "residual-aware σ, null-space check, diagnostics)\n",
       static_cast<long long>(n), static_cast<long long>(r.statics),
       static_cast<long long>(r.dynamic_samples), r.iterations, r.cost.back(), wall, cpu,
-      PeakRssMb() - rss0, r.cost.front());
+      PeakRssMb() - rss0, r.cost.front(), r.sigma_ratio);
   return 0;
 }
 

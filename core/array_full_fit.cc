@@ -588,17 +588,23 @@ Status ComputeResidualAwareCovariance(FullFit* f, const FullProblem& fp) {
     Eigen::MatrixXd Ib(q, q);
     FullProblem::Normal b;
     b.C.resize(9, q);
+    Eigen::Matrix<double, 9, Eigen::Dynamic> Z(9, q);
     int not_converged = 0;
     for (const auto& batch : batches) {
       if (StopRequested(options.stop)) return f->Stopped("residual-aware covariance");
       FullProblem::Sums sums = fp.MakeSums();
+      // Σ C_n^T H_n^-1 C_n into the lower triangle of Ib (a dynamic sample by its Kronecker
+      // structure, as the solve's Schur term; a static densely), then Ib = H_pp − that.
       Ib.setZero();
       for (int64_t n : batch) {
         fp.Linearize(n, x.col(n), ctx, &b, &sums);
         const Eigen::Matrix<double, 9, 9> Linv = InverseCholeskyFactor<9>(b.H);
-        const Eigen::MatrixXd Z = Linv * b.C;
-        Ib.noalias() -= Z.transpose() * Z;
+        if (!fp.AddCouplingGram(n, x.col(n), ctx, Linv, &Ib)) {
+          Z.noalias() = Linv * b.C;
+          Ib.selfadjointView<Eigen::Lower>().rankUpdate(Z.transpose());
+        }
       }
+      Ib = -Ib.selfadjointView<Eigen::Lower>().toDenseMatrix();
       for (int k = 0; k < K; ++k) Ib.block<kP, kP>(kP * k, kP * k) += sums.H[k];
       const Eigen::VectorXd t0v = Cov * sums.g;
       Eigen::VectorXd tv = t0v;
