@@ -275,7 +275,9 @@ class FullProblem {
       const Vec3 eg = wg * (d_.yg.col(m).segment<3>(3 * k) - p.Tg * w - p.bg);
       out->cost += ea.squaredNorm() + eg.squaredNorm();
       if (!full && !g) continue;
-      // Accelerometer: J_p over (T_a row-major, b_a, r).
+      // Accelerometer: J_p over (T_a row-major, b_a, r). (Products of these small fixed-size
+      // matrices are lazy: Eigen would send e.g. a 15x3 by 3x15 product to its GEMM kernel,
+      // whose packing costs more than the product.)
       Eigen::Matrix<double, 3, 15> Jp = Eigen::Matrix<double, 3, 15>::Zero();
       for (int i = 0; i < 3; ++i) Jp.block<1, 3>(i, 3 * i) = -wa * u.transpose();
       Jp.block<3, 3>(0, 9) = -wa * Mat3::Identity();
@@ -285,32 +287,32 @@ class FullProblem {
       for (int i = 0; i < 3; ++i) Jg.block<1, 3>(i, 3 * i) = -wg * w.transpose();
       Jg.block<3, 3>(0, 9) = -wg * Mat3::Identity();
       if (g) {
-        const Eigen::Matrix<double, 15, 1> ga = -Jp.transpose() * ea;
+        const Eigen::Matrix<double, 15, 1> ga = -Jp.transpose().lazyProduct(ea);
         g->segment<12>(o) += ga.head<12>();
         g->segment<3>(o + kR) += ga.tail<3>();
-        g->segment<12>(o + kTg) -= Jg.transpose() * eg;
+        g->segment<12>(o + kTg) -= Jg.transpose().lazyProduct(eg);
       }
       if (!full) continue;
       Eigen::Matrix<double, 3, 9> dU;
       dU << CentripetalJacobian(w, p.r), -Skew(p.r), Mat3::Identity();
       const Eigen::Matrix<double, 3, 9> Jx = -wa * p.Ta * dU;
       const Mat3 Jxg = -wg * p.Tg;
-      out->H.noalias() += Jx.transpose() * Jx;
-      out->H.topLeftCorner<3, 3>().noalias() += Jxg.transpose() * Jxg;
+      out->H.noalias() += Jx.transpose().lazyProduct(Jx);
+      out->H.topLeftCorner<3, 3>().noalias() += Jxg.transpose().lazyProduct(Jxg);
       out->g.noalias() -= Jx.transpose() * ea;
       out->g.head<3>().noalias() -= Jxg.transpose() * eg;
-      const Eigen::Matrix<double, 9, 15> CJ = Jx.transpose() * Jp;
+      const Eigen::Matrix<double, 9, 15> CJ = Jx.transpose().lazyProduct(Jp);
       out->C.block(0, o, 9, 12) += CJ.leftCols<12>();
       out->C.block(0, o + kR, 9, 3) += CJ.rightCols<3>();
-      out->C.block(0, o + kTg, 3, 12).noalias() += Jxg.transpose() * Jg;
+      out->C.block(0, o + kTg, 3, 12).noalias() += Jxg.transpose().lazyProduct(Jg);
       if (H) {
         Mat27& h = (*H)[k];
-        const Eigen::Matrix<double, 15, 15> hp = Jp.transpose() * Jp;
+        const Eigen::Matrix<double, 15, 15> hp = Jp.transpose().lazyProduct(Jp);
         h.topLeftCorner<12, 12>() += hp.topLeftCorner<12, 12>();
         h.block<12, 3>(0, kR) += hp.topRightCorner<12, 3>();
         h.block<3, 12>(kR, 0) += hp.bottomLeftCorner<3, 12>();
         h.block<3, 3>(kR, kR) += hp.bottomRightCorner<3, 3>();
-        h.block<12, 12>(kTg, kTg).noalias() += Jg.transpose() * Jg;
+        h.block<12, 12>(kTg, kTg).noalias() += Jg.transpose().lazyProduct(Jg);
       }
     }
   }
@@ -341,10 +343,10 @@ class FullProblem {
       const Eigen::Matrix<double, 3, 2> Jx = -wa * p.Ta * Bs;
       H2.noalias() += Jx.transpose() * Jx;
       g2.noalias() -= Jx.transpose() * ea;
-      out->C.block(0, o, 2, 12).noalias() += Jx.transpose() * Jp;
+      out->C.block(0, o, 2, 12).noalias() += Jx.transpose().lazyProduct(Jp);
       if (H) {
         Mat27& h = (*H)[k];
-        h.topLeftCorner<12, 12>().noalias() += Jp.transpose() * Jp;
+        h.topLeftCorner<12, 12>().noalias() += Jp.transpose().lazyProduct(Jp);
         h.block<3, 3>(kBg, kBg).diagonal().array() += wg * wg;
       }
     }
