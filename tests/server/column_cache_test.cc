@@ -33,7 +33,9 @@
 #include "formats/recording_version.h"
 #include "methods/imu/imu_method.h"
 #include "server/config.h"
+#include "server/metrics.h"
 #include "server/recording_check.h"
+#include "server/worker_pool.h"
 #include "storage/store.h"
 #include "tests/server/http_test_util.h"
 
@@ -42,6 +44,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
+using storage::JobStatus;
 using testing::TempDir;
 using testing::TestServer;
 
@@ -478,6 +481,70 @@ TEST_F(ColumnCacheTest, ACheckWaitingForABuildStopsWithItsStopToken) {
   request.stop = nullptr;
   ASSERT_TRUE(ComputeCheck(store_.get(), request, &out).ok());
   EXPECT_EQ(cache.hits(), 1);
+}
+
+// A job (WorkerPool) waiting for a build of its entry: a cancel fails it within a second; the
+// shutdown (the cache's Stop, then the workers') sends it back to the queue within a second,
+// uncounted.
+TEST_F(ColumnCacheTest, AJobWaitingForABuildStopsWithItsCancelAndAtShutdown) {
+  const storage::RecordingInfo info = Put(SimulatedCsv(24, 38));
+  const json config = {{"method", "imu"}};
+  ColumnCache cache(Options());
+  // The job's own reading rules (worker_pool.cc), so that it waits for this very entry.
+  HeldBuild held(&cache, store_.get(), info, [&](RecordingParser* p) {
+    p->ExpectRows(info.rows);
+    PrepareParser(config, p);
+  });
+  Metrics metrics;
+  WorkerPoolOptions o;
+  o.workers = 1;
+  o.lease_ms = 300;
+  o.poll_ms = 20;
+  o.cancel_poll_ms = 20;
+  o.id_prefix = "test:1";
+  o.column_cache = &cache;
+  WorkerPool pool(store_.get(), &metrics, o);
+  pool.Start();
+  // Polls job `id` (a liveness bound of 30 s, not a speed claim) until done(job).
+  auto wait_for = [&](int64_t id, auto done) {
+    storage::JobInfo job;
+    for (int i = 0; i < 3000; ++i) {
+      EXPECT_TRUE(store_->GetJob(id, &job).ok());
+      if (done(job)) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return job;
+  };
+  for (const bool cancel : {true, false}) {
+    storage::JobInfo queued;
+    ASSERT_TRUE(store_->EnqueueJob(info.id, "imu", "", config.dump(), &queued).ok());
+    pool.Notify();
+    ASSERT_EQ(wait_for(queued.id,
+                       [](const storage::JobInfo& j) { return j.status == JobStatus::kRunning; })
+                  .status,
+              JobStatus::kRunning);
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // waiting for the build
+    const auto start = std::chrono::steady_clock::now();
+    if (cancel) {
+      EXPECT_TRUE(pool.Cancel(queued.id));
+      const storage::JobInfo job = wait_for(
+          queued.id, [](const storage::JobInfo& j) { return j.status != JobStatus::kRunning; });
+      EXPECT_LT(SecondsSince(start), 1.0) << "cancel";
+      EXPECT_EQ(job.status, JobStatus::kFailed);
+      EXPECT_EQ(job.error_reason, "cancelled");
+    } else {
+      // As Service::Shutdown does: the cache first (its waiters woken with kStopped), then the
+      // workers (here without grace: their jobs' stop requested at once).
+      cache.Stop();
+      EXPECT_EQ(pool.Stop(std::chrono::milliseconds(0)), StopOutcome::kReleased);
+      EXPECT_LT(SecondsSince(start), 1.0) << "shutdown";
+      storage::JobInfo job;
+      ASSERT_TRUE(store_->GetJob(queued.id, &job).ok());
+      EXPECT_EQ(job.status, JobStatus::kQueued) << job.error_code << ": " << job.error_message;
+      EXPECT_EQ(job.attempts, 0) << "a shutdown's release is not counted";
+    }
+  }
+  held.Release();
 }
 
 // An entry that cannot be read now (kIoError: here a directory where the file should be, EISDIR)
