@@ -24,7 +24,7 @@ namespace {
 
 constexpr char kMagic[16] = "calibd-columns\n";  // 15 characters and '\0'
 constexpr uint32_t kByteOrderMark = 0x01020304;
-constexpr uint64_t kMaxHeaderBytes = uint64_t{16} << 20;  // names and a log's description
+constexpr uint64_t kMaxHeaderBytes = kMaxColumnFileHeaderBytes;
 
 uint64_t Bits(double x) {
   uint64_t b;
@@ -172,6 +172,13 @@ Status WriteColumnFile(const std::string& path, const ColumnFileKey& key,
       {"mag_names", log.mag_names},
       {"mag_device_ids", log.mag_device_ids},
       {"data_bytes", data_bytes}}.dump(-1, ' ', false, json::error_handler_t::replace);
+  // The reader refuses a longer header: such an entry would be written only to be rebuilt.
+  if (header.size() > kMaxHeaderBytes) {
+    return Status(StatusCode::kInvalidInput,
+                  "column cache: not written: a header of " + std::to_string(header.size()) +
+                      " bytes (names and the log's description) is over the " +
+                      std::to_string(kMaxHeaderBytes) + " a reader accepts");
+  }
   static std::atomic<uint64_t> counter{0};
   const std::string temporary =
       path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(counter++);

@@ -30,6 +30,9 @@ namespace calibd::server {
 // 2: the magnetometers' device ids (mag_device_ids) in the header.
 inline constexpr uint32_t kColumnFileVersion = 2;
 
+// The longest header (names, the summary, the log's description) written or read.
+inline constexpr uint64_t kMaxColumnFileHeaderBytes = uint64_t{16} << 20;
+
 // What a file is of: the recording's bytes (their SHA-256) and the reading rules they were
 // parsed with (any text that determines the parse, compared verbatim).
 struct ColumnFileKey {
@@ -40,7 +43,9 @@ struct ColumnFileKey {
 // Writes `log` (array layout) and `summary` atomically: to a new temporary file beside `path`,
 // fsync'd, then renamed over `path` (and the folder fsync'd). After a crash `path` is either
 // absent, the old file or the whole new one. kIoError naming the path (disk full, ...); the
-// temporary file is removed on every error. *bytes (may be null): the file's size.
+// temporary file is removed on every error. kInvalidInput (nothing written) for a header over
+// kMaxColumnFileHeaderBytes, which ReadColumnFile would refuse. *bytes (may be null): the file's
+// size.
 Status WriteColumnFile(const std::string& path, const ColumnFileKey& key,
                        const RecordingSummary& summary, const ArrayRecording& log,
                        int64_t* bytes = nullptr);

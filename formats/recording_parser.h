@@ -18,6 +18,7 @@
 #include "formats/csv_dialect.h"
 #include "formats/log_assembly.h"
 #include "formats/recording.h"
+#include "formats/recording_version.h"  // bump it with any change to the reading rules
 #include "formats/sensor_log.h"
 
 namespace calibd::server {

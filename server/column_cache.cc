@@ -2,6 +2,7 @@
 #include "server/column_cache.h"
 
 #include <sys/stat.h>
+#include <sys/statvfs.h>
 
 #include <algorithm>
 #include <chrono>
@@ -13,6 +14,7 @@
 #include "formats/column_file.h"
 #include "formats/csv_dialect.h"
 #include "formats/log_assembly.h"
+#include "formats/recording_version.h"
 #include "server/config.h"
 
 namespace calibd::server {
@@ -25,7 +27,12 @@ namespace {
 constexpr const char* kEntrySuffix = ".columns";
 constexpr auto kTemporaryAge = std::chrono::hours(1);
 
-// Streams recording `id`'s stored bytes through `parser` and finishes it (unless stopped).
+Status Stopped(int64_t id) {
+  return Status(StatusCode::kStopped, "the read of recording " + std::to_string(id) + " stopped");
+}
+
+// Streams recording `id`'s stored bytes through `parser` and finishes it (unless stopped: then
+// `read` is kStopped).
 ColumnCache::Outcome ReadStored(storage::Store* store, int64_t id, RecordingParser* parser,
                                 const std::function<bool()>& keep_going) {
   ColumnCache::Outcome o;
@@ -35,32 +42,62 @@ ColumnCache::Outcome ReadStored(storage::Store* store, int64_t id, RecordingPars
     stopped = keep_going && !keep_going();
     return o.parse.ok() && !stopped;
   });
-  if (o.read.ok() && o.parse.ok() && !stopped) o.parse = parser->Finish();
+  if (o.read.ok() && stopped) o.read = Stopped(id);
+  if (o.read.ok() && o.parse.ok()) o.parse = parser->Finish();
   return o;
+}
+
+// Bytes available to unprivileged users on the file system of `dir`; -1: unknown.
+int64_t FreeBytes(const fs::path& dir) {
+  struct statvfs v;
+  if (::statvfs(dir.c_str(), &v) != 0) return -1;
+  return static_cast<int64_t>(v.f_bavail) * static_cast<int64_t>(v.f_frsize);
+}
+
+// The first violated constraint of `o`, or "".
+std::string Invalid(const ColumnCacheOptions& o) {
+  if (o.max_bytes <= 0) return "max_bytes must be > 0";
+  if (o.min_free_bytes < 0) return "min_free_bytes must be >= 0";
+  if (o.wait_poll_ms <= 0) return "wait_poll_ms must be > 0";
+  return "";
 }
 
 }  // namespace
 
 ColumnCache::ColumnCache(ColumnCacheOptions options) : options_(std::move(options)) {
   if (!enabled()) return;
+  const std::string invalid = Invalid(options_);
   std::error_code ec;
-  fs::create_directories(options_.dir, ec);
-  if (ec) {
-    std::cerr << "calibd: column cache disabled: cannot create " << options_.dir << ": "
-              << ec.message() << "\n";
+  if (invalid.empty() && !fs::exists(options_.dir, ec)) {
+    // Users' data: the owner's alone (the parents, if made, get the usual mode).
+    if (fs::create_directories(options_.dir, ec)) {
+      fs::permissions(options_.dir, fs::perms::owner_all, fs::perm_options::replace, ec);
+    }
+  }
+  if (!invalid.empty() || ec) {
+    std::cerr << "calibd: column cache disabled: "
+              << (invalid.empty() ? "cannot create " + options_.dir.string() + ": " + ec.message()
+                                  : invalid)
+              << "\n";
     options_.dir.clear();
     return;
   }
+  Evict();  // the bound may have been lowered since the entries were written
   builder_ = std::thread([this] { BuildLoop(); });
 }
 
-ColumnCache::~ColumnCache() {
+ColumnCache::~ColumnCache() { Stop(); }
+
+void ColumnCache::Stop() {
   {
     std::lock_guard<std::mutex> lock(mu_);
     stopping_ = true;
     queue_.clear();
   }
   cv_.notify_all();
+  // The build in progress polls stopping_ after every chunk. Stop() may run on several threads
+  // (Shutdown, the destructor): one joins.
+  std::lock_guard<std::mutex> join(join_mu_);
   if (builder_.joinable()) builder_.join();
 }
 
@@ -68,7 +105,8 @@ std::string ColumnCache::RulesText(const RecordingParser& parser) {
   const LogStreamSelection& streams = parser.log_streams();
   json imus = json::array();
   for (const auto& imu : streams.imus) imus.push_back({imu.accel, imu.gyro, imu.temp});
-  return json{{"time_unit", TimeUnitName(parser.time_unit())},
+  return json{{"parser_version", kRecordingParserVersion},
+              {"time_unit", TimeUnitName(parser.time_unit())},
               {"csv", parser.csv_dialect().ToJson()},
               {"imus", imus},
               // `streams` given at all (even {}): a log with IMUs on their own time bases is
@@ -80,23 +118,46 @@ std::string ColumnCache::RulesText(const RecordingParser& parser) {
 }
 
 fs::path ColumnCache::EntryPath(const std::string& sha256, const std::string& rules) const {
-  return options_.dir / (sha256 + "-" + Sha256Hex(rules).substr(0, 16) + kEntrySuffix);
+  // The file's version in the name: a server of another version neither reads nor removes it.
+  return options_.dir / (sha256 + "-" + Sha256Hex(rules).substr(0, 16) + ".v" +
+                         std::to_string(kColumnFileVersion) + kEntrySuffix);
+}
+
+bool ColumnCache::Claim(const std::string& path, const std::function<bool()>& keep_going) {
+  // One reader or builder per entry: a second one waits and then reads what the first wrote.
+  std::unique_lock<std::mutex> lock(mu_);
+  for (;;) {
+    if (stopping_) return false;
+    if (building_.count(path) == 0) break;
+    cv_.wait_for(lock, std::chrono::milliseconds(options_.wait_poll_ms));
+    if (stopping_ || building_.count(path) == 0) continue;
+    // keep_going may take locks of its own (never call it holding mu_).
+    lock.unlock();
+    const bool go = !keep_going || keep_going();
+    lock.lock();
+    if (!go) return false;
+  }
+  building_.insert(path);
+  return true;
 }
 
 ColumnCache::Outcome ColumnCache::Fill(storage::Store* store, const storage::RecordingInfo& info,
                                        RecordingParser* parser,
                                        const std::function<bool()>& keep_going) {
-  if (!enabled() || !parser->collects() || parser->collects_float() ||
+  if (!enabled() || stopping_ || !parser->collects() || parser->collects_float() ||
       info.layout != LayoutName(Layout::kArray) || info.sha256.empty()) {
     return ReadStored(store, info.id, parser, keep_going);
   }
   const ColumnFileKey key{info.sha256, RulesText(*parser)};
   const fs::path path = EntryPath(key.recording_sha256, key.rules);
-  {
-    // One reader or builder per entry: a second one waits and then reads what the first wrote.
-    std::unique_lock<std::mutex> lock(mu_);
-    cv_.wait(lock, [&] { return building_.count(path.string()) == 0; });
-    building_.insert(path.string());
+  if (!Claim(path.string(), keep_going)) {
+    Outcome o;
+    o.read = stopping_ ? Status(StatusCode::kStopped,
+                                "the parsed-columns cache stopped "
+                                "(shutdown) while recording " +
+                                    std::to_string(info.id) + " was built")
+                       : Stopped(info.id);
+    return o;
   }
   struct Release {
     ColumnCache* cache;
@@ -122,7 +183,14 @@ ColumnCache::Outcome ColumnCache::Fill(storage::Store* store, const storage::Rec
     o.hit = true;
     return o;
   }
-  if (cached.code() != StatusCode::kNotFound) {
+  // Damaged, cut or stale: removed and rebuilt. Not readable now (kIoError: out of file
+  // descriptors, EIO...): left as it is, this read parses the stored bytes and writes nothing.
+  const bool unreadable =
+      cached.code() != StatusCode::kNotFound && cached.code() != StatusCode::kCorruption;
+  if (unreadable) {
+    std::cerr << "calibd: " << cached.message() << "; recording " << info.id
+              << " read from its stored bytes, the entry kept\n";
+  } else if (cached.code() == StatusCode::kCorruption) {
     std::cerr << "calibd: " << cached.message() << "; removed, rebuilt from recording " << info.id
               << "\n";
     std::error_code ec;
@@ -130,27 +198,40 @@ ColumnCache::Outcome ColumnCache::Fill(storage::Store* store, const storage::Rec
     ++rebuilt_;
   }
   Outcome o = ReadStored(store, info.id, parser, keep_going);
-  if (!o.read.ok() || !o.parse.ok() || parser->summary().layout != Layout::kArray ||
+  if (unreadable || !o.read.ok() || !o.parse.ok() || parser->summary().layout != Layout::kArray ||
       (keep_going && !keep_going())) {
     return o;
   }
   summary = parser->summary();
   if (!parser->TakeArray(&log).ok()) return o;
-  const int64_t estimate = 8 * (log.t.size() + log.accel.size() + log.gyro.size() +
-                                log.temperature.size() + log.mag.size());
-  if (estimate < options_.max_bytes) {
-    int64_t bytes = 0;
-    Status w = WriteColumnFile(path.string(), key, summary, log, &bytes);
-    if (w.ok()) {
-      ++writes_;
-      Evict();
-    } else {
-      std::cerr << "calibd: " << w.message() << " (recording " << info.id
-                << " is read from its stored bytes until an entry can be written)\n";
-    }
-  }
+  WriteEntry(path.string(), key, summary, log, info.id);
   parser->Restore(summary, std::move(log));
   return o;
+}
+
+void ColumnCache::WriteEntry(const std::string& path, const ColumnFileKey& key,
+                             const RecordingSummary& summary, const ArrayRecording& log,
+                             int64_t id) {
+  const int64_t estimate = 8 * (log.t.size() + log.accel.size() + log.gyro.size() +
+                                log.temperature.size() + log.mag.size());
+  if (estimate >= options_.max_bytes) return;
+  if (options_.min_free_bytes > 0) {
+    const int64_t free = FreeBytes(options_.dir);
+    if (free >= 0 && free - estimate < options_.min_free_bytes) {
+      std::cerr << "calibd: column cache: no entry for recording " << id << ": "
+                << options_.dir.string() << " has " << free << " bytes free, under "
+                << options_.min_free_bytes << " after a " << estimate << "-byte entry\n";
+      return;
+    }
+  }
+  Status w = WriteColumnFile(path, key, summary, log);
+  if (w.ok()) {
+    ++writes_;
+    Evict();
+  } else {
+    std::cerr << "calibd: " << w.message() << " (recording " << id
+              << " is read from its stored bytes until an entry can be written)\n";
+  }
 }
 
 void ColumnCache::Evict() {
@@ -206,7 +287,7 @@ void ColumnCache::WaitIdle() {
 
 void ColumnCache::BuildLoop() {
   for (;;) {
-    Job job;
+    BuildJob job;
     {
       std::unique_lock<std::mutex> lock(mu_);
       cv_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
@@ -215,24 +296,13 @@ void ColumnCache::BuildLoop() {
       queue_.pop_front();
       busy_ = true;
     }
-    storage::RecordingInfo info;
-    if (job.store->GetRecording(job.id, &info).ok() && info.layout == LayoutName(Layout::kArray)) {
-      const json columns = json::parse(info.columns_json, nullptr, /*allow_exceptions=*/false);
-      const int64_t doubles =
-          info.rows * (columns.is_array() ? static_cast<int64_t>(columns.size()) : 0);
-      if (options_.prefetch_memory_bytes <= 0 || 16 * doubles <= options_.prefetch_memory_bytes) {
-        json config = job.config.is_object() ? job.config : json::object();
-        InheritCsvDialect(info, &config);
-        RecordingParser parser("recording " + std::to_string(job.id), /*collect=*/true);
-        parser.ExpectRows(info.rows);
-        PrepareParser(config, &parser);
-        parser.CollectArrayAsDouble();
-        // Stops at shutdown; errors are the reader's to report (the job's or the check's).
-        (void)Fill(job.store, info, &parser, [this] {
-          std::lock_guard<std::mutex> lock(mu_);
-          return !stopping_;
-        });
-      }
+    // One failed build (out of memory, a store or library that throws) is that build's alone:
+    // an exception escaping this thread would end the process.
+    try {
+      Build(job);
+    } catch (const std::exception& e) {
+      std::cerr << "calibd: column cache: the background build of recording " << job.id
+                << " failed: " << e.what() << "\n";
     }
     {
       std::lock_guard<std::mutex> lock(mu_);
@@ -240,6 +310,25 @@ void ColumnCache::BuildLoop() {
     }
     cv_.notify_all();
   }
+}
+
+void ColumnCache::Build(const BuildJob& job) {
+  storage::RecordingInfo info;
+  if (!job.store->GetRecording(job.id, &info).ok() || info.layout != LayoutName(Layout::kArray)) {
+    return;
+  }
+  const json columns = json::parse(info.columns_json, nullptr, /*allow_exceptions=*/false);
+  const int64_t doubles =
+      info.rows * (columns.is_array() ? static_cast<int64_t>(columns.size()) : 0);
+  if (options_.prefetch_memory_bytes > 0 && 16 * doubles > options_.prefetch_memory_bytes) return;
+  json config = job.config.is_object() ? job.config : json::object();
+  InheritCsvDialect(info, &config);
+  RecordingParser parser("recording " + std::to_string(job.id), /*collect=*/true);
+  parser.ExpectRows(info.rows);
+  PrepareParser(config, &parser);
+  parser.CollectArrayAsDouble();
+  // Stops at Stop(); errors are the reader's to report (the job's or the check's).
+  (void)Fill(job.store, info, &parser, [this] { return !stopping_.load(); });
 }
 
 ColumnCache::Outcome FillParser(ColumnCache* cache, storage::Store* store,

@@ -214,7 +214,10 @@ Status ComputeCheck(storage::Store* store, const CheckRequest& request, json* ou
   parser.ExpectRows(info.rows);
   PrepareParser(read_config, &parser);
   parser.CollectArrayAsDouble();
-  const ColumnCache::Outcome read = FillParser(request.cache, store, info, &parser);
+  const core::StopToken* stop = request.stop;
+  const ColumnCache::Outcome read = FillParser(
+      request.cache, store, info, &parser,
+      stop == nullptr ? std::function<bool()>{} : [stop] { return !stop->stop_requested(); });
   if (!read.parse.ok()) return read.parse;
   if (!read.read.ok()) return read.read;
   s = CheckLogConfig(parser.summary(), request.config, name);

@@ -314,6 +314,9 @@ bool Service::Shutdown() {
     // (which ran on meanwhile) get what the requests left of it.
     const auto deadline =
         std::chrono::steady_clock::now() + std::chrono::seconds(d.options.shutdown_grace_seconds);
+    // The parsed-columns cache's background build ends and readers waiting for a build (a job,
+    // a check) are woken with kStopped: none of them holds up the shutdown.
+    if (d.column_cache) d.column_cache->Stop();
     d.http->Shutdown(d.options.shutdown_grace_seconds * 1000);
     {
       std::lock_guard<std::mutex> lock(d.checker_mu);

@@ -374,6 +374,12 @@ void WorkerPool::RunJob(const std::string& worker_id, const storage::JobInfo& jo
                                                    &parser, [&] { return !stop.stop_requested(); });
       s = read.read;
       Status parsed = read.parse;
+      // Stopped mid-read: by the job's own stop (then already requested), or by the cache's
+      // Stop at shutdown while the job waited for another's build (then released to the queue).
+      if (s.code() == StatusCode::kStopped) {
+        stop.RequestStop(core::StopReason::kShutdown);
+        s = Status::Ok();
+      }
       if (options_.storage_outcome) {
         options_.storage_outcome(s, "recording " + std::to_string(job.recording_id), false);
       }

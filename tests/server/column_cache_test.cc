@@ -4,23 +4,38 @@
 // removed and rebuilt, never served; other reading rules (time unit, CSV dialect) never meet an
 // entry made for others; the entries stay within their byte bound (least recently used removed
 // first); the upload's background build serves the first reader; and over HTTP the check and
-// /segments answer the same with the cache as without it.
+// /segments answer the same with the cache as without it. Hardening: a reader waiting for
+// another's build ends with its own stop (a check's stop token too) or the cache's Stop() within
+// a second; an entry that cannot be read (kIoError) is kept, not removed; the entry's name holds
+// the file version and its key the parser's; a header over the reader's limit is not written;
+// the bound is enforced at start; the folder is 0700; no entry below the free-space floor.
 #include "server/column_cache.h"
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <future>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/imu_simulation.h"
 #include "formats/column_file.h"
 #include "formats/csv_dialect.h"
+#include "formats/recording_version.h"
 #include "methods/imu/imu_method.h"
+#include "server/config.h"
+#include "server/metrics.h"
+#include "server/recording_check.h"
+#include "server/worker_pool.h"
 #include "storage/store.h"
 #include "tests/server/http_test_util.h"
 
@@ -29,6 +44,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
+using storage::JobStatus;
 using testing::TempDir;
 using testing::TestServer;
 
@@ -98,6 +114,7 @@ class ColumnCacheTest : public ::testing::Test {
     ColumnCacheOptions o;
     o.dir = dir_.path() / "columns";
     o.max_bytes = max_bytes;
+    o.min_free_bytes = 0;  // the floor has its own test; these must not depend on the disk
     return o;
   }
 
@@ -328,6 +345,328 @@ TEST_F(ColumnCacheTest, BackgroundBuildServesTheFirstReader) {
   const RecordingSummary s = Read(&cache, info, &log, TimeUnit::kSeconds, {}, &hit);
   EXPECT_TRUE(hit);
   ExpectSame(Read(nullptr, info, &parsed), parsed, s, log);
+}
+
+// A reader that holds an entry's build: its keep_going (asked after the first chunk) blocks
+// until Release() (or 10 s), so the build is as slow as a test needs.
+class HeldBuild {
+ public:
+  // `prepare` sets the parser's reading rules (those of the reader that is to wait for it).
+  HeldBuild(ColumnCache* cache, storage::Store* store, const storage::RecordingInfo& info,
+            const std::function<void(RecordingParser*)>& prepare) {
+    thread_ = std::thread([this, cache, store, info, prepare] {
+      RecordingParser parser("held", /*collect=*/true);
+      prepare(&parser);
+      outcome_ = FillParser(cache, store, info, &parser, [this] {
+        std::unique_lock<std::mutex> lock(mu_);
+        inside_ = true;
+        cv_.notify_all();
+        cv_.wait_for(lock, std::chrono::seconds(10), [&] { return released_; });
+        return true;
+      });
+    });
+    std::unique_lock<std::mutex> lock(mu_);
+    cv_.wait(lock, [&] { return inside_; });
+  }
+  void Release() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      released_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+  ~HeldBuild() { Release(); }
+  const ColumnCache::Outcome& outcome() const { return outcome_; }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+  bool inside_ = false, released_ = false;
+  ColumnCache::Outcome outcome_;
+  std::thread thread_;
+};
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+TEST_F(ColumnCacheTest, AReaderWaitingForAnothersBuildStopsWithItsOwnStop) {
+  const storage::RecordingInfo info = Put(SimulatedCsv(6, 31));
+  ColumnCache cache(Options());
+  HeldBuild held(&cache, store_.get(), info, [&](RecordingParser* p) { p->ExpectRows(info.rows); });
+  std::atomic<bool> stop{false};
+  auto waiter = std::async(std::launch::async, [&] {
+    RecordingParser parser("waiter", /*collect=*/true);
+    ColumnCache::Outcome o = FillParser(&cache, store_.get(), info, &parser, [&] { return !stop; });
+    return std::make_pair(o, std::chrono::steady_clock::now());
+  });
+  // It waits (the build is held)...
+  EXPECT_EQ(waiter.wait_for(std::chrono::milliseconds(300)), std::future_status::timeout);
+  const auto asked = std::chrono::steady_clock::now();
+  stop = true;
+  // ...and ends within a second of its stop, with kStopped, though the build still runs.
+  ASSERT_EQ(waiter.wait_for(std::chrono::seconds(1)), std::future_status::ready);
+  const auto [o, when] = waiter.get();
+  EXPECT_LT(std::chrono::duration<double>(when - asked).count(), 1.0);
+  EXPECT_EQ(o.read.code(), StatusCode::kStopped) << o.read.ToString();
+  EXPECT_FALSE(o.hit);
+  held.Release();
+  EXPECT_TRUE(held.outcome().read.ok()) << held.outcome().read.ToString();
+  EXPECT_EQ(cache.writes(), 1);
+}
+
+TEST_F(ColumnCacheTest, StopWakesWaitersAndLaterReadsParseTheStoredBytes) {
+  const storage::RecordingInfo info = Put(SimulatedCsv(6, 32));
+  ColumnCache cache(Options());
+  HeldBuild held(&cache, store_.get(), info, [&](RecordingParser* p) { p->ExpectRows(info.rows); });
+  auto waiter = std::async(std::launch::async, [&] {
+    RecordingParser parser("waiter", /*collect=*/true);
+    return FillParser(&cache, store_.get(), info, &parser);  // no stop of its own
+  });
+  EXPECT_EQ(waiter.wait_for(std::chrono::milliseconds(300)), std::future_status::timeout);
+  const auto start = std::chrono::steady_clock::now();
+  cache.Stop();
+  ASSERT_EQ(waiter.wait_for(std::chrono::seconds(1)), std::future_status::ready);
+  EXPECT_LT(SecondsSince(start), 1.0);
+  const ColumnCache::Outcome o = waiter.get();
+  EXPECT_EQ(o.read.code(), StatusCode::kStopped) << o.read.ToString();
+  // A read after Stop neither waits nor uses the cache: the stored bytes, parsed.
+  ArrayRecording log, parsed;
+  bool hit = true;
+  const RecordingSummary s = Read(&cache, info, &log, TimeUnit::kSeconds, {}, &hit);
+  EXPECT_FALSE(hit);
+  ExpectSame(Read(nullptr, info, &parsed), parsed, s, log);
+  // Nothing more is queued after Stop.
+  cache.Prefetch(store_.get(), info.id, json{{"method", "imu"}});
+  cache.WaitIdle();
+  EXPECT_EQ(cache.writes(), 0);
+  held.Release();
+  EXPECT_EQ(cache.hits(), 0);
+}
+
+// A check (its stop token) waiting for a build of the same entry: stopped within a second.
+TEST_F(ColumnCacheTest, ACheckWaitingForABuildStopsWithItsStopToken) {
+  const storage::RecordingInfo info = Put(SimulatedCsv(24, 33));
+  ColumnCache cache(Options());
+  const json config = {{"method", "imu"}};
+  // The check's own reading rules (recording_check.cc), so that it waits for this very entry.
+  HeldBuild held(&cache, store_.get(), info, [&](RecordingParser* p) {
+    json read_config = config;
+    InheritCsvDialect(info, &read_config);
+    p->ExpectRows(info.rows);
+    PrepareParser(read_config, p);
+    p->CollectArrayAsDouble();
+  });
+  core::StopToken stop;
+  CheckRequest request;
+  request.recording_id = info.id;
+  request.config = config;
+  request.cache = &cache;
+  request.stop = &stop;
+  auto check = std::async(std::launch::async, [&] {
+    json out;
+    return ComputeCheck(store_.get(), request, &out);
+  });
+  EXPECT_EQ(check.wait_for(std::chrono::milliseconds(300)), std::future_status::timeout);
+  const auto start = std::chrono::steady_clock::now();
+  stop.RequestStop(core::StopReason::kShutdown);
+  ASSERT_EQ(check.wait_for(std::chrono::seconds(1)), std::future_status::ready);
+  EXPECT_LT(SecondsSince(start), 1.0);
+  const Status s = check.get();
+  EXPECT_EQ(s.code(), StatusCode::kStopped) << s.ToString();
+  held.Release();
+  // Unstopped, the same check is served by the entry the build wrote.
+  json out;
+  request.stop = nullptr;
+  ASSERT_TRUE(ComputeCheck(store_.get(), request, &out).ok());
+  EXPECT_EQ(cache.hits(), 1);
+}
+
+// A job (WorkerPool) waiting for a build of its entry: a cancel fails it within a second; the
+// shutdown (the cache's Stop, then the workers') sends it back to the queue within a second,
+// uncounted.
+TEST_F(ColumnCacheTest, AJobWaitingForABuildStopsWithItsCancelAndAtShutdown) {
+  const storage::RecordingInfo info = Put(SimulatedCsv(24, 38));
+  const json config = {{"method", "imu"}};
+  ColumnCache cache(Options());
+  // The job's own reading rules (worker_pool.cc), so that it waits for this very entry.
+  HeldBuild held(&cache, store_.get(), info, [&](RecordingParser* p) {
+    p->ExpectRows(info.rows);
+    PrepareParser(config, p);
+  });
+  Metrics metrics;
+  WorkerPoolOptions o;
+  o.workers = 1;
+  o.lease_ms = 300;
+  o.poll_ms = 20;
+  o.cancel_poll_ms = 20;
+  o.id_prefix = "test:1";
+  o.column_cache = &cache;
+  WorkerPool pool(store_.get(), &metrics, o);
+  pool.Start();
+  // Polls job `id` (a liveness bound of 30 s, not a speed claim) until done(job).
+  auto wait_for = [&](int64_t id, auto done) {
+    storage::JobInfo job;
+    for (int i = 0; i < 3000; ++i) {
+      EXPECT_TRUE(store_->GetJob(id, &job).ok());
+      if (done(job)) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return job;
+  };
+  for (const bool cancel : {true, false}) {
+    storage::JobInfo queued;
+    ASSERT_TRUE(store_->EnqueueJob(info.id, "imu", "", config.dump(), &queued).ok());
+    pool.Notify();
+    ASSERT_EQ(wait_for(queued.id,
+                       [](const storage::JobInfo& j) { return j.status == JobStatus::kRunning; })
+                  .status,
+              JobStatus::kRunning);
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // waiting for the build
+    const auto start = std::chrono::steady_clock::now();
+    if (cancel) {
+      EXPECT_TRUE(pool.Cancel(queued.id));
+      const storage::JobInfo job = wait_for(
+          queued.id, [](const storage::JobInfo& j) { return j.status != JobStatus::kRunning; });
+      EXPECT_LT(SecondsSince(start), 1.0) << "cancel";
+      EXPECT_EQ(job.status, JobStatus::kFailed);
+      EXPECT_EQ(job.error_reason, "cancelled");
+    } else {
+      // As Service::Shutdown does: the cache first (its waiters woken with kStopped), then the
+      // workers (here without grace: their jobs' stop requested at once).
+      cache.Stop();
+      EXPECT_EQ(pool.Stop(std::chrono::milliseconds(0)), StopOutcome::kReleased);
+      EXPECT_LT(SecondsSince(start), 1.0) << "shutdown";
+      storage::JobInfo job;
+      ASSERT_TRUE(store_->GetJob(queued.id, &job).ok());
+      EXPECT_EQ(job.status, JobStatus::kQueued) << job.error_code << ": " << job.error_message;
+      EXPECT_EQ(job.attempts, 0) << "a shutdown's release is not counted";
+    }
+  }
+  held.Release();
+}
+
+// An entry that cannot be read now (kIoError: here a directory where the file should be, EISDIR)
+// is not removed and not overwritten: the read parses the stored bytes.
+TEST_F(ColumnCacheTest, AnUnreadableEntryIsKeptAndTheStoredBytesRead) {
+  const storage::RecordingInfo info = Put(SimulatedCsv(6, 34));
+  ColumnCache cache(Options());
+  const fs::path entry = cache.EntryPath(info.sha256, DefaultRules());
+  fs::create_directories(entry);
+  RecordingSummary s;
+  ArrayRecording a;
+  ASSERT_EQ(ReadColumnFile(entry.string(), {info.sha256, DefaultRules()}, &s, &a).code(),
+            StatusCode::kIoError);
+  ArrayRecording log, parsed;
+  for (int round = 0; round < 2; ++round) {
+    bool hit = true;
+    const RecordingSummary got = Read(&cache, info, &log, TimeUnit::kSeconds, {}, &hit);
+    EXPECT_FALSE(hit);
+    ExpectSame(Read(nullptr, info, &parsed), parsed, got, log);
+  }
+  EXPECT_TRUE(fs::is_directory(entry)) << "an unreadable entry was removed";
+  EXPECT_EQ(cache.rebuilt(), 0);
+  EXPECT_EQ(cache.writes(), 0);
+}
+
+// The key holds the parser's reading-rules version; the name, the column file's version.
+TEST_F(ColumnCacheTest, KeyAndNameHoldTheParsersAndTheFilesVersions) {
+  const json rules = json::parse(DefaultRules());
+  EXPECT_EQ(rules.at("parser_version").get<int>(), kRecordingParserVersion);
+  const storage::RecordingInfo info = Put(SimulatedCsv(6, 35));
+  ColumnCache cache(Options());
+  ArrayRecording log;
+  Read(&cache, info, &log);
+  ASSERT_EQ(Entries().size(), 1u);
+  const std::string name = Entries()[0].filename().string();
+  const std::string suffix = ".v" + std::to_string(kColumnFileVersion) + ".columns";
+  EXPECT_EQ(name.substr(name.size() - suffix.size()), suffix) << name;
+  EXPECT_EQ(Entries()[0], cache.EntryPath(info.sha256, DefaultRules()));
+}
+
+// A header the reader would refuse (over 16 MB: here the log's description) is not written.
+TEST_F(ColumnCacheTest, AHeaderOverTheReadersLimitIsNotWritten) {
+  const storage::RecordingInfo info = Put(SimulatedCsv(6, 36));
+  ArrayRecording log;
+  RecordingSummary s = Read(nullptr, info, &log);
+  fs::create_directories(dir_.path() / "columns");
+  const std::string path = (dir_.path() / "columns" / "big.columns").string();
+  const ColumnFileKey key{info.sha256, DefaultRules()};
+  s.log_description = std::string(kMaxColumnFileHeaderBytes, 'x');
+  const Status w = WriteColumnFile(path, key, s, log);
+  EXPECT_EQ(w.code(), StatusCode::kInvalidInput) << w.ToString();
+  EXPECT_TRUE(Entries().empty()) << "a file or its temporary was left";
+  // Just under the limit: written and read back.
+  s.log_description.resize(kMaxColumnFileHeaderBytes - 8192);
+  ASSERT_TRUE(WriteColumnFile(path, key, s, log).ok());
+  RecordingSummary back;
+  ArrayRecording again;
+  ASSERT_TRUE(ReadColumnFile(path, key, &back, &again).ok());
+  EXPECT_EQ(back.log_description.size(), s.log_description.size());
+}
+
+// A bound lowered between runs holds from the start, before any write.
+TEST_F(ColumnCacheTest, TheBoundIsEnforcedAtStart) {
+  std::vector<storage::RecordingInfo> infos;
+  for (uint64_t seed = 41; seed <= 43; ++seed) infos.push_back(Put(SimulatedCsv(6, seed)));
+  {
+    ColumnCache large(Options());
+    ArrayRecording log;
+    for (const auto& info : infos) Read(&large, info, &log);
+  }
+  ASSERT_EQ(Entries().size(), 3u);
+  int64_t entry_bytes = 0;
+  for (const fs::path& p : Entries())
+    entry_bytes = std::max<int64_t>(entry_bytes, fs::file_size(p));
+  const int64_t bound = entry_bytes + entry_bytes / 2;
+  ColumnCache small(Options(bound));
+  ASSERT_EQ(Entries().size(), 1u);
+  EXPECT_LE(static_cast<int64_t>(fs::file_size(Entries()[0])), bound);
+}
+
+TEST_F(ColumnCacheTest, TheFolderIsTheOwnersAlone) {
+  ColumnCacheOptions o = Options();
+  o.dir = dir_.path() / "made" / "columns";
+  ColumnCache cache(o);
+  ASSERT_TRUE(cache.enabled());
+  struct stat st;
+  ASSERT_EQ(::stat(o.dir.c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0700u);
+}
+
+// Below the free-space floor no entry is written (the read is served all the same); a floor
+// the disk has room for writes.
+TEST_F(ColumnCacheTest, NoEntryBelowTheFreeSpaceFloor) {
+  const storage::RecordingInfo info = Put(SimulatedCsv(6, 37));
+  ColumnCacheOptions o = Options();
+  o.min_free_bytes = int64_t{1} << 62;  // more than any disk has
+  ColumnCache full(o);
+  ArrayRecording log, parsed;
+  bool hit = true;
+  const RecordingSummary s = Read(&full, info, &log, TimeUnit::kSeconds, {}, &hit);
+  EXPECT_FALSE(hit);
+  ExpectSame(Read(nullptr, info, &parsed), parsed, s, log);
+  EXPECT_EQ(full.writes(), 0);
+  EXPECT_TRUE(Entries().empty());
+  o.min_free_bytes = 1;
+  ColumnCache roomy(o);
+  Read(&roomy, info, &log);
+  EXPECT_EQ(roomy.writes(), 1);
+  EXPECT_EQ(Entries().size(), 1u);
+}
+
+TEST(ColumnCacheOptionsTest, ViolatedConstraintsDisableTheCache) {
+  TempDir dir;
+  for (int k = 0; k < 3; ++k) {
+    ColumnCacheOptions o;
+    o.dir = dir.path() / "columns";
+    if (k == 0) o.max_bytes = 0;
+    if (k == 1) o.min_free_bytes = -1;
+    if (k == 2) o.wait_poll_ms = 0;
+    ColumnCache cache(o);
+    EXPECT_FALSE(cache.enabled()) << k;
+  }
 }
 
 // Over HTTP: the check and /segments of a server with the cache (served from it the second time)
