@@ -73,6 +73,67 @@ Status ParseThermalProtocol(const json& protocol, PlanProtocol* out) {
   return Status::Ok();
 }
 
+// A direction given as a name ("+z") or a vector [x, y, z]: unit *v and its label.
+Status ReadDirection(const json& o, const std::string& field, Eigen::Vector3d* v,
+                     std::string* label);
+
+// The array keys (methods/plan.h): angular_rate, angular_acceleration, rotation_axis, duration.
+Status ParseMotionProtocol(const json& protocol, PlanProtocol* out) {
+  if (protocol.contains("angular_rate")) {
+    double rate = 0;
+    if (Status s = ReadPositive(protocol, "angular_rate", PlanProtocol::kMaxAngularRate, &rate);
+        !s.ok()) {
+      return s;
+    }
+    out->angular_rate = rate;
+  }
+  for (const char* key : {"angular_acceleration", "rotation_axis", "duration"}) {
+    if (protocol.contains(key) && !out->angular_rate) {
+      return FieldError("angular_rate", std::string("is missing: ") + key +
+                                            " belongs to a motion protocol (array), which gives "
+                                            "angular_rate (rad/s)");
+    }
+  }
+  if (Status s = ReadPositive(protocol, "angular_acceleration",
+                              PlanProtocol::kMaxAngularAcceleration, &out->angular_acceleration);
+      !s.ok()) {
+    return s;
+  }
+  if (Status s = ReadPositive(protocol, "duration", PlanProtocol::kMaxDuration, &out->duration);
+      !s.ok()) {
+    return s;
+  }
+  if (const auto it = protocol.find("rotation_axis"); it != protocol.end()) {
+    Eigen::Vector3d v;
+    if (Status s = ReadDirection(*it, "rotation_axis", &v, &out->rotation_axis_label); !s.ok()) {
+      return s;
+    }
+    out->rotation_axis = v;
+  }
+  return Status::Ok();
+}
+
+Status ReadDirection(const json& o, const std::string& field, Eigen::Vector3d* v,
+                     std::string* label) {
+  if (o.is_string()) {
+    if (Status s = OrientationFromName(o.get<std::string>(), v); !s.ok()) {
+      return FieldError(field, s.message());
+    }
+    *label = o.get<std::string>();
+  } else if (o.is_array() && o.size() == 3 && o[0].is_number() && o[1].is_number() &&
+             o[2].is_number()) {
+    *v = Eigen::Vector3d(o[0].get<double>(), o[1].get<double>(), o[2].get<double>());
+    if (!v->allFinite() || !(v->norm() > 1e-9)) {
+      return FieldError(field, "must be a non-zero finite vector");
+    }
+    v->normalize();
+    *label = "[" + Num((*v)(0)) + ", " + Num((*v)(1)) + ", " + Num((*v)(2)) + "]";
+  } else {
+    return FieldError(field, "must be a name such as \"+x\" or a vector [x, y, z]");
+  }
+  return Status::Ok();
+}
+
 // protocol.orientations into out (names or vectors, normalised).
 Status ParseOrientations(const json& protocol, PlanProtocol* out) {
   const auto it = protocol.find("orientations");
@@ -84,24 +145,13 @@ Status ParseOrientations(const json& protocol, PlanProtocol* out) {
   }
   for (size_t i = 0; i < it->size(); ++i) {
     const json& o = (*it)[i];
-    const std::string field = "orientations[" + std::to_string(i) + "]";
     Eigen::Vector3d v;
-    if (o.is_string()) {
-      if (Status s = OrientationFromName(o.get<std::string>(), &v); !s.ok()) {
-        return FieldError(field, s.message());
-      }
-      out->labels.push_back(o.get<std::string>());
-    } else if (o.is_array() && o.size() == 3 && o[0].is_number() && o[1].is_number() &&
-               o[2].is_number()) {
-      v = Eigen::Vector3d(o[0].get<double>(), o[1].get<double>(), o[2].get<double>());
-      if (!v.allFinite() || !(v.norm() > 1e-9)) {
-        return FieldError(field, "must be a non-zero finite vector");
-      }
-      v.normalize();
-      out->labels.push_back("[" + Num(v(0)) + ", " + Num(v(1)) + ", " + Num(v(2)) + "]");
-    } else {
-      return FieldError(field, "must be a name such as \"+x\" or a vector [x, y, z]");
+    std::string label;
+    if (Status s = ReadDirection(o, "orientations[" + std::to_string(i) + "]", &v, &label);
+        !s.ok()) {
+      return s;
     }
+    out->labels.push_back(label);
     out->orientations.push_back(v);
   }
   return Status::Ok();
@@ -142,15 +192,18 @@ Status ParsePlanProtocol(const json& protocol, PlanProtocol* out) {
     (void)value;
     if (key != "orientations" && key != "static_duration" && key != "rate" &&
         key != "rotation_duration" && key != "t_min" && key != "t_max" &&
-        key != "temperature_rate" && key != "imus") {
+        key != "temperature_rate" && key != "imus" && key != "angular_rate" &&
+        key != "angular_acceleration" && key != "rotation_axis" && key != "duration") {
       return FieldError(key.substr(0, 64),
                         "is not a protocol key (known: orientations, static_duration, rate, "
-                        "rotation_duration, t_min, t_max, temperature_rate, imus)");
+                        "rotation_duration, t_min, t_max, temperature_rate, imus, angular_rate, "
+                        "angular_acceleration, rotation_axis, duration)");
     }
   }
   if (Status s = ParseThermalProtocol(protocol, out); !s.ok()) return s;
-  // A thermal protocol may leave the orientations out (methods/plan.h).
-  if (!out->t_min || protocol.contains("orientations")) {
+  if (Status s = ParseMotionProtocol(protocol, out); !s.ok()) return s;
+  // A thermal or motion protocol may leave the orientations out (methods/plan.h).
+  if ((!out->t_min && !out->angular_rate) || protocol.contains("orientations")) {
     if (Status s = ParseOrientations(protocol, out); !s.ok()) return s;
   }
   if (Status s = ReadPositive(protocol, "static_duration", PlanProtocol::kMaxStaticDuration,
@@ -169,7 +222,9 @@ Status ParsePlanProtocol(const json& protocol, PlanProtocol* out) {
   const double n = static_cast<double>(out->orientations.size());
   const double samples =
       out->t_min ? out->rate * (*out->t_max - *out->t_min) / out->temperature_rate * 60
-                 : out->rate * (n * out->static_duration + (n - 1) * out->rotation_duration);
+      : out->angular_rate
+          ? out->rate * out->duration
+          : out->rate * (n * out->static_duration + (n - 1) * out->rotation_duration);
   if (samples > PlanProtocol::kMaxSamples) {
     return FieldError("rate", "× the protocol's duration is " + Num(samples) +
                                   " samples; at most " + Num(PlanProtocol::kMaxSamples) +

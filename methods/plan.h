@@ -34,21 +34,35 @@ struct PlanProtocol {
   std::optional<double> t_min, t_max;
   double temperature_rate = 1;  // °C/min, in (0, kMaxTemperatureRate]
   int imus = 1;
+  // array: free motion for `duration` s, every sample turning at |ω| = angular_rate rad/s with
+  // |ω̇| = angular_acceleration rad/s² (default: angular_rate's number, per second), about axes
+  // uniform on the sphere, or about rotation_axis only (body frame, unit) when set. Unset when
+  // the protocol names no angular_rate.
+  std::optional<double> angular_rate;
+  double angular_acceleration = 0;  // 0: angular_rate's number
+  std::optional<Eigen::Vector3d> rotation_axis;
+  std::string rotation_axis_label;  // its name ("+z") or "[x, y, z]"
+  double duration = 60;             // s, in (0, kMaxDuration]
 
   static constexpr int kMaxPositions = 1000;
   static constexpr int kMaxImus = 64;
   static constexpr double kMaxTemperatureRate = 60;
   static constexpr double kMaxStaticDuration = 600;
   static constexpr double kMaxRate = 10000;
-  static constexpr double kMaxSamples = 2e7;  // rate × total duration
+  static constexpr double kMaxSamples = 2e7;              // rate × total duration
+  static constexpr double kMaxAngularRate = 100;          // rad/s
+  static constexpr double kMaxAngularAcceleration = 1e4;  // rad/s²
+  static constexpr double kMaxDuration = 3600;            // s
 };
 
 // Reads {"orientations": [name or [x, y, z], ...], "static_duration", "rate",
-// "rotation_duration", "t_min", "t_max", "temperature_rate", "imus"} (all but orientations
-// optional, defaults as above; orientations may be left out when t_min or t_max is given: a
-// thermal protocol. A method needing orientations then names protocol.orientations). A name is up
-// to three signed axes, e.g. "+x", "-z", "+x+y", "-x+y-z" (the sum, normalised). kInvalidInput with
-// WithField("protocol.orientations[3]") etc. naming what is wrong; unknown keys are errors.
+// "rotation_duration", "t_min", "t_max", "temperature_rate", "imus", "angular_rate",
+// "angular_acceleration", "rotation_axis", "duration"} (all but orientations optional, defaults
+// as above; orientations may be left out when t_min or t_max is given: a thermal protocol, or
+// when angular_rate is given: an array's motion protocol. A method needing orientations then names
+// protocol.orientations). A name is up to three signed axes, e.g. "+x", "-z", "+x+y", "-x+y-z" (the
+// sum, normalised). kInvalidInput with WithField("protocol.orientations[3]") etc. naming what is
+// wrong; unknown keys are errors.
 Status ParsePlanProtocol(const nlohmann::json& protocol, PlanProtocol* out);
 
 // kInvalidInput naming protocol.orientations when the protocol has none (a thermal protocol sent

@@ -129,13 +129,22 @@ web::PlanView PlanPageView(const std::multimap<std::string, std::string>& params
     if (key == "t_max") view.t_max = value;
     if (key == "temperature_rate") view.temperature_rate = value;
     if (key == "imus") view.imus = value;
+    if (key == "angular_rate") view.angular_rate = value;
+    if (key == "angular_acceleration") view.angular_acceleration = value;
+    if (key == "rotation_axis") view.rotation_axis = value;
+    if (key == "duration") view.duration = value;
   }
   json request = {{"method", view.method}};
   json protocol = {{"orientations", json::array()}};
   for (const std::string& c : view.checked) protocol["orientations"].push_back(c);
   for (const json& o : TypedOrientations(view.orientations)) protocol["orientations"].push_back(o);
-  // A thermal warm-up may have no orientations (methods/plan.h).
-  if (protocol["orientations"].empty() && !view.t_min.empty()) protocol.erase("orientations");
+  // A thermal warm-up or an array's motion may have no orientations (methods/plan.h).
+  if (protocol["orientations"].empty() && (!view.t_min.empty() || !view.angular_rate.empty())) {
+    protocol.erase("orientations");
+  }
+  if (const json axis = TypedOrientations(view.rotation_axis); !axis.empty()) {
+    protocol["rotation_axis"] = axis[0];
+  }
   for (const auto& [key, text] :
        {std::pair<const char*, const std::string*>{"static_duration", &view.static_duration},
         {"rate", &view.rate},
@@ -143,7 +152,10 @@ web::PlanView PlanPageView(const std::multimap<std::string, std::string>& params
         {"t_min", &view.t_min},
         {"t_max", &view.t_max},
         {"temperature_rate", &view.temperature_rate},
-        {"imus", &view.imus}}) {
+        {"imus", &view.imus},
+        {"angular_rate", &view.angular_rate},
+        {"angular_acceleration", &view.angular_acceleration},
+        {"duration", &view.duration}}) {
     if (!text->empty()) protocol[key] = TypedNumber(*text);
   }
   request["protocol"] = protocol;

@@ -199,15 +199,16 @@ struct PlanView {
   std::vector<std::string> candidates;  // every candidate direction's name (the checkboxes)
   std::string static_duration, rate, rotation_duration;  // as typed
   std::string t_min, t_max, temperature_rate, imus;      // thermal's warm-up, as typed
-  std::string error;                                     // the plan's error message (empty: none)
+  std::string angular_rate, angular_acceleration, rotation_axis, duration;  // array's motion
+  std::string error;    // the plan's error message (empty: none)
   nlohmann::json plan;  // PlanJson's answer; null before the form is sent
 };
 
 // The plan page: form.plan-form (GET, works without JS), then, once sent, table.table-plan (the
 // predicted σ, one row per quantity), ul.undetermined (what the protocol cannot determine), the
-// suggested orientations (thermal: p.suggested-ramp, the warm-up) with their σ, and svg.sphere: the
-// protocol's and the suggestion's orientations on the unit sphere seen from +z and from −z. Every
-// user-controlled string is escaped.
+// suggested orientations (thermal: p.suggested-ramp, the warm-up; array: p.suggested-motion) with
+// their σ, and svg.sphere: the protocol's and the suggestion's orientations on the unit sphere seen
+// from +z and from −z. Every user-controlled string is escaped.
 std::string RenderPlanPage(const PlanView& view);
 
 // The history page: filter form (GET, works without JS), table.table-history (device link,

@@ -500,6 +500,22 @@ class Array : public Method {
     core::ArrayOptions options;
     return ParseArrayConfig(config, &geometry, &options, &degrees);
   }
+  // The positions model's plan (PlanArray); the full model has none yet (400 naming
+  // config.model).
+  Status Plan(const nlohmann::json& config, const PlanProtocol& protocol,
+              const AcceptanceLimits& limits, nlohmann::json* out) const override {
+    if (IsFullModel(config)) {
+      return Status::InvalidInput(
+                 "config.model: the array plan covers the positions model only; model full "
+                 "(gains, misalignments, biases) has no plan yet")
+          .WithField("config.model");
+    }
+    core::ArrayProblem geometry;
+    core::ArrayOptions options;
+    bool degrees = false;
+    if (Status s = ParseArrayConfig(config, &geometry, &options, &degrees); !s.ok()) return s;
+    return PlanArray(geometry, options, protocol, limits, out);
+  }
   void Judge(const nlohmann::json& result, const nlohmann::json& config,
              const AcceptanceLimits& limits, Verdict* verdict) const override {
     JudgeArray(result, config, limits, verdict);

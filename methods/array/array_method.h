@@ -117,6 +117,13 @@ Status ParseArrayConfig(const nlohmann::json& config, core::ArrayProblem* geomet
 Status RunArray(ArrayRecording recording, const nlohmann::json& config, nlohmann::json* result,
                 const core::StopToken* stop = nullptr, core::TaskExecutor executor = {});
 
+// The plan of a free-motion protocol for the positions model (Method::Plan; methods/array/
+// array_plan.cc): `geometry` (nominal_positions, reference) and `options` (noises in rad/s etc.)
+// as ParseArrayConfig fills them. kInvalidInput naming protocol.angular_rate when the protocol
+// gives no motion.
+Status PlanArray(const core::ArrayProblem& geometry, const core::ArrayOptions& options,
+                 const PlanProtocol& protocol, const AcceptanceLimits& limits, nlohmann::json* out);
+
 // The acceptance gate of an array result (Method::Judge), read typed (results::FromJson; a result
 // that does not read is rejected with the reader's message): every triad but the reference within
 // max_offset of its nominal position and its 1 sigma within max_position_std

@@ -45,6 +45,18 @@ std::string Form(const PlanView& v) {
            "\" size=\"6\" value=\"" + A(*value) + "\"></label>";
   }
   out +=
+      "<p class=\"small\">array: free motion at |ω| (rad/s) and |ω̇| (rad/s²), about random "
+      "axes or one rotation axis (a name such as +z), for a duration (s).</p>";
+  for (const auto& [name, label, value] :
+       {std::tuple<const char*, const char*, const std::string*>{"angular_rate", "|ω| (rad/s)",
+                                                                 &v.angular_rate},
+        {"angular_acceleration", "|ω̇| (rad/s²)", &v.angular_acceleration},
+        {"rotation_axis", "rotation axis", &v.rotation_axis},
+        {"duration", "duration (s)", &v.duration}}) {
+    out += "<label>" + E(label) + "<input type=\"text\" name=\"" + A(name) +
+           "\" size=\"6\" value=\"" + A(*value) + "\"></label>";
+  }
+  out +=
       "<p class=\"small\">Orientations: the direction pointing up (along the field), in the "
       "sensors' axes. Tick directions and/or type names or vectors, in order.</p><p>";
   for (const std::string& c : v.candidates) {
@@ -174,6 +186,13 @@ std::string Result(const PlanView& v) {
       out += "<p class=\"suggested-ramp\">" + Number(suggested["t_min"]) + " → " +
              Number(suggested["t_max"]) + " °C at " + Number(suggested["temperature_rate"]) +
              " °C/min (" + Number(suggested["duration"]) + " s)</p>";
+    }
+    // array: the motion (methods/array/array_plan.cc Suggest).
+    if (suggested.contains("angular_rate")) {
+      out += "<p class=\"suggested-motion\">" + Number(suggested["duration"]) + " s at |ω| " +
+             Number(suggested["angular_rate"]) + " rad/s, |ω̇| " +
+             Number(suggested["angular_acceleration"]) + " rad/s², about random axes, " +
+             Number(suggested["rate"]) + " Hz</p>";
     }
     out += suggested.value("meets_limits", false)
                ? "<p>Meets the gate's limits.</p>"
