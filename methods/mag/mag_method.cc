@@ -12,6 +12,7 @@
 #include "core/static_detection.h"
 #include "formats/inertial_log.h"
 #include "methods/config_keys.h"
+#include "methods/noise/noise_reference.h"
 
 namespace calibd::server {
 
@@ -33,6 +34,7 @@ struct MagConfig {
   // Hand-held holds are short: windows and holds of 0.5 s (SPEC §7's detection otherwise).
   core::StaticDetectionOptions statics = HandHeldStatics();
   size_t device_ids = 0;  // entries of config device_id (a number counts as one)
+  MagPlanConfig plan;     // mag_noise and dip: read by the plan only (methods/mag/mag_plan.cc)
 };
 
 // µT per reading unit of a named mag_unit; 0 for an unknown name.
@@ -44,15 +46,32 @@ double MicroteslaPerUnit(const std::string& name) {
   return 0;
 }
 
+// The plan's keys (mag_noise, dip) and the field and unit they go with.
+Status ParseMagPlanKeys(const json& config, const core::MagOptions& options, MagPlanConfig* out) {
+  out->field = options.field;
+  out->microtesla_per_unit = options.microtesla_per_unit;
+  if (auto it = config.find("mag_noise"); it != config.end() && it->is_object()) {
+    // Noise jobs (methods/noise) read accelerometer and gyroscope channels only.
+    return ConfigKeyError("mag_noise",
+                          "a noise job has no magnetometer channels to refer to: give the "
+                          "magnetometer's white-noise σ per sample as a number in mag_unit");
+  }
+  std::optional<NoiseLevel> level;
+  if (Status s = ReadNoiseLevel(config, "mag_noise", &level); !s.ok()) return s;
+  if (level) out->noise = level->value;
+  return ConfigNumber(config, "dip", -89, 89, &out->dip);
+}
+
 Status ParseMagConfig(const json& config, MagConfig* out) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
-  static const std::set<std::string>& kKnown = *new std::set<std::string>{
-      "method", "device", "mag_unit", "field", "static_window", "min_static", "device_id"};
+  static const std::set<std::string>& kKnown =
+      *new std::set<std::string>{"method",     "device",    "mag_unit",  "field", "static_window",
+                                 "min_static", "device_id", "mag_noise", "dip"};
   for (const auto& [key, value] : config.items()) {
     if (kKnown.count(key) == 0) {
       return ConfigKeyError(key,
                             "is not a mag config key (known: mag_unit, field, static_window, "
-                            "min_static, device_id, method, device)");
+                            "min_static, device_id, mag_noise, dip, method, device)");
     }
   }
   *out = MagConfig();
@@ -98,6 +117,7 @@ Status ParseMagConfig(const json& config, MagConfig* out) {
   }
   Status s = ConfigNumber(config, "static_window", 0.05, 60, &out->statics.static_window);
   if (s.ok()) s = ConfigNumber(config, "min_static", 0, 600, &out->statics.min_static);
+  if (s.ok()) s = ParseMagPlanKeys(config, out->options, &out->plan);
   if (!s.ok()) return s;
   return out->options.Validate();
 }
@@ -168,6 +188,10 @@ class Mag : public Method {
   Status ValidateConfig(const json& config) const override {
     MagConfig c;
     return ParseMagConfig(config, &c);
+  }
+  Status Plan(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits,
+              json* out) const override {
+    return PlanMag(config, protocol, limits, out);
   }
   const char* simulate_summary() const override {
     return "a magnetometer turned by hand with known hard and soft iron, misalignment, dip and "
@@ -429,6 +453,13 @@ std::function<Status(SimulatedFiles*)> Mag::AddSimulateOptions(CLI::App* command
 }
 
 }  // namespace
+
+Status ReadMagPlanConfig(const json& config, MagPlanConfig* out) {
+  MagConfig c;
+  if (Status s = ParseMagConfig(config, &c); !s.ok()) return s;
+  *out = c.plan;
+  return Status::Ok();
+}
 
 Status SimulateMagFiles(const core::MagSimulationOptions& options, std::string* csv, json* config,
                         json* truth) {
