@@ -164,6 +164,9 @@ render plan-imu "/plan?method=imu&orientations=%2Bz+-z+%2Bx+-x+%2By+-y+%2Bx%2By+
 # thermal: a warm-up 20 -> 50 degC at 1 degC/min, without orientations (issue #27 item 1).
 thermal_plan_config='config=%7B%22accel_noise%22%3A0.02%2C%22gyro_noise%22%3A0.002%7D'
 render plan-thermal "/plan?method=thermal&t_min=20&t_max=50&temperature_rate=1&rate=100&$thermal_plan_config"
+# The mag plan (issue 33 item 1): field, noise, eight held orientations with the turns between them.
+mag_plan_config='config=%7B%22field%22%3A50%2C%22mag_noise%22%3A0.3%7D'
+render plan-mag "/plan?method=mag&orientations=%2Bz+-z+%2Bx+-x+%2By+-y+%2Bx%2By+-x%2Bz&static_duration=2&rotation_duration=2&rate=50&$mag_plan_config"
 
 # A running job's page: its elapsed time and the Cancel form (issue #20); then it is cancelled.
 python3 - "$tmp/array/config.json" "$tmp/endless.json" <<'PY'
@@ -217,6 +220,7 @@ expect fleet 'class="page-fleet' 'table-fleet' 'href="/devices/FLEET-1"' 'P-&lt;
 expect plan 'class="page-plan' 'table-plan' 'table-plan-suggested' 'class="sphere' 'greedy D-optimal'
 expect plan-planar 'class="undetermined' 'no orientation with a component along z'
 expect plan-thermal 'class="page-plan' 'table-plan-suggested' 'suggested-ramp' 'one orientation'
+expect plan-mag 'class="page-plan' 'table-plan' 'table-plan-suggested' 'hard_iron_std' 'the mag method on the simulated logs'
 expect plan-imu 'class="page-plan' 'table-plan-suggested' 'starting flat (+z up)' \
   'class="fewer small"' 'positions the limits are not met'
 expect pca 'class="model"'
@@ -237,7 +241,7 @@ expect mag-device 'mag: hard-iron drift'
 expect thermal-device 'thermal (2 accepted calibrations' 'table-drift-thermal' \
   'plot-drift-thermal-accel' 'plot-drift-thermal-gyro'
 for page in history pca array failed failed-imu device devices revoked rejected recording check \
-  full device-drift running fleet plan plan-planar plan-imu plan-thermal mag mag-device thermal-device; do
+  full device-drift running fleet plan plan-planar plan-imu plan-thermal plan-mag mag mag-device thermal-device; do
   reject "$page" '<script' '<img'
   if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"
