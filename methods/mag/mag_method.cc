@@ -193,6 +193,8 @@ class Mag : public Method {
               json* out) const override {
     return PlanMag(config, protocol, limits, out);
   }
+  Status Check(const ArrayRecording& log, const json& config, const RunContext& context,
+               json* check) const override;
   const char* simulate_summary() const override {
     return "a magnetometer turned by hand with known hard and soft iron, misalignment, dip and "
            "disturbances";
@@ -404,6 +406,94 @@ Status Mag::Run(RecordingParser* parser, const json& config, const RunContext& c
     run.sample_noise_std = SampleNoise(p, run.result, to_ut);
   }
   *result = MagResultToJson(runs, c.unit_text, c.options.microtesla_per_unit, c.options.field);
+  return Status::Ok();
+}
+
+// The check before fitting (Method::Check): per magnetometer the samples, the statics Run's
+// FindStatics finds for the alignment and whether there are enough, and the raw field magnitude
+// against the Earth's in the declared mag_unit. The coverage and disturbed spans are the fit's
+// (core/mag.h steps 2 and 5: they need the calibrated field directions and the residuals), and
+// the predicted σ is not computed (the plan's, methods/mag/mag_plan.cc, needs the orientations of
+// the turns, which the log gives only after the fit): both are said in "mags[].notes".
+Status Mag::Check(const ArrayRecording& log, const json& config, const RunContext& context,
+                  json* check) const {
+  MagConfig c;
+  if (Status s = ParseMagConfig(config, &c); !s.ok()) return s;
+  c.statics.stop = context.stop;
+  if (log.mag_names.empty()) {
+    return Status::InvalidInput(
+        "mag needs magnetometer columns m0_x, m0_y, m0_z (one triad per magnetometer); the log "
+        "has none");
+  }
+  const AcceptanceKey* lo = nullptr;
+  const AcceptanceKey* hi = nullptr;
+  for (const AcceptanceKey& k : AcceptanceKeys()) {
+    if (std::string(k.name) == "min_field") lo = &k;
+    if (std::string(k.name) == "max_field") hi = &k;
+  }
+  const double min_field = lo->default_value.value_or(0);
+  const double max_field = hi->default_value.value_or(INFINITY);
+  const int needed = c.options.min_alignment_statics;
+  json mags = json::array();
+  for (size_t k = 0; k < log.mag_names.size(); ++k) {
+    const int a = AccelFor(log, k);
+    std::vector<core::MagStatic> statics;
+    if (Status s = FindStatics(log, a, c, &statics); !s.ok()) return s;
+    json list = json::array();
+    for (const core::MagStatic& st : statics) {
+      const Eigen::Vector3d up = st.specific_force.normalized();
+      list.push_back({{"start", log.t(st.first)},
+                      {"end", log.t(st.last)},
+                      {"samples", st.last - st.first + 1},
+                      {"up", {up(0), up(1), up(2)}}});
+    }
+    // The median raw magnitude (the hard iron shifts it by its size; a unit error by 10-1000).
+    std::vector<double> norms(static_cast<size_t>(log.mag.rows()));
+    for (Eigen::Index i = 0; i < log.mag.rows(); ++i) {
+      norms[static_cast<size_t>(i)] =
+          log.mag.block(i, 3 * static_cast<Eigen::Index>(k), 1, 3).norm();
+    }
+    std::nth_element(norms.begin(), norms.begin() + static_cast<std::ptrdiff_t>(norms.size() / 2),
+                     norms.end());
+    const double median = norms.empty() ? NAN : norms[norms.size() / 2];
+    const double field = median * c.options.microtesla_per_unit;
+    json units = json::array();
+    if (!(field >= 0.5 * min_field && field <= 2 * max_field)) {
+      units.push_back(
+          {{"quantity", "magnetometer"},
+           {"key", "mag_unit"},
+           {"message",
+            "the median |reading| is " + Fmt(field) + " uT with mag_unit \"" + c.unit_text +
+                "\", far from the Earth's field (" + Fmt(min_field) + "-" + Fmt(max_field) +
+                " uT)" +
+                FieldUnitHint(field, c.options.microtesla_per_unit, min_field, max_field)}});
+    }
+    mags.push_back(
+        {{"name", log.mag_names[k]},
+         {"samples", log.mag.rows()},
+         {"accelerometer", a >= 0 ? json(log.accel_names[static_cast<size_t>(a)]) : json()},
+         {"statics", list},
+         {"alignment_statics_needed", needed},
+         {"alignment_possible", static_cast<int>(statics.size()) >= needed},
+         {"median_field", field},
+         {"units", units},
+         {"coverage", nullptr},
+         {"disturbed_spans", nullptr},
+         {"predicted", nullptr},
+         {"notes",
+          {"coverage and disturbed spans are found by the fit (they need the calibrated field "
+           "directions and the residuals)",
+           "predicted σ: not computed for mag (the turns' orientations are known only after the "
+           "fit); see POST /plan"}}});
+  }
+  // The common keys (server/recording_check.h): the first magnetometer's statics, every unit.
+  (*check)["statics"] = mags[0]["statics"];
+  json& all_units = (*check)["units"];
+  if (!all_units.is_array()) all_units = json::array();
+  for (const json& m : mags) {
+    for (const json& u : m["units"]) all_units.push_back(u);
+  }
+  (*check)["mags"] = mags;
   return Status::Ok();
 }
 

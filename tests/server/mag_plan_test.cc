@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -192,6 +194,92 @@ TEST(MagPlanTest, ErrorsNameTheConfigKey) {
   config["dip"] = 95;
   s = PlanJson(Request(kTwelve, config), json(), &out);
   EXPECT_EQ(s.field(), "config.dip") << s.message();
+}
+
+}  // namespace
+}  // namespace calibd::server
+
+namespace calibd::server {
+namespace {
+
+// The check before fitting (Method::Check of mag) against the job on one simulated log: the same
+// statics (the job's FindStatics), and readings in gauss declared as µT named with the unit.
+TEST(MagCheckTest, StaticsAgreeWithTheJobAndGaussDeclaredAsMicroteslaIsNamed) {
+  for (const double per_unit : {1.0, 100.0}) {  // readings in µT, then in gauss
+    core::MagSimulationOptions sim;
+    sim.seed = 5;
+    sim.rate = 50;
+    sim.soft_iron *= per_unit;
+    sim.hard_iron /= per_unit;
+    sim.noise /= per_unit;
+    std::string csv;
+    json config, truth;
+    ASSERT_TRUE(SimulateMagFiles(sim, &csv, &config, &truth).ok());
+    const json job_config = {{"method", "mag"}};  // mag_unit uT (wrong for gauss)
+    RecordingParser for_check("check.csv", /*collect=*/true);
+    ASSERT_TRUE(for_check.Feed(csv).ok());
+    ASSERT_TRUE(for_check.Finish().ok());
+    ArrayRecording log;
+    ASSERT_TRUE(for_check.TakeArray(&log).ok());
+    json check = json::object();
+    ASSERT_TRUE(MagMethod().Check(log, job_config, RunContext(), &check).ok());
+    const json& m = check["mags"][0];
+    RecordingParser for_job("job.csv", /*collect=*/true);
+    MagMethod().PrepareParser(job_config, &for_job);
+    ASSERT_TRUE(for_job.Feed(csv).ok());
+    ASSERT_TRUE(for_job.Finish().ok());
+    json result;
+    const Status s = MagMethod().Run(&for_job, job_config, RunContext(), &result);
+    ASSERT_TRUE(s.ok()) << s.message();
+    EXPECT_EQ(m["statics"].size(), result["diagnostics"]["mags"][0]["statics"].get<size_t>());
+    EXPECT_EQ(m["statics"].size(), static_cast<size_t>(sim.statics));
+    EXPECT_TRUE(m["alignment_possible"].get<bool>());
+    EXPECT_EQ(m["samples"].get<int64_t>(), result["diagnostics"]["mags"][0]["samples"]);
+    if (per_unit == 1) {
+      EXPECT_TRUE(m["units"].empty()) << m["units"].dump();
+    } else {
+      ASSERT_EQ(m["units"].size(), 1u);
+      EXPECT_NE(m["units"][0]["message"].get<std::string>().find("\"gauss\""), std::string::npos)
+          << m["units"].dump();
+    }
+  }
+}
+
+// The same on CK-Explorer's real log (tests/methods/mag_method_test.cc reads it the same way:
+// 100 Hz, the accelerometer in g, the magnetometer in gauss): the check's statics are the job's.
+TEST(MagCheckTest, RealLogStaticsAgreeWithTheJob) {
+  const char* dir = std::getenv("CALIBD_MAG_DATA");
+  std::ifstream in(std::string(dir ? dir : "/work/data/mag") + "/acc_mag_log.csv");
+  if (!in) GTEST_SKIP() << "acc_mag_log.csv absent (see tests/core/mag_data_test.cc)";
+  std::string line, csv = "t,a0_x,a0_y,a0_z,m0_x,m0_y,m0_z\n";
+  std::getline(in, line);
+  for (int i = 0; std::getline(in, line); ++i) {
+    if (!line.empty()) csv += std::to_string(i * 0.01) + "," + line + "\n";
+  }
+  const json config = {{"method", "mag"}, {"mag_unit", "gauss"}};
+  RecordingParser for_check("check.csv", /*collect=*/true);
+  ASSERT_TRUE(for_check.Feed(csv).ok());
+  ASSERT_TRUE(for_check.Finish().ok());
+  ArrayRecording log;
+  ASSERT_TRUE(for_check.TakeArray(&log).ok());
+  json check = json::object();
+  ASSERT_TRUE(MagMethod().Check(log, config, RunContext(), &check).ok());
+  RecordingParser for_job("job.csv", /*collect=*/true);
+  MagMethod().PrepareParser(config, &for_job);
+  ASSERT_TRUE(for_job.Feed(csv).ok());
+  ASSERT_TRUE(for_job.Finish().ok());
+  json result;
+  const Status s = MagMethod().Run(&for_job, config, RunContext(), &result);
+  ASSERT_TRUE(s.ok()) << s.message();
+  const json& m = check["mags"][0];
+  EXPECT_EQ(m["statics"].size(), result["diagnostics"]["mags"][0]["statics"].get<size_t>());
+  EXPECT_EQ(m["samples"].get<int64_t>(), result["diagnostics"]["mags"][0]["samples"]);
+  EXPECT_TRUE(m["units"].empty()) << m["units"].dump();
+  // Declared in µT, the same readings are named as gauss.
+  json wrong = json::object();
+  ASSERT_TRUE(MagMethod().Check(log, {{"method", "mag"}}, RunContext(), &wrong).ok());
+  ASSERT_EQ(wrong["mags"][0]["units"].size(), 1u);
+  EXPECT_NE(wrong["mags"][0]["units"][0]["message"].dump().find("gauss"), std::string::npos);
 }
 
 }  // namespace
