@@ -468,8 +468,17 @@ Status Mag::Check(const ArrayRecording& log, const json& config, const RunContex
                 " uT)" +
                 FieldUnitHint(field, c.options.microtesla_per_unit, min_field, max_field)}});
     }
+    // The fit's first coverage stage (core/mag.h step 5, checked first): a planar log fails.
+    const Eigen::Matrix3Xd y = log.mag.middleCols(3 * static_cast<Eigen::Index>(k), 3).transpose();
+    const Status planar = core::CheckMagReadingsNotPlanar(y, c.options);
+    if (!planar.ok() && !check->contains("job_would_fail")) {
+      (*check)["job_would_fail"] =
+          log.mag_names.size() == 1 ? planar.message()
+                                    : "magnetometer " + log.mag_names[k] + ": " + planar.message();
+    }
     mags.push_back(
         {{"name", log.mag_names[k]},
+         {"readings_planar", !planar.ok()},
          {"samples", log.mag.rows()},
          {"accelerometer", a >= 0 ? json(log.accel_names[static_cast<size_t>(a)]) : json()},
          {"statics", list},
@@ -481,8 +490,9 @@ Status Mag::Check(const ArrayRecording& log, const json& config, const RunContex
          {"disturbed_spans", nullptr},
          {"predicted", nullptr},
          {"notes",
-          {"coverage and disturbed spans are found by the fit (they need the calibrated field "
-           "directions and the residuals)",
+          {"coverage: only the fit's first stage (readings close to a plane fail the job); the "
+           "verdict and missing axes, and the disturbed spans, are found by the fit (they need "
+           "the calibrated field directions and the residuals)",
            "predicted σ: not computed for mag (the turns' orientations are known only after the "
            "fit); see POST /plan"}}});
   }

@@ -234,6 +234,8 @@ TEST(MagCheckTest, StaticsAgreeWithTheJobAndGaussDeclaredAsMicroteslaIsNamed) {
     EXPECT_EQ(m["statics"].size(), result["diagnostics"]["mags"][0]["statics"].get<size_t>());
     EXPECT_EQ(m["statics"].size(), static_cast<size_t>(sim.statics));
     EXPECT_TRUE(m["alignment_possible"].get<bool>());
+    EXPECT_FALSE(m["readings_planar"].get<bool>());  // the job went on past its planar check
+    EXPECT_FALSE(check.contains("job_would_fail"));
     EXPECT_EQ(m["samples"].get<int64_t>(), result["diagnostics"]["mags"][0]["samples"]);
     if (per_unit == 1) {
       EXPECT_TRUE(m["units"].empty()) << m["units"].dump();
@@ -275,11 +277,39 @@ TEST(MagCheckTest, RealLogStaticsAgreeWithTheJob) {
   EXPECT_EQ(m["statics"].size(), result["diagnostics"]["mags"][0]["statics"].get<size_t>());
   EXPECT_EQ(m["samples"].get<int64_t>(), result["diagnostics"]["mags"][0]["samples"]);
   EXPECT_TRUE(m["units"].empty()) << m["units"].dump();
+  EXPECT_FALSE(m["readings_planar"].get<bool>());
   // Declared in µT, the same readings are named as gauss.
   json wrong = json::object();
   ASSERT_TRUE(MagMethod().Check(log, {{"method", "mag"}}, RunContext(), &wrong).ok());
   ASSERT_EQ(wrong["mags"][0]["units"].size(), 1u);
   EXPECT_NE(wrong["mags"][0]["units"][0]["message"].dump().find("gauss"), std::string::npos);
+}
+
+// A log turned about the vertical only: the check says the job would fail, with its message.
+TEST(MagCheckTest, PlanarLogFailsInTheCheckAsInTheJob) {
+  core::MagSimulationOptions sim;
+  sim.seed = 9;
+  sim.rate = 50;
+  sim.yaw_only = true;
+  std::string csv;
+  json config, truth;
+  ASSERT_TRUE(SimulateMagFiles(sim, &csv, &config, &truth).ok());
+  RecordingParser for_check("check.csv", /*collect=*/true);
+  ASSERT_TRUE(for_check.Feed(csv).ok());
+  ASSERT_TRUE(for_check.Finish().ok());
+  ArrayRecording log;
+  ASSERT_TRUE(for_check.TakeArray(&log).ok());
+  json check = json::object();
+  ASSERT_TRUE(MagMethod().Check(log, config, RunContext(), &check).ok());
+  RecordingParser for_job("job.csv", /*collect=*/true);
+  MagMethod().PrepareParser(config, &for_job);
+  ASSERT_TRUE(for_job.Feed(csv).ok());
+  ASSERT_TRUE(for_job.Finish().ok());
+  json result;
+  const Status s = MagMethod().Run(&for_job, config, RunContext(), &result);
+  ASSERT_FALSE(s.ok());
+  EXPECT_TRUE(check["mags"][0]["readings_planar"].get<bool>());
+  EXPECT_EQ(check.value("job_would_fail", ""), s.message());
 }
 
 }  // namespace
