@@ -416,6 +416,10 @@ void ChoosePrimary(const Covariances& c, const std::vector<Matrix3d>& dp, const 
 
 }  // namespace
 
+Status CheckMagReadingsNotPlanar(const Eigen::Matrix3Xd& y, const MagOptions& options) {
+  return CheckNotPlanar(y, options);
+}
+
 Status MagOptions::Validate() const {
   if (!(field >= 0) || !std::isfinite(field)) return Invalid("field must be >= 0 µT");
   if (!(microtesla_per_unit > 0) || !std::isfinite(microtesla_per_unit)) {

@@ -188,6 +188,11 @@ struct MagResult {
 // kIllConditioned; kStopped when options.stop asked. On failure `result` holds what was found.
 Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagResult* result);
 
+// Step 5's check made first (before any fit): kNotDeterminable (kPoorOrientationCoverage) with
+// CalibrateMag's message when the readings lie close to a plane; Ok otherwise. For checks before
+// fitting (Method::Check).
+Status CheckMagReadingsNotPlanar(const Eigen::Matrix3Xd& y, const MagOptions& options);
+
 }  // namespace calibd::core
 
 #endif  // CALIBD_CORE_MAG_H_

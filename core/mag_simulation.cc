@@ -28,6 +28,12 @@ Status Check(const MagSimulationOptions& o) {
   if (!(o.noise >= 0) || !(o.accel_noise >= 0)) return Invalid("noise must be >= 0");
   if (!(o.ar1 >= 0 && o.ar1 < 1)) return Invalid("ar1 must lie in [0, 1)");
   if (!(o.max_tilt > 0 && o.max_tilt <= 180)) return Invalid("max_tilt must lie in (0, 180]");
+  for (const Eigen::Matrix3d& q : o.orientations) {
+    if (!(q.transpose() * q).isApprox(Eigen::Matrix3d::Identity(), 1e-9) ||
+        !(q.determinant() > 0)) {
+      return Invalid("orientations must be rotation matrices");
+    }
+  }
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(o.soft_iron);
   if (!o.soft_iron.isApprox(o.soft_iron.transpose()) || !(es.eigenvalues()(0) > 0)) {
     return Invalid("soft_iron must be symmetric positive definite");
@@ -63,12 +69,16 @@ Status SimulateMag(const MagSimulationOptions& o, MagSimulation* out) {
   const Eigen::Vector3d g_earth(0, 0, -9.81);
   const int64_t per_turn = std::max<int64_t>(2, std::llround(o.turn_seconds * o.rate));
   const int64_t per_static = std::max<int64_t>(2, std::llround(o.static_seconds * o.rate));
-  const int64_t n = o.turns * per_turn + o.statics * per_static;
+  const bool given = !o.orientations.empty();
+  const int64_t turns = given ? static_cast<int64_t>(o.orientations.size()) - 1 : o.turns;
+  const int64_t holds_planned = given ? turns + 1 : o.statics;
+  const int64_t n = turns * per_turn + holds_planned * per_static;
   out->problem.t.resize(n);
   out->problem.y.resize(3, n);
   out->problem.statics.clear();
   out->accel.resize(3, n);
-  Eigen::Quaterniond from = RandomOrientation(o, &rng);
+  Eigen::Quaterniond from =
+      given ? Eigen::Quaterniond(o.orientations.front()) : RandomOrientation(o, &rng);
   Eigen::Vector3d coloured = Eigen::Vector3d::Zero();
   const double innovation = std::sqrt(1 - o.ar1 * o.ar1);
   int64_t i = 0;
@@ -87,24 +97,29 @@ Status SimulateMag(const MagSimulationOptions& o, MagSimulation* out) {
     out->accel.col(i) = qt * g_earth + nu;
     ++i;
   };
+  auto hold = [&]() {
+    const int64_t first = i;
+    for (int64_t k = 0; k < per_static; ++k) sample(from);
+    const int64_t trim = std::min<int64_t>(per_static / 4, std::llround(0.2 * o.rate));
+    MagStatic s;
+    s.first = first + trim;
+    s.last = i - 1 - trim;
+    s.specific_force = out->accel.middleCols(s.first, s.last - s.first + 1).rowwise().mean();
+    out->problem.statics.push_back(s);
+  };
+  if (given) hold();
   const int every = o.statics > 0 ? o.turns / o.statics : 0;
   int holds = 0;
-  for (int turn = 0; turn < o.turns; ++turn) {
-    const Eigen::Quaterniond to = RandomOrientation(o, &rng);
+  for (int64_t turn = 0; turn < turns; ++turn) {
+    const Eigen::Quaterniond to =
+        given ? Eigen::Quaterniond(o.orientations[turn + 1]) : RandomOrientation(o, &rng);
     for (int64_t k = 0; k < per_turn; ++k) {
       const double x = static_cast<double>(k + 1) / per_turn;
       sample(from.slerp(0.5 * (1 - std::cos(3.14159265358979323846 * x)), to));
     }
     from = to;
-    if (holds < o.statics && (turn + 1) % every == 0) {
-      const int64_t first = i;
-      for (int64_t k = 0; k < per_static; ++k) sample(from);
-      const int64_t trim = std::min<int64_t>(per_static / 4, std::llround(0.2 * o.rate));
-      MagStatic s;
-      s.first = first + trim;
-      s.last = i - 1 - trim;
-      s.specific_force = out->accel.middleCols(s.first, s.last - s.first + 1).rowwise().mean();
-      out->problem.statics.push_back(s);
+    if (given || (holds < o.statics && (turn + 1) % every == 0)) {
+      hold();
       ++holds;
     }
   }

@@ -49,6 +49,11 @@ struct MagSimulationOptions {
   // orientation), yaw uniform: below 90° the device is never turned over.
   double max_tilt = 180;
   std::vector<MagDisturbance> disturbances;
+  // A given protocol instead of random turns (the plan, methods/mag/mag_plan.cc): the body's
+  // attitudes Q_j (body → NED), held static_seconds each in order, joined by turns of
+  // turn_seconds (the same 1 − cos slerp); turns, statics, yaw_only and max_tilt are then
+  // ignored. Each entry a rotation matrix. Empty: random orientations.
+  std::vector<Eigen::Matrix3d> orientations;
 };
 
 struct MagSimulation {

@@ -12,6 +12,7 @@
 #include "core/static_detection.h"
 #include "formats/inertial_log.h"
 #include "methods/config_keys.h"
+#include "methods/noise/noise_reference.h"
 
 namespace calibd::server {
 
@@ -33,6 +34,7 @@ struct MagConfig {
   // Hand-held holds are short: windows and holds of 0.5 s (SPEC §7's detection otherwise).
   core::StaticDetectionOptions statics = HandHeldStatics();
   std::vector<int64_t> device_ids;  // config device_id (a number: m0's), empty when absent
+  MagPlanConfig plan;  // mag_noise and dip: read by the plan only (methods/mag/mag_plan.cc)
 };
 
 // µT per reading unit of a named mag_unit; 0 for an unknown name.
@@ -44,15 +46,32 @@ double MicroteslaPerUnit(const std::string& name) {
   return 0;
 }
 
+// The plan's keys (mag_noise, dip) and the field and unit they go with.
+Status ParseMagPlanKeys(const json& config, const core::MagOptions& options, MagPlanConfig* out) {
+  out->field = options.field;
+  out->microtesla_per_unit = options.microtesla_per_unit;
+  if (auto it = config.find("mag_noise"); it != config.end() && it->is_object()) {
+    // Noise jobs (methods/noise) read accelerometer and gyroscope channels only.
+    return ConfigKeyError("mag_noise",
+                          "a noise job has no magnetometer channels to refer to: give the "
+                          "magnetometer's white-noise σ per sample as a number in mag_unit");
+  }
+  std::optional<NoiseLevel> level;
+  if (Status s = ReadNoiseLevel(config, "mag_noise", &level); !s.ok()) return s;
+  if (level) out->noise = level->value;
+  return ConfigNumber(config, "dip", -89, 89, &out->dip);
+}
+
 Status ParseMagConfig(const json& config, MagConfig* out) {
   if (!config.is_object()) return Status::InvalidInput("the config must be a JSON object");
-  static const std::set<std::string>& kKnown = *new std::set<std::string>{
-      "method", "device", "mag_unit", "field", "static_window", "min_static", "device_id"};
+  static const std::set<std::string>& kKnown =
+      *new std::set<std::string>{"method",     "device",    "mag_unit",  "field", "static_window",
+                                 "min_static", "device_id", "mag_noise", "dip"};
   for (const auto& [key, value] : config.items()) {
     if (kKnown.count(key) == 0) {
       return ConfigKeyError(key,
                             "is not a mag config key (known: mag_unit, field, static_window, "
-                            "min_static, device_id, method, device)");
+                            "min_static, device_id, mag_noise, dip, method, device)");
     }
   }
   *out = MagConfig();
@@ -98,6 +117,7 @@ Status ParseMagConfig(const json& config, MagConfig* out) {
   }
   Status s = ConfigNumber(config, "static_window", 0.05, 60, &out->statics.static_window);
   if (s.ok()) s = ConfigNumber(config, "min_static", 0, 600, &out->statics.min_static);
+  if (s.ok()) s = ParseMagPlanKeys(config, out->options, &out->plan);
   if (!s.ok()) return s;
   return out->options.Validate();
 }
@@ -188,6 +208,12 @@ class Mag : public Method {
     MagConfig c;
     return ParseMagConfig(config, &c);
   }
+  Status Plan(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits,
+              json* out) const override {
+    return PlanMag(config, protocol, limits, out);
+  }
+  Status Check(const ArrayRecording& log, const json& config, const RunContext& context,
+               json* check) const override;
   const char* simulate_summary() const override {
     return "a magnetometer turned by hand with known hard and soft iron, misalignment, dip and "
            "disturbances";
@@ -403,6 +429,104 @@ Status Mag::Run(RecordingParser* parser, const json& config, const RunContext& c
   return Status::Ok();
 }
 
+// The check before fitting (Method::Check): per magnetometer the samples, the statics Run's
+// FindStatics finds for the alignment and whether there are enough, and the raw field magnitude
+// against the Earth's in the declared mag_unit. The coverage and disturbed spans are the fit's
+// (core/mag.h steps 2 and 5: they need the calibrated field directions and the residuals), and
+// the predicted σ is not computed (the plan's, methods/mag/mag_plan.cc, needs the orientations of
+// the turns, which the log gives only after the fit): both are said in "mags[].notes".
+Status Mag::Check(const ArrayRecording& log, const json& config, const RunContext& context,
+                  json* check) const {
+  MagConfig c;
+  if (Status s = ParseMagConfig(config, &c); !s.ok()) return s;
+  c.statics.stop = context.stop;
+  if (log.mag_names.empty()) {
+    return Status::InvalidInput(
+        "mag needs magnetometer columns m0_x, m0_y, m0_z (one triad per magnetometer); the log "
+        "has none");
+  }
+  const AcceptanceKey* lo = nullptr;
+  const AcceptanceKey* hi = nullptr;
+  for (const AcceptanceKey& k : AcceptanceKeys()) {
+    if (std::string(k.name) == "min_field") lo = &k;
+    if (std::string(k.name) == "max_field") hi = &k;
+  }
+  const double min_field = lo->default_value.value_or(0);
+  const double max_field = hi->default_value.value_or(INFINITY);
+  const int needed = c.options.min_alignment_statics;
+  json mags = json::array();
+  for (size_t k = 0; k < log.mag_names.size(); ++k) {
+    const int a = AccelFor(log, k);
+    std::vector<core::MagStatic> statics;
+    if (Status s = FindStatics(log, a, c, &statics); !s.ok()) return s;
+    json list = json::array();
+    for (const core::MagStatic& st : statics) {
+      const Eigen::Vector3d up = st.specific_force.normalized();
+      list.push_back({{"start", log.t(st.first)},
+                      {"end", log.t(st.last)},
+                      {"samples", st.last - st.first + 1},
+                      {"up", {up(0), up(1), up(2)}}});
+    }
+    // The median raw magnitude (the hard iron shifts it by its size; a unit error by 10-1000).
+    std::vector<double> norms(static_cast<size_t>(log.mag.rows()));
+    for (Eigen::Index i = 0; i < log.mag.rows(); ++i) {
+      norms[static_cast<size_t>(i)] =
+          log.mag.block(i, 3 * static_cast<Eigen::Index>(k), 1, 3).norm();
+    }
+    std::nth_element(norms.begin(), norms.begin() + static_cast<std::ptrdiff_t>(norms.size() / 2),
+                     norms.end());
+    const double median = norms.empty() ? NAN : norms[norms.size() / 2];
+    const double field = median * c.options.microtesla_per_unit;
+    json units = json::array();
+    if (!(field >= 0.5 * min_field && field <= 2 * max_field)) {
+      units.push_back(
+          {{"quantity", "magnetometer"},
+           {"key", "mag_unit"},
+           {"message",
+            "the median |reading| is " + Fmt(field) + " uT with mag_unit \"" + c.unit_text +
+                "\", far from the Earth's field (" + Fmt(min_field) + "-" + Fmt(max_field) +
+                " uT)" +
+                FieldUnitHint(field, c.options.microtesla_per_unit, min_field, max_field)}});
+    }
+    // The fit's first coverage stage (core/mag.h step 5, checked first): a planar log fails.
+    const Eigen::Matrix3Xd y = log.mag.middleCols(3 * static_cast<Eigen::Index>(k), 3).transpose();
+    const Status planar = core::CheckMagReadingsNotPlanar(y, c.options);
+    if (!planar.ok() && !check->contains("job_would_fail")) {
+      (*check)["job_would_fail"] =
+          log.mag_names.size() == 1 ? planar.message()
+                                    : "magnetometer " + log.mag_names[k] + ": " + planar.message();
+    }
+    mags.push_back(
+        {{"name", log.mag_names[k]},
+         {"readings_planar", !planar.ok()},
+         {"samples", log.mag.rows()},
+         {"accelerometer", a >= 0 ? json(log.accel_names[static_cast<size_t>(a)]) : json()},
+         {"statics", list},
+         {"alignment_statics_needed", needed},
+         {"alignment_possible", static_cast<int>(statics.size()) >= needed},
+         {"median_field", field},
+         {"units", units},
+         {"coverage", nullptr},
+         {"disturbed_spans", nullptr},
+         {"predicted", nullptr},
+         {"notes",
+          {"coverage: only the fit's first stage (readings close to a plane fail the job); the "
+           "verdict and missing axes, and the disturbed spans, are found by the fit (they need "
+           "the calibrated field directions and the residuals)",
+           "predicted σ: not computed for mag (the turns' orientations are known only after the "
+           "fit); see POST /plan"}}});
+  }
+  // The common keys (server/recording_check.h): the first magnetometer's statics, every unit.
+  (*check)["statics"] = mags[0]["statics"];
+  json& all_units = (*check)["units"];
+  if (!all_units.is_array()) all_units = json::array();
+  for (const json& m : mags) {
+    for (const json& u : m["units"]) all_units.push_back(u);
+  }
+  (*check)["mags"] = mags;
+  return Status::Ok();
+}
+
 std::function<Status(SimulatedFiles*)> Mag::AddSimulateOptions(CLI::App* command) const {
   auto o = std::make_shared<core::MagSimulationOptions>();
   auto disturbed = std::make_shared<int>(0);
@@ -449,6 +573,13 @@ std::function<Status(SimulatedFiles*)> Mag::AddSimulateOptions(CLI::App* command
 }
 
 }  // namespace
+
+Status ReadMagPlanConfig(const json& config, MagPlanConfig* out) {
+  MagConfig c;
+  if (Status s = ParseMagConfig(config, &c); !s.ok()) return s;
+  *out = c.plan;
+  return Status::Ok();
+}
 
 Status SimulateMagFiles(const core::MagSimulationOptions& options, std::string* csv, json* config,
                         json* truth) {

@@ -18,7 +18,9 @@
 //     "least_covered_direction", "missing", "sufficient", "verdict"}, "plot": {"t", "raw" [3][n],
 //     "calibrated" [3][n], "residual" [n], "disturbed" [n] (0/1)} (at most kMagPlotPoints samples)}
 // Config keys: method, device, mag_unit ("uT" default, "gauss", "mG", "nT", or µT per reading
-// unit), field (µT, > 0; absent: unknown, |m| = 1), static_window and min_static (s, default 0.5:
+// unit), field (µT, > 0; absent: unknown, |m| = 1), mag_noise (σ per sample and axis in
+// mag_unit) and dip (degrees, positive down, default 60): read by the plan only (a job estimates
+// both from its log), static_window and min_static (s, default 0.5:
 // hand-held holds are short), device_id (the firmware's device id of m0, or an array of them for
 // m0, m1, ...: written as PX4's CAL_MAGn_ID and ArduPilot's COMPASS_DEV_IDn; absent, the files say
 // it must be set).
@@ -26,6 +28,7 @@
 #define CALIBD_METHODS_MAG_MAG_METHOD_H_
 
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -37,6 +40,20 @@ namespace calibd::server {
 
 // The `mag` method for the registry: reads inertial logs with magnetometer columns.
 const Method& MagMethod();
+
+// What the plan reads of a mag config (methods/mag/mag_plan.cc).
+struct MagPlanConfig {
+  double field = 0;                // µT; 0: not given
+  double microtesla_per_unit = 1;  // of mag_unit
+  std::optional<double> noise;     // mag_noise: σ per sample and axis, reading units
+  double dip = 60;                 // degrees, positive down
+};
+// kInvalidInput naming the key, as ValidateConfig.
+Status ReadMagPlanConfig(const nlohmann::json& config, MagPlanConfig* out);
+
+// Method::Plan of mag (methods/mag/mag_plan.cc): see there.
+Status PlanMag(const nlohmann::json& config, const PlanProtocol& protocol,
+               const AcceptanceLimits& limits, nlohmann::json* out);
 
 // Samples of each triad's plot in diagnostics (evenly spaced over the log).
 inline constexpr int kMagPlotPoints = 800;

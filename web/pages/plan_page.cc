@@ -35,7 +35,10 @@ std::string Form(const PlanView& v) {
          "\"></label>";
   out += "<label>rotation (s)<input type=\"text\" name=\"rotation_duration\" size=\"6\" value=\"" +
          A(v.rotation_duration) + "\"></label>";
-  out += "<p class=\"small\">thermal: a warm-up at rest from t_min to t_max at a steady rate.</p>";
+  out +=
+      "<p class=\"small\">thermal: a warm-up at rest from t_min to t_max at a steady rate. "
+      "mag: config field (µT), mag_noise, dip; the orientations are attitudes in a level "
+      "frame (x north), held still, with the turns between them logged.</p>";
   for (const auto& [name, label, value] :
        {std::tuple<const char*, const char*, const std::string*>{"t_min", "t_min (°C)", &v.t_min},
         {"t_max", "t_max (°C)", &v.t_max},
