@@ -61,11 +61,13 @@ const char* const kFirmwareComment =
     "carried; the orientation parameters are not written (leave them at 0, rotation none).";
 
 // The firmware device id of magnetometer k: the result's (config device_id, else the log
-// stream's; see methods/mag/mag_method.cc SetDeviceId), else, for a result stored before it
-// carried one, config device_id (a number: m0's; an array: one per magnetometer); -1: none.
+// stream's; see methods/mag/mag_method.cc SetDeviceId), else (none known to the run, or a result
+// stored before it carried one) the export's config device_id (a number: m0's; an array: one per
+// magnetometer); -1: none.
 int64_t DeviceId(const json& mags, const ExportContext& context, size_t k) {
-  if (const json& m = mags.at(k); m.contains("device_id")) {
-    return m.at("device_id").is_number_integer() ? m.at("device_id").get<int64_t>() : -1;
+  if (const json& m = mags.at(k);
+      m.contains("device_id") && m.at("device_id").is_number_integer()) {
+    return m.at("device_id").get<int64_t>();
   }
   if (!context.config.is_object() || !context.config.contains("device_id")) return -1;
   const json& id = context.config.at("device_id");
