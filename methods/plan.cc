@@ -326,4 +326,72 @@ std::vector<std::string> MissingDirections(const std::vector<Eigen::Vector3d>& o
   return out;
 }
 
+PlanProtocol PlanPrefix(const std::vector<const PlanCandidate*>& sequence, int k,
+                        const PlanProtocol& protocol) {
+  PlanProtocol out = protocol;
+  out.orientations.clear();
+  out.labels.clear();
+  for (int j = 0; j < k; ++j) {
+    out.orientations.push_back(sequence[static_cast<size_t>(j)]->direction);
+    out.labels.push_back(sequence[static_cast<size_t>(j)]->name);
+  }
+  return out;
+}
+
+void SuggestFewestPositions(
+    const std::vector<const PlanCandidate*>& sequence, const PlanProtocol& protocol,
+    int min_positions, int cap,
+    const std::function<Status(const PlanProtocol&, nlohmann::json*)>& predict,
+    const std::function<void(const nlohmann::json&, Verdict*)>& judge, const std::string& too_few,
+    nlohmann::json* out) {
+  struct Trial {
+    bool predicted = false;  // the method ran and gave parameters
+    nlohmann::json result;
+    Verdict verdict;
+  };
+  int predictions = 0;
+  const auto attempt = [&](int k) {
+    ++predictions;
+    Trial t;
+    const Status s = predict(PlanPrefix(sequence, k, protocol), &t.result);
+    t.predicted = s.ok();
+    if (s.ok()) {
+      judge(t.result, &t.verdict);
+    } else {
+      t.verdict.Reject(s.message());
+    }
+    return t;
+  };
+  // Invariant: hi passes (or is the cap), lo fails (lo = min − 1: the method refuses it).
+  int hi = cap, lo = min_positions - 1;
+  Trial best = attempt(hi), fewer;
+  bool fewer_predicted = false;
+  if (best.verdict.accepted()) {
+    while (hi - lo > 1) {
+      const int mid = lo + (hi - lo) / 2;
+      Trial t = attempt(mid);
+      if (t.verdict.accepted()) {
+        hi = mid;
+        best = std::move(t);
+      } else {
+        lo = mid;
+        fewer = std::move(t);
+        fewer_predicted = true;
+      }
+    }
+  }
+  const PlanProtocol chosen = PlanPrefix(sequence, hi, protocol);
+  nlohmann::json& o = *out;
+  o["orientations"] = OrientationsJson(chosen.orientations, chosen.labels);
+  o["meets_limits"] = best.verdict.accepted();
+  o["unmet"] = best.verdict.reasons();
+  if (best.predicted) o["uncertainty"] = best.result["uncertainty"];
+  if (best.verdict.accepted()) {
+    o["fewer"] = {
+        {"positions", lo},
+        {"unmet", fewer_predicted ? fewer.verdict.reasons() : std::vector<std::string>{too_few}}};
+  }
+  o["predictions"] = predictions;
+}
+
 }  // namespace calibd::server

@@ -7,12 +7,14 @@
 #define CALIBD_METHODS_PLAN_H_
 
 #include <Eigen/Core>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "base/status.h"
+#include "methods/acceptance.h"
 
 namespace calibd::server {
 
@@ -85,6 +87,24 @@ struct PlanCandidate {
   Eigen::Vector3d direction;
 };
 const std::vector<PlanCandidate>& PlanCandidates();
+
+// The first k positions of a greedy sequence as a protocol (its durations and rate kept).
+PlanProtocol PlanPrefix(const std::vector<const PlanCandidate*>& sequence, int k,
+                        const PlanProtocol& protocol);
+
+// The suggestion's cut of a greedy sequence (the imu and mag plans): the fewest of its first
+// `cap` positions whose prediction passes the gate, by bisection between min_positions − 1 (the
+// method refuses it) and cap (passes, or is the cap). `predict` runs the method on a protocol
+// (non-OK: no result, its message the reason it fails); `judge` is the method's gate (with the
+// plan's tightened limits). Sets `orientations`, `meets_limits`, `unmet`, `uncertainty`, `fewer`
+// ({positions, unmet}: one position less and why it fails; `too_few` when that many were not
+// predicted, the method refusing them) and `predictions` (the method's runs it took) in *out.
+void SuggestFewestPositions(
+    const std::vector<const PlanCandidate*>& sequence, const PlanProtocol& protocol,
+    int min_positions, int cap,
+    const std::function<Status(const PlanProtocol&, nlohmann::json*)>& predict,
+    const std::function<void(const nlohmann::json&, Verdict*)>& judge, const std::string& too_few,
+    nlohmann::json* out);
 
 // "z" for a unit axis direction (either sign), "[0.71, 0.71, 0]" otherwise: for messages.
 std::string DirectionWords(const Eigen::Vector3d& direction);

@@ -165,38 +165,6 @@ bool ImuSuggestOptions::IsValid(std::string* error) const {
 
 namespace {
 
-// The protocol of the first k positions of `sequence` with `protocol`'s durations and rate.
-PlanProtocol Prefix(const std::vector<const PlanCandidate*>& sequence, int k,
-                    const PlanProtocol& protocol) {
-  PlanProtocol out = protocol;
-  out.orientations.clear();
-  out.labels.clear();
-  for (int j = 0; j < k; ++j) {
-    out.orientations.push_back(sequence[static_cast<size_t>(j)]->direction);
-    out.labels.push_back(sequence[static_cast<size_t>(j)]->name);
-  }
-  return out;
-}
-
-// One prediction of a prefix and its verdict under `limits`.
-struct Trial {
-  bool predicted = false;  // the method ran and gave parameters
-  json result;
-  Verdict verdict;
-};
-
-Trial Try(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits) {
-  Trial t;
-  const Status s = PredictImu(config, protocol, &t.result);
-  t.predicted = s.ok();
-  if (!s.ok()) {
-    t.verdict.Reject(s.message());
-  } else {
-    ImuMethod().Judge(t.result, config, limits, &t.verdict);
-  }
-  return t;
-}
-
 Status MissingNoise(const char* key) {
   return Status::InvalidInput(std::string("config.") + key +
                               ": the plan needs the white-noise σ per sample (SI), a number or "
@@ -271,42 +239,13 @@ json SuggestImu(const json& config, const PlanProtocol& protocol, const Acceptan
     return out;
   }
   const std::vector<const PlanCandidate*> sequence = ImuGreedySequence(cap);
-  int predictions = 0;
-  auto attempt = [&](int k) {
-    ++predictions;
-    return Try(config, Prefix(sequence, k, protocol), margined);
-  };
-  // Invariant: hi passes (or is the cap), lo fails (lo = min − 1: the method refuses it).
-  int hi = cap, lo = min_positions - 1;
-  Trial best = attempt(hi), fewer;
-  bool fewer_predicted = false;
-  if (best.verdict.accepted()) {
-    while (hi - lo > 1) {
-      const int mid = lo + (hi - lo) / 2;
-      Trial t = attempt(mid);
-      if (t.verdict.accepted()) {
-        hi = mid;
-        best = std::move(t);
-      } else {
-        lo = mid;
-        fewer = std::move(t);
-        fewer_predicted = true;
-      }
-    }
-  }
-  const PlanProtocol chosen = Prefix(sequence, hi, protocol);
-  out["orientations"] = OrientationsJson(chosen.orientations, chosen.labels);
-  out["meets_limits"] = best.verdict.accepted();
-  out["unmet"] = best.verdict.reasons();
-  if (best.predicted) out["uncertainty"] = best.result["uncertainty"];
-  if (best.verdict.accepted()) {
-    out["fewer"] = {{"positions", lo},
-                    {"unmet", fewer_predicted ? fewer.verdict.reasons()
-                                              : std::vector<std::string>{
-                                                    "the imu method needs " +
-                                                    std::to_string(min_positions) + " statics"}}};
-  }
-  out["predictions"] = predictions;
+  SuggestFewestPositions(
+      sequence, protocol, min_positions, cap,
+      [&](const PlanProtocol& p, json* result) { return PredictImu(config, p, result); },
+      [&](const json& result, Verdict* verdict) {
+        ImuMethod().Judge(result, config, margined, verdict);
+      },
+      "the imu method needs " + std::to_string(min_positions) + " statics", &out);
   return out;
 }
 

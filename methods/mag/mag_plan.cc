@@ -265,40 +265,6 @@ Status PredictMag(const json& config, const PlanProtocol& protocol, json* result
   return Status::Ok();
 }
 
-namespace {
-
-struct Trial {
-  bool predicted = false;
-  json result;
-  Verdict verdict;
-};
-
-PlanProtocol Prefix(const std::vector<const PlanCandidate*>& sequence, int k,
-                    const PlanProtocol& protocol) {
-  PlanProtocol out = protocol;
-  out.orientations.clear();
-  out.labels.clear();
-  for (int j = 0; j < k; ++j) {
-    out.orientations.push_back(sequence[static_cast<size_t>(j)]->direction);
-    out.labels.push_back(sequence[static_cast<size_t>(j)]->name);
-  }
-  return out;
-}
-
-Trial Try(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits) {
-  Trial t;
-  const Status s = PredictMag(config, protocol, &t.result);
-  t.predicted = s.ok();
-  if (!s.ok()) {
-    t.verdict.Reject(s.message());
-  } else {
-    MagMethod().Judge(t.result, config, limits, &t.verdict);
-  }
-  return t;
-}
-
-}  // namespace
-
 // The first `positions` up directions of the greedy D-optimal sequence (file comment).
 std::vector<const PlanCandidate*> MagGreedySequence(int positions, const PlanProtocol& protocol,
                                                     double dip) {
@@ -370,41 +336,13 @@ json SuggestMag(const json& config, const PlanProtocol& protocol, const Acceptan
     return out;
   }
   const std::vector<const PlanCandidate*> sequence = MagGreedySequence(cap, protocol, dip);
-  int predictions = 0;
-  auto attempt = [&](int k) {
-    ++predictions;
-    return Try(config, Prefix(sequence, k, protocol), margined);
-  };
-  int hi = cap, lo = min_positions - 1;  // hi passes (or is the cap), lo fails
-  Trial best = attempt(hi), fewer;
-  bool fewer_predicted = false;
-  if (best.verdict.accepted()) {
-    while (hi - lo > 1) {
-      const int mid = lo + (hi - lo) / 2;
-      Trial t = attempt(mid);
-      if (t.verdict.accepted()) {
-        hi = mid;
-        best = std::move(t);
-      } else {
-        lo = mid;
-        fewer = std::move(t);
-        fewer_predicted = true;
-      }
-    }
-  }
-  const PlanProtocol chosen = Prefix(sequence, hi, protocol);
-  out["orientations"] = OrientationsJson(chosen.orientations, chosen.labels);
-  out["meets_limits"] = best.verdict.accepted();
-  out["unmet"] = best.verdict.reasons();
-  if (best.predicted) out["uncertainty"] = best.result["uncertainty"];
-  if (best.verdict.accepted()) {
-    out["fewer"] = {{"positions", lo},
-                    {"unmet", fewer_predicted ? fewer.verdict.reasons()
-                                              : std::vector<std::string>{
-                                                    "the alignment needs " +
-                                                    std::to_string(min_positions) + " statics"}}};
-  }
-  out["predictions"] = predictions;
+  SuggestFewestPositions(
+      sequence, protocol, min_positions, cap,
+      [&](const PlanProtocol& p, json* result) { return PredictMag(config, p, result); },
+      [&](const json& result, Verdict* verdict) {
+        MagMethod().Judge(result, config, margined, verdict);
+      },
+      "the alignment needs " + std::to_string(min_positions) + " statics", &out);
   return out;
 }
 
