@@ -8,7 +8,8 @@
 # Release build; the core code runs here in the methods', server's and fuzz tests.
 # Left out, because their subject is statistics or timing, which the Release build checks, while
 # the code they run is run here by other tests:
-#   - the Monte-Carlo chain over boards (CalibrationChain.ArrayReachesTheCramerRaoBound...);
+#   - the Monte-Carlo chain over boards (CalibrationChain.ArrayReachesTheCramerRaoBound...) and
+#     the array and mag plans' sweeps against simulated fits (below);
 #   - browser_pages (its time is Chromium's; every page's rendering runs here in the web tests)
 #     and the StopProcess timing test (a job of several seconds made of BCD sweeps, 143 s under
 #     ASan; the other StopProcess tests run the same shutdown code here).
@@ -32,7 +33,12 @@ export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 [ -x /usr/lib/llvm-14/bin/llvm-symbolizer ] && export ASAN_SYMBOLIZER_PATH=/usr/lib/llvm-14/bin/llvm-symbolizer
 slow='^(CalibrationChain\.ArrayReachesTheCramerRaoBoundOnlyWithTheCalibration'
 slow+='|StopProcess\.SigtermPastTheGraceStopsTheJobExitsWithinOneSecondAndTheRestartCompletesIt'
-slow+='|browser_pages)$'
+slow+='|browser_pages'
+# The plans' Monte-Carlo sweeps against simulated fits (70-115 s each here, 1-5 s in Release, which
+# runs them: tests/CMakeLists.txt release_test_executables); the plans' code runs here in their
+# other tests (ArrayPlanTest.SigmaMatches..., MagPlanTest.Suggestion..., the errors).
+slow+='|ArrayPlanTest\.(ReplayCapKeepsTheInformation|SuggestionMeetsTheLimit)'
+slow+='|MagPlanTest\.(SigmaMatchesWhatTheMethodReportsOnTheProtocol|TurnsAboutOneAxisNameTheMissingDirection))$'
 [ "${CALIBD_FUZZ_FOLLOWS:-0}" = 1 ] && slow+='|^fuzz_corpus\.'
 exclude=${CALIBD_SANITIZE_EXCLUDE:-$slow}
 args=(--output-on-failure -j "$(nproc)")
