@@ -19,7 +19,7 @@ namespace {
 
 using nlohmann::json;
 
-constexpr double kAccelNoise = 0.04;               // m/s², the paper's σ_a
+constexpr double kAccelNoise = 0.04;                 // m/s², the paper's σ_a
 constexpr double kGyroNoise = 0.06 * core::kDegree;  // rad/s, the paper's σ_g
 constexpr double kRate = 100, kAngularRate = 10, kAngularAcceleration = 30;
 
@@ -73,8 +73,7 @@ Status Calibrate(double duration, uint64_t seed, const Eigen::Vector3d* axis,
     f.col(i) = 9.81 * rng.UnitVector();
   }
   core::SimulateArrayReadings(*truth, omega, omega_dot, f, kAccelNoise, kGyroNoise,
-                              static_cast<int>(truth->cols()), &rng, &problem.accel,
-                              &problem.gyro);
+                              static_cast<int>(truth->cols()), &rng, &problem.accel, &problem.gyro);
   options.threads = 1;
   return core::CalibrateArray(problem, options, result);
 }
@@ -160,9 +159,9 @@ TEST(ArrayPlanTest, ReplayCapKeepsTheInformation) {
       Plan({{"method", "array"}, {"config", Config()}, {"protocol", Protocol(10, 1000)}});
   const json slow =
       Plan({{"method", "array"}, {"config", Config()}, {"protocol", Protocol(100, 100)}});
-  EXPECT_NEAR(fast["uncertainty"]["std_rms"].get<double>() /
-                  slow["uncertainty"]["std_rms"].get<double>(),
-              1, 0.05);
+  EXPECT_NEAR(
+      fast["uncertainty"]["std_rms"].get<double>() / slow["uncertainty"]["std_rms"].get<double>(),
+      1, 0.05);
 }
 
 // A rotation about z only: every A_n maps z to 0, so the plan names every non-reference triad's
