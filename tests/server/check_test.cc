@@ -316,16 +316,22 @@ TEST(RecordingCheck, PredictedSigmaIsTheJobs) {
               all.size(), sum / static_cast<double>(all.size()), max_dev);
 }
 
+// The thermal checks' log: a 15-minute warm-up and a 10-minute cool-down, a cubic truth.
+core::ThermalSimulationOptions WarmupAndCooldown() {
+  core::ThermalSimulationOptions o;
+  o.warmup = 900;
+  o.cooldown = 600;
+  o.coefficients = core::DefaultThermalTruth(3);
+  return o;
+}
+
 // The thermal check (Method::Check: the job's stages 1 and 5, no fit): the windows, their
 // temperature span and phase counts are the job's; a 4 °C warm-up is named as the job refuses it,
 // with the range found.
 TEST(RecordingCheck, ThermalWindowsAndRangeAreTheJobs) {
   TestServer server;
   ASSERT_TRUE(server.error().empty()) << server.error();
-  core::ThermalSimulationOptions o;
-  o.warmup = 900;
-  o.cooldown = 600;
-  o.coefficients = core::DefaultThermalTruth(3);
+  core::ThermalSimulationOptions o = WarmupAndCooldown();
   std::string csv;
   json config, truth;
   ASSERT_TRUE(SimulateThermalFiles(o, &csv, &config, &truth).ok());
@@ -374,10 +380,7 @@ TEST(RecordingCheck, ThermalWindowsAndRangeAreTheJobs) {
 TEST(RecordingCheck, ThermalPredictedSigmaIsTheJobsBound) {
   TestServer server;
   ASSERT_TRUE(server.error().empty()) << server.error();
-  core::ThermalSimulationOptions o;
-  o.warmup = 900;
-  o.cooldown = 600;
-  o.coefficients = core::DefaultThermalTruth(3);
+  core::ThermalSimulationOptions o = WarmupAndCooldown();
   std::string csv;
   json config, truth;
   ASSERT_TRUE(SimulateThermalFiles(o, &csv, &config, &truth).ok());
