@@ -56,14 +56,21 @@ double TrueBiasAtRef(const ThermalSimulation& sim, int a, double t_ref) {
          ThermalCurve(sim.truth.coefficients[static_cast<size_t>(a)], t_ref - sim.truth.t_ref);
 }
 
-TEST(ThermalScaleTest, RecoversBiasAndScaleWithoutNoise) {
-  ThermalSimulationOptions o = Faces(1, 2, true);
-  o.accel_noise = o.gyro_noise = o.temp_noise = 0;
-  const ThermalSimulation sim = SimulateThermal(o);
+// The method's options for a log without noise: 1 s windows, statics found by fixed thresholds,
+// orders from 0.
+ThermalOptions NoiseFreeOptions() {
   ThermalOptions options;
   options.window = 1;
   options.statics.accel_threshold = options.statics.gyro_threshold = 1.0;
   options.min_order = 0;
+  return options;
+}
+
+TEST(ThermalScaleTest, RecoversBiasAndScaleWithoutNoise) {
+  ThermalSimulationOptions o = Faces(1, 2, true);
+  o.accel_noise = o.gyro_noise = o.temp_noise = 0;
+  const ThermalSimulation sim = SimulateThermal(o);
+  const ThermalOptions options = NoiseFreeOptions();
   ThermalResult r;
   const Status st = Calibrate(sim, options, &r);
   ASSERT_TRUE(st.ok()) << st.message();
@@ -98,10 +105,7 @@ TEST(ThermalScaleTest, ASixFaceTumbleRecoversEveryAxisWithoutNoise) {
   ThermalSimulationOptions o = Faces(2, 6, true, true, 4);
   o.accel_noise = o.gyro_noise = o.temp_noise = 0;
   const ThermalSimulation sim = SimulateThermal(o);
-  ThermalOptions options;
-  options.window = 1;
-  options.statics.accel_threshold = options.statics.gyro_threshold = 1.0;
-  options.min_order = 0;
+  const ThermalOptions options = NoiseFreeOptions();
   ThermalResult r;
   const Status st = Calibrate(sim, options, &r);
   ASSERT_TRUE(st.ok()) << st.message();
