@@ -2,6 +2,7 @@
 // orientation groups, the six channel fits and the heating/cooling comparison.
 #include "core/thermal.h"
 
+#include <Eigen/Cholesky>
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
@@ -54,6 +55,7 @@ ChannelData SelectWindows(const std::vector<ThermalWindow>& windows, int c, int 
     int& g = d.group_of_orientation[static_cast<size_t>(o)];
     if (g < 0) g = d.groups++;
     d.group.push_back(g);
+    d.samples += w.samples;
     d.x(static_cast<Eigen::Index>(r)) = w.temperature - t_ref;
     d.y(static_cast<Eigen::Index>(r)) = w.mean(c);
     // A window without noise (a noise-free simulation) still needs a positive weight.
@@ -120,6 +122,58 @@ ThermalWindow MakeWindow(const Eigen::VectorXd& t, const ThermalImuInput& imu,
   if (options.gyro_noise) w.mean_std.tail<3>().setConstant(*options.gyro_noise / root_n);
   SetWindowTemperature(t, temp, range, options.min_rate, &w);
   return w;
+}
+
+// E[ln s²] − ln σ² for the sample variance s² of ν + 1 Gaussian samples: ψ(ν/2) − ln(ν/2).
+double LogVarianceBias(double nu) {
+  double x = 0.5 * nu, shift = 0;
+  for (; x < 6; x += 1) shift -= 1 / x;  // ψ(x) = ψ(x + 1) − 1/x
+  const double x2 = 1 / (x * x);
+  const double psi = std::log(x) - 0.5 / x - x2 * (1.0 / 12 - x2 * (1.0 / 120 - x2 / 252));
+  return psi + shift - std::log(0.5 * nu);
+}
+
+// Stage 1's variance function: per channel whose σ the options do not give, the windows' log
+// sample variances, less their bias LogVarianceBias(n − 1), fitted by a quadratic in the window's
+// temperature weighted by (n − 1)/2 (ln s² has variance ψ'(ν/2) ≈ 2/ν); each window's σ of the
+// mean is then √(exp(fit)/n). A window's own s² from ~500 samples is off by ~6 % and its weight
+// by ~13 %: that noise in the weights costs ~2 % of squared error against the flight stacks'
+// unweighted cubic (README); the smooth function keeps a noise that changes with temperature.
+// Windows with s² = 0 (quantised or noise-free readings) take the function's value; fewer than
+// 3 windows with s² > 0 leave the channel's own σ.
+void SmoothWindowVariances(const ThermalOptions& options, std::vector<ThermalWindow>* windows) {
+  if (windows->empty()) return;
+  double lo = windows->front().temperature, hi = lo;
+  for (const ThermalWindow& w : *windows) {
+    lo = std::min(lo, w.temperature);
+    hi = std::max(hi, w.temperature);
+  }
+  const double mid = 0.5 * (lo + hi), half = std::max(0.5 * (hi - lo), 1e-9);
+  for (int c = 0; c < 6; ++c) {
+    if ((c < 3 && options.accel_noise) || (c >= 3 && options.gyro_noise)) continue;
+    Eigen::Matrix3d ata = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d atz = Eigen::Vector3d::Zero();
+    int used = 0;
+    for (const ThermalWindow& w : *windows) {
+      const double n = static_cast<double>(w.samples);
+      const double s2 = w.mean_std(c) * w.mean_std(c) * n;
+      if (!(s2 > 0)) continue;
+      const double u = (w.temperature - mid) / half;
+      const Eigen::Vector3d row(1, u, u * u);
+      const double weight = 0.5 * (n - 1);
+      ata.noalias() += weight * row * row.transpose();
+      atz += weight * row * (std::log(s2) - LogVarianceBias(n - 1));
+      ++used;
+    }
+    if (used < 3) continue;
+    const Eigen::Vector3d beta = ata.ldlt().solve(atz);
+    if (!beta.allFinite()) continue;
+    for (ThermalWindow& w : *windows) {
+      const double u = (w.temperature - mid) / half;
+      const double log_s2 = beta(0) + u * (beta(1) + u * beta(2));
+      w.mean_std(c) = std::sqrt(std::exp(log_s2) / static_cast<double>(w.samples));
+    }
+  }
 }
 
 std::vector<WindowRange> CutWindows(const StaticDetection& statics, const ThermalOptions& options) {
@@ -191,11 +245,11 @@ void CompareHeatingCooling(const std::vector<ThermalWindow>& windows, int c, dou
   if (common < 0 || !(hi > lo)) return;
   const int order = ch->fit.order;
   ThermalPolyFit fh, fk;
-  if (!FitThermalPolynomial(h.x, h.y, h.sigma, h.group, h.groups, order, order, scale, &fh,
-                            h.gravity)
+  if (!FitThermalPolynomial(h.x, h.y, h.sigma, h.group, h.groups, order, order, scale, h.samples,
+                            &fh, h.gravity)
            .ok() ||
-      !FitThermalPolynomial(k.x, k.y, k.sigma, k.group, k.groups, order, order, scale, &fk,
-                            k.gravity)
+      !FitThermalPolynomial(k.x, k.y, k.sigma, k.group, k.groups, order, order, scale, k.samples,
+                            &fk, k.gravity)
            .ok() ||
       fh.dof < 1 || fk.dof < 1) {
     return;
@@ -261,6 +315,7 @@ Status MakeWindows(const Eigen::VectorXd& t, const ThermalImuInput& imu,
   for (const WindowRange& range : *ranges) {
     r->windows.push_back(MakeWindow(t, imu, *imu.temp, range, options));
   }
+  SmoothWindowVariances(options, &r->windows);
   r->orientations = GroupOrientations(options.orientation_tolerance, &r->windows);
   st = SetRange(options, r);
   if (!st.ok() || options.lag == ThermalLagMode::kNone) return st;
@@ -474,7 +529,7 @@ void SeparateGravity(const ThermalOptions& options, double scale, ThermalImuResu
                                                (static_cast<int>(d.x.size()) - d.groups - 1) / 2}));
       ThermalPolyFit fit;
       const Status st = FitThermalPolynomial(d.x, d.y, d.sigma, d.group, d.groups, lowest,
-                                             options.max_order, scale, &fit, d.gravity);
+                                             options.max_order, scale, d.samples, &fit, d.gravity);
       if (!st.ok()) {  // the bias-only fit stays
         with_scale[static_cast<size_t>(a)] = false;
         (*gravity)[static_cast<size_t>(a)].clear();
@@ -550,7 +605,7 @@ Status CalibrateImu(const Eigen::VectorXd& t, const ThermalImuInput& imu,
     const int lowest = std::max(0, std::min({options.min_order, options.max_order,
                                              static_cast<int>(d.x.size()) - d.groups - 1}));
     st = FitThermalPolynomial(d.x, d.y, d.sigma, d.group, d.groups, lowest, options.max_order,
-                              scale, &ch.fit);
+                              scale, d.samples, &ch.fit);
     if (!st.ok())
       return Status::NotDeterminable("IMU " + imu.name + ", " + ch.name + ": " + st.message());
     r->channels.push_back(std::move(ch));

@@ -5,8 +5,11 @@
 // Stages (core/thermal.cc, core/thermal_fit.cc):
 //  1. Statics: core/static_detection on the IMU's two triads; each static interval is cut into
 //     consecutive averaging windows of `window` seconds (a remainder shorter than half a window
-//     joins the last one). Per window: the mean of every channel, its σ from the window's own
-//     samples (sample std / √n, white noise; or σ/√n with σ the options' accel_noise/gyro_noise),
+//     joins the last one). Per window: the mean of every channel, its σ = s/√n (white noise; σ/√n
+//     with σ the options' accel_noise/gyro_noise where given) with s² from a variance function:
+//     the windows' log sample variances, less their bias ψ(ν/2) − ln(ν/2), fitted by a quadratic
+//     in the window's temperature (each window's own s² is ~6 % off: weights that noisy cost
+//     ~2 % of squared error; the function keeps a noise that changes with temperature),
 //     the mean temperature and the temperature rate (least squares slope of T over the window); the
 //     window's phase is heating (rate > min_rate), cooling (rate < −min_rate) or steady. Windows
 //     are grouped by orientation (gravity directions within `orientation_tolerance` of each other).
@@ -17,20 +20,25 @@
 //     over 60 °C stays well conditioned. Every order p ∈ [p_0, P] is fitted (p_0 = min_order,
 //     default 3, the flight stacks' cubic; P = max_order; both less where fewer windows leave no
 //     residual degree of freedom) and the curves are averaged with BIC weights
-//     w_p ∝ exp(−BIC_p/2), BIC_p = n ln(χ²_p/n) + k ln n (k the regression parameters plus the
-//     noise scale: σ_w that are uniformly too small do not favour high orders). BIC is consistent:
-//     a term that is absent gets a weight that vanishes with n, so a curve of the floor's order
-//     pays little for the orders offered above it; efficient criteria (AIC weights, Mallows or
-//     jackknife model averaging) keep a spurious order's weight at O(1) and cost 25–40 % of squared
-//     error against the cubic when the truth is cubic (README, table of rules). The floor at 3
-//     keeps a barely detectable cubic term in the curve (below it every rule pays for deciding it
-//     from the data); it costs nothing against the flight stacks, which fit that cubic anyway.
-//     Choosing one order on the same data either overfits (AICc: order 4–5 in ~25 % of logs whose
-//     truth is cubic) or, with a stricter criterion, drops a weak term and leaves a bias the band
-//     does not cover; the average's covariance Σ w_p (C_p + d_p d_pᵀ), d_p the order's parameters
-//     minus the average (zero-padded to P), includes that between-order spread. The fit's order is
-//     P (the length of the averaged coefficients); the table keeps every order's χ², BIC and
-//     weight; χ², dof and the basis are the heaviest order's.
+//     w_p ∝ exp(−BIC_p/2), BIC_p = n ln(χ²_p/n) + k ln N (n the windows, k the regression
+//     parameters plus the noise scale: σ_w that are uniformly too small do not favour high orders;
+//     N the samples the windows average). The window means are sufficient for the samples'
+//     likelihood, so its ratio between orders is the windows' and the penalty takes N: the weights
+//     do not depend on `window`. BIC is consistent: a term that is absent gets a weight that
+//     vanishes with N, so a curve of the floor's order pays little for the orders offered above
+//     it (with ln n an absent 4th or 5th order kept ~15 % of the weight and cost up to 16 % of
+//     squared error against the flight stacks' cubic when the truth is cubic); efficient
+//     criteria (AIC weights, Mallows or jackknife model averaging) keep a spurious order's weight
+//     at O(1) and cost 25–40 % (README, table of rules). The floor at 3 keeps a barely detectable
+//     cubic term in the curve (below it every rule pays for deciding it from the data); it costs
+//     nothing against the flight stacks, which fit that cubic anyway. A strict penalty also gives
+//     a weak term that is there a small weight and leaves a bias: the band therefore mixes the
+//     orders with the band weights v_p ∝ exp(−BIC'_p/2), BIC' with the windows' penalty k ln n (a
+//     prior as broad as one window), as Σ v_p (C_p + d_p d_pᵀ), d_p the order's parameters minus
+//     the curve's average (zero-padded to P): an order the curve's weights dropped but the data
+//     still support widens the band. The fit's order is P (the length of the averaged
+//     coefficients); the table keeps every order's χ², BIC, weight and band weight; χ², dof and
+//     the basis are the heaviest order's.
 //  3. Uncertainty (SPEC §7 σ convention), per order: crb = (AᵀWA)⁻¹; when χ²/dof exceeds its
 //     one-sided 1 % quantile under the white-noise model (1 + 2.326 √(2/dof)), the primary is
 //     chi2_scaled (crb × χ²/dof), else crb; averaged as in stage 2 (the crb without the spread).
@@ -82,6 +90,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -145,8 +154,9 @@ struct ThermalWindow {
 struct ThermalOrderRow {
   int order = 0;
   double chi2 = 0;
-  double bic = 0;
-  double weight = 0;  // in [0, 1], summing to 1 over the table: the order's share of the curve
+  double bic = 0;          // with the samples' penalty k ln N (stage 2)
+  double weight = 0;       // in [0, 1], summing to 1 over the table: the order's share of the curve
+  double band_weight = 0;  // in [0, 1], summing to 1: its share of the band (penalty k ln n)
 };
 
 // One weighted polynomial fit (one channel, one set of windows).
@@ -233,11 +243,14 @@ Status FindThermalWindows(const Eigen::VectorXd& t, const ThermalImuInput& imu,
 
 // Stage 2 and 3 for one channel, exposed for tests: x = T − t_ref (°C), group per window (in
 // [0, groups)), the orders min_order..max_order averaged (equal: a fixed order). `scale` (> 0)
-// is the unit of x the design uses internally (half the range). `gravity` non-empty (one per
-// window, SI): the model y = I_g + Σ c_k x^k + G_w Σ d_k x^k, both curves of the same order.
+// is the unit of x the design uses internally (half the range). `samples` (>= the windows; 0:
+// the windows) the samples the window means reduce, whose count BIC's penalty takes. `gravity`
+// non-empty (one per window, SI): the model y = I_g + Σ c_k x^k + G_w Σ d_k x^k, both curves of
+// the same order.
 Status FitThermalPolynomial(const Eigen::VectorXd& x, const Eigen::VectorXd& y,
                             const Eigen::VectorXd& sigma, const std::vector<int>& group, int groups,
-                            int min_order, int max_order, double scale, ThermalPolyFit* out,
+                            int min_order, int max_order, double scale, int64_t samples,
+                            ThermalPolyFit* out,
                             const Eigen::VectorXd& gravity = Eigen::VectorXd());
 
 // The curve Σ c_k x^k and its 1σ √(vᵀ C v) at x = T − t_ref.

@@ -1,6 +1,7 @@
 // Stages 2 and 3 of core/thermal.h: the weighted polynomial fits of one channel at every order,
 // their BIC-weighted average, its covariance under the σ convention, and the curve's band.
 #include <Eigen/QR>
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -49,10 +50,12 @@ ScaledFit SolveScaled(const Eigen::VectorXd& u, const Eigen::VectorXd& y,
   return fit;
 }
 
-// BIC with the noise scale estimated: n ln(χ²/n) + k ln n, k the regression parameters plus the
-// scale.
-double Bic(double chi2, int n, int k) {
-  return n * std::log(std::max(chi2, 1e-300) / n) + k * std::log(static_cast<double>(n));
+// BIC with the noise scale estimated: n ln(χ²/n) + k ln N, n the windows, k the regression
+// parameters plus the scale, N = max(samples, n) the penalty's count (core/thermal.h stage 2:
+// the samples for the curve's weights, the windows for the band's).
+double Bic(double chi2, int n, int k, int64_t samples) {
+  return n * std::log(std::max(chi2, 1e-300) / n) +
+         k * std::log(static_cast<double>(std::max<int64_t>(samples, n)));
 }
 
 // One order's fit unscaled to x and padded to `top`: parameters (intercepts, c_1..c_top, then
@@ -105,13 +108,13 @@ OrderFit FitOrder(const Eigen::VectorXd& u, const Eigen::VectorXd& y, const Eige
 
 Status FitThermalPolynomial(const Eigen::VectorXd& x, const Eigen::VectorXd& y,
                             const Eigen::VectorXd& sigma, const std::vector<int>& group, int groups,
-                            int min_order, int max_order, double scale, ThermalPolyFit* out,
-                            const Eigen::VectorXd& gravity) {
+                            int min_order, int max_order, double scale, int64_t samples,
+                            ThermalPolyFit* out, const Eigen::VectorXd& gravity) {
   const int n = static_cast<int>(x.size());
   const int blocks = gravity.size() > 0 ? 2 : 1;
   if (y.size() != n || sigma.size() != n || static_cast<int>(group.size()) != n || groups < 1 ||
       (blocks == 2 && gravity.size() != n) || min_order < 0 || max_order < min_order ||
-      !(scale > 0)) {
+      !(scale > 0) || samples < 0) {
     return Status::InvalidInput("thermal fit: inconsistent inputs");
   }
   for (int i = 0; i < n; ++i) {
@@ -136,19 +139,27 @@ Status FitThermalPolynomial(const Eigen::VectorXd& x, const Eigen::VectorXd& y,
   for (int p = min_order; p <= top; ++p) {
     fits.push_back(FitOrder(u, y, sigma, group, groups, p, top, scale, gravity));
     out->table.push_back(
-        {p, fits.back().chi2, Bic(fits.back().chi2, n, groups + blocks * p + 1), 0});
+        {p, fits.back().chi2, Bic(fits.back().chi2, n, groups + blocks * p + 1, samples), 0});
     bic_min = std::min(bic_min, out->table.back().bic);
   }
-  // Weights ∝ exp(−ΔBIC/2); the curve is their average, its covariance the mixture's (each
-  // order's primary plus the spread of the orders' parameters about the average).
-  double total = 0;
-  for (ThermalOrderRow& row : out->table)
-    total += row.weight = std::exp(-0.5 * (row.bic - bic_min));
+  // Weights ∝ exp(−ΔBIC/2); the curve is their average, its covariance the mixture over the band
+  // weights (each order's primary plus the spread of the orders' parameters about the average).
+  std::vector<double> band_bic(fits.size());
+  for (size_t i = 0; i < fits.size(); ++i) {
+    band_bic[i] = Bic(fits[i].chi2, n, groups + blocks * out->table[i].order + 1, n);
+  }
+  const double band_bic_min = *std::min_element(band_bic.begin(), band_bic.end());
+  double total = 0, band_total = 0;
+  for (size_t i = 0; i < fits.size(); ++i) {
+    total += out->table[i].weight = std::exp(-0.5 * (out->table[i].bic - bic_min));
+    band_total += out->table[i].band_weight = std::exp(-0.5 * (band_bic[i] - band_bic_min));
+  }
   const int m = groups + blocks * top;
   Eigen::VectorXd params = Eigen::VectorXd::Zero(m);
   size_t heaviest = 0;
   for (size_t i = 0; i < fits.size(); ++i) {
     out->table[i].weight /= total;
+    out->table[i].band_weight /= band_total;
     params += out->table[i].weight * fits[i].params;
     if (out->table[i].weight > out->table[heaviest].weight) heaviest = i;
   }
@@ -156,8 +167,9 @@ Status FitThermalPolynomial(const Eigen::VectorXd& x, const Eigen::VectorXd& y,
   Eigen::MatrixXd crb_full = Eigen::MatrixXd::Zero(m, m);
   for (size_t i = 0; i < fits.size(); ++i) {
     const Eigen::VectorXd d = fits[i].params - params;
-    out->full_covariance += out->table[i].weight * (fits[i].primary + d * d.transpose());
-    crb_full += out->table[i].weight * fits[i].crb;
+    const double v = out->table[i].band_weight;
+    out->full_covariance += v * (fits[i].primary + d * d.transpose());
+    crb_full += v * fits[i].crb;
   }
   out->order = top;
   out->chi2 = fits[heaviest].chi2;

@@ -30,6 +30,7 @@ struct ChannelData {
   Eigen::VectorXd gravity;      // G_w, SI; empty without a scale curve
   std::vector<int> group;
   std::vector<int> group_of_orientation;  // orientation -> dense group, −1 absent
+  int64_t samples = 0;                    // the samples behind the selected windows
   int groups = 0;
   double t_lo = 0, t_hi = 0;
 };

@@ -90,7 +90,7 @@ double Profile(const Eigen::VectorXd& t, const Eigen::VectorXd& reading,
     const ChannelData d = SelectWindows(*work, c, 0, t_ref, orientations);
     ThermalPolyFit fit;
     const Status st = FitThermalPolynomial(d.x, d.y, d.sigma, d.group, d.groups, orders[c],
-                                           orders[c], scale, &fit);
+                                           orders[c], scale, d.samples, &fit);
     if (!st.ok()) {
       *status = st;
       return std::numeric_limits<double>::infinity();
@@ -187,7 +187,7 @@ Status EstimateLag(const Eigen::VectorXd& t, const Eigen::VectorXd& reading,
     const ChannelData d = SelectWindows(work, c, 0, 0.0, imu->orientations);
     ThermalPolyFit fit;
     status = FitThermalPolynomial(d.x, d.y, d.sigma, d.group, d.groups, 0, options.max_order, scale,
-                                  &fit);
+                                  d.samples, &fit);
     if (!status.ok()) return status;
     orders[c] = fit.order;
   }

@@ -119,7 +119,8 @@ Status PredictSensor(const PlannedWindows& w, const Eigen::VectorXd& sigma, cons
   const Eigen::VectorXd y = Eigen::VectorXd::Zero(x.size());
   const double scale = 0.5 * (p.t_hi - p.t_lo);
   core::ThermalPolyFit fit;
-  Status s = core::FitThermalPolynomial(x, y, sigma, w.group, groups, lowest, lowest, scale, &fit);
+  Status s =
+      core::FitThermalPolynomial(x, y, sigma, w.group, groups, lowest, lowest, scale, 0, &fit);
   if (!s.ok()) return s;
   out->covariance = fit.crb;
   out->intercept_std = fit.intercept_std;
@@ -130,7 +131,7 @@ Status PredictSensor(const PlannedWindows& w, const Eigen::VectorXd& sigma, cons
   out->worst_band = out->band.maxCoeff();
   out->worst_band_top = out->worst_band;
   if (top > lowest &&
-      core::FitThermalPolynomial(x, y, sigma, w.group, groups, top, top, scale, &fit).ok()) {
+      core::FitThermalPolynomial(x, y, sigma, w.group, groups, top, top, scale, 0, &fit).ok()) {
     for (Eigen::Index i = 0; i < p.grid.size(); ++i) {
       out->worst_band_top =
           std::max(out->worst_band_top, core::ThermalCurveStd(fit.crb, p.grid(i) - p.t_ref));

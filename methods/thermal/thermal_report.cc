@@ -114,12 +114,18 @@ std::string ScalePlot(const json& pimu, const json& uimu, int a) {
 std::string OrderTable(const json& d) {
   std::string h =
       "<table><tr><th>channel</th><th>order</th><th>chi2/dof</th><th>residual RMS</th>"
-      "<th>noise RMS</th><th>BIC weight by order</th><th>hysteresis max |z|</th></tr>";
+      "<th>noise RMS</th><th>BIC weight by order (curve / band)</th><th>hysteresis max "
+      "|z|</th></tr>";
   for (const json& ch : d.at("channels")) {
     std::string weights;
     for (const json& row : ch.at("order_table")) {
-      weights += std::to_string(row.at("order").get<int>()) + ": " +
-                 FormatSig(row.at("weight").get<double>(), 2) + " ";
+      // Results stored before the band weights have none.
+      weights +=
+          std::to_string(row.at("order").get<int>()) + ": " +
+          FormatSig(row.at("weight").get<double>(), 2) +
+          (row.contains("band_weight") ? " / " + FormatSig(row.at("band_weight").get<double>(), 2)
+                                       : std::string()) +
+          " ";
     }
     const json& hy = ch.at("hysteresis");
     const std::string z = hy.at("tested").get<bool>()

@@ -111,8 +111,11 @@ json ChannelDiagnostics(const core::ThermalImuResult& imu, int c) {
   const core::ThermalChannel& ch = imu.channels[static_cast<size_t>(c)];
   json table = json::array();
   for (const core::ThermalOrderRow& row : ch.fit.table) {
-    table.push_back(
-        {{"order", row.order}, {"chi2", row.chi2}, {"bic", row.bic}, {"weight", row.weight}});
+    table.push_back({{"order", row.order},
+                     {"chi2", row.chi2},
+                     {"bic", row.bic},
+                     {"weight", row.weight},
+                     {"band_weight", row.band_weight}});
   }
   // The window means as deviations from the curve's value at t_ref (their orientation's
   // intercept removed), for the report's plot.
@@ -242,8 +245,10 @@ json ThermalResultToJson(const core::ThermalResult& r, const core::ThermalOption
          "curves of orders " + std::to_string(std::min(options.min_order, options.max_order)) +
              ".." + std::to_string(options.max_order) +
              " (min_order..max_order, fewer where the windows leave no residual degree of "
-             "freedom) averaged with BIC weights exp(-BIC/2), BIC = n ln(chi2/n) + k ln n (noise "
-             "scale estimated); order_table[].weight"},
+             "freedom) averaged with BIC weights exp(-BIC/2), BIC = n ln(chi2/n) + k ln N (n "
+             "windows, N the samples they average, noise scale estimated): "
+             "order_table[].weight; the band mixes the orders with the weights of the penalty k "
+             "ln n: order_table[].band_weight"},
         {"hysteresis_test",
          {{"method",
            "heating and cooling windows fitted apart at the curve's order; |z| of their difference "

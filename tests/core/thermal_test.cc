@@ -10,6 +10,7 @@
 #include <Eigen/Cholesky>
 #include <cmath>
 #include <cstdio>
+#include <random>
 #include <vector>
 
 #include "core/thermal_simulation.h"
@@ -73,19 +74,33 @@ TEST(ThermalTest, RecoversTheCurveWithoutNoise) {
 }
 
 // z of the curve against the truth over the grid (t_ref excluded: there σ = 0), per channel, over
-// `trials` seeds; also the mean BIC weight of `true_order` per channel.
+// A truth of order 5 whose 4th and 5th orders are not small (ArduPilot's "very poor fit" of a
+// cubic on the ICM-42688): each changes the bias as much as the first order does at 20 °C from
+// t_ref.
+std::vector<Eigen::VectorXd> StrongOrder5Truth() {
+  std::vector<Eigen::VectorXd> truth = DefaultThermalTruth(5);
+  for (Eigen::VectorXd& c : truth) {
+    c(3) = -c(0) / std::pow(20.0, 3);
+    c(4) = c(0) / std::pow(20.0, 4);
+  }
+  return truth;
+}
+
+// `trials` seeds; also the mean BIC weight of `true_order` per channel. `truth`: the simulated
+// coefficients (empty: DefaultThermalTruth(true_order)).
 struct Honesty {
   double z_rms[6] = {0};
   double true_order_weight[6] = {0};
 };
 
-Honesty MonteCarlo(int trials, int min_order, int max_order, int true_order) {
+Honesty MonteCarlo(int trials, int min_order, int max_order, int true_order,
+                   const std::vector<Eigen::VectorXd>& truth = {}) {
   Honesty h;
   double sum[6] = {0};
   int count[6] = {0};
   for (int trial = 0; trial < trials; ++trial) {
     ThermalSimulationOptions o = Warmup(100 + static_cast<uint64_t>(trial));
-    o.coefficients = DefaultThermalTruth(true_order);
+    o.coefficients = truth.empty() ? DefaultThermalTruth(true_order) : truth;
     const ThermalSimulation sim = SimulateThermal(o);
     ThermalOptions options;
     options.min_order = min_order;
@@ -124,9 +139,25 @@ TEST(ThermalTest, BandIsHonestInMonteCarlo) {
                 h.true_order_weight[c]);
     EXPECT_GT(h.z_rms[c], 0.7);
     EXPECT_LT(h.z_rms[c], 1.4);
-    // The true order carries most of the weight on average (see the printout; the rest mostly
-    // on one order higher, which stays unbiased).
-    EXPECT_GE(h.true_order_weight[c], 0.5);
+    // The true order carries nearly all the weight on average: the penalty k ln N of the samples
+    // (0.98–0.99 measured; with the windows' k ln n it was 0.83–0.86, the rest on orders 4–5).
+    EXPECT_GE(h.true_order_weight[c], 0.95);
+  }
+}
+
+// The flight stacks' cubic is the wrong order: a truth of order 5 whose 4th and 5th orders
+// matter (ComparedWithTheFlightStacksCubic's case (b)). Gyroscope y's are weak against its noise,
+// so the curve's weights (penalty k ln N) often drop them; the band's weights (k ln n) keep them
+// in the spread. Measured z RMS 0.97–1.10 (gyroscope y's weight of order 5 0.81); with the
+// curve's weights for the band too, gyroscope y's was 1.39 and 1.30 on two other seed sets (100
+// and 400 logs). Same margins as BandIsHonestInMonteCarlo.
+TEST(ThermalTest, BandIsHonestWhenTheCubicIsTheWrongOrder) {
+  const Honesty h = MonteCarlo(100, 3, 5, 5, StrongOrder5Truth());
+  for (int c = 0; c < 6; ++c) {
+    std::printf("channel %d (strong orders 4, 5): z RMS %.3f, mean weight of order 5 %.2f\n", c,
+                h.z_rms[c], h.true_order_weight[c]);
+    EXPECT_GT(h.z_rms[c], 0.7);
+    EXPECT_LT(h.z_rms[c], 1.4);
   }
 }
 
@@ -166,6 +197,47 @@ TEST(ThermalTest, MinOrderIsValidatedAndCapped) {
     EXPECT_EQ(ch.fit.table[0].order, 2);
     EXPECT_EQ(ch.fit.table[0].weight, 1.0);
   }
+}
+
+// The windows' σ come from a variance function of temperature (core/thermal.h stage 1): a gyroscope
+// x whose noise grows from 0.002 to 0.0045 rad/s over the warm-up (extra white noise of σ 0 at
+// 20 °C to 0.004 at 58 °C) gets window σ that follow it, and its band stays honest. 40 trials: a
+// z RMS from 40 logs has a relative σ of ~11 %, 0.7–1.4 is > 2.7σ either side; a window σ from
+// one log's fit is within a few % of the truth, 12 % is > 3σ (a constant σ would miss the hot end
+// by 55 %).
+TEST(ThermalTest, WindowSigmaFollowsANoiseThatGrowsWithTemperature) {
+  double z2 = 0;
+  int count = 0;
+  for (int trial = 0; trial < 40; ++trial) {
+    ThermalSimulation sim = SimulateThermal(Warmup(300 + static_cast<uint64_t>(trial)));
+    std::mt19937_64 rng(900 + static_cast<uint64_t>(trial));
+    std::normal_distribution<double> normal;
+    const auto extra = [](double temp) { return 0.004 * std::max(0.0, (temp - 20) / 38); };
+    for (Eigen::Index i = 0; i < sim.t.size(); ++i)
+      sim.gyro(i, 0) += extra(sim.temp(i)) * normal(rng);
+    ThermalOptions options;
+    options.grid_points = 11;
+    ThermalResult r;
+    const Status st = Calibrate(sim, options, &r);
+    ASSERT_TRUE(st.ok()) << st.message();
+    const ThermalImuResult& imu = r.imus[0];
+    for (const ThermalWindow* w : {&imu.windows.front(), &imu.windows.back()}) {
+      const double truth = std::hypot(0.002, extra(w->temperature));
+      EXPECT_NEAR(w->mean_std(3) * std::sqrt(static_cast<double>(w->samples)), truth, 0.12 * truth)
+          << "trial " << trial << " at " << w->temperature << " °C";
+    }
+    const ThermalChannel& ch = imu.channels[3];
+    for (Eigen::Index i = 0; i < imu.grid.size(); ++i) {
+      if (std::abs(imu.grid(i) - imu.t_ref) < 1e-6) continue;
+      z2 += std::pow(
+          (ch.grid_value(i) - TrueDeviation(sim, 3, imu.grid(i), imu.t_ref)) / ch.grid_std(i), 2);
+      ++count;
+    }
+  }
+  const double z = std::sqrt(z2 / count);
+  std::printf("noise growing with temperature: gyroscope x z RMS %.3f\n", z);
+  EXPECT_GT(z, 0.7);
+  EXPECT_LT(z, 1.4);
 }
 
 TEST(ThermalTest, RefusesARangeBelowMinRange) {
@@ -237,18 +309,6 @@ Eigen::VectorXd FlightStackFit(const ThermalSimulation& sim, int c, double t_ref
   return Eigen::Vector3d(a(1) / h, a(2) / (h * h), a(3) / (h * h * h));
 }
 
-// A truth of order 5 whose 4th and 5th orders are not small (ArduPilot's "very poor fit" of a
-// cubic on the ICM-42688): each changes the bias as much as the first order does at 20 °C from
-// t_ref.
-std::vector<Eigen::VectorXd> StrongOrder5Truth() {
-  std::vector<Eigen::VectorXd> truth = DefaultThermalTruth(5);
-  for (Eigen::VectorXd& c : truth) {
-    c(3) = -c(0) / std::pow(20.0, 3);
-    c(4) = c(0) / std::pow(20.0, 4);
-  }
-  return truth;
-}
-
 // Mean squared error of the curve (relative to t_ref) over calibd's grid [t_min, t_max], per
 // channel, summed over trials: calibd's and the flight stacks' cubic.
 struct CurveErrors {
@@ -316,11 +376,11 @@ CurveErrors CompareWithFlightStacks(char scenario, int trials) {
 }
 
 // Ratios of the mean squared errors calibd / cubic over 100 trials (60 with the lag), each with its
-// Monte-Carlo σ from the paired per-trial errors (CurveErrors::RatioStd: 0.02–0.07 in (a), 0.003–
-// 0.024 in (b), 0.002–0.010 in (c)). Where the cubic is the true order (a), calibd pays for the
-// orders offered above it; the issue asks for no more than the cubic's error, taken as ≤ 1.05
-// within 3σ. "Clearly smaller" in (b), (c): below 0.5 by 3σ. Measured ratios (a) / (b) / (c) per
-// channel by the way the orders are combined (same seeds; "from 3": min_order 3):
+// Monte-Carlo σ from the paired per-trial errors (CurveErrors::RatioStd: 0.01–0.03 in (a), 0.003–
+// 0.034 in (b), 0.002–0.010 in (c)). The issue asks for no more than the cubic's error where the
+// cubic is the true order (a): the ratio less 3σ below 1. "Clearly smaller" in (b), (c): below 0.6
+// by 3σ. Measured ratios (a) / (b) / (c) per channel by the way the orders are combined (same
+// seeds; "from 3": min_order 3):
 //   AICc, one order:                  1.37–1.59 / 0.05–0.30 / 0.01–0.09 (order 4–5 in ~25 %)
 //   AICc within 2 of its minimum:     1.17–1.40 / 0.05–0.30 / 0.01–0.10, lag z RMS up to 1.63
 //   likelihood-ratio tests, α 5 %:    1.19–1.42 / 0.05–0.30 / 0.01–0.09, lag z RMS up to 1.59
@@ -332,22 +392,30 @@ CurveErrors CompareWithFlightStacks(char scenario, int trials) {
 //   Mallows model averaging, from 3:  1.23–1.30 / 0.05–0.30 / 0.01–0.07
 //   jackknife averaging, from 3:      1.22–1.33 / 0.05–0.31 / 0.01–0.08
 //   BIC-weight average:               1.06–1.31 / 0.05–0.32 / 0.01–0.09, z RMS 0.83–1.27
-//   BIC-weight average, from 3 (now): 1.06–1.16 / 0.05–0.32 / 0.01–0.07, z RMS 0.89–1.04
-//   order fixed at 3 (the oracle):    0.99–1.06
-// Mallows and jackknife averaging (Hansen 2007, Hansen & Racine 2012) and Akaike weights are
-// efficient, not consistent: an absent 4th or 5th order keeps an O(1) weight and costs its variance
-// (largest at the cold end, where a warm-up has few windows). Selecting one order strictly drops
-// weak terms and leaves a bias the band does not cover. From order 0, gyroscope y's barely
-// detectable cubic (0.6e-4/45² rad/s/°C³) cost 1.31; the floor at 3 keeps it. Left: the BIC weight
-// of orders 4–5 when absent, 1.06–1.16 (gyroscope x 1.156 ± 0.052, 2σ above 1.05).
+//   BIC-weight average, from 3, penalty k ln n (n windows), each window's own σ:
+//                                     1.06–1.16 / 0.05–0.32 / 0.01–0.07, z RMS 0.89–1.04
+//   the same, σ from the variance function: 1.05–1.13 / 0.05–0.31
+//   BIC-weight average, from 3, penalty k ln N (N samples), variance function (now):
+//                                     1.00–1.04 / 0.05–0.40 / 0.01–0.06
+//   order fixed at 3 (the oracle in (a)), variance function: 0.98–1.04 (each window's σ:
+//                                     0.99–1.06)
+// Against a cubic of the samples calibd's statics keep (the detector leaves the first 0.5 s, the
+// coldest), (a) is 0.999–1.026 ± 0.005–0.020. The price of the strict penalty is (b)'s gyroscope
+// y (0.31 → 0.40): its weak 4th and 5th orders lose weight in the curve; the band keeps them
+// (BandIsHonestWhenTheCubicIsTheWrongOrder). Mallows and jackknife averaging (Hansen 2007,
+// Hansen & Racine 2012) and Akaike weights are efficient, not consistent: an absent 4th or 5th
+// order keeps an O(1) weight and costs its variance (largest at the cold end, where a warm-up has
+// few windows). Selecting one order strictly drops weak terms and leaves a bias the band does not
+// cover. From order 0, gyroscope y's barely detectable cubic (0.6e-4/45² rad/s/°C³) cost 1.31; the
+// floor at 3 keeps it.
 TEST(ThermalTest, ComparedWithTheFlightStacksCubic) {
   const CurveErrors a = CompareWithFlightStacks('a', 100);
   const CurveErrors b = CompareWithFlightStacks('b', 100);
   const CurveErrors c = CompareWithFlightStacks('c', 60);
   for (int ch = 0; ch < 6; ++ch) {
-    EXPECT_LT(a.Ratio(ch) - 3 * a.RatioStd(ch), 1.05) << ch;
-    EXPECT_LT(b.Ratio(ch) + 3 * b.RatioStd(ch), 0.5) << ch;
-    EXPECT_LT(c.Ratio(ch) + 3 * c.RatioStd(ch), 0.5) << ch;
+    EXPECT_LT(a.Ratio(ch) - 3 * a.RatioStd(ch), 1.0) << ch;
+    EXPECT_LT(b.Ratio(ch) + 3 * b.RatioStd(ch), 0.6) << ch;
+    EXPECT_LT(c.Ratio(ch) + 3 * c.RatioStd(ch), 0.6) << ch;
   }
 }
 
