@@ -6,13 +6,18 @@
 //
 // Built only when Ceres is found (bench/CMakeLists.txt); not needed by CI or the tests.
 //
-//   array_full_ceres_bench calibd N   calibd's joint LM (CalibrateArrayFull, 2 threads)
+//   array_full_ceres_bench calibd N   calibd's joint LM (CalibrateArrayFull), per-stage CPU
 //   array_full_ceres_bench ceres N    Ceres from calibd's start (its closed forms and
 //                                     positions-only fit, computed first and not timed)
 //   array_full_ceres_bench ceres N check   the same with Ceres checking the analytic Jacobians
 //                                     against numeric differences (slow)
-// One solver per process, so the peak RSS is its own; prints wall and CPU seconds, iterations,
-// the final cost (sum of squared whitened residuals) and the extra peak RSS of the solve.
+//   array_full_ceres_bench export N FILE   the problem and the start Ceres gets, for
+//                                     bench/array_full_scipy.py (ExportProblem)
+//   array_full_ceres_bench ceres N covariance   then ceres::Covariance of the triads' parameters
+//                                     (what calibd's CRB stage computes), timed apart
+// Both use 2 threads ($BENCH_THREADS to change). One solver per process, so the peak RSS is its
+// own; prints wall and CPU seconds, iterations, the final cost (sum of squared whitened residuals)
+// and the extra peak RSS of the solve.
 //
 // Same problem: the statics are found by core/static_detection with calibd's options and enter
 // as their means weighted by sqrt(samples); every other sample is a block (omega, omega_dot, s).
@@ -26,11 +31,14 @@
 #include <Eigen/Dense>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <ctime>
 #include <fstream>
+#include <iomanip>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/array_full.h"
@@ -64,6 +72,13 @@ double RssMb() {
   return 0;
 }
 void ResetPeakRss() { std::ofstream("/proc/self/clear_refs") << "5"; }
+
+// Threads of both solvers: 2, or $BENCH_THREADS (1 compares the algorithms without either's
+// threading; on a loaded machine a spinning pool inflates the CPU time).
+int BenchThreads() {
+  const char* env = std::getenv("BENCH_THREADS");
+  return env != nullptr && std::atoi(env) > 0 ? std::atoi(env) : 2;
+}
 
 Mat3 Skew(const Vec3& v) {
   Mat3 m;
@@ -197,7 +212,7 @@ void MakeSetup(int64_t n, Setup* s) {
   s->o.gyro_noise = s->so.gyro_noise;
   s->o.statics.static_window = 0.5;
   s->o.statics.min_static = 0.5;
-  s->o.threads = 2;
+  s->o.threads = BenchThreads();
 }
 
 int RunCalibd(int64_t n) {
@@ -207,6 +222,18 @@ int RunCalibd(int64_t n) {
   ResetPeakRss();
   const double cpu0 = ProcessCpuSeconds();
   const auto t0 = std::chrono::steady_clock::now();
+  // Process CPU at the start of each stage (ArrayFullOptions::on_stage).
+  struct Stage {
+    std::string name;
+    double cpu, wall;
+  };
+  std::vector<Stage> stages;
+  s.o.on_stage = [&stages](const char* name) {
+    stages.push_back(
+        {name, ProcessCpuSeconds(),
+         std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch())
+             .count()});
+  };
   ArrayFullResult r;
   const calibd::Status st = CalibrateArrayFull(s.sim.problem, s.o, &r);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -222,10 +249,46 @@ int RunCalibd(int64_t n) {
       static_cast<long long>(n), static_cast<long long>(r.statics),
       static_cast<long long>(r.dynamic_samples), r.iterations, r.cost.back(), wall, cpu,
       PeakRssMb() - rss0, r.cost.front(), r.sigma_ratio);
+  // Per stage, both threads; "joint solver" is what Ceres' run times (the same start, to the
+  // same cost).
+  const int other = s.sim.problem.reference == 1 ? 2 : 1;
+  std::printf("calibd position_std_crb[%d].x=%.6g (another scale gauge than Ceres')\n", other,
+              r.report_std_crb[other].position_std(0));
+  std::printf("calibd stages cpu_s/wall_s:");
+  for (size_t i = 0; i + 1 < stages.size(); ++i) {
+    std::printf(" %s=%.3f/%.3f", stages[i].name.c_str(), stages[i + 1].cpu - stages[i].cpu,
+                stages[i + 1].wall - stages[i].wall);
+  }
+  std::printf("\n");
   return 0;
 }
 
-int RunCeres(int64_t n, bool check_gradients) {
+// The problem as RunCeres sets it up (readings, statics, weights, its start) for
+// bench/array_full_scipy.py: a header line "K Nd J ref wa wg g", then little-endian doubles:
+// the dynamic samples' accelerometer and gyroscope readings (Nd × 3K each, sample-major), the
+// statics' accelerometer and gyroscope means (J × 3K each) and sample counts (J), the start's
+// T_a (9K, row-major per triad), b_a (3K), T_g (9K), b_g (3K), r (3K), static directions (3J) and
+// per-sample motion (9 Nd: omega, omega_dot, s).
+void ExportProblem(const std::string& path, const ArrayFullProblem& p, int K,
+                   const std::vector<int64_t>& dyn, const StaticDetection& det, double wa,
+                   double wg, double g, const std::vector<const std::vector<double>*>& start) {
+  std::ofstream out(path, std::ios::binary);
+  out << K << " " << dyn.size() << " " << det.intervals.size() << " " << p.reference << " "
+      << std::setprecision(17) << wa << " " << wg << " " << g << "\n";
+  const auto put = [&out](double v) { out.write(reinterpret_cast<const char*>(&v), sizeof v); };
+  for (const Eigen::MatrixXd* m : {&p.accel, &p.gyro})
+    for (int64_t i : dyn)
+      for (int c = 0; c < 3 * K; ++c) put((*m)(i, c));
+  for (int kind = 0; kind < 2; ++kind)
+    for (const StaticInterval& iv : det.intervals)
+      for (int k = 0; k < K; ++k)
+        for (int a = 0; a < 3; ++a) put(iv.mean[kind * K + k](a));
+  for (const StaticInterval& iv : det.intervals) put(static_cast<double>(iv.samples));
+  for (const std::vector<double>* v : start)
+    for (double e : *v) put(e);
+}
+
+int RunCeres(int64_t n, bool check_gradients, bool covariance, const std::string& export_path) {
   Setup s;
   MakeSetup(n, &s);
   const ArrayFullProblem& p = s.sim.problem;
@@ -306,6 +369,11 @@ int RunCeres(int64_t n, bool check_gradients) {
     Eigen::Map<Eigen::Matrix<double, 6, 1>>{&x[9 * m + 3]} = sol;
   }
 
+  if (!export_path.empty()) {
+    ExportProblem(export_path, p, K, dyn, det, wa, wg, g, {&Ta, &ba, &Tg, &bg, &rr, &sd, &x});
+    std::printf("wrote %s\n", export_path.c_str());
+    return 0;
+  }
   ceres::Problem::Options po;
   ceres::Problem problem(po);
   auto order = std::make_shared<ceres::ParameterBlockOrdering>();
@@ -343,7 +411,7 @@ int RunCeres(int64_t n, bool check_gradients) {
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_SCHUR;
   so.linear_solver_ordering = order;
-  so.num_threads = 2;
+  so.num_threads = BenchThreads();
   so.max_num_iterations = 100;
   so.function_tolerance = 1e-10;  // calibd's tolerance (relative cost decrease)
   so.parameter_tolerance = 1e-10;
@@ -362,15 +430,41 @@ int RunCeres(int64_t n, bool check_gradients) {
       PeakRssMb() - rss0, 2 * summary.initial_cost,
       ceres::TerminationTypeToString(summary.termination_type));
   if (check_gradients) std::printf("%s\n", summary.message.c_str());
+  if (covariance && summary.IsSolutionUsable()) {
+    // What calibd's "crb" stage gives: the covariance of every triad's parameters (the inverse
+    // of the information with the per-sample and static unknowns eliminated), by ceres::Covariance
+    // over all pairs of the triads' blocks (its default sparse QR, 2 threads).
+    const double cpu1 = ProcessCpuSeconds();
+    ceres::Covariance::Options co;
+    co.num_threads = BenchThreads();
+    ceres::Covariance cov(co);
+    std::vector<const double*> blocks;
+    for (int k = 0; k < K; ++k)
+      for (const double* b : {&Ta[9 * k], &ba[3 * k], &Tg[9 * k], &bg[3 * k], &rr[3 * k]})
+        if (k != ref || b != &rr[3 * ref]) blocks.push_back(b);
+    std::vector<std::pair<const double*, const double*>> pairs;
+    for (size_t i = 0; i < blocks.size(); ++i)
+      for (size_t j = i; j < blocks.size(); ++j) pairs.emplace_back(blocks[i], blocks[j]);
+    const bool ok = cov.Compute(pairs, &problem);
+    const int other = ref == 1 ? 2 : 1;  // a triad whose position is estimated
+    std::vector<double> rc(9);
+    if (ok) cov.GetCovarianceBlock(&rr[3 * other], &rr[3 * other], rc.data());
+    std::printf(
+        "ceres  covariance cpu_s=%.3f ok=%d peak_rss_delta_MB=%.1f position_std[%d].x=%.6g\n",
+        ProcessCpuSeconds() - cpu1, ok ? 1 : 0, PeakRssMb() - rss0, other,
+        std::sqrt(std::max(0.0, rc[0])));
+  }
   return summary.IsSolutionUsable() ? 0 : 1;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 3 || argc > 4 ||
-      (std::strcmp(argv[1], "calibd") != 0 && std::strcmp(argv[1], "ceres") != 0)) {
-    std::fprintf(stderr, "usage: %s calibd|ceres N [check]\n", argv[0]);
+  const bool known =
+      argc >= 3 && (std::strcmp(argv[1], "calibd") == 0 || std::strcmp(argv[1], "ceres") == 0 ||
+                    std::strcmp(argv[1], "export") == 0);
+  if (!known || argc > 4 || (std::strcmp(argv[1], "export") == 0 && argc != 4)) {
+    std::fprintf(stderr, "usage: %s calibd|ceres N [check|covariance] | export N FILE\n", argv[0]);
     return 2;
   }
   const int64_t n = std::atoll(argv[2]);
@@ -378,5 +472,9 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "N must be >= 3000 (2 500 samples of statics)\n");
     return 2;
   }
-  return std::strcmp(argv[1], "calibd") == 0 ? RunCalibd(n) : RunCeres(n, argc == 4);
+  if (std::strcmp(argv[1], "export") == 0) return RunCeres(n, false, false, argv[3]);
+  return std::strcmp(argv[1], "calibd") == 0
+             ? RunCalibd(n)
+             : RunCeres(n, argc == 4 && std::strcmp(argv[3], "check") == 0,
+                        argc == 4 && std::strcmp(argv[3], "covariance") == 0, "");
 }

@@ -202,15 +202,21 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
                   ? options.threads
                   : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   if (StopRequested(options.stop)) return f.Stopped("statics");
+  const auto stage = [&options](const char* name) {
+    if (options.on_stage) options.on_stage(name);
+  };
   namespace afm = array_full_model;
+  stage("statics");
   if (Status s = afm::FindStatics(&f); !s.ok()) return s;
   if (Status s = afm::SelectDynamicSamples(&f); !s.ok()) return s;
+  stage("start");
   if (Status s = afm::StartAccelerometers(&f); !s.ok()) return s;
   if (Status s = afm::StartPositions(&f); !s.ok()) return s;
   afm::StartMotion(&f);
   if (Status s = afm::CheckRotationExcitation(&f); !s.ok()) return s;
 
   // The joint fit, in the gauge of triad `reference`.
+  stage("joint solver");
   const int ref = problem.reference;
   f.E = afm::GaugeBasis(K, ref);
   res.gauge_basis = f.E;
@@ -234,7 +240,9 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   if (Status s = afm::SolveJoint(&f, fp, lm); !s.ok()) return s;
   afm::ComputeResiduals(&f, fp);
   afm::EstimateSamplingTimeOffsets(&f);
+  stage("crb");
   if (Status s = afm::ComputeCramerRaoBound(&f, lm); !s.ok()) return s;
+  stage("residual-aware sigma");
   if (Status s = afm::ComputeResidualAwareCovariance(&f, fp); !s.ok()) return s;
   if (!res.converged)
     res.warnings.push_back(std::string("the solver did not converge (") +
@@ -244,6 +252,7 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   res.reason = res.converged ? std::string("converged (") +
                                    BlockLmTerminationName(f.summary.termination) + ")"
                              : "not converged: see warnings";
+  stage("done");
   return Status::Ok();
 }
 

@@ -130,6 +130,10 @@ struct ArrayFullOptions {
   // Called after every accepted LM step with the iteration number; false stops the solver
   // (termination kUserStopped: the result is not used). Optional (cancellation).
   std::function<bool(int iteration)> callback;
+  // Called as each stage begins, with its name: "statics", "start" (closed forms, positions-only
+  // fit, motion), "joint solver", "crb", "residual-aware sigma", and "done" at the end of a
+  // successful run; for benchmarks' per-stage times and progress. Optional.
+  std::function<void(const char* stage)> on_stage;
   // Polled (core/stop_token.h) between the stages, in the positions-only start, every LM
   // iteration and every 16 blocks of its passes, and per batch of the residual-aware covariance:
   // when it asks, CalibrateArrayFull returns core::StoppedStatus at once (termination

@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
+#include <vector>
 
 #include "core/array_full_simulation.h"
 #include "tests/lib/sanitizer.h"
@@ -44,6 +46,24 @@ TEST(ArrayFull, RecoversEveryParameterExactlyWithoutNoise) {
   const Eigen::VectorXd err = r.theta - sim.truth_theta;
   EXPECT_LT(err.cwiseAbs().maxCoeff(), 1e-9) << err.transpose();
   EXPECT_EQ(r.gauge, "sum_trace_gyroscope");
+}
+
+// ArrayFullOptions::on_stage names each stage as it begins, in order, and "done" only after a
+// successful run; a refused log ends at the stage that refused it.
+TEST(ArrayFull, OnStageNamesTheStagesInOrder) {
+  ArrayFullSimulation sim;
+  ASSERT_TRUE(SimulateArrayFull(Board8(5), &sim).ok());
+  ArrayFullOptions o = FitOptions(Board8(5));
+  std::vector<std::string> stages;
+  o.on_stage = [&stages](const char* name) { stages.emplace_back(name); };
+  ArrayFullResult r;
+  ASSERT_TRUE(CalibrateArrayFull(sim.problem, o, &r).ok());
+  EXPECT_EQ(stages, (std::vector<std::string>{"statics", "start", "joint solver", "crb",
+                                              "residual-aware sigma", "done"}));
+  stages.clear();
+  o.min_statics = 1000;  // more statics than the log has: refused before the start
+  EXPECT_FALSE(CalibrateArrayFull(sim.problem, o, &r).ok());
+  EXPECT_EQ(stages, (std::vector<std::string>{"statics"}));
 }
 
 TEST(ArrayFull, RecoversThe32TriadArrayExactlyWithoutNoise) {
