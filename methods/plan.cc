@@ -3,6 +3,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -392,6 +393,52 @@ void SuggestFewestPositions(
         {"unmet", fewer_predicted ? fewer.verdict.reasons() : std::vector<std::string>{too_few}}};
   }
   o["predictions"] = predictions;
+}
+
+json SuggestGreedyProtocol(
+    const SuggestSettings& settings, const PlanProtocol& protocol, const AcceptanceLimits& limits,
+    const std::vector<std::string>& sigma_keys, const std::string& design,
+    const std::string& predicted_by,
+    const std::function<std::vector<const PlanCandidate*>(int cap)>& sequence,
+    const std::function<Status(const PlanProtocol&, json*)>& predict,
+    const std::function<void(const json&, const AcceptanceLimits&, Verdict*)>& judge,
+    const std::string& too_few) {
+  const double per_position =
+      protocol.rate * (protocol.static_duration + protocol.rotation_duration);
+  const int by_samples = static_cast<int>(std::floor(
+      (settings.max_samples + protocol.rate * protocol.rotation_duration) / per_position));
+  const int cap = std::min(settings.max_positions, by_samples);
+  AcceptanceLimits margined = limits;
+  for (const std::string& key : sigma_keys) {
+    const auto it = margined.values.find(key);
+    if (it != margined.values.end() && it->second) *it->second *= 1 - settings.margin;
+  }
+  json out = {{"design", design + "; the fewest positions of that sequence, from " +
+                             std::to_string(settings.min_positions) + " to " +
+                             std::to_string(settings.max_positions) + ", whose predicted result (" +
+                             predicted_by + ") passes the gate with its σ limits tightened by " +
+                             Fmt(settings.margin * 100) + " %, by bisection"},
+              {"rotations", "the shortest rotation between consecutive orientations"},
+              {"margin", settings.margin},
+              {"orientations", json::array()},
+              {"meets_limits", false},
+              {"unmet", json::array()},
+              {"uncertainty", nullptr},
+              {"fewer", nullptr},
+              {"predictions", 0}};
+  if (cap < settings.min_positions) {
+    out["unmet"].push_back("a log of " + std::to_string(settings.min_positions) +
+                           " positions at this rate and duration has more than " +
+                           Fmt(settings.max_samples) +
+                           " samples, the most a suggestion simulates (max_samples): shorten the "
+                           "statics or lower the rate");
+    return out;
+  }
+  SuggestFewestPositions(
+      sequence(cap), protocol, settings.min_positions, cap, predict,
+      [&](const json& result, Verdict* verdict) { judge(result, margined, verdict); }, too_few,
+      &out);
+  return out;
 }
 
 }  // namespace calibd::server

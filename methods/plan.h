@@ -106,6 +106,32 @@ void SuggestFewestPositions(
     const std::function<void(const nlohmann::json&, Verdict*)>& judge, const std::string& too_few,
     nlohmann::json* out);
 
+// How a suggestion is cut from a greedy sequence (the imu and mag plans). Plain data.
+struct SuggestSettings {
+  int min_positions = 9;     // >= 1: the fewest statics the method takes (it refuses fewer)
+  int max_positions = 24;    // in [min_positions, PlanProtocol::kMaxPositions]: the longest
+  double margin = 0.1;       // in [0, 1): the σ limits are met by this fraction (a plan's σ is
+                             // within Monte-Carlo resolution of a recording's, not exact)
+  double max_samples = 5e5;  // > 0: fewer positions when a log of max_positions has more
+};
+
+// The imu and mag plans' `suggested` object: cap = max_positions, less where a log of cap
+// positions (the protocol's static and rotation durations and rate) would have more than
+// max_samples samples (then none is simulated and `unmet` says so); the gate's `sigma_keys`
+// tightened by the margin; the first positions of sequence(cap) cut by SuggestFewestPositions
+// (`judge` gets the tightened limits). `design` says how the sequence is chosen, `predicted_by`
+// what predicts a protocol's result (e.g. "the imu method on the simulated log"); the object also
+// holds `rotations`, `margin`, `orientations`, `meets_limits`, `unmet`, `uncertainty`, `fewer`
+// and `predictions`.
+nlohmann::json SuggestGreedyProtocol(
+    const SuggestSettings& settings, const PlanProtocol& protocol, const AcceptanceLimits& limits,
+    const std::vector<std::string>& sigma_keys, const std::string& design,
+    const std::string& predicted_by,
+    const std::function<std::vector<const PlanCandidate*>(int cap)>& sequence,
+    const std::function<Status(const PlanProtocol&, nlohmann::json*)>& predict,
+    const std::function<void(const nlohmann::json&, const AcceptanceLimits&, Verdict*)>& judge,
+    const std::string& too_few);
+
 // "z" for a unit axis direction (either sign), "[0.71, 0.71, 0]" otherwise: for messages.
 std::string DirectionWords(const Eigen::Vector3d& direction);
 

@@ -200,53 +200,24 @@ Status PredictImu(const json& config, const PlanProtocol& protocol, json* result
 
 json SuggestImu(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits,
                 const ImuSuggestOptions& options) {
-  const int min_positions = core::ImuOptions().min_statics;
-  const double per_position =
-      protocol.rate * (protocol.static_duration + protocol.rotation_duration);
-  const int by_samples = static_cast<int>(std::floor(
-      (options.max_samples + protocol.rate * protocol.rotation_duration) / per_position));
-  const int cap = std::min(options.max_positions, by_samples);
-  AcceptanceLimits margined = limits;
-  for (const char* key : kSigmaKeys) {
-    const auto it = margined.values.find(key);
-    if (it != margined.values.end() && it->second) *it->second *= 1 - options.margin;
-  }
-  json out = {
-      {"design",
-       "greedy D-optimal over the 26 directions ±x, ±y, ±z, the 12 edge and 8 corner diagonals, "
-       "starting flat (+z up), each joined to the previous one by the shortest rotation: the "
-       "candidate that most increases log det of the linearised accelerometer (|a| = g at each "
-       "static) and gyroscope (the gravity direction after each rotation) information at nominal "
-       "values; the fewest positions of that sequence, from " +
-           std::to_string(min_positions) + " to " + std::to_string(options.max_positions) +
-           ", whose predicted result (the imu method on the simulated log) passes the gate with "
-           "its σ limits tightened by " +
-           Fmt(options.margin * 100) + " %, by bisection"},
-      {"rotations", "the shortest rotation between consecutive orientations"},
-      {"margin", options.margin},
-      {"orientations", json::array()},
-      {"meets_limits", false},
-      {"unmet", json::array()},
-      {"uncertainty", nullptr},
-      {"fewer", nullptr},
-      {"predictions", 0}};
-  if (cap < min_positions) {
-    out["unmet"].push_back("a log of " + std::to_string(min_positions) +
-                           " positions at this rate and duration has more than " +
-                           Fmt(options.max_samples) +
-                           " samples, the most a suggestion simulates (max_samples): shorten the "
-                           "statics or lower the rate");
-    return out;
-  }
-  const std::vector<const PlanCandidate*> sequence = ImuGreedySequence(cap);
-  SuggestFewestPositions(
-      sequence, protocol, min_positions, cap,
+  SuggestSettings settings;
+  settings.min_positions = core::ImuOptions().min_statics;
+  settings.max_positions = options.max_positions;
+  settings.margin = options.margin;
+  settings.max_samples = options.max_samples;
+  return SuggestGreedyProtocol(
+      settings, protocol, limits, {std::begin(kSigmaKeys), std::end(kSigmaKeys)},
+      "greedy D-optimal over the 26 directions ±x, ±y, ±z, the 12 edge and 8 corner diagonals, "
+      "starting flat (+z up), each joined to the previous one by the shortest rotation: the "
+      "candidate that most increases log det of the linearised accelerometer (|a| = g at each "
+      "static) and gyroscope (the gravity direction after each rotation) information at nominal "
+      "values",
+      "the imu method on the simulated log", ImuGreedySequence,
       [&](const PlanProtocol& p, json* result) { return PredictImu(config, p, result); },
-      [&](const json& result, Verdict* verdict) {
+      [&](const json& result, const AcceptanceLimits& margined, Verdict* verdict) {
         ImuMethod().Judge(result, config, margined, verdict);
       },
-      "the imu method needs " + std::to_string(min_positions) + " statics", &out);
-  return out;
+      "the imu method needs " + std::to_string(settings.min_positions) + " statics");
 }
 
 Status PlanImu(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits,

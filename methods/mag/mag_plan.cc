@@ -71,12 +71,6 @@ constexpr int kPlanSeeds = 16;            // simulated logs a prediction average
 constexpr const char* kSigmaKeys[] = {"max_hard_iron_std", "max_soft_iron_std",
                                       "max_alignment_std"};
 
-struct SuggestOptions {
-  int max_positions = 26;    // the longest suggestion, >= min_alignment_statics
-  double margin = 0.1;       // σ limits met by this fraction (Monte-Carlo resolution), [0, 1)
-  double max_samples = 5e5;  // fewer positions when a log of max_positions has more, > 0
-};
-
 // Body → NED attitudes of up directions: ProtocolRotations' level frame has x north and z up
 // (y west); NED = diag(1, −1, −1) of it.
 std::vector<Eigen::Matrix3d> Attitudes(const std::vector<Eigen::Vector3d>& up) {
@@ -295,55 +289,23 @@ std::vector<const PlanCandidate*> MagGreedySequence(int positions, const PlanPro
 
 json SuggestMag(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits,
                 double dip) {
-  const SuggestOptions options;
-  const int min_positions = core::MagOptions().min_alignment_statics;
-  const double per_position =
-      protocol.rate * (protocol.static_duration + protocol.rotation_duration);
-  const int by_samples = static_cast<int>(std::floor(
-      (options.max_samples + protocol.rate * protocol.rotation_duration) / per_position));
-  const int cap = std::min(options.max_positions, by_samples);
-  AcceptanceLimits margined = limits;
-  for (const char* key : kSigmaKeys) {
-    const auto it = margined.values.find(key);
-    if (it != margined.values.end() && it->second) *it->second *= 1 - options.margin;
-  }
-  json out = {
-      {"design",
-       "greedy D-optimal over the 26 up directions ±x, ±y, ±z, the 12 edge and 8 corner "
-       "diagonals, starting flat (+z up), each joined to the previous one by the shortest "
-       "rotation: the candidate that most increases log det of the ellipsoid's information (the "
-       "field's directions in the body frame over the statics and turns) plus log det of the "
-       "alignment's (the statics' field and down directions) at nominal values; the fewest "
-       "positions of that sequence, from " +
-           std::to_string(min_positions) + " to " + std::to_string(options.max_positions) +
-           ", whose predicted result (the mag method on the simulated logs) passes the gate with "
-           "its σ limits tightened by " +
-           Fmt(options.margin * 100) + " %, by bisection"},
-      {"rotations", "the shortest rotation between consecutive orientations"},
-      {"margin", options.margin},
-      {"orientations", json::array()},
-      {"meets_limits", false},
-      {"unmet", json::array()},
-      {"uncertainty", nullptr},
-      {"fewer", nullptr},
-      {"predictions", 0}};
-  if (cap < min_positions) {
-    out["unmet"].push_back("a log of " + std::to_string(min_positions) +
-                           " positions at this rate and duration has more than " +
-                           Fmt(options.max_samples) +
-                           " samples, the most a suggestion simulates: shorten the statics or "
-                           "lower the rate");
-    return out;
-  }
-  const std::vector<const PlanCandidate*> sequence = MagGreedySequence(cap, protocol, dip);
-  SuggestFewestPositions(
-      sequence, protocol, min_positions, cap,
+  SuggestSettings settings;
+  settings.min_positions = core::MagOptions().min_alignment_statics;
+  settings.max_positions = 26;
+  return SuggestGreedyProtocol(
+      settings, protocol, limits, {std::begin(kSigmaKeys), std::end(kSigmaKeys)},
+      "greedy D-optimal over the 26 up directions ±x, ±y, ±z, the 12 edge and 8 corner "
+      "diagonals, starting flat (+z up), each joined to the previous one by the shortest "
+      "rotation: the candidate that most increases log det of the ellipsoid's information (the "
+      "field's directions in the body frame over the statics and turns) plus log det of the "
+      "alignment's (the statics' field and down directions) at nominal values",
+      "the mag method on the simulated logs",
+      [&](int cap) { return MagGreedySequence(cap, protocol, dip); },
       [&](const PlanProtocol& p, json* result) { return PredictMag(config, p, result); },
-      [&](const json& result, Verdict* verdict) {
+      [&](const json& result, const AcceptanceLimits& margined, Verdict* verdict) {
         MagMethod().Judge(result, config, margined, verdict);
       },
-      "the alignment needs " + std::to_string(min_positions) + " statics", &out);
-  return out;
+      "the alignment needs " + std::to_string(settings.min_positions) + " statics");
 }
 
 Status PlanMag(const json& config, const PlanProtocol& protocol, const AcceptanceLimits& limits,
