@@ -12,10 +12,9 @@
 //   coloured    AR(1) noise, φ = 0.9 sample to sample, the same marginal σ (pca: along the
 //               positions; imu: white noise plus a bias random walk instead)
 //   jitter      imu: timestamps off by N(0, 0.26 ms) per sample (MIMU4444's timing jitter);
-//               noise: the same on its timestamps. array (both models) has no row: the
-//               positions-only model uses no time, and the full model's simulation draws its
-//               dynamic samples independently (no trajectory), so a timing error has no
-//               defined effect on its readings.
+//               noise: the same on its timestamps; array (both models): every triad's sample
+//               read that much late, to first order through ω and ω̇ (AddTimingJitter: their
+//               simulations draw samples independently, so ω̈ and ṡ are taken as zero).
 // Columns: trials, parameters per trial, z RMS with the primary σ, z RMS with the white-noise
 // bound (crb), warned trials. The z RMS from P·T values has a relative standard error of about
 // 1/√(2·P·T) if they were independent; parameters of one trial share the trial's noise, so the
@@ -137,6 +136,35 @@ Row Pca(Misfit noise, int trials) {
 }
 
 // array positions-only: the paper's 32-triad board, 1 000 samples; 31 × 3 position coordinates.
+// Every triad's every sample read kTimingJitter·N(0, 1) late (independently per triad and
+// sample), to first order: the reading plus δ times its rate of change, gyroscope G ω̇,
+// accelerometer T (ω̇×ω× + ω×ω̇×) r. The array simulations draw their samples independently (no
+// trajectory), so ω̈ and ṡ are taken as zero. `accel_T`, `positions`: per accelerometer triad;
+// `gyro_T`: per gyroscope triad (the columns of *gyro).
+void AddTimingJitter(const Eigen::Matrix3Xd& omega, const Eigen::Matrix3Xd& omega_dot,
+                     const std::vector<Eigen::Matrix3d>& accel_T, const Eigen::Matrix3Xd& positions,
+                     const std::vector<Eigen::Matrix3d>& gyro_T, GaussianRng* rng,
+                     Eigen::MatrixXd* accel, Eigen::MatrixXd* gyro) {
+  const auto skew = [](const Eigen::Vector3d& v) {
+    Eigen::Matrix3d m;
+    m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+    return m;
+  };
+  for (Eigen::Index n = 0; n < omega.cols(); ++n) {
+    const Eigen::Vector3d w = omega.col(n), wd = omega_dot.col(n);
+    const Eigen::Matrix3d dA = skew(wd) * skew(w) + skew(w) * skew(wd);
+    for (size_t k = 0; k < accel_T.size(); ++k) {
+      accel->row(n).segment<3>(3 * static_cast<Eigen::Index>(k)) +=
+          kTimingJitter * rng->Normal() *
+          (accel_T[k] * dA * positions.col(static_cast<Eigen::Index>(k))).transpose();
+    }
+    for (size_t j = 0; j < gyro_T.size(); ++j) {
+      gyro->row(n).segment<3>(3 * static_cast<Eigen::Index>(j)) +=
+          kTimingJitter * rng->Normal() * (gyro_T[j] * wd).transpose();
+    }
+  }
+}
+
 Row Array(Misfit noise, int trials) {
   Row row{"array", NoiseName(noise)};
   for (int t = 0; t < trials; ++t) {
@@ -150,6 +178,16 @@ Row Array(Misfit noise, int trials) {
     GaussianRng rng(3000 + t);
     AddNoise(sa, noise == Misfit::kColoured, &rng, &sim.problem.accel);
     AddNoise(sg, noise == Misfit::kColoured, &rng, &sim.problem.gyro);
+    if (noise == Misfit::kJitter) {
+      std::vector<Eigen::Matrix3d> accel_T(static_cast<size_t>(sim.true_positions.cols()),
+                                           Eigen::Matrix3d::Identity());
+      for (size_t k = 0; k < sim.accel_models.size() && k < accel_T.size(); ++k)
+        accel_T[k] = sim.accel_models[k].sensitivity.transpose();
+      const std::vector<Eigen::Matrix3d> gyro_T(static_cast<size_t>(sim.problem.gyro.cols() / 3),
+                                                Eigen::Matrix3d::Identity());
+      AddTimingJitter(sim.omega, sim.omega_dot, accel_T, sim.true_positions, gyro_T, &rng,
+                      &sim.problem.accel, &sim.problem.gyro);
+    }
     ArrayOptions o;
     const double f = noise == Misfit::kUnderstated ? 1.0 / 3 : 1.0;
     o.accel_noise = f * sa;
@@ -191,6 +229,17 @@ Row ArrayFull(Misfit noise, int trials) {
     GaussianRng rng(5000 + t);
     AddNoise(sa, noise == Misfit::kColoured, &rng, &sim.problem.accel);
     AddNoise(sg, noise == Misfit::kColoured, &rng, &sim.problem.gyro);
+    if (noise == Misfit::kJitter) {
+      std::vector<Eigen::Matrix3d> accel_T, gyro_T;
+      Eigen::Matrix3Xd positions(3, static_cast<Eigen::Index>(sim.truth.size()));
+      for (size_t k = 0; k < sim.truth.size(); ++k) {
+        accel_T.push_back(sim.truth[k].accel_T);
+        gyro_T.push_back(sim.truth[k].gyro_T);
+        positions.col(static_cast<Eigen::Index>(k)) = sim.truth[k].position;
+      }
+      AddTimingJitter(sim.motion.topRows<3>(), sim.motion.middleRows<3>(3), accel_T, positions,
+                      gyro_T, &rng, &sim.problem.accel, &sim.problem.gyro);
+    }
     ArrayFullOptions o;
     const double f = noise == Misfit::kUnderstated ? 1.0 / 3 : 1.0;
     o.accel_noise = f * sa;
@@ -369,8 +418,14 @@ int main(int argc, char** argv) {
   };
   const std::vector<Plan> plans = {
       {"pca", Pca, {Misfit::kRight, Misfit::kUnderstated, Misfit::kColoured}, 300},
-      {"array", Array, {Misfit::kRight, Misfit::kUnderstated, Misfit::kColoured}, 40},
-      {"array_full", ArrayFull, {Misfit::kRight, Misfit::kUnderstated, Misfit::kColoured}, 30},
+      {"array",
+       Array,
+       {Misfit::kRight, Misfit::kUnderstated, Misfit::kColoured, Misfit::kJitter},
+       40},
+      {"array_full",
+       ArrayFull,
+       {Misfit::kRight, Misfit::kUnderstated, Misfit::kColoured, Misfit::kJitter},
+       30},
       {"imu", Imu, {Misfit::kRight, Misfit::kUnderstated, Misfit::kColoured, Misfit::kJitter}, 150},
       {"noise", NoiseMethod, {Misfit::kRight, Misfit::kColoured, Misfit::kJitter}, 400},
   };

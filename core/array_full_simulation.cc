@@ -75,11 +75,13 @@ Status SimulateArrayFull(const ArrayFullSimulationOptions& o, ArrayFullSimulatio
   p.t.resize(N);
   p.accel.resize(N, 3 * K);
   p.gyro.resize(N, 3 * K);
+  out->motion.resize(9, N);
   for (int64_t n = 0; n < N; ++n) p.t(n) = static_cast<double>(n) / o.rate;
   std::vector<Eigen::Vector3d> dirs(o.statics);
   for (int j = 0; j < o.statics; ++j) dirs[j] = o.gravity * rng.UnitVector();
   auto emit = [&](int64_t n, const Eigen::Vector3d& w, const Eigen::Vector3d& wd,
                   const Eigen::Vector3d& s) {
+    out->motion.col(n) << w, wd, s;
     Eigen::Matrix3d A = w * w.transpose() - w.squaredNorm() * Eigen::Matrix3d::Identity();
     A(0, 1) -= wd.z();
     A(0, 2) += wd.y();

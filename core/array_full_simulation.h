@@ -51,6 +51,9 @@ struct ArrayFullSimulation {
   ArrayFullProblem problem;           // t, accel, gyro, nominal positions, reference
   std::vector<ArrayFullTriad> truth;  // K, in the gauges
   Eigen::VectorXd truth_theta;        // 27K, PackArrayFullTriad per triad
+  // Per sample, the true motion (omega, omega_dot, s): rad/s, rad/s², m/s² (a static's s is its
+  // gravity reaction, omega and omega_dot zero). 9 x N.
+  Eigen::Matrix<double, 9, Eigen::Dynamic> motion;
   int64_t static_samples_per_orientation = 0;
 };
 

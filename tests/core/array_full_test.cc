@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -46,6 +47,35 @@ TEST(ArrayFull, RecoversEveryParameterExactlyWithoutNoise) {
   const Eigen::VectorXd err = r.theta - sim.truth_theta;
   EXPECT_LT(err.cwiseAbs().maxCoeff(), 1e-9) << err.transpose();
   EXPECT_EQ(r.gauge, "sum_trace_gyroscope");
+}
+
+// The simulation's per-sample motion is the one its noise-free readings were made from.
+TEST(ArrayFullSimulationMotion, ReproducesTheNoiseFreeReadings) {
+  ArrayFullSimulationOptions so = Board8(9);
+  so.accel_noise = so.gyro_noise = 0;
+  ArrayFullSimulation sim;
+  ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+  ASSERT_EQ(sim.motion.cols(), sim.problem.t.size());
+  const auto skew = [](const Eigen::Vector3d& v) {
+    Eigen::Matrix3d m;
+    m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+    return m;
+  };
+  double worst = 0;
+  for (Eigen::Index n = 0; n < sim.motion.cols(); ++n) {
+    const Eigen::Vector3d w = sim.motion.col(n).head<3>(), wd = sim.motion.col(n).segment<3>(3),
+                          s = sim.motion.col(n).tail<3>();
+    for (size_t k = 0; k < sim.truth.size(); ++k) {
+      const ArrayFullTriad& t = sim.truth[k];
+      const Eigen::Index c = 3 * static_cast<Eigen::Index>(k);
+      const Eigen::Vector3d ya =
+          t.accel_T * ((skew(w) * skew(w) + skew(wd)) * t.position + s) + t.accel_bias;
+      const Eigen::Vector3d yg = t.gyro_T * w + t.gyro_bias;
+      worst = std::max({worst, (ya - sim.problem.accel.row(n).segment<3>(c).transpose()).norm(),
+                        (yg - sim.problem.gyro.row(n).segment<3>(c).transpose()).norm()});
+    }
+  }
+  EXPECT_LT(worst, 1e-12);
 }
 
 // ArrayFullOptions::on_stage names each stage as it begins, in order, and "done" only after a
