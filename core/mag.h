@@ -22,6 +22,14 @@
 //     weights w_i = 1/(1 + (|e_i|/(c σ̂))²) on each sample's residual norm, σ̂ from the median
 //     residual, so that spans disturbed by nearby iron weigh little; samples with w_i below
 //     `disturbed_weight` are reported as disturbed spans.
+//  2b. Errors in variables: each u_i is fitted to the noise too (Neyman-Scott), so a reading's
+//     distance to the fitted ellipsoid along its outward normal n_i has the mean (σ²/2) κ_i, κ_i
+//     the sum of the principal curvatures at the foot point (2/radius on a sphere), and plain
+//     maximum likelihood returns an ellipsoid too large by about σ²/radius (relative (σ/radius)²:
+//     several σ of P at a noisy sensor's 5 % of the field). The fit is repeated, robust passes
+//     and all, on the readings less (σ̂²/2) κ_i n_i (σ̂ from the median residual, κ_i and n_i at
+//     the first fit's foot points); the weights then come from zero-mean distances too. The
+//     uncertainty (step 3) is that of the corrected fit.
 //  3. Uncertainty: the white-noise bound σ̂² (Σ w J̃ᵀJ̃)⁻¹ (J̃ the reduced Jacobian, σ̂ from the
 //     weighted residuals) and the residual-aware sandwich over batches of consecutive samples
 //     (`batch_seconds`), Newey-West with lag one batch: H⁻¹ M H⁻¹ · n_b/(n_b − 9),
@@ -84,6 +92,10 @@ struct MagOptions {
   double robust_scale = 3;
   // Reweighting passes after the first (unweighted) fit. >= 0.
   int robust_passes = 3;
+  // Remove the fit's errors-in-variables bias (step 2b): refit on the readings less each one's
+  // expected distance to the ellipsoid, (σ̂²/2) × the sum of the principal curvatures along the
+  // normal. false: plain maximum likelihood (the ellipsoid too large by about σ²/radius).
+  bool errors_in_variables = true;
   // A sample weighs less than this: it is counted as disturbed. In (0, 1).
   double disturbed_weight = 0.25;
   // More than this fraction of samples disturbed: kFieldDisturbed. In (0, 1].
