@@ -321,6 +321,7 @@ struct Covariances {
   Matrix9d sandwich = Matrix9d::Zero();       // over batches that leave min_batches
   Matrix9d sandwich_long = Matrix9d::Zero();  // also over those that leave min_long_batches
   double sigma = 0;                           // σ̂, reading units
+  std::vector<MagBlockingStep> blocking;      // every batch length tried
   bool ok = false;
 };
 
@@ -360,6 +361,7 @@ Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vect
     }
     const Matrix9d sandwich = h_inv * meat * h_inv * (static_cast<double>(batches) / (batches - 9));
     const double size = (sandwich.diagonal().array() / c.crb.diagonal().array()).sum();
+    c.blocking.push_back({seconds, batches, std::sqrt(size / 9)});
     if (size > largest && (seconds == options.batch_seconds || batches >= options.min_batches)) {
       largest = size;
       c.sandwich = sandwich;
@@ -469,6 +471,21 @@ void ChoosePrimary(const Covariances& c, const std::vector<Matrix3d>& dp, const 
   }
 }
 
+// The blocking's plateau check (MagResult::plateau) and its warning.
+void CheckPlateau(const Covariances& c, const MagOptions& options, MagResult* r) {
+  r->blocking = c.blocking;
+  const size_t k = c.blocking.size();
+  if (k < 2) return;
+  const double growth = c.blocking[k - 1].ratio / c.blocking[k - 2].ratio;
+  if (growth <= options.plateau_growth) return;
+  r->plateau = false;
+  r->warnings.push_back(
+      "the sandwich's blocking reaches no plateau: its σ grew " + Fmt("%.2f", growth) + "× from " +
+      Fmt("%.0f", c.blocking[k - 2].seconds) + " s to " + Fmt("%.0f", c.blocking[k - 1].seconds) +
+      " s batches (the longest the log allows): the residuals (offsets) wander over longer than "
+      "that, and σ is a lower bound");
+}
+
 }  // namespace
 
 Status CheckMagReadingsNotPlanar(const Eigen::Matrix3Xd& y, const MagOptions& options) {
@@ -497,6 +514,7 @@ Status MagOptions::Validate() const {
   }
   if (!(span_merge_seconds >= 0)) return Invalid("span_merge_seconds must be >= 0");
   if (!(sandwich_margin >= 1)) return Invalid("sandwich_margin must be >= 1");
+  if (!(plateau_growth > 1)) return Invalid("plateau_growth must be > 1");
   if (!(min_coverage_eigenvalue > 0 && min_coverage_eigenvalue <= 1)) {
     return Invalid("min_coverage_eigenvalue must lie in (0, 1]");
   }
@@ -563,6 +581,7 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
   result->noise_std = c.sigma;
   const std::vector<Matrix3d> dp = SoftIronDirections(e.a, result->field);
   ChoosePrimary(c, dp, options, result);
+  CheckPlateau(c, options, result);
   // Residual RMS before (identity, no offset, against the data's own field) and after.
   const double f_ut = options.field > 0 ? options.field : result->field_estimate;
   result->residual_rms_before =

@@ -46,7 +46,8 @@
 //     QMC5883L sphere's σ ratio grows 1.9, 2.2, 2.6, 3.1, 4.5 over 2-32 s batches, its x and z
 //     offsets wandering at every time scale from 5 s up; CK-Explorer's 8.5, 10, 14 over 2-8 s),
 //     and its halves, each with 24 batches at most, disagreed at z RMS 2.08 and 1.68 (1.50 and
-//     1.45 with 15). Where there is no plateau the σ stays a lower bound.
+//     1.45 with 15). Where there is no plateau the σ stays a lower bound: the result's
+//     `blocking` lists the curve and a warning names it (`plateau_growth`).
 //  4. Alignment (with accelerometer statics): the down direction d_j (−specific force, unit) and
 //     the calibrated field direction n_j = P(ȳ_j − h)/|·| of each static satisfy
 //     d_jᵀ R n_j = sin δ (δ the dip, positive down); Gauss-Newton over R (left perturbation) and
@@ -114,6 +115,10 @@ struct MagOptions {
   double span_merge_seconds = 0.5;
   // The sandwich becomes the primary σ when the RMS of its σ over the bound's exceeds this. >= 1.
   double sandwich_margin = 1.15;
+  // The blocking reaches no plateau (a warning: σ is then a lower bound) when the sandwich's σ
+  // ratio (RMS over the parameters, sandwich over bound) at the longest batches exceeds the one at
+  // batches half as long by more than this factor. > 1.
+  double plateau_growth = 1.3;
   // Coverage: the smallest eigenvalue of (3/N) Σ u uᵀ for a "good" verdict (all 1 when the field
   // directions are spread evenly). In (0, 1].
   double min_coverage_eigenvalue = 0.2;
@@ -155,6 +160,14 @@ struct MagSpan {
   double max_residual = 0;  // µT, the largest residual norm in the span
 };
 
+// One step of the sandwich's blocking (core/mag.h step 3): batches of `seconds`, `batches` of
+// them, the RMS over the parameters of σ(sandwich) / σ(bound).
+struct MagBlockingStep {
+  double seconds = 0;
+  int64_t batches = 0;
+  double ratio = 0;
+};
+
 // The σ of every parameter, in the result's units (see MagResult).
 struct MagStd {
   Eigen::Vector3d hard_iron = Eigen::Vector3d::Zero();
@@ -182,6 +195,12 @@ struct MagResult {
   // the residuals themselves.)
   double sandwich_ratio = std::numeric_limits<double>::quiet_NaN();
   double noise_std = 0;  // σ̂, reading units (white, from the residuals)
+  // The sandwich over every batch length tried (2, 4, 8... × batch_seconds while at least
+  // min_long_batches remain); `plateau` false when the longest grew by more than plateau_growth
+  // over the one before (residuals correlated longer than the log's blocking can show: σ is a
+  // lower bound, and a warning says so). True with fewer than two steps.
+  std::vector<MagBlockingStep> blocking;
+  bool plateau = true;
 
   // |m| − F over all samples, µT (RMS): the nominal (identity, no offset) and calibrated.
   double residual_rms_before = 0;
