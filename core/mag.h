@@ -119,7 +119,7 @@ struct MagOptions {
   // ratio (RMS over the parameters, sandwich over bound) at the longest batches exceeds the one at
   // batches half as long by more than this factor (measured at about 16 batches: white-noise and
   // AR(1) logs 1.1-1.3, the small-sample factor lifting it over 1; a random-walk offset 1.4-1.5;
-  // README "mag"). > 1.
+  // README, mag section). > 1.
   double plateau_growth = 1.3;
   // Coverage: the smallest eigenvalue of (3/N) Σ u uᵀ for a "good" verdict (all 1 when the field
   // directions are spread evenly). In (0, 1].
