@@ -234,6 +234,61 @@ double Median(VectorXd v) {
   return v(mid);
 }
 
+// Stage 2 on the readings y, from `e`: Levenberg-Marquardt with the weights w, then
+// options.robust_passes reweightings (Cauchy weights from the residual norms, σ̂ from their
+// median), each followed by a fit. `reweight_first`: weigh by e's residuals before the first fit
+// (e already fits y closely). A fit whose weights the next replaces runs at most kPassIterations
+// (enough for the residuals the weights come from: a log with disturbances converges only
+// linearly before it is weighted); the last runs to convergence.
+Status RobustFit(const Eigen::Matrix3Xd& y, const MagOptions& options, bool reweight_first,
+                 Linearized* workspace, Ellipsoid* e, VectorXd* w, int* iterations) {
+  constexpr int kPassIterations = 5;
+  const int passes = options.robust_scale > 0 ? options.robust_passes : 0;
+  // Cauchy weights from e's residuals; false when they are rounding only (a noise-free log).
+  auto reweight = [&] {
+    const VectorXd r = ResidualNorms(y, *e);
+    const double sigma = Median(r) / 0.6745;
+    if (!(sigma > 1e-9 * e->a.norm())) return false;
+    for (Eigen::Index i = 0; i < y.cols(); ++i) {
+      const double z = r(i) / (options.robust_scale * sigma);
+      (*w)(i) = 1 / (1 + z * z);
+    }
+    return true;
+  };
+  int pass = 0;
+  if (reweight_first && passes > 0 && !reweight()) pass = passes;
+  for (;; ++pass) {
+    const int cap =
+        pass < passes ? std::min(kPassIterations, options.max_iterations) : options.max_iterations;
+    if (Status s = MaximumLikelihood(y, *w, options, cap, workspace, e, iterations); !s.ok()) {
+      return s;
+    }
+    if (pass >= passes) return Status::Ok();
+    // Weighting ends early on a noise-free log: the next fit converges as weighted so far.
+    if (!reweight()) pass = passes - 1;
+  }
+}
+
+// The errors-in-variables offsets (stage 2b): a reading's distance to the ellipsoid along the
+// outward normal n has the mean (σ²/2) κ (κ the sum of the principal curvatures at the foot
+// point), not 0 (the foot point is fitted to the noise too: Neyman-Scott), so plain maximum
+// likelihood returns an ellipsoid too large by about σ²/radius. Returns the columns (σ²/2) κ_i n_i
+// at e's foot points; the readings minus them have a zero-mean distance. For the surface
+// pᵀ M p = 1, M = A⁻², p = A u: n = M p / |M p|, κ = (tr M |M p|² − (M p)ᵀ M (M p)) / |M p|³.
+Eigen::Matrix3Xd CurvatureOffsets(const Ellipsoid& e, double sigma) {
+  const Matrix3d a_inv = e.a.inverse();
+  const Matrix3d m = a_inv * a_inv;
+  const double trace = m.trace();
+  Eigen::Matrix3Xd c(3, e.u.cols());
+  for (Eigen::Index i = 0; i < e.u.cols(); ++i) {
+    const Vector3d g = m * (e.a * e.u.col(i));
+    const double g_norm = g.norm();
+    const double kappa = (trace * g_norm * g_norm - g.dot(m * g)) / (g_norm * g_norm * g_norm);
+    c.col(i) = 0.5 * sigma * sigma * kappa * g / g_norm;
+  }
+  return c;
+}
+
 // Newey-West over batches of `seconds` of consecutive samples, lag one batch (Bartlett weight ½:
 // noise correlated across a batch boundary counts too; positive semi-definite by construction):
 // M = Σ_b s_b s_bᵀ + ½ Σ_b (s_b s_{b−1}ᵀ + s_{b−1} s_bᵀ), s_b the sum of the batch's `score`.
@@ -266,6 +321,7 @@ struct Covariances {
   Matrix9d sandwich = Matrix9d::Zero();       // over batches that leave min_batches
   Matrix9d sandwich_long = Matrix9d::Zero();  // also over those that leave min_long_batches
   double sigma = 0;                           // σ̂, reading units
+  std::vector<MagBlockingStep> blocking;      // every batch length tried
   bool ok = false;
 };
 
@@ -305,6 +361,7 @@ Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vect
     }
     const Matrix9d sandwich = h_inv * meat * h_inv * (static_cast<double>(batches) / (batches - 9));
     const double size = (sandwich.diagonal().array() / c.crb.diagonal().array()).sum();
+    c.blocking.push_back({seconds, batches, std::sqrt(size / 9)});
     if (size > largest && (seconds == options.batch_seconds || batches >= options.min_batches)) {
       largest = size;
       c.sandwich = sandwich;
@@ -414,6 +471,21 @@ void ChoosePrimary(const Covariances& c, const std::vector<Matrix3d>& dp, const 
   }
 }
 
+// The blocking's plateau check (MagResult::plateau) and its warning.
+void CheckPlateau(const Covariances& c, const MagOptions& options, MagResult* r) {
+  r->blocking = c.blocking;
+  const size_t k = c.blocking.size();
+  if (k < 2) return;
+  const double growth = c.blocking[k - 1].ratio / c.blocking[k - 2].ratio;
+  if (growth <= options.plateau_growth) return;
+  r->plateau = false;
+  r->warnings.push_back(
+      "the sandwich's blocking reaches no plateau: its σ grew " + Fmt("%.2f", growth) + "× from " +
+      Fmt("%.0f", c.blocking[k - 2].seconds) + " s to " + Fmt("%.0f", c.blocking[k - 1].seconds) +
+      " s batches (the longest the log allows): the residuals (offsets) wander over longer than "
+      "that, and σ is a lower bound");
+}
+
 }  // namespace
 
 Status CheckMagReadingsNotPlanar(const Eigen::Matrix3Xd& y, const MagOptions& options) {
@@ -442,6 +514,7 @@ Status MagOptions::Validate() const {
   }
   if (!(span_merge_seconds >= 0)) return Invalid("span_merge_seconds must be >= 0");
   if (!(sandwich_margin >= 1)) return Invalid("sandwich_margin must be >= 1");
+  if (!(plateau_growth > 1)) return Invalid("plateau_growth must be > 1");
   if (!(min_coverage_eigenvalue > 0 && min_coverage_eigenvalue <= 1)) {
     return Invalid("min_coverage_eigenvalue must lie in (0, 1]");
   }
@@ -464,44 +537,28 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
   Ellipsoid e;
   if (Status s = StartFit(y, &e); !s.ok()) return s;
   VectorXd w = VectorXd::Ones(n);
-  // Stage 2: plain maximum likelihood, then the robust passes. A pass whose weights the next one
-  // replaces runs at most kPassIterations (enough for the residuals the weights come from: a log
-  // with disturbances converges only linearly before it is weighted); the last runs to convergence.
-  constexpr int kPassIterations = 5;
-  const int passes = options.robust_scale > 0 ? options.robust_passes : 0;
-  auto pass_iterations = [&](int pass) {
-    return pass < passes ? std::min(kPassIterations, options.max_iterations)
-                         : options.max_iterations;
-  };
-  Linearized workspace;  // the per-sample pieces, reused by every pass
+  Linearized workspace;  // the per-sample pieces, reused by every fit
   if (Status s =
-          MaximumLikelihood(y, w, options, pass_iterations(0), &workspace, &e, &result->iterations);
+          RobustFit(y, options, /*reweight_first=*/false, &workspace, &e, &w, &result->iterations);
       !s.ok()) {
     return s;
   }
-  int pass = 0;
-  for (; pass < passes; ++pass) {
-    const VectorXd r = ResidualNorms(y, e);
-    const double sigma = Median(r) / 0.6745;
-    if (!(sigma > 1e-9 * e.a.norm())) break;  // noise-free (rounding only): nothing to weigh
-    for (Eigen::Index i = 0; i < n; ++i) {
-      const double z = r(i) / (options.robust_scale * sigma);
-      w(i) = 1 / (1 + z * z);
-    }
-    if (Status s = MaximumLikelihood(y, w, options, pass_iterations(pass + 1), &workspace, &e,
-                                     &result->iterations);
-        !s.ok()) {
-      return s;
-    }
-  }
-  if (pass < passes) {  // weighting ended early (a noise-free log): converge as weighted so far
-    if (Status s = MaximumLikelihood(y, w, options, options.max_iterations, &workspace, &e,
-                                     &result->iterations);
-        !s.ok()) {
-      return s;
+  // Stage 2b: the errors-in-variables correction, one round (the offsets move the fit by
+  // O(σ²/radius), which changes the offsets only at the next order).
+  Eigen::Matrix3Xd y_corrected;
+  if (options.errors_in_variables) {
+    const double sigma = Median(ResidualNorms(y, e)) / 0.6745;
+    if (sigma > 1e-9 * e.a.norm()) {
+      y_corrected = y - CurvatureOffsets(e, sigma);
+      if (Status s = RobustFit(y_corrected, options, /*reweight_first=*/true, &workspace, &e, &w,
+                               &result->iterations);
+          !s.ok()) {
+        return s;
+      }
     }
   }
-  const VectorXd residual = ResidualNorms(y, e) * options.microtesla_per_unit;
+  const Eigen::Matrix3Xd& y_fit = y_corrected.size() ? y_corrected : y;
+  const VectorXd residual = ResidualNorms(y_fit, e) * options.microtesla_per_unit;
   result->disturbed_spans = mag_internal::DisturbedSpans(problem.t, w, residual, options);
   for (const MagSpan& s : result->disturbed_spans) result->disturbed_samples += s.samples;
   result->coverage = mag_internal::AssessCoverage(e.u, w, options);
@@ -516,7 +573,7 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
         Reason::kIllConditioned, "mag: the fit's values are not finite (check the readings' unit)");
   }
   // Stage 3.
-  const Covariances c = Uncertainty(y, problem.t, w, e, options, &workspace);
+  const Covariances c = Uncertainty(y_fit, problem.t, w, e, options, &workspace);
   if (!c.ok) {
     return Status::NotDeterminable(Reason::kSingularInformation,
                                    "mag: the log does not determine every soft-iron entry");
@@ -524,6 +581,7 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
   result->noise_std = c.sigma;
   const std::vector<Matrix3d> dp = SoftIronDirections(e.a, result->field);
   ChoosePrimary(c, dp, options, result);
+  CheckPlateau(c, options, result);
   // Residual RMS before (identity, no offset, against the data's own field) and after.
   const double f_ut = options.field > 0 ? options.field : result->field_estimate;
   result->residual_rms_before =

@@ -22,6 +22,14 @@
 //     weights w_i = 1/(1 + (|e_i|/(c σ̂))²) on each sample's residual norm, σ̂ from the median
 //     residual, so that spans disturbed by nearby iron weigh little; samples with w_i below
 //     `disturbed_weight` are reported as disturbed spans.
+//  2b. Errors in variables: each u_i is fitted to the noise too (Neyman-Scott), so a reading's
+//     distance to the fitted ellipsoid along its outward normal n_i has the mean (σ²/2) κ_i, κ_i
+//     the sum of the principal curvatures at the foot point (2/radius on a sphere), and plain
+//     maximum likelihood returns an ellipsoid too large by about σ²/radius (relative (σ/radius)²:
+//     several σ of P at a noisy sensor's 5 % of the field). The fit is repeated, robust passes
+//     and all, on the readings less (σ̂²/2) κ_i n_i (σ̂ from the median residual, κ_i and n_i at
+//     the first fit's foot points); the weights then come from zero-mean distances too. The
+//     uncertainty (step 3) is that of the corrected fit.
 //  3. Uncertainty: the white-noise bound σ̂² (Σ w J̃ᵀJ̃)⁻¹ (J̃ the reduced Jacobian, σ̂ from the
 //     weighted residuals) and the residual-aware sandwich over batches of consecutive samples
 //     (`batch_seconds`), Newey-West with lag one batch: H⁻¹ M H⁻¹ · n_b/(n_b − 9),
@@ -38,7 +46,8 @@
 //     QMC5883L sphere's σ ratio grows 1.9, 2.2, 2.6, 3.1, 4.5 over 2-32 s batches, its x and z
 //     offsets wandering at every time scale from 5 s up; CK-Explorer's 8.5, 10, 14 over 2-8 s),
 //     and its halves, each with 24 batches at most, disagreed at z RMS 2.08 and 1.68 (1.50 and
-//     1.45 with 15). Where there is no plateau the σ stays a lower bound.
+//     1.45 with 15). Where there is no plateau the σ stays a lower bound: the result's
+//     `blocking` lists the curve and a warning names it (`plateau_growth`).
 //  4. Alignment (with accelerometer statics): the down direction d_j (−specific force, unit) and
 //     the calibrated field direction n_j = P(ȳ_j − h)/|·| of each static satisfy
 //     d_jᵀ R n_j = sin δ (δ the dip, positive down); Gauss-Newton over R (left perturbation) and
@@ -84,6 +93,10 @@ struct MagOptions {
   double robust_scale = 3;
   // Reweighting passes after the first (unweighted) fit. >= 0.
   int robust_passes = 3;
+  // Remove the fit's errors-in-variables bias (step 2b): refit on the readings less each one's
+  // expected distance to the ellipsoid, (σ̂²/2) × the sum of the principal curvatures along the
+  // normal. false: plain maximum likelihood (the ellipsoid too large by about σ²/radius).
+  bool errors_in_variables = true;
   // A sample weighs less than this: it is counted as disturbed. In (0, 1).
   double disturbed_weight = 0.25;
   // More than this fraction of samples disturbed: kFieldDisturbed. In (0, 1].
@@ -102,6 +115,12 @@ struct MagOptions {
   double span_merge_seconds = 0.5;
   // The sandwich becomes the primary σ when the RMS of its σ over the bound's exceeds this. >= 1.
   double sandwich_margin = 1.15;
+  // The blocking reaches no plateau (a warning: σ is then a lower bound) when the sandwich's σ
+  // ratio (RMS over the parameters, sandwich over bound) at the longest batches exceeds the one at
+  // batches half as long by more than this factor (measured at about 16 batches: white-noise and
+  // AR(1) logs 1.1-1.3, the small-sample factor lifting it over 1; a random-walk offset 1.4-1.5;
+  // README, mag section). > 1.
+  double plateau_growth = 1.3;
   // Coverage: the smallest eigenvalue of (3/N) Σ u uᵀ for a "good" verdict (all 1 when the field
   // directions are spread evenly). In (0, 1].
   double min_coverage_eigenvalue = 0.2;
@@ -143,6 +162,14 @@ struct MagSpan {
   double max_residual = 0;  // µT, the largest residual norm in the span
 };
 
+// One step of the sandwich's blocking (core/mag.h step 3): batches of `seconds`, `batches` of
+// them, the RMS over the parameters of σ(sandwich) / σ(bound).
+struct MagBlockingStep {
+  double seconds = 0;
+  int64_t batches = 0;
+  double ratio = 0;
+};
+
 // The σ of every parameter, in the result's units (see MagResult).
 struct MagStd {
   Eigen::Vector3d hard_iron = Eigen::Vector3d::Zero();
@@ -170,6 +197,12 @@ struct MagResult {
   // the residuals themselves.)
   double sandwich_ratio = std::numeric_limits<double>::quiet_NaN();
   double noise_std = 0;  // σ̂, reading units (white, from the residuals)
+  // The sandwich over every batch length tried (2, 4, 8... × batch_seconds while at least
+  // min_long_batches remain); `plateau` false when the longest grew by more than plateau_growth
+  // over the one before (residuals correlated longer than the log's blocking can show: σ is a
+  // lower bound, and a warning says so). True with fewer than two steps.
+  std::vector<MagBlockingStep> blocking;
+  bool plateau = true;
 
   // |m| − F over all samples, µT (RMS): the nominal (identity, no offset) and calibrated.
   double residual_rms_before = 0;

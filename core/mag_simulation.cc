@@ -27,6 +27,7 @@ Status Check(const MagSimulationOptions& o) {
   if (!(std::abs(o.dip) < 90)) return Invalid("dip must lie in (-90, 90)");
   if (!(o.noise >= 0) || !(o.accel_noise >= 0)) return Invalid("noise must be >= 0");
   if (!(o.ar1 >= 0 && o.ar1 < 1)) return Invalid("ar1 must lie in [0, 1)");
+  if (!(o.hard_iron_walk >= 0)) return Invalid("hard_iron_walk must be >= 0");
   if (!(o.max_tilt > 0 && o.max_tilt <= 180)) return Invalid("max_tilt must lie in (0, 180]");
   for (const Eigen::Matrix3d& q : o.orientations) {
     if (!(q.transpose() * q).isApprox(Eigen::Matrix3d::Identity(), 1e-9) ||
@@ -81,6 +82,10 @@ Status SimulateMag(const MagSimulationOptions& o, MagSimulation* out) {
       given ? Eigen::Quaterniond(o.orientations.front()) : RandomOrientation(o, &rng);
   Eigen::Vector3d coloured = Eigen::Vector3d::Zero();
   const double innovation = std::sqrt(1 - o.ar1 * o.ar1);
+  // The hard iron's random walk and its sum (its mean is removed at the end). Drawn only when
+  // asked, so that logs without it keep their random sequence.
+  Eigen::Vector3d walk = Eigen::Vector3d::Zero(), walk_sum = Eigen::Vector3d::Zero();
+  const double walk_step = o.hard_iron_walk / std::sqrt(o.rate);
   int64_t i = 0;
   auto sample = [&](const Eigen::Quaterniond& q) {
     const double t = static_cast<double>(i) / o.rate;
@@ -91,7 +96,11 @@ Status SimulateMag(const MagSimulationOptions& o, MagSimulation* out) {
     const Eigen::Matrix3d qt = q.toRotationMatrix().transpose();
     for (int k = 0; k < 3; ++k) coloured(k) = o.ar1 * coloured(k) + innovation * rng.Normal();
     out->problem.t(i) = t;
-    out->problem.y.col(i) = o.hard_iron + map * (qt * b) + o.noise * coloured;
+    if (o.hard_iron_walk > 0) {
+      for (int k = 0; k < 3; ++k) walk(k) += walk_step * rng.Normal();
+      walk_sum += walk;
+    }
+    out->problem.y.col(i) = o.hard_iron + walk + map * (qt * b) + o.noise * coloured;
     Eigen::Vector3d nu;
     for (int k = 0; k < 3; ++k) nu(k) = o.accel_noise * rng.Normal();
     out->accel.col(i) = qt * g_earth + nu;
@@ -126,6 +135,7 @@ Status SimulateMag(const MagSimulationOptions& o, MagSimulation* out) {
   out->problem.t.conservativeResize(i);
   out->problem.y.conservativeResize(3, i);
   out->accel.conservativeResize(3, i);
+  out->problem.y.colwise() -= walk_sum / static_cast<double>(i);
   out->hard_iron = o.hard_iron;
   out->soft_iron_symmetric = o.soft_iron;
   out->soft_iron = r * o.soft_iron;

@@ -6,7 +6,8 @@
 //
 // Q_i the body-to-earth rotation (NED), B = F (cos δ, 0, sin δ) the Earth's field with dip δ, δB_i
 // a disturbance fixed in space during its span (iron near the bench), ε_i white (or AR(1), same
-// marginal σ) and ν_i white. Deterministic per seed (core/array_simulation.h GaussianRng).
+// marginal σ; plus a random walk of the hard iron when asked) and ν_i white. Deterministic per seed
+// (core/array_simulation.h GaussianRng).
 #ifndef CALIBD_CORE_MAG_SIMULATION_H_
 #define CALIBD_CORE_MAG_SIMULATION_H_
 
@@ -43,6 +44,10 @@ struct MagSimulationOptions {
   double noise = 0.3;         // σ of ε per axis, reading units, >= 0
   double ar1 = 0;             // AR(1) coefficient of ε, in [0, 1): 0 white
   double accel_noise = 0.02;  // σ of ν per axis, m/s², >= 0
+  // A hard iron that wanders: a random walk added to h, this many reading units per √s per axis
+  // (the offset drift of a warming or 1/f sensor), its mean over the log removed so that the
+  // truth `hard_iron` is the log's average offset. >= 0; 0: a constant hard iron.
+  double hard_iron_walk = 0;
   // Turn only about the vertical (yaw), the board flat: the field sweeps a cone (poor coverage).
   bool yaw_only = false;
   // Otherwise: orientations with the board's z axis within this angle of down (degrees; 180: any

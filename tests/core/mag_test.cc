@@ -117,7 +117,7 @@ double RmsStandardError(const std::vector<double>& z, int trials) {
 TEST(Mag, ThePrimarySigmaMatchesMonteCarloErrorsUnderWhiteNoise) {
   const int trials = 200;
   Z z;
-  int crb = 0;
+  int crb = 0, no_plateau = 0;
   for (int trial = 0; trial < trials; ++trial) {
     MagSimulationOptions so;
     so.seed = 100 + trial;
@@ -128,8 +128,11 @@ TEST(Mag, ThePrimarySigmaMatchesMonteCarloErrorsUnderWhiteNoise) {
     const Status s = CalibrateMag(sim.problem, FieldKnown(sim), &r);
     ASSERT_TRUE(s.ok()) << s.ToString();
     crb += r.basis == "crb";
+    no_plateau += !r.plateau;
     AddZ(r, r.std, sim, &z);
   }
+  std::printf("white noise: no plateau reported in %d of %d logs\n", no_plateau, trials);
+  EXPECT_LE(no_plateau, trials / 10) << "the no-plateau warning fires on white noise";
   std::printf(
       "white noise, z RMS ± SE: hard iron %.3f ± %.3f, soft iron %.3f ± %.3f, alignment %.3f ± "
       "%.3f, dip %.3f ± %.3f\n",
@@ -149,6 +152,61 @@ TEST(Mag, ThePrimarySigmaMatchesMonteCarloErrorsUnderWhiteNoise) {
   EXPECT_GE(crb, trials * 3 / 4) << "white noise: the white-noise bound should be the primary";
 }
 
+// Errors in variables (core/mag.h step 2b): at a noisy sensor's 5 % of the field (2.5 µT per
+// axis on 50 µT, as the public QMC5883L log), plain maximum likelihood returns P's diagonal
+// about (σ/F)² low, several white-noise σ; the curvature correction brings the mean error to 0.
+// Mean z of P's diagonal over 40 logs: the standard error of a mean of 120 z correlated within
+// a log is measured from the logs' means; the corrected mean must lie within 4 of them of 0, the
+// uncorrected one more than 4 below (a correction that did nothing fails). The corrected fit's
+// σ stays honest (z RMS 0.7-1.4 over all 9 entries).
+TEST(Mag, TheErrorsInVariablesCorrectionRemovesTheBiasAtHighNoise) {
+  const int trials = 40;
+  std::vector<double> corrected, plain;  // per log: mean z of P's diagonal
+  Z z;
+  for (int trial = 0; trial < trials; ++trial) {
+    MagSimulationOptions so;
+    so.seed = 900 + trial;
+    so.turns = 40;
+    so.noise = 0.05 * so.field;
+    MagSimulation sim;
+    ASSERT_TRUE(SimulateMag(so, &sim).ok());
+    MagOptions o = FieldKnown(sim);
+    MagResult r, rp;
+    ASSERT_TRUE(CalibrateMag(sim.problem, o, &r).ok());
+    o.errors_in_variables = false;
+    ASSERT_TRUE(CalibrateMag(sim.problem, o, &rp).ok());
+    double zc = 0, zp = 0;
+    for (int k = 0; k < 3; ++k) {
+      zc +=
+          (r.soft_iron_symmetric(k, k) - sim.soft_iron_symmetric(k, k)) / r.crb.soft_iron(k, k) / 3;
+      zp += (rp.soft_iron_symmetric(k, k) - sim.soft_iron_symmetric(k, k)) /
+            rp.crb.soft_iron(k, k) / 3;
+    }
+    corrected.push_back(zc);
+    plain.push_back(zp);
+    AddZ(r, r.std, sim, &z);
+  }
+  auto mean_and_se = [&](const std::vector<double>& v, double* se) {
+    double m = 0, var = 0;
+    for (double x : v) m += x / v.size();
+    for (double x : v) var += (x - m) * (x - m) / (v.size() - 1);
+    *se = std::sqrt(var / v.size());
+    return m;
+  };
+  double se_c = 0, se_p = 0;
+  const double mc = mean_and_se(corrected, &se_c), mp = mean_and_se(plain, &se_p);
+  std::printf(
+      "noise 5 %% of the field, P diagonal mean z (bias in white-noise σ) ± SE: corrected %.2f ± "
+      "%.2f, plain maximum likelihood %.2f ± %.2f; corrected z RMS hard %.3f soft %.3f\n",
+      mc, se_c, mp, se_p, Rms(z.hard), Rms(z.soft));
+  EXPECT_LT(std::abs(mc), 4 * se_c);
+  EXPECT_LT(mp, -4 * se_p) << "the bias the correction removes was not there";
+  EXPECT_GT(Rms(z.hard), 0.7);
+  EXPECT_LT(Rms(z.hard), 1.4);
+  EXPECT_GT(Rms(z.soft), 0.7);
+  EXPECT_LT(Rms(z.soft), 1.4);
+}
+
 // Coloured noise (AR(1), correlation time 0.5 s): the white-noise bound is far too small, the
 // sandwich (over 2 s batches and the longer ones, down to 15 batches) is honest: the largest
 // over noisier long batches errs high, not low (hard iron 0.89, soft iron 1.10; 1.01 and 1.11
@@ -156,6 +214,7 @@ TEST(Mag, ThePrimarySigmaMatchesMonteCarloErrorsUnderWhiteNoise) {
 TEST(Mag, UnderColouredNoiseThePrimaryIsTheSandwichAndStaysHonest) {
   const int trials = 30;
   Z primary, bound;
+  int no_plateau = 0;
   for (int trial = 0; trial < trials; ++trial) {
     MagSimulationOptions so;
     so.seed = 300 + trial;
@@ -167,17 +226,80 @@ TEST(Mag, UnderColouredNoiseThePrimaryIsTheSandwichAndStaysHonest) {
     const Status s = CalibrateMag(sim.problem, FieldKnown(sim), &r);
     ASSERT_TRUE(s.ok()) << s.ToString();
     EXPECT_EQ(r.basis, "sandwich");
+    no_plateau += !r.plateau;
     AddZ(r, r.std, sim, &primary);
     AddZ(r, r.crb, sim, &bound);
   }
   std::printf(
       "AR(1) 0.98, z RMS: primary hard %.3f soft %.3f; white-noise bound hard %.3f soft %.3f\n",
       Rms(primary.hard), Rms(primary.soft), Rms(bound.hard), Rms(bound.soft));
+  std::printf("AR(1) 0.98: no plateau reported in %d of %d logs\n", no_plateau, trials);
+  EXPECT_LE(no_plateau, 3) << "the no-plateau warning fires on noise the blocking resolves";
   EXPECT_GT(Rms(bound.hard), 2) << "the bound alone would be honest: the test shows nothing";
   EXPECT_GT(Rms(primary.hard), 0.7);
   EXPECT_LT(Rms(primary.hard), 1.4);
   EXPECT_GT(Rms(primary.soft), 0.7);
   EXPECT_LT(Rms(primary.soft), 1.4);
+}
+
+// A hard iron that wanders (a random walk of 0.02 µT/√s, core/mag_simulation.h hard_iron_walk;
+// the truth its log average) over 264 s logs: the residuals stay correlated over longer than any
+// batch the log allows, the blocking's last doubling grows the σ by 1.4-1.5 (white noise and
+// AR(1) 0.98 logs as long: 1.1-1.3, MagOptions::plateau_growth is 1.3) and the result says so in
+// at least 18 of 20 logs. Measured, not asserted (core/mag.h step 3): against the log average
+// the primary σ is conservative for the hard iron and right for the soft iron, while the two
+// halves, each estimating its own average offset, disagree by more than their σ.
+TEST(Mag, AWanderingHardIronIsReportedAsNoPlateau) {
+  const int trials = 20;
+  Z primary;
+  int no_plateau = 0;
+  double halves = 0, halves_soft = 0;
+  for (int trial = 0; trial < trials; ++trial) {
+    MagSimulationOptions so;
+    so.seed = 1100 + trial;
+    so.turns = 160;
+    so.hard_iron_walk = 0.02;
+    MagSimulation sim;
+    ASSERT_TRUE(SimulateMag(so, &sim).ok());
+    MagResult r;
+    const Status s = CalibrateMag(sim.problem, FieldKnown(sim), &r);
+    ASSERT_TRUE(s.ok()) << s.ToString();
+    AddZ(r, r.std, sim, &primary);
+    if (!r.plateau) {
+      ++no_plateau;
+      EXPECT_NE(r.warnings.back().find("reaches no plateau"), std::string::npos);
+    }
+    // The halves, each with its own σ.
+    const Eigen::Index n = sim.problem.y.cols();
+    MagResult half[2];
+    for (int k = 0; k < 2; ++k) {
+      MagProblem p;
+      p.t = sim.problem.t.segment(k * (n / 2), n / 2);
+      p.y = sim.problem.y.middleCols(k * (n / 2), n / 2);
+      ASSERT_TRUE(CalibrateMag(p, FieldKnown(sim), &half[k]).ok());
+    }
+    for (int k = 0; k < 3; ++k) {
+      halves += std::pow((half[0].hard_iron(k) - half[1].hard_iron(k)) /
+                             std::hypot(half[0].std.hard_iron(k), half[1].std.hard_iron(k)),
+                         2) /
+                (3 * trials);
+    }
+    for (int i = 0; i < 3; ++i) {
+      for (int j = i; j < 3; ++j) {
+        halves_soft +=
+            std::pow((half[0].soft_iron(i, j) - half[1].soft_iron(i, j)) /
+                         std::hypot(half[0].std.soft_iron(i, j), half[1].std.soft_iron(i, j)),
+                     2) /
+            (6 * trials);
+      }
+    }
+  }
+  std::printf(
+      "hard-iron walk 0.02 µT/√s: no plateau in %d of %d logs; primary σ against the log "
+      "average: z RMS hard %.3f soft %.3f; halves' z RMS hard iron %.2f, soft iron %.2f\n",
+      no_plateau, trials, Rms(primary.hard), Rms(primary.soft), std::sqrt(halves),
+      std::sqrt(halves_soft));
+  EXPECT_GE(no_plateau, trials - 2);
 }
 
 // An ArduPilot-style fit (CompassCalibrator: sphere, then ellipsoid by least squares of
@@ -338,6 +460,13 @@ TEST(Mag, InvalidOptionsAndInputsNameTheConstraint) {
   o = MagOptions();
   o.min_long_batches = o.min_batches + 1;
   EXPECT_NE(o.Validate().message().find("min_long_batches"), std::string::npos);
+  o = MagOptions();
+  o.plateau_growth = 1;
+  EXPECT_NE(o.Validate().message().find("plateau_growth"), std::string::npos);
+  MagSimulationOptions so;
+  so.hard_iron_walk = -0.1;
+  MagSimulation sim;
+  EXPECT_NE(SimulateMag(so, &sim).message().find("hard_iron_walk"), std::string::npos);
   MagProblem p;
   p.t = Eigen::VectorXd::LinSpaced(10, 0, 1);
   p.y = Eigen::Matrix3Xd::Random(3, 10);
