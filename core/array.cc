@@ -79,8 +79,9 @@ Status InsufficientExcitation(const ArrayExcitation& ex) {
       array_reason::kWeakExcitation,
       "the motion does not determine the positions along the direction " + std::string(dir) +
           ": the smallest eigenvalue of sum A_n^T A_n is " + Fmt(ex.min_eigenvalue) +
-          ", not above what noise alone gives (" + Fmt(ex.noise_floor) +
-          "); this happens when the array rotates about one fixed axis only, or too slowly. "
+          " rad^2/s^4, not above what noise alone gives (" + Fmt(ex.noise_floor) +
+          " rad^2/s^4); this happens when the array rotates about one fixed axis only, or too "
+          "slowly. "
           "Instead, " +
           std::string(kRecordAdvice) + ".");
 }
