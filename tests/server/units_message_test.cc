@@ -13,6 +13,9 @@
 #include <string>
 #include <vector>
 
+#include "core/array.h"
+#include "core/array_full.h"
+#include "core/array_simulation.h"
 #include "core/pca_simulation.h"
 #include "formats/recording.h"
 #include "methods/array/array_method.h"
@@ -262,6 +265,8 @@ TEST(UnitsInResults, ArrayPositions) {
   ASSERT_TRUE(s.ok()) << s.ToString();
   const std::vector<std::string> w = Warnings(result);
   ASSERT_TRUE(AnyContains(w, "gyroscope noise estimated")) << result["warnings"].dump();
+  // In the config's gyro_unit, as the diagnostics are.
+  EXPECT_TRUE(AnyContains(w, " deg/s) differs from the configured ")) << result["warnings"].dump();
   EXPECT_GE(ExpectUnitsInMessages(w), 4) << Join(w);
   EXPECT_EQ(result["diagnostics"]["accel_unit"], "m/s^2");
   EXPECT_EQ(result["diagnostics"]["gyro_unit"], "deg/s");
@@ -284,8 +289,27 @@ TEST(UnitsInResults, ArrayFull) {
   ASSERT_TRUE(s.ok()) << s.ToString();
   const std::vector<std::string> w = Warnings(result);
   ASSERT_TRUE(AnyContains(w, "residual-aware sandwich")) << result["warnings"].dump();
+  EXPECT_TRUE(AnyContains(w, " deg/s against noise ")) << result["warnings"].dump();
+  EXPECT_FALSE(AnyContains(w, " rad/s")) << result["warnings"].dump();
   EXPECT_GE(ExpectUnitsInMessages(w), 6) << Join(w);
   ExpectUnitsInDiagnostics(result["diagnostics"], {"accel_unit", "units"});
+}
+
+TEST(UnitsInResults, TheGyroscopeMessageUnitIsValidatedNamingIt) {
+  core::ArrayOptions positions;
+  positions.accel_noise = positions.gyro_noise = 1;
+  std::string error;
+  ASSERT_TRUE(positions.IsValid(&error)) << error;
+  EXPECT_EQ(positions.gyro_message_unit.Quote(core::kDegree * 0.5), "0.00873 rad/s");
+  positions.gyro_message_unit = {"deg/s", core::kDegree};
+  EXPECT_EQ(positions.gyro_message_unit.Quote(core::kDegree * 0.5), "0.5 deg/s");
+  positions.gyro_message_unit.rad_per_unit = 0;
+  EXPECT_FALSE(positions.IsValid(&error));
+  EXPECT_NE(error.find("gyro_message_unit"), std::string::npos) << error;
+  core::ArrayFullOptions full;
+  full.gyro_message_unit.name.clear();
+  EXPECT_FALSE(full.IsValid(&error));
+  EXPECT_NE(error.find("gyro_message_unit"), std::string::npos) << error;
 }
 
 }  // namespace
