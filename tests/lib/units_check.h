@@ -21,14 +21,22 @@ inline std::vector<std::string> NumbersWithoutUnit(const std::string& text) {
       "m/s^2", "m/s²", "m/s", "rad^2/s^4", "rad²/s⁴", "(rad/s)^2",     "rad/s", "mrad", "rad",
       "deg/s", "°/s",  "°C",  "°",         "degrees", "reading units", "µm",    "mm",   "ms",
       "min",   "days", "Hz",  "%",         "×",       "times",         "ppm",   "dB"};
-  static const char* const kLetterUnits[] = {"s", "m", "h", "x"};
+  static const char* const kLetterUnits[] = {"s", "m", "h", "x", "um"};
   // Words of a clause whose numbers are dimensionless (ratios, eigenvalues of unitless matrices,
   // unit vectors), up to the clause's start: "(", ";", ":" or ". ".
   static const char* const kDimensionless[] = {
       "ratio",      "χ²",         "chi2",     "chi²", "eigenvalues", "scatter_min",
       "design_min", "multiplier", "fraction", "×",    "direction",   "times the largest"};
   static const std::regex kNumber(R"([-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)");
-  std::vector<std::string> out;
+  // Between two numbers, words that let them share the second's unit: "0.1 and 0.2 m/s^2",
+  // "1.02 against 1.00 reading units", "0.05/0.06 rad/s", "gyro_unit 0.0001745 = 0.0001745 rad/s".
+  static const char* const kShared[] = {" against ", " and ", " to ", " = ", "/", " ... ", " or "};
+  struct Figure {
+    size_t at, end;
+    std::string number;
+    bool decimal, ok;
+  };
+  std::vector<Figure> figures;
   for (auto it = std::sregex_iterator(text.begin(), text.end(), kNumber);
        it != std::sregex_iterator(); ++it) {
     const std::smatch& m = *it;
@@ -41,15 +49,15 @@ inline std::vector<std::string> NumbersWithoutUnit(const std::string& text) {
           p == '^')
         continue;
     }
-    if (number.find_first_of(".eE") == std::string::npos) continue;  // a count or an index
     std::string_view after(text);
     after.remove_prefix(at + number.size());
     if (!after.empty() && after.front() == ' ') after.remove_prefix(1);
     bool ok = false;
     for (const char* u : kUnits) ok |= after.substr(0, std::string_view(u).size()) == u;
     for (const char* u : kLetterUnits) {
-      if (after.substr(0, 1) == u &&
-          (after.size() == 1 || !std::isalpha(static_cast<unsigned char>(after[1]))))
+      const size_t n = std::string_view(u).size();
+      if (after.substr(0, n) == u &&
+          (after.size() == n || !std::isalpha(static_cast<unsigned char>(after[n]))))
         ok = true;
     }
     // A parenthesis right after the number saying it is relative: "0.25 (relative: ...)".
@@ -66,11 +74,21 @@ inline std::vector<std::string> NumbersWithoutUnit(const std::string& text) {
       const std::string clause = text.substr(start, at - start);
       for (const char* d : kDimensionless) ok |= clause.find(d) != std::string::npos;
     }
-    if (!ok) {
-      const size_t from = at > 30 ? at - 30 : 0;
-      out.push_back(number + " in \"..." + text.substr(from, at + number.size() + 30 - from) +
-                    "...\"");
-    }
+    figures.push_back(
+        {at, at + number.size(), number, number.find_first_of(".eE") != std::string::npos, ok});
+  }
+  for (size_t i = figures.size(); i-- > 1;) {
+    Figure& f = figures[i - 1];
+    const Figure& next = figures[i];
+    const std::string between = text.substr(f.end, next.at - f.end);
+    for (const char* w : kShared) f.ok |= between == w && next.ok;
+  }
+  std::vector<std::string> out;
+  for (const Figure& f : figures) {
+    // Integers are counts or indices, not checked.
+    if (!f.decimal || f.ok) continue;
+    const size_t from = f.at > 30 ? f.at - 30 : 0;
+    out.push_back(f.number + " in \"..." + text.substr(from, f.end + 30 - from) + "...\"");
   }
   return out;
 }

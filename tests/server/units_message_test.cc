@@ -22,6 +22,7 @@
 #include "methods/imu/imu_method.h"
 #include "methods/noise/noise_method.h"
 #include "methods/pca/pca_method.h"
+#include "methods/registry.h"
 #include "server/config.h"
 #include "tests/lib/units_check.h"
 
@@ -58,6 +59,21 @@ std::vector<std::string> Warnings(const json& result) {
   return out;
 }
 
+// The gate's reasons for `result` (written by `method` with `config`) under `acceptance`.
+std::vector<std::string> GateReasons(const char* method, json result, json config,
+                                     const json& acceptance) {
+  config["acceptance"] = acceptance;
+  JudgeResult(*FindMethod(method), config, json(), &result);
+  std::vector<std::string> out;
+  for (const json& r : result["verdict"]["reasons"]) out.push_back(r.get<std::string>());
+  EXPECT_FALSE(out.empty()) << result["verdict"].dump();
+  return out;
+}
+
+void Append(std::vector<std::string>* to, const std::vector<std::string>& from) {
+  to->insert(to->end(), from.begin(), from.end());
+}
+
 bool AnyContains(const std::vector<std::string>& v, const std::string& what) {
   for (const std::string& s : v)
     if (s.find(what) != std::string::npos) return true;
@@ -91,6 +107,9 @@ TEST(UnitsCheck, FlagsANumberWithoutItsUnitAndAcceptsUnitsAndNamedRatios) {
   EXPECT_TRUE(NumbersWithoutUnit("12 of 100 samples; IMU 0; a0_z; T[0]").empty());
   EXPECT_TRUE(NumbersWithoutUnit("along the direction (0.12, -0.99, 0.00): the").empty());
   EXPECT_EQ(NumbersWithoutUnit("the gap: 0.5 then 1.5 m").size(), 1u);
+  EXPECT_TRUE(NumbersWithoutUnit("g0_x (1.02 against 1 reading units per field unit)").empty());
+  EXPECT_TRUE(NumbersWithoutUnit("pinned at -0.05/0.06 m/s^2; 4.5 um").empty());
+  EXPECT_EQ(NumbersWithoutUnit("between 0.5 and 0.25 (limit)").size(), 2u);
 }
 
 // ---- pca ----
@@ -129,6 +148,22 @@ TEST(UnitsInResults, Pca) {
   ASSERT_TRUE(AnyContains(Warnings(r), "times the given noise_std")) << r["warnings"].dump();
   ASSERT_TRUE(AnyContains(Warnings(r), "degrees from its nominal")) << r["warnings"].dump();
   for (const std::string& w : Warnings(r)) messages.push_back(w);
+  // The gate's reasons: residuals against noise_std, coverage, scale factors, their σ.
+  const json pca_config = {
+      {"method", "pca"}, {"magnitude", so.magnitude}, {"noise_std", *o.noise_std}};
+  std::vector<std::string> reasons = GateReasons("pca", r, pca_config,
+                                                 {{"max_chi2", 1.5},
+                                                  {"min_scatter", 0.99},
+                                                  {"scale_range", 1e-6},
+                                                  {"max_scale_std", 1e-9},
+                                                  {"max_axis_std", 1e-12},
+                                                  {"max_bias_std", 1e-12}});
+  ASSERT_TRUE(AnyContains(reasons, "times the given noise_std")) << Join(reasons);
+  ASSERT_TRUE(AnyContains(reasons, "against")) << Join(reasons);
+  Append(&messages, reasons);
+  reasons = GateReasons("pca", r, pca_config, {{"implausible_factor", 1.000001}});
+  ASSERT_TRUE(AnyContains(reasons, "x the nominal")) << Join(reasons);
+  Append(&messages, reasons);
   // Orientations within 30° of +z: poor coverage and a small rank gap.
   core::PcaSimulation cone = sim;
   for (int j = 0; j < cone.v.cols(); ++j) {
@@ -169,13 +204,27 @@ TEST(UnitsInResults, Imu) {
   sim.statics = 12;  // fewer than recommended: a warning
   Status s;
   // The configured noise a tenth of the simulated one: the χ²-scaled σ and its warning.
-  const json r = RunImuCase(sim, {{"accel_noise", sim.accel_noise / 10}}, &s);
+  const json extra = {{"accel_noise", sim.accel_noise / 10}};
+  const json r = RunImuCase(sim, extra, &s);
   ASSERT_TRUE(s.ok()) << s.ToString();
   const std::vector<std::string> w = Warnings(r);
+  json imu_config = {{"method", "imu"}};
+  imu_config.update(extra);
+  const std::vector<std::string> reasons = GateReasons("imu", r, imu_config,
+                                                       {{"max_accel_residual", 1e-9},
+                                                        {"max_gyro_residual", 1e-12},
+                                                        {"max_chi2", 1.1},
+                                                        {"scale_range", 1e-7},
+                                                        {"max_scale_std", 1e-12},
+                                                        {"max_axis_std", 1e-12},
+                                                        {"max_accel_bias_std", 1e-12},
+                                                        {"max_accel_bias", 1e-12}});
+  ASSERT_TRUE(AnyContains(reasons, "differs from gravity")) << Join(reasons);
   ASSERT_TRUE(AnyContains(w, "CRB scaled")) << r["warnings"].dump();
   ASSERT_TRUE(AnyContains(w, "are recommended")) << r["warnings"].dump();
   ExpectUnitsInDiagnostics(r["diagnostics"], {"units"});
   std::vector<std::string> messages = w;
+  Append(&messages, reasons);
   // A gyroscope gain 1.31 times the nominal gyro_unit: refused, the limit named as relative.
   core::ImuSimulationOptions off = sim;
   off.statics = 24;
@@ -185,6 +234,16 @@ TEST(UnitsInResults, Imu) {
   RunImuCase(off, {{"gyro_unit", 1.0 / 6258}}, &s);
   ASSERT_EQ(s.code(), StatusCode::kNotDeterminable) << s.ToString();
   messages.push_back(s.message());
+  // Let through (max_scale_deviation 0.5), the gate finds the gain implausible.
+  const json through = {{"gyro_unit", 1.0 / 6258}, {"max_scale_deviation", 0.5}};
+  const json r_off = RunImuCase(off, through, &s);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  json off_config = {{"method", "imu"}};
+  off_config.update(through);
+  const std::vector<std::string> implausible =
+      GateReasons("imu", r_off, off_config, {{"implausible_factor", 1.2}});
+  ASSERT_TRUE(AnyContains(implausible, "times the nominal")) << Join(implausible);
+  Append(&messages, implausible);
   // Statics shorter than min_static: refused, listing the detection's thresholds and stretches.
   RunImuCase(sim, {{"min_static", 1e4}}, &s);
   ASSERT_FALSE(s.ok());
@@ -237,6 +296,10 @@ TEST(UnitsInResults, Noise) {
   }
   for (const json& c : result["diagnostics"]["allan"])
     EXPECT_EQ(c["unit"], c["name"].get<std::string>()[0] == 'a' ? "m/s^2" : "rad/s") << c.dump();
+  Append(&messages, GateReasons("noise", result, config,
+                                {{"max_white_noise_std", 1e-9},
+                                 {"max_accel_white_noise", 1e-12},
+                                 {"max_gyro_white_noise", 1e-12}}));
   EXPECT_GE(ExpectUnitsInMessages(messages), 6) << Join(messages);
   ExpectUnitsInDiagnostics(result["diagnostics"], {"rate_unit", "duration_unit"});
 }
@@ -267,7 +330,17 @@ TEST(UnitsInResults, ArrayPositions) {
   ASSERT_TRUE(AnyContains(w, "gyroscope noise estimated")) << result["warnings"].dump();
   // In the config's gyro_unit, as the diagnostics are.
   EXPECT_TRUE(AnyContains(w, " deg/s) differs from the configured ")) << result["warnings"].dump();
-  EXPECT_GE(ExpectUnitsInMessages(w), 4) << Join(w);
+  // The gate: residuals against the configured noise, position σ and offset.
+  config["accel_noise"] = so.accel_noise / 10;
+  config["gyro_noise"] = so.gyro_noise_dps / 10;
+  ASSERT_TRUE(RunArray(RecordingFromCsv(csv), config, &result).ok());
+  const std::vector<std::string> reasons =
+      GateReasons("array", result, config,
+                  {{"max_chi2", 1.5}, {"max_position_std", 1e-12}, {"max_offset", 1e-12}});
+  ASSERT_TRUE(AnyContains(reasons, "times the configured noise")) << Join(reasons);
+  std::vector<std::string> messages = w;
+  Append(&messages, reasons);
+  EXPECT_GE(ExpectUnitsInMessages(messages), 6) << Join(messages);
   EXPECT_EQ(result["diagnostics"]["accel_unit"], "m/s^2");
   EXPECT_EQ(result["diagnostics"]["gyro_unit"], "deg/s");
   ExpectUnitsInDiagnostics(result["diagnostics"], {"accel_unit", "units", "excitation.units"});
@@ -291,7 +364,18 @@ TEST(UnitsInResults, ArrayFull) {
   ASSERT_TRUE(AnyContains(w, "residual-aware sandwich")) << result["warnings"].dump();
   EXPECT_TRUE(AnyContains(w, " deg/s against noise ")) << result["warnings"].dump();
   EXPECT_FALSE(AnyContains(w, " rad/s")) << result["warnings"].dump();
-  EXPECT_GE(ExpectUnitsInMessages(w), 6) << Join(w);
+  std::vector<std::string> messages = w;
+  Append(&messages, GateReasons("array", result, config,
+                                {{"scale_range", 1e-7},
+                                 {"max_scale_std", 1e-12},
+                                 {"max_axis_std", 1e-12},
+                                 {"max_accel_bias_std", 1e-12},
+                                 {"max_gyro_bias_std", 1e-12},
+                                 {"max_accel_bias", 1e-12},
+                                 {"max_gyro_bias", 1e-12},
+                                 {"max_position_std", 1e-12}}));
+  Append(&messages, GateReasons("array", result, config, {{"implausible_factor", 1.000001}}));
+  EXPECT_GE(ExpectUnitsInMessages(messages), 6) << Join(messages);
   ExpectUnitsInDiagnostics(result["diagnostics"], {"accel_unit", "units"});
 }
 
