@@ -203,7 +203,8 @@ constexpr const char* kAccelDiagnosticsUnit = "m/s^2";
 
 // diagnostics.units (an extension): what the numbers the unit keys above leave unnamed are.
 json DiagnosticsUnits(bool full) {
-  json units = {{"cost", "dimensionless: ½ the sum of squared whitened residuals"}};
+  json units = {
+      {"cost", "dimensionless: the sum of squared whitened residuals (χ², per iteration)"}};
   if (full) {
     units["rotation_excitation.weakest_axis"] = "unit vector, body frame";
     units["static_intervals[].start, end"] = "s";
