@@ -79,8 +79,9 @@ Status InsufficientExcitation(const ArrayExcitation& ex) {
       array_reason::kWeakExcitation,
       "the motion does not determine the positions along the direction " + std::string(dir) +
           ": the smallest eigenvalue of sum A_n^T A_n is " + Fmt(ex.min_eigenvalue) +
-          ", not above what noise alone gives (" + Fmt(ex.noise_floor) +
-          "); this happens when the array rotates about one fixed axis only, or too slowly. "
+          " rad^2/s^4, not above what noise alone gives (" + Fmt(ex.noise_floor) +
+          " rad^2/s^4); this happens when the array rotates about one fixed axis only, or too "
+          "slowly. "
           "Instead, " +
           std::string(kRecordAdvice) + ".");
 }
@@ -473,8 +474,9 @@ void AddWarnings(const ArrayOptions& options, int64_t samples_in, int max_iterat
     warnings.push_back(
         std::to_string(result->samples_dropped) + " of " + std::to_string(samples_in) +
         " samples dropped because a sensor reached its saturation limit (" +
-        (options.gyro_saturation ? "gyroscopes " + Fmt(*options.gyro_saturation) + " rad/s"
-                                 : std::string("gyroscopes none")) +
+        (options.gyro_saturation
+             ? "gyroscopes " + options.gyro_message_unit.Quote(*options.gyro_saturation)
+             : std::string("gyroscopes none")) +
         (options.accel_saturation ? ", accelerometers " + Fmt(*options.accel_saturation) + " m/s^2"
                                   : std::string()) +
         ")");
@@ -485,19 +487,22 @@ void AddWarnings(const ArrayOptions& options, int64_t samples_in, int max_iterat
                        (options.solver == ArraySolver::kBcd ? " or use solver \"joint\"" : ""));
   if (result->termination == ArrayTermination::kUserStopped)
     warnings.push_back("stopped by the caller before convergence");
-  auto check_noise = [&](const char* what, double estimate, double configured, const char* unit) {
+  // quote: a value (in SI) with its unit.
+  auto check_noise = [&](const char* what, double estimate, double configured, auto quote) {
     if (estimate > 2 * configured || estimate < configured / 2)
       warnings.push_back(std::string(what) + " noise estimated from the residuals (" +
-                         Fmt(estimate) + " " + unit + ") differs from the configured " +
-                         Fmt(configured) + " " + unit + " by more than 2x: " +
+                         quote(estimate) + ") differs from the configured " + quote(configured) +
+                         " by more than 2x: " +
                          (result->sigma_basis == "sandwich"
                               ? "the reported σ is the residual-aware one; "
                               : "the reported uncertainties assume the configured value; ") +
                          "check the noise setting, the units and the sensors");
   };
-  check_noise("accelerometer", result->noise_estimate_accel, options.accel_noise, "m/s^2");
+  check_noise("accelerometer", result->noise_estimate_accel, options.accel_noise,
+              [](double v) { return Fmt(v) + " m/s^2"; });
   if (gyro_dof > 0.5)
-    check_noise("gyroscope", result->noise_estimate_gyro, options.gyro_noise, "rad/s");
+    check_noise("gyroscope", result->noise_estimate_gyro, options.gyro_noise,
+                [&](double v) { return options.gyro_message_unit.Quote(v); });
   if (result->excitation.verdict == "weak")
     warnings.push_back(
         "weak excitation: the smallest eigenvalue of sum A_n^T A_n (" +
@@ -539,11 +544,22 @@ const char* ArrayTerminationName(ArrayTermination t) {
   return "unknown";
 }
 
+std::string GyroMessageUnit::Quote(double rad_per_s) const {
+  return Fmt(rad_per_s / rad_per_unit) + " " + name;
+}
+
+bool GyroMessageUnit::IsValid(std::string* error) const {
+  if (!name.empty() && rad_per_unit > 0 && std::isfinite(rad_per_unit)) return true;
+  if (error) *error = "gyro_message_unit needs a name and a finite rad_per_unit > 0";
+  return false;
+}
+
 bool ArrayOptions::IsValid(std::string* error) const {
   auto fail = [&](const std::string& m) {
     if (error) *error = m;
     return false;
   };
+  if (!gyro_message_unit.IsValid(error)) return false;
   if (!(accel_noise > 0) || !std::isfinite(accel_noise))
     return fail("accel_noise must be a finite number > 0 (m/s^2)");
   if (!(gyro_noise > 0) || !std::isfinite(gyro_noise))

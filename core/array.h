@@ -81,6 +81,16 @@ inline constexpr Reason kWeakExcitation{"weak_excitation"};
 inline constexpr Reason kNoDynamicPhase{"no_dynamic_phase"};
 }  // namespace array_reason
 
+// The unit in which messages quote a gyroscope rate (the numerics never read it): the array
+// methods pass the config's gyro_unit, so that warnings and diagnostics speak one unit.
+struct GyroMessageUnit {
+  std::string name = "rad/s";  // non-empty
+  double rad_per_unit = 1;     // rad/s in one `name`: finite, > 0
+  // "0.0566 deg/s" for a rate in rad/s (3 significant digits).
+  std::string Quote(double rad_per_s) const;
+  bool IsValid(std::string* error) const;
+};
+
 enum class ArraySolver { kJoint, kBcd };
 const char* ArraySolverName(ArraySolver solver);  // "joint" | "bcd"
 
@@ -89,6 +99,8 @@ struct ArrayOptions {
   double accel_noise = 0;
   // Gyroscope noise sigma_g, rad/s, per axis. Required, > 0.
   double gyro_noise = 0;
+  // How warnings quote gyroscope rates (default rad/s).
+  GyroMessageUnit gyro_message_unit;
   // rad/s. When set (> 0), samples with any gyroscope |component| >= it are dropped and counted.
   std::optional<double> gyro_saturation;
   // m/s². When set (> 0), samples with any accelerometer |component| >= it are dropped and

@@ -138,6 +138,7 @@ bool ArrayFullOptions::IsValid(std::string* error) const {
   if (!(gyro_noise >= 0) || !std::isfinite(gyro_noise))
     return fail("gyro_noise must be a finite number >= 0 (rad/s; 0: from the statics)");
   if (!(gravity > 0) || !std::isfinite(gravity)) return fail("gravity must be > 0 (m/s^2)");
+  if (!gyro_message_unit.IsValid(error)) return false;
   if (gyro_saturation && (!(*gyro_saturation > 0) || !std::isfinite(*gyro_saturation)))
     return fail("gyro_saturation must be a finite number > 0 (rad/s)");
   if (accel_saturation && (!(*accel_saturation > 0) || !std::isfinite(*accel_saturation)))

@@ -85,6 +85,7 @@
 #include <vector>
 
 #include "base/status.h"
+#include "core/array.h"
 #include "core/block_lm.h"
 #include "core/static_detection.h"
 
@@ -142,6 +143,8 @@ struct ArrayFullOptions {
   // Weighting of the dynamic samples. kResidual also reports the residual-aware σ whenever the
   // dynamic residuals exceed the noise.
   ArrayFullDynamicWeighting dynamic_weighting = ArrayFullDynamicWeighting::kNoise;
+  // How warnings quote gyroscope rates (default rad/s; not the rotation excitation's (rad/s)^2).
+  GyroMessageUnit gyro_message_unit;
   // Minimum number of statics (the accelerometer closed form needs 9 spanning orientations).
   int min_statics = 9;
 

@@ -647,10 +647,10 @@ Status ComputeResidualAwareCovariance(FullFit* f, const FullProblem& fp) {
           res.triads[k], res.theta_covariance.block<kP, kP>(kP * k, kP * k));
       res.report_std[k].name = res.names[k];
     }
+    const GyroMessageUnit& gu = options.gyro_message_unit;
     const std::string noise = "dynamic residual rms " + Fmt("%.3g", res.dynamic_rms_accel) +
-                              " m/s² and " + Fmt("%.3g", res.dynamic_rms_gyro) +
-                              " rad/s against noise " + Fmt("%.3g", sigma_a) + " m/s² and " +
-                              Fmt("%.3g", sigma_g) + " rad/s";
+                              " m/s² and " + gu.Quote(res.dynamic_rms_gyro) + " against noise " +
+                              Fmt("%.3g", sigma_a) + " m/s² and " + gu.Quote(sigma_g);
     res.warnings.push_back(
         "σ is the residual-aware sandwich, " + Fmt("%.2g", res.sigma_ratio) +
         "× the white-noise bound (uncertainty.imus[].crb): the residuals exceed the noise model "
@@ -663,7 +663,7 @@ Status ComputeResidualAwareCovariance(FullFit* f, const FullProblem& fp) {
       res.warnings.push_back(
           "the dynamic residuals exceed the statics' noise: the dynamic samples were weighted by "
           "their own residual level (" +
-          Fmt("%.3g", 1 / d.wa_d) + " m/s² and " + Fmt("%.3g", 1 / d.wg_d) + " rad/s)");
+          Fmt("%.3g", 1 / d.wa_d) + " m/s² and " + gu.Quote(1 / d.wg_d) + ")");
   }
   return Status::Ok();
 }

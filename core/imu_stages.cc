@@ -407,13 +407,13 @@ Status CheckPlausibility(const ImuStageInput& in, bool max_iter, ImuResult* res)
         << "xyz"[i] << " is " << ra_i
         << " times the nominal accel_unit: wrong accel_unit or gravity? (a gain known only "
            "roughly: raise max_scale_deviation, now "
-        << o.max_scale_deviation << ")";
+        << o.max_scale_deviation << " (relative: the largest |scale / nominal - 1|))";
     } else if (!(std::abs(rg_i - 1) <= o.max_scale_deviation)) {
       m << "gyroscope scale "
         << "xyz"[i] << " is " << rg_i
         << " times the nominal gyro_unit: wrong gyro_unit (deg/s vs rad/s?) (a gain known "
            "only roughly: raise max_scale_deviation, now "
-        << o.max_scale_deviation << ")";
+        << o.max_scale_deviation << " (relative: the largest |scale / nominal - 1|))";
     }
     if (!m.str().empty()) {
       return Fail(Status::NotDeterminable(Reason::kImplausibleEstimate, m.str()),
@@ -425,7 +425,7 @@ Status CheckPlausibility(const ImuStageInput& in, bool max_iter, ImuResult* res)
     m.precision(3);
     m << "after calibration the gravity direction still misses by " << res->gyro_direction_rms_after
       << " rad RMS per rotation (limit " << o.max_direction_error
-      << "): the gyroscope does not explain the rotations: wrong gyro_unit (deg/s vs rad/s?), "
+      << " rad): the gyroscope does not explain the rotations: wrong gyro_unit (deg/s vs rad/s?), "
          "saturation or a wrong time column";
     return Fail(Status::NotDeterminable(Reason::kImplausibleEstimate, m.str()),
                 ImuTermination::kImplausible, res);

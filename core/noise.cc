@@ -454,7 +454,8 @@ Status AnalyseChannel(const NoiseChannelInput& in, int64_t n, double tau0,
   if (!s.ok()) return s;
   if (lo == hi) {
     ch->status = NoiseChannelStatus::kConstant;
-    ch->reason = "every sample is " + Sci(lo) + ": a dead or saturated sensor has no noise";
+    ch->reason =
+        "every sample is " + Sci(lo) + " " + in.unit + ": a dead or saturated sensor has no noise";
     ch->warnings.push_back(ch->name + ": " + ch->reason);
     return Status::Ok();
   }

@@ -66,7 +66,7 @@ Status CheckRank(const VectorXd& sv, int d, const PcaOptions& options, bool affi
     return Status::NotDeterminable(Reason::kPoorOrientationCoverage,
                                    readings + " span fewer than d = " + std::to_string(d) +
                                        " dimensions (singular value " + std::to_string(d) + " is " +
-                                       Num(sv(d - 1) / s1) + " of the largest)." + what_instead);
+                                       Num(sv(d - 1) / s1) + " times the largest)." + what_instead);
   }
   if (result->rank_gap < options.min_rank_gap) {
     return Status::NotDeterminable(
@@ -156,7 +156,8 @@ Status ClosedFormBiasFree(const MatrixXd& mm, int d, double c, const PcaOptions&
   if (!(lambda(0) > 1e-12 * std::abs(lambda(d - 1)))) {
     return Status::NotDeterminable(
         Reason::kNotAnEllipsoid,
-        "g is not positive definite (eigenvalues " + Num(lambda(0)) + " ... " + Num(lambda(d - 1)) +
+        "g is not positive definite (its eigenvalues, whose signs decide it, " + Num(lambda(0)) +
+            " ... " + Num(lambda(d - 1)) +
             "): the readings are not those of bias-free linear sensors in a field of constant "
             "magnitude. Likely causes: sensor biases not removed (use bias: estimate, or record "
             "the "
@@ -235,9 +236,10 @@ Status ClosedFormAffine(const MatrixXd& mm, int d, double c, const PcaOptions& o
       std::string(kSpreadAdvice) + ".";
   if (!(mu(0) > 1e-12 * mu(d - 1))) {
     result->g_eigenvalues = mu;
-    return Status::NotDeterminable(
-        Reason::kNotAnEllipsoid,
-        not_ellipsoid + ", eigenvalues " + Num(mu(0)) + " ... " + Num(mu(d - 1)) + causes);
+    return Status::NotDeterminable(Reason::kNotAnEllipsoid,
+                                   not_ellipsoid +
+                                       ", the eigenvalues of its unit-norm shape matrix " +
+                                       Num(mu(0)) + " ... " + Num(mu(d - 1)) + causes);
   }
   const VectorXd y0h = mh.llt().solve(wh);
   const double rho = y0h.dot(mh * y0h) - kh;

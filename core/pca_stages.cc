@@ -258,16 +258,16 @@ OutlierReport Diagnose(const PcaSetup& setup, const Fit& fit, PcaResult* result)
   // (Residuals above the given noise_std scale the σ instead: ApplySigmaBasis.)
   if (options.noise_std && result->degrees_of_freedom >= 20 &&
       result->noise_std_estimated < 0.5 * *options.noise_std) {
-    result->warnings.push_back("The residuals suggest a noise level of " +
-                               Num(unit * result->noise_std_estimated) +
-                               ", not the given noise_std " + Num(unit * *options.noise_std) +
-                               ": the uncertainties use the given value; check it.");
+    result->warnings.push_back(
+        "The residuals suggest a noise level of " + Num(unit * result->noise_std_estimated) +
+        " reading units, not the given noise_std " + Num(unit * *options.noise_std) +
+        " reading units: the uncertainties use the given value; check it.");
   }
   OutlierReport outliers = FindOutliers(setup, result);
   if (result->rank_gap < 10 * options.min_rank_gap) {
     result->warnings.push_back(
         "The gap between singular values " + std::to_string(d) + " and " + std::to_string(d + 1) +
-        " is small (" + Num(result->rank_gap) + "): the positions barely span " +
+        " is small (their ratio " + Num(result->rank_gap) + "): the positions barely span " +
         std::to_string(d) +
         " dimensions above the noise; the estimate may be poor. Record more orientations spread "
         "over the sphere.");

@@ -386,11 +386,11 @@ std::string StaticShortfall(const StaticDetection& d) {
   m += "window spread";
   const size_t shown = std::min<size_t>(d.triad_names.size(), 4);
   for (size_t k = 0; k < shown; ++k) {
-    m += (k ? ", " : " ") + d.triad_names[k] + " " + Num(d.threshold[k]) +
+    m += (k ? ", " : " ") + d.triad_names[k] + " " + Num(d.threshold[k]) + " reading units" +
          (d.threshold_overridden[k] ? " (static_threshold)" : "");
   }
   if (d.triad_names.size() > shown) m += ", ...";
-  m += " reading units) found ";
+  m += ") found ";
   auto list = [](const auto& items, size_t max) {
     std::string out;
     for (size_t i = 0; i < items.size() && i < max; ++i) {

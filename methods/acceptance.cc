@@ -233,6 +233,7 @@ void JudgeImuTriads(const std::vector<results::ImuTriads>& imus,
           !t.matrix.allFinite()) {
         not_finite.Add(who);
       }
+      const std::string si_scale = accel ? "m/s^2 per reading unit" : "rad/s per reading unit";
       // Scale factors against the nominal unit conversion.
       for (int k = 0; k < 3; ++k) {
         const double ratio = t.scale(k) / unit;
@@ -246,10 +247,10 @@ void JudgeImuTriads(const std::vector<results::ImuTriads>& imus,
           if (hint.empty())
             hint = "units, or a wrong " + std::string(accel ? "accel_unit" : "gyro_unit") + "?";
           verdict->Reject(
-              axis + ": scale " + Fmt(t.scale(k)) + " is " + Fmt(ratio) + " times the nominal " +
-              Fmt(unit) + " (" +
+              axis + ": scale " + Fmt(t.scale(k)) + " " + si_scale + " is " + Fmt(ratio) +
+              " times the nominal (" +
               (accel ? "accel_unit " + nominal.accel_text : "gyro_unit " + nominal.gyro_text) +
-              "), physically implausible: " + hint);
+              " = " + Fmt(unit) + " " + si_scale + "), physically implausible: " + hint);
         } else if (range && std::abs(ratio - 1) > *range) {
           out_of_range.Add(axis + " " + Fmt((ratio - 1) * 100) + " %");
         }

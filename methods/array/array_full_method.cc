@@ -180,6 +180,7 @@ Status ParseArrayFullConfig(const json& config, core::ArrayFullProblem* geometry
   }
   if (Status u = ParseGyroUnit(config, gyro_in_degrees); !u.ok()) return u;
   const double gyro_scale = *gyro_in_degrees ? core::kDegree : 1.0;
+  if (*gyro_in_degrees) options->gyro_message_unit = {"deg/s", core::kDegree};
   core::ArrayProblem geometry;
   Status s = ParseGeometry(config, &geometry);
   if (!s.ok()) return s;

@@ -286,8 +286,9 @@ void JudgeArray(const json& result, const json& config, const AcceptanceLimits& 
       if (chi2 > *chi2_max) {
         verdict->Reject(std::string("the ") + (accel ? "accelerometer" : "gyroscope") +
                         " residuals are " + Fmt(res / n) + " times the configured noise (" +
-                        (accel ? "accel_noise " : "gyro_noise ") + Fmt(n) + ", ratio squared " +
-                        Fmt(chi2) + " above " + Fmt(*chi2_max) +
+                        (accel ? "accel_noise " : "gyro_noise ") + Fmt(n) + " " +
+                        (accel ? std::string("m/s^2") : r.diagnostics.gyro_unit) +
+                        ", ratio squared " + Fmt(chi2) + " above " + Fmt(*chi2_max) +
                         "): the noise figure is wrong, the sensors saturated, or the model does "
                         "not fit (a sensor's gain or bias: calibrate the accelerometers first)");
       }

@@ -105,8 +105,9 @@ Status ParseArrayConfig(const nlohmann::json& config, core::ArrayProblem* geomet
 // With an accelerometer_calibration, each triad's readings are corrected (f = A_k⁻ᵀ(y − b_k))
 // before the fit; accel_noise stays the σ_a of the raw readings (the correction changes it by
 // the scale errors, ~1%, which the isotropic model ignores).
-// Metres, m/s², rad/s (gyroscope figures in the configured gyro_unit). "motion" holds at most
-// 2000 points (every stride-th usable sample). No NaN/Inf (null instead). Deterministic.
+// Metres, m/s², rad/s (gyroscope figures in the configured gyro_unit); diagnostics name them
+// (accel_unit, gyro_unit, excitation.units, units: methods/array/array_result.cc). "motion" holds
+// at most 2000 points (every stride-th usable sample). No NaN/Inf (null instead). Deterministic.
 // The recording's triad count must equal the geometry's (kInvalidInput naming both).
 // Errors as core::CalibrateArray otherwise.
 // `stop` (optional): the solver stops at its next iteration once it asks to.
@@ -162,7 +163,8 @@ void JudgeArray(const nlohmann::json& result, const nlohmann::json& config,
 //                 "positions_only" (the fit the full model starts from), "positions_only_std"
 //                 (its CRB; absent when that fit failed), "position_change",
 //                 "position_change_norm", "position_change_sigma" (change / the full model's
-//                 position_std per axis; null for the reference)}]}; "model": the equation.
+//                 position_std per axis; null for the reference), "unit"}], "accel_unit",
+//                 "units"}; "model": the equation.
 // Gyroscope figures in the configured gyro_unit (bias in it, scale in rad/s per unit).
 Status ParseArrayFullConfig(const nlohmann::json& config, core::ArrayFullProblem* geometry_part,
                             core::ArrayFullOptions* options, bool* gyro_in_degrees);

@@ -262,6 +262,7 @@ Status ParseArrayConfig(const json& config, core::ArrayProblem* geometry_part,
   // Units first: they apply to gyro_noise and gyro_saturation.
   if (Status u = ParseGyroUnit(config, gyro_in_degrees); !u.ok()) return u;
   const double gyro_scale = *gyro_in_degrees ? core::kDegree : 1.0;
+  if (*gyro_in_degrees) options->gyro_message_unit = {"deg/s", core::kDegree};
 
   Status s = ParseGeometry(config, geometry_part);
   if (!s.ok()) return s;

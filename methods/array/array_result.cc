@@ -197,18 +197,42 @@ void ReadUncertainty(const JsonReader& r, bool full, ArrayUncertainty* out) {
 
 // ---- diagnostics, positions model ----
 
+// The unit of every accelerometer figure in the diagnostics of either model (the gyroscope's are
+// in the config's gyro_unit, named by diagnostics.gyro_unit).
+constexpr const char* kAccelDiagnosticsUnit = "m/s^2";
+
+// diagnostics.units (an extension): what the numbers the unit keys above leave unnamed are.
+json DiagnosticsUnits(bool full) {
+  json units = {
+      {"cost", "dimensionless: the sum of squared whitened residuals (χ², per iteration)"}};
+  if (full) {
+    units["rotation_excitation.weakest_axis"] = "unit vector, body frame";
+    units["static_intervals[].start, end"] = "s";
+  } else {
+    units["excitation.weakest_direction"] = "unit vector, body frame";
+    units["accelerometer_calibration.magnitude"] = "m/s^2";
+    units["accelerometer_calibration.max_condition_number"] =
+        "dimensionless: largest over the triads' sensitivity matrices";
+    units["parallel_fraction"] = "dimensionless: fraction of the samples";
+  }
+  return units;
+}
+
 json ExcitationJson(const ArrayExcitation& e) {
-  return {{"min_eigenvalue", Num(e.min_eigenvalue)},
-          {"max_eigenvalue", Num(e.max_eigenvalue)},
-          {"noise_floor", Num(e.noise_floor)},
-          {"weakest_direction", Nums(e.weakest_direction)},
-          {"verdict", e.verdict}};
+  return {
+      {"min_eigenvalue", Num(e.min_eigenvalue)},
+      {"max_eigenvalue", Num(e.max_eigenvalue)},
+      {"noise_floor", Num(e.noise_floor)},
+      {"weakest_direction", Nums(e.weakest_direction)},
+      {"verdict", e.verdict},
+      {"units", "rad^2/s^4"}};  // of the eigenvalues and the noise floor (SI, whatever gyro_unit)
 }
 
 json PositionsDiagnosticsJson(const ArrayPositionsDiagnostics& d, bool usable) {
   json out = {{"solver", d.solver},
               {"termination", d.termination},
               {"gyro_unit", d.gyro_unit},
+              {"accel_unit", kAccelDiagnosticsUnit},
               {"excitation", ExcitationJson(d.excitation)}};
   if (usable) {  // SPEC's: always there
     out["iterations"] = d.iterations.value_or(0);
@@ -247,6 +271,7 @@ json PositionsDiagnosticsJson(const ArrayPositionsDiagnostics& d, bool usable) {
     out["accelerometer_calibration"] = nullptr;
   }
   if (d.saturation) out["saturation"] = ToJson(*d.saturation);
+  out["units"] = DiagnosticsUnits(false);
   return out;
 }
 
@@ -340,6 +365,7 @@ json FullDiagnosticsJson(const ArrayFullDiagnostics& d, bool usable) {
   PutCount(&out, "dof", d.dof);
   out["chi2_per_dof"] = Num(d.chi2_per_dof);
   out["gyro_unit"] = d.gyro_unit;
+  out["accel_unit"] = kAccelDiagnosticsUnit;
   out["noise"] = {{"accelerometer", Num(d.noise.accelerometer)},
                   {"gyroscope", Num(d.noise.gyroscope)},
                   {"source", d.noise.source},
@@ -381,11 +407,13 @@ json FullDiagnosticsJson(const ArrayFullDiagnostics& d, bool usable) {
               {"positions_only", Nums(c.positions_only)},
               {"position_change", Nums(c.position_change)},
               {"position_change_norm", Num(c.position_change_norm)},
-              {"position_change_sigma", Nums(c.position_change_sigma)}};
+              {"position_change_sigma", Nums(c.position_change_sigma)},
+              {"unit", "m"}};  // of every member but position_change_sigma (shift / σ)
     if (c.positions_only_std) e["positions_only_std"] = Nums(*c.positions_only_std);
     changed.push_back(std::move(e));
   }
   out["changed_from_positions_only"] = std::move(changed);
+  out["units"] = DiagnosticsUnits(true);
   return out;
 }
 

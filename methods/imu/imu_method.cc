@@ -568,9 +568,10 @@ class Imu : public Method {
       }
       const double accel = d.accel_norm_rms_after;
       if (accel_max && std::isfinite(accel) && accel > *accel_max) {
-        verdict->Reject(name + ": after calibration |a| still differs from gravity by " +
-                        Fmt(accel) + " m/s^2 RMS over the statics (above " + Fmt(*accel_max) +
-                        "): the board moved during a static, or gravity is wrong for this place");
+        verdict->Reject(
+            name + ": after calibration |a| still differs from gravity by " + Fmt(accel) +
+            " m/s^2 RMS over the statics (above " + Fmt(*accel_max) +
+            " m/s^2): the board moved during a static, or gravity is wrong for this place");
       }
       const double gyro = d.gyro_direction_rms_after;
       if (gyro_max && std::isfinite(gyro) && gyro > *gyro_max) {
@@ -578,7 +579,7 @@ class Imu : public Method {
                         ": after calibration the integrated rotations still miss the "
                         "measured gravity direction by " +
                         Fmt(gyro) + " rad RMS (above " + Fmt(*gyro_max) +
-                        "): rotate more slowly (the gyroscope saturated?) or "
+                        " rad): rotate more slowly (the gyroscope saturated?) or "
                         "hold each static longer");
       }
     }

@@ -18,6 +18,36 @@ json NoiseModelJson(const std::optional<ImuNoiseModel>& m) {
           {"random_walk", Num(m->random_walk)}};
 }
 
+// diagnostics.units: the unit of every number in the diagnostics, by key (an extension; the
+// members not listed are counts, flags, texts or named ratios such as chi2_per_dof).
+json DiagnosticsUnits() {
+  const char* accel_reading = "accelerometer reading units (parameters.accel_unit SI per unit)";
+  const char* gyro_reading = "gyroscope reading units (parameters.gyro_unit SI per unit)";
+  return {{"statics[].start, end", "s"},
+          {"static_window, min_static", "s"},
+          {"gaps[].start, end", "s"},
+          {"imus[].statics[].start, end", "s"},
+          {"imus[].rotations[].start, end", "s"},
+          {"rate", "Hz"},
+          {"imus[].statics[].accel_mean, accel_std", accel_reading},
+          {"imus[].statics[].gyro_mean, gyro_std", gyro_reading},
+          {"imus[].statics[].gravity_direction", "unit vector in the body frame, calibrated"},
+          {"imus[].statics[].norm_residual_before, norm_residual_after", "m/s^2 (|a| - g)"},
+          {"imus[].rotations[].angle, direction_error_before, direction_error_after", "rad"},
+          {"imus[].noise.accelerometer", "m/s^2 (σ per axis per sample)"},
+          {"imus[].noise.gyroscope", "rad/s (σ per axis per sample)"},
+          {"imus[].residuals.accel_norm_rms_before, accel_norm_rms_after", "m/s^2"},
+          {"imus[].residuals.gyro_direction_rms_before, gyro_direction_rms_after", "rad"},
+          {"imus[].coverage.gravity_eigenvalues, min_eigenvalue",
+           "dimensionless: eigenvalues of (3/n) Σ u uᵀ of unit gravity directions, all 1 for an "
+           "even spread"},
+          {"imus[].coverage.rotation_per_axis", "rad (∫|ω| dt per body axis)"},
+          {"imus[].coverage.least_covered_direction", "unit vector, body frame"},
+          {"imus[].cost", "dimensionless: ½χ² of the whitened residuals"},
+          {"noise_model.*.white_noise", "m/s^2/√Hz (accelerometer), rad/s/√Hz (gyroscope)"},
+          {"noise_model.*.random_walk", "m/s^2/s/√Hz (accelerometer), rad/s/s/√Hz (gyroscope)"}};
+}
+
 json FitJson(const ImuFitDiagnostics& f) {
   json statics = json::array(), rotations = json::array(), trials = json::array();
   for (const ImuStatic& s : f.statics) {
@@ -240,6 +270,7 @@ json ToJson(const ImuResult& r) {
   }
   if (d.saturated_samples) diag["saturated_samples"] = *d.saturated_samples;
   if (d.saturation) diag["saturation"] = ToJson(*d.saturation);
+  diag["units"] = DiagnosticsUnits();
   for (const std::string& key : r.dropped) diag.erase(key);  // left out by the trimming
   if (!ContainsKey(r.dropped, "diagnostics")) out["diagnostics"] = std::move(diag);
   if (r.trimmed) out["trimmed"] = *r.trimmed;

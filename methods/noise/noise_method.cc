@@ -365,10 +365,10 @@ results::NoiseResult NoiseResultOf(const core::NoiseResult& r, int taus_per_deca
       if (!(out.chi2_per_dof >= c.chi2_per_dof)) out.chi2_per_dof = c.chi2_per_dof;
     }
     out.channel_stds.push_back(std::move(u));
-    d.allan.push_back(
-        {c.name, c.allan.tau, c.allan.adev, c.allan.adev_lower, c.allan.adev_upper, c.fitted_adev});
+    d.allan.push_back({c.name, c.allan.tau, c.allan.adev, c.allan.adev_lower, c.allan.adev_upper,
+                       c.fitted_adev, c.unit});
     d.channels.push_back({c.name, core::NoiseChannelStatusName(c.status), c.reason, c.fit_points,
-                          c.fit_chi2, c.mean});
+                          c.fit_chi2, c.mean, c.unit});
   }
   d.rate = r.rate;
   d.samples = r.samples;

@@ -55,28 +55,37 @@ json ToJson(const NoiseResult& r) {
   const NoiseDiagnostics& d = r.diagnostics;
   json channels = json::array(), allan = json::array();
   for (const NoiseChannelDiagnostics& c : d.channels) {
-    channels.push_back({{"name", c.name},
-                        {"status", c.status},
-                        {"reason", c.reason},
-                        {"fit_points", c.fit_points},
-                        {"fit_chi2", Num(c.fit_chi2)},
-                        {"mean", Num(c.mean)}});
+    json e = {{"name", c.name},
+              {"status", c.status},
+              {"reason", c.reason},
+              {"fit_points", c.fit_points},
+              {"fit_chi2", Num(c.fit_chi2)},
+              {"mean", Num(c.mean)}};
+    if (!c.unit.empty()) e["unit"] = c.unit;
+    channels.push_back(std::move(e));
   }
   for (const NoiseAllanCurve& c : d.allan) {
-    allan.push_back({{"name", c.name},
-                     {"tau", Nums(c.tau)},
-                     {"adev", Nums(c.adev)},
-                     {"adev_lower", Nums(c.adev_lower)},
-                     {"adev_upper", Nums(c.adev_upper)},
-                     {"fitted_adev", Nums(c.fitted_adev)}});
+    json e = {{"name", c.name},
+              {"tau", Nums(c.tau)},
+              {"tau_unit", "s"},
+              {"adev", Nums(c.adev)},
+              {"adev_lower", Nums(c.adev_lower)},
+              {"adev_upper", Nums(c.adev_upper)},
+              {"fitted_adev", Nums(c.fitted_adev)}};
+    if (!c.unit.empty()) e["unit"] = c.unit;
+    allan.push_back(std::move(e));
   }
   json diag = {{"rate", Num(d.rate)},
+               {"rate_unit", "Hz"},
                {"samples", d.samples},
                {"duration", Num(d.duration)},
+               {"duration_unit", "s"},
                {"jitter", Num(d.jitter)},
+               {"jitter_unit", "fraction of the sample period"},
                {"stationary", d.stationary},
                {"taus_per_decade", d.taus_per_decade},
                {"confidence", Num(d.confidence)},
+               {"confidence_unit", "probability that an Allan interval holds the true value"},
                {"channels", std::move(channels)},
                {"allan", std::move(allan)}};
   if (d.units) {
@@ -157,6 +166,7 @@ Status FromJson(const json& doc, NoiseResult* out) {
         e.Read("adev_lower", &c->adev_lower);
         e.Read("adev_upper", &c->adev_upper);
         e.ReadExtension("fitted_adev", &c->fitted_adev);
+        e.ReadExtension("unit", &c->unit);
       });
     }
     // Extensions: absent in a result of an earlier calibd, the defaults of noise_result.h.
@@ -174,6 +184,7 @@ Status FromJson(const json& doc, NoiseResult* out) {
                              e.ReadExtension("fit_points", &c->fit_points);
                              e.ReadExtension("fit_chi2", &c->fit_chi2);
                              e.ReadExtension("mean", &c->mean);
+                             e.ReadExtension("unit", &c->unit);
                            });
     }
     if (std::optional<JsonReader> u = d.OptionalObject("units")) {

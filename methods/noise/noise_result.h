@@ -82,6 +82,7 @@ struct NoiseChannelDiagnostics {
   int64_t fit_points = 0;  // cluster times the fit used
   double fit_chi2 = std::numeric_limits<double>::quiet_NaN();
   double mean = std::numeric_limits<double>::quiet_NaN();  // of the samples, unit
+  std::string unit;  // ext.: the channel's SI unit, of mean and of its allan[] curve ("": absent)
 };
 
 // diagnostics.allan[]: one channel's overlapping Allan deviation, its confidence bounds and the
@@ -91,6 +92,7 @@ struct NoiseAllanCurve {
   std::vector<double> tau;  // s
   std::vector<double> adev, adev_lower, adev_upper;
   std::vector<double> fitted_adev;  // ext. (empty when absent: the plot leaves the model out)
+  std::string unit;  // ext.: of adev, its bounds and fitted_adev, the channel's ("": absent)
 };
 
 // diagnostics.units: the units the log was read with, as the config gave them (ext.).

@@ -318,11 +318,11 @@ void JudgePcaCoverage(const results::PcaDiagnostics& diag, const AcceptanceLimit
       (min_design && (!design || *design < *min_design))) {
     const std::string& advice = coverage.advice;
     verdict->Reject(
-        "the orientations are poorly spread (spread " +
+        "the orientations are poorly spread (scatter_min " +
         (scatter ? Fmt(*scatter) : std::string("unknown")) + ", minimum " +
-        (min_scatter ? Fmt(*min_scatter) : std::string("none")) + "; design " +
+        (min_scatter ? Fmt(*min_scatter) : std::string("none")) + "; design_min " +
         (design ? Fmt(*design) : std::string("unknown")) + ", minimum " +
-        (min_design ? Fmt(*min_design) : std::string("none")) + ")" +
+        (min_design ? Fmt(*min_design) : std::string("none")) + "; both 1 for a uniform spread)" +
         (advice.empty() ? std::string(": add positions between the axes") : ": " + advice));
   }
 }
@@ -350,11 +350,12 @@ std::string ImplausibleScaleCause(bool has_nominal, double ratio, double magnitu
   auto near = [](double x, double target) { return std::abs(x / target - 1) < 0.15; };
   if (!has_nominal && near(ratio, 1 / kG) && near(magnitude, kG)) {
     return "readings look like g but magnitude is " + Fmt(magnitude) +
-           ": units? (give magnitude 1 for readings in g, or convert them to m/s^2)";
+           " (gravity in m/s^2): units? (give magnitude 1 for readings in g, or convert them to "
+           "m/s^2)";
   }
   if (!has_nominal && near(ratio, kG) && near(magnitude, 1)) {
     return "readings look like m/s^2 but magnitude is " + Fmt(magnitude) +
-           ": units? (give magnitude 9.80665 for readings in m/s^2)";
+           " (gravity in g): units? (give magnitude 9.80665 for readings in m/s^2)";
   }
   return std::string("are the readings and magnitude (") + Fmt(magnitude) + ") in the same unit" +
          (has_nominal ? ", and is nominal right?"
@@ -390,10 +391,12 @@ void JudgePcaSensors(const results::PcaResult& result, const core::PcaOptions& o
     const double ratio = scale / nominal_scale[i];
     if (std::isfinite(ratio)) {
       if (implausible && (ratio > *implausible || ratio < 1 / *implausible)) {
-        absurd.Add(name + " (" + Fmt(scale) + ", " + Fmt(ratio) + " x the nominal)");
+        absurd.Add(name + " (" + Fmt(scale) + " reading units per field unit, " + Fmt(ratio) +
+                   " x the nominal)");
         absurd_ratio = ratio;
       } else if (range && std::abs(ratio - 1) > *range) {
-        out_of_range.Add(name + " (" + Fmt(scale) + " against " + Fmt(nominal_scale[i]) + ")");
+        out_of_range.Add(name + " (" + Fmt(scale) + " against " + Fmt(nominal_scale[i]) +
+                         " reading units per field unit)");
       }
     }
     const results::PcaSensorStd& sd = stds[i];
@@ -458,7 +461,8 @@ void JudgePcaResiduals(const results::PcaDiagnostics& diag, const AcceptanceLimi
     const double chi2 = 2 * *cost / dof / (*sigma * *sigma);
     if (chi2 > *chi2_max) {
       verdict->Reject("the residuals are " + Fmt(std::sqrt(chi2)) + " times the given noise_std " +
-                      Fmt(*sigma) + " (chi2/dof " + Fmt(chi2) + " above " + Fmt(*chi2_max) +
+                      Fmt(*sigma) + " reading units (chi2/dof " + Fmt(chi2) + " above " +
+                      Fmt(*chi2_max) +
                       "): the device moved during a position, the field was not constant, or "
                       "noise_std is wrong");
     }

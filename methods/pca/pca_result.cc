@@ -175,6 +175,24 @@ void ReadDiagnostics(const JsonReader& g, bool partial, bool usable, PcaDiagnost
   if (g.ok()) *out = std::move(v);
 }
 
+// diagnostics.units: the unit of every number in the diagnostics, by key (an extension; the
+// members not listed are counts, flags or texts).
+json DiagnosticsUnits() {
+  return {{"singular_values, residual_rms, noise_std, noise_std_estimated, removed_bias",
+           "reading units"},
+          {"magnitude_error",
+           "field units (of parameters.magnitude; relative to 1 when magnitude_known is false)"},
+          {"cost, cost_closed_form", "reading units^2 (½ the sum of squared residuals)"},
+          {"rank_gap", "dimensionless: singular value d over singular value d+1"},
+          {"g_eigenvalues",
+           "eigenvalues of g (bias none) or of the unit-norm ellipsoid shape (bias estimate): only "
+           "their signs are read, all > 0 for a usable result"},
+          {"coverage.scatter_eigenvalues",
+           "dimensionless: eigenvalues of Σ u uᵀ / n of the unit field directions (sum 1)"},
+          {"coverage.scatter_min, design_min",
+           "dimensionless: 1 for orientations spread evenly over the sphere, 0 degenerate"}};
+}
+
 }  // namespace
 
 const char* Name(PcaFrame frame) { return frame == PcaFrame::kNominal ? "nominal" : "canonical"; }
@@ -273,6 +291,7 @@ json ToJson(const PcaResult& r) {
   diag["reflection"] = g.reflection;
   if (g.position_labels) diag["position_labels"] = *g.position_labels;
   if (g.removed_bias) diag["removed_bias"] = Nums(*g.removed_bias);
+  diag["units"] = DiagnosticsUnits();
   out["diagnostics"] = std::move(diag);
   return out;
 }

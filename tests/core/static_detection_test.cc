@@ -399,7 +399,7 @@ TEST(StaticDetection, TheShortfallMessageListsTheStillStretches) {
   const std::string none = StaticShortfall(d);
   EXPECT_NE(none.find("no shorter still stretch"), std::string::npos) << none;
   EXPECT_NE(none.find("static_threshold"), std::string::npos) << none;
-  EXPECT_NE(none.find("a0 1e-06 (static_threshold)"), std::string::npos) << none;
+  EXPECT_NE(none.find("a0 1e-06 reading units (static_threshold)"), std::string::npos) << none;
 }
 
 TEST(StaticDetection, StopsWhenTheTokenAsks) {
