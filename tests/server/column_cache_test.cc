@@ -536,7 +536,10 @@ TEST_F(ColumnCacheTest, AJobWaitingForABuildStopsWithItsCancelAndAtShutdown) {
       // As Service::Shutdown does: the cache first (its waiters woken with kStopped), then the
       // workers (here without grace: their jobs' stop requested at once).
       cache.Stop();
-      EXPECT_EQ(pool.Stop(std::chrono::milliseconds(0)), StopOutcome::kReleased);
+      // The woken job returns itself to the queue; whether that happens before the pool's stop
+      // (kFinished: nothing left running) or by it (kReleased) is the threads' timing (under
+      // ASan on a loaded machine, the former). Never abandoned.
+      EXPECT_NE(pool.Stop(std::chrono::milliseconds(0)), StopOutcome::kAbandoned);
       EXPECT_LT(SecondsSince(start), 1.0) << "shutdown";
       storage::JobInfo job;
       ASSERT_TRUE(store_->GetJob(queued.id, &job).ok());
