@@ -13,7 +13,10 @@
 //     "disturbed_spans" [{start, end, samples, max_residual}], "noise_std" (reading units),
 //     "sample_noise_std" (µT per axis, from second differences of consecutive samples), "chi2"
 //     (residual_rms_clean² / sample_noise_std²), "residual_rms_before", "residual_rms_after",
-//     "residual_rms_clean" (µT), "sandwich_ratio", "iterations", "statics" (count),
+//     "residual_rms_clean" (µT), "sandwich_ratio", "blocking" [{seconds, batches, ratio: the
+//     sandwich's σ over the bound's, RMS over the 9 ellipsoid parameters}] (every batch length
+//     tried), "plateau" (false: σ grew over the last doubling, a lower bound), "iterations",
+//     "statics" (count),
 //     "accelerometer" (the triad used, or null), "alignment_note", "coverage": {"eigenvalues",
 //     "least_covered_direction", "missing", "sufficient", "verdict"}, "plot": {"t", "raw" [3][n],
 //     "calibrated" [3][n], "residual" [n], "disturbed" [n] (0/1)} (at most kMagPlotPoints samples)}

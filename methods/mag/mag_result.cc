@@ -74,6 +74,10 @@ json MagDiagnostics(const MagRun& run) {
                      {"samples", s.samples},
                      {"max_residual", Num(s.max_residual)}});
   }
+  json blocking = json::array();
+  for (const core::MagBlockingStep& b : r.blocking) {
+    blocking.push_back({{"seconds", b.seconds}, {"batches", b.batches}, {"ratio", Num(b.ratio)}});
+  }
   const core::MagCoverage& c = r.coverage;
   const double chi2 =
       r.residual_rms_clean * r.residual_rms_clean / (run.sample_noise_std * run.sample_noise_std);
@@ -91,6 +95,8 @@ json MagDiagnostics(const MagRun& run) {
       {"residual_rms_after", Num(r.residual_rms_after)},
       {"residual_rms_clean", Num(r.residual_rms_clean)},
       {"sandwich_ratio", Num(r.sandwich_ratio)},
+      {"blocking", blocking},
+      {"plateau", r.plateau},
       {"iterations", r.iterations},
       {"statics", run.statics},
       {"accelerometer", run.accelerometer.empty() ? json(nullptr) : json(run.accelerometer)},
