@@ -12,8 +12,10 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <algorithm>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <thread>
@@ -373,17 +375,23 @@ TEST(StopProcess, WithATokenCancelNeedsItInTheHeaderOrTheJobPagesForm) {
   server.Signal(SIGTERM);
 }
 
-// How many BCD sweeps take about `seconds` here (measured on a short job).
+// How many BCD sweeps take at least about `seconds` here: the fastest of two short probe jobs
+// (other load only slows a probe down; a probe slowed by it and a job run after the load ended
+// made the job end before the signal, 1 run in 2 beside a heavy test).
 int64_t IterationsFor(const std::string& db_dir, double seconds) {
   ServerProcess server(db_dir + "/probe.db", {"--workers", "1"});
   if (server.port() == 0) return 0;
   const int64_t iterations = 200;
-  const int64_t id = Upload(server, ArrayUpload(11, iterations));
-  WaitForStatus(server, id, {"succeeded", "failed"}, 120000);
-  const storage::JobInfo job = StoredJob(db_dir + "/probe.db", id);
+  double per_iteration = std::numeric_limits<double>::infinity();
+  for (int probe = 0; probe < 2; ++probe) {
+    const int64_t id = Upload(server, ArrayUpload(11 + probe, iterations));
+    WaitForStatus(server, id, {"succeeded", "failed"}, 120000);
+    const storage::JobInfo job = StoredJob(db_dir + "/probe.db", id);
+    per_iteration =
+        std::min(per_iteration,
+                 std::max<double>(job.finished_at_ms - job.started_at_ms, 1) / 1e3 / iterations);
+  }
   server.Signal(SIGTERM);
-  const double per_iteration =
-      std::max<double>(job.finished_at_ms - job.started_at_ms, 1) / 1e3 / iterations;
   return std::max<int64_t>(iterations, static_cast<int64_t>(seconds / per_iteration));
 }
 
