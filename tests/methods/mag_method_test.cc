@@ -15,9 +15,11 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 #include <map>
+#include <optional>
 #include <sstream>
+
+#include "tests/lib/mag_public_log.h"
 
 namespace calibd::server {
 namespace {
@@ -308,14 +310,9 @@ TEST(MagMethod, FirmwareFilesReproduceTheCorrectionAsTheFirmwaresApplyIt) {
 // 100 Hz; the field comes out in the Earth's range, the residual drops, the alignment is
 // estimated from the holds.
 TEST(MagMethod, ThePublicAccMagLogCalibratesThroughTheMethod) {
-  const char* dir = std::getenv("CALIBD_MAG_DATA");
-  std::ifstream in(std::string(dir ? dir : "/work/data/mag") + "/acc_mag_log.csv");
-  if (!in) GTEST_SKIP() << "acc_mag_log.csv absent (see tests/core/mag_data_test.cc)";
-  std::string line, csv = "t,a0_x,a0_y,a0_z,m0_x,m0_y,m0_z\n";
-  std::getline(in, line);
-  for (int i = 0; std::getline(in, line); ++i) {
-    if (!line.empty()) csv += std::to_string(i * 0.01) + "," + line + "\n";
-  }
+  const std::optional<std::string> public_log = calibd::testing::CkExplorerAccMagCsv();
+  if (!public_log) GTEST_SKIP() << "acc_mag_log.csv absent (see tests/core/mag_data_test.cc)";
+  const std::string& csv = *public_log;
   json result;
   const Status s = RunMag(csv, {{"method", "mag"}, {"mag_unit", "gauss"}}, &result);
   ASSERT_TRUE(s.ok()) << s.ToString();

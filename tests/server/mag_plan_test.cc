@@ -6,8 +6,9 @@
 
 #include <cmath>
 #include <cstdlib>
-#include <fstream>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/mag_simulation.h"
@@ -15,6 +16,7 @@
 #include "methods/mag/mag_method.h"
 #include "methods/plan.h"
 #include "server/plan.h"
+#include "tests/lib/mag_public_log.h"
 
 namespace calibd::server {
 namespace {
@@ -202,6 +204,26 @@ TEST(MagPlanTest, ErrorsNameTheConfigKey) {
 namespace calibd::server {
 namespace {
 
+// The check (Method::Check, on the log as the recording page parses it) and the job
+// (Method::Run, with the method's own parser rules) of mag on one CSV: *check, *result and the
+// job's status; *log the parsed recording when given.
+void CheckThenRun(const std::string& csv, const json& config, json* check, json* result,
+                  Status* job, ArrayRecording* log = nullptr) {
+  RecordingParser for_check("check.csv", /*collect=*/true);
+  ASSERT_TRUE(for_check.Feed(csv).ok());
+  ASSERT_TRUE(for_check.Finish().ok());
+  ArrayRecording parsed;
+  ASSERT_TRUE(for_check.TakeArray(&parsed).ok());
+  *check = json::object();
+  ASSERT_TRUE(MagMethod().Check(parsed, config, RunContext(), check).ok());
+  RecordingParser for_job("job.csv", /*collect=*/true);
+  MagMethod().PrepareParser(config, &for_job);
+  ASSERT_TRUE(for_job.Feed(csv).ok());
+  ASSERT_TRUE(for_job.Finish().ok());
+  *job = MagMethod().Run(&for_job, config, RunContext(), result);
+  if (log != nullptr) *log = std::move(parsed);
+}
+
 // The check before fitting (Method::Check of mag) against the job on one simulated log: the same
 // statics (the job's FindStatics), and readings in gauss declared as µT named with the unit.
 TEST(MagCheckTest, StaticsAgreeWithTheJobAndGaussDeclaredAsMicroteslaIsNamed) {
@@ -216,21 +238,11 @@ TEST(MagCheckTest, StaticsAgreeWithTheJobAndGaussDeclaredAsMicroteslaIsNamed) {
     json config, truth;
     ASSERT_TRUE(SimulateMagFiles(sim, &csv, &config, &truth).ok());
     const json job_config = {{"method", "mag"}};  // mag_unit uT (wrong for gauss)
-    RecordingParser for_check("check.csv", /*collect=*/true);
-    ASSERT_TRUE(for_check.Feed(csv).ok());
-    ASSERT_TRUE(for_check.Finish().ok());
-    ArrayRecording log;
-    ASSERT_TRUE(for_check.TakeArray(&log).ok());
-    json check = json::object();
-    ASSERT_TRUE(MagMethod().Check(log, job_config, RunContext(), &check).ok());
-    const json& m = check["mags"][0];
-    RecordingParser for_job("job.csv", /*collect=*/true);
-    MagMethod().PrepareParser(job_config, &for_job);
-    ASSERT_TRUE(for_job.Feed(csv).ok());
-    ASSERT_TRUE(for_job.Finish().ok());
-    json result;
-    const Status s = MagMethod().Run(&for_job, job_config, RunContext(), &result);
+    json check, result;
+    Status s;
+    ASSERT_NO_FATAL_FAILURE(CheckThenRun(csv, job_config, &check, &result, &s));
     ASSERT_TRUE(s.ok()) << s.message();
+    const json& m = check["mags"][0];
     EXPECT_EQ(m["statics"].size(), result["diagnostics"]["mags"][0]["statics"].get<size_t>());
     EXPECT_EQ(m["statics"].size(), static_cast<size_t>(sim.statics));
     EXPECT_TRUE(m["alignment_possible"].get<bool>());
@@ -250,28 +262,14 @@ TEST(MagCheckTest, StaticsAgreeWithTheJobAndGaussDeclaredAsMicroteslaIsNamed) {
 // The same on CK-Explorer's real log (tests/methods/mag_method_test.cc reads it the same way:
 // 100 Hz, the accelerometer in g, the magnetometer in gauss): the check's statics are the job's.
 TEST(MagCheckTest, RealLogStaticsAgreeWithTheJob) {
-  const char* dir = std::getenv("CALIBD_MAG_DATA");
-  std::ifstream in(std::string(dir ? dir : "/work/data/mag") + "/acc_mag_log.csv");
-  if (!in) GTEST_SKIP() << "acc_mag_log.csv absent (see tests/core/mag_data_test.cc)";
-  std::string line, csv = "t,a0_x,a0_y,a0_z,m0_x,m0_y,m0_z\n";
-  std::getline(in, line);
-  for (int i = 0; std::getline(in, line); ++i) {
-    if (!line.empty()) csv += std::to_string(i * 0.01) + "," + line + "\n";
-  }
+  const std::optional<std::string> public_log = calibd::testing::CkExplorerAccMagCsv();
+  if (!public_log) GTEST_SKIP() << "acc_mag_log.csv absent (see tests/core/mag_data_test.cc)";
+  const std::string& csv = *public_log;
   const json config = {{"method", "mag"}, {"mag_unit", "gauss"}};
-  RecordingParser for_check("check.csv", /*collect=*/true);
-  ASSERT_TRUE(for_check.Feed(csv).ok());
-  ASSERT_TRUE(for_check.Finish().ok());
+  json check, result;
+  Status s;
   ArrayRecording log;
-  ASSERT_TRUE(for_check.TakeArray(&log).ok());
-  json check = json::object();
-  ASSERT_TRUE(MagMethod().Check(log, config, RunContext(), &check).ok());
-  RecordingParser for_job("job.csv", /*collect=*/true);
-  MagMethod().PrepareParser(config, &for_job);
-  ASSERT_TRUE(for_job.Feed(csv).ok());
-  ASSERT_TRUE(for_job.Finish().ok());
-  json result;
-  const Status s = MagMethod().Run(&for_job, config, RunContext(), &result);
+  ASSERT_NO_FATAL_FAILURE(CheckThenRun(csv, config, &check, &result, &s, &log));
   ASSERT_TRUE(s.ok()) << s.message();
   const json& m = check["mags"][0];
   EXPECT_EQ(m["statics"].size(), result["diagnostics"]["mags"][0]["statics"].get<size_t>());
@@ -294,19 +292,9 @@ TEST(MagCheckTest, PlanarLogFailsInTheCheckAsInTheJob) {
   std::string csv;
   json config, truth;
   ASSERT_TRUE(SimulateMagFiles(sim, &csv, &config, &truth).ok());
-  RecordingParser for_check("check.csv", /*collect=*/true);
-  ASSERT_TRUE(for_check.Feed(csv).ok());
-  ASSERT_TRUE(for_check.Finish().ok());
-  ArrayRecording log;
-  ASSERT_TRUE(for_check.TakeArray(&log).ok());
-  json check = json::object();
-  ASSERT_TRUE(MagMethod().Check(log, config, RunContext(), &check).ok());
-  RecordingParser for_job("job.csv", /*collect=*/true);
-  MagMethod().PrepareParser(config, &for_job);
-  ASSERT_TRUE(for_job.Feed(csv).ok());
-  ASSERT_TRUE(for_job.Finish().ok());
-  json result;
-  const Status s = MagMethod().Run(&for_job, config, RunContext(), &result);
+  json check, result;
+  Status s;
+  ASSERT_NO_FATAL_FAILURE(CheckThenRun(csv, config, &check, &result, &s));
   ASSERT_FALSE(s.ok());
   EXPECT_TRUE(check["mags"][0]["readings_planar"].get<bool>());
   EXPECT_EQ(check.value("job_would_fail", ""), s.message());
