@@ -317,6 +317,7 @@ Matrix9d BatchMeat(const std::vector<Vector9d>& score, const VectorXd& t, double
 
 // The two covariances of θ = (h, a) (stage 3).
 struct Covariances {
+  Matrix9d h_inv = Matrix9d::Zero();  // the reduced information's inverse (σ̂² h_inv = crb)
   Matrix9d crb = Matrix9d::Zero();
   Matrix9d sandwich = Matrix9d::Zero();       // over batches that leave min_batches
   Matrix9d sandwich_long = Matrix9d::Zero();  // also over those that leave min_long_batches
@@ -336,6 +337,7 @@ Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vect
   Eigen::LDLT<Matrix9d> ldlt(h);
   if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return c;
   const Matrix9d h_inv = ldlt.solve(Matrix9d::Identity());
+  c.h_inv = h_inv;
   const double weight_sum = w.sum();
   c.sigma = std::sqrt(Cost(y, w, e) / std::max(weight_sum - 9, 1.0));
   c.crb = c.sigma * c.sigma * h_inv;
@@ -373,6 +375,133 @@ Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vect
   }
   c.ok = c.crb.allFinite() && c.sandwich.allFinite() && c.sandwich_long.allFinite();
   return c;
+}
+
+// Sample i's w_i J̃_iᵀ (9×3): the reduced Jacobian's transpose, w_i jtᵀ (I − Π_i), Π_i the
+// projection onto the span of ∂r/∂u_i (the direction's two tangent unknowns). −h_inv times it is
+// the fit's response to a change of reading i (a change of the hard iron at that sample).
+Eigen::Matrix<double, 9, 3> ReducedJacobianT(const Ellipsoid& e, const Linearized& l, double w,
+                                             Eigen::Index i) {
+  const Eigen::Matrix<double, 3, 2> ju = -e.a * l.tangent[i];
+  const Matrix3d projection = ju * (ju.transpose() * ju).inverse() * ju.transpose();
+  const Eigen::Matrix<double, 3, 9> jt = ThetaJacobian(1, e.u.col(i));
+  return w * jt.transpose() * (Matrix3d::Identity() - projection);
+}
+
+// Stage 3c: the hard iron's wander (see MagOptions::offset_wander). The log is cut into
+// segments; each one's hard iron with A held at the fit is h + δ_k, δ_k = −G_k⁻¹ b_k (G_k the
+// segment's reduced hard-iron information, b_k its reduced score), its noise C_k = σ̂_d² G_k⁻¹
+// with σ̂_d² = Σ w |r_i − r_{i−1}|² / (2 Σ w) (coloured noise counts as wander: conservative).
+// Consecutive differences d_k = δ_{k+1} − δ_k of a random walk of rate q (per axis) have E d_k² =
+// C_k + C_{k+1} + q (τ_k + τ_{k+1})/3 (τ the segments' lengths): q by weighted moments, weights
+// 1/(E d_k²)², iterated. The covariance returned is the wander's share of ½ E (θ̂ − θ̂')(θ̂ − θ̂')ᵀ, θ̂'
+// the fit of the next log as long, made the same way: θ̂ − θ̂' = Σ_i L_i (w(t_i) − w(t_i + T)), L_i =
+// −h_inv w_i J̃_iᵀ, whose covariance under the random walk is Σ_k Δt_k (head_k Q head_kᵀ + tail_k Q
+// tail_kᵀ) (head and tail the sums of L_i before and after the k-th interval). Σ L_i is exactly the
+// hard iron's selector (a constant offset moves h alone), so for the hard iron it is q T/3, the
+// offset's Allan variance at T.
+struct Wander {
+  Vector3d rate = Vector3d::Zero();  // q per axis, reading units² / s
+  Matrix9d cov = Matrix9d::Zero();
+  int segments = 0;
+  double segment_seconds = 0;
+  bool ok = false;
+};
+
+Wander EstimateWander(const Eigen::Matrix3Xd& y, const VectorXd& t, const VectorXd& w,
+                      const Ellipsoid& e, const Covariances& c, const Linearized& l,
+                      const MagOptions& options) {
+  Wander out;
+  const Eigen::Index n = y.cols();
+  if (n < 2 || l.tangent.size() != static_cast<size_t>(n)) return out;
+  const double length = t(n - 1) - t(0);
+  const double dt = length / static_cast<double>(n - 1);
+  out.segment_seconds = std::max(length / options.wander_segments, options.wander_min_seconds);
+  // Per segment: G_k and b_k; the noise from the residuals' successive differences, which a
+  // slow wander does not reach (a sandwich over the segment's batches would count the wander
+  // inside the segment as noise and take it out of the differences: the rate then read 0.56×
+  // the simulated walk's).
+  struct Segment {
+    double start = 0;
+    Matrix3d g = Matrix3d::Zero();
+    Vector3d b = Vector3d::Zero();
+  };
+  std::vector<Segment> segments;
+  double diff_sum = 0, diff_weight = 0;
+  Vector3d previous = Vector3d::Zero();
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (segments.empty() || t(i) - segments.back().start >= out.segment_seconds) {
+      segments.push_back({t(i), Matrix3d::Zero(), Vector3d::Zero()});
+    }
+    const Eigen::Matrix<double, 9, 3> jr = ReducedJacobianT(e, l, w(i), i);
+    const Vector3d r = y.col(i) - e.h - e.a * e.u.col(i);
+    // The hard-iron rows: jt_h = −I, so −w (I − Π) r is the score and w (I − Π) the information.
+    segments.back().g -= jr.topRows<3>();
+    segments.back().b += jr.topRows<3>() * r;
+    if (i > 0) {
+      diff_sum += w(i) * (r - previous).squaredNorm();
+      diff_weight += w(i);
+    }
+    previous = r;
+  }
+  const double noise_variance = diff_weight > 0 ? diff_sum / (2 * diff_weight) : 0;
+  // A last segment shorter than half the others joins the one before.
+  if (segments.size() > 1 && (t(n - 1) - segments.back().start) < 0.5 * out.segment_seconds) {
+    segments[segments.size() - 2].g += segments.back().g;
+    segments[segments.size() - 2].b += segments.back().b;
+    segments.pop_back();
+  }
+  std::vector<Vector3d> delta;
+  std::vector<Vector3d> noise;  // diag C_k
+  std::vector<double> tau;
+  for (size_t k = 0; k < segments.size(); ++k) {
+    const double end = k + 1 < segments.size() ? segments[k + 1].start : t(n - 1) + dt;
+    Eigen::LDLT<Matrix3d> ldlt(segments[k].g);
+    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) continue;
+    const Matrix3d g_inv = ldlt.solve(Matrix3d::Identity());
+    delta.push_back(-g_inv * segments[k].b);
+    noise.push_back(noise_variance * g_inv.diagonal());
+    tau.push_back(end - segments[k].start);
+  }
+  out.segments = static_cast<int>(delta.size());
+  if (delta.size() < 3) return out;
+  for (int a = 0; a < 3; ++a) {
+    double q = 0;
+    for (int iteration = 0; iteration < 20; ++iteration) {
+      double num = 0, den = 0;
+      for (size_t k = 0; k + 1 < delta.size(); ++k) {
+        const double d2 = std::pow(delta[k + 1](a) - delta[k](a), 2);
+        const double cn = noise[k](a) + noise[k + 1](a);
+        const double ell = (tau[k] + tau[k + 1]) / 3;
+        const double weight = 1 / std::pow(cn + q * ell, 2);
+        num += weight * (d2 - cn);
+        den += weight * ell;
+      }
+      const double next = den > 0 ? std::max(num / den, 0.0) : 0;
+      if (std::abs(next - q) <= 1e-6 * std::max(next, 1e-300)) {
+        q = next;
+        break;
+      }
+      q = next;
+    }
+    out.rate(a) = q;
+  }
+  // The propagation (two passes: the total of the M_i = w_i J̃_iᵀ first, then heads and tails).
+  using Matrix93 = Eigen::Matrix<double, 9, 3>;
+  Matrix93 total = Matrix93::Zero();
+  for (Eigen::Index i = 0; i < n; ++i) total += ReducedJacobianT(e, l, w(i), i);
+  const Matrix3d q = out.rate.asDiagonal();
+  Matrix9d sum = Matrix9d::Zero();
+  Matrix93 head = Matrix93::Zero();
+  for (Eigen::Index i = 0; i < n; ++i) {
+    head += ReducedJacobianT(e, l, w(i), i);
+    const double step = i + 1 < n ? t(i + 1) - t(i) : dt;  // the last: up to the next log's start
+    const Matrix93 tail = total - head;                    // the samples after this interval
+    sum += step * (head * q * head.transpose() + tail * q * tail.transpose());
+  }
+  out.cov = 0.5 * c.h_inv * sum * c.h_inv;
+  out.ok = out.cov.allFinite();
+  return out;
 }
 
 // ∂P/∂a_k for P = F A⁻¹ (k < 6).
@@ -515,6 +644,10 @@ Status MagOptions::Validate() const {
   if (!(span_merge_seconds >= 0)) return Invalid("span_merge_seconds must be >= 0");
   if (!(sandwich_margin >= 1)) return Invalid("sandwich_margin must be >= 1");
   if (!(plateau_growth > 1)) return Invalid("plateau_growth must be > 1");
+  if (wander_segments < 4) return Invalid("wander_segments must be >= 4");
+  if (!(wander_min_seconds >= 4 * batch_seconds)) {
+    return Invalid("wander_min_seconds must be >= 4 × batch_seconds");
+  }
   if (!(min_coverage_eigenvalue > 0 && min_coverage_eigenvalue <= 1)) {
     return Invalid("min_coverage_eigenvalue must lie in (0, 1]");
   }
@@ -582,6 +715,29 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
   const std::vector<Matrix3d> dp = SoftIronDirections(e.a, result->field);
   ChoosePrimary(c, dp, options, result);
   CheckPlateau(c, options, result);
+  // The ellipsoid's covariance behind the primary σ (the alignment carries it through).
+  Matrix9d primary = result->basis == "sandwich" ? c.sandwich_long : c.crb;
+  if (!result->plateau && result->basis == "sandwich" && options.offset_wander) {
+    const Wander wander = EstimateWander(y_fit, problem.t, w, e, c, workspace, options);
+    result->wander_segments = wander.segments;
+    result->wander_segment_seconds = wander.segment_seconds;
+    if (wander.ok) {
+      result->wander_rate = wander.rate.cwiseSqrt();
+      result->wander_included = true;
+      primary += wander.cov;
+      result->std = StdOf(primary, dp);
+      const double length = problem.t(n - 1) - problem.t(0);
+      // The plateau warning's last clause ("σ is a lower bound") becomes what σ now holds.
+      std::string& warning = result->warnings.back();
+      warning.erase(std::min(warning.size(), warning.rfind(", and σ is a lower bound")));
+      warning +=
+          "; σ adds the hard iron's wander to the next log as long as this one (" +
+          Fmt("%.0f", length) + " s): a random walk of " + Fmt("%.3g", result->wander_rate(0)) +
+          ", " + Fmt("%.3g", result->wander_rate(1)) + ", " + Fmt("%.3g", result->wander_rate(2)) +
+          " reading units/√s (x, y, z) from the hard irons of " + std::to_string(wander.segments) +
+          " segments of " + Fmt("%.0f", wander.segment_seconds) + " s";
+    }
+  }
   // Residual RMS before (identity, no offset, against the data's own field) and after.
   const double f_ut = options.field > 0 ? options.field : result->field_estimate;
   result->residual_rms_before =
@@ -594,8 +750,7 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
   result->residual_rms_clean =
       FieldResidualRms(y, e.h, result->soft_iron_symmetric, result->field, to_ut, &clean);
   // Stage 4.
-  mag_internal::EstimateAlignment(
-      problem, options, e, result->basis == "sandwich" ? c.sandwich_long : c.crb, c.crb, result);
+  mag_internal::EstimateAlignment(problem, options, e, primary, c.crb, result);
   const double disturbed = static_cast<double>(result->disturbed_samples) / n;
   if (disturbed > options.max_disturbed_fraction) {
     return Status::NotDeterminable(Reason::kFieldDisturbed,

@@ -46,8 +46,18 @@
 //     QMC5883L sphere's σ ratio grows 1.9, 2.2, 2.6, 3.1, 4.5 over 2-32 s batches, its x and z
 //     offsets wandering at every time scale from 5 s up; CK-Explorer's 8.5, 10, 14 over 2-8 s),
 //     and its halves, each with 24 batches at most, disagreed at z RMS 2.08 and 1.68 (1.50 and
-//     1.45 with 15). Where there is no plateau the σ stays a lower bound: the result's
-//     `blocking` lists the curve and a warning names it (`plateau_growth`).
+//     1.45 with 15). Where there is no plateau the result's `blocking` lists the curve and a
+//     warning names it (`plateau_growth`).
+//  3c. Offset wander (no plateau, sandwich primary): a sensor whose offsets wander (an AMR's
+//     1/f offset noise, warm-up) gives each log its own average hard iron, which no σ about
+//     that average covers (halves of the public logs disagreed by 1.5σ RMS). The primary σ then
+//     predicts the next log as long as this one: the sandwich plus the wander's share of
+//     ½ E (θ̂ − θ̂')(θ̂ − θ̂')ᵀ, under a random walk of the hard iron (rate per axis from the hard
+//     irons of `wander_segments` consecutive segments, A held at the fit, less their own noise)
+//     carried through the fit's linear response to every reading (so the soft iron's share
+//     too). For the hard iron that share is q T / 3, the offset's Allan variance at the log's
+//     length T. A random walk is the model that grows fastest of those a flat or falling Allan
+//     deviation would allow (flicker: flat); for 1/f offsets it is conservative.
 //  4. Alignment (with accelerometer statics): the down direction d_j (−specific force, unit) and
 //     the calibrated field direction n_j = P(ȳ_j − h)/|·| of each static satisfy
 //     d_jᵀ R n_j = sin δ (δ the dip, positive down); Gauss-Newton over R (left perturbation) and
@@ -121,6 +131,16 @@ struct MagOptions {
   // AR(1) logs 1.1-1.3, the small-sample factor lifting it over 1; a random-walk offset 1.4-1.5;
   // README, mag section). > 1.
   double plateau_growth = 1.3;
+  // Where the blocking reaches no plateau and σ is the sandwich: add the hard iron's wander to
+  // the primary σ (step 3c), a random walk whose rate comes from the hard irons of consecutive
+  // segments, carried through the fit to the next log as long as this one. false: σ stays the
+  // sandwich (a lower bound there, as the warning says).
+  bool offset_wander = true;
+  // The wander's segments: the log in this many, each at least wander_min_seconds long (then
+  // fewer). >= 4; wander_min_seconds >= 4 × batch_seconds (each segment's noise is a sandwich
+  // over its batches).
+  int wander_segments = 12;
+  double wander_min_seconds = 8;
   // Coverage: the smallest eigenvalue of (3/N) Σ u uᵀ for a "good" verdict (all 1 when the field
   // directions are spread evenly). In (0, 1].
   double min_coverage_eigenvalue = 0.2;
@@ -203,6 +223,13 @@ struct MagResult {
   // lower bound, and a warning says so). True with fewer than two steps.
   std::vector<MagBlockingStep> blocking;
   bool plateau = true;
+  // Step 3c (no plateau, sandwich primary, MagOptions::offset_wander): the hard iron's random
+  // walk, √q per axis (reading units/√s), from `wander_segments` segments of
+  // `wander_segment_seconds`; `wander_included`: the primary σ holds its share.
+  Eigen::Vector3d wander_rate = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+  int wander_segments = 0;
+  double wander_segment_seconds = 0;
+  bool wander_included = false;
 
   // |m| − F over all samples, µT (RMS): the nominal (identity, no offset) and calibrated.
   double residual_rms_before = 0;

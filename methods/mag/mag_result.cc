@@ -97,6 +97,13 @@ json MagDiagnostics(const MagRun& run) {
       {"sandwich_ratio", Num(r.sandwich_ratio)},
       {"blocking", blocking},
       {"plateau", r.plateau},
+      // core/mag.h step 3c: the hard iron's random walk where the blocking found no plateau.
+      {"wander",
+       {{"included", r.wander_included},
+        {"rate", r.wander_included ? Vec(r.wander_rate) : json(nullptr)},
+        {"rate_unit", "reading units/sqrt(s)"},  // MagResultToJson names mag_unit
+        {"segments", r.wander_segments},
+        {"segment_seconds", Num(r.wander_segment_seconds)}}},
       {"iterations", r.iterations},
       {"statics", run.statics},
       {"accelerometer", run.accelerometer.empty() ? json(nullptr) : json(run.accelerometer)},
@@ -135,7 +142,9 @@ json MagResultToJson(const std::vector<MagRun>& runs, const std::string& unit_te
     u["name"] = run.name;
     u["crb"] = StdKeys(r.crb, aligned);
     unc.push_back(u);
-    diag.push_back(MagDiagnostics(run));
+    json d = MagDiagnostics(run);
+    d["wander"]["rate_unit"] = unit_text + "/sqrt(s)";
+    diag.push_back(std::move(d));
     sandwich |= r.basis == "sandwich";
     for (const auto* list : {&run.warnings, &r.warnings}) {
       for (const std::string& w : *list)
