@@ -24,9 +24,10 @@ MagSimulation TargetLog(bool disturbed, double walk = 0) {
   return sim;
 }
 
-void Run(benchmark::State& state, const MagSimulation& sim) {
+void Run(benchmark::State& state, const MagSimulation& sim, bool offset_wander = true) {
   MagOptions o;
   o.field = sim.field;
+  o.offset_wander = offset_wander;
   for (auto _ : state) {
     MagResult r;
     if (!CalibrateMag(sim.problem, o, &r).ok()) state.SkipWithError("fit failed");
@@ -54,6 +55,13 @@ void BM_MagTenMinutes100HzWandering(benchmark::State& state) {
   Run(state, sim);
 }
 BENCHMARK(BM_MagTenMinutes100HzWandering)->Unit(benchmark::kMillisecond);
+
+// The same log without step 3c (the sandwich alone): the difference is the wander's cost.
+void BM_MagTenMinutes100HzWanderingNoStep3c(benchmark::State& state) {
+  static const MagSimulation sim = TargetLog(false, 0.02);
+  Run(state, sim, /*offset_wander=*/false);
+}
+BENCHMARK(BM_MagTenMinutes100HzWanderingNoStep3c)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

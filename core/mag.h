@@ -46,8 +46,8 @@
 //     QMC5883L sphere's σ ratio grows 1.9, 2.2, 2.6, 3.1, 4.5 over 2-32 s batches, its x and z
 //     offsets wandering at every time scale from 5 s up; CK-Explorer's 8.5, 10, 14 over 2-8 s),
 //     and its halves, each with 24 batches at most, disagreed at z RMS 2.08 and 1.68 (1.50 and
-//     1.45 with 15). Where there is no plateau the result's `blocking` lists the curve and a
-//     warning names it (`plateau_growth`).
+//     1.45 with 15). The result's `blocking` lists the curve; where σ is the sandwich and the
+//     curve reaches no plateau (`plateau_growth`) a warning names it.
 //  3c. Offset wander (no plateau, sandwich primary): a sensor whose offsets wander (an AMR's
 //     1/f offset noise, warm-up) gives each log its own average hard iron, which no σ about
 //     that average covers (halves of the public logs disagreed by 1.5σ RMS). The primary σ then
@@ -125,7 +125,7 @@ struct MagOptions {
   double span_merge_seconds = 0.5;
   // The sandwich becomes the primary σ when the RMS of its σ over the bound's exceeds this. >= 1.
   double sandwich_margin = 1.15;
-  // The blocking reaches no plateau (a warning: σ is then a lower bound) when the sandwich's σ
+  // Where σ is the sandwich: the blocking reaches no plateau (a warning; step 3c) when its σ
   // ratio (RMS over the parameters, sandwich over bound) at the longest batches exceeds the one at
   // batches half as long by more than this factor (measured at about 16 batches: white-noise and
   // AR(1) logs 1.1-1.3, the small-sample factor lifting it over 1; a random-walk offset 1.4-1.5;
@@ -218,9 +218,10 @@ struct MagResult {
   double sandwich_ratio = std::numeric_limits<double>::quiet_NaN();
   double noise_std = 0;  // σ̂, reading units (white, from the residuals)
   // The sandwich over every batch length tried (2, 4, 8... × batch_seconds while at least
-  // min_long_batches remain); `plateau` false when the longest grew by more than plateau_growth
-  // over the one before (residuals correlated longer than the log's blocking can show: σ is a
-  // lower bound, and a warning says so). True with fewer than two steps.
+  // min_long_batches remain); `plateau` false when σ is the sandwich and the longest grew by
+  // more than plateau_growth over the one before (residuals correlated longer than the log's
+  // blocking can show; a warning says so, and step 3c adds the wander). True with fewer than two
+  // steps or where σ is the bound.
   std::vector<MagBlockingStep> blocking;
   bool plateau = true;
   // Step 3c (no plateau, sandwich primary, MagOptions::offset_wander): the hard iron's random
