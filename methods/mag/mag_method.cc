@@ -557,6 +557,12 @@ std::function<Status(SimulatedFiles*)> Mag::AddSimulateOptions(CLI::App* command
       ->capture_default_str();
   command->add_flag("--yaw-only", o->yaw_only, "turn about the vertical only (poor coverage)");
   command
+      ->add_option("--hard-iron-walk", o->hard_iron_walk,
+                   "a hard iron that wanders: a random walk of this many uT/sqrt(s) per axis (the "
+                   "truth is its log average)")
+      ->check(CLI::Range(0.0, 10.0))
+      ->capture_default_str();
+  command
       ->add_option("--disturbances", *disturbed,
                    "spans of 3 s in which iron near the bench adds 15 uT")
       ->check(CLI::Range(0, 100))

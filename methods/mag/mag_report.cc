@@ -152,6 +152,18 @@ std::string ParameterTable(const json& p, const json& u, const json& d) {
        E(ScalarText(&d.at("residual_rms_clean"), 3)) + " uT after (undisturbed samples); " +
        std::to_string(d.at("disturbed_samples").get<int64_t>()) + " of " +
        std::to_string(d.at("samples").get<int64_t>()) + " samples disturbed.</p>";
+  // What σ holds where the offsets wander (core/mag.h step 3c; absent from results of calibd
+  // before it).
+  const json* wander = d.contains("wander") ? &d.at("wander") : nullptr;
+  if (wander != nullptr && wander->value("included", false) && wander->at("rate").is_array()) {
+    const json& rate = wander->at("rate");
+    h += "<p class=\"wander\">The offsets wander (the sandwich's blocking reaches no plateau): " +
+         std::string(kSigma) + " above predicts the next log as long as this one, the sandwich " +
+         "plus the hard iron's random walk of " + E(ScalarText(&rate.at(0), 3)) + ", " +
+         E(ScalarText(&rate.at(1), 3)) + ", " + E(ScalarText(&rate.at(2), 3)) + " " +
+         E(wander->value("rate_unit", std::string())) + " (x, y, z) from " +
+         std::to_string(wander->value("segments", 0)) + " segments.</p>";
+  }
   return h;
 }
 

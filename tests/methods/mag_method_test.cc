@@ -341,6 +341,13 @@ TEST(MagMethod, ThePublicAccMagLogCalibratesThroughTheMethod) {
   EXPECT_FALSE(d["plateau"].get<bool>()) << d["blocking"].dump();
   EXPECT_NE(result["warnings"].dump().find("no plateau"), std::string::npos)
       << result["warnings"].dump();
+  // So σ predicts the next log (core/mag.h step 3c), in the configured unit per √s.
+  const json& wander = d["wander"];
+  EXPECT_TRUE(wander["included"].get<bool>()) << wander.dump();
+  EXPECT_EQ(wander["rate_unit"], "gauss/sqrt(s)");
+  EXPECT_EQ(wander["segments"], 12);
+  for (int a = 0; a < 3; ++a) EXPECT_GE(wander["rate"][a].get<double>(), 0);
+  EXPECT_NE(result["warnings"].dump().find("σ adds the hard iron's wander"), std::string::npos);
 }
 
 }  // namespace

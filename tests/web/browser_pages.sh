@@ -96,6 +96,10 @@ for s in 3 4; do
   jm=$(upload "$tmp/mag$s" 'MAG-1')
   wait_job "$jm"
 done
+# A magnetometer whose offsets wander: the report says what its σ predicts (core/mag.h step 3c).
+"$bin" simulate mag --out "$tmp/magw" --seed 5 --turns 160 --hard-iron-walk 0.02 2>/dev/null
+jw=$(upload "$tmp/magw" 'MAG-WANDER')
+wait_job "$jw"
 # Two accepted thermal calibrations of one device: the device page's drift of the curves.
 for s in 3 4; do
   "$bin" simulate thermal --out "$tmp/therm$s" --seed "$s" --rate 20 2>/dev/null
@@ -144,6 +148,7 @@ render check "/recordings/$r7?check=imu"
 render full "/jobs/$j8"
 render device-drift /devices/IMU-DRIFT
 render mag "/jobs/$jm"
+render mag-wander "/jobs/$jw"
 render mag-device /devices/MAG-1
 render thermal-device /devices/THERM-1
 # A product's fleet (issue #27): three units of the product "P-<b>" (escaped on the page).
@@ -243,10 +248,11 @@ expect device-drift 'imu (2 accepted calibrations' 'noise (2 accepted calibratio
 expect mag 'plot-mag-sphere' 'plot-mag-residuals' 'plot-mag-coverage' 'Hard and soft iron' \
   'ArduPilot COMPASS parameters' 'PX4 CAL_MAG parameters'
 expect mag-device 'mag: hard-iron drift'
+expect mag-wander 'class="wander"' 'predicts the next log as long as this one' 'uT/sqrt(s)'
 expect thermal-device 'thermal (2 accepted calibrations' 'table-drift-thermal' \
   'plot-drift-thermal-accel' 'plot-drift-thermal-gyro'
 for page in history pca array failed failed-imu device devices revoked rejected recording check \
-  full device-drift running fleet plan plan-planar plan-imu plan-thermal plan-array plan-mag mag mag-device thermal-device; do
+  full device-drift running fleet plan plan-planar plan-imu plan-thermal plan-array plan-mag mag mag-device mag-wander thermal-device; do
   reject "$page" '<script' '<img'
   if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"
