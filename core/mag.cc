@@ -319,10 +319,11 @@ Matrix9d BatchMeat(const std::vector<Vector9d>& score, const VectorXd& t, double
 struct Covariances {
   Matrix9d h_inv = Matrix9d::Zero();  // the reduced information's inverse (σ̂² h_inv = crb)
   Matrix9d crb = Matrix9d::Zero();
-  Matrix9d sandwich = Matrix9d::Zero();       // over batches that leave min_batches
-  Matrix9d sandwich_long = Matrix9d::Zero();  // also over those that leave min_long_batches
-  double sigma = 0;                           // σ̂, reading units
-  std::vector<MagBlockingStep> blocking;      // every batch length tried
+  Matrix9d sandwich = Matrix9d::Zero();        // over batches that leave min_batches
+  Matrix9d sandwich_long = Matrix9d::Zero();   // also over those that leave min_long_batches
+  Matrix9d sandwich_short = Matrix9d::Zero();  // over batch_seconds only
+  double sigma = 0;                            // σ̂, reading units
+  std::vector<MagBlockingStep> blocking;       // every batch length tried
   bool ok = false;
 };
 
@@ -353,7 +354,7 @@ Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vect
   // Batches down to `options.min_long_batches` (noisier) count only for `sandwich_long`, the
   // primary once the sandwich is (see ChoosePrimary): a hand-held log's misfit can stay
   // correlated longer than the batches that leave `min_batches` (no plateau yet).
-  c.sandwich = c.sandwich_long = c.crb;  // too few batches for a sandwich: the bound alone
+  c.sandwich = c.sandwich_long = c.sandwich_short = c.crb;  // too few batches: the bound alone
   double largest = 0, largest_long = 0;
   for (double seconds = options.batch_seconds;; seconds *= 2) {
     int64_t batches = 0;
@@ -364,6 +365,7 @@ Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vect
     const Matrix9d sandwich = h_inv * meat * h_inv * (static_cast<double>(batches) / (batches - 9));
     const double size = (sandwich.diagonal().array() / c.crb.diagonal().array()).sum();
     c.blocking.push_back({seconds, batches, std::sqrt(size / 9)});
+    if (seconds == options.batch_seconds) c.sandwich_short = sandwich;
     if (size > largest && (seconds == options.batch_seconds || batches >= options.min_batches)) {
       largest = size;
       c.sandwich = sandwich;
@@ -433,14 +435,17 @@ Wander EstimateWander(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vector
     if (segments.empty() || t(i) - segments.back().start >= out.segment_seconds) {
       segments.push_back({t(i), Matrix3d::Zero(), Vector3d::Zero()});
     }
-    const Eigen::Matrix<double, 9, 3> jr = ReducedJacobianT(e, l, w(i), i);
+    // Each sample counts fully unless disturbed: the robust weights fall with the residual, so
+    // they would pull each segment's hard iron towards the fit's (the rate then reads low).
+    const double weight = w(i) >= options.disturbed_weight ? 1.0 : 0.0;
+    const Eigen::Matrix<double, 9, 3> jr = ReducedJacobianT(e, l, weight, i);
     const Vector3d r = y.col(i) - e.h - e.a * e.u.col(i);
     // The hard-iron rows: jt_h = −I, so −w (I − Π) r is the score and w (I − Π) the information.
     segments.back().g -= jr.topRows<3>();
     segments.back().b += jr.topRows<3>() * r;
     if (i > 0) {
-      diff_sum += w(i) * (r - previous).squaredNorm();
-      diff_weight += w(i);
+      diff_sum += weight * (r - previous).squaredNorm();
+      diff_weight += weight;
     }
     previous = r;
   }
@@ -720,6 +725,7 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
   CheckPlateau(c, options, result);
   // The ellipsoid's covariance behind the primary σ (the alignment carries it through).
   Matrix9d primary = result->basis == "sandwich" ? c.sandwich_long : c.crb;
+  const Matrix9d without_wander = primary;
   if (!result->plateau && result->basis == "sandwich" && options.offset_wander) {
     const Wander wander = EstimateWander(y_fit, problem.t, w, e, c, workspace, options);
     result->wander_segments = wander.segments;
@@ -727,18 +733,23 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
     if (wander.ok) {
       result->wander_rate = wander.rate.cwiseSqrt();
       result->wander_included = true;
-      primary += wander.cov;
+      // The noise's share from the shortest batches (which the wander hardly reaches), the
+      // wander's from the propagation: the longer batches' sandwich would count the wander
+      // inside the log twice (simulated halves' soft iron then z RMS 0.65).
+      primary = c.sandwich_short + wander.cov;
       result->std = StdOf(primary, dp);
       const double length = problem.t(n - 1) - problem.t(0);
       // The plateau warning's last clause ("σ is a lower bound") becomes what σ now holds.
       std::string& warning = result->warnings.back();
       warning.erase(std::min(warning.size(), warning.rfind(", and σ is a lower bound")));
-      warning +=
-          "; σ adds the hard iron's wander to the next log as long as this one (" +
-          Fmt("%.0f", length) + " s): a random walk of " + Fmt("%.3g", result->wander_rate(0)) +
-          ", " + Fmt("%.3g", result->wander_rate(1)) + ", " + Fmt("%.3g", result->wander_rate(2)) +
-          " reading units/√s (x, y, z) from the hard irons of " + std::to_string(wander.segments) +
-          " segments of " + Fmt("%.0f", wander.segment_seconds) + " s";
+      warning += "; σ predicts the next log as long as this one (" + Fmt("%.0f", length) +
+                 " s): the " + Fmt("%.0f", options.batch_seconds) +
+                 " s batches' sandwich plus the hard iron's wander, a random walk of " +
+                 Fmt("%.3g", result->wander_rate(0)) + ", " + Fmt("%.3g", result->wander_rate(1)) +
+                 ", " + Fmt("%.3g", result->wander_rate(2)) +
+                 " reading units/√s (x, y, z) from the hard irons of " +
+                 std::to_string(wander.segments) + " segments of " +
+                 Fmt("%.0f", wander.segment_seconds) + " s";
     }
   }
   // Residual RMS before (identity, no offset, against the data's own field) and after.
@@ -753,7 +764,9 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
   result->residual_rms_clean =
       FieldResidualRms(y, e.h, result->soft_iron_symmetric, result->field, to_ut, &clean);
   // Stage 4.
-  mag_internal::EstimateAlignment(problem, options, e, primary, c.crb, result);
+  const Eigen::MatrixXd primary_dynamic = primary;
+  mag_internal::EstimateAlignment(problem, options, e, without_wander, c.crb, result,
+                                  &primary_dynamic);
   const double disturbed = static_cast<double>(result->disturbed_samples) / n;
   if (disturbed > options.max_disturbed_fraction) {
     return Status::NotDeterminable(Reason::kFieldDisturbed,

@@ -51,13 +51,16 @@
 //  3c. Offset wander (no plateau, sandwich primary): a sensor whose offsets wander (an AMR's
 //     1/f offset noise, warm-up) gives each log its own average hard iron, which no σ about
 //     that average covers (halves of the public logs disagreed by 1.5σ RMS). The primary σ then
-//     predicts the next log as long as this one: the sandwich plus the wander's share of
-//     ½ E (θ̂ − θ̂')(θ̂ − θ̂')ᵀ, under a random walk of the hard iron (rate per axis from the hard
-//     irons of `wander_segments` consecutive segments, A held at the fit, less their own noise)
-//     carried through the fit's linear response to every reading (so the soft iron's share
-//     too). For the hard iron that share is q T / 3, the offset's Allan variance at the log's
-//     length T. A random walk is the model that grows fastest of those a flat or falling Allan
-//     deviation would allow (flicker: flat); for 1/f offsets it is conservative.
+//     predicts the next log as long as this one: the sandwich over `batch_seconds` batches
+//     (the noise; the longer batches' would count the wander inside the log twice) plus the
+//     wander's share of ½ E (θ̂ − θ̂')(θ̂ − θ̂')ᵀ, under a random walk of the hard iron (rate per
+//     axis from the hard irons of `wander_segments` consecutive segments, A held at the fit, each
+//     sample weighted 1 unless disturbed, less their own noise) carried through the fit's linear
+//     response to every reading (so the soft iron's share too; the alignment carries the
+//     sandwich alone: its statics' scatter holds the wander within the log). For the hard iron that
+//     share is q T / 3, the offset's Allan variance at the log's length T. A random walk is the
+//     model that grows fastest of those a flat or falling Allan deviation would allow (flicker:
+//     flat); for 1/f offsets it is conservative.
 //  4. Alignment (with accelerometer statics): the down direction d_j (−specific force, unit) and
 //     the calibrated field direction n_j = P(ȳ_j − h)/|·| of each static satisfy
 //     d_jᵀ R n_j = sin δ (δ the dip, positive down); Gauss-Newton over R (left perturbation) and

@@ -111,7 +111,7 @@ Matrix3d EntryStd(const std::vector<Matrix3d>& d, const Eigen::MatrixXd& cov) {
 
 void EstimateAlignment(const MagProblem& problem, const MagOptions& options, const Ellipsoid& fit,
                        const Eigen::MatrixXd& cov_primary, const Eigen::MatrixXd& cov_crb,
-                       MagResult* result) {
+                       MagResult* result, const Eigen::MatrixXd* cov_p) {
   const double field = result->field;
   const Matrix3d p = result->soft_iron_symmetric;
   std::vector<Vector3d> d, n;
@@ -222,7 +222,8 @@ void EstimateAlignment(const MagProblem& problem, const MagOptions& options, con
     ds.push_back(-field * r * a_inv * Sym(e) * a_inv);
   }
   for (int k = 0; k < 3; ++k) ds.push_back(Skew(Vector3d::Unit(k)) * r * p);
-  for (const auto& [theta, align, out] : {std::tuple{&cov_primary, &cov, &result->std},
+  const Eigen::MatrixXd& p_primary = cov_p != nullptr ? *cov_p : cov_primary;
+  for (const auto& [theta, align, out] : {std::tuple{&p_primary, &cov, &result->std},
                                           std::tuple{&cov_crb, &cov_bound, &result->crb}}) {
     Eigen::MatrixXd c = Eigen::MatrixXd::Zero(9, 9);
     c.topLeftCorner(6, 6) = theta->bottomRightCorner(6, 6);

@@ -35,10 +35,14 @@ struct Ellipsoid {
 Eigen::Matrix3d EntryStd(const std::vector<Eigen::Matrix3d>& d, const Eigen::MatrixXd& cov);
 
 // Stage 4: R and the dip from the statics (fills alignment, dip, their σ, alignment_note; makes
-// soft_iron R P with its σ). `cov_primary` and `cov_crb`: the covariances of θ = (h, a) (9×9).
+// soft_iron R P with its σ). `cov_primary` and `cov_crb`: the covariances of θ = (h, a) (9×9) the
+// alignment carries through; `cov_p`: the one P's entries in R P take (the primary's with the
+// offsets' wander, step 3c, which the alignment must not carry: the statics' scatter already
+// holds the wander within the log, and the shift to the next log moves no static of this one;
+// null: cov_primary).
 void EstimateAlignment(const MagProblem& problem, const MagOptions& options, const Ellipsoid& fit,
                        const Eigen::MatrixXd& cov_primary, const Eigen::MatrixXd& cov_crb,
-                       MagResult* result);
+                       MagResult* result, const Eigen::MatrixXd* cov_p = nullptr);
 
 // Stage 5: coverage of the field directions u_i with weight >= options.disturbed_weight.
 MagCoverage AssessCoverage(const Eigen::Matrix3Xd& u, const Eigen::VectorXd& w,

@@ -347,7 +347,7 @@ TEST(MagMethod, ThePublicAccMagLogCalibratesThroughTheMethod) {
   EXPECT_EQ(wander["rate_unit"], "gauss/sqrt(s)");
   EXPECT_EQ(wander["segments"], 12);
   for (int a = 0; a < 3; ++a) EXPECT_GE(wander["rate"][a].get<double>(), 0);
-  EXPECT_NE(result["warnings"].dump().find("σ adds the hard iron's wander"), std::string::npos);
+  EXPECT_NE(result["warnings"].dump().find("σ predicts the next log"), std::string::npos);
 }
 
 }  // namespace
