@@ -319,11 +319,10 @@ Matrix9d BatchMeat(const std::vector<Vector9d>& score, const VectorXd& t, double
 struct Covariances {
   Matrix9d h_inv = Matrix9d::Zero();  // the reduced information's inverse (σ̂² h_inv = crb)
   Matrix9d crb = Matrix9d::Zero();
-  Matrix9d sandwich = Matrix9d::Zero();        // over batches that leave min_batches
-  Matrix9d sandwich_long = Matrix9d::Zero();   // also over those that leave min_long_batches
-  Matrix9d sandwich_short = Matrix9d::Zero();  // over batch_seconds only
-  double sigma = 0;                            // σ̂, reading units
-  std::vector<MagBlockingStep> blocking;       // every batch length tried
+  Matrix9d sandwich = Matrix9d::Zero();       // over batches that leave min_batches
+  Matrix9d sandwich_long = Matrix9d::Zero();  // also over those that leave min_long_batches
+  double sigma = 0;                           // σ̂, reading units
+  std::vector<MagBlockingStep> blocking;      // every batch length tried
   bool ok = false;
 };
 
@@ -354,7 +353,7 @@ Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vect
   // Batches down to `options.min_long_batches` (noisier) count only for `sandwich_long`, the
   // primary once the sandwich is (see ChoosePrimary): a hand-held log's misfit can stay
   // correlated longer than the batches that leave `min_batches` (no plateau yet).
-  c.sandwich = c.sandwich_long = c.sandwich_short = c.crb;  // too few batches: the bound alone
+  c.sandwich = c.sandwich_long = c.crb;  // too few batches for a sandwich: the bound alone
   double largest = 0, largest_long = 0;
   for (double seconds = options.batch_seconds;; seconds *= 2) {
     int64_t batches = 0;
@@ -365,7 +364,6 @@ Covariances Uncertainty(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vect
     const Matrix9d sandwich = h_inv * meat * h_inv * (static_cast<double>(batches) / (batches - 9));
     const double size = (sandwich.diagonal().array() / c.crb.diagonal().array()).sum();
     c.blocking.push_back({seconds, batches, std::sqrt(size / 9)});
-    if (seconds == options.batch_seconds) c.sandwich_short = sandwich;
     if (size > largest && (seconds == options.batch_seconds || batches >= options.min_batches)) {
       largest = size;
       c.sandwich = sandwich;
@@ -407,6 +405,7 @@ struct Wander {
   Matrix9d cov = Matrix9d::Zero();
   int segments = 0;
   double segment_seconds = 0;
+  double noise_variance = 0;  // σ̂_d², reading units²
   bool ok = false;
 };
 
@@ -450,6 +449,7 @@ Wander EstimateWander(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vector
     previous = r;
   }
   const double noise_variance = diff_weight > 0 ? diff_sum / (2 * diff_weight) : 0;
+  out.noise_variance = noise_variance;
   // A last segment shorter than half the others joins the one before.
   if (segments.size() > 1 && (t(n - 1) - segments.back().start) < 0.5 * out.segment_seconds) {
     segments[segments.size() - 2].g += segments.back().g;
@@ -733,18 +733,19 @@ Status CalibrateMag(const MagProblem& problem, const MagOptions& options, MagRes
     if (wander.ok) {
       result->wander_rate = wander.rate.cwiseSqrt();
       result->wander_included = true;
-      // The noise's share from the shortest batches (which the wander hardly reaches), the
-      // wander's from the propagation: the longer batches' sandwich would count the wander
-      // inside the log twice (simulated halves' soft iron then z RMS 0.65).
-      primary = c.sandwich_short + wander.cov;
+      // The noise's share: the white-noise bound with σ̂_d, which the wander does not reach.
+      // Every sandwich counts the wander's level in its batches' scores, so with it the wander
+      // would count twice (the 2 s batches': simulated halves' soft iron z RMS 0.73; the
+      // longest: 0.65; this: 0.90, and a fixed log under 30 walks 0.94).
+      primary = wander.noise_variance * c.h_inv + wander.cov;
       result->std = StdOf(primary, dp);
       const double length = problem.t(n - 1) - problem.t(0);
       // The plateau warning's last clause ("σ is a lower bound") becomes what σ now holds.
       std::string& warning = result->warnings.back();
       warning.erase(std::min(warning.size(), warning.rfind(", and σ is a lower bound")));
       warning += "; σ predicts the next log as long as this one (" + Fmt("%.0f", length) +
-                 " s): the " + Fmt("%.0f", options.batch_seconds) +
-                 " s batches' sandwich plus the hard iron's wander, a random walk of " +
+                 " s): the white-noise bound at the sample-to-sample noise plus the hard "
+                 "iron's wander, a random walk of " +
                  Fmt("%.3g", result->wander_rate(0)) + ", " + Fmt("%.3g", result->wander_rate(1)) +
                  ", " + Fmt("%.3g", result->wander_rate(2)) +
                  " reading units/√s (x, y, z) from the hard irons of " +

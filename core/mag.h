@@ -51,9 +51,10 @@
 //  3c. Offset wander (no plateau, sandwich primary): a sensor whose offsets wander (an AMR's
 //     1/f offset noise, warm-up) gives each log its own average hard iron, which no σ about
 //     that average covers (halves of the public logs disagreed by 1.5σ RMS). The primary σ then
-//     predicts the next log as long as this one: the sandwich over `batch_seconds` batches
-//     (the noise; the longer batches' would count the wander inside the log twice) plus the
-//     wander's share of ½ E (θ̂ − θ̂')(θ̂ − θ̂')ᵀ, under a random walk of the hard iron (rate per
+//     predicts the next log as long as this one: the white-noise bound at σ̂_d (the residuals'
+//     sample-to-sample noise, which the wander does not reach; every sandwich counts the
+//     wander's level in its batches and would count it twice) plus the wander's share of
+//     ½ E (θ̂ − θ̂')(θ̂ − θ̂')ᵀ, under a random walk of the hard iron (rate per
 //     axis from the hard irons of `wander_segments` consecutive segments, A held at the fit, each
 //     sample weighted 1 unless disturbed, less their own noise) carried through the fit's linear
 //     response to every reading (so the soft iron's share too; the alignment carries the

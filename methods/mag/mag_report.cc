@@ -158,11 +158,11 @@ std::string ParameterTable(const json& p, const json& u, const json& d) {
   if (wander != nullptr && wander->value("included", false) && wander->at("rate").is_array()) {
     const json& rate = wander->at("rate");
     h += "<p class=\"wander\">The offsets wander (the sandwich's blocking reaches no plateau): " +
-         std::string(kSigma) + " above predicts the next log as long as this one, the sandwich " +
-         "plus the hard iron's random walk of " + E(ScalarText(&rate.at(0), 3)) + ", " +
-         E(ScalarText(&rate.at(1), 3)) + ", " + E(ScalarText(&rate.at(2), 3)) + " " +
-         E(wander->value("rate_unit", std::string())) + " (x, y, z) from " +
-         std::to_string(wander->value("segments", 0)) + " segments.</p>";
+         std::string(kSigma) + " above predicts the next log as long as this one: the sensor's " +
+         "sample-to-sample noise plus the hard iron's random walk of " +
+         E(ScalarText(&rate.at(0), 3)) + ", " + E(ScalarText(&rate.at(1), 3)) + ", " +
+         E(ScalarText(&rate.at(2), 3)) + " " + E(wander->value("rate_unit", std::string())) +
+         " (x, y, z) from " + std::to_string(wander->value("segments", 0)) + " segments.</p>";
   }
   return h;
 }

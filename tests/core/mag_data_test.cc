@@ -317,7 +317,7 @@ MagResult CheckLog(const Log& log) {
               b.plateau ? "yes" : "no");
   // The halves agree within their σ (core/mag.h step 3c: where a half's blocking reaches no
   // plateau its σ holds the hard iron's wander to the next log). Measured 0.67 (CK-Explorer,
-  // whose second half has a plateau) and 0.77 (QMC5883L); with the sandwich alone 1.14 and 1.51
+  // whose second half has a plateau) and 0.83 (QMC5883L); with the sandwich alone 1.14 and 1.51
   // (2.08 and 1.68 before the sandwich went on to batches that leave 15).
   MagOptions sandwich_only = o;
   sandwich_only.offset_wander = false;

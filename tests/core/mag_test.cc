@@ -268,7 +268,7 @@ void AddHalves(const MagResult& a, const MagResult& b, int trials, HalvesZ* z) {
 // reaches no plateau and says so, and the primary σ predicts the next log as long as this one
 // (core/mag.h step 3c): the two halves of a log, each fitted with its own σ, agree within them
 // (z RMS in [0.7, 1.4]: 60 hard-iron and 120 soft-iron differences, SE of a z RMS of 1 about
-// 0.1; measured 0.97 and 0.73, the soft iron's share conservative), where the sandwich alone
+// 0.1; measured 0.98 and 0.90), where the sandwich alone
 // leaves the hard iron at z RMS above 2 (measured 3.90: each half's σ is about its own average
 // offset). The rate read from the segments, in variance: 0.99× the walk's, within [0.8, 1.2]
 // (its SE over 20 logs about 0.06×; the robust weights in the segments' fits read 0.73×).
