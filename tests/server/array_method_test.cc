@@ -9,6 +9,7 @@
 
 #include "core/array_simulation.h"
 #include "formats/recording.h"
+#include "tests/lib/array_csv.h"
 
 namespace calibd::server {
 namespace {
@@ -124,15 +125,6 @@ TEST(ParseArrayConfig, ErrorsNameTheKey) {
   ExpectKeyError(c, "accelerometer_calibration", "is not a pca result");
 }
 
-ArrayRecording RecordingFromCsv(const std::string& csv) {
-  RecordingParser parser("recording.csv", true);
-  const Status s = ParseRecording(csv, &parser);
-  EXPECT_TRUE(s.ok()) << s.ToString();
-  ArrayRecording rec;
-  EXPECT_TRUE(parser.TakeArray(&rec).ok());
-  return rec;
-}
-
 TEST(RunArray, SimulatedFilesGiveTheSpecResult) {
   ArraySimulationFileOptions so;
   so.samples = 400;
@@ -147,7 +139,7 @@ TEST(RunArray, SimulatedFilesGiveTheSpecResult) {
   EXPECT_EQ(truth["positions"].size(), 32u);
   EXPECT_EQ(truth["seed"], 3);
 
-  const ArrayRecording rec = RecordingFromCsv(csv);
+  const ArrayRecording rec = testing::ArrayRecordingFromCsv(csv);
   ASSERT_EQ(rec.accel.rows(), 400);
   json result;
   const Status s = RunArray(rec, config, &result);
@@ -208,8 +200,8 @@ TEST(RunArray, GyroInDegreesGivesTheSameEstimate) {
   EXPECT_EQ(config_deg["gyro_unit"], "deg/s");
   EXPECT_DOUBLE_EQ(config_deg["gyro_noise"].get<double>(), 0.06);
   json a, b;
-  ASSERT_TRUE(RunArray(RecordingFromCsv(csv_rad), config_rad, &a).ok());
-  ASSERT_TRUE(RunArray(RecordingFromCsv(csv_deg), config_deg, &b).ok());
+  ASSERT_TRUE(RunArray(testing::ArrayRecordingFromCsv(csv_rad), config_rad, &a).ok());
+  ASSERT_TRUE(RunArray(testing::ArrayRecordingFromCsv(csv_deg), config_deg, &b).ok());
   for (int k = 0; k < 32; ++k)
     for (int i = 0; i < 3; ++i)
       EXPECT_NEAR(a["parameters"]["positions"][k]["position"][i].get<double>(),
@@ -226,7 +218,7 @@ TEST(RunArray, TriadCountMismatchNamesBothCounts) {
   ASSERT_TRUE(SimulateArrayFiles(so, &csv, &config, &truth).ok());
   config["geometry"]["positions"].erase(31);
   json result;
-  const Status s = RunArray(RecordingFromCsv(csv), config, &result);
+  const Status s = RunArray(testing::ArrayRecordingFromCsv(csv), config, &result);
   ASSERT_EQ(s.code(), StatusCode::kInvalidInput);
   EXPECT_NE(s.message().find("32"), std::string::npos) << s.message();
   EXPECT_NE(s.message().find("31"), std::string::npos) << s.message();
@@ -240,7 +232,7 @@ TEST(RunArray, NotDeterminableAndDecimatedMotion) {
   std::string csv;
   json config, truth, result;
   ASSERT_TRUE(SimulateArrayFiles(so, &csv, &config, &truth).ok());
-  Status s = RunArray(RecordingFromCsv(csv), config, &result);
+  Status s = RunArray(testing::ArrayRecordingFromCsv(csv), config, &result);
   EXPECT_EQ(s.code(), StatusCode::kNotDeterminable);
   EXPECT_NE(s.message().find("at least 3"), std::string::npos);
 
@@ -513,7 +505,7 @@ TEST(AccelerometerCalibration, TheTrueModelsMakeTheFitExact) {
     s["sensitivity"] = truth["accelerometer_sensors"][i]["sensitivity"];
     s["bias"] = truth["accelerometer_sensors"][i]["bias"];
   }
-  const ArrayRecording rec = RecordingFromCsv(csv);
+  const ArrayRecording rec = testing::ArrayRecordingFromCsv(csv);
   auto max_error = [&](const json& result) {
     double e = 0;
     for (int k = 0; k < 32; ++k)

@@ -16,6 +16,7 @@
 #include "methods/export_util.h"
 #include "methods/pca/pca_method.h"
 #include "methods/registry.h"
+#include "tests/lib/array_csv.h"
 #include "web/method_report.h"
 #include "web/pages.h"
 
@@ -23,15 +24,6 @@ namespace calibd::server {
 namespace {
 
 using nlohmann::json;
-
-ArrayRecording RecordingFromCsv(const std::string& csv) {
-  RecordingParser parser("recording.csv", true);
-  const Status s = ParseRecording(csv, &parser);
-  EXPECT_TRUE(s.ok()) << s.ToString();
-  ArrayRecording rec;
-  EXPECT_TRUE(parser.TakeArray(&rec).ok());
-  return rec;
-}
 
 // FromJson(doc) succeeds, and ToJson of what it read is doc exactly.
 void ExpectRoundTrip(const json& doc, bool usable, bool full) {
@@ -69,7 +61,7 @@ TEST(ArrayResultSchema, PositionsModelJointSolverRoundTrips) {
   std::string csv;
   json config, truth, result;
   ASSERT_TRUE(SimulateArrayFiles(so, &csv, &config, &truth).ok());
-  const Status s = RunArray(RecordingFromCsv(csv), config, &result);
+  const Status s = RunArray(testing::ArrayRecordingFromCsv(csv), config, &result);
   ASSERT_TRUE(s.ok()) << s.ToString();
   EXPECT_EQ(result["diagnostics"]["solver"], "joint");
   EXPECT_TRUE(result["diagnostics"]["accelerometer_calibration"].is_null());
@@ -90,7 +82,7 @@ TEST(ArrayResultSchema, PositionsModelBcdWithCalibrationAndNoiseJobRoundTrips) {
   config["max_iterations"] = 30;
   config["gyro_noise"] = {{"job", 12}, {"sigma", 0.06 * core::kDegree}};  // resolved reference
   config["accelerometer_calibration"] = {{"job", 7}, {"result", PcaOfTheBoard(so)}};
-  const Status s = RunArray(RecordingFromCsv(csv), config, &result);
+  const Status s = RunArray(testing::ArrayRecordingFromCsv(csv), config, &result);
   ASSERT_TRUE(s.ok()) << s.ToString();
   const json& d = result["diagnostics"];
   EXPECT_EQ(d["solver"], "bcd");
@@ -106,7 +98,7 @@ TEST(ArrayResultSchema, PositionsModelFailingRunsPartialDocumentRoundTrips) {
   std::string csv;
   json config, truth, result;
   ASSERT_TRUE(SimulateArrayFiles(so, &csv, &config, &truth).ok());
-  const Status s = RunArray(RecordingFromCsv(csv), config, &result);
+  const Status s = RunArray(testing::ArrayRecordingFromCsv(csv), config, &result);
   ASSERT_EQ(s.code(), StatusCode::kNotDeterminable) << s.ToString();
   EXPECT_EQ(result["usable"], false);
   EXPECT_FALSE(result.contains("parameters"));
@@ -120,7 +112,7 @@ TEST(ArrayResultSchema, FullModelRoundTrips) {
   std::string csv;
   json config, truth, result;
   ASSERT_TRUE(SimulateArrayFullFiles(so, &csv, &config, &truth).ok());
-  const Status s = RunArray(RecordingFromCsv(csv), config, &result);
+  const Status s = RunArray(testing::ArrayRecordingFromCsv(csv), config, &result);
   ASSERT_TRUE(s.ok()) << s.ToString();
   EXPECT_EQ(result["parameters"]["model"], "full");
   ExpectRoundTrip(result, true, true);
@@ -138,7 +130,7 @@ TEST(ArrayResultSchema, FullModelWithResidualAwareSigmaInDegreesRoundTrips) {
   // result carries the residual-aware σ (uncertainty.imus[].crb).
   config["accel_noise"] = so.accel_noise / 10;
   config["dynamic_weighting"] = "residual";
-  const Status s = RunArray(RecordingFromCsv(csv), config, &result);
+  const Status s = RunArray(testing::ArrayRecordingFromCsv(csv), config, &result);
   ASSERT_TRUE(s.ok()) << s.ToString();
   EXPECT_EQ(result["diagnostics"]["gyro_unit"], "deg/s");
   EXPECT_TRUE(result["diagnostics"]["robust"]["used"].get<bool>()) << result["diagnostics"].dump();
@@ -154,7 +146,7 @@ TEST(ArrayResultSchema, FullModelFailingRunsPartialDocumentRoundTrips) {
   json config, truth, result;
   ASSERT_TRUE(SimulateArrayFullFiles(so, &csv, &config, &truth).ok());
   config["min_static"] = 100;  // s: no static of 1.5 s qualifies
-  const Status s = RunArray(RecordingFromCsv(csv), config, &result);
+  const Status s = RunArray(testing::ArrayRecordingFromCsv(csv), config, &result);
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(result["usable"], false) << result.dump();
   EXPECT_EQ(result["diagnostics"]["model"], "full");
@@ -170,7 +162,7 @@ TEST(ArrayResultSchema, ExportsReadTheTypedResultAndNameWhatDoesNotRead) {
   std::string csv;
   json config, truth, result;
   ASSERT_TRUE(SimulateArrayFiles(so, &csv, &config, &truth).ok());
-  ASSERT_TRUE(RunArray(RecordingFromCsv(csv), config, &result).ok());
+  ASSERT_TRUE(RunArray(testing::ArrayRecordingFromCsv(csv), config, &result).ok());
   std::string out;
   ASSERT_TRUE(ArrayResultToCsv(result, &out).ok());
   EXPECT_EQ(out.substr(0, out.find('\n')),
@@ -326,7 +318,7 @@ TEST(ArrayResultSchema, PositionsResultWithOnlyTheSpecsKeysStillReadsExportsAndR
   ASSERT_TRUE(SimulateArrayFiles(so, &csv, &config, &truth).ok());
   config["gyro_noise"] = {{"job", 12}, {"sigma", 0.06 * core::kDegree}};
   config["accelerometer_calibration"] = {{"job", 7}, {"result", PcaOfTheBoard(so)}};
-  ASSERT_TRUE(RunArray(RecordingFromCsv(csv), config, &result).ok());
+  ASSERT_TRUE(RunArray(testing::ArrayRecordingFromCsv(csv), config, &result).ok());
   ExpectSpecOnlyResultServes(result, config);
 }
 
@@ -339,7 +331,7 @@ TEST(ArrayResultSchema, FullModelResultWithOnlyTheSpecsKeysStillReadsExportsAndR
   json config, truth, result;
   ASSERT_TRUE(SimulateArrayFullFiles(so, &csv, &config, &truth).ok());
   config["accel_noise"] = so.accel_noise / 10;  // the residual-aware σ too (robust)
-  ASSERT_TRUE(RunArray(RecordingFromCsv(csv), config, &result).ok());
+  ASSERT_TRUE(RunArray(testing::ArrayRecordingFromCsv(csv), config, &result).ok());
   ASSERT_EQ(result["uncertainty"]["basis"], "sandwich");
   ExpectSpecOnlyResultServes(result, config);
 }
@@ -353,7 +345,7 @@ TEST(ArrayResultSchema, GateJudgesTheOffsetsOfAFullResultWithoutPositionsAgainst
   std::string csv;
   json config, truth, result;
   ASSERT_TRUE(SimulateArrayFullFiles(so, &csv, &config, &truth).ok());
-  ASSERT_TRUE(RunArray(RecordingFromCsv(csv), config, &result).ok());
+  ASSERT_TRUE(RunArray(testing::ArrayRecordingFromCsv(csv), config, &result).ok());
   config["acceptance"] = {{"max_offset", 1e-9}};  // m: every free triad is farther
   const AcceptanceLimits limits = EffectiveAcceptance("array", json(), config);
   auto far_reason = [&](const json& doc) {
@@ -394,11 +386,11 @@ TEST(ArrayResultSchema, PartialDocumentsWithDiagnosticsLeftOutStillRead) {
   std::string csv;
   json config, truth, positions, full;
   ASSERT_TRUE(SimulateArrayFiles(so, &csv, &config, &truth).ok());
-  ASSERT_FALSE(RunArray(RecordingFromCsv(csv), config, &positions).ok());
+  ASSERT_FALSE(RunArray(testing::ArrayRecordingFromCsv(csv), config, &positions).ok());
   so.samples = 100;
   ASSERT_TRUE(SimulateArrayFullFiles(so, &csv, &config, &truth).ok());
   config["min_static"] = 100;
-  ASSERT_FALSE(RunArray(RecordingFromCsv(csv), config, &full).ok());
+  ASSERT_FALSE(RunArray(testing::ArrayRecordingFromCsv(csv), config, &full).ok());
   for (const json& doc : {positions, full}) {
     ASSERT_EQ(doc["usable"], false);
     json empty = doc;

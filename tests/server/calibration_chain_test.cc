@@ -13,6 +13,7 @@
 #include "formats/recording.h"
 #include "methods/array/array_method.h"
 #include "methods/pca/pca_method.h"
+#include "tests/lib/array_csv.h"
 
 namespace calibd::server {
 namespace {
@@ -49,15 +50,6 @@ Status CalibrateStatic(const ArraySimulationFileOptions& so, int positions, json
   s = ParsePcaConfig(config, &options);
   if (!s.ok()) return s;
   return RunPca(rec, options, pca_result);
-}
-
-ArrayRecording ArrayFromCsv(const std::string& csv) {
-  RecordingParser parser("recording.csv", /*collect=*/true);
-  const Status s = ParseRecording(csv, &parser);
-  EXPECT_TRUE(s.ok()) << s.ToString();
-  ArrayRecording rec;
-  EXPECT_TRUE(parser.TakeArray(&rec).ok());
-  return rec;
 }
 
 // Sums over the non-reference coordinates: squared error against the truth, reported variance.
@@ -132,7 +124,7 @@ TEST(CalibrationChain, ArrayReachesTheCramerRaoBoundOnlyWithTheCalibration) {
     std::string csv;
     json config, truth;
     ASSERT_TRUE(SimulateArrayFiles(so, &csv, &config, &truth).ok());
-    const ArrayRecording rec = ArrayFromCsv(csv);
+    const ArrayRecording rec = testing::ArrayRecordingFromCsv(csv);
 
     json plain;
     ASSERT_TRUE(RunArray(rec, config, &plain).ok());
@@ -157,7 +149,7 @@ TEST(CalibrationChain, ArrayReachesTheCramerRaoBoundOnlyWithTheCalibration) {
         0;
     ASSERT_TRUE(SimulateArrayFiles(ideal_options, &csv, &config, &truth).ok());
     json ideal_result;
-    ASSERT_TRUE(RunArray(ArrayFromCsv(csv), config, &ideal_result).ok());
+    ASSERT_TRUE(RunArray(testing::ArrayRecordingFromCsv(csv), config, &ideal_result).ok());
     ideal.Add(ideal_result, truth);
   }
   std::printf(

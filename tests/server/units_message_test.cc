@@ -24,6 +24,7 @@
 #include "methods/pca/pca_method.h"
 #include "methods/registry.h"
 #include "server/config.h"
+#include "tests/lib/array_csv.h"
 #include "tests/lib/units_check.h"
 
 namespace calibd::server {
@@ -306,14 +307,6 @@ TEST(UnitsInResults, Noise) {
 
 // ---- array ----
 
-ArrayRecording RecordingFromCsv(const std::string& csv) {
-  RecordingParser parser("recording.csv", true);
-  EXPECT_TRUE(ParseRecording(csv, &parser).ok());
-  ArrayRecording rec;
-  EXPECT_TRUE(parser.TakeArray(&rec).ok());
-  return rec;
-}
-
 TEST(UnitsInResults, ArrayPositions) {
   ArraySimulationFileOptions so;
   so.samples = 400;
@@ -324,7 +317,7 @@ TEST(UnitsInResults, ArrayPositions) {
   // Both noise levels configured 10× too high: the estimates from the residuals differ.
   config["accel_noise"] = 10 * so.accel_noise;
   config["gyro_noise"] = 10 * so.gyro_noise_dps;
-  const Status s = RunArray(RecordingFromCsv(csv), config, &result);
+  const Status s = RunArray(testing::ArrayRecordingFromCsv(csv), config, &result);
   ASSERT_TRUE(s.ok()) << s.ToString();
   const std::vector<std::string> w = Warnings(result);
   ASSERT_TRUE(AnyContains(w, "gyroscope noise estimated")) << result["warnings"].dump();
@@ -333,7 +326,7 @@ TEST(UnitsInResults, ArrayPositions) {
   // The gate: residuals against the configured noise, position σ and offset.
   config["accel_noise"] = so.accel_noise / 10;
   config["gyro_noise"] = so.gyro_noise_dps / 10;
-  ASSERT_TRUE(RunArray(RecordingFromCsv(csv), config, &result).ok());
+  ASSERT_TRUE(RunArray(testing::ArrayRecordingFromCsv(csv), config, &result).ok());
   const std::vector<std::string> reasons =
       GateReasons("array", result, config,
                   {{"max_chi2", 1.5}, {"max_position_std", 1e-12}, {"max_offset", 1e-12}});
@@ -358,7 +351,7 @@ TEST(UnitsInResults, ArrayFull) {
   // and the dynamic samples' own weights.
   config["accel_noise"] = so.accel_noise / 10;
   config["dynamic_weighting"] = "residual";
-  const Status s = RunArray(RecordingFromCsv(csv), config, &result);
+  const Status s = RunArray(testing::ArrayRecordingFromCsv(csv), config, &result);
   ASSERT_TRUE(s.ok()) << s.ToString();
   const std::vector<std::string> w = Warnings(result);
   ASSERT_TRUE(AnyContains(w, "residual-aware sandwich")) << result["warnings"].dump();
