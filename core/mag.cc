@@ -428,6 +428,8 @@ Wander EstimateWander(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vector
     Vector3d b = Vector3d::Zero();
   };
   std::vector<Segment> segments;
+  using Matrix93 = Eigen::Matrix<double, 9, 3>;
+  Matrix93 total = Matrix93::Zero();  // Σ M_i, M_i = w_i J̃_iᵀ, for the propagation below
   double diff_sum = 0, diff_weight = 0;
   Vector3d previous = Vector3d::Zero();
   for (Eigen::Index i = 0; i < n; ++i) {
@@ -437,7 +439,9 @@ Wander EstimateWander(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vector
     // Each sample counts fully unless disturbed: the robust weights fall with the residual, so
     // they would pull each segment's hard iron towards the fit's (the rate then reads low).
     const double weight = w(i) >= options.disturbed_weight ? 1.0 : 0.0;
-    const Eigen::Matrix<double, 9, 3> jr = ReducedJacobianT(e, l, weight, i);
+    const Eigen::Matrix<double, 9, 3> unit = ReducedJacobianT(e, l, 1, i);  // linear in w
+    total += w(i) * unit;
+    const Eigen::Matrix<double, 9, 3> jr = weight * unit;
     const Vector3d r = y.col(i) - e.h - e.a * e.u.col(i);
     // The hard-iron rows: jt_h = −I, so −w (I − Π) r is the score and w (I − Π) the information.
     segments.back().g -= jr.topRows<3>();
@@ -491,10 +495,7 @@ Wander EstimateWander(const Eigen::Matrix3Xd& y, const VectorXd& t, const Vector
     }
     out.rate(a) = q;
   }
-  // The propagation (two passes: the total of the M_i = w_i J̃_iᵀ first, then heads and tails).
-  using Matrix93 = Eigen::Matrix<double, 9, 3>;
-  Matrix93 total = Matrix93::Zero();
-  for (Eigen::Index i = 0; i < n; ++i) total += ReducedJacobianT(e, l, w(i), i);
+  // The propagation: heads and tails of the M_i (their total from the first pass).
   const Matrix3d q = out.rate.asDiagonal();
   Matrix9d sum = Matrix9d::Zero();
   Matrix93 head = Matrix93::Zero();
