@@ -546,6 +546,12 @@ TEST(Mag, InvalidOptionsAndInputsNameTheConstraint) {
   o = MagOptions();
   o.plateau_growth = 1;
   EXPECT_NE(o.Validate().message().find("plateau_growth"), std::string::npos);
+  o = MagOptions();
+  o.wander_segments = 3;
+  EXPECT_NE(o.Validate().message().find("wander_segments must be >= 4"), std::string::npos);
+  o = MagOptions();
+  o.wander_min_seconds = 4 * o.batch_seconds - 0.5;
+  EXPECT_NE(o.Validate().message().find("wander_min_seconds"), std::string::npos);
   MagSimulationOptions so;
   so.hard_iron_walk = -0.1;
   MagSimulation sim;
