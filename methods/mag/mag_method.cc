@@ -415,7 +415,7 @@ Status Mag::Run(RecordingParser* parser, const json& config, const RunContext& c
       if (s.code() != StatusCode::kStopped) {
         *result = {{"method", "mag"},
                    {"usable", false},
-                   {"diagnostics", {{"mags", {MagDiagnostics(run)}}}},
+                   {"diagnostics", {{"mags", {MagDiagnostics(run, c.unit_text)}}}},
                    {"warnings", run.result.warnings}};
       }
       if (runs.size() == 1) return s;

@@ -78,8 +78,9 @@ struct MagRun {
 // `microtesla_per_unit` as configured; `field` the config's (0: unknown).
 nlohmann::json MagResultToJson(const std::vector<MagRun>& runs, const std::string& unit_text,
                                double microtesla_per_unit, double field);
-// The diagnostics of one run (also the partial diagnostics of a failed run).
-nlohmann::json MagDiagnostics(const MagRun& run);
+// The diagnostics of one run (also the partial diagnostics of a failed run); `unit_text` the
+// configured mag_unit (the wander's rate is in it per √s).
+nlohmann::json MagDiagnostics(const MagRun& run, const std::string& unit_text);
 
 // `calibd simulate mag`: CSV `t,a0_x,a0_y,a0_z,m0_x,m0_y,m0_z` (%.10g), the config (with the
 // field) and the truth ({"hard_iron", "soft_iron", "soft_iron_symmetric", "alignment", "dip",

@@ -65,7 +65,7 @@ json PlotData(const MagRun& run) {
 
 }  // namespace
 
-json MagDiagnostics(const MagRun& run) {
+json MagDiagnostics(const MagRun& run, const std::string& unit_text) {
   const core::MagResult& r = run.result;
   json spans = json::array();
   for (const core::MagSpan& s : r.disturbed_spans) {
@@ -101,7 +101,7 @@ json MagDiagnostics(const MagRun& run) {
       {"wander",
        {{"included", r.wander_included},
         {"rate", r.wander_included ? Vec(r.wander_rate) : json(nullptr)},
-        {"rate_unit", "reading units/sqrt(s)"},  // MagResultToJson names mag_unit
+        {"rate_unit", unit_text + "/sqrt(s)"},
         {"segments", r.wander_segments},
         {"segment_seconds", Num(r.wander_segment_seconds)}}},
       {"iterations", r.iterations},
@@ -142,9 +142,7 @@ json MagResultToJson(const std::vector<MagRun>& runs, const std::string& unit_te
     u["name"] = run.name;
     u["crb"] = StdKeys(r.crb, aligned);
     unc.push_back(u);
-    json d = MagDiagnostics(run);
-    d["wander"]["rate_unit"] = unit_text + "/sqrt(s)";
-    diag.push_back(std::move(d));
+    diag.push_back(MagDiagnostics(run, unit_text));
     sandwich |= r.basis == "sandwich";
     for (const auto* list : {&run.warnings, &r.warnings}) {
       for (const std::string& w : *list)
