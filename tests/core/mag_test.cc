@@ -189,15 +189,9 @@ TEST(Mag, TheErrorsInVariablesCorrectionRemovesTheBiasAtHighNoise) {
     plain.push_back(zp);
     AddZ(r, r.std, sim, &z);
   }
-  auto mean_and_se = [&](const std::vector<double>& v, double* se) {
-    double m = 0, var = 0;
-    for (double x : v) m += x / v.size();
-    for (double x : v) var += (x - m) * (x - m) / (v.size() - 1);
-    *se = std::sqrt(var / v.size());
-    return m;
-  };
   double se_c = 0, se_p = 0;
-  const double mc = mean_and_se(corrected, &se_c), mp = mean_and_se(plain, &se_p);
+  const double mc = monte_carlo::MeanAndStandardError(corrected, &se_c),
+               mp = monte_carlo::MeanAndStandardError(plain, &se_p);
   std::printf(
       "noise 5 %% of the field, P diagonal mean z (bias in white-noise σ) ± SE: corrected %.2f ± "
       "%.2f, plain maximum likelihood %.2f ± %.2f; corrected z RMS hard %.3f soft %.3f\n",
@@ -495,17 +489,10 @@ TEST(Mag, AtHighNoiseTheFieldSpreadRanksTheFitsAsTheirErrorsDo) {
     true_gap.push_back(Spread(clean.problem.y, r.hard_iron, r.soft_iron_symmetric).total -
                        Spread(clean.problem.y, h, m).total);
   }
-  auto mean_and_se = [](const std::vector<double>& v, double* se) {
-    double mean = 0, var = 0;
-    for (double x : v) mean += x / v.size();
-    for (double x : v) var += (x - mean) * (x - mean) / (v.size() - 1);
-    *se = std::sqrt(var / v.size());
-    return mean;
-  };
   double se_total = 0, se_field = 0, se_true = 0;
-  const double total = mean_and_se(total_gap, &se_total);
-  const double field = mean_and_se(field_gap, &se_field);
-  const double truth = mean_and_se(true_gap, &se_true);
+  const double total = monte_carlo::MeanAndStandardError(total_gap, &se_total);
+  const double field = monte_carlo::MeanAndStandardError(field_gap, &se_field);
+  const double truth = monte_carlo::MeanAndStandardError(true_gap, &se_true);
   std::printf(
       "noise 6 %% of the field: soft iron RMSE ours %.4f, least squares %.4f; |m| spread gap (ours "
       "− least squares) %+.6f ± %.6f, field spread %+.6f ± %.6f, noise-free readings %+.6f ± "

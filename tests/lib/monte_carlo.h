@@ -31,6 +31,16 @@ inline double StdRatioStandardError(double samples) { return std::sqrt(0.5 / sam
 // Standard error of the mean of `samples` independent values of standard deviation `sigma`.
 inline double MeanStandardError(double sigma, double samples) { return sigma / std::sqrt(samples); }
 
+// The mean of the independent values `x` (at least 2), and its standard error from their own
+// scatter in `*se`.
+inline double MeanAndStandardError(const std::vector<double>& x, double* se) {
+  double mean = 0, var = 0;
+  for (double v : x) mean += v / x.size();
+  for (double v : x) var += (v - mean) * (v - mean) / (x.size() - 1);
+  *se = std::sqrt(var / x.size());
+  return mean;
+}
+
 // Standard error of the median of the independent values `x`, without assuming their
 // distribution: the number of values below the true median is Binomial(T, 1/2), standard deviation
 // √T / 2, so the order statistics √T / 2 ranks either side of the middle bound about ±1 standard
