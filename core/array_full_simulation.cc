@@ -1,6 +1,7 @@
 #include "core/array_full_simulation.h"
 
 #include <cmath>
+#include <string>
 
 namespace calibd::core {
 
@@ -22,6 +23,11 @@ bool ArrayFullSimulationOptions::IsValid(std::string* error) const {
   if (!omega_axes.allFinite() || !(omega_axes.cwiseAbs().maxCoeff() > 0))
     return fail("omega_axes must be finite and not all zero");
   if (!(gravity > 0) || !std::isfinite(gravity)) return fail("gravity must be > 0");
+  if (rotation_axis && (!rotation_axis->allFinite() || !(rotation_axis->norm() > 0)))
+    return fail("rotation_axis must be finite and not zero");
+  for (size_t j = 0; j < static_directions.size(); ++j)
+    if (!static_directions[j].allFinite() || !(static_directions[j].norm() > 0))
+      return fail("static_directions[" + std::to_string(j) + "] must be finite and not zero");
   return true;
 }
 
@@ -68,7 +74,9 @@ Status SimulateArrayFull(const ArrayFullSimulationOptions& o, ArrayFullSimulatio
 
   const int64_t per_static = std::max<int64_t>(1, std::llround(o.static_duration * o.rate));
   out->static_samples_per_orientation = per_static;
-  const int64_t N = o.statics * per_static + o.dynamic_samples;
+  const int statics =
+      o.static_directions.empty() ? o.statics : static_cast<int>(o.static_directions.size());
+  const int64_t N = statics * per_static + o.dynamic_samples;
   ArrayFullProblem& p = out->problem;
   p.nominal_positions = o.nominal_positions;
   p.reference = o.reference;
@@ -77,8 +85,11 @@ Status SimulateArrayFull(const ArrayFullSimulationOptions& o, ArrayFullSimulatio
   p.gyro.resize(N, 3 * K);
   out->motion.resize(9, N);
   for (int64_t n = 0; n < N; ++n) p.t(n) = static_cast<double>(n) / o.rate;
-  std::vector<Eigen::Vector3d> dirs(o.statics);
-  for (int j = 0; j < o.statics; ++j) dirs[j] = o.gravity * rng.UnitVector();
+  std::vector<Eigen::Vector3d> dirs(statics);
+  for (int j = 0; j < statics; ++j) {
+    dirs[j] = o.gravity * (o.static_directions.empty() ? rng.UnitVector()
+                                                       : o.static_directions[j].normalized());
+  }
   auto emit = [&](int64_t n, const Eigen::Vector3d& w, const Eigen::Vector3d& wd,
                   const Eigen::Vector3d& s) {
     out->motion.col(n) << w, wd, s;
@@ -100,13 +111,20 @@ Status SimulateArrayFull(const ArrayFullSimulationOptions& o, ArrayFullSimulatio
     }
   };
   int64_t n = 0;
-  for (int j = 0; j < o.statics; ++j)
+  for (int j = 0; j < statics; ++j)
     for (int64_t i = 0; i < per_static; ++i, ++n)
       emit(n, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), dirs[j]);
   for (int64_t m = 0; m < o.dynamic_samples; ++m, ++n) {
-    Eigen::Vector3d w = rng.UnitVector().cwiseProduct(o.omega_axes);
-    w = w.norm() > 0 ? Eigen::Vector3d(o.omega_norm * w.normalized()) : Eigen::Vector3d::Zero();
-    const Eigen::Vector3d wd = o.omega_dot_norm * rng.UnitVector();
+    Eigen::Vector3d w, wd;
+    if (o.rotation_axis) {
+      const Eigen::Vector3d axis = o.rotation_axis->normalized();
+      w = (rng.Uniform() < 0.5 ? 1 : -1) * o.omega_norm * axis;
+      wd = (rng.Uniform() < 0.5 ? 1 : -1) * o.omega_dot_norm * axis;
+    } else {
+      w = rng.UnitVector().cwiseProduct(o.omega_axes);
+      w = w.norm() > 0 ? Eigen::Vector3d(o.omega_norm * w.normalized()) : Eigen::Vector3d::Zero();
+      wd = o.omega_dot_norm * rng.UnitVector();
+    }
     const Eigen::Vector3d s = o.specific_force_norm * rng.UnitVector();
     emit(n, w, wd, s);
   }

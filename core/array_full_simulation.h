@@ -12,6 +12,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -34,6 +35,13 @@ struct ArrayFullSimulationOptions {
   // The direction of omega is uniform on the sphere, then scaled per body axis by these weights
   // and renormalised to omega_norm (e.g. (1, 1, 0): no rotation about z). Not all zero.
   Eigen::Vector3d omega_axes = Eigen::Vector3d::Ones();
+  // Rotation about this one body axis only (finite, not zero; normalised): omega = ±omega_norm
+  // axis and omega_dot = ±omega_dot_norm axis, signs random (omega_axes ignored). Unset: as above.
+  std::optional<Eigen::Vector3d> rotation_axis;
+  // The statics' "up" directions in the body frame (each finite, not zero; normalised): static j
+  // reads s_j = gravity u_j, in this order; `statics` is then ignored. Empty: `statics` random
+  // directions.
+  std::vector<Eigen::Vector3d> static_directions;
   double accel_noise = 0.04;            // sigma_a, m/s^2, >= 0
   double gyro_noise = 0.2 * kDegree;    // sigma_g, rad/s, >= 0
   double gain_error = 0.01;             // sigma of every relative gain error
@@ -62,8 +70,9 @@ struct ArrayFullSimulation {
 Eigen::Matrix3Xd Mimu4444NominalPositions();
 
 // Draws, in order: the triads' errors (per triad: T_a gains and off-diagonals, b_a, T_g gains
-// and off-diagonals, b_g, position perturbation), then the static orientations, then per static
-// sample the noise, then per dynamic sample the directions of omega, omega_dot, s and the noise.
+// and off-diagonals, b_g, position perturbation), then the static orientations (unless given),
+// then per static sample the noise, then per dynamic sample the directions (or with
+// rotation_axis the signs) of omega, omega_dot, then s and the noise.
 // kInvalidInput when the options are not valid.
 Status SimulateArrayFull(const ArrayFullSimulationOptions& options, ArrayFullSimulation* out);
 

@@ -36,8 +36,10 @@ slow+='|StopProcess\.SigtermPastTheGraceStopsTheJobExitsWithinOneSecondAndTheRes
 slow+='|browser_pages'
 # The plans' Monte-Carlo sweeps against simulated fits (70-115 s each here, 1-5 s in Release, which
 # runs them: tests/CMakeLists.txt release_test_executables); the plans' code runs here in their
-# other tests (ArrayPlanTest.SigmaMatches..., MagPlanTest.Suggestion..., the errors).
+# other tests (ArrayPlanTest.SigmaMatches..., ArrayFullPlanTest.AMotionAboutOneAxis..., whose
+# suggestion runs the full model's predictions, MagPlanTest.Suggestion..., the errors).
 slow+='|ArrayPlanTest\.(ReplayCapKeepsTheInformation|SuggestionMeetsTheLimit)'
+slow+='|ArrayFullPlanTest\.(SigmaMatchesCalibrationsOfTheProtocol|TheCappedReplayKeepsTheProtocolsInformation|TheSuggestionIsTheShortestProtocolMeetingTheLimits)'
 slow+='|MagPlanTest\.(SigmaMatchesWhatTheMethodReportsOnTheProtocol|TurnsAboutOneAxisNameTheMissingDirection))$'
 [ "${CALIBD_FUZZ_FOLLOWS:-0}" = 1 ] && slow+='|^fuzz_corpus\.'
 exclude=${CALIBD_SANITIZE_EXCLUDE:-$slow}

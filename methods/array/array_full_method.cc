@@ -271,6 +271,15 @@ Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
   options.stop = stop;  // a stopped run returns core::StoppedStatus ("array (full model): ...")
   core::ArrayFullResult r;
   s = core::CalibrateArrayFull(problem, options, &r);
+  *result = FullResultJson(r, s, problem, options, degrees, std::move(saturation),
+                           std::move(saturation_warnings));
+  return s;
+}
+
+json FullResultJson(const core::ArrayFullResult& r, const Status& status,
+                    const core::ArrayFullProblem& problem, const core::ArrayFullOptions& options,
+                    bool degrees, std::optional<results::SaturationDiagnostics> saturation,
+                    std::vector<std::string> saturation_warnings) {
   results::ArrayResult out;
   out.envelope.method = "array";
   out.envelope.warnings = r.warnings;
@@ -288,16 +297,13 @@ Status RunArrayFull(ArrayRecording recording, const json& config, json* result,
   d.rotation_excitation.weakest_axis = r.weakest_rotation_axis;
   d.rotation_excitation.verdict = r.rotation_verdict;
   d.null_directions = r.null_directions;
-  if (!s.ok()) {
+  if (!status.ok()) {
     // The partial diagnostics kept with the failed job: what the run found before failing.
     out.envelope.usable = false;
-    *result = results::ToJson(out);
-    return s;
+    return results::ToJson(out);
   }
-
   WriteFullResult(r, problem, options, degrees, &out);
-  *result = results::ToJson(out);
-  return Status::Ok();
+  return results::ToJson(out);
 }
 
 }  // namespace array_detail

@@ -6,6 +6,7 @@
 //   array_positions.cc    model "positions" (the default): config, accelerometer_calibration,
 //                         run and result, simulated files
 //   array_full_method.cc  model "full" (SPEC §7): config, run and result, simulated files
+//   array_plan.cc         the plan of the positions model; array_full_plan.cc: the full model's
 // Stateless functions: safe to call from any thread.
 #ifndef CALIBD_METHODS_ARRAY_ARRAY_INTERNAL_H_
 #define CALIBD_METHODS_ARRAY_ARRAY_INTERNAL_H_
@@ -19,6 +20,7 @@
 
 #include "base/status.h"
 #include "core/array.h"
+#include "core/array_full.h"
 #include "core/stop_token.h"
 #include "formats/recording.h"
 #include "results/saturation.h"
@@ -76,6 +78,16 @@ Status RunArrayPositions(ArrayRecording recording, const nlohmann::json& config,
                          core::TaskExecutor executor);
 Status RunArrayFull(ArrayRecording recording, const nlohmann::json& config, nlohmann::json* result,
                     const core::StopToken* stop, core::TaskExecutor executor);
+
+// The result JSON of a full-model fit whose status is `status` (not OK: the partial diagnostics
+// of a failed run, usable false), gyroscope figures in the configured unit (`degrees`: deg/s);
+// `saturation` and its warnings as ArraySaturation gave them (none: nullopt, empty). What
+// RunArrayFull stores, and what the plan judges (methods/array/array_full_plan.cc).
+nlohmann::json FullResultJson(const core::ArrayFullResult& r, const Status& status,
+                              const core::ArrayFullProblem& problem,
+                              const core::ArrayFullOptions& options, bool degrees,
+                              std::optional<results::SaturationDiagnostics> saturation,
+                              std::vector<std::string> saturation_warnings);
 
 }  // namespace calibd::server::array_detail
 

@@ -501,16 +501,10 @@ class Array : public Method {
     core::ArrayOptions options;
     return ParseArrayConfig(config, &geometry, &options, &degrees);
   }
-  // The positions model's plan (PlanArray); the full model has none yet (400 naming
-  // config.model).
+  // The positions model's plan (PlanArray) or the full model's (PlanArrayFull).
   Status Plan(const nlohmann::json& config, const PlanProtocol& protocol,
               const AcceptanceLimits& limits, nlohmann::json* out) const override {
-    if (IsFullModel(config)) {
-      return Status::InvalidInput(
-                 "config.model: the array plan covers the positions model only; model full "
-                 "(gains, misalignments, biases) has no plan yet")
-          .WithField("config.model");
-    }
+    if (IsFullModel(config)) return PlanArrayFull(config, protocol, limits, out);
     core::ArrayProblem geometry;
     core::ArrayOptions options;
     bool degrees = false;

@@ -125,6 +125,14 @@ Status RunArray(ArrayRecording recording, const nlohmann::json& config, nlohmann
 Status PlanArray(const core::ArrayProblem& geometry, const core::ArrayOptions& options,
                  const PlanProtocol& protocol, const AcceptanceLimits& limits, nlohmann::json* out);
 
+// The plan of a statics-then-motion protocol for the full model (Method::Plan; methods/array/
+// array_full_plan.cc): `config` a full-model config whose accel_noise and gyro_noise are given
+// (kInvalidInput naming the missing one); the protocol's orientations (the statics) and
+// angular_rate (the dynamic phase) are required. kInvalidInput also for a protocol too long to
+// replay (naming protocol.duration).
+Status PlanArrayFull(const nlohmann::json& config, const PlanProtocol& protocol,
+                     const AcceptanceLimits& limits, nlohmann::json* out);
+
 // The acceptance gate of an array result (Method::Judge), read typed (results::FromJson; a result
 // that does not read is rejected with the reader's message): every triad but the reference within
 // max_offset of its nominal position and its 1 sigma within max_position_std

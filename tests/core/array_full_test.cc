@@ -78,6 +78,38 @@ TEST(ArrayFullSimulationMotion, ReproducesTheNoiseFreeReadings) {
   EXPECT_LT(worst, 1e-12);
 }
 
+// Given static directions are held in order (each static reads gravity along its direction) and
+// `statics` is then ignored; a rotation axis makes every dynamic sample's ω and ω̇ parallel to
+// it; invalid ones are refused naming the option.
+TEST(ArrayFullSimulationMotion, HoldsGivenStaticDirectionsAndRotatesAboutAGivenAxis) {
+  ArrayFullSimulationOptions so = Board8(9);
+  so.statics = 3;
+  so.static_directions = {{0, 0, 2}, {1, 0, 0}, {0, -1, -1}, {1, 1, 1}};
+  so.rotation_axis = Eigen::Vector3d(0, 0, 3);
+  ArrayFullSimulation sim;
+  ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+  const int64_t per = sim.static_samples_per_orientation;
+  ASSERT_EQ(sim.problem.t.size(), 4 * per + so.dynamic_samples);
+  for (int j = 0; j < 4; ++j) {
+    const Eigen::Vector3d s = sim.motion.col(j * per + per / 2).tail<3>();
+    EXPECT_LT((s - so.gravity * so.static_directions[j].normalized()).norm(), 1e-12) << j;
+  }
+  for (int64_t n = 4 * per; n < sim.motion.cols(); ++n) {
+    const Eigen::Vector3d w = sim.motion.col(n).head<3>(), wd = sim.motion.col(n).segment<3>(3);
+    EXPECT_NEAR(std::abs(w.z()), so.omega_norm, 1e-12);
+    EXPECT_NEAR(std::abs(wd.z()), so.omega_dot_norm, 1e-12);
+    EXPECT_EQ(w.head<2>().norm() + wd.head<2>().norm(), 0);
+  }
+  so.static_directions[2].setZero();
+  Status s = SimulateArrayFull(so, &sim);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidInput);
+  EXPECT_NE(s.message().find("static_directions[2]"), std::string::npos) << s.message();
+  so.static_directions.clear();
+  so.rotation_axis = Eigen::Vector3d(0, NAN, 1);
+  s = SimulateArrayFull(so, &sim);
+  EXPECT_NE(s.message().find("rotation_axis"), std::string::npos) << s.message();
+}
+
 // ArrayFullOptions::on_stage names each stage as it begins, in order, and "done" only after a
 // successful run; a refused log ends at the stage that refused it.
 TEST(ArrayFull, OnStageNamesTheStagesInOrder) {

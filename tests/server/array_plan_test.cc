@@ -234,10 +234,11 @@ TEST(ArrayPlanTest, ErrorsNameTheField) {
   bad_axis["rotation_axis"] = "+w";
   s = PlanJson({{"method", "array"}, {"config", Config()}, {"protocol", bad_axis}}, json(), &out);
   EXPECT_EQ(s.field(), "protocol.rotation_axis") << s.message();
+  // The full model's plan (tests/server/array_full_plan_test.cc) needs the statics too.
   json full = Config();
   full["model"] = "full";
   s = PlanJson({{"method", "array"}, {"config", full}, {"protocol", Protocol(10)}}, json(), &out);
-  EXPECT_EQ(s.field(), "config.model") << s.message();
+  EXPECT_EQ(s.field(), "protocol.orientations") << s.message();
   json orientations = {{"orientations", {"+x", "+y"}}};
   s = PlanJson({{"method", "array"}, {"config", Config()}, {"protocol", orientations}}, json(),
                &out);

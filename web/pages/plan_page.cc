@@ -190,12 +190,16 @@ std::string Result(const PlanView& v) {
              Number(suggested["t_max"]) + " °C at " + Number(suggested["temperature_rate"]) +
              " °C/min (" + Number(suggested["duration"]) + " s)</p>";
     }
-    // array: the motion (methods/array/array_plan.cc Suggest).
+    // array: the motion (methods/array/array_plan.cc Suggest), after the statics for the full
+    // model (array_full_plan.cc).
     if (suggested.contains("angular_rate")) {
-      out += "<p class=\"suggested-motion\">" + Number(suggested["duration"]) + " s at |ω| " +
-             Number(suggested["angular_rate"]) + " rad/s, |ω̇| " +
-             Number(suggested["angular_acceleration"]) + " rad/s², about random axes, " +
-             Number(suggested["rate"]) + " Hz</p>";
+      out += "<p class=\"suggested-motion\">" +
+             (suggested.contains("static_duration")
+                  ? "each static held " + Number(suggested["static_duration"]) + " s, then "
+                  : std::string()) +
+             Number(suggested["duration"]) + " s at |ω| " + Number(suggested["angular_rate"]) +
+             " rad/s, |ω̇| " + Number(suggested["angular_acceleration"]) +
+             " rad/s², about random axes, " + Number(suggested["rate"]) + " Hz</p>";
     }
     out += suggested.value("meets_limits", false)
                ? "<p>Meets the gate's limits.</p>"
