@@ -153,6 +153,8 @@ bool ArrayFullOptions::IsValid(std::string* error) const {
   if (!(robust_batch > 0) || !std::isfinite(robust_batch))
     return fail("robust_batch must be > 0 (seconds)");
   if (min_statics < 9) return fail("min_statics must be >= 9");
+  if (!(dynamic_noise_scale > 0) || !std::isfinite(dynamic_noise_scale))
+    return fail("dynamic_noise_scale must be > 0");
   return true;
 }
 
@@ -243,8 +245,12 @@ Status CalibrateArrayFull(const ArrayFullProblem& problem, const ArrayFullOption
   afm::EstimateSamplingTimeOffsets(&f);
   stage("crb");
   if (Status s = afm::ComputeCramerRaoBound(&f, lm); !s.ok()) return s;
-  stage("residual-aware sigma");
-  if (Status s = afm::ComputeResidualAwareCovariance(&f, fp); !s.ok()) return s;
+  if (options.residual_aware_sigma) {
+    stage("residual-aware sigma");
+    if (Status s = afm::ComputeResidualAwareCovariance(&f, fp); !s.ok()) return s;
+  } else {
+    res.sigma_ratio = std::numeric_limits<double>::quiet_NaN();
+  }
   if (!res.converged)
     res.warnings.push_back(std::string("the solver did not converge (") +
                            BlockLmTerminationName(f.final_summary.termination) +

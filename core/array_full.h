@@ -132,8 +132,9 @@ struct ArrayFullOptions {
   // (termination kUserStopped: the result is not used). Optional (cancellation).
   std::function<bool(int iteration)> callback;
   // Called as each stage begins, with its name: "statics", "start" (closed forms, positions-only
-  // fit, motion), "joint solver", "crb", "residual-aware sigma", and "done" at the end of a
-  // successful run; for benchmarks' per-stage times and progress. Optional.
+  // fit, motion), "joint solver", "crb", "residual-aware sigma" (unless residual_aware_sigma is
+  // false), and "done" at the end of a successful run; for benchmarks' per-stage times and
+  // progress. Optional.
   std::function<void(const char* stage)> on_stage;
   // Polled (core/stop_token.h) between the stages, in the positions-only start, every LM
   // iteration and every 16 blocks of its passes, and per batch of the residual-aware covariance:
@@ -147,6 +148,14 @@ struct ArrayFullOptions {
   GyroMessageUnit gyro_message_unit;
   // Minimum number of statics (the accelerometer closed form needs 9 spanning orientations).
   int min_statics = 9;
+  // Compute the residual-aware (sandwich) covariance. false: skipped (the CRB is then the
+  // primary σ whatever the residuals, sigma_ratio NaN, robust_batches 0): for plans, whose
+  // noise-free replays have no residuals to be aware of (methods/array/array_full_plan.cc).
+  bool residual_aware_sigma = true;
+  // The dynamic samples' σ is the noise times this (each weighs 1/scale² of a sample at the
+  // noise; kResidual weighting raises it further). 1 (default): the stated model. A replay that
+  // stands N' dynamic samples for N sets √(N'/N) (methods/array/array_full_plan.cc). > 0.
+  double dynamic_noise_scale = 1;
 
   bool IsValid(std::string* error) const;
 };

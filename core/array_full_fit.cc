@@ -96,15 +96,19 @@ Status FindStatics(FullFit* f) {
   const double sigma_g = f->sigma_g =
       options.gyro_noise > 0 ? options.gyro_noise : res.static_noise_gyro;
   res.noise_estimated = !(options.accel_noise > 0 && options.gyro_noise > 0);
-  res.accel_noise = res.dynamic_accel_noise = sigma_a;
-  res.gyro_noise = res.dynamic_gyro_noise = sigma_g;
+  res.accel_noise = sigma_a;
+  res.gyro_noise = sigma_g;
   if (!(sigma_a > 0) || !(sigma_g > 0))
     return f->NotDeterminable(
         Reason::kUnknownNoise,
         "the noise levels are zero in the statics (noise-free readings?): configure accel_noise "
         "and gyro_noise");
-  d.wa = d.wa_d = 1 / sigma_a;
-  d.wg = d.wg_d = 1 / sigma_g;
+  d.wa = 1 / sigma_a;
+  d.wg = 1 / sigma_g;
+  d.wa_d = d.wa / options.dynamic_noise_scale;
+  d.wg_d = d.wg / options.dynamic_noise_scale;
+  res.dynamic_accel_noise = 1 / d.wa_d;
+  res.dynamic_gyro_noise = 1 / d.wg_d;
 
   return Status::Ok();
 }
@@ -364,8 +368,8 @@ Status SolveJoint(FullFit* f, const FullProblem& fp, BlockLm<FullProblem>& lm) {
       const double correction = 6.0 * K / (6.0 * K - 9);
       const double sa = std::sqrt(dy.col(0).sum() / (3.0 * K * d.Nd) * correction);
       const double sg = std::sqrt(dy.col(1).sum() / (3.0 * K * d.Nd) * correction);
-      d.wa_d = 1 / std::max(sa, sigma_a);
-      d.wg_d = 1 / std::max(sg, sigma_g);
+      d.wa_d = 1 / std::max(sa, sigma_a * options.dynamic_noise_scale);
+      d.wg_d = 1 / std::max(sg, sigma_g * options.dynamic_noise_scale);
       final_summary = lm.Solve(&x, &theta, callback);
       res.iterations += final_summary.iterations;
       resolved_costs.insert(resolved_costs.end(), final_summary.cost.begin(),
@@ -503,9 +507,16 @@ Status ComputeCramerRaoBound(FullFit* f, BlockLm<FullProblem>& lm) {
     Eigen::VectorXd scale(P);
     for (int i = 0; i < P; ++i) scale(i) = dg(i) > 0 ? 1 / std::sqrt(dg(i)) : 0;
     const Eigen::MatrixXd Sn = scale.asDiagonal() * info.information * scale.asDiagonal();
-    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Sn);
-    const double lmax = es.eigenvalues().maxCoeff();
-    for (int i = 0; i < P; ++i) {
+    // The eigenvalues first (about a fifth of the work with the vectors, which a regular
+    // information, the usual case, does not need); the vectors only to name null directions.
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> values(Sn, Eigen::EigenvaluesOnly);
+    const bool singular =
+        values.eigenvalues().minCoeff() <= 1e-12 * values.eigenvalues().maxCoeff();
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es =
+        singular ? Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Sn)
+                 : Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>();
+    const double lmax = values.eigenvalues().maxCoeff();
+    for (int i = 0; singular && i < P; ++i) {
       if (es.eigenvalues()(i) > 1e-12 * lmax) break;
       const Eigen::VectorXd dir = E * (scale.asDiagonal() * es.eigenvectors().col(i));
       if (!(dir.norm() > 0)) continue;  // a parameter without information: named below
@@ -563,7 +574,8 @@ Status ComputeResidualAwareCovariance(FullFit* f, const FullProblem& fp) {
   const Eigen::Matrix<double, 10, Eigen::Dynamic>& x = f->x;
   const std::vector<TriadParams>& ctx = f->ctx;
   const bool reweighted = options.dynamic_weighting == ArrayFullDynamicWeighting::kResidual &&
-                          (d.wa_d < d.wa || d.wg_d < d.wg);
+                          (d.wa_d * options.dynamic_noise_scale < d.wa ||
+                           d.wg_d * options.dynamic_noise_scale < d.wg);
   {
     // Batches: every static alone, the dynamic samples in runs of robust_batch seconds.
     std::vector<std::vector<int64_t>> batches;

@@ -16,24 +16,28 @@
 // and its Cramér–Rao bound there is the σ a job reports on white-noise residuals (basis crb). The
 // result is written as a job writes it (FullResultJson) and judged by the method's gate.
 //
-// Cost bound (an HTTP request; the fit is O(N K²) per iteration for N samples and K triads): the
-// replay runs at the rate cut to at most kReplayRate Hz and kReplaySamples samples in all. Every
-// part of the protocol (each static's samples, the dynamic samples) shrinks by the same factor f,
-// so scaling both noises by √f keeps the protocol's information (a sum over samples, ∝ N / σ²).
-// The statics keep their durations in seconds, so the static detection trims them as in a real
-// log; a protocol whose replay would run below kMinReplayRate is refused, naming its length.
+// Cost bound (an HTTP request; the fit is O(N_d K²) per pass for N_d dynamic samples and K
+// triads): the statics are replayed at the rate cut to at most kReplayRate Hz and
+// kReplayStaticSamples samples (factor f_s; they keep their durations in seconds, so the static
+// detection trims them as in a real log; below kMinReplayRate the protocol is refused, naming
+// protocol.static_duration), the dynamic phase as at most kReplayWork / K² i.i.d. samples
+// (factor f_d). The information, a sum over samples ∝ N / σ², is kept by scaling the statics'
+// noise by √f_s and the dynamic samples' by √f_d (core::ArrayFullOptions::dynamic_noise_scale).
+// The fit's rotation-excitation check compares the mean squared rate with the gyroscope noise at
+// the statics' scaling: above 100 Hz it is more lenient than a job's by 1/f_s.
 //
 // Undetermined: the method's own refusal on the replay (too few statics found, statics that do
 // not span the sphere, too little rotation about an axis, null directions of the information),
 // with the parameters it names, and the directions the orientations miss (methods/plan.h).
 //
 // Suggested: the same orientations and motion (about random axes when the protocol turns about
-// one) with every duration (each static's and the
-// dynamic phase's) scaled by one factor c, the smallest whose prediction passes the gate with its
-// σ limits tightened by kMargin (bisection on log c to 1 %, bracketed from c = 1 by factors of
-// 4; every σ follows 1/√c but for the statics' trimming). One protocol length instead of two: the
-// statics fix the accelerometers and the gyroscope biases, the motion the gyroscope gains and the
-// positions, and both shrink together.
+// one) with every duration (each static's and the dynamic phase's) scaled by one factor c, the
+// smallest whose prediction passes the gate with its σ limits tightened by kMargin. Every σ
+// follows 1/√c but for the statics' trimming: c starts at the law's value from the protocol's own
+// prediction (the gate alone, judged at scaled limits: no fit) and is bracketed and bisected on
+// log c to 1 % with the method's fits (typically 3-4 of them). One protocol length instead of
+// two: the statics fix the accelerometers and the gyroscope biases, the motion the gyroscope
+// gains and the positions, and both shrink together.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -47,11 +51,15 @@ namespace {
 
 using nlohmann::json;
 
-constexpr double kReplayRate = 100;       // Hz: the replay's highest sample rate
-constexpr int64_t kReplaySamples = 4000;  // the replay's most samples (statics and motion)
-constexpr double kMinReplayRate = 10;     // Hz: below it the statics' detection has too few samples
-constexpr double kMargin = 0.1;           // the suggestion's σ limits are met by 10 %
-constexpr double kSpecificForce = 9.81;   // |s| of the dynamic samples, m/s²
+constexpr double kReplayRate = 100;              // Hz: the replay's highest sample rate
+constexpr int64_t kReplayStaticSamples = 20000;  // the replay's most static samples
+constexpr double kMinReplayRate = 10;  // Hz: below it the statics' detection has too few samples
+// The replay's dynamic samples: at most kReplayWork / K² (the fit's cost per sample grows as K²),
+// within [kMinReplayDynamic, kMaxReplayDynamic]: 4000 for 8 IMUs, 250 for 32.
+constexpr double kReplayWork = 256000;
+constexpr int64_t kMinReplayDynamic = 200, kMaxReplayDynamic = 4000;
+constexpr double kMargin = 0.1;          // the suggestion's σ limits are met by 10 %
+constexpr double kSpecificForce = 9.81;  // |s| of the dynamic samples, m/s²
 constexpr uint64_t kSeed = 1;
 // The σ keys of the array gate (AcceptanceKeys): the ones the suggestion's margin tightens.
 constexpr const char* kSigmaKeys[] = {"max_position_std", "max_scale_std", "max_axis_std",
@@ -80,11 +88,11 @@ struct Protocol {
   std::optional<Eigen::Vector3d> axis;
   std::string axis_label;
 
-  int64_t Samples() const {
+  int64_t StaticSamples() const {
     return static_cast<int64_t>(up.size()) *
-               std::max<int64_t>(1, std::llround(static_duration * rate)) +
-           std::llround(duration * rate);
+           std::max<int64_t>(1, std::llround(static_duration * rate));
   }
+  int64_t DynamicSamples() const { return std::llround(duration * rate); }
   Protocol Scaled(double c) const {
     Protocol p = *this;
     p.static_duration *= c;
@@ -98,25 +106,33 @@ struct Prediction {
   core::ArrayFullResult fit;
   json result;  // as a job writes it
   Verdict verdict;
-  int64_t samples = 0, replay_samples = 0;
-  double replay_rate = 0, noise_scale = 1;
+  int64_t samples = 0, replay_samples = 0, replay_dynamic_samples = 0;
+  double replay_rate = 0;
+  double static_scale = 1, dynamic_scale = 1;  // f_s, f_d: replay samples / protocol samples
 };
 
 Prediction Predict(const Setup& setup, const Protocol& m, const AcceptanceLimits& limits) {
   Prediction p;
-  p.samples = m.Samples();
-  const double f = std::min({1.0, kReplayRate / m.rate,
-                             static_cast<double>(kReplaySamples) / static_cast<double>(p.samples)});
-  p.replay_rate = m.rate * f;
-  p.noise_scale = std::sqrt(f);
+  p.samples = m.StaticSamples() + m.DynamicSamples();
+  const int K = static_cast<int>(setup.geometry.nominal_positions.cols());
+  p.static_scale = std::min({1.0, kReplayRate / m.rate,
+                             static_cast<double>(kReplayStaticSamples) /
+                                 static_cast<double>(std::max<int64_t>(1, m.StaticSamples()))});
+  p.replay_rate = m.rate * p.static_scale;
+  const auto most_dynamic = std::clamp<int64_t>(std::llround(kReplayWork / (K * K)),
+                                                kMinReplayDynamic, kMaxReplayDynamic);
+  p.replay_dynamic_samples = std::min(m.DynamicSamples(), most_dynamic);
+  p.dynamic_scale = m.DynamicSamples() > 0 ? static_cast<double>(p.replay_dynamic_samples) /
+                                                 static_cast<double>(m.DynamicSamples())
+                                           : 1.0;
   if (p.replay_rate < kMinReplayRate) {
     p.status = Status::InvalidInput(
-                   "protocol: " + std::to_string(p.samples) +
-                   " samples are too long to replay for a plan (its replay would run at " +
+                   "protocol: the statics' " + std::to_string(m.StaticSamples()) +
+                   " samples are too many to replay for a plan (their replay would run at " +
                    Sig3(p.replay_rate) + " Hz, below " + Sig3(kMinReplayRate) + " Hz: at most " +
-                   std::to_string(kReplaySamples) +
-                   " samples in all); plan a shorter protocol, its σ scales as 1/√duration")
-                   .WithField("protocol.duration");
+                   std::to_string(kReplayStaticSamples) +
+                   " samples); plan shorter statics, their σ scales as 1/√duration")
+                   .WithField("protocol.static_duration");
     p.verdict.Reject(p.status.message());
     return p;
   }
@@ -126,7 +142,7 @@ Prediction Predict(const Setup& setup, const Protocol& m, const AcceptanceLimits
   so.rate = p.replay_rate;
   so.static_directions = m.up;
   so.static_duration = m.static_duration;
-  so.dynamic_samples = std::llround(m.duration * p.replay_rate);
+  so.dynamic_samples = p.replay_dynamic_samples;
   so.omega_norm = m.angular_rate;
   so.omega_dot_norm = m.angular_acceleration;
   so.specific_force_norm = kSpecificForce;
@@ -143,9 +159,13 @@ Prediction Predict(const Setup& setup, const Protocol& m, const AcceptanceLimits
   }
   p.replay_samples = sim.problem.t.size();
   core::ArrayFullOptions options = setup.options;
-  options.accel_noise *= p.noise_scale;
-  options.gyro_noise *= p.noise_scale;
+  // The information of every part kept (a sum over samples, ∝ N / σ²): the statics' σ scaled
+  // by √f_s, the dynamic samples' by √f_d.
+  options.accel_noise *= std::sqrt(p.static_scale);
+  options.gyro_noise *= std::sqrt(p.static_scale);
+  options.dynamic_noise_scale = std::sqrt(p.dynamic_scale / p.static_scale);
   options.dynamic_weighting = core::ArrayFullDynamicWeighting::kNoise;
+  options.residual_aware_sigma = false;  // no residuals in a noise-free replay
   options.threads = 1;
   options.gyro_saturation.reset();
   options.accel_saturation.reset();
@@ -207,7 +227,33 @@ json Undetermined(const Prediction& p, const Protocol& m) {
   return out;
 }
 
-json Suggest(const Setup& setup, Protocol m, const AcceptanceLimits& limits) {
+// The smallest λ for which `result` passes the gate with its σ limits multiplied by λ (the gate
+// only, no fit: log bisection to 1e-6); nullopt when it fails for a reason other than σ.
+std::optional<double> SigmaLimitFactor(const Setup& setup, const json& result,
+                                       const AcceptanceLimits& limits) {
+  const auto passes = [&](double lambda) {
+    AcceptanceLimits scaled = limits;
+    for (const char* key : kSigmaKeys) {
+      const auto it = scaled.values.find(key);
+      if (it != scaled.values.end() && it->second) *it->second *= lambda;
+    }
+    Verdict verdict;
+    JudgeArray(result, setup.config, scaled, &verdict);
+    return verdict.accepted();
+  };
+  double lo = 1e-6, hi = 1e6;
+  if (!passes(hi)) return std::nullopt;
+  if (passes(lo)) return lo;
+  while (hi / lo > 1 + 1e-6) {
+    const double mid = std::sqrt(lo * hi);
+    (passes(mid) ? hi : lo) = mid;
+  }
+  return hi;
+}
+
+json Suggest(const Setup& setup, Protocol m, const Prediction& planned,
+             const AcceptanceLimits& limits) {
+  const bool one_axis = m.axis.has_value();
   m.axis.reset();  // a one-axis motion leaves the gyroscope along the other axes undetermined
   m.axis_label.clear();
   const AcceptanceLimits margined = Margined(limits);
@@ -221,47 +267,78 @@ json Suggest(const Setup& setup, Protocol m, const AcceptanceLimits& limits) {
     ++predictions;
     return Predict(setup, m.Scaled(c), margined);
   };
+  // The protocol's own prediction (about random axes: a new one when it turned about one).
+  Prediction chosen = one_axis ? predict(1) : planned;
+  if (!one_axis && chosen.status.ok()) {
+    chosen.verdict = Verdict();
+    JudgeArray(chosen.result, setup.config, margined, &chosen.verdict);
+  }
   double c = 1;
   std::string design;
   if (!any_sigma_limit) {
     design = "no σ limit in force: the protocol as it is (about random axes)";
   } else {
-    // σ ∝ 1/√c: bracket from c = 1 by factors of 4, then bisect on log c. Invariant once
-    // bracketed: hi passes, lo fails (or is the shortest).
+    // Every σ ∝ 1/√c (but for the statics' trimming): the law's factor from the protocol's own
+    // prediction, c₀ = λ² for the smallest λ at which its σ meet the limits × λ; then bracketed by
+    // predictions in steps of 3 % (doubling in log while on one side) and bisected on log c to
+    // 1 %. Invariant: hi passes, lo fails (or is the shortest).
     constexpr double kShortest = 1e-3;
-    double hi = std::min(longest, 1.5), lo = std::max(kShortest, 1 / 1.5);
-    bool hi_passes = predict(hi).verdict.accepted();
-    while (!hi_passes && hi < longest) {
-      lo = hi;
-      hi = std::min(longest, hi * 4);
-      hi_passes = predict(hi).verdict.accepted();
+    double c0 = 1;
+    if (chosen.status.ok()) {
+      if (const auto lambda = SigmaLimitFactor(setup, chosen.result, margined)) {
+        c0 = *lambda * *lambda;
+      }
     }
-    while (hi_passes && lo > kShortest && predict(lo).verdict.accepted()) {
-      hi = lo;
-      lo = std::max(kShortest, lo / 4);
+    // Statics shorter than min_static are not found (the law cannot see that): start no lower.
+    const double floor =
+        m.static_duration > 0 ? setup.options.statics.min_static / m.static_duration : kShortest;
+    c0 = std::clamp(std::max(c0, floor), kShortest, longest);
+    double hi = c0, lo = c0, step = 1.03;
+    Prediction at_hi = predict(hi);
+    bool hi_passes = at_hi.verdict.accepted();
+    if (hi_passes) {
+      for (lo = std::max(kShortest, hi / step); lo < hi; lo = std::max(kShortest, hi / step)) {
+        Prediction at_lo = predict(lo);
+        if (!at_lo.verdict.accepted()) break;
+        hi = lo;
+        at_hi = std::move(at_lo);
+        step *= step;
+      }
+    } else {
+      while (!hi_passes && hi < longest) {
+        lo = hi;
+        hi = std::min(longest, hi * step);
+        step *= step;
+        at_hi = predict(hi);
+        hi_passes = at_hi.verdict.accepted();
+      }
     }
     for (int i = 0; i < 30 && hi_passes && hi / lo > 1.01; ++i) {
       const double mid = std::sqrt(lo * hi);
-      (predict(mid).verdict.accepted() ? hi : lo) = mid;
+      Prediction at_mid = predict(mid);
+      if (at_mid.verdict.accepted()) {
+        hi = mid;
+        at_hi = std::move(at_mid);
+      } else {
+        lo = mid;
+      }
     }
     c = hi;
+    chosen = std::move(at_hi);
     design =
         "the protocol's orientations and motion (about random axes) with every duration (each "
         "static's and the dynamic phase's) scaled by one factor, the smallest whose prediction "
-        "passes the gate with "
-        "its σ limits tightened by " +
-        Sig3(100 * kMargin) + " % (bisection on the log of the factor, to 1 %)";
+        "passes the gate with its σ limits tightened by " +
+        Sig3(100 * kMargin) +
+        " % (from the factor the 1/√duration law gives, bisection on its log to 1 %)";
   }
-  const Protocol chosen = m.Scaled(c);
-  const Prediction p = Predict(setup, chosen, margined);
-  ++predictions;
-  json out = ProtocolJson(chosen);
+  json out = ProtocolJson(m.Scaled(c));
   out["scale"] = c;
   out["design"] = design;
   out["margin"] = kMargin;
-  out["unmet"] = p.verdict.reasons();
-  out["meets_limits"] = p.verdict.accepted();
-  out["uncertainty"] = p.status.ok() ? p.result["uncertainty"] : json();
+  out["unmet"] = chosen.verdict.reasons();
+  out["meets_limits"] = chosen.verdict.accepted();
+  out["uncertainty"] = chosen.status.ok() ? chosen.result["uncertainty"] : json();
   out["predictions"] = predictions;
   return out;
 }
@@ -318,23 +395,23 @@ Status PlanArrayFull(const json& config, const PlanProtocol& protocol,
         {{"samples", p.samples},
          {"replay_samples", p.replay_samples},
          {"replay_rate", p.replay_rate},
+         {"replay_dynamic_samples", p.replay_dynamic_samples},
          {"seed", kSeed}}},
        {"notes",
         {"σ is the Cramér–Rao bound the full model's own fit reports (basis crb, i.e. white-noise "
          "residuals) on a noise-free replay of this protocol with a nominal array: a real "
          "recording whose residuals exceed the noise reports the larger sandwich σ",
-         "the replay has at most " + Sig3(kReplayRate) + " Hz and " +
-             std::to_string(kReplaySamples) +
-             " samples; the protocol's information is kept by scaling the noise by √(replay "
-             "samples / protocol samples) = " +
-             Sig3(p.noise_scale)}}};
+         "the replay runs at " + Sig3(p.replay_rate) + " Hz (at most " + Sig3(kReplayRate) +
+             " Hz and " + std::to_string(kReplayStaticSamples) + " static samples) with " +
+             std::to_string(p.replay_dynamic_samples) + " dynamic samples (at most " +
+             Sig3(kReplayWork) +
+             " / IMUs²); the protocol's information is kept by scaling the statics' noise by " +
+             Sig3(std::sqrt(p.static_scale)) + " and the dynamic samples' by " +
+             Sig3(std::sqrt(p.dynamic_scale))}}};
   if (p.status.ok()) o["verdict"] = p.verdict.ToJson(limits);
-  // The fit's warnings about the protocol (e.g. little rotation about an axis); not those of its
-  // residual-aware σ, which a noise-free replay makes meaningless.
-  for (const std::string& w : p.fit.warnings) {
-    if (w.find("residual-aware") == std::string::npos) o["notes"].push_back("the fit: " + w);
-  }
-  o["suggested"] = Suggest(setup, m, limits);
+  // The fit's warnings about the protocol (e.g. little rotation about an axis).
+  for (const std::string& w : p.fit.warnings) o["notes"].push_back("the fit: " + w);
+  o["suggested"] = Suggest(setup, m, p, limits);
   return Status::Ok();
 }
 

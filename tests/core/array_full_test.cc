@@ -110,6 +110,30 @@ TEST(ArrayFullSimulationMotion, HoldsGivenStaticDirectionsAndRotatesAboutAGivenA
   EXPECT_NE(s.message().find("rotation_axis"), std::string::npos) << s.message();
 }
 
+// residual_aware_sigma false (the plans' noise-free replays): the same estimate and CRB, no
+// sandwich (sigma_ratio NaN, no batches, no such stage), the CRB primary.
+TEST(ArrayFull, WithoutTheResidualAwareSigmaTheBoundIsUnchangedAndPrimary) {
+  const ArrayFullSimulationOptions so = Board8(11);
+  ArrayFullSimulation sim;
+  ASSERT_TRUE(SimulateArrayFull(so, &sim).ok());
+  ArrayFullOptions o = FitOptions(so);
+  ArrayFullResult with, without;
+  ASSERT_TRUE(CalibrateArrayFull(sim.problem, o, &with).ok());
+  o.residual_aware_sigma = false;
+  std::vector<std::string> stages;
+  o.on_stage = [&](const char* stage) { stages.emplace_back(stage); };
+  ASSERT_TRUE(CalibrateArrayFull(sim.problem, o, &without).ok());
+  EXPECT_EQ((with.theta - without.theta).cwiseAbs().maxCoeff(), 0);
+  EXPECT_EQ((with.theta_covariance_crb - without.theta_covariance_crb).cwiseAbs().maxCoeff(), 0);
+  EXPECT_EQ((without.theta_covariance - without.theta_covariance_crb).cwiseAbs().maxCoeff(), 0);
+  EXPECT_EQ(without.sigma_basis, "crb");
+  EXPECT_TRUE(std::isnan(without.sigma_ratio));
+  EXPECT_EQ(without.robust_batches, 0);
+  EXPECT_GT(with.robust_batches, 0);
+  EXPECT_EQ(std::find(stages.begin(), stages.end(), "residual-aware sigma"), stages.end());
+  EXPECT_EQ(stages.back(), "done");
+}
+
 // ArrayFullOptions::on_stage names each stage as it begins, in order, and "done" only after a
 // successful run; a refused log ends at the stage that refused it.
 TEST(ArrayFull, OnStageNamesTheStagesInOrder) {
