@@ -172,6 +172,9 @@ render plan-thermal "/plan?method=thermal&t_min=20&t_max=50&temperature_rate=1&r
 # array: 4 triads turning about z only (their z undetermined), then the suggestion about all axes.
 array_plan_config='config=%7B%22geometry%22%3A%7B%22positions%22%3A%5B%5B0%2C0%2C0%5D%2C%5B0.01%2C0%2C0%5D%2C%5B0%2C0.01%2C0%5D%2C%5B0%2C0%2C0.002%5D%5D%7D%2C%22accel_noise%22%3A0.04%2C%22gyro_noise%22%3A0.001%7D'
 render plan-array "/plan?method=array&angular_rate=10&angular_acceleration=30&rotation_axis=%2Bz&duration=10&rate=100&$array_plan_config"
+# The array's full model: twelve statics, then the motion about z only (the gyroscope across z named).
+array_full_plan_config='config=%7B%22model%22%3A%22full%22%2C%22geometry%22%3A%7B%22positions%22%3A%5B%5B0%2C0%2C0%5D%2C%5B0.01%2C0%2C0%5D%2C%5B0%2C0.01%2C0%5D%2C%5B0%2C0%2C0.002%5D%5D%7D%2C%22accel_noise%22%3A0.04%2C%22gyro_noise%22%3A0.0035%2C%22static_window%22%3A0.25%2C%22min_static%22%3A0.5%7D'
+render plan-array-full "/plan?method=array&orientations=%2Bz+-z+%2Bx+-x+%2By+-y+%2Bx%2By%2Bz+-x-y%2Bz+%2Bx-y-z+-x%2By-z+%2Bx%2Bz+-y-z&static_duration=1.5&angular_rate=10&angular_acceleration=50&rotation_axis=%2Bz&duration=4&rate=100&$array_full_plan_config"
 # The mag plan (issue 33 item 1): field, noise, eight held orientations with the turns between them.
 mag_plan_config='config=%7B%22field%22%3A50%2C%22mag_noise%22%3A0.3%7D'
 render plan-mag "/plan?method=mag&orientations=%2Bz+-z+%2Bx+-x+%2By+-y+%2Bx%2By+-x%2Bz&static_duration=2&rotation_duration=2&rate=50&$mag_plan_config"
@@ -230,6 +233,8 @@ expect plan-planar 'class="undetermined' 'no orientation with a component along 
 expect plan-thermal 'class="page-plan' 'table-plan-suggested' 'suggested-ramp' 'one orientation'
 expect plan-array 'class="page-plan' 'table-plan-suggested' 'suggested-motion' \
   'maps z to 0' 'undetermined: positions'
+expect plan-array-full 'class="page-plan' 'table-plan-suggested' 'suggested-motion' 'each static held' \
+  'too little rotation about the body axis' 'undetermined: gyroscope gains and misalignments' 'misalignment_std'
 expect plan-mag 'class="page-plan' 'table-plan' 'table-plan-suggested' 'hard_iron_std' 'the mag method on the simulated logs'
 expect plan-imu 'class="page-plan' 'table-plan-suggested' 'starting flat (+z up)' \
   'class="fewer small"' 'positions the limits are not met'
@@ -252,7 +257,7 @@ expect mag-wander 'class="wander"' 'predicts the next log as long as this one' '
 expect thermal-device 'thermal (2 accepted calibrations' 'table-drift-thermal' \
   'plot-drift-thermal-accel' 'plot-drift-thermal-gyro'
 for page in history pca array failed failed-imu device devices revoked rejected recording check \
-  full device-drift running fleet plan plan-planar plan-imu plan-thermal plan-array plan-mag mag mag-device mag-wander thermal-device; do
+  full device-drift running fleet plan plan-planar plan-imu plan-thermal plan-array plan-array-full plan-mag mag mag-device mag-wander thermal-device; do
   reject "$page" '<script' '<img'
   if grep -q 'Uncaught\|CONSOLE.*[Ee]rror' "$tmp/$page.log"; then
     failed=$((failed + 1)); echo "FAIL: $page: console errors:"; grep 'CONSOLE' "$tmp/$page.log"
