@@ -217,7 +217,7 @@ json Undetermined(const Prediction& p, const Protocol& m) {
   for (const std::string& words : missing) {
     parameters.push_back("accelerometer gains, misalignments and biases: " + words);
   }
-  if (p.fit.rotation_verdict == "insufficient" && p.fit.dynamic_samples > 0) {
+  if (p.status.reason() == core::array_reason::kWeakExcitation) {  // not a refusal before it
     parameters.push_back("gyroscope gains and misalignments along the body axis " +
                          DirectionWords(p.fit.weakest_rotation_axis) +
                          ", and the positions' lever arms it turns");

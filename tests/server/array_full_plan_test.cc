@@ -285,6 +285,7 @@ TEST(ArrayFullPlanTest, TooFewOrCoplanarStaticsNameTheAccelerometers) {
     EXPECT_NE(parameters.find("accelerometer gains, misalignments and biases"), std::string::npos)
         << parameters;
     EXPECT_NE(parameters.find("along z"), std::string::npos) << parameters;
+    EXPECT_EQ(parameters.find("gyroscope"), std::string::npos) << parameters;  // not reached
     EXPECT_TRUE(plan["uncertainty"].is_null());
   }
 }
