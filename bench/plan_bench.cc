@@ -16,6 +16,7 @@
 #include "core/array_simulation.h"
 #include "methods/imu/imu_plan.h"
 #include "server/plan.h"
+#include "tests/lib/array_geometry.h"
 
 namespace {
 
@@ -62,8 +63,7 @@ BENCHMARK(BM_ImuSuggest)
 void BM_ArrayFullPlan(benchmark::State& state) {
   const Eigen::Matrix3Xd p = state.range(0) == 8 ? calibd::core::Mimu4444NominalPositions()
                                                  : calibd::core::PaperArrayNominalPositions();
-  json positions = json::array();
-  for (Eigen::Index k = 0; k < p.cols(); ++k) positions.push_back({p(0, k), p(1, k), p(2, k)});
+  const json positions = calibd::testing::GeometryPositions(p);
   json config = {{"method", "array"},
                  {"model", "full"},
                  {"geometry", {{"positions", positions}, {"reference", 0}}},

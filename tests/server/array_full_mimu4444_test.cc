@@ -21,6 +21,7 @@
 #include "methods/array/array_method.h"
 #include "methods/registry.h"
 #include "server/config.h"
+#include "tests/lib/array_geometry.h"
 #include "tests/lib/mimu4444.h"
 #include "tests/lib/sanitizer.h"
 
@@ -31,8 +32,7 @@ using nlohmann::json;
 
 json Config() {
   const Eigen::Matrix3Xd p = core::Mimu4444NominalPositions();
-  json positions = json::array();
-  for (Eigen::Index k = 0; k < p.cols(); ++k) positions.push_back({p(0, k), p(1, k), p(2, k)});
+  const json positions = calibd::testing::GeometryPositions(p);
   return {{"method", "array"},
           {"model", "full"},
           {"gyro_unit", "deg/s"},

@@ -15,6 +15,7 @@
 #include "methods/array/array_method.h"
 #include "methods/plan.h"
 #include "server/plan.h"
+#include "tests/lib/array_geometry.h"
 
 namespace calibd::server {
 namespace {
@@ -36,8 +37,7 @@ const std::vector<std::string>& Up() {
 
 json Config() {
   const Eigen::Matrix3Xd p = core::Mimu4444NominalPositions();
-  json positions = json::array();
-  for (Eigen::Index k = 0; k < p.cols(); ++k) positions.push_back({p(0, k), p(1, k), p(2, k)});
+  const json positions = calibd::testing::GeometryPositions(p);
   return {{"method", "array"},
           {"model", "full"},
           {"geometry", {{"positions", positions}, {"reference", 0}}},
@@ -220,11 +220,7 @@ TEST(ArrayFullPlanTest, TheCappedReplayKeepsTheProtocolsInformation) {
   for (const Case& c : {Case{"MIMU4444", core::Mimu4444NominalPositions(), 30, 200, 4000},
                         Case{"paper's 32", core::PaperArrayNominalPositions(), 4, 100, 250}}) {
     json config = Config();
-    json positions = json::array();
-    for (Eigen::Index k = 0; k < c.positions.cols(); ++k) {
-      positions.push_back({c.positions(0, k), c.positions(1, k), c.positions(2, k)});
-    }
-    config["geometry"]["positions"] = positions;
+    config["geometry"]["positions"] = calibd::testing::GeometryPositions(c.positions);
     const json plan = Plan(config, Protocol(Up(), c.duration, c.rate));
     ASSERT_TRUE(plan["uncertainty"].is_object()) << plan.dump();
     EXPECT_EQ(plan["replay"]["replay_dynamic_samples"], c.replay_dynamic) << c.board;

@@ -13,6 +13,7 @@
 #include "core/array_simulation.h"
 #include "methods/array/array_method.h"
 #include "server/plan.h"
+#include "tests/lib/array_geometry.h"
 
 namespace calibd::server {
 namespace {
@@ -26,8 +27,7 @@ constexpr double kRate = 100, kAngularRate = 10, kAngularAcceleration = 30;
 // The config of the paper's 32-IMU board (SPEC §3 array keys).
 json Config() {
   const Eigen::Matrix3Xd p = core::PaperArrayNominalPositions();
-  json positions = json::array();
-  for (Eigen::Index k = 0; k < p.cols(); ++k) positions.push_back({p(0, k), p(1, k), p(2, k)});
+  const json positions = calibd::testing::GeometryPositions(p);
   return {{"method", "array"},
           {"geometry", {{"positions", positions}, {"reference", 0}}},
           {"accel_noise", kAccelNoise},

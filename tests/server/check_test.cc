@@ -18,6 +18,7 @@
 #include "core/thermal_simulation.h"
 #include "methods/imu/imu_method.h"
 #include "methods/thermal/thermal_method.h"
+#include "tests/lib/array_geometry.h"
 #include "tests/lib/mimu4444.h"
 #include "tests/server/http_test_util.h"
 
@@ -562,8 +563,7 @@ TEST(RecordingCheck, Mimu4444SaturationNamed) {
   // The array method's own check (its job's saturation search, either model): the channels and
   // the dropped samples are its job's, which a positions job here shows.
   const Eigen::Matrix3Xd p = core::Mimu4444NominalPositions();
-  json positions = json::array();
-  for (Eigen::Index k = 0; k < p.cols(); ++k) positions.push_back({p(0, k), p(1, k), p(2, k)});
+  const json positions = calibd::testing::GeometryPositions(p);
   json config = {{"method", "array"},
                  {"gyro_unit", "deg/s"},
                  {"accel_noise", 0.05},
