@@ -573,9 +573,9 @@ Status ComputeResidualAwareCovariance(FullFit* f, const FullProblem& fp) {
   const double sigma_a = f->sigma_a, sigma_g = f->sigma_g;
   const Eigen::Matrix<double, 10, Eigen::Dynamic>& x = f->x;
   const std::vector<TriadParams>& ctx = f->ctx;
-  const bool reweighted = options.dynamic_weighting == ArrayFullDynamicWeighting::kResidual &&
-                          (d.wa_d * options.dynamic_noise_scale < d.wa ||
-                           d.wg_d * options.dynamic_noise_scale < d.wg);
+  const bool reweighted =
+      options.dynamic_weighting == ArrayFullDynamicWeighting::kResidual &&
+      (d.wa_d * options.dynamic_noise_scale < d.wa || d.wg_d * options.dynamic_noise_scale < d.wg);
   {
     // Batches: every static alone, the dynamic samples in runs of robust_batch seconds.
     std::vector<std::vector<int64_t>> batches;
