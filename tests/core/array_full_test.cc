@@ -134,6 +134,17 @@ TEST(ArrayFull, WithoutTheResidualAwareSigmaTheBoundIsUnchangedAndPrimary) {
   EXPECT_EQ(stages.back(), "done");
 }
 
+// dynamic_noise_scale must be a finite number > 0; the error names it.
+TEST(ArrayFull, ANonPositiveDynamicNoiseScaleIsRefusedNamingIt) {
+  for (double scale : {0.0, -1.0, double{NAN}, double{INFINITY}}) {
+    ArrayFullOptions o;
+    o.dynamic_noise_scale = scale;
+    std::string error;
+    EXPECT_FALSE(o.IsValid(&error)) << scale;
+    EXPECT_NE(error.find("dynamic_noise_scale"), std::string::npos) << error;
+  }
+}
+
 // ArrayFullOptions::on_stage names each stage as it begins, in order, and "done" only after a
 // successful run; a refused log ends at the stage that refused it.
 TEST(ArrayFull, OnStageNamesTheStagesInOrder) {

@@ -155,11 +155,6 @@ Gap FieldSpreadGap(const Eigen::Matrix3Xd& y, const Fit& ours, const Fit& peer, 
   return out;
 }
 
-// The least-squares fit of |S(y − h)| = 1 (ArduPilot's CompassCalibrator's residual).
-void PeerFit(const Eigen::Matrix3Xd& y, Eigen::Vector3d* h, Eigen::Matrix3d* s) {
-  PeerEllipsoidFit(y, 1.0, h, s);
-}
-
 std::string Fmt2(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.2f", v);
@@ -270,7 +265,7 @@ void CheckFieldSpreadNoWorse(const Log& log, const MagOptions& o, const MagProbl
     MagResult r;
     ASSERT_TRUE(CalibrateMag(problem, o, &r).ok()) << "fold " << k;
     Fit p;
-    PeerFit(problem.y, &p.h, &p.s);
+    PeerEllipsoidFit(problem.y, 1.0, &p.h, &p.s);  // |S(y − h)| = 1
     const Eigen::Matrix3Xd held = whole.y.middleCols(b0, b1 - b0);
     const MagnitudeSpread so = Spread(held, r.hard_iron, r.soft_iron_symmetric);
     const MagnitudeSpread sp = Spread(held, p.h, p.s);
@@ -315,7 +310,7 @@ MagResult CheckLog(const Log& log) {
               r.blocking.empty() ? 0.0 : r.blocking.front().seconds, curve.c_str());
   EXPECT_FALSE(r.plateau);
   Fit peer;
-  PeerFit(whole.y, &peer.h, &peer.s);
+  PeerEllipsoidFit(whole.y, 1.0, &peer.h, &peer.s);  // |S(y − h)| = 1
   const Fit fit{r.hard_iron, r.soft_iron_symmetric};
   const MagnitudeSpread ours = Spread(whole.y, fit.h, fit.s);
   const MagnitudeSpread lsq = Spread(whole.y, peer.h, peer.s);
